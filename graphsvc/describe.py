@@ -1,0 +1,100 @@
+"""What `graphsvc inspect` reports: per clip frames, rate, joints and duration with
+per-folder and overall totals, and for recordings their samples, sensors, channels."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+from tqdm import tqdm
+
+from graphsvc.errors import UnknownFormatError
+from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
+from graphsvc.sensors.recording import describe_recording, load_recording
+
+RECORDING_SUFFIXES = (".rec",)
+
+
+def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
+    """{"clips": [...], "folders": [...], "totals": {...}, "recordings": [...]}.
+
+    Motion files are fully parsed, so a file that would fail to load fails here too."""
+    recordings = []
+    motion_inputs = []
+    for p in paths:
+        path = Path(p)
+        if path.suffix.lower() in RECORDING_SUFFIXES:
+            info = describe_recording(load_recording(path))
+            recordings.append({"path": str(path), **info})
+        elif path.is_file() and path.suffix.lower() not in MOTION_SUFFIXES:
+            raise UnknownFormatError(
+                f"{path}: unknown format (motion: {', '.join(MOTION_SUFFIXES)}; recordings: .rec)"
+            )
+        else:
+            motion_inputs.append(p)
+    clips = []
+    if motion_inputs:
+        files = find_motion_files(motion_inputs)
+        for f in tqdm(files, desc="reading", unit="clip", disable=None if progress is None else not progress):
+            m = load_motion(f)
+            clips.append(
+                {
+                    "path": str(f),
+                    "name": m.name,
+                    "frames": m.num_frames,
+                    "rate_hz": m.rate_hz,
+                    "joints": m.skeleton.num_joints,
+                    "duration_s": round(m.duration_s, 6),
+                    "labels": list(m.labels),
+                }
+            )
+    folders = defaultdict(list)
+    for c in clips:
+        folders[str(Path(c["path"]).parent)].append(c)
+    return {
+        "clips": clips,
+        "folders": [{"path": k, **_totals(v)} for k, v in sorted(folders.items())],
+        "totals": _totals(clips),
+        "recordings": recordings,
+    }
+
+
+def _totals(clips: list[dict]) -> dict:
+    return {
+        "clips": len(clips),
+        "frames": sum(c["frames"] for c in clips),
+        "duration_s": round(sum(c["duration_s"] for c in clips), 6),
+        "rates_hz": sorted({c["rate_hz"] for c in clips}),
+    }
+
+
+def format_description(info: dict) -> str:
+    """The human-readable table `graphsvc inspect` prints."""
+    lines = []
+    if info["clips"]:
+        width = max(len(c["name"]) for c in info["clips"])
+        lines.append(f"{'clip':<{width}}  {'frames':>7}  {'rate':>6}  {'joints':>6}  {'duration':>9}  labels")
+        for c in info["clips"]:
+            lines.append(
+                f"{c['name']:<{width}}  {c['frames']:>7}  {c['rate_hz']:>6g}  {c['joints']:>6}  "
+                f"{c['duration_s']:>8.2f}s  {','.join(c['labels'])}"
+            )
+        lines.append("")
+        for f in info["folders"]:
+            lines.append(_total_line(f["path"], f))
+        lines.append(_total_line("total", info["totals"]))
+    for r in info["recordings"]:
+        lines.append(
+            f"{r['path']}: recording, {r['samples']} samples of {len(r['sensors'])} sensors "
+            f"({', '.join(r['sensors'])}) at {r['rate_hz']:g} Hz, {r['duration_s']:.2f} s"
+        )
+        lines.append(f"  channels: {', '.join(r['channels'])}")
+    return "\n".join(lines)
+
+
+def _total_line(label: str, t: dict) -> str:
+    rates = "/".join(f"{r:g}" for r in t["rates_hz"])
+    return (
+        f"{label}: {t['clips']} clips, {t['frames']:,} frames at {rates} Hz, "
+        f"{t['duration_s'] / 60:.1f} min"
+    )

@@ -1,0 +1,38 @@
+"""Exception types. Every error a user can cause derives from GraphsvcError.
+
+The CLI catches GraphsvcError, prints its message on one line and exits 2; anything
+else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+
+class GraphsvcError(Exception):
+    """Base class of all errors caused by bad input or bad use."""
+
+
+class FormatError(GraphsvcError):
+    """A file is malformed: names the file, the line (when known) and what was expected."""
+
+    def __init__(self, path, message: str, line: int | None = None):
+        self.path = str(path)
+        self.line = line
+        self.detail = message
+        where = f"{self.path}:{line}" if line is not None else self.path
+        super().__init__(f"{where}: {message}")
+
+
+class UnknownFormatError(GraphsvcError):
+    """A path whose format graphsvc does not read."""
+
+
+class InputError(GraphsvcError):
+    """Values are unusable: NaN or infinite, zero frames, shapes that disagree."""
+
+
+class SkeletonError(GraphsvcError):
+    """A skeleton lacks joints a layout, mapping or operation needs."""
+
+
+class LayoutError(GraphsvcError):
+    """A sensor layout is unknown or malformed."""

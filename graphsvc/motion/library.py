@@ -1,0 +1,156 @@
+"""Finding and loading motion files of any supported format, with their labels.
+
+Labels: the content label first, then user tags. The content label comes from a
+Bandai-style sidecar `<stem>.json` ({"content": id, ...}) whose id indexes the
+lines of `../cfg/content*.txt` (0-based, e.g. "dataset-1_walk" → "walk"); without
+them it is derived from the file name (`dataset-2_walk_normal_001` → "walk", any
+other name → its stem, e.g. CMU "02_01"). User tags are read from an optional
+sidecar `<stem>.tags`, one per line ('#' starts a comment).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import functools
+import glob
+import json
+import re
+from pathlib import Path
+
+from graphsvc.errors import FormatError, UnknownFormatError
+from graphsvc.motion.asfamc import read_asf_amc
+from graphsvc.motion.bvh import read_bvh
+from graphsvc.motion.skeleton import Motion, check_finite
+
+MOTION_SUFFIXES = (".bvh", ".amc")
+_BANDAI_NAME = re.compile(r"^dataset-\d+_(?P<content>[^_]+)_(?P<style>[^_]+)_\d+$")
+_GLOB_CHARS = re.compile(r"[*?\[]")
+
+
+def _check_suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix == ".asf":
+        raise UnknownFormatError(
+            f"{path}: an .asf file is a skeleton only; pass the .amc motion file "
+            "(the .asf beside it is found automatically)"
+        )
+    if suffix not in MOTION_SUFFIXES:
+        raise UnknownFormatError(f"{path}: unknown motion format {suffix or '(no extension)'!r}; expected .bvh or .amc")
+    return suffix
+
+
+def _read_label_file(path: Path) -> list[str]:
+    try:
+        return path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+
+
+@functools.lru_cache(maxsize=64)
+def _content_table(path: Path) -> tuple[str, ...]:
+    # One table serves hundreds of clips: read it once per process.
+    return tuple(n.strip() for n in _read_label_file(path))
+
+
+def content_label(path) -> str:
+    """The clip's content label (see module docstring)."""
+    path = Path(path)
+    sidecar = path.with_suffix(".json")
+    if sidecar.is_file():
+        try:
+            meta = json.loads(sidecar.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise FormatError(sidecar, f"not valid JSON: {exc}") from None
+        content = meta.get("content") if isinstance(meta, dict) else None
+        cfg = path.parent.parent / "cfg"
+        tables = sorted(cfg.glob("content*.txt")) if cfg.is_dir() else []
+        if isinstance(content, int) and not isinstance(content, bool) and tables:
+            names = _content_table(tables[0])
+            if not 0 <= content < len(names) or not names[content]:
+                raise FormatError(sidecar, f"content id {content} is not a line of {tables[0]} ({len(names)} lines)")
+            label = names[content]
+            # "dataset-1_walk" → "walk": drop the dataset prefix the table repeats.
+            prefix = path.parent.parent.name + "_"
+            if label.startswith(prefix):
+                label = label[len(prefix) :]
+            return re.sub(r"^dataset-\d+_", "", label)
+        if isinstance(content, str) and content:
+            return content
+    m = _BANDAI_NAME.match(path.stem)
+    if m:
+        return m.group("content")
+    # "walk_03" → "walk": a trailing take number is not part of the content, unless
+    # nothing but numbers would remain (CMU "01_01" keeps its whole stem).
+    stripped = re.sub(r"[_-]\d+$", "", path.stem)
+    return stripped if re.search(r"[^\d_-]", stripped) else path.stem
+
+
+def user_tags(path) -> list[str]:
+    """Tags from the optional sidecar `<stem>.tags`, one per line, in order."""
+    sidecar = Path(path).with_suffix(".tags")
+    if not sidecar.is_file():
+        return []
+    tags = []
+    for line in _read_label_file(sidecar):
+        tag = line.split("#", 1)[0].strip()
+        if tag and tag not in tags:
+            tags.append(tag)
+    return tags
+
+
+def load_motion(path, **options) -> Motion:
+    """Load one .bvh or .amc file (options go to read_bvh / read_asf_amc, e.g.
+    scale=, asf_path=, rate_hz=), with name, source and labels filled in."""
+    path = Path(path)
+    suffix = _check_suffix(path)
+    motion = read_bvh(path, **options) if suffix == ".bvh" else read_asf_amc(path, **options)
+    content = content_label(path)
+    labels = [content] + [t for t in user_tags(path) if t != content]
+    motion.name = path.stem
+    motion.source = str(path)
+    motion.labels = tuple(labels)
+    check_finite(motion)
+    return motion
+
+
+def _excluded(path: Path, exclude) -> bool:
+    text = path.as_posix()
+    return any(fnmatch.fnmatch(path.name, pat) or fnmatch.fnmatch(text, pat) for pat in exclude)
+
+
+def find_motion_files(paths, exclude=()) -> list[Path]:
+    """Motion files named by `paths`: files, folders (searched recursively) or glob
+    patterns ('**' recurses). Only .bvh/.amc files are collected from folders and
+    patterns; a file named directly must be one. `exclude`: fnmatch patterns matched
+    against the file name or the whole path. Sorted, without duplicates."""
+    if isinstance(paths, (str, Path)):
+        paths = [paths]
+    exclude = [exclude] if isinstance(exclude, str) else list(exclude)
+    found: set[Path] = set()
+    for item in paths:
+        text = str(item)
+        p = Path(text)
+        if p.is_file():
+            _check_suffix(p)
+            found.add(p)
+        elif p.is_dir():
+            found.update(f for f in p.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
+        elif _GLOB_CHARS.search(text):
+            hits = [Path(h) for h in glob.glob(text, recursive=True)]
+            files = set()
+            for h in hits:
+                if h.is_dir():
+                    files.update(f for f in h.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
+                elif h.suffix.lower() in MOTION_SUFFIXES and h.is_file():
+                    files.add(h)
+            if not files:
+                raise FormatError(text, "not found: the pattern matches no .bvh or .amc files")
+            found.update(files)
+        else:
+            raise FormatError(text, "not found")
+    return sorted((f for f in found if not _excluded(f, exclude)), key=lambda f: f.as_posix())
+
+
+def load_motions(paths, exclude=(), **options) -> list[Motion]:
+    """load_motion over find_motion_files(paths, exclude)."""
+    return [load_motion(p, **options) for p in find_motion_files(paths, exclude)]

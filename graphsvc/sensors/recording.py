@@ -1,0 +1,444 @@
+"""Input streams on disk: the native `.rec` container and CSV for real devices.
+
+A Recording is what the body-worn accelerometers and the overhead tracker reported:
+timestamps, per-sensor accelerations in each sensor's own frame, optional ground
+position and heading, annotation constraint sets, the sensor layout and provenance.
+
+Native format (`.rec`)
+    A graphsvc container (graphsvc/store.py) of kind "recording", format_version 1.
+    Arrays: ``timestamps_s`` (T,) <f8, ``accelerations`` (T, S, 3) <f4, and when
+    present ``ground_position`` (T, 2) <f8 and ``heading`` (T,) <f8. The JSON meta
+    holds ``rate_hz``, ``sensor_names``, ``constraints``, ``layout`` and ``meta``.
+    Everything round-trips exactly.
+
+CSV format
+    UTF-8 text, comma-separated, one header row then one row per sample::
+
+        # graphsvc recording v1
+        # rate_hz=30
+        t_s,l_wrist_ax,l_wrist_ay,l_wrist_az,r_ankle_ax,r_ankle_ay,r_ankle_az,pos_x_m,pos_z_m,heading_rad
+        0,0.12,9.79,-0.3,...
+
+    - Lines starting with ``#`` are comments; ``# key=value`` comments before the
+      header set ``rate_hz``. export_csv writes the two lines shown; files from
+      devices may have none.
+    - ``t_s``: seconds, required, finite, strictly increasing.
+    - ``<sensor>_ax, <sensor>_ay, <sensor>_az``: acceleration in the sensor's frame,
+      m/s² (or g with ``import_csv(..., units="g")``, converted with 9.81 m/s²). Each
+      sensor needs all three columns, in any column order; sensors are numbered in
+      the order their first column appears.
+    - ``pos_x_m, pos_z_m`` (both or neither): overhead-tracker ground position, m.
+    - ``heading_rad``: facing about +Y, radians. Optional.
+    - An empty cell or ``nan`` (any case) means missing (NaN); ``inf`` is refused.
+    - Numbers are written with ``'%.9g'``: exact for the float32 accelerations, 9
+      significant digits for times (1 µs at 1000 s), positions and heading.
+    - Constraint sets, the layout and provenance are not carried by CSV; pass
+      ``layout=`` to import_csv. The rate comes from ``rate_hz=``, else the
+      ``# rate_hz=`` comment, else the median timestamp step.
+    Errors name the file and line: wrong column counts, non-numeric cells, a
+    missing ``t_s`` column, incomplete sensor triplets, unknown columns,
+    non-increasing timestamps.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from graphsvc.errors import FormatError, InputError
+from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.store import atomic_writer, read_container, write_container
+
+KIND = "recording"
+FORMAT_VERSION = 1
+CSV_MAGIC = "# graphsvc recording v1"
+CONTACTS = ("left", "right", "both", "none")
+UNITS = ("m/s2", "g")
+_AXES = ("x", "y", "z")
+_SENSOR_COLUMN = re.compile(r"^(.+)_a([xyz])$")
+_POSITION_COLUMNS = ("pos_x_m", "pos_z_m")
+_HEADING_COLUMN = "heading_rad"
+_BAD_NAME_CHARS = set(',"\r\n')
+
+
+@dataclass(eq=False)
+class Recording:
+    """One input stream. T samples of S sensors.
+
+    rate_hz: nominal sample rate, Hz. timestamps_s: (T,) float64 s, finite, strictly
+    increasing. accelerations: (T, S, 3) float32 m/s² in each sensor's frame, NaN =
+    missing. ground_position: (T, 2) float64 m (x, z) or None. heading: (T,) float64
+    rad about +Y or None. constraints: annotation constraint sets in priority order,
+    each a list of {"start_s", "end_s", "require": {"contact": left|right|both|none}
+    or {"label": NAME}}. layout: the sensor layout description (JSON-able) or None.
+    meta: provenance (JSON-able)."""
+
+    rate_hz: float
+    timestamps_s: np.ndarray
+    sensor_names: tuple[str, ...]
+    accelerations: np.ndarray
+    ground_position: np.ndarray | None = None
+    heading: np.ndarray | None = None
+    constraints: list = field(default_factory=list)
+    layout: dict | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def num_samples(self) -> int:
+        return int(self.timestamps_s.shape[0])
+
+    @property
+    def num_sensors(self) -> int:
+        return len(self.sensor_names)
+
+    @property
+    def duration_s(self) -> float:
+        """Span covered, each sample lasting one nominal period: T / rate_hz for a
+        uniformly sampled stream (as Motion.duration_s)."""
+        return float(self.timestamps_s[-1] - self.timestamps_s[0]) + 1.0 / self.rate_hz
+
+    def validate(self) -> None:
+        """Raise InputError unless the recording is usable (see the class docstring).
+        NaN is allowed as "missing" in the readings, ±inf nowhere."""
+        validate_recording(self)
+
+
+def validate_recording(rec: Recording) -> None:
+    """Recording.validate as a free function."""
+    rate = rec.rate_hz
+    if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)):
+        raise InputError(f"rate_hz must be a number, got {rate!r}")
+    if not math.isfinite(rate) or rate <= 0:
+        raise InputError(f"rate_hz must be positive and finite, got {rate}")
+    t = rec.timestamps_s
+    if not isinstance(t, np.ndarray) or t.ndim != 1 or t.dtype.kind not in "fiu":
+        raise InputError("timestamps_s must be a 1-D numeric array")
+    T = t.shape[0]
+    if T == 0:
+        raise InputError("recording has zero samples")
+    if not np.isfinite(t).all():
+        raise InputError("timestamps_s contains NaN or infinite values")
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0)) + 1
+        raise InputError(f"timestamps_s must be strictly increasing (sample {i}: {t[i]} after {t[i - 1]})")
+    names = rec.sensor_names
+    if not isinstance(names, tuple) or not all(isinstance(n, str) for n in names):
+        raise InputError("sensor_names must be a tuple of strings")
+    for n in names:
+        if not n or n != n.strip() or _BAD_NAME_CHARS & set(n):
+            raise InputError(f"bad sensor name {n!r} (non-empty, no commas, quotes, newlines or edge spaces)")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"duplicate sensor names: {', '.join(dup)}")
+    _check_readings("accelerations", rec.accelerations, (T, len(names), 3))
+    if rec.ground_position is not None:
+        _check_readings("ground_position", rec.ground_position, (T, 2))
+    if rec.heading is not None:
+        _check_readings("heading", rec.heading, (T,))
+    validate_constraints(rec.constraints)
+    if rec.layout is not None and not isinstance(rec.layout, dict):
+        raise InputError(f"layout must be a dict or None, got {type(rec.layout).__name__}")
+    if not isinstance(rec.meta, dict):
+        raise InputError(f"meta must be a dict, got {type(rec.meta).__name__}")
+
+
+def _check_readings(name: str, a, shape: tuple[int, ...]) -> None:
+    if not isinstance(a, np.ndarray) or a.dtype.kind != "f":
+        raise InputError(f"{name} must be a floating-point array")
+    if a.shape != shape:
+        raise InputError(f"{name} has shape {a.shape}, expected {shape}")
+    if np.isinf(a).any():
+        raise InputError(f"{name} contains infinite values (use NaN for missing)")
+
+
+def validate_constraints(constraints) -> None:
+    """Raise InputError unless `constraints` is a list of constraint sets, each a
+    list of {"start_s": s, "end_s": s, "require": {"contact": ...} | {"label": ...}}
+    with 0 <= start_s < end_s."""
+    if not isinstance(constraints, list):
+        raise InputError("constraints must be a list of constraint sets")
+    for i, cset in enumerate(constraints):
+        if not isinstance(cset, list):
+            raise InputError(f"constraint set {i} must be a list")
+        for j, c in enumerate(cset):
+            where = f"constraint {j} of set {i}"
+            if not isinstance(c, dict) or set(c) != {"start_s", "end_s", "require"}:
+                raise InputError(f"{where} must have exactly the keys start_s, end_s, require")
+            s, e = c["start_s"], c["end_s"]
+            for key, v in (("start_s", s), ("end_s", e)):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise InputError(f"{where}: {key} must be a finite number, got {v!r}")
+            if s < 0 or not s < e:
+                raise InputError(f"{where}: need 0 <= start_s < end_s, got {s}..{e}")
+            req = c["require"]
+            if not isinstance(req, dict) or len(req) != 1:
+                raise InputError(f"{where}: require must be {{'contact': ...}} or {{'label': ...}}")
+            (key, value), = req.items()
+            if key == "contact":
+                if value not in CONTACTS:
+                    raise InputError(f"{where}: contact must be one of {', '.join(CONTACTS)}, got {value!r}")
+            elif key == "label":
+                if not isinstance(value, str) or not value:
+                    raise InputError(f"{where}: label must be a non-empty string, got {value!r}")
+            else:
+                raise InputError(f"{where}: unknown requirement {key!r} (contact or label)")
+
+
+# ---------------------------------------------------------------- native .rec
+
+
+def save_recording(rec: Recording, path) -> None:
+    """Validate `rec` and write it atomically as a `.rec` container. Equal
+    recordings give byte-identical files."""
+    rec.validate()
+    arrays = {
+        "timestamps_s": np.asarray(rec.timestamps_s, dtype=np.float64),
+        "accelerations": np.asarray(rec.accelerations, dtype=np.float32),
+    }
+    if rec.ground_position is not None:
+        arrays["ground_position"] = np.asarray(rec.ground_position, dtype=np.float64)
+    if rec.heading is not None:
+        arrays["heading"] = np.asarray(rec.heading, dtype=np.float64)
+    meta = {
+        "rate_hz": float(rec.rate_hz),
+        "sensor_names": list(rec.sensor_names),
+        "constraints": rec.constraints,
+        "layout": rec.layout,
+        "meta": rec.meta,
+    }
+    write_container(path, KIND, meta, arrays, FORMAT_VERSION)
+
+
+def load_recording(path) -> Recording:
+    """Read a `.rec` file. Arrays are read into memory (recordings are small), so
+    the file is closed on return. FormatError for anything but an intact, valid
+    recording file."""
+    meta, arrays, version = read_container(path, kind=KIND, mmap=False)
+    if version != FORMAT_VERSION:
+        raise FormatError(path, f"unsupported recording format version {version} "
+                          f"(this graphsvc reads {FORMAT_VERSION})")  # fmt: skip
+    try:
+        rate = meta["rate_hz"]
+        names = meta["sensor_names"]
+        if not isinstance(names, list):
+            raise TypeError("sensor_names is not a list")
+        rec = Recording(
+            rate_hz=rate,
+            timestamps_s=arrays["timestamps_s"],
+            sensor_names=tuple(names),
+            accelerations=arrays["accelerations"],
+            ground_position=arrays.get("ground_position"),
+            heading=arrays.get("heading"),
+            constraints=meta["constraints"],
+            layout=meta["layout"],
+            meta=meta["meta"],
+        )
+    except (KeyError, TypeError) as e:
+        raise FormatError(path, f"not a valid recording: missing or bad {e}") from None
+    try:
+        rec.validate()
+    except InputError as e:
+        raise FormatError(path, f"not a valid recording: {e}") from None
+    return rec
+
+
+# ---------------------------------------------------------------- CSV
+
+
+def csv_columns(rec: Recording) -> list[str]:
+    """The CSV header export_csv writes for `rec`."""
+    cols = ["t_s"] + [f"{n}_a{k}" for n in rec.sensor_names for k in _AXES]
+    if rec.ground_position is not None:
+        cols += list(_POSITION_COLUMNS)
+    if rec.heading is not None:
+        cols.append(_HEADING_COLUMN)
+    return cols
+
+
+def export_csv(rec: Recording, path) -> None:
+    """Write `rec` as CSV (format in the module docstring), atomically; NaN → empty
+    cell, numbers as '%.9g', so equal recordings give identical files."""
+    rec.validate()
+    T = rec.num_samples
+    parts = [rec.timestamps_s.astype(np.float64)[:, None],
+             rec.accelerations.astype(np.float64).reshape(T, -1)]  # fmt: skip
+    if rec.ground_position is not None:
+        parts.append(rec.ground_position.astype(np.float64))
+    if rec.heading is not None:
+        parts.append(rec.heading.astype(np.float64)[:, None])
+    table = np.concatenate(parts, axis=1)
+    lines = [CSV_MAGIC, f"# rate_hz={_shortest(rec.rate_hz)}", ",".join(csv_columns(rec))]
+    for row in table.tolist():
+        lines.append(",".join("" if v != v else "%.9g" % v for v in row))  # v != v ⇔ NaN
+    with atomic_writer(path) as f:
+        f.write(("\n".join(lines) + "\n").encode("utf-8"))
+
+
+def _shortest(x: float) -> str:
+    """The shortest text that reads back as exactly `x` (30.0 → "30")."""
+    s = repr(float(x))
+    return s[:-2] if s.endswith(".0") else s
+
+
+def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: dict | None = None) -> Recording:
+    """Read a CSV recording (ours or a device's; format in the module docstring).
+
+    rate_hz: overrides the file's; else `# rate_hz=` or the median timestamp step.
+    units: "m/s2" or "g" for the acceleration columns (g × 9.81 → m/s²).
+    layout: the sensor layout description to attach.
+    FormatError (with the line number) for malformed files."""
+    if units not in UNITS:
+        raise InputError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
+    except FileNotFoundError:
+        raise FormatError(path, "no such file") from None
+    except UnicodeDecodeError as e:
+        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+
+    comments: dict[str, str] = {}
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[float]] = []
+    row_lines: list[int] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            if header is None and "=" in stripped:
+                key, _, value = stripped[1:].partition("=")
+                comments[key.strip()] = value.strip()
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if header is None:
+            header, header_line = cells, lineno
+            layout_cols = _parse_header(path, header, lineno)
+            continue
+        if len(cells) != len(header):
+            raise FormatError(path, f"expected {len(header)} columns, got {len(cells)}", line=lineno)
+        rows.append([_parse_cell(path, c, header[k], lineno) for k, c in enumerate(cells)])
+        row_lines.append(lineno)
+    if header is None:
+        raise FormatError(path, "no header row (expected t_s,<sensor>_ax,...)")
+    if not rows:
+        raise FormatError(path, "no samples after the header", line=header_line)
+
+    table = np.array(rows, dtype=np.float64)
+    t_col, sensor_names, acc_cols, pos_cols, heading_col = layout_cols
+    t = table[:, t_col]
+    missing = np.isnan(t)
+    if missing.any():
+        raise FormatError(path, "t_s is empty or nan", line=row_lines[int(np.argmax(missing))])
+    bad = np.diff(t) <= 0
+    if bad.any():
+        i = int(np.argmax(bad)) + 1
+        raise FormatError(path, f"timestamps must be strictly increasing ({t[i]:g} after {t[i - 1]:g})",
+                          line=row_lines[i])  # fmt: skip
+
+    if rate_hz is None and "rate_hz" in comments:
+        try:
+            rate_hz = float(comments["rate_hz"])
+        except ValueError:
+            raise FormatError(path, f"bad rate_hz comment {comments['rate_hz']!r}") from None
+    if rate_hz is None:
+        if len(t) < 2:
+            raise InputError(f"{path}: cannot infer the sample rate from one sample; pass rate_hz")
+        rate_hz = 1.0 / float(np.median(np.diff(t)))
+
+    acc = table[:, acc_cols].reshape(len(t), len(sensor_names), 3)
+    if units == "g":
+        acc = acc * GRAVITY
+    rec = Recording(
+        rate_hz=float(rate_hz),
+        timestamps_s=np.ascontiguousarray(t),
+        sensor_names=sensor_names,
+        accelerations=acc.astype(np.float32),
+        ground_position=np.ascontiguousarray(table[:, pos_cols]) if pos_cols else None,
+        heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
+        layout=layout,
+        meta={"source": str(path), "imported_from": "csv", "units": units},
+    )
+    rec.validate()
+    return rec
+
+
+def _parse_header(path: Path, cols: list[str], lineno: int):
+    """Column indices: (t, sensor names, acceleration columns in (sensor, axis)
+    order, position columns or [], heading column or None)."""
+    seen: dict[str, int] = {}
+    for k, c in enumerate(cols):
+        if not c:
+            raise FormatError(path, f"column {k + 1} has an empty name", line=lineno)
+        if c in seen:
+            raise FormatError(path, f"duplicate column {c!r}", line=lineno)
+        seen[c] = k
+    if "t_s" not in seen:
+        raise FormatError(path, "missing t_s column (seconds)", line=lineno)
+    sensors: dict[str, dict[str, int]] = {}
+    for c, k in seen.items():
+        m = _SENSOR_COLUMN.match(c)
+        if m:
+            sensors.setdefault(m.group(1), {})[m.group(2)] = k
+        elif c not in ("t_s", _HEADING_COLUMN, *_POSITION_COLUMNS):
+            raise FormatError(path, f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, "
+                              f"{', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})", line=lineno)  # fmt: skip
+    acc_cols = []
+    for name, axes in sensors.items():
+        absent = [f"{name}_a{a}" for a in _AXES if a not in axes]
+        if absent:
+            raise FormatError(path, f"sensor {name!r} lacks column(s) {', '.join(absent)}", line=lineno)
+        if name != name.strip() or '"' in name:
+            raise FormatError(path, f"bad sensor name {name!r}", line=lineno)
+        acc_cols += [axes[a] for a in _AXES]
+    have_pos = [c in seen for c in _POSITION_COLUMNS]
+    if any(have_pos) and not all(have_pos):
+        raise FormatError(path, "pos_x_m and pos_z_m must both be present or both absent", line=lineno)
+    pos_cols = [seen[c] for c in _POSITION_COLUMNS] if all(have_pos) else []
+    return seen["t_s"], tuple(sensors), acc_cols, pos_cols, seen.get(_HEADING_COLUMN)
+
+
+def _parse_cell(path: Path, cell: str, column: str, lineno: int) -> float:
+    if not cell or cell.lower() == "nan":
+        return math.nan
+    try:
+        v = float(cell)
+    except ValueError:
+        raise FormatError(path, f"non-numeric value {cell!r} in column {column}", line=lineno) from None
+    if math.isinf(v):
+        raise FormatError(path, f"infinite value {cell!r} in column {column} (leave the cell empty for missing)",
+                          line=lineno)  # fmt: skip
+    if v != v:  # float() also reads "+nan", "-NaN"
+        return math.nan
+    return v
+
+
+# ---------------------------------------------------------------- inspect
+
+
+def describe_recording(rec: Recording) -> dict:
+    """What `graphsvc inspect` shows of a recording: {"samples", "sensors" (names),
+    "channels" (e.g. "l_wrist.ax", ..., "ground_position.x", "ground_position.z",
+    "heading"), "rate_hz", "duration_s", "has_ground_position", "has_heading",
+    "constraint_sets"}."""
+    channels = [f"{n}.a{k}" for n in rec.sensor_names for k in _AXES]
+    if rec.ground_position is not None:
+        channels += ["ground_position.x", "ground_position.z"]
+    if rec.heading is not None:
+        channels.append("heading")
+    return {
+        "samples": rec.num_samples,
+        "sensors": list(rec.sensor_names),
+        "channels": channels,
+        "rate_hz": float(rec.rate_hz),
+        "duration_s": round(rec.duration_s, 6),
+        "has_ground_position": rec.ground_position is not None,
+        "has_heading": rec.heading is not None,
+        "constraint_sets": len(rec.constraints),
+    }

@@ -1,0 +1,68 @@
+"""Shared fixtures: a tiny canonical T-pose skeleton for hand-checked cases, and the
+location of ../shared/data for tests that read real motion capture."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from graphsvc.motion import quat
+from graphsvc.motion.skeleton import Motion, Skeleton
+
+DATA = Path(os.environ.get("GRAPHSVC_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+
+_TPOSE = [  # name, parent, offset (m): faces +Z, left is +X
+    ("pelvis", None, (0.0, 0.96, 0.0)),
+    ("spine", "pelvis", (0.0, 0.10, 0.0)),
+    ("chest", "spine", (0.0, 0.20, 0.0)),
+    ("neck", "chest", (0.0, 0.25, 0.0)),
+    ("head", "neck", (0.0, 0.10, 0.0)),
+    ("l_shoulder", "chest", (0.18, 0.20, 0.0)),
+    ("l_elbow", "l_shoulder", (0.28, 0.0, 0.0)),
+    ("l_wrist", "l_elbow", (0.25, 0.0, 0.0)),
+    ("r_shoulder", "chest", (-0.18, 0.20, 0.0)),
+    ("r_elbow", "r_shoulder", (-0.28, 0.0, 0.0)),
+    ("r_wrist", "r_elbow", (-0.25, 0.0, 0.0)),
+    ("l_hip", "pelvis", (0.10, -0.05, 0.0)),
+    ("l_knee", "l_hip", (0.0, -0.42, 0.0)),
+    ("l_ankle", "l_knee", (0.0, -0.42, 0.0)),
+    ("l_toe", "l_ankle", (0.0, -0.07, 0.13)),
+    ("r_hip", "pelvis", (-0.10, -0.05, 0.0)),
+    ("r_knee", "r_hip", (0.0, -0.42, 0.0)),
+    ("r_ankle", "r_knee", (0.0, -0.42, 0.0)),
+    ("r_toe", "r_ankle", (0.0, -0.07, 0.13)),
+]
+
+
+def tpose_skeleton() -> Skeleton:
+    names = tuple(n for n, _, _ in _TPOSE)
+    parents = [-1 if p is None else names.index(p) for _, p, _ in _TPOSE]
+    channels = tuple(
+        ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation") if p is None
+        else ("Zrotation", "Xrotation", "Yrotation")
+        for _, p, _ in _TPOSE
+    )  # fmt: skip
+    return Skeleton(names, np.array(parents), np.array([o for _, _, o in _TPOSE]), channels, np.zeros(len(names), bool))
+
+
+def still_motion(frames: int, rate_hz: float = 30.0) -> Motion:
+    """The T-pose held for `frames` frames."""
+    sk = tpose_skeleton()
+    rot = quat.identity((frames, sk.num_joints))
+    trans = np.broadcast_to(sk.offsets, (frames, sk.num_joints, 3)).copy()
+    return Motion(sk, rot, trans, rate_hz, name="still")
+
+
+@pytest.fixture
+def skeleton() -> Skeleton:
+    return tpose_skeleton()
+
+
+@pytest.fixture
+def data_dir() -> Path:
+    if not DATA.is_dir():
+        pytest.skip(f"../shared/data not found at {DATA} (set GRAPHSVC_DATA to run real-data tests)")
+    return DATA

@@ -1,0 +1,97 @@
+"""The CLI end to end: real files in, exit codes and one-line errors out."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from graphsvc.cli import main
+from graphsvc.motion.bvh import write_bvh
+from tests.conftest import still_motion
+
+
+@pytest.fixture
+def clip(tmp_path):
+    m = still_motion(40)
+    m.translations[:, 0, 2] = np.linspace(0, 1.0, 40)
+    path = tmp_path / "walk_demo_001.bvh"
+    write_bvh(path, m, scale=100.0)
+    return path
+
+
+def run(argv, capsys):
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_simulate_then_inspect_recording(tmp_path, clip, capsys):
+    rec = tmp_path / "walk.rec"
+    code, out, _ = run(["simulate", str(clip), "--layout", "kelly6", "--noise", "default", "--seed", "2", "-o", str(rec)], capsys)
+    assert code == 0 and "40 samples of 6 sensors" in out
+    code, out, _ = run(["inspect", str(rec), "--json"], capsys)
+    info = json.loads(out)["recordings"][0]
+    assert code == 0 and info["samples"] == 40 and len(info["sensors"]) == 6
+    assert "ground_position.x" in info["channels"]
+
+
+def test_inspect_motion_folder_totals(tmp_path, clip, capsys):
+    code, out, _ = run(["inspect", str(tmp_path), "--json"], capsys)
+    info = json.loads(out)
+    assert code == 0
+    assert info["totals"] == {"clips": 1, "frames": 40, "duration_s": pytest.approx(40 / 30), "rates_hz": [30.0]}
+    assert info["clips"][0]["labels"][0] == "walk_demo"  # take number dropped
+    code, out, _ = run(["inspect", str(clip)], capsys)
+    assert "total: 1 clips, 40 frames at 30 Hz" in out
+
+
+def test_simulate_csv_output(tmp_path, clip, capsys):
+    out_csv = tmp_path / "walk.csv"
+    code, _, _ = run(["simulate", str(clip), "--layout", "right-wrist", "-o", str(out_csv)], capsys)
+    assert code == 0
+    lines = out_csv.read_text().splitlines()
+    assert lines[0].startswith("#") and sum(not line.startswith("#") for line in lines) == 41
+
+
+@pytest.mark.parametrize("argv_tail, needle", [
+    (["inspect", "{tmp}/missing.bvh"], "not found"),
+    (["inspect", "{tmp}/notes.txt"], "unknown format"),
+    (["simulate", "{clip}", "--layout", "elbows", "-o", "{tmp}/x.rec"], "unknown layout"),
+    (["simulate", "{clip}", "--layout", "kelly6", "--noise", "loud", "-o", "{tmp}/x.rec"], "noise preset"),
+    (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/no/such/dir/x.rec"], "does not exist"),
+    (["simulate", "{bad}", "--layout", "kelly6", "-o", "{tmp}/x.rec"], "{bad}"),
+    (["simulate", "{clip}", "--layout", "kelly6"], "required"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, clip, capsys, argv_tail, needle):
+    (tmp_path / "notes.txt").write_text("hello")
+    bad = tmp_path / "broken.bvh"
+    bad.write_text(clip.read_text().replace("MOTION", "MOTON"))
+    subs = {"{tmp}": str(tmp_path), "{clip}": str(clip), "{bad}": str(bad)}
+    argv = [a for a in argv_tail]
+    for k, v in subs.items():
+        argv = [a.replace(k, v) for a in argv]
+        needle = needle.replace(k, v)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(SystemExit) if "required" in needle else _noop():
+        code, out, err = run(argv, capsys)
+        assert code == 2
+        assert len(err.strip().splitlines()) == 1 and needle.lower() in err.lower()
+        assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+class _noop:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def test_console_script_exit_code_and_no_traceback(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "graphsvc.cli", "inspect", str(tmp_path / "nope.bvh")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
