@@ -6,32 +6,69 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
-from graphsvc.errors import GraphsvcError
+from graphsvc.errors import InputError
 
 
 @contextlib.contextmanager
-def atomic_path(path, suffix: str | None = None):
-    """Yield a temporary path in the target's folder; on success it replaces `path`.
-    `suffix` keeps tools that pick a format from the extension (matplotlib) happy."""
+def atomic_writer(path) -> Iterator[IO[bytes]]:
+    """Yield a binary file beside `path`; on normal exit it is flushed, fsynced and
+    renamed onto `path`. On any error the temporary file is removed and an existing
+    `path` is left untouched. A missing output folder raises InputError naming it."""
     path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = path.parent
     if not folder.is_dir():
-        raise GraphsvcError(f"output folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp")
-    os.close(fd)
+        raise InputError(f"{path}: output folder {folder} does not exist")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file")
+    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".tmp", delete=False)
     try:
-        yield Path(tmp)
-        with open(tmp, "rb+") as f:
+        with tmp as f:
+            yield f
+            f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        # NamedTemporaryFile creates 0600; give the result the mode a plain open()
+        # would (or keep the mode of the file it replaces).
+        os.chmod(tmp.name, _target_mode(path))
+        os.replace(tmp.name, path)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        with contextlib.suppress(OSError):
+            os.unlink(tmp.name)
         raise
+    _fsync_dir(folder)
+
+
+def _target_mode(path: Path) -> int:
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        return 0o666 & ~_umask()
+
+
+_UMASK: int | None = None
+
+
+def _umask() -> int:
+    global _UMASK
+    if _UMASK is None:  # os.umask can only be read by setting it; do it once
+        _UMASK = os.umask(0o022)
+        os.umask(_UMASK)
+    return _UMASK
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Make the rename itself durable (POSIX); harmless to skip where unsupported."""
+    with contextlib.suppress(OSError, AttributeError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def write_text_atomic(path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(text)
+    with atomic_writer(path) as f:
+        f.write(text.encode("utf-8"))

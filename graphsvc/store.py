@@ -39,19 +39,18 @@ that pass (fast open of a large trusted file) and then only structural damage
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import math
 import mmap as _mmap
 import os
 import struct
-import tempfile
 from pathlib import Path
-from typing import IO, Iterator, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
+from graphsvc.fileio import atomic_writer
 from graphsvc.errors import FormatError, InputError
 
 MAGIC = b"GRAPHSVC"
@@ -174,62 +173,6 @@ def read_header(path, verify: bool = False) -> dict:
 
 
 # ---------------------------------------------------------------- atomic output
-
-
-@contextlib.contextmanager
-def atomic_writer(path) -> Iterator[IO[bytes]]:
-    """Yield a binary file beside `path`; on normal exit it is flushed, fsynced and
-    renamed onto `path`. On any error the temporary file is removed and an existing
-    `path` is left untouched. A missing output folder raises InputError naming it."""
-    path = Path(path)
-    folder = path.parent
-    if not folder.is_dir():
-        raise InputError(f"{path}: output folder {folder} does not exist")
-    if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a file")
-    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".tmp", delete=False)
-    try:
-        with tmp as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        # NamedTemporaryFile creates 0600; give the result the mode a plain open()
-        # would (or keep the mode of the file it replaces).
-        os.chmod(tmp.name, _target_mode(path))
-        os.replace(tmp.name, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp.name)
-        raise
-    _fsync_dir(folder)
-
-
-def _target_mode(path: Path) -> int:
-    try:
-        return path.stat().st_mode & 0o7777
-    except OSError:
-        return 0o666 & ~_umask()
-
-
-_UMASK: int | None = None
-
-
-def _umask() -> int:
-    global _UMASK
-    if _UMASK is None:  # os.umask can only be read by setting it; do it once
-        _UMASK = os.umask(0o022)
-        os.umask(_UMASK)
-    return _UMASK
-
-
-def _fsync_dir(folder: Path) -> None:
-    """Make the rename itself durable (POSIX); harmless to skip where unsupported."""
-    with contextlib.suppress(OSError, AttributeError):
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 # ---------------------------------------------------------------- writing helpers

@@ -4,50 +4,60 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphsvc.fileio import atomic_path
+from graphsvc.fileio import atomic_writer
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.recording import Recording
 
 
 def plot_recording(rec: Recording, path, title: str = "", contacts: np.ndarray | None = None) -> None:
-    """One panel per sensor (x, y, z in g over time), then the ground track if any.
-    contacts: optional (T, 2) bool flags shaded behind the sensor panels."""
+    """One panel per sensor (x, y, z in g over time); a strip of foot contacts when
+    `contacts` ((T, 2) bool, left then right) is given; the ground track if any."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     S = rec.num_sensors
-    panels = S + (1 if rec.ground_position is not None else 0)
-    fig, axes = plt.subplots(panels, 1, figsize=(10, 1.6 * panels + 0.8), squeeze=False)
     t = rec.timestamps_s
+    heights = ([0.5] if contacts is not None else []) + [1.0] * S + ([2.0] if rec.ground_position is not None else [])
+    fig, axes = plt.subplots(
+        len(heights), 1, figsize=(10, 1.5 * sum(heights) + 0.8), squeeze=False,
+        gridspec_kw={"height_ratios": heights},
+    )  # fmt: skip
+    axes = list(axes[:, 0])
+    if contacts is not None:
+        ax = axes.pop(0)
+        for row, (side, colour) in enumerate((("left", "tab:blue"), ("right", "tab:orange"))):
+            ax.fill_between(t, 1 - row - 0.9, 1 - row - 0.1, where=contacts[:, row], color=colour, step="mid", linewidth=0)
+        ax.set_yticks([0.5, -0.5], ["left foot", "right foot"], fontsize=7)
+        ax.set_ylim(-1, 1)
+        ax.set_xlim(t[0], t[-1])
+        ax.tick_params(labelsize=7, labelbottom=False)
+        ax.set_title("foot contacts", fontsize=8, loc="left")
     for s in range(S):
-        ax = axes[s, 0]
-        if contacts is not None:
-            for side, colour in ((0, "#cfe8ff"), (1, "#ffe0c7")):
-                ax.fill_between(t, -100, 100, where=contacts[:, side], color=colour, step="mid", linewidth=0)
+        ax = axes[s]
         for k, colour in enumerate(("tab:red", "tab:green", "tab:blue")):
             ax.plot(t, rec.accelerations[:, s, k] / GRAVITY, color=colour, linewidth=0.8, label="xyz"[k])
         finite = rec.accelerations[:, s][np.isfinite(rec.accelerations[:, s])] / GRAVITY
         span = max(1.5, float(np.abs(finite).max()) * 1.1) if finite.size else 1.5
         ax.set_ylim(-span, span)
         ax.set_ylabel(f"{rec.sensor_names[s]}\n[g]", fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=7, labelbottom=s == S - 1)
         ax.set_xlim(t[0], t[-1])
         if s == 0:
             ax.legend(loc="upper right", fontsize=7, ncol=3)
+    axes[S - 1].set_xlabel("time [s]", fontsize=8)
     if rec.ground_position is not None:
-        ax = axes[-1, 0]
+        ax = axes[S]
         ax.plot(rec.ground_position[:, 0], rec.ground_position[:, 1], ".", markersize=1.5)
-        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_aspect("equal", adjustable="box")
         ax.set_xlabel("x [m]", fontsize=8)
-        ax.set_ylabel("z [m]", fontsize=8)
+        ax.set_ylabel("ground track\nz [m]", fontsize=8)
         ax.tick_params(labelsize=7)
-    axes[S - 1, 0].set_xlabel("time [s]", fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     # Fixed metadata: the same recording gives the same PNG bytes.
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=90, metadata={"Software": None})
+    with atomic_writer(path) as f:
+        fig.savefig(f, format="png", dpi=90, metadata={"Software": None})
     plt.close(fig)

@@ -51,7 +51,8 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.store import atomic_writer, read_container, write_container
+from graphsvc.fileio import atomic_writer
+from graphsvc.store import read_container, write_container
 
 KIND = "recording"
 FORMAT_VERSION = 1

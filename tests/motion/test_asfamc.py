@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.motion.asfamc import find_asf, read_amc, read_asf, read_asf_amc
+from graphsvc.motion.asfamc import find_asf, read_asf, read_asf_amc
 from graphsvc.motion.kinematics import motion_fk
 
 # Non-trivial axes, mixed axis orders and dof subsets/orders, a root order with

@@ -35,7 +35,7 @@ def test_constant_linear_acceleration_is_exact_at_every_frame_including_edges():
 
 
 def test_uniform_circular_motion_reads_centripetal_acceleration():
-    rate, radius, omega = 60.0, 0.5, 2.0 * np.pi * 0.5  # 0.5 turns/s
+    rate, omega = 60.0, 2.0 * np.pi * 0.5  # 0.5 turns/s
     m = still_motion(120, rate)
     t = np.arange(120) / rate
     # Spin the whole body about +Y through its pelvis while the pelvis stays still.
