@@ -4,7 +4,7 @@
 Prints one JSON object: frames, contact-change frames, kd-tree candidate pairs,
 transitions found and seconds per stage. Usage:
 
-    tools/probe_transitions.py [PATHS...] [--threshold 0.08] [--k K] [--bruteforce]
+    tools/probe_transitions.py [PATHS...] [--threshold 0.05] [--k K] [--max-per-source M] [--bruteforce]
 
 PATHS are files, folders or glob patterns (default ../shared/data/bandai). Loading,
 FK, features and contacts are timed separately from the search; the data is only
@@ -24,12 +24,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from graphsvc.graph import transitions as tr  # noqa: E402
-from graphsvc.graph.distance import concat_features, pose_features, window_frames  # noqa: E402
-from graphsvc.motion import signals  # noqa: E402
-from graphsvc.motion.joints import canonical_indices, joint_map  # noqa: E402
-from graphsvc.motion.kinematics import motion_fk  # noqa: E402
-from graphsvc.motion.library import find_motion_files, load_motion  # noqa: E402
+from graphsvc.graph import transitions as tr
+from graphsvc.graph.distance import concat_features, pose_features, window_frames
+from graphsvc.motion import signals
+from graphsvc.motion.joints import canonical_indices, joint_map
+from graphsvc.motion.kinematics import motion_fk
+from graphsvc.motion.library import find_motion_files, load_motion
 
 
 def prepare(path):
@@ -49,6 +49,7 @@ def main() -> None:
     parser.add_argument("--k", type=int, default=None, help="cap on kd-tree neighbours per frame")
     parser.add_argument("--exclude-within", type=int, default=tr.DEFAULT_EXCLUDE_WITHIN)
     parser.add_argument("--local-min-radius", type=int, default=tr.DEFAULT_LOCAL_MIN_RADIUS)
+    parser.add_argument("--max-per-source", type=int, default=None)
     parser.add_argument("--bruteforce", action="store_true", help="also run the all-pairs reference")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
@@ -64,7 +65,8 @@ def main() -> None:
     lengths = np.array([c[0].num_frames for c in clips])
     clip_of_frame = np.repeat(np.arange(len(clips)), lengths)
     frame_in_clip = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    rules = dict(exclude_same_clip_within=args.exclude_within, local_min_radius=args.local_min_radius)
+    rules = {"exclude_same_clip_within": args.exclude_within, "local_min_radius": args.local_min_radius,
+                 "max_per_source": args.max_per_source}
 
     t2 = time.perf_counter()
     fr = tr.kb_frames(features, contacts, changes, clip_of_frame, frame_in_clip, lengths)
@@ -84,6 +86,7 @@ def main() -> None:
         "transitions": len(found),
         "cross_clip": int(np.sum(src_clip != dst_clip)),
         "clips_with_out_edge": int(np.unique(src_clip).size),
+        "clips_without_changes": int(np.sum(np.bincount(clip_of_frame[fr.is_change], minlength=len(clips)) == 0)),
         "distance_m_quantiles": [round(float(q), 4) for q in np.quantile(found.distance, [0.1, 0.5, 0.9])]
         if len(found) else [],
         "load_fk_features_s": round(t1 - t0, 3),
