@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 from graphsvc.errors import GraphsvcError
@@ -66,6 +67,45 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _cmd_build(args) -> int:
+    from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
+    from graphsvc.graph.file import save_graph
+    from graphsvc.graph.model import format_summary, summary
+    from graphsvc.sensors.layout import load_layout
+
+    out = Path(args.output)
+    _check_output(out)
+    progress = False if args.quiet else None
+    augment = tuple(a for a in (args.augment or "").split(",") if a)
+    options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
+                           interp=not args.no_interp, augment=augment, jobs=args.jobs, progress=progress)  # fmt: skip
+    t0 = time.perf_counter()
+    motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
+    load_s = time.perf_counter() - t0
+    graph, report = build_graph(motions, options)
+    t0 = time.perf_counter()
+    save_graph(graph, out)
+    timings = {"load_s": load_s, **report.timings, "write_s": time.perf_counter() - t0}
+    print(f"wrote {out}")
+    print(format_summary(summary(graph, out.stat().st_size)))
+    if report.still_clips:
+        print(f"{len(report.still_clips)} clips without foot-contact changes get transition candidates every "
+              f"{options.still_clip_step_s:g} s")  # fmt: skip
+    print("times: " + ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in timings.items()) + f" (total {sum(timings.values()):.2f} s)")
+    return 0
+
+
+def _cmd_info(args) -> int:
+    from graphsvc.graph.file import load_graph
+    from graphsvc.graph.model import format_summary, summary
+
+    graph = load_graph(args.graph)
+    info = summary(graph, Path(args.graph).stat().st_size)
+    info["params"] = graph.params
+    print(json.dumps(info, indent=2, sort_keys=True) if args.json else format_summary(info))
+    return 0
+
+
 def _check_output(path: Path) -> None:
     if not path.parent.exists() or not path.parent.is_dir():
         raise GraphsvcError(f"output folder {path.parent} does not exist")
@@ -92,6 +132,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons")
     p.add_argument("-o", "--output", required=True, metavar="REC", help="output .rec (or .csv)")
     p.set_defaults(run=_cmd_simulate)
+
+    p = sub.add_parser("build", help="build a motion graph from a knowledge base")
+    p.add_argument("kb", nargs="+", metavar="KB", help="motion files, folders or globs (.bvh, .amc)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p.add_argument("--rate", type=float, default=30.0, metavar="HZ", help="graph rate (default 30)")
+    p.add_argument("--layout", default="wrists-ankles", help="sensor layout for the edge metadata")
+    p.add_argument("--no-msv", action="store_true", help="no slow-down nodes or speed-up edges")
+    p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
+    p.add_argument("--exclude", action="append", metavar="GLOB", help="leave out matching files (repeatable)")
+    p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N", help="threads for loading and preparing clips")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=_cmd_build)
+
+    p = sub.add_parser("info", help="describe a graph file")
+    p.add_argument("graph", metavar="FILE")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(run=_cmd_info)
 
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")

@@ -53,6 +53,8 @@ def test_simulate_csv_output(tmp_path, clip, capsys):
     assert code == 0
     lines = out_csv.read_text().splitlines()
     assert lines[0].startswith("#") and sum(not line.startswith("#") for line in lines) == 41
+    code, out, _ = run(["inspect", str(out_csv)], capsys)
+    assert code == 0 and "40 samples of 1 sensors (r_wrist)" in out
 
 
 @pytest.mark.parametrize("argv_tail, needle", [

@@ -1,0 +1,364 @@
+"""Offline motion-graph builder (SPEC §3, K §4).
+
+Stages, each over flat arrays: prepare clips (resample to the graph rate, FK,
+contacts, pose features, sensor readings at three speeds) → transitions (kd-tree
+indexed, contact-constrained) → speed variations → edges with metadata → sort.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from graphsvc.errors import InputError, SkeletonError
+from graphsvc.graph import metadata as meta
+from graphsvc.graph.distance import DEFAULT_WINDOW_S, PoseFeatures, concat_features, pose_features, window_frames
+from graphsvc.graph.model import (
+    EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_ORIGINAL, NODE_SLOW,
+    MotionGraph, incoming_offsets,
+)  # fmt: skip
+from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
+from graphsvc.motion import signals
+from graphsvc.motion.joints import CANONICAL, joint_map
+from graphsvc.motion.kinematics import forward_kinematics, motion_fk
+from graphsvc.motion.resample import resample
+from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
+from graphsvc.sensors.layout import Layout, place
+
+FORMAT_PARAMS = ("rate_hz", "layout", "msv", "interp", "transition_threshold_m", "window_s",
+                 "max_transitions_per_frame", "still_clip_step_s", "augment")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """rate_hz: graph rate. transition_threshold_m: RMS point-cloud distance (m).
+    window_s: distance window. max_transitions_per_frame: cap on a frame's
+    transitions (None: all local minima). still_clip_step_s: clips without any
+    contact change (gestures with both feet planted) offer a transition candidate
+    every this many seconds, or they could never be entered or left. jobs: threads
+    for clip preparation (does not change the result)."""
+
+    rate_hz: float = 30.0
+    layout: Layout | None = None
+    msv: bool = True
+    interp: bool = True
+    transition_threshold_m: float = DEFAULT_THRESHOLD_M
+    window_s: float = DEFAULT_WINDOW_S
+    max_transitions_per_frame: int | None = 8
+    still_clip_step_s: float = 0.2
+    augment: tuple[str, ...] = ()
+    jobs: int = 1
+    progress: bool | None = None  # None: only on a terminal
+
+
+@dataclass
+class PreparedClip:
+    """One KB clip at the graph rate, with everything the graph needs (F frames)."""
+
+    motion: Motion
+    world_pos: np.ndarray  # (F, J, 3)
+    contacts: np.ndarray  # (F, 2) bool
+    changes: np.ndarray  # (F,) bool
+    ground: np.ndarray  # (F, 2)
+    heading: np.ndarray  # (F,)
+    features: PoseFeatures
+    readings: meta.SpeedReadings
+    half_ground: np.ndarray  # (2F−1, 2)
+    half_heading: np.ndarray  # (2F−1,)
+    half_rotations: np.ndarray  # (2F−1, J, 4)
+    half_translations: np.ndarray  # (2F−1, J, 3)
+    digest: str = ""
+
+
+@dataclass
+class BuildReport:
+    timings: dict = field(default_factory=dict)
+    still_clips: list = field(default_factory=list)
+    transitions: int = 0
+
+
+def content_digest(motion: Motion) -> str:
+    """sha256 of the source file when there is one, else of the motion's arrays."""
+    h = hashlib.sha256()
+    src = Path(motion.source) if motion.source else None
+    if src is not None and src.is_file():
+        h.update(src.read_bytes())
+    else:
+        h.update(np.ascontiguousarray(motion.rotations).tobytes())
+        h.update(np.ascontiguousarray(motion.translations).tobytes())
+    return h.hexdigest()
+
+
+def check_knowledge_base(motions: list[Motion], window: int, rate_hz: float) -> None:
+    """One topology, finite values, every clip at least one distance window long."""
+    if not motions:
+        raise InputError("the knowledge base is empty: no motion files given or found")
+    first = motions[0]
+    for m in motions:
+        check_finite(m)
+        if m.skeleton.names != first.skeleton.names or not np.array_equal(m.skeleton.parents, first.skeleton.parents):
+            raise SkeletonError(
+                f"the knowledge base mixes skeleton topologies: {first.source or first.name} and "
+                f"{m.source or m.name} differ (one topology per graph)"
+            )
+        frames = int(np.floor((m.num_frames - 1) * rate_hz / m.rate_hz + 1e-9)) + 1
+        if frames < max(window, 3):
+            raise InputError(
+                f"{m.source or m.name}: {frames} frames at {rate_hz:g} Hz, shorter than the "
+                f"distance window of {window} frames"
+            )
+
+
+def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int) -> PreparedClip:
+    motion = resample(motion, rate_hz)
+    sk = motion.skeleton
+    table = joint_map(sk)
+    _, world_pos = motion_fk(motion)
+    contacts = signals.foot_contacts(world_pos, table, rate_hz)
+    ground, heading = meta.ground_and_heading(world_pos, table)
+    canon = world_pos[:, [table[c] for c in CANONICAL]]
+    placement = place(layout, sk)
+    readings = meta.speed_readings(motion.rotations, motion.translations, sk.parents, placement, rate_hz)
+    half_rot, half_trans = meta.half_speed_poses(motion.rotations, motion.translations)
+    _, half_pos = forward_kinematics(half_rot, half_trans, sk.parents)
+    half_ground, half_heading = meta.ground_and_heading(half_pos, table)
+    return PreparedClip(
+        motion=motion, world_pos=world_pos, contacts=contacts, changes=signals.contact_changes(contacts),
+        ground=ground, heading=heading, features=pose_features(canon, window), readings=readings,
+        half_ground=half_ground, half_heading=half_heading, half_rotations=half_rot,
+        half_translations=half_trans, digest=content_digest(motion),
+    )  # fmt: skip
+
+
+def standard_skeleton(motions: list[Motion]) -> Skeleton:
+    """The KB topology with bone offsets averaged over clips (SPEC §1, T §3)."""
+    sk = motions[0].skeleton
+    offsets = np.mean([m.skeleton.offsets for m in motions], axis=0)
+    return Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
+
+
+class _Edges:
+    """Edge lists gathered per kind, concatenated once at the end."""
+
+    def __init__(self):
+        self.parts: list[tuple] = []
+
+    def add(self, src, dst, kind, acc, offset, dheading):
+        n = len(src)
+        if n:
+            self.parts.append((np.asarray(src, np.int64), np.asarray(dst, np.int64), np.full(n, kind, np.uint8),
+                               acc.astype(np.float32), offset.astype(np.float32), dheading.astype(np.float32)))  # fmt: skip
+
+    def arrays(self, S: int):
+        if not self.parts:
+            return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.uint8),
+                    np.zeros((0, S, 3), np.float32), np.zeros((0, 2), np.float32), np.zeros(0, np.float32))  # fmt: skip
+        return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
+
+
+def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGraph, BuildReport]:
+    """Build the motion graph of a knowledge base (already loaded and augmented)."""
+    from graphsvc.sensors.layout import PRESETS
+
+    layout = options.layout or PRESETS["wrists-ankles"]
+    rate = float(options.rate_hz)
+    if not (np.isfinite(rate) and rate > 0):
+        raise InputError(f"graph rate must be positive, got {rate}")
+    window = window_frames(rate, options.window_s)
+    check_knowledge_base(motions, window, rate)
+    joint_map(motions[0].skeleton)  # unknown skeleton: fail before any work
+    place(layout, motions[0].skeleton)  # layout naming missing joints: same
+    report = BuildReport()
+    bar = lambda it, **kw: tqdm(it, disable=None if options.progress is None else not options.progress, **kw)  # noqa: E731
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max_workers=max(1, options.jobs)) as pool:
+        clips = list(bar(pool.map(lambda m: prepare_clip(m, rate, layout, window), motions),
+                         total=len(motions), desc="clips", unit="clip"))  # fmt: skip
+    report.timings["prepare_s"] = time.perf_counter() - t0
+
+    C = len(clips)
+    lengths = np.array([c.motion.num_frames for c in clips], dtype=np.int64)
+    start = np.zeros(C + 1, dtype=np.int64)
+    np.cumsum(lengths, out=start[1:])
+    N0 = int(start[-1])
+    clip_of_frame = np.repeat(np.arange(C), lengths)
+    frame_in_clip = np.arange(N0) - start[clip_of_frame]
+    contacts = np.concatenate([c.contacts for c in clips])
+    changes = np.concatenate([c.changes for c in clips])
+    ground = np.concatenate([c.ground for c in clips])
+    heading = np.concatenate([c.heading for c in clips])
+    normal = np.concatenate([c.readings.normal for c in clips])
+    S = normal.shape[1]
+
+    # Clips where the feet never change contact (waving, bowing) would be islands:
+    # offer regularly spaced candidates there instead of contact changes.
+    candidates = changes.copy()
+    step = max(1, int(round(options.still_clip_step_s * rate)))
+    for c, clip in enumerate(clips):
+        if not clip.changes[1:].any():
+            report.still_clips.append(clip.motion.name)
+            frames = np.arange(step, lengths[c] - 1, step)
+            candidates[start[c] + frames] = True
+    if not candidates.any():
+        raise InputError("no clip of the knowledge base has a foot-contact change: no transitions possible")
+
+    t0 = time.perf_counter()
+    scale = rate / 30.0  # the transition search's frame radii are tuned at 30 Hz
+    trans = find_transitions(
+        concat_features([c.features for c in clips]), contacts, candidates, clip_of_frame, frame_in_clip, lengths,
+        threshold_m=options.transition_threshold_m,
+        exclude_same_clip_within=max(1, int(round(10 * scale))),
+        local_min_radius=max(1, int(round(5 * scale))),
+        max_per_source=options.max_transitions_per_frame,
+    )  # fmt: skip
+    report.transitions = len(trans)
+    report.timings["transitions_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    edges = _Edges()
+    # Original edges: f → f+1 within each clip, reading the clip's own stream.
+    has_next = frame_in_clip < lengths[clip_of_frame] - 1
+    src = np.nonzero(has_next)[0]
+    off, dh = meta.local_offsets(ground[src], heading[src], ground[src + 1], heading[src + 1])
+    edges.add(src, src + 1, EDGE_ORIGINAL, normal[src + 1], off, dh)
+
+    # Transitions i → j+1: continue as j's clip continues, placed by the alignment
+    # that takes j's window onto i's.
+    i, j = trans.src, trans.dst
+    dst_ground = meta.rotate_ground(ground[j + 1], trans.theta, trans.translation)
+    off, dh = meta.local_offsets(ground[i], heading[i], dst_ground, heading[j + 1] + trans.theta)
+    edges.add(i, j + 1, EDGE_TRANSITION, normal[j + 1], off, dh)
+
+    node_parts = {"kind": [np.full(N0, NODE_ORIGINAL, np.uint8)], "clip": [clip_of_frame.astype(np.int32)],
+                  "frame": [frame_in_clip.astype(np.float32)], "contacts": [contacts],
+                  "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
+                  "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
+                  "ground": [ground.astype(np.float32)], "heading": [heading.astype(np.float32)]}  # fmt: skip
+    if options.msv:
+        next_node = N0
+        for c, clip in enumerate(clips):
+            next_node = _add_speed_variations(clip, int(start[c]), c, next_node, edges, node_parts)
+    report.timings["edges_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    e_src, e_dst, e_kind, e_acc, e_off, e_dh = edges.arrays(S)
+    # Sort by destination, then source, then kind; drop duplicate (src, dst) pairs
+    # (a transition onto the next frame duplicates the original edge) keeping the
+    # lowest kind, so the order never depends on how edges were gathered.
+    order = np.lexsort((e_kind, e_src, e_dst))
+    e_src, e_dst = e_src[order], e_dst[order]
+    keep = np.ones(len(order), dtype=bool)
+    keep[1:] = (e_src[1:] != e_src[:-1]) | (e_dst[1:] != e_dst[:-1])
+    order = order[keep]
+    N = sum(len(k) for k in node_parts["kind"])
+    labels = sorted({_content(m.motion) for m in clips})
+    label_of_clip = np.array([labels.index(_content(c.motion)) for c in clips], dtype=np.int32)
+    node_clip = np.concatenate(node_parts["clip"])
+    graph = MotionGraph(
+        rate_hz=rate,
+        skeleton=standard_skeleton([c.motion for c in clips]),
+        layout=layout.to_dict(),
+        clips=[{"name": c.motion.name, "source": c.motion.source, "sha256": c.digest, "frames": int(lengths[k]),
+                "first_node": int(start[k]), "labels": list(c.motion.labels) or [c.motion.name]}
+               for k, c in enumerate(clips)],  # fmt: skip
+        labels=tuple(labels),
+        params={k: v for k, v in _params(options, layout, window).items()},
+        clip_offsets=np.stack([c.motion.skeleton.offsets for c in clips]),
+        node_kind=np.concatenate(node_parts["kind"]),
+        node_clip=node_clip,
+        node_frame=np.concatenate(node_parts["frame"]),
+        node_contacts=np.concatenate(node_parts["contacts"]),
+        node_label=label_of_clip[node_clip],
+        node_rotations=np.concatenate(node_parts["rot"]),
+        node_translations=np.concatenate(node_parts["trans"]),
+        node_ground=np.concatenate(node_parts["ground"]),
+        node_heading=np.concatenate(node_parts["heading"]),
+        edge_src=e_src[keep].astype(np.int32),
+        edge_dst=e_dst[keep].astype(np.int32),
+        edge_kind=e_kind[order],
+        edge_acc=e_acc[order],
+        edge_offset=e_off[order],
+        edge_heading=e_dh[order],
+        incoming=incoming_offsets(e_dst[keep], N),
+    )
+    report.timings["assemble_s"] = time.perf_counter() - t0
+    return graph, report
+
+
+def _content(motion: Motion) -> str:
+    return motion.labels[0] if motion.labels else motion.name
+
+
+def _params(options: BuildOptions, layout: Layout, window: int) -> dict:
+    d = asdict(options)
+    d["layout"] = layout.name
+    d["window_frames"] = window
+    d["augment"] = list(options.augment)
+    for k in ("jobs", "progress"):  # do not change the graph: keep them out of the file
+        d.pop(k)
+    return d
+
+
+def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_node: int, edges: _Edges, parts) -> int:
+    """Slow-down nodes between frames f and f+1 and speed-up edges f → f+2 (K §4.1),
+    never where a frame involved has both feet off the ground (gravity would play
+    at half or double strength). Returns the next free node index."""
+    F = clip.motion.num_frames
+    grounded = clip.contacts.any(axis=1)
+    r = clip.readings
+    # Slow-down: o_f → s_f → o_{f+1}, along the half-speed timeline.
+    f = np.nonzero(grounded[:-1] & grounded[1:])[0]
+    s = next_node + np.arange(len(f))
+    hg, hh = clip.half_ground, clip.half_heading
+    off_in, dh_in = meta.local_offsets(hg[2 * f], hh[2 * f], hg[2 * f + 1], hh[2 * f + 1])
+    off_out, dh_out = meta.local_offsets(hg[2 * f + 1], hh[2 * f + 1], hg[2 * f + 2], hh[2 * f + 2])
+    edges.add(first + f, s, EDGE_SLOW, r.half[2 * f + 1], off_in, dh_in)
+    edges.add(s, first + f + 1, EDGE_SLOW, r.half[2 * f + 2], off_out, dh_out)
+    parts["kind"].append(np.full(len(f), NODE_SLOW, np.uint8))
+    parts["clip"].append(np.full(len(f), clip_index, np.int32))
+    parts["frame"].append((f + 0.5).astype(np.float32))
+    parts["contacts"].append(clip.contacts[f] & clip.contacts[f + 1])
+    parts["rot"].append(clip.half_rotations[2 * f + 1].astype(np.float32))
+    parts["trans"].append(clip.half_translations[2 * f + 1].astype(np.float32))
+    parts["ground"].append(hg[2 * f + 1].astype(np.float32))
+    parts["heading"].append(hh[2 * f + 1].astype(np.float32))
+    # Speed-up: o_f → o_{f+2}, reading the double-speed playback.
+    if F >= 3:
+        g = np.nonzero(grounded[:-2] & grounded[1:-1] & grounded[2:])[0]
+        off, dh = meta.local_offsets(clip.ground[g], clip.heading[g], clip.ground[g + 2], clip.heading[g + 2])
+        edges.add(first + g, first + g + 2, EDGE_SPEEDUP, r.double[g + 2], off, dh)
+    return next_node + len(f)
+
+
+def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
+                        progress: bool | None = None) -> list[Motion]:  # fmt: skip
+    """Load KB files/folders/globs, then add the requested augmented copies
+    (`mirror`: left/right mirror images, `reverse`: time-reversed clips; OLNG paper)."""
+    from graphsvc.motion.library import find_motion_files, load_motion
+
+    unknown = sorted(set(augment) - {"mirror", "reverse"})
+    if unknown:
+        raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
+    files = find_motion_files(list(paths), exclude=list(exclude))
+    if not files:
+        raise InputError("the knowledge base is empty: no .bvh or .amc files matched")
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
+                            disable=None if progress is None else not progress))  # fmt: skip
+    if augment:
+        from graphsvc.motion import augment as aug
+
+        extra = []
+        if "mirror" in augment:
+            extra += [aug.mirror_motion(m) for m in motions]
+        if "reverse" in augment:
+            extra += [aug.reverse_motion(m) for m in motions + extra]
+        motions = motions + extra
+    return motions

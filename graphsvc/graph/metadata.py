@@ -1,0 +1,108 @@
+"""Edge metadata (K §4.3): sensor readings and root offsets of playing an edge.
+
+A node can be reached at three playback speeds: normal (an original edge or a
+transition), half (through a slow-down node) and double (a speed-up edge). For each
+clip we simulate the layout's sensors on the clip itself, on the clip resampled to
+twice the rate but played at the graph rate (half speed), and on every other frame
+(double speed); an edge's reading is the reading of its destination at the edge's
+speed. Original edges therefore reproduce the clip's simulated stream exactly, and
+a transition — only allowed between frames whose windowed poses match — reads what
+its destination reads in its own clip.
+
+The same functions run at build time on the clips' float64 poses and later on the
+graph's stored float32 poses, for another layout (`recompute_accelerations`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from graphsvc.motion import quat, signals
+from graphsvc.motion.kinematics import forward_kinematics
+from graphsvc.motion.resample import resample_arrays
+from graphsvc.sensors.accelerometer import simulate_accelerations
+from graphsvc.sensors.layout import Placement
+
+
+@dataclass(frozen=True)
+class SpeedReadings:
+    """Readings (m/s², float32) of one clip of F frames: normal (F, S, 3); half
+    (2F−1, S, 3) along the half-speed timeline (even rows are original frames, odd
+    rows the slow-down poses); double (F, S, 3): frame g in the double-speed
+    playback through frames of g's parity."""
+
+    normal: np.ndarray
+    half: np.ndarray
+    double: np.ndarray
+
+
+def half_speed_poses(rotations: np.ndarray, translations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(2F−1, J, 4), (2F−1, J, 3): the clip with a slerped pose between every pair of
+    frames (rows 2f are frame f, rows 2f+1 the slow-down pose between f and f+1)."""
+    if rotations.shape[0] < 2:
+        return rotations.copy(), translations.copy()
+    return resample_arrays(rotations, translations, 1.0, 2.0)
+
+
+def speed_readings(
+    rotations: np.ndarray, translations: np.ndarray, parents: np.ndarray, placement: Placement, rate_hz: float
+) -> SpeedReadings:
+    """Sensor readings of one clip at the three playback speeds."""
+    F = rotations.shape[0]
+    normal = simulate_accelerations(*forward_kinematics(rotations, translations, parents), placement, rate_hz)
+    half_rot, half_trans = half_speed_poses(rotations, translations)
+    half = simulate_accelerations(*forward_kinematics(half_rot, half_trans, parents), placement, rate_hz)
+    double = np.empty_like(normal)
+    for parity in (0, 1):
+        rows = np.arange(parity, F, 2)
+        if rows.size:
+            double[rows] = simulate_accelerations(
+                *forward_kinematics(rotations[rows], translations[rows], parents), placement, rate_hz
+            )
+    return SpeedReadings(normal, half, double)
+
+
+def ground_and_heading(world_pos: np.ndarray, joints: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 2) root ground positions (m) and (F,) headings (rad) from world positions."""
+    return signals.ground_position(world_pos, joints["pelvis"]), signals.heading(world_pos, joints)
+
+
+def local_offsets(
+    ground_src: np.ndarray, heading_src: np.ndarray, ground_dst: np.ndarray, heading_dst: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ground displacement src → dst in src's local frame (K, 2) (m; facing +Z, left
+    +X) and the wrapped heading change (K,) (rad)."""
+    delta = ground_dst - ground_src
+    c, s = np.cos(heading_src), np.sin(heading_src)
+    # R_y(−h)·(x, z) = (c·x − s·z, s·x + c·z) turns the facing direction onto +Z.
+    local = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], axis=-1)
+    return local, quat.wrap_angle(heading_dst - heading_src)
+
+
+def apply_offsets(ground: np.ndarray, heading: float, offset: np.ndarray, dheading: float) -> tuple[np.ndarray, float]:
+    """Inverse of `local_offsets` for one step: the destination's ground position
+    and heading given the source's and an edge's offsets."""
+    c, s = np.cos(heading), np.sin(heading)
+    world = np.array([c * offset[0] + s * offset[1], -s * offset[0] + c * offset[1]])
+    return ground + world, float(quat.wrap_angle(heading + dheading))
+
+
+def integrate_path(
+    ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets."""
+    K = offsets.shape[0]
+    ground = np.empty((K + 1, 2))
+    heading = np.empty(K + 1)
+    ground[0], heading[0] = ground0, heading0
+    for k in range(K):
+        ground[k + 1], heading[k + 1] = apply_offsets(ground[k], heading[k], offsets[k], dheadings[k])
+    return ground, heading
+
+
+def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """R_y(θ)·(x, z) + t for (K, 2) points, (K,) angles, (K, 2) translations."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], axis=-1) + translation

@@ -1,0 +1,131 @@
+"""The motion graph as flat arrays (SPEC §3).
+
+Nodes are poses: every knowledge-base frame (original), half-way frames for playing
+slower (slow-down), and blends of similar segments (interpolated). Each node keeps
+its full local pose, so sensor metadata for any layout can be recomputed from the
+graph alone (`graph.metadata.recompute_accelerations`).
+
+An edge m → n says "after pose m, pose n may follow, one sample later". Its metadata
+(K §4.3): the accelerations the layout's sensors read on arriving at n that way
+(S × 3, m/s², sensor frames), the root's ground displacement expressed in m's local
+frame (metres; local frame: facing +Z, left +X), and the heading change (radians).
+Edges are sorted by destination then source, so a node's incoming edges are one
+contiguous run (`incoming`, CSR offsets) — the access pattern of the Viterbi search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from graphsvc.motion.skeleton import Skeleton
+
+NODE_ORIGINAL, NODE_SLOW, NODE_INTERP = 0, 1, 2
+NODE_KINDS = ("original", "slow-down", "interpolated")
+EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, EDGE_INTERP = 0, 1, 2, 3, 4
+EDGE_KINDS = ("original", "slow-down", "speed-up", "transition", "interpolated")
+
+
+@dataclass(eq=False)
+class MotionGraph:
+    """Node arrays have N rows, edge arrays E rows; J joints, S sensors, C clips.
+
+    node_kind (N,) uint8; node_clip (N,) int32 source clip; node_frame (N,) float32
+    source frame (x.5 for slow-down nodes); node_contacts (N, 2) bool (left, right);
+    node_label (N,) int32 into `labels`; node_rotations (N, J, 4) float32 local
+    quaternions; node_translations (N, J, 3) float32 local translations (m);
+    node_ground (N, 2) float32 root ground position (x, z) in its source clip (m);
+    node_heading (N,) float32 (rad).
+    edge_src, edge_dst (E,) int32; edge_kind (E,) uint8; edge_acc (E, S, 3) float32
+    (m/s²); edge_offset (E, 2) float32 (m, in the source node's local frame);
+    edge_heading (E,) float32 (rad); incoming (N + 1,) int64 CSR offsets by destination.
+    clip_offsets (C, J, 3) float64: each clip's skeleton offsets (sensor placement).
+    """
+
+    rate_hz: float
+    skeleton: Skeleton
+    layout: dict
+    clips: list[dict]
+    labels: tuple[str, ...]
+    params: dict
+    clip_offsets: np.ndarray
+    node_kind: np.ndarray
+    node_clip: np.ndarray
+    node_frame: np.ndarray
+    node_contacts: np.ndarray
+    node_label: np.ndarray
+    node_rotations: np.ndarray
+    node_translations: np.ndarray
+    node_ground: np.ndarray
+    node_heading: np.ndarray
+    edge_src: np.ndarray
+    edge_dst: np.ndarray
+    edge_kind: np.ndarray
+    edge_acc: np.ndarray
+    edge_offset: np.ndarray
+    edge_heading: np.ndarray
+    incoming: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def num_nodes(self) -> int:
+        return int(self.node_kind.shape[0])
+
+    @property
+    def num_edges(self) -> int:
+        return int(self.edge_src.shape[0])
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        return tuple(s["name"] for s in self.layout["sensors"])
+
+    def out_degree(self) -> np.ndarray:
+        return np.bincount(self.edge_src, minlength=self.num_nodes)
+
+
+def incoming_offsets(edge_dst: np.ndarray, num_nodes: int) -> np.ndarray:
+    """CSR offsets (N + 1,) of edges sorted by destination."""
+    out = np.zeros(num_nodes + 1, dtype=np.int64)
+    np.cumsum(np.bincount(edge_dst, minlength=num_nodes), out=out[1:])
+    return out
+
+
+def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
+    """What `graphsvc info` reports (the columns of K's Table 2 and more)."""
+    nodes = {k: int(np.sum(graph.node_kind == i)) for i, k in enumerate(NODE_KINDS)}
+    edges = {k: int(np.sum(graph.edge_kind == i)) for i, k in enumerate(EDGE_KINDS)}
+    original_frames = nodes["original"]
+    out = {
+        "nodes": graph.num_nodes,
+        "edges": graph.num_edges,
+        "nodes_by_kind": nodes,
+        "edges_by_kind": edges,
+        "dead_ends": int(np.sum(graph.out_degree() == 0)),
+        "clips": len(graph.clips),
+        "kb_frames": original_frames,
+        "kb_minutes": round(original_frames / graph.rate_hz / 60.0, 3),
+        "labels": list(graph.labels),
+        "layout": graph.layout["name"],
+        "sensors": list(graph.sensor_names),
+        "rate_hz": graph.rate_hz,
+        "joints": graph.skeleton.num_joints,
+    }
+    if file_size is not None:
+        out["file_bytes"] = int(file_size)
+    return out
+
+
+def format_summary(s: dict) -> str:
+    kinds = lambda d: ", ".join(f"{k} {v:,}" for k, v in d.items())  # noqa: E731
+    lines = [
+        f"nodes {s['nodes']:,} ({kinds(s['nodes_by_kind'])})",
+        f"edges {s['edges']:,} ({kinds(s['edges_by_kind'])})",
+        f"dead ends {s['dead_ends']:,}; clips {s['clips']}, {s['kb_frames']:,} frames "
+        f"({s['kb_minutes']:.1f} min) at {s['rate_hz']:g} Hz, {s['joints']} joints",
+        f"layout {s['layout']} ({', '.join(s['sensors'])})",
+        f"labels: {', '.join(s['labels'])}",
+    ]
+    if "file_bytes" in s:
+        lines.append(f"file size {s['file_bytes'] / 2**20:.1f} MiB")
+    return "\n".join(lines)

@@ -1,0 +1,77 @@
+"""`graphsvc build` and `graphsvc info` end to end, bad input included."""
+
+import json
+
+import pytest
+
+from graphsvc.cli import main
+from graphsvc.motion.bvh import write_bvh
+from graphsvc.motion.procedural import generate_knowledge_base
+
+
+@pytest.fixture(scope="module")
+def kb_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("kb")
+    for clip in generate_knowledge_base(seed=5, minutes=0.8):
+        write_bvh(folder / f"{clip.name}.bvh", clip, scale=100.0)
+    return folder
+
+
+def test_build_then_info(kb_dir, tmp_path, capsys):
+    out = tmp_path / "kb.graph"
+    assert main(["build", str(kb_dir), "-o", str(out), "--layout", "kelly6", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "transition" in printed and "times:" in printed
+    assert main(["info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["layout"] == "kelly6" and info["nodes"] > info["kb_frames"] > 0
+    assert info["file_bytes"] == out.stat().st_size
+    assert set(info["labels"]) <= {"walk", "run", "stop", "idle", "forehand", "backhand", "overhead", "punch"}
+
+
+def test_exclude_and_no_msv(kb_dir, tmp_path, capsys):
+    out = tmp_path / "small.graph"
+    assert main(["build", str(kb_dir), "--exclude", "run_*", "--no-msv", "-o", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    main(["info", str(out), "--json"])
+    info = json.loads(capsys.readouterr().out)
+    assert "run" not in info["labels"] and info["nodes_by_kind"]["slow-down"] == 0
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("empty", "empty"),
+    ("missing-folder", "does not exist"),
+    ("layout", "unknown layout"),
+    ("short", "shorter than the distance window"),
+    ("corrupt-info", "corrupted"),
+])
+def test_bad_input_exit_2_no_file(kb_dir, tmp_path, capsys, case, needle):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "g.graph"
+    argv = ["build", str(kb_dir), "-o", str(out), "--quiet"]
+    if case == "empty":
+        argv[1] = str(empty)
+    elif case == "missing-folder":
+        argv[3] = str(tmp_path / "nope" / "g.graph")
+    elif case == "layout":
+        argv += ["--layout", "elbows"]
+    elif case == "short":
+        text = sorted(kb_dir.glob("*.bvh"))[0].read_text()
+        head, frames = text.split("MOTION\n")
+        lines = frames.splitlines()
+        short = head + "MOTION\nFrames: 3\n" + lines[1] + "\n" + "\n".join(lines[2:5]) + "\n"
+        (empty / "tiny.bvh").write_text(short)
+        argv = ["build", str(kb_dir), str(empty / "tiny.bvh"), "-o", str(out), "--quiet"]
+    elif case == "corrupt-info":
+        assert main(argv) == 0
+        capsys.readouterr()
+        data = bytearray(out.read_bytes())
+        data[len(data) // 2] ^= 1
+        out.write_bytes(data)
+        argv = ["info", str(out)]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+    if case != "corrupt-info":
+        assert not out.exists() and not list(tmp_path.glob(".g.graph*"))
