@@ -18,21 +18,23 @@ from tqdm import tqdm
 
 from graphsvc.errors import InputError, SkeletonError
 from graphsvc.graph import metadata as meta
-from graphsvc.graph.distance import DEFAULT_WINDOW_S, PoseFeatures, concat_features, pose_features, window_frames
+from graphsvc.graph import interpolation as interp
+from graphsvc.graph.distance import (
+    DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, window_frames,
+)  # fmt: skip
 from graphsvc.graph.model import (
-    EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_ORIGINAL, NODE_SLOW,
+    EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW,
     MotionGraph, incoming_offsets,
 )  # fmt: skip
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
-from graphsvc.motion import signals
+from graphsvc.motion import quat, signals
 from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
+from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.layout import Layout, place
 
-FORMAT_PARAMS = ("rate_hz", "layout", "msv", "interp", "transition_threshold_m", "window_s",
-                 "max_transitions_per_frame", "still_clip_step_s", "augment")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,9 @@ class BuildOptions:
     msv: bool = True
     interp: bool = True
     transition_threshold_m: float = DEFAULT_THRESHOLD_M
+    interp_threshold_m: float = 0.08
+    interp_min_s: float = 0.5
+    interp_partners: int = 2
     window_s: float = DEFAULT_WINDOW_S
     max_transitions_per_frame: int | None = 8
     still_clip_step_s: float = 0.2
@@ -241,11 +246,16 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
                   "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
                   "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
                   "ground": [ground.astype(np.float32)], "heading": [heading.astype(np.float32)]}  # fmt: skip
+    next_node = N0
     if options.msv:
-        next_node = N0
         for c, clip in enumerate(clips):
             next_node = _add_speed_variations(clip, int(start[c]), c, next_node, edges, node_parts)
     report.timings["edges_s"] = time.perf_counter() - t0
+    segments = []
+    if options.interp:
+        t0 = time.perf_counter()
+        segments = _add_interpolations(clips, start, options, layout, next_node, edges, node_parts, bar)
+        report.timings["interpolation_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     e_src, e_dst, e_kind, e_acc, e_off, e_dh = edges.arrays(S)
@@ -287,6 +297,7 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
         edge_offset=e_off[order],
         edge_heading=e_dh[order],
         incoming=incoming_offsets(e_dst[keep], N),
+        segments=segments,
     )
     report.timings["assemble_s"] = time.perf_counter() - t0
     return graph, report
@@ -335,6 +346,101 @@ def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_
         off, dh = meta.local_offsets(clip.ground[g], clip.heading[g], clip.ground[g + 2], clip.heading[g + 2])
         edges.add(first + g, first + g + 2, EDGE_SPEEDUP, r.double[g + 2], off, dh)
     return next_node + len(f)
+
+
+def _add_interpolations(clips, start, options, layout, next_node, edges, parts, bar) -> list[dict]:
+    """Interpolation nodes (K §4.2). For every pair of clips with the same content
+    label — K blends only similar actions, and restricting the pairs keeps the
+    similarity matrices few — find regions of similar frames with equal contact
+    state, align each with slope-bounded DTW, and blend segments longer than
+    `interp_min_s` with even weights into new nodes, expressed in clip a's frame.
+    Each segment is entered from the frames before it in both clips and left
+    toward the frames after it in both.
+
+    Blending every pair grows the graph with the square of the clips per label
+    (Bandai: 13× the data); each clip instead blends with its `interp_partners` best
+    partners, ranked by the fraction of its frames that have a close match in the
+    partner, so growth stays linear in the data."""
+    rate = options.rate_hz
+    by_label: dict[str, list[int]] = {}
+    for c, clip in enumerate(clips):
+        by_label.setdefault(_content(clip.motion), []).append(c)
+    chosen: set[tuple[int, int]] = set()
+    for members in bar(list(by_label.values()), desc="similarity", unit="label"):
+        score = {}
+        for k, a in enumerate(members):
+            for b in members[k + 1:]:
+                distance = distance_block(clips[a].features, clips[b].features)
+                same = interp.same_contact_matrix(clips[a].contacts, clips[b].contacts)
+                close = np.where(same, distance, np.inf) < options.interp_threshold_m
+                score[a, b] = float(close.any(axis=1).mean())
+                score[b, a] = float(close.any(axis=0).mean())
+        for a in members:
+            ranked = sorted((b for b in members if b != a and score[a, b] > 0), key=lambda b: (-score[a, b], b))
+            chosen.update((min(a, b), max(a, b)) for b in ranked[: options.interp_partners])
+    segments = []
+    for a, b in bar(sorted(chosen), desc="interpolation", unit="pair"):
+        A, B = clips[a], clips[b]
+        # Recomputed rather than kept from the ranking pass: storing every pair's
+        # matrix costs gigabytes on large KBs, computing one costs a millisecond.
+        distance = distance_block(A.features, B.features)
+        same = interp.same_contact_matrix(A.contacts, B.contacts)
+        for path in interp.aligned_segments(distance, same, options.interp_threshold_m, rate, options.interp_min_s):
+            seg = _blend_segment(A, B, path, layout, rate)
+            if seg is None:
+                continue
+            rot, trans, ground, heading, contacts, coords_a, readings, theta, shift = seg
+            K = rot.shape[0]
+            nodes = next_node + np.arange(K)
+            next_node += K
+            parts["kind"].append(np.full(K, NODE_INTERP, np.uint8))
+            parts["clip"].append(np.full(K, a, np.int32))
+            parts["frame"].append(coords_a.astype(np.float32))
+            parts["contacts"].append(contacts)
+            parts["rot"].append(rot.astype(np.float32))
+            parts["trans"].append(trans.astype(np.float32))
+            parts["ground"].append(ground.astype(np.float32))
+            parts["heading"].append(heading.astype(np.float32))
+            off, dh = meta.local_offsets(ground[:-1], heading[:-1], ground[1:], heading[1:])
+            edges.add(nodes[:-1], nodes[1:], EDGE_INTERP, readings[1:], off, dh)
+            (a0, b0), (a1, b1) = path[0], path[-1]
+            # b's frames, moved into a's frame by the segment's alignment.
+            b_ground = meta.rotate_ground(B.ground, np.full(B.ground.shape[0], theta), np.broadcast_to(shift, B.ground.shape))
+            b_heading = B.heading + theta
+            for clip_index, g, h, first, last, clip in ((a, A.ground, A.heading, a0, a1, A), (b, b_ground, b_heading, b0, b1, B)):
+                base = int(start[clip_index])
+                if first >= 1:  # enter from the frame before the segment
+                    off, dh = meta.local_offsets(g[first - 1:first], h[first - 1:first], ground[:1], heading[:1])
+                    edges.add([base + first - 1], nodes[:1], EDGE_INTERP, readings[:1], off, dh)
+                if last + 1 < clip.motion.num_frames:  # leave toward the frame after it
+                    off, dh = meta.local_offsets(ground[-1:], heading[-1:], g[last + 1:last + 2], h[last + 1:last + 2])
+                    edges.add(nodes[-1:], [base + last + 1], EDGE_INTERP, clip.readings.normal[last + 1:last + 2], off, dh)
+            segments.append({"first_node": int(nodes[0]), "count": int(K), "clip_a": int(a), "clip_b": int(b),
+                             "a_start": int(a0), "a_end": int(a1), "b_start": int(b0), "b_end": int(b1),
+                             "theta": float(theta), "translation": [float(v) for v in shift]})  # fmt: skip
+    return segments
+
+
+def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: Layout, rate: float):
+    """Even-weight blend of clips A and B along a DTW path, in A's frame."""
+    theta, shift = interp.path_alignment(A.features, B.features, path)
+    rot_b = B.motion.rotations.copy()
+    trans_b = B.motion.translations.copy()
+    # Move all of B rigidly: turn and shift its root, the rest of the body follows.
+    rot_b[:, 0] = quat.mul(quat.about_y(np.full(rot_b.shape[0], theta)), rot_b[:, 0])
+    root_xz = meta.rotate_ground(trans_b[:, 0, [0, 2]], np.full(rot_b.shape[0], theta), np.broadcast_to(shift, (rot_b.shape[0], 2)))
+    trans_b[:, 0, 0], trans_b[:, 0, 2] = root_xz[:, 0], root_xz[:, 1]
+    rot = interp.blend_along_path(A.motion.rotations, rot_b, path)
+    trans = interp.blend_arrays_along_path(A.motion.translations, trans_b, path)
+    if rot.shape[0] < 2:
+        return None
+    coords_a, _ = interp.blend_timeline(path)
+    sk = A.motion.skeleton
+    world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
+    ground, heading = meta.ground_and_heading(world_pos, joint_map(sk))
+    readings = simulate_accelerations(world_rot, world_pos, place(layout, sk), rate)
+    contacts = A.contacts[np.clip(np.rint(coords_a).astype(np.int64), 0, A.motion.num_frames - 1)]
+    return rot, trans, ground, heading, contacts, coords_a, readings, theta, np.asarray(shift, dtype=np.float64)
 
 
 def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,

@@ -32,6 +32,7 @@ def save_graph(graph: MotionGraph, path) -> None:
         "clips": graph.clips,
         "labels": list(graph.labels),
         "params": graph.params,
+        "segments": graph.segments,
         "counts": {"nodes": graph.num_nodes, "edges": graph.num_edges},
     }
     write_container(path, KIND, meta, {name: getattr(graph, name) for name in ARRAYS}, FORMAT_VERSION)
@@ -51,6 +52,7 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
                             tuple(tuple(c) for c in s["channels"]), np.array(s["end_site"]))  # fmt: skip
         graph = MotionGraph(rate_hz=float(meta["rate_hz"]), skeleton=skeleton, layout=meta["layout"],
                             clips=meta["clips"], labels=tuple(meta["labels"]), params=meta["params"],
+                            segments=meta.get("segments", []),
                             **{name: arrays[name] for name in ARRAYS})  # fmt: skip
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None

@@ -66,7 +66,9 @@ class MotionGraph:
     edge_offset: np.ndarray
     edge_heading: np.ndarray
     incoming: np.ndarray
-    extra: dict = field(default_factory=dict)
+    # Interpolated segments: first_node, count, clip_a, clip_b, a_start, a_end,
+    # b_start, b_end (source frames, inclusive), the alignment theta/translation of b onto a.
+    segments: list[dict] = field(default_factory=list)
 
     @property
     def num_nodes(self) -> int:
@@ -110,6 +112,7 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
         "sensors": list(graph.sensor_names),
         "rate_hz": graph.rate_hz,
         "joints": graph.skeleton.num_joints,
+        "interpolated_segments": len(graph.segments),
     }
     if file_size is not None:
         out["file_bytes"] = int(file_size)

@@ -26,6 +26,8 @@ reorders quaternion components: mirroring twice returns the original exactly
 
 from __future__ import annotations
 
+import re
+
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,6 +48,7 @@ _CANDIDATES = (
     np.diag([1.0, -1.0, 1.0]),
     np.diag([1.0, 1.0, -1.0]),
 )
+_W_INDEX = 1
 
 FIT_TOLERANCE = 0.25  # max |M·o − o_partner| / |o| for a frame reflection to count as fitting
 _TIE = 1e-3  # residuals this close (relative) are equally good fits
@@ -112,7 +115,8 @@ def mirror_pairs(names: Sequence[str], parents: np.ndarray | None = None) -> np.
     if bad.size:
         j = int(bad[0])
         raise SkeletonError(
-            f"mirror pairing is not symmetric: {names[j]!r} → {names[pairs[j]]!r} → {names[pairs[pairs[j]]]!r}"
+            "mirror pairing is not symmetric: "
+            f"{names[j]!r} → {names[pairs[j]]!r} → {names[pairs[pairs[j]]]!r}"
         )
     if parents is not None:
         parents = np.asarray(parents, dtype=np.int64)
@@ -136,45 +140,60 @@ def mirror_frames(skeleton: Skeleton, pairs: np.ndarray | None = None) -> np.nda
     """(J, 3, 3) reflections M[j] (det -1) from joint j's local frame to its
     partner's, chosen so that M[j]·offset[c] ≈ offset[partner c] for j's children c.
 
-    Per joint the best-fitting candidate wins (diag(-1,1,1), diag(1,-1,1),
-    diag(1,1,-1) or -I); among equally good fits the parent's reflection is kept
-    (frames along a chain share a convention), and a joint without children
-    inherits it outright, with W for the root's (world) parent. Raises
-    SkeletonError when no candidate fits a joint within FIT_TOLERANCE."""
+    Candidates are -I, diag(-1,1,1), diag(1,-1,1) and diag(1,1,-1); a joint keeps
+    those that fit its children best. A bone along one axis leaves two fitting,
+    a joint whose children sit at the joint (end sites) leaves all four; such
+    ties go, in order, to the convention the joint's subtree settles (Bandai's
+    spine frame follows its chest, not its hips), to the parent's reflection (W
+    for the root), then to the candidate order. Raises SkeletonError when no
+    candidate fits a joint within FIT_TOLERANCE."""
     if pairs is None:
         pairs = mirror_pairs(skeleton.names, skeleton.parents)
     J = skeleton.num_joints
-    offsets = skeleton.offsets
-    parents = skeleton.parents
-    frames = np.empty((J, 3, 3))
-    done = np.zeros(J, dtype=bool)
+    offsets, parents = skeleton.offsets, skeleton.parents
+    children = [np.nonzero(parents == j)[0] for j in range(J)]
+    K = len(_CANDIDATES)
+
+    fits = np.ones((J, K), dtype=bool)  # candidates that fit joint j equally best
     for j in range(J):
-        if done[j]:
-            continue  # set with its partner
-        inherited = WORLD_MIRROR if parents[j] < 0 else frames[parents[j]]
-        kids = np.nonzero(parents == j)[0]
-        src, dst = offsets[kids], offsets[pairs[kids]]
+        src, dst = offsets[children[j]], offsets[pairs[children[j]]]
         scale = np.maximum(np.linalg.norm(src, axis=-1), np.linalg.norm(dst, axis=-1))
         keep = scale > _MIN_OFFSET_M
         if not keep.any():
-            chosen = inherited
+            continue
+        src, dst, scale = src[keep], dst[keep], scale[keep]
+        resid = np.array([np.max(np.linalg.norm(src @ m.T - dst, axis=-1) / scale) for m in _CANDIDATES])
+        best = resid.min()
+        if best > FIT_TOLERANCE:
+            raise SkeletonError(
+                f"no axis reflection maps the children of {skeleton.names[j]!r} onto those of "
+                f"{skeleton.names[pairs[j]]!r} (best relative misfit {best:.2f}); the skeleton's "
+                "rest pose is not left/right symmetric in its local frames"
+            )
+        fits[j] = resid <= best + _TIE
+
+    below = np.full(J, -1)  # candidate settled by the subtree, -1 while open
+    for j in range(J - 1, -1, -1):
+        if fits[j].sum() == 1:
+            below[j] = int(np.argmax(fits[j]))
         else:
-            src, dst, scale = src[keep], dst[keep], scale[keep]
-            options = (inherited,) + _CANDIDATES
-            resid = np.array([np.max(np.linalg.norm(src @ m.T - dst, axis=-1) / scale) for m in options])
-            best = resid.min()
-            if best > FIT_TOLERANCE:
-                raise SkeletonError(
-                    f"no axis reflection maps the children of {skeleton.names[j]!r} onto those of "
-                    f"{skeleton.names[pairs[j]]!r} (best relative misfit {best:.2f}); the skeleton's "
-                    "rest pose is not left/right symmetric in its local frames"
-                )
-            chosen = options[int(np.nonzero(resid <= best + _TIE)[0][0])]
-        # M[partner] = M[j]⁻¹ makes mirroring an involution; the candidates are their own inverses.
-        frames[j] = chosen
-        frames[pairs[j]] = chosen.T
-        done[j] = done[pairs[j]] = True
-    return frames
+            settled = [below[c] for c in children[j] if below[c] >= 0 and fits[j, below[c]]]
+            below[j] = settled[0] if settled else -1
+
+    choice = np.full(J, -1)
+    for j in range(J):
+        if choice[j] >= 0:
+            continue  # set with its partner
+        inherited = _W_INDEX if parents[j] < 0 else choice[parents[j]]
+        if below[j] >= 0:
+            k = below[j]
+        elif fits[j, inherited]:
+            k = inherited
+        else:
+            k = int(np.argmax(fits[j]))
+        # M[partner] = M[j]⁻¹ = M[j] (diagonal) makes mirroring an involution.
+        choice[j] = choice[pairs[j]] = k
+    return np.stack(_CANDIDATES)[choice]
 
 
 def _proper_quat(reflections: np.ndarray) -> np.ndarray:
@@ -190,7 +209,7 @@ def mirror_motion(motion: Motion) -> Motion:
     """The left/right mirror image of `motion`: world positions become
     W·P[partner] with W = diag(-1, 1, 1), world rotations W·R[partner]·M[j]
     (see mirror_frames). Returns a Motion named "<name>_mirror" with the same
-    labels and source.
+    source and its labels mirrored too ("walk-turn-left" → "walk-turn-right").
 
     The skeleton is kept when it is symmetric (mirrored offsets within 1e-9 m);
     otherwise (CMU subjects' left and right bones differ by millimetres) the
@@ -216,8 +235,18 @@ def mirror_motion(motion: Motion) -> Motion:
     else:
         skeleton = Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
     return motion.copy(
-        skeleton=skeleton, rotations=rotations, translations=translations, name=motion.name + "_mirror"
+        skeleton=skeleton, rotations=rotations, translations=translations, name=motion.name + "_mirror",
+        labels=tuple(mirror_label(label) for label in motion.labels),
     )
+
+
+_SIDE_WORDS = {"left": "right", "right": "left", "Left": "Right", "Right": "Left", "LEFT": "RIGHT", "RIGHT": "LEFT"}
+
+
+def mirror_label(label: str) -> str:
+    """Swap the words left and right in a label: a mirrored left-hand wave is a
+    right-hand wave. Other text is unchanged."""
+    return re.sub(r"(?<![A-Za-z])(left|right|Left|Right|LEFT|RIGHT)(?![a-z])", lambda m: _SIDE_WORDS[m.group(1)], label)
 
 
 def reverse_motion(motion: Motion) -> Motion:

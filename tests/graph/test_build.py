@@ -7,7 +7,9 @@ from graphsvc.errors import FormatError, InputError, SkeletonError
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
-from graphsvc.graph.model import EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_ORIGINAL, NODE_SLOW, summary
+from graphsvc.graph.model import (
+    EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW, summary,
+)
 from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
@@ -164,3 +166,27 @@ def test_bad_knowledge_bases(kb):
     other = kb[1].copy(skeleton=Skeleton(renamed, sk.parents, sk.offsets, sk.channels, sk.end_site))
     with pytest.raises(SkeletonError, match="mix"):
         build_graph([kb[0], other], BuildOptions(progress=False))
+
+
+def test_interpolated_segments_are_long_enough_and_slope_bounded(built):
+    g, _ = built
+    assert g.segments, "the procedural KB has similar clips of one label: expect blends"
+    rate = g.rate_hz
+    for seg in g.segments:
+        a_span = seg["a_end"] - seg["a_start"]
+        b_span = seg["b_end"] - seg["b_start"]
+        assert a_span / rate >= 0.5 - 1e-9 and b_span / rate >= 0.5 - 1e-9
+        assert 0.5 <= b_span / a_span <= 2.0
+        nodes = np.arange(seg["first_node"], seg["first_node"] + seg["count"])
+        assert np.all(g.node_kind[nodes] == NODE_INTERP)
+        # Chained one after the other, and entered/left through the source clips.
+        chain = (g.edge_kind == EDGE_INTERP) & np.isin(g.edge_src, nodes[:-1])
+        assert chain.sum() == len(nodes) - 1
+        frames = g.node_frame[nodes]
+        assert frames[0] == seg["a_start"] and np.all(np.diff(frames) > 0)
+        assert g.clips[seg["clip_a"]]["labels"][0] == g.clips[seg["clip_b"]]["labels"][0]
+
+
+def test_interpolation_can_be_switched_off(kb):
+    g, _ = build_graph(kb[:6], BuildOptions(interp=False, progress=False))
+    assert not g.segments and not np.any(g.node_kind == NODE_INTERP)

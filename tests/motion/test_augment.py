@@ -3,7 +3,13 @@ import pytest
 
 from graphsvc.errors import SkeletonError
 from graphsvc.motion import quat
-from graphsvc.motion.augment import WORLD_MIRROR, mirror_frames, mirror_motion, mirror_pairs, reverse_motion
+from graphsvc.motion.augment import (
+    WORLD_MIRROR,
+    mirror_frames,
+    mirror_motion,
+    mirror_pairs,
+    reverse_motion,
+)
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.skeleton import Motion, Skeleton
 from tests.conftest import still_motion, tpose_skeleton
@@ -116,7 +122,8 @@ def test_pairs_on_bandai_names():
 
 
 def test_pairs_on_other_conventions():
-    names = ("Hips", "LeftUpLeg", "RightUpLeg", "mixamorig:LeftHand", "mixamorig:RightHand", "hand.L", "hand.R", "thigh_l", "thigh_r")
+    names = ("Hips", "LeftUpLeg", "RightUpLeg", "mixamorig:LeftHand", "mixamorig:RightHand",
+             "hand.L", "hand.R", "thigh_l", "thigh_r")  # fmt: skip
     got = _partner_names(names, mirror_pairs(names))
     assert got == {
         "Hips": "Hips", "LeftUpLeg": "RightUpLeg", "RightUpLeg": "LeftUpLeg",
@@ -136,7 +143,8 @@ def test_unpaired_and_inconsistent_names_raise():
 
 
 def test_no_fitting_reflection_raises():
-    sk = _skeleton([("pelvis", None, (0, 1, 0)), ("l_hip", "pelvis", (0.1, 0, 0)), ("r_hip", "pelvis", (0, 0, 0.1))])
+    # The right hip sits in front where the left one sits to the side.
+    sk = _skeleton([("pelvis", None, (0, 1, 0)), ("l_hip", "pelvis", (0.1, 0, 0)), ("r_hip", "pelvis", (0, 0, 0.1))])  # fmt: skip
     with pytest.raises(SkeletonError, match="reflection"):
         mirror_motion(_random_motion(sk, frames=2))
 
@@ -156,7 +164,8 @@ def test_mirror_matches_reflected_partners_in_world(table):
     np.testing.assert_allclose(np.linalg.norm(mirrored.rotations, axis=-1), 1.0, atol=1e-12)
     # Joints without position channels still carry their (mirrored) skeleton's offsets.
     fixed = np.array([not c or c[0] != "Xposition" for c in sk.channels])
-    np.testing.assert_allclose(mirrored.translations[:, fixed], np.broadcast_to(mirrored.skeleton.offsets[fixed], mirrored.translations[:, fixed].shape), atol=1e-12)  # fmt: skip
+    diff = mirrored.translations[:, fixed] - mirrored.skeleton.offsets[fixed]
+    assert np.abs(diff).max() < 1e-12
 
 
 @pytest.mark.parametrize("table", [None, BANDAI_LIKE, CMU_LIKE], ids=["tpose", "bandai_like", "cmu_like"])
@@ -202,7 +211,8 @@ def test_asymmetric_bones_give_a_mirrored_skeleton():
 def test_mirror_keeps_metadata():
     motion = _random_motion(tpose_skeleton(), frames=5)
     mirrored = mirror_motion(motion)
-    assert (mirrored.name, mirrored.source, mirrored.labels, mirrored.rate_hz) == ("clip_mirror", "clip.bvh", ("walk", "tag"), 30.0)
+    assert (mirrored.name, mirrored.source, mirrored.labels) == ("clip_mirror", "clip.bvh", ("walk", "tag"))
+    assert mirrored.rate_hz == 30.0
     assert mirrored.rotations.shape == motion.rotations.shape
 
 
@@ -217,3 +227,16 @@ def test_reverse():
     np.testing.assert_array_equal(twice.translations, motion.translations)
     rev.rotations[0] = 0.0  # a copy, not a view
     assert np.all(np.linalg.norm(motion.rotations, axis=-1) > 0.5)
+
+
+def test_mirror_swaps_side_words_in_labels():
+    from graphsvc.motion.augment import mirror_label
+
+    assert mirror_label("walk-turn-left") == "walk-turn-right"
+    assert mirror_label("raise-up-right-hand") == "raise-up-left-hand"
+    assert mirror_label("wave-both-hands") == "wave-both-hands"
+    assert mirror_label("LeftHandWave") == "RightHandWave"
+    assert mirror_label("upright") == "upright"  # a word that merely contains "right"
+    m = still_motion(3)
+    m.labels = ("wave-left-hand", "left-handed-player")
+    assert mirror_motion(m).labels == ("wave-right-hand", "right-handed-player")
