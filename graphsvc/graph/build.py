@@ -20,7 +20,7 @@ from graphsvc.errors import InputError, SkeletonError
 from graphsvc.graph import metadata as meta
 from graphsvc.graph import interpolation as interp
 from graphsvc.graph.distance import (
-    DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, window_frames,
+    DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, take, window_frames,
 )  # fmt: skip
 from graphsvc.graph.model import (
     EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW,
@@ -366,12 +366,16 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     for c, clip in enumerate(clips):
         by_label.setdefault(_content(clip.motion), []).append(c)
     chosen: set[tuple[int, int]] = set()
+    # Ranking looks at every `step`-th frame only (0.1 s apart): a ninth of the cells,
+    # enough to tell which clips share long similar stretches.
+    step = max(1, int(round(rate / 10.0)))
+    sampled = [(take(c.features, np.arange(0, c.motion.num_frames, step)), c.contacts[::step]) for c in clips]
     for members in bar(list(by_label.values()), desc="similarity", unit="label"):
         score = {}
         for k, a in enumerate(members):
             for b in members[k + 1:]:
-                distance = distance_block(clips[a].features, clips[b].features)
-                same = interp.same_contact_matrix(clips[a].contacts, clips[b].contacts)
+                distance = distance_block(sampled[a][0], sampled[b][0])
+                same = interp.same_contact_matrix(sampled[a][1], sampled[b][1])
                 close = np.where(same, distance, np.inf) < options.interp_threshold_m
                 score[a, b] = float(close.any(axis=1).mean())
                 score[b, a] = float(close.any(axis=0).mean())

@@ -92,7 +92,11 @@ def take(features: PoseFeatures, frames: np.ndarray) -> PoseFeatures:
 
 
 def distance_block(a: PoseFeatures, b: PoseFeatures) -> np.ndarray:
-    """(Fa, Fb) aligned RMS point distances in metres between every frame of a and b."""
+    """(Fa, Fb) aligned RMS point distances in metres between every frame of a and b.
+
+    Products in float64: near-zero distances lose everything to cancellation in
+    float32, and this must agree with `distance_pairs` (the kd-tree search and its
+    all-pairs reference rely on it)."""
     ax, az, ay = (v.astype(np.float64) for v in (a.x, a.z, a.y))
     bx, bz, by = (v.astype(np.float64) for v in (b.x, b.z, b.y))
     cos_term = ax @ bx.T + az @ bz.T

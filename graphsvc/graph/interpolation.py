@@ -78,9 +78,10 @@ def same_contact_matrix(contacts_a: np.ndarray, contacts_b: np.ndarray) -> np.nd
     contacts_*: (F, C) bool per-foot contact flags (or (F,) integer state codes)."""
     ca = np.asarray(contacts_a)
     cb = np.asarray(contacts_b)
-    if ca.ndim == 1:
-        return ca[:, None] == cb[None, :]
-    return np.all(ca[:, None, :] == cb[None, :, :], axis=-1)
+    if ca.ndim == 2:  # pack each frame's flags into one integer code: one comparison per cell
+        weights = 1 << np.arange(ca.shape[1])
+        ca, cb = ca.astype(np.int64) @ weights, cb.astype(np.int64) @ weights
+    return ca[:, None] == cb[None, :]
 
 
 def similar_regions(distance: np.ndarray, same_contacts: np.ndarray, threshold_m: float) -> list[Region]:
