@@ -106,6 +106,24 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _cmd_relayout(args) -> int:
+    from dataclasses import replace
+
+    from graphsvc.graph.file import load_graph, save_graph
+    from graphsvc.graph.metadata import recompute_accelerations
+    from graphsvc.sensors.layout import load_layout
+
+    out = Path(args.output)
+    _check_output(out)
+    layout = load_layout(args.layout)
+    graph = load_graph(args.graph)
+    acc = recompute_accelerations(graph, layout)
+    params = {**graph.params, "layout": layout.name}
+    save_graph(replace(graph, edge_acc=acc, layout=layout.to_dict(), params=params), out)
+    print(f"wrote {out}: edge metadata for layout {layout.name} ({', '.join(layout.sensor_names)})")
+    return 0
+
+
 def _check_output(path: Path) -> None:
     if not path.parent.exists() or not path.parent.is_dir():
         raise GraphsvcError(f"output folder {path.parent} does not exist")
@@ -150,6 +168,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("graph", metavar="FILE")
     p.add_argument("--json", action="store_true")
     p.set_defaults(run=_cmd_info)
+
+    p = sub.add_parser("relayout", help="recompute a graph's sensor metadata for another layout")
+    p.add_argument("graph", metavar="GRAPH")
+    p.add_argument("--layout", required=True, help="preset or layout file")
+    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p.set_defaults(run=_cmd_relayout)
 
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")

@@ -106,3 +106,46 @@ def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray
     """R_y(θ)·(x, z) + t for (K, 2) points, (K,) angles, (K, 2) translations."""
     c, s = np.cos(theta), np.sin(theta)
     return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], axis=-1) + translation
+
+
+def recompute_accelerations(graph, layout) -> np.ndarray:
+    """(E, S, 3) float32 edge readings of `layout` for an existing graph, from the
+    poses it stores (no knowledge base needed). Equal to the built metadata up to
+    the float32 rounding of the stored poses (≈ 1e-3 m/s²)."""
+    from graphsvc.graph.model import EDGE_SLOW, EDGE_SPEEDUP, NODE_SLOW
+    from graphsvc.motion.skeleton import Skeleton
+    from graphsvc.sensors.layout import place
+
+    sk = graph.skeleton
+    N = graph.num_nodes
+    S = len(layout.sensors)
+    normal = np.zeros((N, S, 3), np.float32)  # reading on arrival at normal speed
+    half = np.zeros((N, S, 3), np.float32)  # ... through the half-speed timeline
+    double = np.zeros((N, S, 3), np.float32)  # ... through a speed-up edge
+    clip_of, frame_of = graph.node_clip, graph.node_frame
+    kind = graph.node_kind
+
+    def clip_skeleton(c):
+        return Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
+
+    slow_nodes = np.nonzero(kind == NODE_SLOW)[0]
+    for c, info in enumerate(graph.clips):
+        nodes = info["first_node"] + np.arange(info["frames"])
+        placement = place(layout, clip_skeleton(c))
+        r = speed_readings(graph.node_rotations[nodes].astype(np.float64),
+                           graph.node_translations[nodes].astype(np.float64), sk.parents, placement, graph.rate_hz)  # fmt: skip
+        normal[nodes], double[nodes], half[nodes] = r.normal, r.double, r.half[0::2]
+        slow = slow_nodes[clip_of[slow_nodes] == c]
+        half[slow] = r.half[(2 * frame_of[slow]).astype(np.int64)]
+    for seg in graph.segments:
+        nodes = seg["first_node"] + np.arange(seg["count"])
+        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                                  graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+        normal[nodes] = simulate_accelerations(world_rot, world_pos, place(layout, clip_skeleton(seg["clip_a"])), graph.rate_hz)
+    dst, ekind = graph.edge_dst, graph.edge_kind
+    out = normal[dst]
+    slow_edges = ekind == EDGE_SLOW
+    out[slow_edges] = half[dst[slow_edges]]
+    fast = ekind == EDGE_SPEEDUP
+    out[fast] = double[dst[fast]]
+    return out

@@ -190,3 +190,15 @@ def test_interpolated_segments_are_long_enough_and_slope_bounded(built):
 def test_interpolation_can_be_switched_off(kb):
     g, _ = build_graph(kb[:6], BuildOptions(interp=False, progress=False))
     assert not g.segments and not np.any(g.node_kind == NODE_INTERP)
+
+
+def test_metadata_recomputed_for_another_layout_without_the_kb(built, kb):
+    g, _ = built
+    again = meta.recompute_accelerations(g, PRESETS["kelly6"])
+    assert again.shape == g.edge_acc.shape
+    # Stored poses are float32, the build used float64: 0.05 m/s² is 0.005 g.
+    np.testing.assert_allclose(again, g.edge_acc, atol=0.05)
+    assert np.median(np.abs(again - g.edge_acc)) < 1e-3
+    other = meta.recompute_accelerations(g, PRESETS["right-wrist"])
+    rebuilt, _ = build_graph(kb, BuildOptions(layout=PRESETS["right-wrist"], progress=False))
+    np.testing.assert_allclose(other, rebuilt.edge_acc, atol=0.05)

@@ -75,3 +75,17 @@ def test_bad_input_exit_2_no_file(kb_dir, tmp_path, capsys, case, needle):
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
     if case != "corrupt-info":
         assert not out.exists() and not list(tmp_path.glob(".g.graph*"))
+
+
+def test_relayout_changes_only_the_sensor_metadata(kb_dir, tmp_path, capsys):
+    from graphsvc.graph.file import load_graph
+
+    src, out = tmp_path / "a.graph", tmp_path / "b.graph"
+    assert main(["build", str(kb_dir), "-o", str(src), "--quiet", "--no-interp"]) == 0
+    assert main(["relayout", str(src), "--layout", "right-wrist", "-o", str(out)]) == 0
+    capsys.readouterr()
+    a, b = load_graph(src), load_graph(out)
+    assert b.sensor_names == ("r_wrist",) and b.edge_acc.shape == (a.num_edges, 1, 3)
+    assert b.params["layout"] == "right-wrist"
+    for name in ("edge_src", "edge_dst", "edge_offset", "node_rotations"):
+        assert (getattr(a, name) == getattr(b, name)).all()
