@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -71,14 +72,17 @@ def _cmd_build(args) -> int:
     from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
     from graphsvc.graph.file import save_graph
     from graphsvc.graph.model import format_summary, summary
+    from graphsvc.motion.joints import load_mapping_file
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
     _check_output(out)
     progress = False if args.quiet else None
     augment = tuple(a for a in (args.augment or "").split(",") if a)
+    mapping = load_mapping_file(args.mapping) if args.mapping else None
     options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
-                           interp=not args.no_interp, augment=augment, jobs=args.jobs, progress=progress)  # fmt: skip
+                           interp=not args.no_interp, augment=augment, mapping=mapping, jobs=args.jobs,
+                           progress=progress)  # fmt: skip
     t0 = time.perf_counter()
     motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
     load_s = time.perf_counter() - t0
@@ -160,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
     p.add_argument("--exclude", action="append", metavar="GLOB", help="leave out matching files (repeatable)")
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
+    p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for skeletons graphsvc does not know")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="threads for loading and preparing clips")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)
@@ -198,6 +203,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args)
+    except BrokenPipeError:
+        # The reader went away (`| head`): not an error; silence the final flush too.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (GraphsvcError, OSError) as exc:
         if args.debug:
             raise

@@ -8,6 +8,7 @@ indexed, contact-constrained) → speed variations → edges with metadata → s
 from __future__ import annotations
 
 import hashlib
+import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
@@ -58,6 +59,7 @@ class BuildOptions:
     max_transitions_per_frame: int | None = 8
     still_clip_step_s: float = 0.2
     augment: tuple[str, ...] = ()
+    mapping: dict | None = None  # canonical joint → skeleton joint, for unknown skeletons
     jobs: int = 1
     progress: bool | None = None  # None: only on a terminal
 
@@ -120,15 +122,15 @@ def check_knowledge_base(motions: list[Motion], window: int, rate_hz: float) -> 
             )
 
 
-def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int) -> PreparedClip:
+def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, mapping=None) -> PreparedClip:
     motion = resample(motion, rate_hz)
     sk = motion.skeleton
-    table = joint_map(sk)
+    table = joint_map(sk, mapping)
     _, world_pos = motion_fk(motion)
     contacts = signals.foot_contacts(world_pos, table, rate_hz)
     ground, heading = meta.ground_and_heading(world_pos, table)
     canon = world_pos[:, [table[c] for c in CANONICAL]]
-    placement = place(layout, sk)
+    placement = place(layout, sk, mapping)
     readings = meta.speed_readings(motion.rotations, motion.translations, sk.parents, placement, rate_hz)
     half_rot, half_trans = meta.half_speed_poses(motion.rotations, motion.translations)
     _, half_pos = forward_kinematics(half_rot, half_trans, sk.parents)
@@ -177,14 +179,14 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
         raise InputError(f"graph rate must be positive, got {rate}")
     window = window_frames(rate, options.window_s)
     check_knowledge_base(motions, window, rate)
-    joint_map(motions[0].skeleton)  # unknown skeleton: fail before any work
-    place(layout, motions[0].skeleton)  # layout naming missing joints: same
+    joint_map(motions[0].skeleton, options.mapping)  # unknown skeleton: fail before any work
+    place(layout, motions[0].skeleton, options.mapping)  # layout naming missing joints: same
     report = BuildReport()
     bar = lambda it, **kw: tqdm(it, disable=None if options.progress is None else not options.progress, **kw)  # noqa: E731
 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=max(1, options.jobs)) as pool:
-        clips = list(bar(pool.map(lambda m: prepare_clip(m, rate, layout, window), motions),
+        clips = list(bar(pool.map(lambda m: prepare_clip(m, rate, layout, window, options.mapping), motions),
                          total=len(motions), desc="clips", unit="clip"))  # fmt: skip
     report.timings["prepare_s"] = time.perf_counter() - t0
 
@@ -303,6 +305,11 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
     return graph, report
 
 
+def _performance(motion: Motion) -> tuple[str, str]:
+    """What identifies one recorded performance across its augmented copies."""
+    return motion.source, re.sub(r"(_mirror|_reverse)+$", "", motion.name)
+
+
 def _content(motion: Motion) -> str:
     return motion.labels[0] if motion.labels else motion.name
 
@@ -374,6 +381,11 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
         score = {}
         for k, a in enumerate(members):
             for b in members[k + 1:]:
+                # A clip and its own mirror or reversal are one performance: blending
+                # a left punch with its mirrored right punch makes neither.
+                if _performance(clips[a].motion) == _performance(clips[b].motion):
+                    score[a, b] = score[b, a] = 0.0
+                    continue
                 distance = distance_block(sampled[a][0], sampled[b][0])
                 same = interp.same_contact_matrix(sampled[a][1], sampled[b][1])
                 close = np.where(same, distance, np.inf) < options.interp_threshold_m
@@ -390,7 +402,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
         distance = distance_block(A.features, B.features)
         same = interp.same_contact_matrix(A.contacts, B.contacts)
         for path in interp.aligned_segments(distance, same, options.interp_threshold_m, rate, options.interp_min_s):
-            seg = _blend_segment(A, B, path, layout, rate)
+            seg = _blend_segment(A, B, path, layout, rate, options.mapping)
             if seg is None:
                 continue
             rot, trans, ground, heading, contacts, coords_a, readings, theta, shift = seg
@@ -425,7 +437,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     return segments
 
 
-def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: Layout, rate: float):
+def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: Layout, rate: float, mapping=None):
     """Even-weight blend of clips A and B along a DTW path, in A's frame."""
     theta, shift = interp.path_alignment(A.features, B.features, path)
     rot_b = B.motion.rotations.copy()
@@ -441,8 +453,8 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
     coords_a, _ = interp.blend_timeline(path)
     sk = A.motion.skeleton
     world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
-    ground, heading = meta.ground_and_heading(world_pos, joint_map(sk))
-    readings = simulate_accelerations(world_rot, world_pos, place(layout, sk), rate)
+    ground, heading = meta.ground_and_heading(world_pos, joint_map(sk, mapping))
+    readings = simulate_accelerations(world_rot, world_pos, place(layout, sk, mapping), rate)
     contacts = A.contacts[np.clip(np.rint(coords_a).astype(np.int64), 0, A.motion.num_frames - 1)]
     return rot, trans, ground, heading, contacts, coords_a, readings, theta, np.asarray(shift, dtype=np.float64)
 

@@ -117,6 +117,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     from graphsvc.sensors.layout import place
 
     sk = graph.skeleton
+    mapping = graph.params.get("mapping")  # the joint mapping the graph was built with
     N = graph.num_nodes
     S = len(layout.sensors)
     normal = np.zeros((N, S, 3), np.float32)  # reading on arrival at normal speed
@@ -131,7 +132,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     slow_nodes = np.nonzero(kind == NODE_SLOW)[0]
     for c, info in enumerate(graph.clips):
         nodes = info["first_node"] + np.arange(info["frames"])
-        placement = place(layout, clip_skeleton(c))
+        placement = place(layout, clip_skeleton(c), mapping)
         r = speed_readings(graph.node_rotations[nodes].astype(np.float64),
                            graph.node_translations[nodes].astype(np.float64), sk.parents, placement, graph.rate_hz)  # fmt: skip
         normal[nodes], double[nodes], half[nodes] = r.normal, r.double, r.half[0::2]
@@ -141,7 +142,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
         nodes = seg["first_node"] + np.arange(seg["count"])
         world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
                                                   graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
-        normal[nodes] = simulate_accelerations(world_rot, world_pos, place(layout, clip_skeleton(seg["clip_a"])), graph.rate_hz)
+        normal[nodes] = simulate_accelerations(world_rot, world_pos, place(layout, clip_skeleton(seg["clip_a"]), mapping), graph.rate_hz)
     dst, ekind = graph.edge_dst, graph.edge_kind
     out = normal[dst]
     slow_edges = ekind == EDGE_SLOW

@@ -202,3 +202,14 @@ def test_metadata_recomputed_for_another_layout_without_the_kb(built, kb):
     other = meta.recompute_accelerations(g, PRESETS["right-wrist"])
     rebuilt, _ = build_graph(kb, BuildOptions(layout=PRESETS["right-wrist"], progress=False))
     np.testing.assert_allclose(other, rebuilt.edge_acc, atol=0.05)
+
+
+def test_augmented_copies_are_never_blended_with_their_original(kb):
+    from graphsvc.motion.augment import mirror_motion
+
+    clips = [c.copy(source=f"/kb/{c.name}.bvh") for c in kb[:4]]
+    clips += [mirror_motion(c) for c in clips]
+    g, _ = build_graph(clips, BuildOptions(progress=False, msv=False))
+    for seg in g.segments:
+        assert g.clips[seg["clip_a"]]["source"] != g.clips[seg["clip_b"]]["source"]
+    assert any(c["name"].endswith("_mirror") for c in g.clips)

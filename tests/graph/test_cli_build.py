@@ -89,3 +89,23 @@ def test_relayout_changes_only_the_sensor_metadata(kb_dir, tmp_path, capsys):
     assert b.params["layout"] == "right-wrist"
     for name in ("edge_src", "edge_dst", "edge_offset", "node_rotations"):
         assert (getattr(a, name) == getattr(b, name)).all()
+
+
+def test_unknown_skeleton_needs_a_mapping(kb_dir, tmp_path, capsys):
+    # Rename the procedural joints: no built-in map fits any more.
+    renamed = tmp_path / "renamed"
+    renamed.mkdir()
+    names = ["pelvis", "spine", "chest", "l_wrist", "r_wrist", "l_ankle", "r_ankle"]
+    for f in sorted(kb_dir.glob("*.bvh"))[:4]:
+        text = f.read_text()
+        for n in names:
+            text = text.replace(f"JOINT {n}\n", f"JOINT X{n}\n").replace(f"ROOT {n}\n", f"ROOT X{n}\n")
+        (renamed / f.name).write_text(text)
+    out = tmp_path / "g.graph"
+    assert main(["build", str(renamed), "-o", str(out), "--quiet", "--no-interp"]) == 2
+    assert "mapping" in capsys.readouterr().err and not out.exists()
+    mapping = tmp_path / "map.json"
+    mapping.write_text(json.dumps({n: f"X{n}" for n in names}))
+    assert main(["build", str(renamed), "-o", str(out), "--quiet", "--no-interp", "--mapping", str(mapping)]) == 0
+    out2 = tmp_path / "g2.graph"
+    assert main(["relayout", str(out), "--layout", "kelly6", "-o", str(out2)]) == 0
