@@ -1,0 +1,93 @@
+"""A plain numpy Viterbi with the full N × T back-pointer lattice.
+
+The reference the numba search is checked against (its survivor-tree pruning must
+never change the result) and the baseline of `tools/bench_viterbi.py`'s speed ratio.
+Vectorised over edges per sample; memory O(N·T). Ties are broken by edge order, so
+compare with the fast search on inputs without exact ties."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graphsvc.graph.model import MotionGraph
+from graphsvc.search.viterbi import Weights, compile_constraints
+from graphsvc.sensors.accelerometer import GRAVITY
+
+
+def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
+                      constraint_sets=None) -> tuple[np.ndarray, float]:  # fmt: skip
+    """(node path (T,), cost) — same inputs and meaning as `viterbi_search`."""
+    acc = np.asarray(acc, dtype=np.float64) / GRAVITY
+    T, N = acc.shape[0], graph.num_nodes
+    src, dst = graph.edge_src.astype(np.int64), graph.edge_dst.astype(np.int64)
+    e_acc = graph.edge_acc.astype(np.float64) / GRAVITY
+    off, dhead = graph.edge_offset.astype(np.float64), graph.edge_heading.astype(np.float64)
+    sets = constraint_sets or []
+    gamma = len(sets)
+    kinds, values = compile_constraints(graph, sets, np.arange(T) / graph.rate_hz)
+    code = graph.node_contacts[:, 0].astype(np.int64) | (graph.node_contacts[:, 1].astype(np.int64) << 1)
+
+    def ok(t):
+        out = np.ones((gamma, N), dtype=bool)
+        for k in range(gamma):
+            if kinds[k, t] == 1:
+                out[k] = code == values[k, t]
+            elif kinds[k, t] == 2:
+                out[k] = graph.node_label == values[k, t]
+        return out
+
+    cost = np.zeros(N)
+    alive = np.ones(N, dtype=bool)
+    rank = (~ok(0)).T.astype(np.int64) if gamma else np.zeros((N, 0), np.int64)
+    p0 = position[0] if position is not None and np.all(np.isfinite(position[0])) else np.zeros(2)
+    h0 = heading[0] if heading is not None and np.isfinite(heading[0]) else 0.0
+    pos = np.tile(p0, (N, 1)).astype(float)
+    head = np.full(N, float(h0))
+    lattice = np.full((T, N), -1, dtype=np.int64)
+    for t in range(1, T):
+        m = acc[t]
+        valid = np.all(np.isfinite(m), axis=-1)
+        ca = np.zeros(len(src))
+        if valid.any() and weights.acc:
+            ca = np.sum((e_acc[:, valid] - m[valid]) ** 2, axis=(1, 2)) / valid.sum()
+        h = head[src]
+        c, s = np.cos(h), np.sin(h)
+        px = pos[src, 0] + c * off[:, 0] + s * off[:, 1]
+        pz = pos[src, 1] - s * off[:, 0] + c * off[:, 1]
+        nh = h + dhead
+        cp = np.zeros(len(src))
+        if position is not None and np.all(np.isfinite(position[t])) and weights.position:
+            cp = np.hypot(px - position[t, 0], pz - position[t, 1])
+        co = np.zeros(len(src))
+        if heading is not None and np.isfinite(heading[t]) and weights.heading:
+            co = np.abs((nh - heading[t] + np.pi) % (2 * np.pi) - np.pi)
+        total = cost[src] + weights.acc * ca + weights.position * cp + weights.heading * co
+        usable = alive[src]
+        keys = [np.where(usable, total, np.inf)] + [rank[src, k] for k in range(gamma - 1, -1, -1)] + [dst]
+        order = np.lexsort(keys)
+        order = order[usable[order]]
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = dst[order][1:] != dst[order][:-1]
+        best = order[first]
+        new_alive = np.zeros(N, dtype=bool)
+        new_alive[dst[best]] = True
+        n = dst[best]
+        new_cost = np.full(N, np.inf)
+        new_cost[n] = total[best]
+        new_rank = np.zeros_like(rank)
+        if gamma:
+            new_rank[n] = rank[src[best]] + (~ok(t)).T[n]
+        new_pos = np.zeros_like(pos)
+        new_pos[n, 0], new_pos[n, 1] = px[best], pz[best]
+        new_head = np.zeros(N)
+        new_head[n] = nh[best]
+        lattice[t, n] = src[best]
+        cost, rank, pos, head, alive = new_cost, new_rank, new_pos, new_head, new_alive
+    live = np.nonzero(alive)[0]
+    keys = [cost[live]] + [rank[live, k] for k in range(gamma - 1, -1, -1)]
+    node = int(live[np.lexsort(keys)[0]])
+    path = np.empty(T, dtype=np.int64)
+    path[-1] = node
+    for t in range(T - 1, 0, -1):
+        path[t - 1] = lattice[t, path[t]]
+    return path, float(cost[node])

@@ -1,0 +1,413 @@
+"""Viterbi search over a motion graph (SPEC §4, K §5).
+
+State = graph node. At each input sample the path advances along one edge:
+    G(n, t) = min over edges e = (m → n) of [L(e, t) + G(m, t−1)],  G(n, 0) = 0,
+    L(e, t) = W_A·C_A + W_P·C_P + W_O·C_O,
+C_A the mean over sensors of the squared reading difference in g² (K eq. 4), C_P the
+distance in metres between the path-carried ground position advanced by the edge
+and the measured one, C_O the wrapped heading difference in radians (K eq. 5–7).
+NaN measurements contribute nothing. With γ annotation constraint sets each path also
+carries γ counts of broken constraints, compared lexicographically before G (K eq. 8).
+
+Memory (K §5.1, after Abbasfar & Yao): instead of the N × T back-pointer lattice the
+search keeps a survivor tree — one entry per (node, sample) that some live path still
+passes through, reference-counted by its children and by being a live path's head.
+When a path dies its entries are freed at once, so the tree holds only the lattice
+points a periodic trace-back from all nodes would keep. The compression ratio
+reported is N·t over the entries alive.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.accelerometer import GRAVITY
+
+REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
+CONTACT_CODES = {"none": 0, "left": 1, "right": 2, "both": 3}  # bit 0 left, bit 1 right
+
+
+@dataclass(frozen=True)
+class Weights:
+    """K eq. 6: accelerometers (per g²), position (per metre), orientation (per radian)."""
+
+    acc: float = 1.0
+    position: float = 1.0
+    heading: float = 1.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _wrap(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+TIE = 1e-9  # costs closer than this are equal (g², m, rad sums: far below any real difference)
+
+
+@numba.njit(cache=True, nogil=True)
+def _better(rank_a, cost_a, detours_a, kind_a, rank_b, cost_b, detours_b, kind_b, gamma):
+    """Lexicographic: fewer broken constraints of the first set, then the next, then
+    cost. Equal costs (standing still reads the same at any speed) prefer the path
+    with fewer non-original edges, then the plainer edge, so exact input replays its
+    own clip."""
+    for k in range(gamma):
+        if rank_a[k] != rank_b[k]:
+            return rank_a[k] < rank_b[k]
+    if cost_a < cost_b - TIE:
+        return True
+    if cost_a > cost_b + TIE:
+        return False
+    if detours_a != detours_b:
+        return detours_a < detours_b
+    return kind_a < kind_b
+
+
+@numba.njit(cache=True, nogil=True)
+def _step(
+    incoming, edge_src, edge_kind, edge_acc, edge_offset, edge_heading,
+    meas_acc, meas_pos, meas_heading, w_acc, w_pos, w_head,
+    ok,
+    cost_prev, rank_prev, pos_prev, head_prev, alive_prev,
+    cost_new, rank_new, pos_new, head_new, alive_new, best_edge, term_new, term_prev,
+):  # fmt: skip
+    """One sample: for every node, the best incoming edge from a live path.
+    meas_acc (S, 3) in g (NaN rows = missing sensors); meas_pos (2,) metres or NaN;
+    meas_heading radians or NaN; ok (γ, N) constraint satisfaction of each node now;
+    term_* (N, 4): per-path accumulated acc / position / heading costs (for reports)
+    and the count of non-original edges (the tie-break)."""
+    N = cost_prev.shape[0]
+    S = meas_acc.shape[0]
+    gamma = rank_prev.shape[1]
+    inv_g = 1.0 / 9.81
+    valid = np.empty(S, dtype=np.bool_)
+    n_valid = 0
+    for s in range(S):
+        valid[s] = np.isfinite(meas_acc[s, 0]) and np.isfinite(meas_acc[s, 1]) and np.isfinite(meas_acc[s, 2])
+        if valid[s]:
+            n_valid += 1
+    use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
+    use_head = np.isfinite(meas_heading) and w_head != 0.0
+    best_rank = np.empty(gamma, dtype=np.int64)
+    cand_rank = np.empty(gamma, dtype=np.int64)
+    for n in range(N):
+        best = -1
+        best_cost = np.inf
+        best_ca = 0.0
+        best_cp = 0.0
+        best_co = 0.0
+        best_px = 0.0
+        best_pz = 0.0
+        best_h = 0.0
+        best_det = 0.0
+        for e in range(incoming[n], incoming[n + 1]):
+            m = edge_src[e]
+            if not alive_prev[m]:
+                continue
+            ca = 0.0
+            if n_valid > 0 and w_acc != 0.0:
+                for s in range(S):
+                    if valid[s]:
+                        for k in range(3):
+                            d = edge_acc[e, s, k] * inv_g - meas_acc[s, k]
+                            ca += d * d
+                ca /= n_valid
+            h = head_prev[m]
+            c, sn = np.cos(h), np.sin(h)
+            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
+            px = pos_prev[m, 0] + c * ox + sn * oz
+            pz = pos_prev[m, 1] - sn * ox + c * oz
+            nh = h + edge_heading[e]
+            cp = 0.0
+            if use_pos:
+                cp = np.sqrt((px - meas_pos[0]) ** 2 + (pz - meas_pos[1]) ** 2)
+            co = 0.0
+            if use_head:
+                co = abs(_wrap(nh - meas_heading))
+            total = cost_prev[m] + w_acc * ca + w_pos * cp + w_head * co
+            for k in range(gamma):
+                cand_rank[k] = rank_prev[m, k]
+            det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
+            if best < 0 or _better(cand_rank, total, det, edge_kind[e], best_rank, best_cost, best_det,
+                                   edge_kind[best], gamma):  # fmt: skip
+                best = e
+                best_det = det
+                best_cost = total
+                for k in range(gamma):
+                    best_rank[k] = cand_rank[k]
+                best_ca, best_cp, best_co = ca, cp, co
+                best_px, best_pz, best_h = px, pz, nh
+        best_edge[n] = best
+        if best < 0:
+            alive_new[n] = False
+            cost_new[n] = np.inf
+            continue
+        alive_new[n] = True
+        cost_new[n] = best_cost
+        m = edge_src[best]
+        for k in range(gamma):
+            rank_new[n, k] = best_rank[k] + (0 if ok[k, n] else 1)
+        pos_new[n, 0] = best_px
+        pos_new[n, 1] = best_pz
+        head_new[n] = best_h
+        term_new[n, 0] = term_prev[m, 0] + best_ca
+        term_new[n, 1] = term_prev[m, 1] + best_cp
+        term_new[n, 2] = term_prev[m, 2] + best_co
+        term_new[n, 3] = best_det
+
+
+@numba.njit(cache=True, nogil=True)
+def _grow_tree(head, best_edge, edge_src, alive_new, t, e_node, e_edge, e_parent, e_time, refcount, free, n_free):
+    """Add one survivor-tree entry per live node (parent: its predecessor's head
+    entry), then release the old heads, freeing every entry no live path uses."""
+    N = head.shape[0]
+    new_head = np.full(N, -1, dtype=np.int64)
+    for n in range(N):
+        if not alive_new[n]:
+            continue
+        e = best_edge[n]
+        parent = head[edge_src[e]]
+        n_free -= 1
+        slot = free[n_free]
+        e_node[slot] = n
+        e_edge[slot] = e
+        e_parent[slot] = parent
+        e_time[slot] = t
+        refcount[slot] = 1  # a live head
+        refcount[parent] += 1  # its child
+        new_head[n] = slot
+    for n in range(N):
+        slot = head[n]
+        while slot >= 0:  # release, cascading up while nothing refers to the entry
+            refcount[slot] -= 1
+            if refcount[slot] > 0:
+                break
+            free[n_free] = slot
+            n_free += 1
+            slot = e_parent[slot]
+    head[:] = new_head
+    return n_free
+
+
+@dataclass
+class SearchResult:
+    """node_path (T,), edge_path (T−1,) int64; cost: total weighted cost of the path;
+    terms: accumulated acc (g²), position (m) and heading (rad) costs; broken: per
+    constraint set, broken constraints; compression: N·T / peak survivor entries."""
+
+    node_path: np.ndarray
+    edge_path: np.ndarray
+    cost: float
+    terms: dict
+    broken: list[int]
+    compression: float
+    peak_entries: int
+    extra: dict = field(default_factory=dict)
+
+
+def compile_constraints(graph: MotionGraph, constraint_sets: list, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Constraint sets (priority order; each a list of {start_s, end_s, require:
+    {contact: left|right|both|none} or {label: NAME}}) → per-sample requirement kinds
+    and values, (γ, T) int arrays. A sample without a requirement in a set is free."""
+    gamma = len(constraint_sets)
+    T = len(times_s)
+    kinds = np.zeros((gamma, T), dtype=np.int64)
+    values = np.zeros((gamma, T), dtype=np.int64)
+    for k, cset in enumerate(constraint_sets):
+        for item in cset:
+            start, end = float(item["start_s"]), float(item["end_s"])
+            req = item["require"]
+            if "contact" in req:
+                if req["contact"] not in CONTACT_CODES:
+                    raise InputError(f"constraint set {k}: unknown contact requirement {req['contact']!r}")
+                kind, value = REQ_CONTACT, CONTACT_CODES[req["contact"]]
+            elif "label" in req:
+                if req["label"] not in graph.labels:
+                    raise InputError(f"constraint set {k}: unknown label {req['label']!r} (graph labels: {', '.join(graph.labels)})")
+                kind, value = REQ_LABEL, graph.labels.index(req["label"])
+            else:
+                raise InputError(f"constraint set {k}: 'require' needs 'contact' or 'label'")
+            span = (times_s >= start) & (times_s <= end)
+            kinds[k, span] = kind
+            values[k, span] = value
+    return kinds, values
+
+
+@numba.njit(cache=True, nogil=True)
+def _satisfied(kinds_t, values_t, contact_code, label, ok):
+    """ok (γ, N): does each node meet each set's requirement at this sample."""
+    gamma, N = ok.shape
+    for k in range(gamma):
+        for n in range(N):
+            if kinds_t[k] == 1:
+                ok[k, n] = contact_code[n] == values_t[k]
+            elif kinds_t[k] == 2:
+                ok[k, n] = label[n] == values_t[k]
+            else:
+                ok[k, n] = True
+
+
+class ViterbiSearch:
+    """Incremental search: `start(first sample)`, `step(sample)` per sample, then
+    `best_path()`. Used by the batch search and by streaming decoders alike.
+
+    Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
+
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0):
+        self.graph = graph
+        self.weights = weights
+        N = graph.num_nodes
+        self.N = N
+        self.gamma = gamma
+        self.incoming = np.ascontiguousarray(graph.incoming, dtype=np.int64)
+        self.edge_src = np.ascontiguousarray(graph.edge_src, dtype=np.int64)
+        self.edge_kind = np.ascontiguousarray(graph.edge_kind, dtype=np.int64)
+        self.edge_acc = graph.edge_acc
+        self.edge_offset = np.ascontiguousarray(graph.edge_offset, dtype=np.float64)
+        self.edge_heading = np.ascontiguousarray(graph.edge_heading, dtype=np.float64)
+        c = graph.node_contacts
+        self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
+        self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
+        self.cost = np.zeros(N)
+        self.rank = np.zeros((N, gamma), dtype=np.int64)
+        self.pos = np.zeros((N, 2))
+        self.head = np.zeros(N)
+        self.alive = np.ones(N, dtype=bool)
+        self.terms = np.zeros((N, 4))
+        self._scratch = (np.zeros(N), np.zeros((N, gamma), np.int64), np.zeros((N, 2)), np.zeros(N),
+                         np.zeros(N, bool), np.zeros(N, np.int64), np.zeros((N, 4)))  # fmt: skip
+        self.ok = np.ones((gamma, N), dtype=bool)
+        cap = 4 * N + 16
+        self._alloc(cap)
+        self.t = -1
+        self.peak_entries = 0
+
+    def _alloc(self, cap):
+        self.e_node = np.zeros(cap, np.int64)
+        self.e_edge = np.zeros(cap, np.int64)
+        self.e_parent = np.zeros(cap, np.int64)
+        self.e_time = np.zeros(cap, np.int64)
+        self.refcount = np.zeros(cap, np.int64)
+        self.free = np.arange(cap - 1, -1, -1, dtype=np.int64)
+        self.n_free = cap
+
+    def _grow(self):
+        old = len(self.e_node)
+        cap = 2 * old
+        for name in ("e_node", "e_edge", "e_parent", "e_time", "refcount"):
+            arr = getattr(self, name)
+            bigger = np.zeros(cap, np.int64)
+            bigger[:old] = arr
+            setattr(self, name, bigger)
+        free = np.empty(cap, np.int64)
+        free[: self.n_free] = self.free[: self.n_free]
+        free[self.n_free : self.n_free + (cap - old)] = np.arange(cap - 1, old - 1, -1)
+        self.free = free
+        self.n_free += cap - old
+
+    @property
+    def live_entries(self) -> int:
+        return len(self.e_node) - self.n_free
+
+    def start(self, position=None, heading=None, kinds_t=None, values_t=None):
+        """Sample 0: every node starts a path at the first measured position/heading."""
+        N = self.N
+        self.t = 0
+        p = np.zeros(2) if position is None or not np.all(np.isfinite(position)) else np.asarray(position, float)
+        h = 0.0 if heading is None or not np.isfinite(heading) else float(heading)
+        self.pos[:] = p
+        self.head[:] = h
+        self.cost[:] = 0.0
+        self.alive[:] = True
+        if self.gamma:
+            _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
+            self.rank[:] = (~self.ok).T
+        slots = self.free[self.n_free - N : self.n_free][::-1].copy()
+        self.n_free -= N
+        self.e_node[slots] = np.arange(N)
+        self.e_edge[slots] = -1
+        self.e_parent[slots] = -1
+        self.e_time[slots] = 0
+        self.refcount[slots] = 1
+        self.heads = slots
+        self.peak_entries = self.live_entries
+
+    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None):
+        """Advance by one sample."""
+        if self.n_free < self.N:
+            self._grow()
+        self.t += 1
+        cost, rank, pos, head, alive, best_edge, terms = self._scratch
+        meas_acc = np.ascontiguousarray(acc, dtype=np.float64) / GRAVITY
+        meas_pos = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
+        meas_head = np.nan if heading is None else float(heading)
+        if self.gamma:
+            _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
+        w = self.weights
+        _step(self.incoming, self.edge_src, self.edge_kind, self.edge_acc, self.edge_offset, self.edge_heading,
+              meas_acc, meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
+              self.cost, self.rank, self.pos, self.head, self.alive,
+              cost, rank, pos, head, alive, best_edge, terms, self.terms)  # fmt: skip
+        if not alive.any():
+            raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
+        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, alive, self.t, self.e_node, self.e_edge,
+                                 self.e_parent, self.e_time, self.refcount, self.free, self.n_free)  # fmt: skip
+        self.peak_entries = max(self.peak_entries, self.live_entries)
+        # Swap buffers: the new state becomes the previous one.
+        self._scratch = (self.cost, self.rank, self.pos, self.head, self.alive, best_edge, self.terms)
+        self.cost, self.rank, self.pos, self.head, self.alive, self.terms = cost, rank, pos, head, alive, terms
+
+    def best_node(self) -> int:
+        """The live node whose path ranks first (fewest broken constraints, then cost;
+        costs within TIE count as equal and the lower node id wins)."""
+        alive = np.nonzero(self.alive)[0]
+        cost = np.round(self.cost[alive] / TIE) if np.all(np.abs(self.cost[alive]) < 1e6) else self.cost[alive]
+        keys = [alive, self.terms[alive, 3], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
+        return int(alive[np.lexsort(keys)[0]])
+
+    def trace(self, node: int) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes (t+1,) and edges (t,) of the path ending at `node` now."""
+        nodes, edges = [], []
+        slot = self.heads[node]
+        while slot >= 0:
+            nodes.append(self.e_node[slot])
+            edges.append(self.e_edge[slot])
+            slot = self.e_parent[slot]
+        return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1][1:], dtype=np.int64)
+
+
+def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
+                   constraint_sets: list | None = None, rate_hz: float | None = None) -> SearchResult:  # fmt: skip
+    """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
+    position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
+    `compile_constraints` (times from sample index / graph rate)."""
+    acc = np.asarray(acc)
+    T = acc.shape[0]
+    if T == 0:
+        raise InputError("the input has no samples")
+    if acc.ndim != 3 or acc.shape[1:] != (len(graph.sensor_names), 3):
+        raise InputError(f"accelerations must be (samples, {len(graph.sensor_names)}, 3) for the graph's layout, got {acc.shape}")
+    constraint_sets = constraint_sets or []
+    gamma = len(constraint_sets)
+    times = np.arange(T) / (rate_hz or graph.rate_hz)
+    kinds, values = compile_constraints(graph, constraint_sets, times)
+    search = ViterbiSearch(graph, weights, gamma)
+    pos = (lambda t: None) if position is None else (lambda t: position[t])
+    head = (lambda t: None) if heading is None else (lambda t: heading[t])
+    search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
+    for t in range(1, T):
+        search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t])
+    best = search.best_node()
+    nodes, edges = search.trace(best)
+    N = graph.num_nodes
+    terms = {"acc_g2": float(search.terms[best, 0]), "position_m": float(search.terms[best, 1]),
+             "heading_rad": float(search.terms[best, 2])}  # fmt: skip
+    return SearchResult(
+        node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
+        broken=[int(v) for v in search.rank[best]],
+        compression=float(N * T / max(search.peak_entries, 1)), peak_entries=int(search.peak_entries),
+    )  # fmt: skip

@@ -1,0 +1,171 @@
+"""The Viterbi search against brute force, the full-lattice reference and crafted graphs."""
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph, incoming_offsets
+from graphsvc.motion.skeleton import Skeleton
+from graphsvc.search.reference import reference_viterbi
+from graphsvc.search.viterbi import Weights, viterbi_search
+
+
+def tiny_graph(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None):
+    """A MotionGraph with N nodes and the given edges (sorted by destination here)."""
+    src, dst = np.asarray(src), np.asarray(dst)
+    N = int(max(src.max(), dst.max())) + 1
+    order = np.lexsort((src, dst))
+    E = len(src)
+    sk = Skeleton(("root",), np.array([-1]), np.zeros((1, 3)), (("Xposition",),), np.zeros(1, bool))
+    offsets = np.zeros((E, 2)) if offsets is None else np.asarray(offsets)
+    dheading = np.zeros(E) if dheading is None else np.asarray(dheading)
+    contacts = np.ones((N, 2), bool) if contacts is None else np.asarray(contacts)
+    labels = np.zeros(N, np.int32) if labels is None else np.asarray(labels, np.int32)
+    kinds = np.zeros(E, np.uint8) if kinds is None else np.asarray(kinds, np.uint8)
+    S = acc.shape[1]
+    return MotionGraph(
+        rate_hz=30.0, skeleton=sk, layout={"name": "t", "sensors": [{"name": f"s{i}"} for i in range(S)]},
+        clips=[], labels=("a", "b"), params={}, clip_offsets=np.zeros((1, 1, 3)),
+        node_kind=np.zeros(N, np.uint8), node_clip=np.zeros(N, np.int32), node_frame=np.zeros(N, np.float32),
+        node_contacts=contacts, node_label=labels, node_rotations=np.zeros((N, 1, 4), np.float32),
+        node_translations=np.zeros((N, 1, 3), np.float32), node_ground=np.zeros((N, 2), np.float32),
+        node_heading=np.zeros(N, np.float32), edge_src=src[order].astype(np.int32), edge_dst=dst[order].astype(np.int32),
+        edge_kind=kinds[order], edge_acc=np.asarray(acc, np.float32)[order],
+        edge_offset=offsets[order].astype(np.float32), edge_heading=dheading[order].astype(np.float32),
+        incoming=incoming_offsets(dst[order], N),
+    )
+
+
+def path_cost(g, nodes, meas):
+    total = 0.0
+    for t in range(1, len(nodes)):
+        e = np.nonzero((g.edge_src == nodes[t - 1]) & (g.edge_dst == nodes[t]))[0]
+        if not len(e):
+            return None
+        total += np.mean(np.sum((g.edge_acc[e[0]].astype(float) / 9.81 - meas[t] / 9.81) ** 2, axis=-1))
+    return total
+
+
+@st.composite
+def random_problem(draw):
+    N = draw(st.integers(2, 5))
+    pairs = draw(st.lists(st.tuples(st.integers(0, N - 1), st.integers(0, N - 1)), min_size=N, max_size=12, unique=True))
+    src, dst = zip(*pairs)
+    if len(set(dst)) < 1:
+        src, dst = src + (0,), dst + (0,)
+    S = draw(st.integers(1, 2))
+    T = draw(st.integers(2, 5))
+    seed = draw(st.integers(0, 2**31 - 1))
+    rng = np.random.default_rng(seed)
+    acc = rng.normal(0, 9.81, (len(src), S, 3))
+    meas = rng.normal(0, 9.81, (T, S, 3))
+    return src, dst, acc, meas
+
+
+@settings(max_examples=80, deadline=None)
+@given(random_problem())
+def test_accelerometer_only_equals_brute_force(problem):
+    src, dst, acc, meas = problem
+    g = tiny_graph(src, dst, acc)
+    T, N = meas.shape[0], g.num_nodes
+    best = None
+    for nodes in itertools.product(range(N), repeat=T):
+        c = path_cost(g, nodes, meas)
+        if c is not None and (best is None or c < best):
+            best = c
+    if best is None:
+        with pytest.raises(InputError, match="dead end"):
+            viterbi_search(g, meas, weights=Weights(1, 0, 0))
+        return
+    r = viterbi_search(g, meas, weights=Weights(1, 0, 0))
+    assert r.cost == pytest.approx(best, rel=1e-9, abs=1e-12)
+    assert path_cost(g, r.node_path, meas) == pytest.approx(r.cost, rel=1e-9, abs=1e-12)
+    assert len(r.node_path) == T and len(r.edge_path) == T - 1
+    np.testing.assert_array_equal(g.edge_src[r.edge_path], r.node_path[:-1])
+    np.testing.assert_array_equal(g.edge_dst[r.edge_path], r.node_path[1:])
+
+
+def random_graph(rng, N=40, out=3, S=2):
+    src = np.repeat(np.arange(N), out)
+    dst = rng.integers(0, N, len(src))
+    pairs = np.unique(np.stack([src, dst], 1), axis=0)
+    E = len(pairs)
+    return tiny_graph(pairs[:, 0], pairs[:, 1], rng.normal(0, 9.81, (E, S, 3)), offsets=rng.normal(0, 0.05, (E, 2)),
+                      dheading=rng.normal(0, 0.05, E), contacts=rng.random((N, 2)) < 0.6,
+                      labels=rng.integers(0, 2, N))  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pruned_survivor_tree_equals_full_lattice(seed):
+    rng = np.random.default_rng(seed)
+    g = random_graph(rng)
+    T = 120
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    meas[rng.random((T, 2)) < 0.1] = np.nan  # missing sensors contribute nothing
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    position[rng.random(T) < 0.1] = np.nan
+    constraints = [[{"start_s": 0.5, "end_s": 1.5, "require": {"contact": "both"}}],
+                   [{"start_s": 1.0, "end_s": 3.0, "require": {"label": "b"}}]]  # fmt: skip
+    for weights, sets in ((Weights(1, 0, 0), []), (Weights(0.5, 1, 1), []), (Weights(0.5, 1, 1), constraints)):
+        fast = viterbi_search(g, meas, position, heading, weights, sets)
+        ref_path, ref_cost = reference_viterbi(g, meas, position, heading, weights, sets)
+        np.testing.assert_array_equal(fast.node_path, ref_path)
+        assert fast.cost == pytest.approx(ref_cost, rel=1e-9)
+        assert fast.compression > 1.0 and fast.peak_entries < g.num_nodes * T
+
+
+def test_constraints_beat_sensor_cost_lexicographically():
+    # Two parallel chains 0→1→2 (contact: left) and 3→4→5 (both feet); start nodes 0 and 3.
+    # The sensors fit the second chain perfectly, but the first set demands left contact.
+    S = 1
+    acc_fit = np.zeros((1, 3))
+    acc_off = np.full((1, 3), 9.81)
+    src = [0, 1, 3, 4]
+    dst = [1, 2, 4, 5]
+    acc = np.stack([acc_off, acc_off, acc_fit, acc_fit])
+    contacts = np.array([[1, 0], [1, 0], [1, 0], [1, 1], [1, 1], [1, 1]], bool)
+    g = tiny_graph(src, dst, acc, contacts=contacts)
+    meas = np.zeros((3, S, 3))
+    free = viterbi_search(g, meas, weights=Weights(1, 0, 0))
+    assert list(free.node_path) == [3, 4, 5]
+    sets = [[{"start_s": 0.0, "end_s": 1.0, "require": {"contact": "left"}}]]
+    bound = viterbi_search(g, meas, weights=Weights(1, 0, 0), constraint_sets=sets)
+    assert list(bound.node_path) == [0, 1, 2] and bound.broken == [0]
+    assert bound.cost > free.cost
+    # A second, less important set cannot override the first.
+    sets2 = sets + [[{"start_s": 0.0, "end_s": 1.0, "require": {"contact": "both"}}]]
+    both = viterbi_search(g, meas, weights=Weights(1, 0, 0), constraint_sets=sets2)
+    assert list(both.node_path) == [0, 1, 2] and both.broken == [0, 3]
+
+
+def test_bad_inputs():
+    g = tiny_graph([0, 1], [1, 0], np.zeros((2, 1, 3)))
+    with pytest.raises(InputError, match="no samples"):
+        viterbi_search(g, np.zeros((0, 1, 3)))
+    with pytest.raises(InputError, match="layout"):
+        viterbi_search(g, np.zeros((3, 2, 3)))
+    with pytest.raises(InputError, match="unknown label"):
+        viterbi_search(g, np.zeros((3, 1, 3)), constraint_sets=[[{"start_s": 0, "end_s": 1, "require": {"label": "zzz"}}]])
+
+
+def test_noise_free_input_decodes_to_its_own_clip():
+    from graphsvc.graph.build import BuildOptions, build_graph
+    from graphsvc.motion.procedural import generate_knowledge_base
+    from graphsvc.sensors.layout import PRESETS
+    from graphsvc.sensors.noise import PRESETS as NOISE
+    from graphsvc.sensors.simulate import simulate_recording
+
+    kb = generate_knowledge_base(seed=3, minutes=0.8)
+    g, _ = build_graph(kb, BuildOptions(progress=False))
+    for c in range(len(kb)):
+        rec = simulate_recording(kb[c], PRESETS["wrists-ankles"], NOISE["none"])
+        first = g.clips[c]["first_node"]
+        for w in (Weights(1, 0, 0), Weights(0.5, 1, 1)):
+            r = viterbi_search(g, rec.accelerations, rec.ground_position, rec.heading, weights=w)
+            np.testing.assert_array_equal(r.node_path, first + np.arange(rec.num_samples), err_msg=kb[c].name)
+            assert r.terms["acc_g2"] < 1e-9
