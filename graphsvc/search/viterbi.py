@@ -46,43 +46,19 @@ def _wrap(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
-TIE = 1e-9  # costs closer than this are equal (g², m, rad sums: far below any real difference)
+# Costs closer than this are equal (g², m, rad sums: far below any real difference).
+# Among equal-cost candidates (standing still reads the same at any speed) the path
+# with fewer non-original edges wins, then the plainer edge (original before
+# slow-down, speed-up, transition, interpolated): exact input replays its own clip.
+TIE = 1e-9
 
 
-@numba.njit(cache=True, nogil=True)
-def _better(rank_a, cost_a, detours_a, kind_a, rank_b, cost_b, detours_b, kind_b, gamma):
-    """Lexicographic: fewer broken constraints of the first set, then the next, then
-    cost. Equal costs (standing still reads the same at any speed) prefer the path
-    with fewer non-original edges, then the plainer edge, so exact input replays its
-    own clip."""
-    for k in range(gamma):
-        if rank_a[k] != rank_b[k]:
-            return rank_a[k] < rank_b[k]
-    if cost_a < cost_b - TIE:
-        return True
-    if cost_a > cost_b + TIE:
-        return False
-    if detours_a != detours_b:
-        return detours_a < detours_b
-    return kind_a < kind_b
-
-
-@numba.njit(cache=True, nogil=True)
-def _step(
-    incoming, edge_src, edge_kind, edge_acc, edge_offset, edge_heading,
-    meas_acc, meas_pos, meas_heading, w_acc, w_pos, w_head,
-    ok,
-    cost_prev, rank_prev, pos_prev, head_prev, alive_prev,
-    cost_new, rank_new, pos_new, head_new, alive_new, best_edge, term_new, term_prev,
-):  # fmt: skip
-    """One sample: for every node, the best incoming edge from a live path.
-    meas_acc (S, 3) in g (NaN rows = missing sensors); meas_pos (2,) metres or NaN;
-    meas_heading radians or NaN; ok (γ, N) constraint satisfaction of each node now;
-    term_* (N, 4): per-path accumulated acc / position / heading costs (for reports)
-    and the count of non-original edges (the tie-break)."""
-    N = cost_prev.shape[0]
-    S = meas_acc.shape[0]
-    gamma = rank_prev.shape[1]
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _edge_acc_costs(edge_acc, meas_acc, out):
+    """C_A of every edge (K eq. 4) in g²: one sequential pass over the metadata,
+    the bulk of the arithmetic, kept apart from the scattered per-node reads.
+    meas_acc (S, 3) in g; sensors with a NaN axis are left out of the mean."""
+    E, S = edge_acc.shape[0], edge_acc.shape[1]
     inv_g = 1.0 / 9.81
     valid = np.empty(S, dtype=np.bool_)
     n_valid = 0
@@ -90,86 +66,122 @@ def _step(
         valid[s] = np.isfinite(meas_acc[s, 0]) and np.isfinite(meas_acc[s, 1]) and np.isfinite(meas_acc[s, 2])
         if valid[s]:
             n_valid += 1
+    if n_valid == 0:
+        out[:] = 0.0
+        return
+    scale = 1.0 / n_valid
+    for e in numba.prange(E):
+        acc = 0.0
+        for s in range(S):
+            if valid[s]:
+                for k in range(3):
+                    d = edge_acc[e, s, k] * inv_g - meas_acc[s, k]
+                    acc += d * d
+        out[e] = acc * scale
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _step(
+    incoming, edge_src, edge_kind, edge_cost_acc, edge_offset, edge_heading,
+    meas_pos, meas_heading, w_acc, w_pos, w_head,
+    ok,
+    cost_prev, rank_prev, pos_prev, head_prev,
+    cost_new, rank_new, pos_new, head_new, best_edge, term_new, term_prev,
+):  # fmt: skip
+    """One sample: for every node, the best incoming edge from a live path.
+    edge_cost_acc (E,) C_A per edge this sample; meas_pos (2,) metres or NaN;
+    meas_heading radians or NaN; ok (γ, N) constraint satisfaction of each node now;
+    cost_prev = inf marks dead paths; term_* (N, 4): per-path accumulated acc /
+    position / heading costs (for reports) and the count of non-original edges
+    (the tie-break)."""
+    N = cost_prev.shape[0]
+    gamma = rank_prev.shape[1]
     use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
     use_head = np.isfinite(meas_heading) and w_head != 0.0
-    best_rank = np.empty(gamma, dtype=np.int64)
-    cand_rank = np.empty(gamma, dtype=np.int64)
-    for n in range(N):
+    carry = use_pos or use_head
+    cos_prev = np.cos(head_prev)  # once per node, not once per edge
+    sin_prev = np.sin(head_prev)
+    for n in numba.prange(N):
         best = -1
         best_cost = np.inf
-        best_ca = 0.0
+        best_det = 0.0
         best_cp = 0.0
         best_co = 0.0
-        best_px = 0.0
-        best_pz = 0.0
-        best_h = 0.0
-        best_det = 0.0
         for e in range(incoming[n], incoming[n + 1]):
             m = edge_src[e]
-            if not alive_prev[m]:
+            base = cost_prev[m]
+            if base == np.inf:
                 continue
-            ca = 0.0
-            if n_valid > 0 and w_acc != 0.0:
-                for s in range(S):
-                    if valid[s]:
-                        for k in range(3):
-                            d = edge_acc[e, s, k] * inv_g - meas_acc[s, k]
-                            ca += d * d
-                ca /= n_valid
-            h = head_prev[m]
-            c, sn = np.cos(h), np.sin(h)
-            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-            px = pos_prev[m, 0] + c * ox + sn * oz
-            pz = pos_prev[m, 1] - sn * ox + c * oz
-            nh = h + edge_heading[e]
+            total = base + w_acc * edge_cost_acc[e]
             cp = 0.0
-            if use_pos:
-                cp = np.sqrt((px - meas_pos[0]) ** 2 + (pz - meas_pos[1]) ** 2)
             co = 0.0
-            if use_head:
-                co = abs(_wrap(nh - meas_heading))
-            total = cost_prev[m] + w_acc * ca + w_pos * cp + w_head * co
-            for k in range(gamma):
-                cand_rank[k] = rank_prev[m, k]
-            det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
-            if best < 0 or _better(cand_rank, total, det, edge_kind[e], best_rank, best_cost, best_det,
-                                   edge_kind[best], gamma):  # fmt: skip
-                best = e
-                best_det = det
-                best_cost = total
+            if carry:
+                if use_pos:
+                    ox, oz = edge_offset[e, 0], edge_offset[e, 1]
+                    px = pos_prev[m, 0] + cos_prev[m] * ox + sin_prev[m] * oz
+                    pz = pos_prev[m, 1] - sin_prev[m] * ox + cos_prev[m] * oz
+                    cp = np.sqrt((px - meas_pos[0]) ** 2 + (pz - meas_pos[1]) ** 2)
+                if use_head:
+                    co = abs(_wrap(head_prev[m] + edge_heading[e] - meas_heading))
+                total += w_pos * cp + w_head * co
+            det = -1.0  # read only on a near-tie: one scattered read per edge, not two
+            if best >= 0:
+                mb = edge_src[best]
+                better = False
+                decided = False
                 for k in range(gamma):
-                    best_rank[k] = cand_rank[k]
-                best_ca, best_cp, best_co = ca, cp, co
-                best_px, best_pz, best_h = px, pz, nh
+                    if rank_prev[m, k] != rank_prev[mb, k]:
+                        better = rank_prev[m, k] < rank_prev[mb, k]
+                        decided = True
+                        break
+                if not decided:
+                    if total < best_cost - TIE:
+                        better = True
+                    elif total > best_cost + TIE:
+                        better = False
+                    else:
+                        det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
+                        if det != best_det:
+                            better = det < best_det
+                        else:
+                            better = edge_kind[e] < edge_kind[best]
+                if not better:
+                    continue
+            if det < 0.0:
+                det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
+            best = e
+            best_cost = total
+            best_det = det
+            best_cp = cp
+            best_co = co
         best_edge[n] = best
         if best < 0:
-            alive_new[n] = False
             cost_new[n] = np.inf
             continue
-        alive_new[n] = True
-        cost_new[n] = best_cost
         m = edge_src[best]
+        cost_new[n] = best_cost
         for k in range(gamma):
-            rank_new[n, k] = best_rank[k] + (0 if ok[k, n] else 1)
-        pos_new[n, 0] = best_px
-        pos_new[n, 1] = best_pz
-        head_new[n] = best_h
-        term_new[n, 0] = term_prev[m, 0] + best_ca
+            rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
+        ox, oz = edge_offset[best, 0], edge_offset[best, 1]
+        pos_new[n, 0] = pos_prev[m, 0] + cos_prev[m] * ox + sin_prev[m] * oz
+        pos_new[n, 1] = pos_prev[m, 1] - sin_prev[m] * ox + cos_prev[m] * oz
+        head_new[n] = head_prev[m] + edge_heading[best]
+        term_new[n, 0] = term_prev[m, 0] + edge_cost_acc[best]
         term_new[n, 1] = term_prev[m, 1] + best_cp
         term_new[n, 2] = term_prev[m, 2] + best_co
         term_new[n, 3] = best_det
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow_tree(head, best_edge, edge_src, alive_new, t, e_node, e_edge, e_parent, e_time, refcount, free, n_free):
+def _grow_tree(head, best_edge, edge_src, t, e_node, e_edge, e_parent, e_time, refcount, free, n_free):
     """Add one survivor-tree entry per live node (parent: its predecessor's head
     entry), then release the old heads, freeing every entry no live path uses."""
     N = head.shape[0]
     new_head = np.full(N, -1, dtype=np.int64)
     for n in range(N):
-        if not alive_new[n]:
-            continue
         e = best_edge[n]
+        if e < 0:
+            continue
         parent = head[edge_src[e]]
         n_free -= 1
         slot = free[n_free]
@@ -276,10 +288,10 @@ class ViterbiSearch:
         self.rank = np.zeros((N, gamma), dtype=np.int64)
         self.pos = np.zeros((N, 2))
         self.head = np.zeros(N)
-        self.alive = np.ones(N, dtype=bool)
         self.terms = np.zeros((N, 4))
         self._scratch = (np.zeros(N), np.zeros((N, gamma), np.int64), np.zeros((N, 2)), np.zeros(N),
-                         np.zeros(N, bool), np.zeros(N, np.int64), np.zeros((N, 4)))  # fmt: skip
+                         np.zeros(N, np.int64), np.zeros((N, 4)))  # fmt: skip
+        self.edge_cost_acc = np.zeros(graph.num_edges)
         self.ok = np.ones((gamma, N), dtype=bool)
         cap = 4 * N + 16
         self._alloc(cap)
@@ -322,7 +334,6 @@ class ViterbiSearch:
         self.pos[:] = p
         self.head[:] = h
         self.cost[:] = 0.0
-        self.alive[:] = True
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
@@ -341,25 +352,31 @@ class ViterbiSearch:
         if self.n_free < self.N:
             self._grow()
         self.t += 1
-        cost, rank, pos, head, alive, best_edge, terms = self._scratch
+        cost, rank, pos, head, best_edge, terms = self._scratch
         meas_acc = np.ascontiguousarray(acc, dtype=np.float64) / GRAVITY
         meas_pos = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
         meas_head = np.nan if heading is None else float(heading)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
-        _step(self.incoming, self.edge_src, self.edge_kind, self.edge_acc, self.edge_offset, self.edge_heading,
-              meas_acc, meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
-              self.cost, self.rank, self.pos, self.head, self.alive,
-              cost, rank, pos, head, alive, best_edge, terms, self.terms)  # fmt: skip
-        if not alive.any():
+        if w.acc:
+            _edge_acc_costs(self.edge_acc, meas_acc, self.edge_cost_acc)
+        _step(self.incoming, self.edge_src, self.edge_kind, self.edge_cost_acc, self.edge_offset, self.edge_heading,
+              meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
+              self.cost, self.rank, self.pos, self.head,
+              cost, rank, pos, head, best_edge, terms, self.terms)  # fmt: skip
+        if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
-        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, alive, self.t, self.e_node, self.e_edge,
+        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.t, self.e_node, self.e_edge,
                                  self.e_parent, self.e_time, self.refcount, self.free, self.n_free)  # fmt: skip
         self.peak_entries = max(self.peak_entries, self.live_entries)
         # Swap buffers: the new state becomes the previous one.
-        self._scratch = (self.cost, self.rank, self.pos, self.head, self.alive, best_edge, self.terms)
-        self.cost, self.rank, self.pos, self.head, self.alive, self.terms = cost, rank, pos, head, alive, terms
+        self._scratch = (self.cost, self.rank, self.pos, self.head, best_edge, self.terms)
+        self.cost, self.rank, self.pos, self.head, self.terms = cost, rank, pos, head, terms
+
+    @property
+    def alive(self) -> np.ndarray:
+        return np.isfinite(self.cost)
 
     def best_node(self) -> int:
         """The live node whose path ranks first (fewest broken constraints, then cost;

@@ -1,0 +1,134 @@
+#!/usr/bin/env python3
+"""Benchmark: Viterbi search speed and memory (issue: SPEC §4 targets).
+
+A generated graph of K's largest size (G_E: 100,686 nodes, 317,600 edges: clips as
+chains of original edges plus random transitions, random 6-sensor metadata), searched
+with 720 samples (24 s at 30 Hz) in modes A (accelerometers), APO (+ position and
+heading) and APO+2constraints; a one-hour input (108,000 samples, mode APO); and the
+plain numpy full-lattice reference against the numba search on a smaller graph.
+One JSON object per run. Each run is its own process, so peak RSS is its own.
+
+Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def generated_graph(nodes: int, edges: int, sensors: int = 6, clip_frames: int = 300, seed: int = 0):
+    from tests.search.test_viterbi import tiny_graph
+
+    rng = np.random.default_rng(seed)
+    idx = np.arange(nodes)
+    chain = idx[(idx + 1) % clip_frames != 0][:-1]  # original edges inside clips
+    src = [chain]
+    dst = [chain + 1]
+    extra = edges - len(chain)
+    src.append(rng.integers(0, nodes, extra))
+    dst.append(rng.integers(0, nodes, extra))
+    src, dst = np.concatenate(src), np.concatenate(dst)
+    pairs = np.unique(np.stack([src, dst], 1), axis=0)
+    while len(pairs) < edges:  # top up duplicates removed by unique
+        more = rng.integers(0, nodes, (edges - len(pairs), 2))
+        pairs = np.unique(np.concatenate([pairs, more]), axis=0)
+    E = len(pairs)
+    contacts = rng.random((nodes, 2)) < 0.7
+    return tiny_graph(pairs[:, 0], pairs[:, 1], rng.normal(0, 9.81, (E, sensors, 3)).astype(np.float32),
+                      offsets=rng.normal(0, 0.05, (E, 2)), dheading=rng.normal(0, 0.03, E), contacts=contacts,
+                      labels=rng.integers(0, 2, nodes))  # fmt: skip
+
+
+def inputs(T: int, sensors: int, seed: int = 1):
+    rng = np.random.default_rng(seed)
+    acc = rng.normal(0, 9.81, (T, sensors, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.03, T))
+    return acc, position, heading
+
+
+def run(mode: str, nodes: int, edges: int, samples: int) -> dict:
+    from graphsvc.search.viterbi import Weights, viterbi_search
+
+    g = generated_graph(nodes, edges)
+    acc, position, heading = inputs(samples, 6)
+    sets = []
+    if mode == "A":
+        weights, position, heading = Weights(1, 0, 0), None, None
+    else:
+        weights = Weights(0.5, 1, 1)
+    if mode == "APO+2constraints":
+        sets = [[{"start_s": 2.0, "end_s": 6.0, "require": {"contact": "both"}}],
+                [{"start_s": 4.0, "end_s": 12.0, "require": {"label": "b"}}]]  # fmt: skip
+    viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
+                   weights, sets)  # warm-up: numba compilation  # fmt: skip
+    t0 = time.perf_counter()
+    r = viterbi_search(g, acc, position, heading, weights, sets)
+    seconds = time.perf_counter() - t0
+    return {"mode": mode, "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
+            "seconds": round(seconds, 3), "ms_per_sample": round(1000 * seconds / samples, 3),
+            "edge_steps_per_s": round(g.num_edges * (samples - 1) / seconds),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "compression": round(r.compression, 1), "peak_entries": r.peak_entries,
+            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}"}  # fmt: skip
+
+
+def run_reference(nodes: int, edges: int, samples: int) -> dict:
+    from graphsvc.search.reference import reference_viterbi
+    from graphsvc.search.viterbi import Weights, viterbi_search
+
+    g = generated_graph(nodes, edges)
+    acc, position, heading = inputs(samples, 6)
+    w = Weights(0.5, 1, 1)
+    viterbi_search(g, acc[:3], position[:3], heading[:3], w)
+    t0 = time.perf_counter()
+    fast = viterbi_search(g, acc, position, heading, w)
+    t_fast = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ref_path, _ = reference_viterbi(g, acc, position, heading, w)
+    t_ref = time.perf_counter() - t0
+    return {"mode": "APO numba vs numpy reference", "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
+            "seconds": round(t_fast, 3), "reference_seconds": round(t_ref, 3), "speed_ratio": round(t_ref / t_fast, 1),
+            "same_path": bool(np.array_equal(fast.node_path, ref_path)),
+            "edge_steps_per_s": round(g.num_edges * (samples - 1) / t_fast),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+
+
+RUNS = {
+    "A": lambda a: run("A", 100_686, 317_600, 720),
+    "APO": lambda a: run("APO", 100_686, 317_600, 720),
+    "APO+2constraints": lambda a: run("APO+2constraints", 100_686, 317_600, 720),
+    "hour": lambda a: run("APO", 100_686, 317_600, a.hour_samples),
+    "reference": lambda a: run_reference(7_577, 9_433, 720),
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=sorted(RUNS))
+    parser.add_argument("--hour-samples", type=int, default=108_000)
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(RUNS[args.child](args)), flush=True)
+        return
+    for name in [args.only] if args.only else list(RUNS):
+        cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples)]
+        out = subprocess.run(cmd, capture_output=True, text=True)
+        print(out.stdout.strip() if out.returncode == 0 else json.dumps({"run": name, "error": out.stderr[-400:]}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
