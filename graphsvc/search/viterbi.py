@@ -172,8 +172,13 @@ def _step(
         term_new[n, 3] = best_det
 
 
+# Survivor-tree entries are rows of one (capacity, 4) int64 array — node, edge used to
+# arrive, parent entry, reference count — so touching an entry is one cache line.
+NODE, EDGE, PARENT, REFS = 0, 1, 2, 3
+
+
 @numba.njit(cache=True, nogil=True)
-def _grow_tree(head, best_edge, edge_src, t, e_node, e_edge, e_parent, e_time, refcount, free, n_free):
+def _grow_tree(head, best_edge, edge_src, entries, free, n_free):
     """Add one survivor-tree entry per live node (parent: its predecessor's head
     entry), then release the old heads, freeing every entry no live path uses."""
     N = head.shape[0]
@@ -185,22 +190,21 @@ def _grow_tree(head, best_edge, edge_src, t, e_node, e_edge, e_parent, e_time, r
         parent = head[edge_src[e]]
         n_free -= 1
         slot = free[n_free]
-        e_node[slot] = n
-        e_edge[slot] = e
-        e_parent[slot] = parent
-        e_time[slot] = t
-        refcount[slot] = 1  # a live head
-        refcount[parent] += 1  # its child
+        entries[slot, NODE] = n
+        entries[slot, EDGE] = e
+        entries[slot, PARENT] = parent
+        entries[slot, REFS] = 1  # a live head
+        entries[parent, REFS] += 1  # its child
         new_head[n] = slot
     for n in range(N):
         slot = head[n]
         while slot >= 0:  # release, cascading up while nothing refers to the entry
-            refcount[slot] -= 1
-            if refcount[slot] > 0:
+            entries[slot, REFS] -= 1
+            if entries[slot, REFS] > 0:
                 break
             free[n_free] = slot
             n_free += 1
-            slot = e_parent[slot]
+            slot = entries[slot, PARENT]
     head[:] = new_head
     return n_free
 
@@ -299,22 +303,16 @@ class ViterbiSearch:
         self.peak_entries = 0
 
     def _alloc(self, cap):
-        self.e_node = np.zeros(cap, np.int64)
-        self.e_edge = np.zeros(cap, np.int64)
-        self.e_parent = np.zeros(cap, np.int64)
-        self.e_time = np.zeros(cap, np.int64)
-        self.refcount = np.zeros(cap, np.int64)
+        self.entries = np.zeros((cap, 4), np.int64)
         self.free = np.arange(cap - 1, -1, -1, dtype=np.int64)
         self.n_free = cap
 
     def _grow(self):
-        old = len(self.e_node)
+        old = len(self.entries)
         cap = 2 * old
-        for name in ("e_node", "e_edge", "e_parent", "e_time", "refcount"):
-            arr = getattr(self, name)
-            bigger = np.zeros(cap, np.int64)
-            bigger[:old] = arr
-            setattr(self, name, bigger)
+        bigger = np.zeros((cap, 4), np.int64)
+        bigger[:old] = self.entries
+        self.entries = bigger
         free = np.empty(cap, np.int64)
         free[: self.n_free] = self.free[: self.n_free]
         free[self.n_free : self.n_free + (cap - old)] = np.arange(cap - 1, old - 1, -1)
@@ -323,7 +321,7 @@ class ViterbiSearch:
 
     @property
     def live_entries(self) -> int:
-        return len(self.e_node) - self.n_free
+        return len(self.entries) - self.n_free
 
     def start(self, position=None, heading=None, kinds_t=None, values_t=None):
         """Sample 0: every node starts a path at the first measured position/heading."""
@@ -339,11 +337,10 @@ class ViterbiSearch:
             self.rank[:] = (~self.ok).T
         slots = self.free[self.n_free - N : self.n_free][::-1].copy()
         self.n_free -= N
-        self.e_node[slots] = np.arange(N)
-        self.e_edge[slots] = -1
-        self.e_parent[slots] = -1
-        self.e_time[slots] = 0
-        self.refcount[slots] = 1
+        self.entries[slots, NODE] = np.arange(N)
+        self.entries[slots, EDGE] = -1
+        self.entries[slots, PARENT] = -1
+        self.entries[slots, REFS] = 1
         self.heads = slots
         self.peak_entries = self.live_entries
 
@@ -367,8 +364,7 @@ class ViterbiSearch:
               cost, rank, pos, head, best_edge, terms, self.terms)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
-        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.t, self.e_node, self.e_edge,
-                                 self.e_parent, self.e_time, self.refcount, self.free, self.n_free)  # fmt: skip
+        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.entries, self.free, self.n_free)
         self.peak_entries = max(self.peak_entries, self.live_entries)
         # Swap buffers: the new state becomes the previous one.
         self._scratch = (self.cost, self.rank, self.pos, self.head, best_edge, self.terms)
@@ -391,9 +387,9 @@ class ViterbiSearch:
         nodes, edges = [], []
         slot = self.heads[node]
         while slot >= 0:
-            nodes.append(self.e_node[slot])
-            edges.append(self.e_edge[slot])
-            slot = self.e_parent[slot]
+            nodes.append(self.entries[slot, NODE])
+            edges.append(self.entries[slot, EDGE])
+            slot = self.entries[slot, PARENT]
         return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1][1:], dtype=np.int64)
 
 
