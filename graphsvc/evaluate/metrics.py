@@ -1,0 +1,206 @@
+"""Evaluation metrics (SPEC §9): pure functions over flat per-frame arrays.
+
+Conventions (SPEC §1): positions in metres, Y up, ground plane XZ; ground positions
+are (x, z) pairs in metres; headings are radians about +Y, 0 facing +Z, positive
+turning toward +X, so that R_y(θ) maps (x, z) to (cos θ·x + sin θ·z, −sin θ·x + cos θ·z).
+Reported metrics are in centimetres and degrees.
+
+Joint arrays hold the canonical joints only: select them with
+`graphsvc.motion.joints.canonical_indices` before calling (`pos[:, idx]`). Ground
+positions and headings are those of `graphsvc.motion.signals.ground_position` and
+`signals.heading` (or whatever the synthesizer reports for its own frames).
+
+Each metric returns `(per_frame, mean)`: a (T,) float array and its mean as a Python
+float. Every function raises `graphsvc.errors.InputError` on empty, non-finite or
+shape-mismatched input, so outputs never contain NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.motion.quat import wrap_angle
+
+METRICS = ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc")
+
+
+def _finite(name: str, a, shape_tail: tuple) -> np.ndarray:
+    """`a` as a float array of shape (T, *shape_tail) with T ≥ 1 and finite values;
+    None in shape_tail accepts any size."""
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim != 1 + len(shape_tail) or any(w is not None and w != n for w, n in zip(shape_tail, arr.shape[1:])):
+        want = ", ".join(["T", *("P" if w is None else str(w) for w in shape_tail)])
+        raise InputError(f"{name}: expected shape ({want}), got {arr.shape}")
+    if arr.shape[0] == 0:
+        raise InputError(f"{name}: zero frames")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}: contains NaN or infinite values")
+    return arr
+
+
+def _same_frames(**arrays) -> int:
+    lengths = {k: len(v) for k, v in arrays.items()}
+    if len(set(lengths.values())) != 1:
+        raise InputError("frame counts disagree: " + ", ".join(f"{k}={n}" for k, n in lengths.items()))
+    return next(iter(lengths.values()))
+
+
+def align_frames(pred_pos, pred_ground, pred_heading, true_ground, true_heading) -> np.ndarray:
+    """(T, P, 3) metres: each predicted frame rotated about +Y by (true − pred heading)
+    around its own root ground position, then translated so that ground position lands
+    on the true one. Heights (Y) are untouched."""
+    d = np.asarray(true_heading, dtype=np.float64) - np.asarray(pred_heading, dtype=np.float64)
+    c, s = np.cos(d)[:, None], np.sin(d)[:, None]
+    pred_ground = np.asarray(pred_ground, dtype=np.float64)
+    true_ground = np.asarray(true_ground, dtype=np.float64)
+    x = pred_pos[..., 0] - pred_ground[:, 0:1]
+    z = pred_pos[..., 2] - pred_ground[:, 1:2]
+    out = np.array(pred_pos, dtype=np.float64, copy=True)
+    out[..., 0] = c * x + s * z + true_ground[:, 0:1]
+    out[..., 2] = -s * x + c * z + true_ground[:, 1:2]
+    return out
+
+
+def joint_err_cm(pred_pos, true_pos, pred_ground, pred_heading, true_ground, true_heading):
+    """Local pose error: ((T,) per-frame, mean) in centimetres.
+
+    pred_pos, true_pos: (T, P, 3) metres, canonical joints, same order. pred_ground,
+    true_ground: (T, 2) root (x, z) metres. pred_heading, true_heading: (T,) radians.
+    Each predicted frame is aligned to the truth (`align_frames`); the per-frame value
+    is the mean Euclidean distance over the P joints."""
+    pred_pos = _finite("pred_pos", pred_pos, (None, 3))
+    true_pos = _finite("true_pos", true_pos, (None, 3))
+    if pred_pos.shape[1] != true_pos.shape[1]:
+        raise InputError(f"joint counts disagree: predicted {pred_pos.shape[1]}, true {true_pos.shape[1]}")
+    if pred_pos.shape[1] == 0:
+        raise InputError("no joints to compare")
+    pg = _finite("pred_ground", pred_ground, (2,))
+    tg = _finite("true_ground", true_ground, (2,))
+    ph = _finite("pred_heading", pred_heading, ())
+    th = _finite("true_heading", true_heading, ())
+    _same_frames(pred_pos=pred_pos, true_pos=true_pos, pred_ground=pg, true_ground=tg, pred_heading=ph, true_heading=th)
+    aligned = align_frames(pred_pos, pg, ph, tg, th)
+    per_frame = 100.0 * np.linalg.norm(aligned - true_pos, axis=-1).mean(axis=1)
+    return per_frame, float(per_frame.mean())
+
+
+def root_err_cm(pred_ground, true_ground):
+    """Ground-plane root distance: ((T,) per-frame, mean) in centimetres.
+    pred_ground, true_ground: (T, 2) (x, z) metres."""
+    pg = _finite("pred_ground", pred_ground, (2,))
+    tg = _finite("true_ground", true_ground, (2,))
+    _same_frames(pred_ground=pg, true_ground=tg)
+    per_frame = 100.0 * np.linalg.norm(pg - tg, axis=-1)
+    return per_frame, float(per_frame.mean())
+
+
+def heading_err_deg(pred_heading, true_heading):
+    """Absolute heading difference wrapped to [0°, 180°]: ((T,) per-frame, mean) in degrees.
+    pred_heading, true_heading: (T,) radians (any range)."""
+    ph = _finite("pred_heading", pred_heading, ())
+    th = _finite("true_heading", true_heading, ())
+    _same_frames(pred_heading=ph, true_heading=th)
+    per_frame = np.degrees(np.abs(wrap_angle(ph - th)))
+    return per_frame, float(per_frame.mean())
+
+
+def label_acc(pred_labels, true_label):
+    """Content-label accuracy: ((T,) per-frame 0/1 floats, fraction of frames).
+
+    pred_labels: (T,) the content label (str or int) of the source clip each
+    synthesized frame was taken from; None marks an unlabelled source and counts as a
+    miss. true_label: the test clip's label. Labels compare as strings, so 3 and "3"
+    match."""
+    labels = list(np.asarray(pred_labels, dtype=object).reshape(-1)) if np.ndim(pred_labels) <= 1 else None
+    if labels is None:
+        raise InputError(f"pred_labels: expected shape (T,), got {np.shape(pred_labels)}")
+    if not labels:
+        raise InputError("pred_labels: zero frames")
+    if true_label is None:
+        raise InputError("true_label: the test clip has no content label")
+    want = str(true_label)
+    per_frame = np.array([lab is not None and str(lab) == want for lab in labels], dtype=np.float64)
+    return per_frame, float(per_frame.mean())
+
+
+def evaluate_frames(
+    pred_pos,
+    true_pos,
+    pred_ground,
+    pred_heading,
+    true_ground,
+    true_heading,
+    pred_labels=None,
+    true_label=None,
+    name: str | None = None,
+) -> dict:
+    """All §9 metrics for one clip.
+
+    Shapes as in `joint_err_cm`; pred_labels (Tp,) and true_label as in `label_acc`.
+    Within each side the arrays must agree on frame count (pred_*: Tp, true_*: Tt),
+    else InputError. Length rule: when Tp ≠ Tt both sides are aligned at frame 0 and
+    truncated to T = min(Tp, Tt); the dropped count is reported as `frames_dropped`.
+    When pred_labels or true_label is None, `label_acc` is None (JSON null).
+
+    Returns {"name", "frames": T, "frames_dropped", "joint_err_cm", "root_err_cm",
+    "heading_err_deg", "label_acc", "per_frame": {metric: (T,) array}} with Python
+    floats for the scalars."""
+    pred_pos = np.asarray(pred_pos, dtype=np.float64)
+    true_pos = np.asarray(true_pos, dtype=np.float64)
+    if pred_pos.ndim != 3 or true_pos.ndim != 3:
+        raise InputError(f"joint positions must be (T, P, 3); got {pred_pos.shape} and {true_pos.shape}")
+    if pred_pos.shape[1] != true_pos.shape[1]:
+        raise InputError(f"joint counts disagree: predicted {pred_pos.shape[1]}, true {true_pos.shape[1]}")
+    pred = {"pred_pos": pred_pos, "pred_ground": np.asarray(pred_ground), "pred_heading": np.asarray(pred_heading)}
+    if pred_labels is not None:
+        pred["pred_labels"] = np.asarray(pred_labels, dtype=object)
+    true = {"true_pos": true_pos, "true_ground": np.asarray(true_ground), "true_heading": np.asarray(true_heading)}
+    tp = _same_frames(**pred)
+    tt = _same_frames(**true)
+    n = min(tp, tt)
+    if n == 0:
+        raise InputError(f"zero frames to evaluate (predicted {tp}, true {tt})")
+    pred = {k: v[:n] for k, v in pred.items()}
+    true = {k: v[:n] for k, v in true.items()}
+
+    joint, joint_mean = joint_err_cm(pred["pred_pos"], true["true_pos"], pred["pred_ground"], pred["pred_heading"], true["true_ground"], true["true_heading"])  # fmt: skip
+    root, root_mean = root_err_cm(pred["pred_ground"], true["true_ground"])
+    head, head_mean = heading_err_deg(pred["pred_heading"], true["true_heading"])
+    per_frame = {"joint_err_cm": joint, "root_err_cm": root, "heading_err_deg": head, "label_acc": None}
+    acc_mean = None
+    if pred_labels is not None and true_label is not None:
+        per_frame["label_acc"], acc_mean = label_acc(pred["pred_labels"], true_label)
+    return {
+        "name": name,
+        "frames": int(n),
+        "frames_dropped": int(max(tp, tt) - n),
+        "joint_err_cm": joint_mean,
+        "root_err_cm": root_mean,
+        "heading_err_deg": head_mean,
+        "label_acc": acc_mean,
+        "per_frame": per_frame,
+    }
+
+
+def summarize(results: list[dict]) -> dict:
+    """JSON-ready summary of `evaluate_frames` results (what `graphsvc evaluate --json`
+    prints): {"clips": [row, ...], "mean": {...}}.
+
+    Each row is the result without `per_frame` (other extra keys, e.g. runtime, pass
+    through). `mean` holds `clips`, total `frames` and, per metric, the frame-weighted
+    mean over clips, Σ frames_i·m_i / Σ frames_i, which equals the mean over all frames;
+    label_acc is averaged only over clips that have it and is None when none do."""
+    rows = []
+    for r in results:
+        row = {k: v for k, v in r.items() if k != "per_frame"}
+        for k in METRICS:
+            if row.get(k) is not None:
+                row[k] = float(row[k])
+        rows.append(row)
+    mean: dict = {"clips": len(rows), "frames": int(sum(int(r["frames"]) for r in rows))}
+    for k in METRICS:
+        have = [r for r in rows if r.get(k) is not None]
+        weight = sum(int(r["frames"]) for r in have)
+        mean[k] = float(sum(int(r["frames"]) * r[k] for r in have) / weight) if weight > 0 else None
+    return {"clips": rows, "mean": mean}
