@@ -126,15 +126,14 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
     motion = resample(motion, rate_hz)
     sk = motion.skeleton
     table = joint_map(sk, mapping)
-    _, world_pos = motion_fk(motion)
+    world_rot, world_pos = motion_fk(motion)
     contacts = signals.foot_contacts(world_pos, table, rate_hz)
     ground, heading = meta.ground_and_heading(world_pos, table)
     canon = world_pos[:, [table[c] for c in CANONICAL]]
-    placement = place(layout, sk, mapping)
-    readings = meta.speed_readings(motion.rotations, motion.translations, sk.parents, placement, rate_hz)
     half_rot, half_trans = meta.half_speed_poses(motion.rotations, motion.translations)
-    _, half_pos = forward_kinematics(half_rot, half_trans, sk.parents)
+    half_world_rot, half_pos = forward_kinematics(half_rot, half_trans, sk.parents)
     half_ground, half_heading = meta.ground_and_heading(half_pos, table)
+    readings = meta.speed_readings(world_rot, world_pos, half_world_rot, half_pos, place(layout, sk, mapping), rate_hz)
     return PreparedClip(
         motion=motion, world_pos=world_pos, contacts=contacts, changes=signals.contact_changes(contacts),
         ground=ground, heading=heading, features=pose_features(canon, window), readings=readings,

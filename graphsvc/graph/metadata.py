@@ -47,20 +47,19 @@ def half_speed_poses(rotations: np.ndarray, translations: np.ndarray) -> tuple[n
 
 
 def speed_readings(
-    rotations: np.ndarray, translations: np.ndarray, parents: np.ndarray, placement: Placement, rate_hz: float
-) -> SpeedReadings:
-    """Sensor readings of one clip at the three playback speeds."""
-    F = rotations.shape[0]
-    normal = simulate_accelerations(*forward_kinematics(rotations, translations, parents), placement, rate_hz)
-    half_rot, half_trans = half_speed_poses(rotations, translations)
-    half = simulate_accelerations(*forward_kinematics(half_rot, half_trans, parents), placement, rate_hz)
+    world_rot: np.ndarray, world_pos: np.ndarray, half_world_rot: np.ndarray, half_world_pos: np.ndarray,
+    placement: Placement, rate_hz: float,
+) -> SpeedReadings:  # fmt: skip
+    """Sensor readings of one clip at the three playback speeds, from the world
+    poses of the clip (F, J, 4/3) and of its half-speed timeline (2F−1, J, 4/3).
+    FK is per frame, so double speed needs no FK of its own: it plays every other
+    row of the clip's world poses."""
+    normal = simulate_accelerations(world_rot, world_pos, placement, rate_hz)
+    half = simulate_accelerations(half_world_rot, half_world_pos, placement, rate_hz)
     double = np.empty_like(normal)
     for parity in (0, 1):
-        rows = np.arange(parity, F, 2)
-        if rows.size:
-            double[rows] = simulate_accelerations(
-                *forward_kinematics(rotations[rows], translations[rows], parents), placement, rate_hz
-            )
+        if parity < world_rot.shape[0]:
+            double[parity::2] = simulate_accelerations(world_rot[parity::2], world_pos[parity::2], placement, rate_hz)
     return SpeedReadings(normal, half, double)
 
 
@@ -133,8 +132,11 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     for c, info in enumerate(graph.clips):
         nodes = info["first_node"] + np.arange(info["frames"])
         placement = place(layout, clip_skeleton(c), mapping)
-        r = speed_readings(graph.node_rotations[nodes].astype(np.float64),
-                           graph.node_translations[nodes].astype(np.float64), sk.parents, placement, graph.rate_hz)  # fmt: skip
+        rot = graph.node_rotations[nodes].astype(np.float64)
+        trans = graph.node_translations[nodes].astype(np.float64)
+        half_rot, half_trans = half_speed_poses(rot, trans)
+        r = speed_readings(*forward_kinematics(rot, trans, sk.parents),
+                           *forward_kinematics(half_rot, half_trans, sk.parents), placement, graph.rate_hz)  # fmt: skip
         normal[nodes], double[nodes], half[nodes] = r.normal, r.double, r.half[0::2]
         slow = slow_nodes[clip_of[slow_nodes] == c]
         half[slow] = r.half[(2 * frame_of[slow]).astype(np.int64)]
