@@ -264,10 +264,10 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
     # (a transition onto the next frame duplicates the original edge) keeping the
     # lowest kind, so the order never depends on how edges were gathered.
     order = np.lexsort((e_kind, e_src, e_dst))
-    e_src, e_dst = e_src[order], e_dst[order]
+    src_sorted, dst_sorted = e_src[order], e_dst[order]
     keep = np.ones(len(order), dtype=bool)
-    keep[1:] = (e_src[1:] != e_src[:-1]) | (e_dst[1:] != e_dst[:-1])
-    order = order[keep]
+    keep[1:] = (src_sorted[1:] != src_sorted[:-1]) | (dst_sorted[1:] != dst_sorted[:-1])
+    order = order[keep]  # every edge array below is indexed by this one order
     N = sum(len(k) for k in node_parts["kind"])
     labels = sorted({_content(m.motion) for m in clips})
     label_of_clip = np.array([labels.index(_content(c.motion)) for c in clips], dtype=np.int32)
@@ -291,13 +291,13 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
         node_translations=np.concatenate(node_parts["trans"]),
         node_ground=np.concatenate(node_parts["ground"]),
         node_heading=np.concatenate(node_parts["heading"]),
-        edge_src=e_src[keep].astype(np.int32),
-        edge_dst=e_dst[keep].astype(np.int32),
+        edge_src=e_src[order].astype(np.int32),
+        edge_dst=e_dst[order].astype(np.int32),
         edge_kind=e_kind[order],
         edge_acc=e_acc[order],
         edge_offset=e_off[order],
         edge_heading=e_dh[order],
-        incoming=incoming_offsets(e_dst[keep], N),
+        incoming=incoming_offsets(e_dst[order], N),
         segments=segments,
     )
     report.timings["assemble_s"] = time.perf_counter() - t0

@@ -269,7 +269,7 @@ def _satisfied(kinds_t, values_t, contact_code, label, ok):
 
 class ViterbiSearch:
     """Incremental search: `start(first sample)`, `step(sample)` per sample, then
-    `best_path()`. Used by the batch search and by streaming decoders alike.
+    `trace(best_node())`. Used by the batch search and by streaming decoders alike.
 
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
@@ -375,8 +375,8 @@ class ViterbiSearch:
         return np.isfinite(self.cost)
 
     def best_node(self) -> int:
-        """The live node whose path ranks first (fewest broken constraints, then cost;
-        costs within TIE count as equal and the lower node id wins)."""
+        """The live node whose path ranks first: fewest broken constraints, then cost
+        (within TIE counts as equal), then fewer non-original edges, then lower node id."""
         alive = np.nonzero(self.alive)[0]
         cost = np.round(self.cost[alive] / TIE) if np.all(np.abs(self.cost[alive]) < 1e6) else self.cost[alive]
         keys = [alive, self.terms[alive, 3], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
