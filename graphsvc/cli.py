@@ -128,6 +128,63 @@ def _cmd_relayout(args) -> int:
     return 0
 
 
+def search_options(args):
+    """Options from the strategy flags shared by `synthesize`, `evaluate` and `client`."""
+    from graphsvc.pipeline import Options, load_constraints, parse_weights
+
+    constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
+    return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
+                   heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
+                   speed_threshold=args.speed_threshold, constraints=constraints)  # fmt: skip
+
+
+def add_search_options(p, constraints: bool = True) -> None:
+    from graphsvc.pipeline import STRATEGIES
+
+    p.add_argument("--strategy", default="viterbi", choices=STRATEGIES, help="search strategy (default viterbi)")
+    p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
+                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
+    if constraints:
+        p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help="fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")
+    p.add_argument("--heading-from-track", action="store_true",
+                   help="derive heading from the ground positions: direction of travel above --speed-threshold")
+    p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
+                   help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
+    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S", help="default 2 m/s (Kelly et al.)")
+
+
+def _cmd_synthesize(args) -> int:
+    from graphsvc.fileio import write_text_atomic
+    from graphsvc.graph.file import load_graph
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.pipeline import reconstruct
+    from graphsvc.sensors.recording import read_recording
+
+    out = Path(args.output)
+    _check_output(out)
+    if args.report:
+        _check_output(Path(args.report))
+    options = search_options(args)
+    graph = load_graph(args.graph)
+    rec = read_recording(args.recording)
+    result = reconstruct(graph, rec, options)
+    write_bvh(out, result.motion, scale=args.scale)
+    if args.report:
+        write_text_atomic(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    r = result.report
+    labels = " → ".join(f"{run['label']} {run['frames'] / graph.rate_hz:.1f} s" for run in r["labels"][:12])
+    more = f" … (+{len(r['labels']) - 12})" if len(r["labels"]) > 12 else ""
+    print(f"wrote {out}: {result.motion.num_frames} frames at {graph.rate_hz:g} Hz from {r['samples']} samples"
+          + (f" (resampled from {r['input_rate_hz']:g} Hz)" if r["resampled"] else ""))  # fmt: skip
+    print(f"path: {labels}{more}")
+    print(f"search {r['timings_s']['search']:.2f} s ({r['samples_per_s']:,.0f} samples/s), "
+          f"synthesis {r['timings_s']['synthesis']:.2f} s, compression {r['compression']:g}:1"
+          + (f", {r['revisions']} revisions at lag {r['lag_samples']} samples" if "revisions" in r else ""))  # fmt: skip
+    return 0
+
+
 def _check_output(path: Path) -> None:
     if not path.parent.exists() or not path.parent.is_dir():
         raise GraphsvcError(f"output folder {path.parent} does not exist")
@@ -179,6 +236,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layout", required=True, help="preset or layout file")
     p.add_argument("-o", "--output", required=True, metavar="FILE")
     p.set_defaults(run=_cmd_relayout)
+
+    p = sub.add_parser("synthesize", help="reconstruct motion from a recording by searching a graph")
+    p.add_argument("graph", metavar="GRAPH")
+    p.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
+    add_search_options(p)
+    p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
+    p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
+    p.set_defaults(run=_cmd_synthesize)
 
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")

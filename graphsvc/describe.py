@@ -10,7 +10,7 @@ from tqdm import tqdm
 
 from graphsvc.errors import UnknownFormatError
 from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
-from graphsvc.sensors.recording import describe_recording, import_csv, load_recording
+from graphsvc.sensors.recording import describe_recording, read_recording
 
 RECORDING_SUFFIXES = (".rec", ".csv")
 
@@ -24,7 +24,7 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
     for p in paths:
         path = Path(p)
         if path.suffix.lower() in RECORDING_SUFFIXES:
-            rec = import_csv(path) if path.suffix.lower() == ".csv" else load_recording(path)
+            rec = read_recording(path)
             info = describe_recording(rec)
             recordings.append({"path": str(path), **info})
         elif path.is_file() and path.suffix.lower() not in MOTION_SUFFIXES:

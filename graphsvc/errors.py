@@ -36,3 +36,7 @@ class SkeletonError(GraphsvcError):
 
 class LayoutError(GraphsvcError):
     """A sensor layout is unknown or malformed."""
+
+
+class StrategyNotImplementedError(GraphsvcError):
+    """A search strategy that is specified (SPEC §6–7) but not built yet."""

@@ -84,13 +84,14 @@ def _edge_acc_costs(edge_acc, meas_acc, out):
 def _step(
     incoming, edge_src, edge_kind, edge_cost_acc, edge_offset, edge_heading,
     meas_pos, meas_heading, w_acc, w_pos, w_head,
-    ok,
+    ok, allowed,
     cost_prev, rank_prev, pos_prev, head_prev,
     cost_new, rank_new, pos_new, head_new, best_edge, term_new, term_prev,
 ):  # fmt: skip
     """One sample: for every node, the best incoming edge from a live path.
     edge_cost_acc (E,) C_A per edge this sample; meas_pos (2,) metres or NaN;
     meas_heading radians or NaN; ok (γ, N) constraint satisfaction of each node now;
+    allowed (N,) bool: nodes the search may visit (leave-one-out masking);
     cost_prev = inf marks dead paths; term_* (N, 4): per-path accumulated acc /
     position / heading costs (for reports) and the count of non-original edges
     (the tie-break)."""
@@ -102,6 +103,10 @@ def _step(
     cos_prev = np.cos(head_prev)  # once per node, not once per edge
     sin_prev = np.sin(head_prev)
     for n in numba.prange(N):
+        if not allowed[n]:
+            best_edge[n] = -1
+            cost_new[n] = np.inf
+            continue
         best = -1
         best_cost = np.inf
         best_det = 0.0
@@ -172,15 +177,16 @@ def _step(
         term_new[n, 3] = best_det
 
 
-# Survivor-tree entries are rows of one (capacity, 4) int64 array — node, edge used to
-# arrive, parent entry, reference count — so touching an entry is one cache line.
-NODE, EDGE, PARENT, REFS = 0, 1, 2, 3
+# Survivor-tree entries are rows of one (capacity, 5) int64 array — node, edge used to
+# arrive, parent entry, reference count, sample — so touching an entry is one cache line.
+NODE, EDGE, PARENT, REFS, TIME = 0, 1, 2, 3, 4
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow_tree(head, best_edge, edge_src, entries, free, n_free):
-    """Add one survivor-tree entry per live node (parent: its predecessor's head
-    entry), then release the old heads, freeing every entry no live path uses."""
+def _grow_tree(head, best_edge, edge_src, entries, free, n_free, t, level_count):
+    """Add one survivor-tree entry per live node at sample t (parent: its
+    predecessor's head entry), then release the old heads, freeing every entry no
+    live path uses. level_count[τ]: entries alive at sample τ (1 = converged)."""
     N = head.shape[0]
     new_head = np.full(N, -1, dtype=np.int64)
     for n in range(N):
@@ -194,8 +200,10 @@ def _grow_tree(head, best_edge, edge_src, entries, free, n_free):
         entries[slot, EDGE] = e
         entries[slot, PARENT] = parent
         entries[slot, REFS] = 1  # a live head
+        entries[slot, TIME] = t
         entries[parent, REFS] += 1  # its child
         new_head[n] = slot
+        level_count[t] += 1
     for n in range(N):
         slot = head[n]
         while slot >= 0:  # release, cascading up while nothing refers to the entry
@@ -204,6 +212,7 @@ def _grow_tree(head, best_edge, edge_src, entries, free, n_free):
                 break
             free[n_free] = slot
             n_free += 1
+            level_count[entries[slot, TIME]] -= 1
             slot = entries[slot, PARENT]
     head[:] = new_head
     return n_free
@@ -273,7 +282,9 @@ class ViterbiSearch:
 
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
-    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0):
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None):
+        """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
+        never entered, which is how leave-one-out evaluation hides a clip."""
         self.graph = graph
         self.weights = weights
         N = graph.num_nodes
@@ -297,20 +308,30 @@ class ViterbiSearch:
                          np.zeros(N, np.int64), np.zeros((N, 4)))  # fmt: skip
         self.edge_cost_acc = np.zeros(graph.num_edges)
         self.ok = np.ones((gamma, N), dtype=bool)
+        if allowed is None:
+            self.allowed = np.ones(N, dtype=bool)
+        else:
+            self.allowed = np.ascontiguousarray(allowed, dtype=bool)
+            if self.allowed.shape != (N,):
+                raise InputError(f"node mask must have {N} entries, got {self.allowed.shape}")
+            if not self.allowed.any():
+                raise InputError("the node mask leaves no node to search")
+        self.level_count = np.zeros(1024, dtype=np.int64)
+        self.converged_t = -1  # every sample ≤ this one has a single surviving entry
         cap = 4 * N + 16
         self._alloc(cap)
         self.t = -1
         self.peak_entries = 0
 
     def _alloc(self, cap):
-        self.entries = np.zeros((cap, 4), np.int64)
+        self.entries = np.zeros((cap, 5), np.int64)
         self.free = np.arange(cap - 1, -1, -1, dtype=np.int64)
         self.n_free = cap
 
     def _grow(self):
         old = len(self.entries)
         cap = 2 * old
-        bigger = np.zeros((cap, 4), np.int64)
+        bigger = np.zeros((cap, 5), np.int64)
         bigger[:old] = self.entries
         self.entries = bigger
         free = np.empty(cap, np.int64)
@@ -331,17 +352,23 @@ class ViterbiSearch:
         h = 0.0 if heading is None or not np.isfinite(heading) else float(heading)
         self.pos[:] = p
         self.head[:] = h
-        self.cost[:] = 0.0
+        self.cost[:] = np.where(self.allowed, 0.0, np.inf)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
-        slots = self.free[self.n_free - N : self.n_free][::-1].copy()
-        self.n_free -= N
-        self.entries[slots, NODE] = np.arange(N)
+        live = np.nonzero(self.allowed)[0]
+        slots = self.free[self.n_free - len(live) : self.n_free][::-1].copy()
+        self.n_free -= len(live)
+        self.entries[slots, NODE] = live
         self.entries[slots, EDGE] = -1
         self.entries[slots, PARENT] = -1
         self.entries[slots, REFS] = 1
-        self.heads = slots
+        self.entries[slots, TIME] = 0
+        self.heads = np.full(N, -1, dtype=np.int64)
+        self.heads[live] = slots
+        self.level_count[:] = 0
+        self.level_count[0] = len(live)
+        self.converged_t = 0 if len(live) == 1 else -1
         self.peak_entries = self.live_entries
 
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None):
@@ -359,13 +386,18 @@ class ViterbiSearch:
         if w.acc:
             _edge_acc_costs(self.edge_acc, meas_acc, self.edge_cost_acc)
         _step(self.incoming, self.edge_src, self.edge_kind, self.edge_cost_acc, self.edge_offset, self.edge_heading,
-              meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
+              meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok, self.allowed,
               self.cost, self.rank, self.pos, self.head,
               cost, rank, pos, head, best_edge, terms, self.terms)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
-        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.entries, self.free, self.n_free)
+        if self.t >= len(self.level_count):
+            self.level_count = np.concatenate([self.level_count, np.zeros_like(self.level_count)])
+        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.entries, self.free, self.n_free, self.t,
+                                 self.level_count)  # fmt: skip
         self.peak_entries = max(self.peak_entries, self.live_entries)
+        while self.converged_t < self.t and self.level_count[self.converged_t + 1] == 1:
+            self.converged_t += 1
         # Swap buffers: the new state becomes the previous one.
         self._scratch = (self.cost, self.rank, self.pos, self.head, best_edge, self.terms)
         self.cost, self.rank, self.pos, self.head, self.terms = cost, rank, pos, head, terms
@@ -382,22 +414,34 @@ class ViterbiSearch:
         keys = [alive, self.terms[alive, 3], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
         return int(alive[np.lexsort(keys)[0]])
 
-    def trace(self, node: int) -> tuple[np.ndarray, np.ndarray]:
-        """Nodes (t+1,) and edges (t,) of the path ending at `node` now."""
+    def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes (t+1−since,) at samples since..t of the path ending at `node` now,
+        and the edges (t−since,) arriving at samples since+1..t. Walks only as far back
+        as `since`, so a fixed-lag trace costs the lag, not the input length."""
         nodes, edges = [], []
         slot = self.heads[node]
-        while slot >= 0:
+        while slot >= 0 and self.entries[slot, TIME] >= since:
             nodes.append(self.entries[slot, NODE])
             edges.append(self.entries[slot, EDGE])
             slot = self.entries[slot, PARENT]
         return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1][1:], dtype=np.int64)
 
+    def arrival_edge(self, node: int, sample: int) -> int:
+        """The edge by which the path ending at `node` now arrived at sample `sample`
+        (−1 at sample 0)."""
+        slot = self.heads[node]
+        while self.entries[slot, TIME] > sample:
+            slot = self.entries[slot, PARENT]
+        return int(self.entries[slot, EDGE])
+
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
-                   constraint_sets: list | None = None, rate_hz: float | None = None) -> SearchResult:  # fmt: skip
+                   constraint_sets: list | None = None, rate_hz: float | None = None,
+                   allowed: np.ndarray | None = None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
-    `compile_constraints` (times from sample index / graph rate)."""
+    `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
+    node mask or None."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -408,7 +452,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
-    search = ViterbiSearch(graph, weights, gamma)
+    search = ViterbiSearch(graph, weights, gamma, allowed)
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])

@@ -165,3 +165,38 @@ def corrupt_heading(
     return heading_from_track(
         noisy_position, rate_hz, model.speed_threshold, np.deg2rad(model.rest_heading)
     )
+
+
+class CausalTrackHeading:
+    """`heading_from_track` for live streams: the velocity is the least-squares slope
+    of the last `window_s` of positions (no look-ahead), so a stream's heading can be
+    derived sample by sample. Same rule: direction of travel above
+    `speed_threshold` (m/s), else `rest_heading` (rad). NaN positions are skipped."""
+
+    def __init__(self, rate_hz: float, speed_threshold: float = 2.0, rest_heading: float = 0.0, window_s: float = 0.5):
+        self.rate_hz = float(rate_hz)
+        self.speed_threshold = float(speed_threshold)
+        self.rest_heading = float(rest_heading)
+        self.size = max(2, int(round(window_s * rate_hz)))
+        self.times = np.full(self.size, np.nan)
+        self.points = np.full((self.size, 2), np.nan)
+        self.t = 0
+
+    def push(self, position) -> float:
+        """Heading (rad) at this sample given its (2,) position in metres (or None)."""
+        k = self.t % self.size
+        self.t += 1
+        p = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
+        self.times[k] = (self.t - 1) / self.rate_hz
+        self.points[k] = p
+        valid = np.isfinite(self.points).all(axis=1) & np.isfinite(self.times)
+        if valid.sum() < 2:
+            return self.rest_heading
+        t = self.times[valid] - self.times[valid].mean()
+        denom = float(t @ t)
+        if denom <= 0:
+            return self.rest_heading
+        velocity = t @ (self.points[valid] - self.points[valid].mean(axis=0)) / denom
+        if float(np.hypot(velocity[0], velocity[1])) > self.speed_threshold:
+            return float(np.arctan2(velocity[0], velocity[1]))
+        return self.rest_heading

@@ -443,3 +443,8 @@ def describe_recording(rec: Recording) -> dict:
         "has_heading": rec.heading is not None,
         "constraint_sets": len(rec.constraints),
     }
+
+
+def read_recording(path, rate_hz: float | None = None) -> Recording:
+    """A recording from a `.rec` file or a device CSV (by suffix)."""
+    return import_csv(path, rate_hz=rate_hz) if Path(path).suffix.lower() == ".csv" else load_recording(path)

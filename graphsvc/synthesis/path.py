@@ -129,7 +129,9 @@ def predecessor_nodes(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
     return out
 
 
-def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray) -> None:
+def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray, allow_jumps: bool = False) -> None:
+    """Raise InputError unless edge_path[k] enters node_path[k+1] — and, unless
+    allow_jumps, leaves node_path[k] (a streaming decoder's revisions jump)."""
     T = node_path.shape[0]
     if T == 0:
         raise InputError("empty node path")
@@ -137,7 +139,9 @@ def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray)
         raise InputError(f"edge path must have {T - 1} entries, got {edge_path.shape}")
     if np.any((node_path < 0) | (node_path >= graph.num_nodes)) or np.any((edge_path < 0) | (edge_path >= graph.num_edges)):
         raise InputError("node or edge index out of range")
-    if np.any(graph.edge_src[edge_path] != node_path[:-1]) or np.any(graph.edge_dst[edge_path] != node_path[1:]):
+    if np.any(graph.edge_dst[edge_path] != node_path[1:]):
+        raise InputError("edge path does not enter the node path")
+    if not allow_jumps and np.any(graph.edge_src[edge_path] != node_path[:-1]):
         raise InputError("edge path does not connect the node path")
 
 
@@ -256,15 +260,18 @@ def synthesize_motion(
     flight_root_blend_s: float = 0.1,
     fix_feet: bool = True,
     mapping=None,
+    allow_jumps: bool = False,
 ) -> Motion:
     """The motion (T frames at graph.rate_hz on graph.skeleton) of a node path (T,)
     and the edges (T−1,) between its nodes, started at `start_ground` (2,) (x, z in
     m) and `start_heading` (rad). blend_s / flight_root_blend_s: blend windows (s)
     at pose discontinuities, for the pelvis the second while both feet are off the
-    ground on both sides. fix_feet: footskate clean-up during contact flags."""
+    ground on both sides. fix_feet: footskate clean-up during contact flags.
+    allow_jumps: edges may leave another node than the previous one (a streaming
+    decoder's revision); such a step is blended as a cut, its edge still moves the root."""
     node_path = np.asarray(node_path, dtype=np.int64).reshape(-1)
     edge_path = np.asarray(edge_path, dtype=np.int64).reshape(-1)
-    check_path(graph, node_path, edge_path)
+    check_path(graph, node_path, edge_path, allow_jumps)
     sk = graph.skeleton
     parents = sk.parents
     T = node_path.shape[0]
@@ -286,7 +293,7 @@ def synthesize_motion(
     below[pelvis] = False  # the pelvis itself is blended through `rel`
 
     # c. Offset blending at discontinuities.
-    cont = continuous_edges(graph, edge_path)
+    cont = continuous_edges(graph, edge_path) & (graph.edge_src[edge_path] == node_path[:-1])
     cuts = np.nonzero(~cont)[0] + 1  # frame index right after each jump
     pred = node_path.copy()
     pred[1:] = np.where(cont, node_path[:-1], predecessor_nodes(graph, node_path[1:]))

@@ -1,0 +1,188 @@
+"""Streaming Viterbi decoders (SPEC §4 "Streaming"): samples in one at a time, final
+frames out as soon as they are decided.
+
+- `FixedLagDecoder`: one incremental search over the whole stream. After sample t,
+  frame t − L is emitted from the best path (fixed lag L), and earlier when every
+  surviving path already agrees on it (the converged-prefix commit). An emitted frame
+  is never changed; when a later best path disagrees with what was emitted, the
+  output jumps there (counted in `revisions`), and synthesis blends it like a cut.
+- `SlidingWindowDecoder`: K §6.4 / fig. 10 for comparison: each sample, a fresh search
+  over the last W samples; frame t − L of that window's best path is emitted.
+
+Both emit (nodes, arrival_edges): arrival_edges[k] is the edge by which the deciding
+path entered nodes[k] (−1 for frame 0). Consecutive emitted nodes are joined by their
+edge except after a revision.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph
+from graphsvc.search.viterbi import EDGE, NODE, PARENT, TIME, ViterbiSearch, Weights, compile_constraints
+
+
+def _check_lag(lag: int) -> int:
+    if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
+        raise InputError(f"lag must be a non-negative whole number of samples, got {lag!r}")
+    return int(lag)
+
+
+class _Requirements:
+    """Constraint sets → the per-set requirement (kind, value) of one sample."""
+
+    def __init__(self, graph: MotionGraph, constraint_sets, rate_hz: float):
+        self.graph = graph
+        self.sets = list(constraint_sets or [])
+        self.gamma = len(self.sets)
+        self.rate_hz = float(rate_hz)
+        compile_constraints(graph, self.sets, np.zeros(0))  # unknown labels fail now, not mid-stream
+
+    def at(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        kinds, values = compile_constraints(self.graph, self.sets, np.array([t / self.rate_hz]))
+        return kinds[:, 0], values[:, 0]
+
+
+class FixedLagDecoder:
+    """Incremental Viterbi search emitting each frame `lag` samples after it arrives
+    (or earlier, once all survivors share it).
+
+    push(acc (S, 3) m/s², position (2,) m or None, heading rad or None) at the graph
+    rate → (nodes, arrival_edges) newly final; flush() → the rest."""
+
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
+                 allowed: np.ndarray | None = None, rate_hz: float | None = None):  # fmt: skip
+        self.graph = graph
+        self.lag = _check_lag(lag)
+        self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
+        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed)
+        self.emitted = 0  # frames emitted so far
+        self.last_node = -1
+        self.revisions = 0  # emitted frames not reached from the previous emitted frame
+        self.converged_frames = 0  # frames emitted because all survivors agreed, before their lag ran out
+
+    @property
+    def samples(self) -> int:
+        return self.search.t + 1
+
+    def push(self, acc, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+        t = self.search.t + 1
+        kinds, values = self.requirements.at(t)
+        if t == 0:
+            self.search.start(position, heading, kinds, values)
+        else:
+            self.search.step(acc, position, heading, kinds, values)
+        final = max(self.search.converged_t, t - self.lag)
+        self.converged_frames += max(0, final - max(self.emitted - 1, t - self.lag))
+        return self._emit(final)
+
+    def flush(self) -> tuple[np.ndarray, np.ndarray]:
+        """Everything not yet emitted, from the best path now."""
+        return self._emit(self.search.t)
+
+    def _emit(self, until: int) -> tuple[np.ndarray, np.ndarray]:
+        if until < self.emitted:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        nodes, edges = trace_arrivals(self.search, self.search.best_node(), self.emitted)
+        count = until - self.emitted + 1
+        nodes, edges = nodes[:count], edges[:count]
+        if self.emitted > 0 and self.graph.edge_src[edges[0]] != self.last_node:
+            self.revisions += 1
+        self.emitted += count
+        self.last_node = int(nodes[-1])
+        return nodes, edges
+
+
+def trace_arrivals(search: ViterbiSearch, node: int, since: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes at samples since..t of the path ending at `node`, and the edge each was
+    entered by (−1 at sample 0). Walks back only to `since`."""
+    entries = search.entries
+    nodes, edges = [], []
+    slot = search.heads[node]
+    while slot >= 0 and entries[slot, TIME] >= since:
+        nodes.append(entries[slot, NODE])
+        edges.append(entries[slot, EDGE])
+        slot = entries[slot, PARENT]
+    return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1], dtype=np.int64)
+
+
+class SlidingWindowDecoder:
+    """K §6.4: at each sample, search the last `window` samples afresh (every node a
+    possible start, at the window's first measured position and heading) and emit
+    frame t − lag of the best path. Costs `window` times the fixed-lag decoder."""
+
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), window: int = 30, lag: int = 0,
+                 constraint_sets=None, allowed: np.ndarray | None = None, rate_hz: float | None = None):  # fmt: skip
+        self.graph = graph
+        self.weights = weights
+        self.lag = _check_lag(lag)
+        window = _check_lag(window)
+        if window < self.lag + 2:
+            raise InputError(f"window ({window} samples) must exceed the lag ({self.lag}) by at least 2")
+        self.window = window
+        self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
+        self.allowed = allowed
+        self.buffer: deque = deque(maxlen=window)
+        self.t = -1
+        self.emitted = 0
+        self.last_node = -1
+        self.revisions = 0
+
+    @property
+    def samples(self) -> int:
+        return self.t + 1
+
+    def _search(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """Best path over the buffered window: nodes, arrival edges, first sample."""
+        first = self.t - len(self.buffer) + 1
+        search = ViterbiSearch(self.graph, self.weights, self.requirements.gamma, self.allowed)
+        for k, (acc, position, heading) in enumerate(self.buffer):
+            kinds, values = self.requirements.at(first + k)
+            if k == 0:
+                search.start(position, heading, kinds, values)
+            else:
+                search.step(acc, position, heading, kinds, values)
+        nodes, edges = trace_arrivals(search, search.best_node(), 0)
+        if first > 0:
+            edges[0] = -1  # the window's start was entered from outside it: unknown
+        return nodes, edges, first
+
+    def push(self, acc, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+        self.t += 1
+        self.buffer.append((np.asarray(acc, dtype=np.float64), position, heading))
+        until = self.t - self.lag
+        if until < self.emitted:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return self._emit(until)
+
+    def flush(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.t < self.emitted:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return self._emit(self.t)
+
+    def _emit(self, until: int) -> tuple[np.ndarray, np.ndarray]:
+        nodes, edges, first = self._search()
+        lo = self.emitted - first
+        nodes, edges = nodes[lo : until - first + 1], edges[lo : until - first + 1]
+        if self.emitted > 0 and (edges[0] < 0 or self.graph.edge_src[edges[0]] != self.last_node):
+            self.revisions += 1
+        self.emitted = until + 1
+        self.last_node = int(nodes[-1])
+        return nodes, edges
+
+
+def decode_stream(decoder, acc: np.ndarray, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+    """Push a whole input (T, S, 3) through a streaming decoder and flush: the node
+    path (T,) and arrival edges (T,) it emits."""
+    out_nodes, out_edges = [], []
+    for t in range(acc.shape[0]):
+        n, e = decoder.push(acc[t], None if position is None else position[t], None if heading is None else heading[t])
+        out_nodes.append(n)
+        out_edges.append(e)
+    n, e = decoder.flush()
+    out_nodes.append(n)
+    out_edges.append(e)
+    return np.concatenate(out_nodes), np.concatenate(out_edges)

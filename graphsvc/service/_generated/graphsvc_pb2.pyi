@@ -1,0 +1,317 @@
+from google.protobuf import struct_pb2 as _struct_pb2
+from google.protobuf.internal import containers as _containers
+from google.protobuf.internal import enum_type_wrapper as _enum_type_wrapper
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class Strategy(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    STRATEGY_UNSPECIFIED: _ClassVar[Strategy]
+    STRATEGY_VITERBI: _ClassVar[Strategy]
+    STRATEGY_OLNG: _ClassVar[Strategy]
+    STRATEGY_SSG: _ClassVar[Strategy]
+
+class ContactState(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
+    __slots__ = ()
+    CONTACT_STATE_UNSPECIFIED: _ClassVar[ContactState]
+    CONTACT_STATE_LEFT: _ClassVar[ContactState]
+    CONTACT_STATE_RIGHT: _ClassVar[ContactState]
+    CONTACT_STATE_BOTH: _ClassVar[ContactState]
+    CONTACT_STATE_NONE: _ClassVar[ContactState]
+STRATEGY_UNSPECIFIED: Strategy
+STRATEGY_VITERBI: Strategy
+STRATEGY_OLNG: Strategy
+STRATEGY_SSG: Strategy
+CONTACT_STATE_UNSPECIFIED: ContactState
+CONTACT_STATE_LEFT: ContactState
+CONTACT_STATE_RIGHT: ContactState
+CONTACT_STATE_BOTH: ContactState
+CONTACT_STATE_NONE: ContactState
+
+class ListGraphsRequest(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class ListGraphsResponse(_message.Message):
+    __slots__ = ("graphs",)
+    GRAPHS_FIELD_NUMBER: _ClassVar[int]
+    graphs: _containers.RepeatedCompositeFieldContainer[GraphInfo]
+    def __init__(self, graphs: _Optional[_Iterable[_Union[GraphInfo, _Mapping]]] = ...) -> None: ...
+
+class GetGraphRequest(_message.Message):
+    __slots__ = ("name",)
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    def __init__(self, name: _Optional[str] = ...) -> None: ...
+
+class GetGraphResponse(_message.Message):
+    __slots__ = ("graph",)
+    GRAPH_FIELD_NUMBER: _ClassVar[int]
+    graph: GraphInfo
+    def __init__(self, graph: _Optional[_Union[GraphInfo, _Mapping]] = ...) -> None: ...
+
+class GraphInfo(_message.Message):
+    __slots__ = ("name", "node_count", "edge_count", "node_counts_by_kind", "edge_counts_by_kind", "dead_end_count", "clip_count", "kb_frame_count", "kb_minutes", "labels", "layout", "sensor_names", "rate_hz", "joint_count", "interpolated_segment_count", "file_bytes", "params", "skeleton", "rest_pose_accelerations_m_s2")
+    class NodeCountsByKindEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
+    class EdgeCountsByKindEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    NODE_COUNT_FIELD_NUMBER: _ClassVar[int]
+    EDGE_COUNT_FIELD_NUMBER: _ClassVar[int]
+    NODE_COUNTS_BY_KIND_FIELD_NUMBER: _ClassVar[int]
+    EDGE_COUNTS_BY_KIND_FIELD_NUMBER: _ClassVar[int]
+    DEAD_END_COUNT_FIELD_NUMBER: _ClassVar[int]
+    CLIP_COUNT_FIELD_NUMBER: _ClassVar[int]
+    KB_FRAME_COUNT_FIELD_NUMBER: _ClassVar[int]
+    KB_MINUTES_FIELD_NUMBER: _ClassVar[int]
+    LABELS_FIELD_NUMBER: _ClassVar[int]
+    LAYOUT_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
+    RATE_HZ_FIELD_NUMBER: _ClassVar[int]
+    JOINT_COUNT_FIELD_NUMBER: _ClassVar[int]
+    INTERPOLATED_SEGMENT_COUNT_FIELD_NUMBER: _ClassVar[int]
+    FILE_BYTES_FIELD_NUMBER: _ClassVar[int]
+    PARAMS_FIELD_NUMBER: _ClassVar[int]
+    SKELETON_FIELD_NUMBER: _ClassVar[int]
+    REST_POSE_ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    node_count: int
+    edge_count: int
+    node_counts_by_kind: _containers.ScalarMap[str, int]
+    edge_counts_by_kind: _containers.ScalarMap[str, int]
+    dead_end_count: int
+    clip_count: int
+    kb_frame_count: int
+    kb_minutes: float
+    labels: _containers.RepeatedScalarFieldContainer[str]
+    layout: str
+    sensor_names: _containers.RepeatedScalarFieldContainer[str]
+    rate_hz: float
+    joint_count: int
+    interpolated_segment_count: int
+    file_bytes: int
+    params: _struct_pb2.Struct
+    skeleton: Skeleton
+    rest_pose_accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, name: _Optional[str] = ..., node_count: _Optional[int] = ..., edge_count: _Optional[int] = ..., node_counts_by_kind: _Optional[_Mapping[str, int]] = ..., edge_counts_by_kind: _Optional[_Mapping[str, int]] = ..., dead_end_count: _Optional[int] = ..., clip_count: _Optional[int] = ..., kb_frame_count: _Optional[int] = ..., kb_minutes: _Optional[float] = ..., labels: _Optional[_Iterable[str]] = ..., layout: _Optional[str] = ..., sensor_names: _Optional[_Iterable[str]] = ..., rate_hz: _Optional[float] = ..., joint_count: _Optional[int] = ..., interpolated_segment_count: _Optional[int] = ..., file_bytes: _Optional[int] = ..., params: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ..., rest_pose_accelerations_m_s2: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class Skeleton(_message.Message):
+    __slots__ = ("joint_names", "parent_indices", "offsets_m", "channels", "end_sites")
+    JOINT_NAMES_FIELD_NUMBER: _ClassVar[int]
+    PARENT_INDICES_FIELD_NUMBER: _ClassVar[int]
+    OFFSETS_M_FIELD_NUMBER: _ClassVar[int]
+    CHANNELS_FIELD_NUMBER: _ClassVar[int]
+    END_SITES_FIELD_NUMBER: _ClassVar[int]
+    joint_names: _containers.RepeatedScalarFieldContainer[str]
+    parent_indices: _containers.RepeatedScalarFieldContainer[int]
+    offsets_m: _containers.RepeatedScalarFieldContainer[float]
+    channels: _containers.RepeatedCompositeFieldContainer[JointChannels]
+    end_sites: _containers.RepeatedScalarFieldContainer[bool]
+    def __init__(self, joint_names: _Optional[_Iterable[str]] = ..., parent_indices: _Optional[_Iterable[int]] = ..., offsets_m: _Optional[_Iterable[float]] = ..., channels: _Optional[_Iterable[_Union[JointChannels, _Mapping]]] = ..., end_sites: _Optional[_Iterable[bool]] = ...) -> None: ...
+
+class JointChannels(_message.Message):
+    __slots__ = ("names",)
+    NAMES_FIELD_NUMBER: _ClassVar[int]
+    names: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
+
+class SynthesisOptions(_message.Message):
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s")
+    STRATEGY_FIELD_NUMBER: _ClassVar[int]
+    WEIGHTS_FIELD_NUMBER: _ClassVar[int]
+    LATENCY_S_FIELD_NUMBER: _ClassVar[int]
+    HEADING_FROM_TRACK_FIELD_NUMBER: _ClassVar[int]
+    REST_HEADING_DEG_FIELD_NUMBER: _ClassVar[int]
+    CONSTRAINT_SETS_FIELD_NUMBER: _ClassVar[int]
+    SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
+    strategy: Strategy
+    weights: CostWeights
+    latency_s: float
+    heading_from_track: bool
+    rest_heading_deg: float
+    constraint_sets: _containers.RepeatedCompositeFieldContainer[ConstraintSet]
+    speed_threshold_m_s: float
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ...) -> None: ...
+
+class CostWeights(_message.Message):
+    __slots__ = ("acceleration", "position", "heading")
+    ACCELERATION_FIELD_NUMBER: _ClassVar[int]
+    POSITION_FIELD_NUMBER: _ClassVar[int]
+    HEADING_FIELD_NUMBER: _ClassVar[int]
+    acceleration: float
+    position: float
+    heading: float
+    def __init__(self, acceleration: _Optional[float] = ..., position: _Optional[float] = ..., heading: _Optional[float] = ...) -> None: ...
+
+class ConstraintSet(_message.Message):
+    __slots__ = ("constraints",)
+    CONSTRAINTS_FIELD_NUMBER: _ClassVar[int]
+    constraints: _containers.RepeatedCompositeFieldContainer[Constraint]
+    def __init__(self, constraints: _Optional[_Iterable[_Union[Constraint, _Mapping]]] = ...) -> None: ...
+
+class Constraint(_message.Message):
+    __slots__ = ("start_s", "end_s", "contact", "label")
+    START_S_FIELD_NUMBER: _ClassVar[int]
+    END_S_FIELD_NUMBER: _ClassVar[int]
+    CONTACT_FIELD_NUMBER: _ClassVar[int]
+    LABEL_FIELD_NUMBER: _ClassVar[int]
+    start_s: float
+    end_s: float
+    contact: ContactState
+    label: str
+    def __init__(self, start_s: _Optional[float] = ..., end_s: _Optional[float] = ..., contact: _Optional[_Union[ContactState, str]] = ..., label: _Optional[str] = ...) -> None: ...
+
+class Recording(_message.Message):
+    __slots__ = ("rate_hz", "sensor_names", "timestamps_s", "accelerations_m_s2", "ground_positions_m", "headings_rad")
+    RATE_HZ_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
+    TIMESTAMPS_S_FIELD_NUMBER: _ClassVar[int]
+    ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
+    GROUND_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
+    HEADINGS_RAD_FIELD_NUMBER: _ClassVar[int]
+    rate_hz: float
+    sensor_names: _containers.RepeatedScalarFieldContainer[str]
+    timestamps_s: _containers.RepeatedScalarFieldContainer[float]
+    accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
+    ground_positions_m: _containers.RepeatedScalarFieldContainer[float]
+    headings_rad: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, rate_hz: _Optional[float] = ..., sensor_names: _Optional[_Iterable[str]] = ..., timestamps_s: _Optional[_Iterable[float]] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_positions_m: _Optional[_Iterable[float]] = ..., headings_rad: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class SynthesizeRequest(_message.Message):
+    __slots__ = ("graph", "recording", "options")
+    GRAPH_FIELD_NUMBER: _ClassVar[int]
+    RECORDING_FIELD_NUMBER: _ClassVar[int]
+    OPTIONS_FIELD_NUMBER: _ClassVar[int]
+    graph: str
+    recording: Recording
+    options: SynthesisOptions
+    def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ...) -> None: ...
+
+class SynthesizeResponse(_message.Message):
+    __slots__ = ("motion", "node_path", "bvh", "report")
+    MOTION_FIELD_NUMBER: _ClassVar[int]
+    NODE_PATH_FIELD_NUMBER: _ClassVar[int]
+    BVH_FIELD_NUMBER: _ClassVar[int]
+    REPORT_FIELD_NUMBER: _ClassVar[int]
+    motion: Motion
+    node_path: _containers.RepeatedScalarFieldContainer[int]
+    bvh: bytes
+    report: _struct_pb2.Struct
+    def __init__(self, motion: _Optional[_Union[Motion, _Mapping]] = ..., node_path: _Optional[_Iterable[int]] = ..., bvh: _Optional[bytes] = ..., report: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ...) -> None: ...
+
+class Motion(_message.Message):
+    __slots__ = ("rate_hz", "frame_count", "joint_count", "rotations_wxyz", "translations_m")
+    RATE_HZ_FIELD_NUMBER: _ClassVar[int]
+    FRAME_COUNT_FIELD_NUMBER: _ClassVar[int]
+    JOINT_COUNT_FIELD_NUMBER: _ClassVar[int]
+    ROTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
+    TRANSLATIONS_M_FIELD_NUMBER: _ClassVar[int]
+    rate_hz: float
+    frame_count: int
+    joint_count: int
+    rotations_wxyz: _containers.RepeatedScalarFieldContainer[float]
+    translations_m: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, rate_hz: _Optional[float] = ..., frame_count: _Optional[int] = ..., joint_count: _Optional[int] = ..., rotations_wxyz: _Optional[_Iterable[float]] = ..., translations_m: _Optional[_Iterable[float]] = ...) -> None: ...
+
+class StreamSynthesizeRequest(_message.Message):
+    __slots__ = ("config", "sample")
+    CONFIG_FIELD_NUMBER: _ClassVar[int]
+    SAMPLE_FIELD_NUMBER: _ClassVar[int]
+    config: StreamConfig
+    sample: SensorSample
+    def __init__(self, config: _Optional[_Union[StreamConfig, _Mapping]] = ..., sample: _Optional[_Union[SensorSample, _Mapping]] = ...) -> None: ...
+
+class StreamConfig(_message.Message):
+    __slots__ = ("graph", "options", "sensor_names")
+    GRAPH_FIELD_NUMBER: _ClassVar[int]
+    OPTIONS_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
+    graph: str
+    options: SynthesisOptions
+    sensor_names: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ...) -> None: ...
+
+class SensorSample(_message.Message):
+    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad")
+    TIME_S_FIELD_NUMBER: _ClassVar[int]
+    ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
+    GROUND_POSITION_FIELD_NUMBER: _ClassVar[int]
+    HEADING_RAD_FIELD_NUMBER: _ClassVar[int]
+    time_s: float
+    accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
+    ground_position: GroundPosition
+    heading_rad: float
+    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ...) -> None: ...
+
+class GroundPosition(_message.Message):
+    __slots__ = ("x_m", "z_m")
+    X_M_FIELD_NUMBER: _ClassVar[int]
+    Z_M_FIELD_NUMBER: _ClassVar[int]
+    x_m: float
+    z_m: float
+    def __init__(self, x_m: _Optional[float] = ..., z_m: _Optional[float] = ...) -> None: ...
+
+class StreamSynthesizeResponse(_message.Message):
+    __slots__ = ("started", "frame", "finished")
+    STARTED_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    FINISHED_FIELD_NUMBER: _ClassVar[int]
+    started: StreamStarted
+    frame: PoseFrame
+    finished: StreamFinished
+    def __init__(self, started: _Optional[_Union[StreamStarted, _Mapping]] = ..., frame: _Optional[_Union[PoseFrame, _Mapping]] = ..., finished: _Optional[_Union[StreamFinished, _Mapping]] = ...) -> None: ...
+
+class StreamStarted(_message.Message):
+    __slots__ = ("graph", "rate_hz", "lag_frames", "sensor_names", "skeleton")
+    GRAPH_FIELD_NUMBER: _ClassVar[int]
+    RATE_HZ_FIELD_NUMBER: _ClassVar[int]
+    LAG_FRAMES_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
+    SKELETON_FIELD_NUMBER: _ClassVar[int]
+    graph: str
+    rate_hz: float
+    lag_frames: int
+    sensor_names: _containers.RepeatedScalarFieldContainer[str]
+    skeleton: Skeleton
+    def __init__(self, graph: _Optional[str] = ..., rate_hz: _Optional[float] = ..., lag_frames: _Optional[int] = ..., sensor_names: _Optional[_Iterable[str]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ...) -> None: ...
+
+class PoseFrame(_message.Message):
+    __slots__ = ("index", "time_s", "node", "label", "rotations_wxyz", "translations_m", "input_sample_index")
+    INDEX_FIELD_NUMBER: _ClassVar[int]
+    TIME_S_FIELD_NUMBER: _ClassVar[int]
+    NODE_FIELD_NUMBER: _ClassVar[int]
+    LABEL_FIELD_NUMBER: _ClassVar[int]
+    ROTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
+    TRANSLATIONS_M_FIELD_NUMBER: _ClassVar[int]
+    INPUT_SAMPLE_INDEX_FIELD_NUMBER: _ClassVar[int]
+    index: int
+    time_s: float
+    node: int
+    label: str
+    rotations_wxyz: _containers.RepeatedScalarFieldContainer[float]
+    translations_m: _containers.RepeatedScalarFieldContainer[float]
+    input_sample_index: int
+    def __init__(self, index: _Optional[int] = ..., time_s: _Optional[float] = ..., node: _Optional[int] = ..., label: _Optional[str] = ..., rotations_wxyz: _Optional[_Iterable[float]] = ..., translations_m: _Optional[_Iterable[float]] = ..., input_sample_index: _Optional[int] = ...) -> None: ...
+
+class StreamFinished(_message.Message):
+    __slots__ = ("samples_received", "frames_emitted")
+    SAMPLES_RECEIVED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_EMITTED_FIELD_NUMBER: _ClassVar[int]
+    samples_received: int
+    frames_emitted: int
+    def __init__(self, samples_received: _Optional[int] = ..., frames_emitted: _Optional[int] = ...) -> None: ...

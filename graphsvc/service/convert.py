@@ -1,0 +1,455 @@
+"""Protocol buffers ↔ numpy arrays, Recordings, Motions and pipeline Options.
+
+Every `*_from_proto` checks what it reads and raises FieldError naming the field
+(its path in the request, e.g. "recording.timestamps_s[12]"), which the server turns
+into INVALID_ARGUMENT. Arrays travel flattened row-major in packed repeated fields;
+their shapes are in the proto's comments.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph, summary
+from graphsvc.motion.skeleton import Motion, Skeleton
+from graphsvc.sensors.recording import Recording, validate_constraints
+from graphsvc.service._generated import graphsvc_pb2 as pb
+
+STRATEGY_NAMES = {pb.STRATEGY_UNSPECIFIED: "viterbi", pb.STRATEGY_VITERBI: "viterbi", pb.STRATEGY_OLNG: "olng",
+                  pb.STRATEGY_SSG: "ssg"}  # fmt: skip
+STRATEGY_VALUES = {"viterbi": pb.STRATEGY_VITERBI, "olng": pb.STRATEGY_OLNG, "ssg": pb.STRATEGY_SSG}
+CONTACT_NAMES = {pb.CONTACT_STATE_LEFT: "left", pb.CONTACT_STATE_RIGHT: "right", pb.CONTACT_STATE_BOTH: "both",
+                 pb.CONTACT_STATE_NONE: "none"}  # fmt: skip
+CONTACT_VALUES = {v: k for k, v in CONTACT_NAMES.items()}
+_AXES = "xyz"
+
+
+class FieldError(InputError):
+    """A request field with an unusable value. field: its path in the request."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        self.detail = message
+        super().__init__(f"{field}: {message}")
+
+
+# ---------------------------------------------------------------- skeleton and graph
+
+
+def skeleton_to_proto(sk: Skeleton) -> pb.Skeleton:
+    return pb.Skeleton(
+        joint_names=list(sk.names),
+        parent_indices=[int(p) for p in sk.parents],
+        offsets_m=np.asarray(sk.offsets, np.float64).ravel().tolist(),
+        channels=[pb.JointChannels(names=list(c)) for c in sk.channels],
+        end_sites=[bool(e) for e in sk.end_site],
+    )
+
+
+def skeleton_from_proto(msg: pb.Skeleton) -> Skeleton:
+    J = len(msg.joint_names)
+    if not (len(msg.parent_indices) == len(msg.channels) == len(msg.end_sites) == J and len(msg.offsets_m) == 3 * J):
+        raise FieldError("skeleton", f"arrays disagree with {J} joint names")
+    return Skeleton(tuple(msg.joint_names), np.array(msg.parent_indices, np.int64),
+                    np.array(msg.offsets_m, np.float64).reshape(J, 3), tuple(tuple(c.names) for c in msg.channels),
+                    np.array(msg.end_sites, bool))  # fmt: skip
+
+
+def rest_pose_readings(graph: MotionGraph) -> np.ndarray:
+    """(S, 3) float32 m/s²: each layout sensor's reading while graph.skeleton stands
+    still in its rest pose (all local rotations identity) — gravity only. NaN when
+    the layout cannot be placed on the skeleton (an unknown skeleton without the
+    mapping it was built with)."""
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.motion.kinematics import forward_kinematics
+    from graphsvc.sensors.accelerometer import simulate_accelerations
+    from graphsvc.sensors.layout import layout_from_dict, place
+
+    sk = graph.skeleton
+    S = len(graph.sensor_names)
+    try:
+        placement = place(layout_from_dict(graph.layout), sk, graph.params.get("mapping"))
+    except GraphsvcError:
+        return np.full((S, 3), np.nan, np.float32)
+    frames = 5  # the derivative stencil needs a few frames; a held pose has p̈ = 0
+    rot = np.zeros((frames, sk.num_joints, 4))
+    rot[..., 0] = 1.0
+    trans = np.broadcast_to(sk.offsets, (frames, sk.num_joints, 3)).copy()
+    world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
+    return simulate_accelerations(world_rot, world_pos, placement, graph.rate_hz)[frames // 2].astype(np.float32)
+
+
+def graph_info(name: str, graph: MotionGraph, file_bytes: int | None) -> pb.GraphInfo:
+    """GraphInfo: graphsvc.graph.model.summary plus params, skeleton and rest readings."""
+    s = summary(graph, file_bytes)
+    info = pb.GraphInfo(
+        name=name,
+        node_count=s["nodes"],
+        edge_count=s["edges"],
+        node_counts_by_kind=s["nodes_by_kind"],
+        edge_counts_by_kind=s["edges_by_kind"],
+        dead_end_count=s["dead_ends"],
+        clip_count=s["clips"],
+        kb_frame_count=s["kb_frames"],
+        kb_minutes=s["kb_minutes"],
+        labels=s["labels"],
+        layout=str(s["layout"]),
+        sensor_names=s["sensors"],
+        rate_hz=s["rate_hz"],
+        joint_count=s["joints"],
+        interpolated_segment_count=s["interpolated_segments"],
+        file_bytes=s.get("file_bytes", 0),
+        skeleton=skeleton_to_proto(graph.skeleton),
+        rest_pose_accelerations_m_s2=rest_pose_readings(graph).ravel().tolist(),
+    )
+    info.params.update(json_safe(graph.params))
+    return info
+
+
+def graph_info_dict(info: pb.GraphInfo) -> dict:
+    """GraphInfo → the dict `graphsvc info --json` prints (keys of model.summary plus
+    "params"), for `graphsvc client graphs` to print the same way."""
+    from google.protobuf.json_format import MessageToDict
+
+    return {
+        "nodes": info.node_count,
+        "edges": info.edge_count,
+        "nodes_by_kind": dict(info.node_counts_by_kind),
+        "edges_by_kind": dict(info.edge_counts_by_kind),
+        "dead_ends": info.dead_end_count,
+        "clips": info.clip_count,
+        "kb_frames": info.kb_frame_count,
+        "kb_minutes": info.kb_minutes,
+        "labels": list(info.labels),
+        "layout": info.layout,
+        "sensors": list(info.sensor_names),
+        "rate_hz": info.rate_hz,
+        "joints": info.joint_count,
+        "interpolated_segments": info.interpolated_segment_count,
+        "file_bytes": info.file_bytes,
+        "params": MessageToDict(info.params),
+    }
+
+
+def json_safe(value):
+    """A JSON-able copy for google.protobuf.Struct: numpy scalars and arrays become
+    Python numbers and lists, NaN and ±inf become None (Struct cannot print them)."""
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    return str(value)
+
+
+# ---------------------------------------------------------------- sensors
+
+
+def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str) -> np.ndarray | None:
+    """Indices that put the request's sensor triplets into the graph's order, or None
+    when they already are (or no names were given: the graph's order is implied)."""
+    given = list(given)
+    if not given or tuple(given) == tuple(graph_names):
+        return None
+    if len(given) != len(graph_names):
+        raise FieldError(field, f"{len(given)} sensors given, the graph's layout has {len(graph_names)} "
+                         f"({', '.join(graph_names)})")  # fmt: skip
+    if len(set(given)) != len(given):
+        raise FieldError(field, "duplicate sensor names")
+    unknown = [n for n in given if n not in graph_names]
+    if unknown:
+        raise FieldError(field, f"not in the graph's layout: {', '.join(unknown)} (the layout has {', '.join(graph_names)})")
+    return np.array([given.index(n) for n in graph_names], np.int64)
+
+
+def _check_no_inf(field: str, values: np.ndarray, per_item: int, names: tuple[str, ...] | None = None) -> None:
+    bad = np.isinf(values)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise FieldError(f"{field}[{k}]", f"infinite value (sample {k // per_item}; use NaN for missing)")
+
+
+def recording_to_proto(rec: Recording) -> pb.Recording:
+    msg = pb.Recording(rate_hz=float(rec.rate_hz), sensor_names=list(rec.sensor_names))
+    msg.timestamps_s.extend(np.asarray(rec.timestamps_s, np.float64).tolist())
+    msg.accelerations_m_s2.extend(np.asarray(rec.accelerations, np.float32).ravel().tolist())
+    if rec.ground_position is not None:
+        msg.ground_positions_m.extend(np.asarray(rec.ground_position, np.float64).ravel().tolist())
+    if rec.heading is not None:
+        msg.headings_rad.extend(np.asarray(rec.heading, np.float64).tolist())
+    return msg
+
+
+def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording") -> Recording:
+    """A validated Recording with the sensors in the graph's order. Checks shapes,
+    finiteness (NaN = missing is allowed in readings, never in times) and order."""
+    rate = msg.rate_hz
+    if not (math.isfinite(rate) and rate > 0):
+        raise FieldError(f"{field}.rate_hz", f"must be a positive number of Hz, got {rate}")
+    t = np.array(msg.timestamps_s, np.float64)
+    T = t.shape[0]
+    if T == 0:
+        raise FieldError(f"{field}.timestamps_s", "no samples")
+    _check_times(t, f"{field}.timestamps_s")
+    order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
+    S = len(graph_names)
+    acc = np.array(msg.accelerations_m_s2, np.float32)
+    if acc.shape[0] != T * S * 3:
+        raise FieldError(f"{field}.accelerations_m_s2", f"expected T×S×3 = {T}×{S}×3 = {T * S * 3} values "
+                         f"({T} timestamps, {S} sensors), got {acc.shape[0]}")  # fmt: skip
+    _check_no_inf(f"{field}.accelerations_m_s2", acc, S * 3)
+    acc = acc.reshape(T, S, 3)
+    if order is not None:
+        acc = np.ascontiguousarray(acc[:, order])
+    position = heading = None
+    if len(msg.ground_positions_m):
+        position = np.array(msg.ground_positions_m, np.float64)
+        if position.shape[0] != 2 * T:
+            raise FieldError(f"{field}.ground_positions_m", f"expected 0 or T×2 = {2 * T} values, got {position.shape[0]}")
+        _check_no_inf(f"{field}.ground_positions_m", position, 2)
+        position = position.reshape(T, 2)
+    if len(msg.headings_rad):
+        heading = np.array(msg.headings_rad, np.float64)
+        if heading.shape[0] != T:
+            raise FieldError(f"{field}.headings_rad", f"expected 0 or T = {T} values, got {heading.shape[0]}")
+        _check_no_inf(f"{field}.headings_rad", heading, 1)
+    rec = Recording(rate_hz=float(rate), timestamps_s=t, sensor_names=tuple(graph_names), accelerations=acc,
+                    ground_position=position, heading=heading, meta={"source": "grpc"})  # fmt: skip
+    try:
+        rec.validate()
+    except InputError as exc:  # anything the checks above missed still names the message
+        raise FieldError(field, str(exc)) from None
+    return rec
+
+
+def _check_times(t: np.ndarray, field: str) -> None:
+    bad = ~np.isfinite(t)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise FieldError(f"{field}[{k}]", f"not a finite number of seconds ({t[k]})")
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        k = int(np.argmax(steps <= 0)) + 1
+        raise FieldError(f"{field}[{k}]", f"{t[k]!r} s is not after the previous timestamp {t[k - 1]!r} s "
+                         "(timestamps must strictly increase)")  # fmt: skip
+
+
+def sample_to_proto(time_s: float, acc: np.ndarray, position=None, heading=None) -> pb.SensorSample:
+    """acc (S, 3) m/s² NaN = missing; position (2,) m or None; heading rad or None."""
+    msg = pb.SensorSample(time_s=float(time_s))
+    msg.accelerations_m_s2.extend(np.asarray(acc, np.float32).ravel().tolist())
+    if position is not None:
+        msg.ground_position.x_m, msg.ground_position.z_m = (float(position[0]), float(position[1]))
+    if heading is not None:
+        msg.heading_rad = float(heading)
+    return msg
+
+
+def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, previous_time_s: float | None,
+                      field: str) -> tuple[float, np.ndarray, np.ndarray | None, float | None]:  # fmt: skip
+    """(time_s, acc (S, 3) float64 m/s², position (2,) m or None, heading rad or
+    None) in the graph's sensor order, checked: finite time after the previous one,
+    S×3 readings with no ±inf, finite-or-NaN position and heading."""
+    t = msg.time_s
+    if not math.isfinite(t):
+        raise FieldError(f"{field}.time_s", f"not a finite number of seconds ({t})")
+    if previous_time_s is not None and not t > previous_time_s:
+        raise FieldError(f"{field}.time_s", f"{t!r} s is not after the previous sample's {previous_time_s!r} s "
+                         "(times must strictly increase)")  # fmt: skip
+    acc = np.array(msg.accelerations_m_s2, np.float64)
+    if acc.shape[0] != 3 * num_sensors:
+        raise FieldError(f"{field}.accelerations_m_s2", f"expected S×3 = {3 * num_sensors} values for the graph's "
+                         f"{num_sensors} sensors, got {acc.shape[0]}")  # fmt: skip
+    if np.isinf(acc).any():
+        k = int(np.argmax(np.isinf(acc)))
+        raise FieldError(f"{field}.accelerations_m_s2[{k}]", "infinite value (use NaN for missing)")
+    acc = acc.reshape(num_sensors, 3)
+    if order is not None:
+        acc = acc[order]
+    position = None
+    if msg.HasField("ground_position"):
+        position = np.array([msg.ground_position.x_m, msg.ground_position.z_m], np.float64)
+        if np.isinf(position).any():
+            raise FieldError(f"{field}.ground_position", "infinite value (use NaN for missing)")
+    heading = None
+    if msg.HasField("heading_rad"):
+        heading = float(msg.heading_rad)
+        if math.isinf(heading):
+            raise FieldError(f"{field}.heading_rad", "infinite value (use NaN for missing)")
+    return float(t), acc, position, heading
+
+
+# ---------------------------------------------------------------- options
+
+
+def constraints_to_proto(constraint_sets: list) -> list[pb.ConstraintSet]:
+    """Constraint sets as in a Recording / constraint file → protos."""
+    out = []
+    for cset in constraint_sets:
+        msg = pb.ConstraintSet()
+        for c in cset:
+            (key, value), = c["require"].items()
+            item = msg.constraints.add(start_s=float(c["start_s"]), end_s=float(c["end_s"]))
+            if key == "contact":
+                item.contact = CONTACT_VALUES[value]
+            else:
+                item.label = value
+        out.append(msg)
+    return out
+
+
+def constraints_from_proto(sets, field: str) -> list:
+    out = []
+    for i, cset in enumerate(sets):
+        items = []
+        for j, c in enumerate(cset.constraints):
+            where = f"{field}[{i}].constraints[{j}]"
+            for key in ("start_s", "end_s"):
+                v = getattr(c, key)
+                if not math.isfinite(v):
+                    raise FieldError(f"{where}.{key}", f"not a finite number of seconds ({v})")
+            if not 0 <= c.start_s < c.end_s:
+                raise FieldError(where, f"need 0 ≤ start_s < end_s, got {c.start_s}..{c.end_s}")
+            kind = c.WhichOneof("requirement")
+            if kind is None:
+                raise FieldError(where, "no requirement (set contact or label)")
+            if kind == "contact":
+                if c.contact not in CONTACT_NAMES:
+                    raise FieldError(f"{where}.contact", f"must be LEFT, RIGHT, BOTH or NONE, got {c.contact}")
+                require = {"contact": CONTACT_NAMES[c.contact]}
+            else:
+                if not c.label:
+                    raise FieldError(f"{where}.label", "empty label")
+                require = {"label": c.label}
+            items.append({"start_s": c.start_s, "end_s": c.end_s, "require": require})
+        out.append(items)
+    try:
+        validate_constraints(out)
+    except InputError as exc:
+        raise FieldError(field, str(exc)) from None
+    return out
+
+
+def options_to_proto(strategy: str = "viterbi", weights=None, latency_s: float | None = None,
+                     heading_from_track: bool = False, rest_heading_deg: float = 0.0,
+                     constraints: list | None = None, speed_threshold_m_s: float | None = None) -> pb.SynthesisOptions:  # fmt: skip
+    """weights: graphsvc.search.viterbi.Weights or None (the default 1, 1, 1)."""
+    if strategy not in STRATEGY_VALUES:
+        raise InputError(f"unknown strategy {strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
+    msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[strategy], heading_from_track=bool(heading_from_track),
+                              rest_heading_deg=float(rest_heading_deg))  # fmt: skip
+    if weights is not None:
+        msg.weights.CopyFrom(pb.CostWeights(acceleration=weights.acc, position=weights.position, heading=weights.heading))
+    if latency_s is not None:
+        msg.latency_s = float(latency_s)
+    if speed_threshold_m_s is not None:
+        msg.speed_threshold_m_s = float(speed_threshold_m_s)
+    if constraints:
+        msg.constraint_sets.extend(constraints_to_proto(constraints))
+    return msg
+
+
+def strategy_from_proto(value: int, field: str) -> str:
+    if value not in STRATEGY_NAMES:
+        raise FieldError(field, f"unknown strategy {value} (VITERBI = 1, OLNG = 2, SSG = 3)")
+    return STRATEGY_NAMES[value]
+
+
+def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
+    """pipeline.Options from a SynthesisOptions, every value checked (FieldError).
+    Whether the strategy is built is left to the pipeline (StrategyNotImplementedError)."""
+    from graphsvc.pipeline import Options
+    from graphsvc.search.viterbi import Weights
+
+    strategy = strategy_from_proto(msg.strategy, f"{field}.strategy")
+    weights = Weights()
+    if msg.HasField("weights"):
+        w = msg.weights
+        for key in ("acceleration", "position", "heading"):
+            v = getattr(w, key)
+            if not (math.isfinite(v) and v >= 0):
+                raise FieldError(f"{field}.weights.{key}", f"must be a finite number ≥ 0, got {v}")
+        weights = Weights(w.acceleration, w.position, w.heading)
+    latency = None
+    if msg.HasField("latency_s"):
+        latency = msg.latency_s
+        if not (math.isfinite(latency) and latency >= 0):
+            raise FieldError(f"{field}.latency_s", f"must be a finite number of seconds ≥ 0, got {latency}")
+    if not math.isfinite(msg.rest_heading_deg):
+        raise FieldError(f"{field}.rest_heading_deg", f"must be finite, got {msg.rest_heading_deg}")
+    extra = {}
+    if msg.HasField("speed_threshold_m_s"):
+        v = msg.speed_threshold_m_s
+        if not (math.isfinite(v) and v >= 0):
+            raise FieldError(f"{field}.speed_threshold_m_s", f"must be a finite speed ≥ 0, got {v}")
+        extra["speed_threshold"] = v
+    constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
+    return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=msg.heading_from_track,
+                   rest_heading_deg=msg.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
+
+
+# ---------------------------------------------------------------- motion and frames
+
+
+def motion_to_proto(motion: Motion) -> pb.Motion:
+    msg = pb.Motion(rate_hz=float(motion.rate_hz), frame_count=motion.num_frames, joint_count=motion.skeleton.num_joints)
+    msg.rotations_wxyz.extend(np.asarray(motion.rotations, np.float32).ravel().tolist())
+    msg.translations_m.extend(np.asarray(motion.translations, np.float32).ravel().tolist())
+    return msg
+
+
+def motion_from_proto(msg: pb.Motion, skeleton: Skeleton, name: str = "synthesized") -> Motion:
+    F, J = msg.frame_count, msg.joint_count
+    if J != skeleton.num_joints or len(msg.rotations_wxyz) != F * J * 4 or len(msg.translations_m) != F * J * 3:
+        raise FieldError("motion", f"arrays disagree with {F} frames of {J} joints on a {skeleton.num_joints}-joint skeleton")
+    rot = np.array(msg.rotations_wxyz, np.float32).reshape(F, J, 4)
+    trans = np.array(msg.translations_m, np.float32).reshape(F, J, 3)
+    return Motion(skeleton, rot, trans, msg.rate_hz, name=name, source="graphsvc service")
+
+
+def frame_to_proto(frame, input_sample_index: int) -> pb.PoseFrame:
+    """A pipeline.Frame → PoseFrame."""
+    msg = pb.PoseFrame(index=int(frame.index), time_s=float(frame.time_s), node=int(frame.node), label=frame.label,
+                       input_sample_index=int(input_sample_index))  # fmt: skip
+    msg.rotations_wxyz.extend(np.asarray(frame.rotations, np.float32).ravel().tolist())
+    msg.translations_m.extend(np.asarray(frame.translations, np.float32).ravel().tolist())
+    return msg
+
+
+def frames_to_motion(frames: list[pb.PoseFrame], skeleton: Skeleton, rate_hz: float, name: str = "synthesized") -> Motion:
+    """PoseFrames (any order, consecutive indices) → one Motion."""
+    J = skeleton.num_joints
+    frames = sorted(frames, key=lambda f: f.index)
+    if frames and [f.index for f in frames] != list(range(frames[0].index, frames[0].index + len(frames))):
+        raise InputError("pose frames are not consecutive")
+    rot = np.array([f.rotations_wxyz for f in frames], np.float32).reshape(len(frames), J, 4)
+    trans = np.array([f.translations_m for f in frames], np.float32).reshape(len(frames), J, 3)
+    return Motion(skeleton, rot, trans, rate_hz, name=name, source="graphsvc live stream")
+
+
+def report_to_struct(report: dict, out) -> None:
+    """Fill a google.protobuf.Struct with a JSON-safe copy of `report`."""
+    out.update(json_safe(report))
+
+
+def struct_to_dict(msg) -> dict:
+    from google.protobuf.json_format import MessageToDict
+
+    return MessageToDict(msg)
+
+
+def dumps(data) -> str:
+    return json.dumps(data, indent=2, sort_keys=True)

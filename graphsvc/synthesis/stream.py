@@ -1,0 +1,91 @@
+"""Synthesis of a path that arrives a few frames at a time (live streams).
+
+A frame's pose depends on the path around it: a blend centred on a cut reaches half
+its window before the cut, and the foot clean-up accumulates from the start of the
+contact span. So a frame is final once the path is known `lookahead` frames past it,
+and each update re-synthesizes a trailing stretch that starts early enough to hold
+those influences (the open contact spans, at most `max_back_s`), from the root
+position and heading the stream has reached there. Frames come out once, in order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from graphsvc.graph import metadata as meta
+from graphsvc.graph.model import MotionGraph
+from graphsvc.synthesis.path import synthesize_motion
+
+
+class StreamingSynthesizer:
+    """add(nodes, arrival_edges) → (first frame index, rotations (K, J, 4), translations
+    (K, J, 3)) of the frames that became final; finish() → the rest."""
+
+    def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
+                 flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0):  # fmt: skip
+        self.graph = graph
+        self.blend_s = blend_s
+        self.flight_root_blend_s = flight_root_blend_s
+        self.fix_feet = fix_feet
+        rate = float(graph.rate_hz)
+        self.lookahead = int(math.ceil(0.5 * blend_s * rate)) + 1
+        self.max_back = int(math.ceil(max_back_s * rate))
+        # The trailing stretch of the path still needed: frames base, base+1, ...
+        self.base = 0
+        self.nodes = np.zeros(0, np.int64)
+        self.edges = np.zeros(0, np.int64)  # arrival edge of each node (−1 for frame 0)
+        self.ground = [np.asarray(start_ground, dtype=np.float64).reshape(2)]
+        self.heading = [float(start_heading)]
+        self.done = 0  # frames emitted
+
+    def add(self, nodes: np.ndarray, arrival_edges: np.ndarray):
+        """Append decided frames; return the frames now final."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        edges = np.asarray(arrival_edges, dtype=np.int64)
+        for e in edges[(1 if self.base + self.nodes.size == 0 else 0):]:
+            # The same float64 steps as integrate_path, so the root matches a batch synthesis.
+            g, h = meta.apply_offsets(self.ground[-1], self.heading[-1], self.graph.edge_offset[e].astype(np.float64),
+                                      float(self.graph.edge_heading[e]))  # fmt: skip
+            self.ground.append(g)
+            self.heading.append(h)
+        self.nodes = np.concatenate([self.nodes, nodes])
+        self.edges = np.concatenate([self.edges, edges])
+        return self._synthesize(self.base + self.nodes.size - self.lookahead)
+
+    def finish(self):
+        return self._synthesize(self.base + self.nodes.size)
+
+    def _synthesize(self, until: int):
+        J = self.graph.skeleton.num_joints
+        if until <= self.done:
+            return self.done, np.zeros((0, J, 4)), np.zeros((0, J, 3))
+        b = self.base
+        start = max(b, self.done - self.lookahead - 1)
+        if self.fix_feet and self.done > 0:
+            # Reach back to where the contact spans open at `done` began.
+            lo = max(b, self.done - self.max_back)
+            contacts = self.graph.node_contacts[self.nodes[lo - b : self.done + 1 - b]]
+            for side in range(2):
+                run = contacts[::-1, side]
+                if run[0]:
+                    length = run.size if run.all() else int(np.argmin(run))
+                    start = min(start, self.done + 1 - length)
+            start = max(lo, start)
+        k = start - b
+        motion = synthesize_motion(
+            self.graph, self.nodes[k:], self.edges[k + 1 :], self.ground[k], self.heading[k],
+            blend_s=self.blend_s, flight_root_blend_s=self.flight_root_blend_s, fix_feet=self.fix_feet,
+            allow_jumps=True,
+        )  # fmt: skip
+        lo, hi = self.done - start, until - start
+        first = self.done
+        self.done = until
+        # Forget what no later window can reach.
+        drop = max(0, self.done - self.max_back - self.lookahead - 2 - self.base)
+        if drop > 256:
+            self.nodes, self.edges = self.nodes[drop:], self.edges[drop:]
+            del self.ground[:drop], self.heading[:drop]
+            self.base += drop
+        return first, motion.rotations[lo:hi], motion.translations[lo:hi]
