@@ -17,10 +17,12 @@ from graphsvc.sensors.accelerometer import GRAVITY
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
                       constraint_sets=None) -> tuple[np.ndarray, float]:  # fmt: skip
     """(node path (T,), cost) — same inputs and meaning as `viterbi_search`."""
-    acc = np.asarray(acc, dtype=np.float64) / GRAVITY
+    # Readings and measurements rounded to float32 in g as the search stores them; the
+    # arithmetic after that is float64 over the full N × T lattice.
+    acc = (np.asarray(acc, dtype=np.float32).astype(np.float64) / GRAVITY).astype(np.float32).astype(np.float64)
     T, N = acc.shape[0], graph.num_nodes
     src, dst = graph.edge_src.astype(np.int64), graph.edge_dst.astype(np.int64)
-    e_acc = graph.edge_acc.astype(np.float64) / GRAVITY
+    e_acc = (graph.edge_acc.astype(np.float32).astype(np.float64) / GRAVITY).astype(np.float32).astype(np.float64)
     off, dhead = graph.edge_offset.astype(np.float64), graph.edge_heading.astype(np.float64)
     sets = constraint_sets or []
     gamma = len(sets)

@@ -22,7 +22,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
-from graphsvc.search.viterbi import EDGE, NODE, PARENT, TIME, ViterbiSearch, Weights, compile_constraints
+from graphsvc.search.viterbi import ViterbiSearch, Weights, compile_constraints
 
 
 def _check_lag(lag: int) -> int:
@@ -86,7 +86,7 @@ class FixedLagDecoder:
     def _emit(self, until: int) -> tuple[np.ndarray, np.ndarray]:
         if until < self.emitted:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        nodes, edges = trace_arrivals(self.search, self.search.best_node(), self.emitted)
+        nodes, edges = self.search.trace_arrivals(self.search.best_node(), self.emitted)
         count = until - self.emitted + 1
         nodes, edges = nodes[:count], edges[:count]
         if self.emitted > 0 and self.graph.edge_src[edges[0]] != self.last_node:
@@ -94,19 +94,6 @@ class FixedLagDecoder:
         self.emitted += count
         self.last_node = int(nodes[-1])
         return nodes, edges
-
-
-def trace_arrivals(search: ViterbiSearch, node: int, since: int) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes at samples since..t of the path ending at `node`, and the edge each was
-    entered by (−1 at sample 0). Walks back only to `since`."""
-    entries = search.entries
-    nodes, edges = [], []
-    slot = search.heads[node]
-    while slot >= 0 and entries[slot, TIME] >= since:
-        nodes.append(entries[slot, NODE])
-        edges.append(entries[slot, EDGE])
-        slot = entries[slot, PARENT]
-    return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1], dtype=np.int64)
 
 
 class SlidingWindowDecoder:
@@ -145,7 +132,7 @@ class SlidingWindowDecoder:
                 search.start(position, heading, kinds, values)
             else:
                 search.step(acc, position, heading, kinds, values)
-        nodes, edges = trace_arrivals(search, search.best_node(), 0)
+        nodes, edges = search.trace_arrivals(search.best_node(), 0)
         if first > 0:
             edges[0] = -1  # the window's start was entered from outside it: unknown
         return nodes, edges, first

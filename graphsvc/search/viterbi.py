@@ -10,11 +10,17 @@ NaN measurements contribute nothing. With γ annotation constraint sets each pat
 carries γ counts of broken constraints, compared lexicographically before G (K eq. 8).
 
 Memory (K §5.1, after Abbasfar & Yao): instead of the N × T back-pointer lattice the
-search keeps a survivor tree — one entry per (node, sample) that some live path still
-passes through, reference-counted by its children and by being a live path's head.
-When a path dies its entries are freed at once, so the tree holds only the lattice
-points a periodic trace-back from all nodes would keep. The compression ratio
-reported is N·t over the entries alive.
+search keeps the last 32 samples' back-pointers as a dense (32, N) block, written
+sequentially, and every 32 samples traces back from all live nodes through it,
+appending only the lattice points some live path passes through to a survivor store
+(rows in sample order, parent before child). When the store has doubled, one backward
+sweep keeps what the live paths still reach. The compression ratio reported is N·T over
+the peak number of surviving lattice points. Once every survivor passes through one
+point, the prefix up to it is final (the converged-prefix commit of streaming decoders).
+
+Speed: the accelerometer cost is computed once per distinct edge reading (transition
+edges read what their destination reads, so many edges share one), as float32 in g;
+the per-node pass reads each incoming edge's source cost from one compact array.
 """
 
 from __future__ import annotations
@@ -53,55 +59,56 @@ def _wrap(a):
 TIE = 1e-9
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _edge_acc_costs(edge_acc, meas_acc, out):
-    """C_A of every edge (K eq. 4) in g²: one sequential pass over the metadata,
-    the bulk of the arithmetic, kept apart from the scattered per-node reads.
-    meas_acc (S, 3) in g; sensors with a NaN axis are left out of the mean."""
-    E, S = edge_acc.shape[0], edge_acc.shape[1]
-    inv_g = 1.0 / 9.81
-    valid = np.empty(S, dtype=np.bool_)
-    n_valid = 0
-    for s in range(S):
-        valid[s] = np.isfinite(meas_acc[s, 0]) and np.isfinite(meas_acc[s, 1]) and np.isfinite(meas_acc[s, 2])
-        if valid[s]:
-            n_valid += 1
-    if n_valid == 0:
-        out[:] = 0.0
-        return
-    scale = 1.0 / n_valid
-    for e in numba.prange(E):
-        acc = 0.0
-        for s in range(S):
-            if valid[s]:
-                for k in range(3):
-                    d = edge_acc[e, s, k] * inv_g - meas_acc[s, k]
-                    acc += d * d
-        out[e] = acc * scale
+def _reading_costs_py(readings, meas, mask, scale, out):
+    """C_A (K eq. 4, g²) of every distinct edge reading: readings (R, 3S) float32 in g,
+    meas (3S,) float32 in g with missing sensors zeroed and `mask` 0 there (1
+    elsewhere), scale = 1 / sensors present. One sequential pass: the bulk of the
+    arithmetic, kept apart from the scattered per-node reads."""
+    R, D = readings.shape
+    for r in numba.prange(R):
+        acc = np.float32(0.0)
+        for j in range(D):
+            d = readings[r, j] - meas[j]
+            acc += mask[j] * d * d
+        out[r] = acc * scale
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _step(
-    incoming, edge_src, edge_kind, edge_cost_acc, edge_offset, edge_heading,
-    meas_pos, meas_heading, w_acc, w_pos, w_head,
-    ok, allowed,
-    cost_prev, rank_prev, pos_prev, head_prev,
-    cost_new, rank_new, pos_new, head_new, best_edge, term_new, term_prev,
+# Each kernel twice: threaded for one search using the whole machine (batch), serial
+# for many searches side by side (a server's streams), where threads would only fight.
+_reading_costs = numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)(_reading_costs_py)
+_reading_costs_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_reading_costs_py)
+
+
+# Per-node path state. The cost is its own array — the one value read for every
+# incoming edge, from a scattered source node, so it should stay in cache; the
+# placement (ground x, z in m, heading in rad and its cos, sin) is read per edge only
+# when position or heading is measured; the detour count only on near-ties.
+X, Z, HEADING, COS, SIN = 0, 1, 2, 3, 4
+PLACE_WIDTH = 5
+
+
+def _step_py(
+    incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn, reading_cost,
+    meas_pos, meas_heading, w_acc, w_pos, w_head, ok, allowed,
+    cost_prev, place_prev, det_prev, rank_prev, terms_prev,
+    cost_new, place_new, det_new, rank_new, terms_new, best_edge,
 ):  # fmt: skip
     """One sample: for every node, the best incoming edge from a live path.
-    edge_cost_acc (E,) C_A per edge this sample; meas_pos (2,) metres or NaN;
-    meas_heading radians or NaN; ok (γ, N) constraint satisfaction of each node now;
-    allowed (N,) bool: nodes the search may visit (leave-one-out masking);
-    cost_prev = inf marks dead paths; term_* (N, 4): per-path accumulated acc /
-    position / heading costs (for reports) and the count of non-original edges
-    (the tie-break)."""
+
+    reading_cost (R,) C_A of each distinct reading this sample, edge_reading (E,) the
+    reading of each edge; edge_turn (E, 2) cos and sin of each edge's heading change
+    (the path's cos/sin are carried by rotation, no trigonometry per node); meas_pos
+    (2,) metres or NaN; meas_heading radians or NaN; ok (γ, N) constraint satisfaction
+    of each node now; allowed (N,) nodes the search may visit (leave-one-out masking).
+    Per node: cost (N,) (inf = no live path), place (N, 5) ground x, z (m), heading
+    (rad), cos, sin; det (N,) non-original edges so far (the tie-break); rank (N, γ)
+    broken constraints; terms (N, 3) accumulated acc (g²), position (m), heading (rad)
+    costs, for reports."""
     N = cost_prev.shape[0]
     gamma = rank_prev.shape[1]
     use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
     use_head = np.isfinite(meas_heading) and w_head != 0.0
     carry = use_pos or use_head
-    cos_prev = np.cos(head_prev)  # once per node, not once per edge
-    sin_prev = np.sin(head_prev)
     for n in numba.prange(N):
         if not allowed[n]:
             best_edge[n] = -1
@@ -117,17 +124,18 @@ def _step(
             base = cost_prev[m]
             if base == np.inf:
                 continue
-            total = base + w_acc * edge_cost_acc[e]
+            total = base + w_acc * reading_cost[edge_reading[e]]
             cp = 0.0
             co = 0.0
             if carry:
                 if use_pos:
                     ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-                    px = pos_prev[m, 0] + cos_prev[m] * ox + sin_prev[m] * oz
-                    pz = pos_prev[m, 1] - sin_prev[m] * ox + cos_prev[m] * oz
+                    c, s = place_prev[m, COS], place_prev[m, SIN]
+                    px = place_prev[m, X] + c * ox + s * oz
+                    pz = place_prev[m, Z] - s * ox + c * oz
                     cp = np.sqrt((px - meas_pos[0]) ** 2 + (pz - meas_pos[1]) ** 2)
                 if use_head:
-                    co = abs(_wrap(head_prev[m] + edge_heading[e] - meas_heading))
+                    co = abs(_wrap(place_prev[m, HEADING] + edge_heading[e] - meas_heading))
                 total += w_pos * cp + w_head * co
             det = -1.0  # read only on a near-tie: one scattered read per edge, not two
             if best >= 0:
@@ -145,15 +153,15 @@ def _step(
                     elif total > best_cost + TIE:
                         better = False
                     else:
-                        det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
+                        det = det_prev[m] + (1.0 if edge_kind[e] != 0 else 0.0)
+                        if best_det < 0.0:
+                            best_det = det_prev[mb] + (1.0 if edge_kind[best] != 0 else 0.0)
                         if det != best_det:
                             better = det < best_det
                         else:
                             better = edge_kind[e] < edge_kind[best]
                 if not better:
                     continue
-            if det < 0.0:
-                det = term_prev[m, 3] + (1.0 if edge_kind[e] != 0 else 0.0)
             best = e
             best_cost = total
             best_det = det
@@ -165,57 +173,202 @@ def _step(
             continue
         m = edge_src[best]
         cost_new[n] = best_cost
+        det_new[n] = det_prev[m] + (1.0 if edge_kind[best] != 0 else 0.0)
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
         ox, oz = edge_offset[best, 0], edge_offset[best, 1]
-        pos_new[n, 0] = pos_prev[m, 0] + cos_prev[m] * ox + sin_prev[m] * oz
-        pos_new[n, 1] = pos_prev[m, 1] - sin_prev[m] * ox + cos_prev[m] * oz
-        head_new[n] = head_prev[m] + edge_heading[best]
-        term_new[n, 0] = term_prev[m, 0] + edge_cost_acc[best]
-        term_new[n, 1] = term_prev[m, 1] + best_cp
-        term_new[n, 2] = term_prev[m, 2] + best_co
-        term_new[n, 3] = best_det
+        c, s = place_prev[m, COS], place_prev[m, SIN]
+        tc, ts = edge_turn[best, 0], edge_turn[best, 1]
+        place_new[n, X] = place_prev[m, X] + c * ox + s * oz
+        place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
+        place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[best]
+        place_new[n, COS] = c * tc - s * ts
+        place_new[n, SIN] = s * tc + c * ts
+        terms_new[n, 0] = terms_prev[m, 0] + reading_cost[edge_reading[best]]
+        terms_new[n, 1] = terms_prev[m, 1] + best_cp
+        terms_new[n, 2] = terms_prev[m, 2] + best_co
 
 
-# Survivor-tree entries are rows of one (capacity, 5) int64 array — node, edge used to
-# arrive, parent entry, reference count, sample — so touching an entry is one cache line.
-NODE, EDGE, PARENT, REFS, TIME = 0, 1, 2, 3, 4
+_step = numba.njit(cache=True, nogil=True, parallel=True)(_step_py)
+_step_serial = numba.njit(cache=True, nogil=True)(_step_py)
+
+
+def search_tables(graph: MotionGraph) -> dict:
+    """The graph's arrays in the search's layout, made once per graph and cached on
+    it: distinct edge readings (R, 3S) float32 in g and each edge's reading (E,) int32
+    (transition edges read what their destination reads in its own clip, so many
+    edges share one), compact edge arrays."""
+    cached = getattr(graph, "_search_tables", None)
+    if cached is not None:
+        return cached
+    E = graph.num_edges
+    flat = np.ascontiguousarray(graph.edge_acc, dtype=np.float32).reshape(E, -1)
+    readings, edge_reading = np.unique(flat, axis=0, return_inverse=True)
+    tables = {
+        "readings": np.ascontiguousarray((readings.astype(np.float64) / GRAVITY).astype(np.float32)),
+        "edge_reading": edge_reading.reshape(-1).astype(np.int32),
+        "incoming": np.ascontiguousarray(graph.incoming, dtype=np.int64),
+        "edge_src": np.ascontiguousarray(graph.edge_src, dtype=np.int32),
+        "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
+        "edge_offset": np.ascontiguousarray(graph.edge_offset, dtype=np.float32),
+        "edge_heading": np.ascontiguousarray(graph.edge_heading, dtype=np.float32),
+        "edge_turn": np.ascontiguousarray(np.stack([np.cos(graph.edge_heading.astype(np.float64)),
+                                                    np.sin(graph.edge_heading.astype(np.float64))], axis=-1)),
+    }
+    graph._search_tables = tables
+    return tables
+
+
+# Survivor store: rows of one (capacity, 4) int64 array — node, edge used to arrive,
+# parent row, sample. Rows are appended a block at a time in sample order, so a parent
+# always precedes its children and garbage collection is one backward sweep.
+NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow_tree(head, best_edge, edge_src, entries, free, n_free, t, level_count):
-    """Add one survivor-tree entry per live node at sample t (parent: its
-    predecessor's head entry), then release the old heads, freeing every entry no
-    live path uses. level_count[τ]: entries alive at sample τ (1 = converged)."""
-    N = head.shape[0]
-    new_head = np.full(N, -1, dtype=np.int64)
-    for n in range(N):
-        e = best_edge[n]
-        if e < 0:
-            continue
-        parent = head[edge_src[e]]
-        n_free -= 1
-        slot = free[n_free]
-        entries[slot, NODE] = n
-        entries[slot, EDGE] = e
-        entries[slot, PARENT] = parent
-        entries[slot, REFS] = 1  # a live head
-        entries[slot, TIME] = t
-        entries[parent, REFS] += 1  # its child
-        new_head[n] = slot
-        level_count[t] += 1
-    for n in range(N):
-        slot = head[n]
-        while slot >= 0:  # release, cascading up while nothing refers to the entry
-            entries[slot, REFS] -= 1
-            if entries[slot, REFS] > 0:
-                break
-            free[n_free] = slot
-            n_free += 1
-            level_count[entries[slot, TIME]] -= 1
-            slot = entries[slot, PARENT]
-    head[:] = new_head
-    return n_free
+def _block_levels(block, used, edge_src, mark, stamp, level_nodes, level_start):
+    """Walk back from every node alive at the block's last row, one row at a time:
+    level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes row k's
+    surviving paths pass through. block (B, N) int32 best incoming edges (−1 dead).
+    Returns (total, stamp, converged_row): converged_row is the highest row where a
+    single node remains (−1 if none)."""
+    N = block.shape[1]
+    # Fill from the top row down, at the end of level_nodes, then shift into place.
+    end = level_nodes.shape[0]
+    pos = end
+    top_count = 0
+    for n in range(N - 1, -1, -1):
+        if block[used - 1, n] >= 0:
+            pos -= 1
+            level_nodes[pos] = n
+            top_count += 1
+    counts = np.zeros(used, np.int64)
+    counts[used - 1] = top_count
+    hi = end
+    lo = pos
+    for k in range(used - 1, 0, -1):
+        stamp += 1
+        start = pos
+        for i in range(lo, hi):
+            m = edge_src[block[k, level_nodes[i]]]
+            if mark[m] != stamp:
+                mark[m] = stamp
+                pos -= 1
+                level_nodes[pos] = m
+        counts[k - 1] = start - pos
+        hi = start
+        lo = pos
+    total = end - pos
+    # Rows in ascending order: row 0's nodes sit lowest already; record the offsets.
+    level_nodes[:total] = level_nodes[pos:end].copy()
+    level_start[0] = 0
+    for k in range(used):
+        level_start[k + 1] = level_start[k] + counts[k]
+    converged_row = -1
+    for k in range(used - 1, -1, -1):
+        if counts[k] == 1:
+            converged_row = k
+            break
+    return total, stamp, converged_row
+
+
+@numba.njit(cache=True, nogil=True)
+def _append_block(block, used, t_top, heads, edge_src, store, size, level_nodes, level_start, row_of):
+    """Append the block's surviving lattice points (see `_block_levels`) to the store in
+    sample order; heads (N,): each node's row at the sample before the block on entry,
+    at the block's last sample on return (−1: not alive). row_of (N,) scratch.
+    Returns the new size."""
+    t0 = t_top - used + 1
+    for k in range(used):
+        for i in range(level_start[k], level_start[k + 1]):
+            n = level_nodes[i]
+            e = block[k, n]
+            m = edge_src[e]
+            parent = heads[m] if k == 0 else row_of[m]
+            store[size, NODE] = n
+            store[size, EDGE] = e
+            store[size, PARENT] = parent
+            store[size, TIME] = t0 + k
+            size += 1
+        # row_of now refers to row k (read by row k+1); a node appears once per row.
+        for i in range(level_start[k], level_start[k + 1]):
+            row_of[level_nodes[i]] = size - (level_start[k + 1] - i)
+    heads[:] = -1
+    for i in range(level_start[used - 1], level_start[used]):
+        heads[level_nodes[i]] = row_of[level_nodes[i]]
+    return size
+
+
+@numba.njit(cache=True, nogil=True)
+def _collect(store, size, heads):
+    """Keep only rows some live head reaches; renumber parents and heads. Returns
+    (new size, kept rows per sample is left to the caller)."""
+    keep = np.zeros(size, np.bool_)
+    for n in range(heads.shape[0]):
+        if heads[n] >= 0:
+            keep[heads[n]] = True
+    for i in range(size - 1, -1, -1):
+        if keep[i] and store[i, PARENT] >= 0:
+            keep[store[i, PARENT]] = True
+    new_row = np.empty(size, np.int64)
+    j = 0
+    for i in range(size):
+        if keep[i]:
+            new_row[i] = j
+            p = store[i, PARENT]
+            store[j, NODE] = store[i, NODE]
+            store[j, EDGE] = store[i, EDGE]
+            store[j, PARENT] = new_row[p] if p >= 0 else -1
+            store[j, TIME] = store[i, TIME]
+            j += 1
+    for n in range(heads.shape[0]):
+        if heads[n] >= 0:
+            heads[n] = new_row[heads[n]]
+    return j
+
+
+@numba.njit(cache=True, nogil=True)
+def _converged_until(store, size, t_from, t_to):
+    """The last sample in [t_from, t_to] up to which every sample has exactly one row
+    (all survivors agree), or t_from − 1. Rows are in sample order."""
+    counts = np.zeros(t_to - t_from + 1, np.int64)
+    for i in range(size):
+        tt = store[i, TIME]
+        if t_from <= tt <= t_to:
+            counts[tt - t_from] += 1
+    last = t_from - 1
+    for k in range(counts.shape[0]):
+        if counts[k] != 1:
+            break
+        last = t_from + k
+    return last
+
+
+@numba.njit(cache=True, nogil=True)
+def _trace(block, used, t, heads, edge_src, store, node, since):
+    """Nodes at samples since..t of the path ending at `node` at sample t, and the
+    edge each was entered by (−1 at sample 0): through the block's rows, then the
+    store."""
+    count = t - since + 1
+    nodes = np.empty(count, np.int64)
+    edges = np.empty(count, np.int64)
+    i = count - 1
+    n = node
+    for k in range(used - 1, -1, -1):
+        if i < 0:
+            break
+        e = block[k, n]
+        nodes[i] = n
+        edges[i] = e
+        n = edge_src[e]
+        i -= 1
+    row = heads[n] if i >= 0 else -1
+    while i >= 0:
+        nodes[i] = store[row, NODE]
+        edges[i] = store[row, EDGE]
+        row = store[row, PARENT]
+        i -= 1
+    return nodes, edges
 
 
 @dataclass
@@ -282,31 +435,41 @@ class ViterbiSearch:
 
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
-    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None):
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
+                 threads: bool = True):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
-        never entered, which is how leave-one-out evaluation hides a clip."""
+        never entered, which is how leave-one-out evaluation hides a clip. threads:
+        spread each step over numba's threads (one search at a time) or not (many
+        searches in parallel, e.g. a server's streams)."""
         self.graph = graph
+        self._kernels = (_reading_costs, _step) if threads else (_reading_costs_serial, _step_serial)
         self.weights = weights
         N = graph.num_nodes
         self.N = N
         self.gamma = gamma
-        self.incoming = np.ascontiguousarray(graph.incoming, dtype=np.int64)
-        self.edge_src = np.ascontiguousarray(graph.edge_src, dtype=np.int64)
-        self.edge_kind = np.ascontiguousarray(graph.edge_kind, dtype=np.int64)
-        self.edge_acc = graph.edge_acc
-        self.edge_offset = np.ascontiguousarray(graph.edge_offset, dtype=np.float64)
-        self.edge_heading = np.ascontiguousarray(graph.edge_heading, dtype=np.float64)
+        tables = search_tables(graph)
+        self.incoming = tables["incoming"]
+        self.edge_src = tables["edge_src"]
+        self.edge_kind = tables["edge_kind"]
+        self.edge_offset = tables["edge_offset"]
+        self.edge_heading = tables["edge_heading"]
+        self.edge_turn = tables["edge_turn"]
+        self.readings = tables["readings"]
+        self.edge_reading = tables["edge_reading"]
         c = graph.node_contacts
         self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
         self.cost = np.zeros(N)
+        self.place = np.zeros((N, PLACE_WIDTH))
+        self.det = np.zeros(N)
         self.rank = np.zeros((N, gamma), dtype=np.int64)
-        self.pos = np.zeros((N, 2))
-        self.head = np.zeros(N)
-        self.terms = np.zeros((N, 4))
-        self._scratch = (np.zeros(N), np.zeros((N, gamma), np.int64), np.zeros((N, 2)), np.zeros(N),
-                         np.zeros(N, np.int64), np.zeros((N, 4)))  # fmt: skip
-        self.edge_cost_acc = np.zeros(graph.num_edges)
+        self.terms = np.zeros((N, 3))
+        self._scratch = (np.zeros(N), np.zeros((N, PLACE_WIDTH)), np.zeros(N), np.zeros((N, gamma), np.int64),
+                         np.zeros((N, 3)))  # fmt: skip
+        self.best_edge = np.zeros(N, dtype=np.int32)
+        self.reading_cost = np.zeros(self.readings.shape[0], dtype=np.float32)
+        self._meas = np.zeros(self.readings.shape[1], dtype=np.float32)
+        self._mask = np.ones(self.readings.shape[1], dtype=np.float32)
         self.ok = np.ones((gamma, N), dtype=bool)
         if allowed is None:
             self.allowed = np.ones(N, dtype=bool)
@@ -316,33 +479,30 @@ class ViterbiSearch:
                 raise InputError(f"node mask must have {N} entries, got {self.allowed.shape}")
             if not self.allowed.any():
                 raise InputError("the node mask leaves no node to search")
-        self.level_count = np.zeros(1024, dtype=np.int64)
         self.converged_t = -1  # every sample ≤ this one has a single surviving entry
-        cap = 4 * N + 16
-        self._alloc(cap)
+        # Back-pointers of the last BLOCK samples as a dense (BLOCK, N) lattice, written
+        # sequentially each step; every BLOCK samples its surviving points move into the
+        # reference-counted tree (K §5.1's periodic trace-back from all live nodes).
+        self.block = np.full((self.BLOCK, N), -1, dtype=np.int32)
+        self.used = 0  # rows of the block filled since the last compaction
+        self.mark = np.zeros(N, dtype=np.int64)
+        self.row_of = np.zeros(N, dtype=np.int64)
+        self.stamp = 0
+        self.level_nodes = np.zeros(4 * N + 16, dtype=np.int64)
+        self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
+        self.store = np.zeros((4 * N + 16, 4), dtype=np.int64)
+        self.size = 0  # rows of the store in use (live or garbage)
+        self.live_rows = 0  # rows alive after the last collection
+        self.heads = np.full(N, -1, dtype=np.int64)
         self.t = -1
         self.peak_entries = 0
 
-    def _alloc(self, cap):
-        self.entries = np.zeros((cap, 5), np.int64)
-        self.free = np.arange(cap - 1, -1, -1, dtype=np.int64)
-        self.n_free = cap
-
-    def _grow(self):
-        old = len(self.entries)
-        cap = 2 * old
-        bigger = np.zeros((cap, 5), np.int64)
-        bigger[:old] = self.entries
-        self.entries = bigger
-        free = np.empty(cap, np.int64)
-        free[: self.n_free] = self.free[: self.n_free]
-        free[self.n_free : self.n_free + (cap - old)] = np.arange(cap - 1, old - 1, -1)
-        self.free = free
-        self.n_free += cap - old
+    BLOCK = 32
 
     @property
     def live_entries(self) -> int:
-        return len(self.entries) - self.n_free
+        """Store rows in use (survivors plus garbage not yet collected)."""
+        return self.size
 
     def start(self, position=None, heading=None, kinds_t=None, values_t=None):
         """Sample 0: every node starts a path at the first measured position/heading."""
@@ -350,57 +510,99 @@ class ViterbiSearch:
         self.t = 0
         p = np.zeros(2) if position is None or not np.all(np.isfinite(position)) else np.asarray(position, float)
         h = 0.0 if heading is None or not np.isfinite(heading) else float(heading)
-        self.pos[:] = p
-        self.head[:] = h
+        self.place[:, X], self.place[:, Z] = p
+        self.place[:, HEADING], self.place[:, COS], self.place[:, SIN] = h, np.cos(h), np.sin(h)
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
+        self.det[:] = 0.0
+        self.terms[:] = 0.0
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
         live = np.nonzero(self.allowed)[0]
-        slots = self.free[self.n_free - len(live) : self.n_free][::-1].copy()
-        self.n_free -= len(live)
-        self.entries[slots, NODE] = live
-        self.entries[slots, EDGE] = -1
-        self.entries[slots, PARENT] = -1
-        self.entries[slots, REFS] = 1
-        self.entries[slots, TIME] = 0
-        self.heads = np.full(N, -1, dtype=np.int64)
-        self.heads[live] = slots
-        self.level_count[:] = 0
-        self.level_count[0] = len(live)
+        self.size = len(live)
+        self.store[: self.size, NODE] = live
+        self.store[: self.size, EDGE] = -1
+        self.store[: self.size, PARENT] = -1
+        self.store[: self.size, TIME] = 0
+        self.heads[:] = -1
+        self.heads[live] = np.arange(self.size)
+        self.live_rows = self.size
+        self.used = 0
         self.converged_t = 0 if len(live) == 1 else -1
-        self.peak_entries = self.live_entries
+        self.peak_entries = self.size
 
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None):
         """Advance by one sample."""
-        if self.n_free < self.N:
-            self._grow()
+        if self.used == self.BLOCK:
+            self.compact()
         self.t += 1
-        cost, rank, pos, head, best_edge, terms = self._scratch
-        meas_acc = np.ascontiguousarray(acc, dtype=np.float64) / GRAVITY
+        cost, place, det, rank, terms = self._scratch
+        best_edge = self.best_edge
         meas_pos = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
         meas_head = np.nan if heading is None else float(heading)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
-        if w.acc:
-            _edge_acc_costs(self.edge_acc, meas_acc, self.edge_cost_acc)
-        _step(self.incoming, self.edge_src, self.edge_kind, self.edge_cost_acc, self.edge_offset, self.edge_heading,
-              meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok, self.allowed,
-              self.cost, self.rank, self.pos, self.head,
-              cost, rank, pos, head, best_edge, terms, self.terms)  # fmt: skip
+        # Computed even at W_A = 0: the report carries each path's accelerometer cost.
+        self._set_measurement(acc)
+        present = float(self._mask.sum()) / 3.0
+        reading_costs, step = self._kernels
+        if present:
+            reading_costs(self.readings, self._meas, self._mask, np.float32(1.0 / present), self.reading_cost)
+        else:
+            self.reading_cost[:] = 0.0
+        step(self.incoming, self.edge_src, self.edge_reading, self.edge_kind, self.edge_offset, self.edge_heading,
+              self.edge_turn, self.reading_cost, meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
+              self.allowed, self.cost, self.place, self.det, self.rank, self.terms,
+              cost, place, det, rank, terms, best_edge)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
-        if self.t >= len(self.level_count):
-            self.level_count = np.concatenate([self.level_count, np.zeros_like(self.level_count)])
-        self.n_free = _grow_tree(self.heads, best_edge, self.edge_src, self.entries, self.free, self.n_free, self.t,
-                                 self.level_count)  # fmt: skip
-        self.peak_entries = max(self.peak_entries, self.live_entries)
-        while self.converged_t < self.t and self.level_count[self.converged_t + 1] == 1:
-            self.converged_t += 1
+        self.block[self.used] = best_edge
+        self.used += 1
         # Swap buffers: the new state becomes the previous one.
-        self._scratch = (self.cost, self.rank, self.pos, self.head, best_edge, self.terms)
-        self.cost, self.rank, self.pos, self.head, self.terms = cost, rank, pos, head, terms
+        self._scratch = (self.cost, self.place, self.det, self.rank, self.terms)
+        self.cost, self.place, self.det, self.rank, self.terms = cost, place, det, rank, terms
+
+    def _set_measurement(self, acc) -> None:
+        """Measured accelerations (S, 3) m/s² → the kernel's (3S,) g vector and mask:
+        a sensor with any NaN axis is left out (K eq. 4 averages over sensors present)."""
+        a = np.asarray(acc, dtype=np.float32).reshape(-1, 3)
+        valid = np.isfinite(a).all(axis=1)
+        # float32(m/s²) / g in float64, rounded once — exactly as the readings table.
+        g = (a.astype(np.float64) / GRAVITY).astype(np.float32)
+        self._meas[:] = np.where(valid[:, None], g, 0.0).reshape(-1)
+        self._mask[:] = np.repeat(valid, 3).astype(np.float32)
+
+
+    def compact(self) -> None:
+        """Move the block's surviving lattice points into the store (K §5.1's trace-back
+        from all live nodes); collect the store's garbage when it has doubled."""
+        if self.used == 0:
+            return
+        if self.level_nodes.shape[0] < self.used * self.N:  # worst case: nothing merges
+            self.level_nodes = np.zeros(self.used * self.N, dtype=np.int64)
+        total, self.stamp, converged_row = _block_levels(self.block, self.used, self.edge_src, self.mark, self.stamp,
+                                                         self.level_nodes, self.level_start)  # fmt: skip
+        if self.size + total > self.store.shape[0]:
+            self._collect()
+            if self.size + total > self.store.shape[0] // 2:
+                bigger = np.zeros((2 * (self.size + total), 4), dtype=np.int64)
+                bigger[: self.size] = self.store[: self.size]
+                self.store = bigger
+        self.size = _append_block(self.block, self.used, self.t, self.heads, self.edge_src, self.store, self.size,
+                                  self.level_nodes, self.level_start, self.row_of)  # fmt: skip
+        t_first = self.t - self.used + 1
+        self.used = 0
+        self.peak_entries = max(self.peak_entries, self.live_rows + total)
+        if converged_row >= 0:  # one node left at that row: everything up to it is agreed
+            self.converged_t = max(self.converged_t, t_first + converged_row)
+
+    def _collect(self) -> None:
+        self.size = _collect(self.store, self.size, self.heads)
+        self.live_rows = self.size
+        self.peak_entries = max(self.peak_entries, self.size)
+        if self.converged_t < self.t:
+            self.converged_t = _converged_until(self.store, self.size, self.converged_t + 1, self.t)
 
     @property
     def alive(self) -> np.ndarray:
@@ -411,28 +613,22 @@ class ViterbiSearch:
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
         alive = np.nonzero(self.alive)[0]
         cost = np.round(self.cost[alive] / TIE) if np.all(np.abs(self.cost[alive]) < 1e6) else self.cost[alive]
-        keys = [alive, self.terms[alive, 3], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
+        keys = [alive, self.det[alive], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
         return int(alive[np.lexsort(keys)[0]])
+
+    def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
+        the edge each was entered by (−1 at sample 0). Walks back only to `since`, so
+        a fixed-lag trace costs the lag, not the input length."""
+        if not 0 <= since <= self.t:
+            raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}")
+        return _trace(self.block, self.used, self.t, self.heads, self.edge_src, self.store, int(node), int(since))
 
     def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now,
-        and the edges (t−since,) arriving at samples since+1..t. Walks only as far back
-        as `since`, so a fixed-lag trace costs the lag, not the input length."""
-        nodes, edges = [], []
-        slot = self.heads[node]
-        while slot >= 0 and self.entries[slot, TIME] >= since:
-            nodes.append(self.entries[slot, NODE])
-            edges.append(self.entries[slot, EDGE])
-            slot = self.entries[slot, PARENT]
-        return np.array(nodes[::-1], dtype=np.int64), np.array(edges[::-1][1:], dtype=np.int64)
-
-    def arrival_edge(self, node: int, sample: int) -> int:
-        """The edge by which the path ending at `node` now arrived at sample `sample`
-        (−1 at sample 0)."""
-        slot = self.heads[node]
-        while self.entries[slot, TIME] > sample:
-            slot = self.entries[slot, PARENT]
-        return int(self.entries[slot, EDGE])
+        and the edges (t−since,) between them."""
+        nodes, edges = self.trace_arrivals(node, since)
+        return nodes, edges[1:]
 
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
@@ -458,6 +654,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
     for t in range(1, T):
         search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t])
+    search.compact()
     best = search.best_node()
     nodes, edges = search.trace(best)
     N = graph.num_nodes

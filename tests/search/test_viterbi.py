@@ -82,8 +82,10 @@ def test_accelerometer_only_equals_brute_force(problem):
             viterbi_search(g, meas, weights=Weights(1, 0, 0))
         return
     r = viterbi_search(g, meas, weights=Weights(1, 0, 0))
-    assert r.cost == pytest.approx(best, rel=1e-9, abs=1e-12)
-    assert path_cost(g, r.node_path, meas) == pytest.approx(r.cost, rel=1e-9, abs=1e-12)
+    # The search sums float32 per-step costs (readings kept as float32 in g): equal to
+    # the float64 brute force to float32 precision.
+    assert r.cost == pytest.approx(best, rel=1e-6, abs=1e-9)
+    assert path_cost(g, r.node_path, meas) == pytest.approx(r.cost, rel=1e-6, abs=1e-9)
     assert len(r.node_path) == T and len(r.edge_path) == T - 1
     np.testing.assert_array_equal(g.edge_src[r.edge_path], r.node_path[:-1])
     np.testing.assert_array_equal(g.edge_dst[r.edge_path], r.node_path[1:])
@@ -115,7 +117,7 @@ def test_pruned_survivor_tree_equals_full_lattice(seed):
         fast = viterbi_search(g, meas, position, heading, weights, sets)
         ref_path, ref_cost = reference_viterbi(g, meas, position, heading, weights, sets)
         np.testing.assert_array_equal(fast.node_path, ref_path)
-        assert fast.cost == pytest.approx(ref_cost, rel=1e-9)
+        assert fast.cost == pytest.approx(ref_cost, rel=1e-6)  # float32 per-step C_A sums
         assert fast.compression > 1.0 and fast.peak_entries < g.num_nodes * T
 
 

@@ -1,0 +1,177 @@
+"""Recording → motion through `graphsvc.pipeline`, the path the CLI, evaluation and
+service share: input checks, rate conversion, heading from the track, batch vs live."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from graphsvc.cli import main
+from graphsvc.errors import InputError, StrategyNotImplementedError
+from graphsvc.graph.build import BuildOptions, build_graph
+from graphsvc.graph.file import save_graph
+from graphsvc.motion.bvh import read_bvh
+from graphsvc.motion.procedural import generate_knowledge_base
+from graphsvc.pipeline import LiveSession, Options, parse_weights, reconstruct, to_graph_rate
+from graphsvc.search.viterbi import Weights
+from graphsvc.sensors.layout import load_layout
+from graphsvc.sensors.noise import PRESETS as NOISE
+from graphsvc.sensors.recording import save_recording
+from graphsvc.sensors.simulate import simulate_recording
+
+
+@pytest.fixture(scope="module")
+def kb():
+    return generate_knowledge_base(seed=2, minutes=0.5)
+
+
+@pytest.fixture(scope="module")
+def graph(kb):
+    g, _ = build_graph(kb, BuildOptions(layout=load_layout("kelly6"), progress=False))
+    return g
+
+
+@pytest.fixture(scope="module")
+def rec(kb):
+    """Noise-free recording of a knowledge-base clip with positions and heading."""
+    return simulate_recording(kb[1], load_layout("kelly6"), NOISE["none"], seed=0)
+
+
+def test_noise_free_clip_comes_back_as_itself(graph, rec):
+    r = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1)))
+    first = graph.clips[1]["first_node"]
+    np.testing.assert_array_equal(r.node_path, first + np.arange(rec.num_samples))
+    assert r.motion.num_frames == rec.num_samples
+    assert r.report["node_path"] == r.node_path.tolist()
+    assert r.report["terms"]["acc_g2"] < 1e-9 and r.report["compression"] > 1
+
+
+def test_layout_mismatch_names_the_sensors(graph, kb):
+    other = simulate_recording(kb[1], load_layout("wrists-ankles"), NOISE["none"])
+    with pytest.raises(InputError, match="missing .*(back|chest)"):
+        reconstruct(graph, other, Options())
+
+
+def test_other_rates_are_resampled_to_the_graph_rate(graph, kb, rec):
+    fast = simulate_recording(kb[1], load_layout("kelly6"), NOISE["none"], rate_hz=60.0)
+    r = reconstruct(graph, fast, Options(weights=Weights(1, 0, 0)))
+    assert r.report["resampled"] and r.report["input_rate_hz"] == 60.0
+    assert abs(r.motion.num_frames - rec.num_samples) <= 1
+    # The 30 Hz grid falls on every other 60 Hz sample: those values, untouched.
+    acc, position, heading, resampled = to_graph_rate(fast, 30.0)
+    assert resampled and acc.shape[0] == r.motion.num_frames
+    np.testing.assert_allclose(acc, fast.accelerations[::2][: acc.shape[0]], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(position, fast.ground_position[::2][: acc.shape[0]], atol=1e-12)
+    # 15 Hz → 30 Hz: half-way values, headings the short way round (3.1 → −3.1 via π).
+    slow = replace(fast, rate_hz=15.0, timestamps_s=np.array([0.0, 1 / 15]), accelerations=fast.accelerations[:2],
+                   ground_position=np.array([[0.0, 0.0], [1.0, np.nan]]), heading=np.array([3.1, -3.1]))  # fmt: skip
+    acc, position, heading, _ = to_graph_rate(slow, 30.0)
+    np.testing.assert_allclose(acc[1], fast.accelerations[:2].astype(float).mean(axis=0), rtol=1e-6)
+    assert position[1, 0] == pytest.approx(0.5) and np.isnan(position[1, 1])  # a gap stays a gap
+    assert abs(heading[1]) == pytest.approx(np.pi)
+
+
+def test_bad_options_and_constraints(graph, rec):
+    with pytest.raises(StrategyNotImplementedError, match="olng"):
+        reconstruct(graph, rec, Options(strategy="olng"))
+    with pytest.raises(InputError, match="unknown strategy"):
+        reconstruct(graph, rec, Options(strategy="magic"))
+    with pytest.raises(InputError, match="weights"):
+        parse_weights("1,2")
+    with pytest.raises(InputError, match="weights"):
+        parse_weights("1,-1,0")
+    with pytest.raises(InputError, match="overlap"):
+        reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"contact": "left"}},
+                                                      {"start_s": 1, "end_s": 3, "require": {"contact": "both"}}],)))  # fmt: skip
+    with pytest.raises(InputError, match="start_s"):
+        reconstruct(graph, rec, Options(constraints=([{"start_s": -1, "end_s": 2, "require": {"contact": "left"}}],)))
+    with pytest.raises(InputError, match="unknown label"):
+        reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"label": "swim"}}],)))
+    with pytest.raises(InputError, match="ground positions"):
+        reconstruct(graph, replace(rec, ground_position=None), Options(heading_from_track=True))
+
+
+def test_heading_from_track_replaces_the_heading(graph, rec):
+    r = reconstruct(graph, replace(rec, heading=None), Options(heading_from_track=True, rest_heading_deg=90))
+    assert r.report["heading_source"] == "track"
+
+
+def test_live_session_equals_batch_with_the_same_lag(graph, rec):
+    opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5)
+    batch = reconstruct(graph, rec, opts)
+    live = LiveSession(graph, opts, rec.sensor_names)
+    frames = []
+    for k in range(rec.num_samples):
+        frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k], rec.heading[k])
+        # Frames come out in order, each at most the announced lag after its sample.
+        assert not frames or frames[-1].index >= k - live.lag_frames
+    frames += live.flush()
+    assert [f.index for f in frames] == list(range(rec.num_samples))
+    assert [f.node for f in frames] == batch.node_path.tolist()
+    np.testing.assert_array_equal(live.motion().rotations, batch.motion.rotations)
+    np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
+
+
+def test_live_session_with_a_long_lag_equals_the_whole_input_search(graph, rec):
+    whole = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1)))
+    live = LiveSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=1000.0), rec.sensor_names)
+    for k in range(rec.num_samples):
+        assert live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k], rec.heading[k]) == []
+    frames = live.flush()
+    assert [f.node for f in frames] == whole.node_path.tolist()
+    # Same path, synthesized in overlapping stretches instead of at once.
+    np.testing.assert_allclose(live.motion().translations, whole.motion.translations, atol=1e-6)
+
+
+def test_live_session_rejects_bad_samples(graph, rec):
+    live = LiveSession(graph, Options(), rec.sensor_names)
+    live.push(0.0, rec.accelerations[0])
+    with pytest.raises(InputError, match="increase"):
+        live.push(0.0, rec.accelerations[1])
+    with pytest.raises(InputError, match="finite"):
+        live.push(float("nan"), rec.accelerations[1])
+    with pytest.raises(InputError, match=r"\(6, 3\)"):
+        live.push(0.1, rec.accelerations[1][:3])
+    with pytest.raises(InputError, match="infinite"):
+        live.push(0.1, np.full((6, 3), np.inf))
+    with pytest.raises(InputError, match="layout"):
+        LiveSession(graph, Options(), ("a", "b"))
+
+
+def test_live_session_resamples_irregular_timestamps(graph, rec):
+    live = LiveSession(graph, Options(latency_s=0.2), rec.sensor_names)
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.01, 0.05, 200))  # 20–100 Hz jitter
+    frames = []
+    for k in range(len(t)):
+        frames += live.push(float(t[k]), rec.accelerations[k % rec.num_samples])
+    frames += live.flush()
+    assert [f.index for f in frames] == list(range(len(frames)))
+    assert len(frames) == int(np.floor((t[-1] - t[0]) * graph.rate_hz + 1e-6)) + 1
+    assert np.allclose([f.time_s for f in frames], t[0] + np.arange(len(frames)) / graph.rate_hz)
+
+
+def test_cli_synthesize(graph, rec, tmp_path, capsys):
+    gpath, rpath = tmp_path / "g.graph", tmp_path / "r.rec"
+    save_graph(graph, gpath)
+    save_recording(rec, rpath)
+    out, report = tmp_path / "out.bvh", tmp_path / "report.json"
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(out), "--weights", "0.5,1,1",
+                 "--report", str(report)]) == 0  # fmt: skip
+    motion = read_bvh(out)
+    assert motion.num_frames == rec.num_samples
+    r = json.loads(report.read_text())
+    assert len(r["node_path"]) == rec.num_samples and {"acc_g2", "position_m", "heading_rad"} <= set(r["terms"])
+    assert {"search", "synthesis"} <= set(r["timings_s"]) and r["compression"] > 1
+    assert "wrote" in capsys.readouterr().out
+    # Bad input: one line, exit 2, nothing written.
+    bad = tmp_path / "bad.bvh"
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--weights", "x"]) == 2
+    cfile = tmp_path / "c.json"
+    cfile.write_text('[[{"start_s": 1, "end_s": 0.5, "require": {"contact": "left"}}]]')
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--constraints", str(cfile)]) == 2
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--strategy", "ssg"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("graphsvc: error:") for line in err)
+    assert not bad.exists()
