@@ -40,3 +40,7 @@ class LayoutError(GraphsvcError):
 
 class StrategyNotImplementedError(GraphsvcError):
     """A search strategy that is specified (SPEC §6–7) but not built yet."""
+
+
+class SearchCancelled(GraphsvcError):
+    """The caller asked a running search to stop (e.g. its client went away)."""

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graphsvc.errors import FormatError, InputError, StrategyNotImplementedError
+from graphsvc.errors import FormatError, InputError, SearchCancelled, StrategyNotImplementedError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
@@ -28,7 +28,7 @@ from graphsvc.search.viterbi import Weights, compile_constraints, viterbi_search
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.synthesis.path import synthesize_motion
-from graphsvc.synthesis.stream import StreamingSynthesizer
+from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
 
 STRATEGIES = ("viterbi", "olng", "ssg")
 
@@ -199,11 +199,14 @@ def _start_state(position, heading) -> tuple[np.ndarray, float]:
     return g, h
 
 
-def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(),
-                allowed: np.ndarray | None = None) -> Reconstruction:  # fmt: skip
+def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,
+                threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
     """The motion a recording's measurements describe. allowed: (N,) bool node mask
-    (leave-one-out evaluation) or None. Raises InputError for recordings that do not
-    fit the graph, StrategyNotImplementedError for strategies not built yet."""
+    (leave-one-out evaluation) or None; threads: numba threads inside the search
+    (False where many searches run side by side); should_stop: callable polled during
+    the search, raising SearchCancelled when it returns true. Raises InputError for
+    recordings that do not fit the graph, StrategyNotImplementedError for strategies
+    not built yet."""
     check_options(options)
     rec.validate()
     check_layout(graph, rec.sensor_names)
@@ -232,7 +235,8 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     start_ground, start_heading = _start_state(position, heading)
     extra = {}
     if options.latency_s is None:
-        result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed)
+        result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
+                                should_stop=should_stop)  # fmt: skip
         nodes, edges = result.node_path, result.edge_path
         search_s = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -242,11 +246,13 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
                  "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
     else:
         lag = int(round(options.latency_s * rate))
-        decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate)
-        synth = StreamingSynthesizer(graph, start_ground, start_heading)
+        decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads)
+        synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
         node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
         synth_s = 0.0
         for t in range(T + 1):
+            if should_stop is not None and t % 32 == 31 and should_stop():
+                raise SearchCancelled(f"search stopped at sample {t} of {T}")
             if t < T:
                 n, e = decoder.push(acc[t], None if use_pos is None else use_pos[t], None if use_head is None else use_head[t])
             else:
@@ -323,11 +329,16 @@ class LiveSession:
 
     Samples are linearly resampled to the graph rate on arrival, decoded by the
     fixed-lag decoder (lag = options.latency_s, default 1 s) and synthesized a few
-    frames behind it. `lag_frames` is the total delay in graph frames."""
+    frames behind it, SYNTH_BATCH frames at a time. `lag_frames` is the most a frame
+    waits, in graph frames, between its sample arriving and its pose coming out.
+    threads: numba threads per step — off by default, since a live server runs many
+    sessions side by side."""
 
     DEFAULT_LATENCY_S = 1.0
+    SYNTH_BATCH = 3  # 0.1 s at 30 Hz
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None):
+    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
+                 threads: bool = False):  # fmt: skip
         check_options(options)
         check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
         self.graph = graph
@@ -335,11 +346,12 @@ class LiveSession:
         self.rate = float(graph.rate_hz)
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
-        self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed, self.rate)
+        self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
+                                       self.rate, threads)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
-        self.lag_frames = self.decoder.lag  # + the synthesis look-ahead, set on the first sample
+        self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
         self.S = len(graph.sensor_names)
         self.t0: float | None = None
         self.prev: tuple | None = None  # last raw sample (t, acc, position, heading)
@@ -402,8 +414,7 @@ class LiveSession:
         if self.synth is None:
             g = position if position is not None and np.all(np.isfinite(position)) else np.zeros(2)
             h = heading if heading is not None and math.isfinite(heading) else 0.0
-            self.synth = StreamingSynthesizer(self.graph, g, h)
-            self.lag_frames = self.decoder.lag + self.synth.lookahead
+            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
         w = self.options.weights
         nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
         return self._frames(nodes, self.synth.add(nodes, edges))

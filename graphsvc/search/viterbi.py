@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from graphsvc.errors import InputError
+from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
 
@@ -506,7 +506,6 @@ class ViterbiSearch:
 
     def start(self, position=None, heading=None, kinds_t=None, values_t=None):
         """Sample 0: every node starts a path at the first measured position/heading."""
-        N = self.N
         self.t = 0
         p = np.zeros(2) if position is None or not np.all(np.isfinite(position)) else np.asarray(position, float)
         h = 0.0 if heading is None or not np.isfinite(heading) else float(heading)
@@ -633,11 +632,13 @@ class ViterbiSearch:
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
                    constraint_sets: list | None = None, rate_hz: float | None = None,
-                   allowed: np.ndarray | None = None) -> SearchResult:  # fmt: skip
+                   allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
-    node mask or None."""
+    node mask or None; threads: see ViterbiSearch; should_stop: a callable polled
+    every 32 samples — when it returns true the search raises SearchCancelled (a
+    server stops work for a client that went away)."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -648,11 +649,13 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
-    search = ViterbiSearch(graph, weights, gamma, allowed)
+    search = ViterbiSearch(graph, weights, gamma, allowed, threads)
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
     for t in range(1, T):
+        if should_stop is not None and t % 32 == 0 and should_stop():
+            raise SearchCancelled(f"search stopped at sample {t} of {T}")
         search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t])
     search.compact()
     best = search.best_node()

@@ -8,7 +8,6 @@ their shapes are in the proto's comments.
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -25,7 +24,6 @@ STRATEGY_VALUES = {"viterbi": pb.STRATEGY_VITERBI, "olng": pb.STRATEGY_OLNG, "ss
 CONTACT_NAMES = {pb.CONTACT_STATE_LEFT: "left", pb.CONTACT_STATE_RIGHT: "right", pb.CONTACT_STATE_BOTH: "both",
                  pb.CONTACT_STATE_NONE: "none"}  # fmt: skip
 CONTACT_VALUES = {v: k for k, v in CONTACT_NAMES.items()}
-_AXES = "xyz"
 
 
 class FieldError(InputError):
@@ -175,7 +173,7 @@ def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str) -> 
     return np.array([given.index(n) for n in graph_names], np.int64)
 
 
-def _check_no_inf(field: str, values: np.ndarray, per_item: int, names: tuple[str, ...] | None = None) -> None:
+def _check_no_inf(field: str, values: np.ndarray, per_item: int) -> None:
     bad = np.isinf(values)
     if bad.any():
         k = int(np.argmax(bad))
@@ -343,22 +341,24 @@ def constraints_from_proto(sets, field: str) -> list:
     return out
 
 
-def options_to_proto(strategy: str = "viterbi", weights=None, latency_s: float | None = None,
-                     heading_from_track: bool = False, rest_heading_deg: float = 0.0,
-                     constraints: list | None = None, speed_threshold_m_s: float | None = None) -> pb.SynthesisOptions:  # fmt: skip
-    """weights: graphsvc.search.viterbi.Weights or None (the default 1, 1, 1)."""
-    if strategy not in STRATEGY_VALUES:
-        raise InputError(f"unknown strategy {strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
-    msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[strategy], heading_from_track=bool(heading_from_track),
-                              rest_heading_deg=float(rest_heading_deg))  # fmt: skip
-    if weights is not None:
-        msg.weights.CopyFrom(pb.CostWeights(acceleration=weights.acc, position=weights.position, heading=weights.heading))
-    if latency_s is not None:
-        msg.latency_s = float(latency_s)
-    if speed_threshold_m_s is not None:
-        msg.speed_threshold_m_s = float(speed_threshold_m_s)
-    if constraints:
-        msg.constraint_sets.extend(constraints_to_proto(constraints))
+def options_to_proto(options=None, constraints: list | None = None) -> pb.SynthesisOptions:
+    """pipeline.Options (None: the defaults) → SynthesisOptions. constraints: sets to
+    send when options.constraints is None (a recording's own), else ignored."""
+    from graphsvc.pipeline import Options
+
+    options = Options() if options is None else options
+    if options.strategy not in STRATEGY_VALUES:
+        raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
+    w = options.weights
+    msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[options.strategy],
+                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading),
+                              heading_from_track=bool(options.heading_from_track),
+                              rest_heading_deg=float(options.rest_heading_deg),
+                              speed_threshold_m_s=float(options.speed_threshold))  # fmt: skip
+    if options.latency_s is not None:
+        msg.latency_s = float(options.latency_s)
+    sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
+    msg.constraint_sets.extend(constraints_to_proto(sets))
     return msg
 
 
@@ -449,7 +449,3 @@ def struct_to_dict(msg) -> dict:
     from google.protobuf.json_format import MessageToDict
 
     return MessageToDict(msg)
-
-
-def dumps(data) -> str:
-    return json.dumps(data, indent=2, sort_keys=True)

@@ -19,18 +19,29 @@ from graphsvc.graph.model import MotionGraph
 from graphsvc.synthesis.path import synthesize_motion
 
 
+def lookahead_frames(rate_hz: float, blend_s: float = 0.7) -> int:
+    """Frames the path must be known past a frame before its pose is final: half the
+    blend window, plus one."""
+    return int(math.ceil(0.5 * blend_s * rate_hz)) + 1
+
+
 class StreamingSynthesizer:
     """add(nodes, arrival_edges) → (first frame index, rotations (K, J, 4), translations
     (K, J, 3)) of the frames that became final; finish() → the rest."""
 
     def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
-                 flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0):  # fmt: skip
+                 flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
+                 batch: int = 1):  # fmt: skip
         self.graph = graph
         self.blend_s = blend_s
         self.flight_root_blend_s = flight_root_blend_s
         self.fix_feet = fix_feet
         rate = float(graph.rate_hz)
-        self.lookahead = int(math.ceil(0.5 * blend_s * rate)) + 1
+        self.lookahead = lookahead_frames(rate, blend_s)
+        # Synthesize once `batch` frames are final, not every frame: each update
+        # re-synthesizes a trailing stretch, so this divides the cost by `batch` and
+        # adds up to batch − 1 frames of delay.
+        self.batch = max(1, int(batch))
         self.max_back = int(math.ceil(max_back_s * rate))
         # The trailing stretch of the path still needed: frames base, base+1, ...
         self.base = 0
@@ -52,7 +63,11 @@ class StreamingSynthesizer:
             self.heading.append(h)
         self.nodes = np.concatenate([self.nodes, nodes])
         self.edges = np.concatenate([self.edges, edges])
-        return self._synthesize(self.base + self.nodes.size - self.lookahead)
+        until = self.base + self.nodes.size - self.lookahead
+        if until - self.done < self.batch:
+            J = self.graph.skeleton.num_joints
+            return self.done, np.zeros((0, J, 4)), np.zeros((0, J, 3))
+        return self._synthesize(until)
 
     def finish(self):
         return self._synthesize(self.base + self.nodes.size)

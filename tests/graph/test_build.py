@@ -10,9 +10,6 @@ from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.model import (
     EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW, summary,
 )
-from graphsvc.motion import signals
-from graphsvc.motion.joints import joint_map
-from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE

@@ -7,7 +7,7 @@ import pytest
 from graphsvc.errors import InputError
 from graphsvc.search.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
 from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
-from tests.search.test_viterbi import random_graph, tiny_graph
+from tests.search.test_viterbi import random_graph
 
 
 def _problem(seed, T=70):

@@ -1,0 +1,294 @@
+"""Command-line entry points of the service: `graphsvc serve`, `graphsvc client
+graphs|synthesize|stream`, `graphsvc sensor-bridge`.
+
+graphsvc/cli.py wires them with `add_service_parsers(sub)`. The same parser also
+runs on its own, for tools and tests that start a server as a subprocess:
+
+    python -m graphsvc.service.cli_commands serve --graph small=small.graph --port 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from graphsvc.errors import GraphsvcError
+
+
+def _check_output(path: Path) -> None:
+    if not path.parent.is_dir():
+        raise GraphsvcError(f"output folder {path.parent} does not exist")
+
+
+def _print(line: str) -> None:
+    print(line, flush=True)  # flushed: tests and tools read these lines from a pipe
+
+
+# ---------------------------------------------------------------- serve
+
+
+def _cmd_serve(args) -> int:
+    from graphsvc.service.server import ServerConfig, load_graphs, read_tokens, serve
+
+    tokens = read_tokens(args.token_file) if args.token_file else ()
+    config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
+                          tls_key=args.tls_key and Path(args.tls_key), tokens=tokens, max_streams=args.max_streams,
+                          max_message_mb=args.max_message_mb, grace_s=args.grace_s)  # fmt: skip
+    if (config.tls_cert is None) != (config.tls_key is None):
+        raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
+    graphs = load_graphs(args.graph)
+    return serve(graphs, config, announce=_print)
+
+
+# ---------------------------------------------------------------- client
+
+
+def _connect(args):
+    from graphsvc.service.client import connect, read_token_file
+
+    token = read_token_file(args.token_file) if args.token_file else None
+    return connect(args.server, token=token, tls_ca=args.tls_ca, tls_server_name=args.tls_server_name)
+
+
+def _options(args, constraints=None):
+    """SynthesisOptions from the strategy flags (graphsvc.cli.search_options)."""
+    from graphsvc.cli import search_options
+    from graphsvc.service.convert import options_to_proto
+
+    return options_to_proto(search_options(args), constraints)
+
+
+def _cmd_client_graphs(args) -> int:
+    from graphsvc.graph.model import format_summary
+    from graphsvc.service.client import get_graph, list_graphs
+    from graphsvc.service.convert import graph_info_dict
+
+    with _connect(args) as conn:
+        if args.graph:
+            info = graph_info_dict(get_graph(conn, args.graph, args.timeout))
+            print(json.dumps(info, indent=2, sort_keys=True) if args.json else format_summary(info))
+            return 0
+        graphs = list_graphs(conn, args.timeout)
+    if args.json:
+        print(json.dumps({g.name: graph_info_dict(g) for g in graphs}, indent=2, sort_keys=True))
+        return 0
+    for g in graphs:
+        print(f"{g.name}: {g.node_count:,} nodes, {g.edge_count:,} edges, {g.rate_hz:g} Hz, "
+              f"layout {g.layout} ({', '.join(g.sensor_names)}), {g.kb_minutes:.1f} min of motion")  # fmt: skip
+    return 0
+
+
+def _cmd_client_synthesize(args) -> int:
+    from graphsvc.fileio import atomic_writer, write_text_atomic
+    from graphsvc.sensors.recording import read_recording
+    from graphsvc.service.client import resolve_graph, synthesize
+    from graphsvc.service.convert import skeleton_from_proto
+
+    out = Path(args.output)
+    _check_output(out)
+    if args.report:
+        _check_output(Path(args.report))
+    rec = read_recording(args.recording)
+    options = _options(args, rec.constraints)
+    with _connect(args) as conn:
+        info = resolve_graph(conn, args.graph, args.timeout)
+        result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
+                            skeleton=skeleton_from_proto(info.skeleton))  # fmt: skip
+    with atomic_writer(out) as f:
+        f.write(result.bvh)
+    if args.report:
+        write_text_atomic(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    r = result.report
+    timings = r.get("timings_s", {})
+    print(f"wrote {out}: {result.motion.num_frames} frames at {info.rate_hz:g} Hz from {rec.num_samples} samples, "
+          f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
+          f"search {timings.get('search', float('nan')):.2f} s)")  # fmt: skip
+    return 0
+
+
+def _cmd_client_stream(args) -> int:
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.sensors.recording import read_recording
+    from graphsvc.service.client import latency_summary, resolve_graph, stream_recording
+
+    out = Path(args.output) if args.output else None
+    if out is not None:
+        _check_output(out)
+    rec = read_recording(args.recording)
+    options = _options(args)
+
+    def on_frame(frame, latency_ms):
+        if not args.quiet:
+            _print(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
+                   f"  latency {latency_ms:7.2f} ms")  # fmt: skip
+
+    with _connect(args) as conn:
+        info = resolve_graph(conn, args.graph, args.timeout)
+        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame)
+    s = latency_summary(result.latencies_ms)
+    lag = result.started.lag_frames if result.started else 0
+    print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
+          f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms")  # fmt: skip
+    if out is not None:
+        write_bvh(out, result.motion(), scale=100.0)
+        print(f"wrote {out}")
+    return 0
+
+
+# ---------------------------------------------------------------- sensor bridge
+
+
+def _cmd_sensor_bridge(args) -> int:
+    import serial
+
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.service.bridge import run_bridge
+    from graphsvc.service.client import resolve_graph
+
+    out = Path(args.output) if args.output else None
+    if out is not None:
+        _check_output(out)
+    if args.calibrate_seconds < 0:
+        raise GraphsvcError(f"--calibrate-seconds must be ≥ 0, got {args.calibrate_seconds}")
+    options = _options(args)
+    stop = threading.Event()
+    with _connect(args) as conn:
+        info = resolve_graph(conn, args.graph, args.timeout)
+        try:
+            port = serial.Serial(args.device, args.baud, timeout=0.1)
+        except (serial.SerialException, ValueError) as exc:
+            raise GraphsvcError(f"cannot open {args.device}: {exc}") from None
+        previous = {}
+        if threading.current_thread() is threading.main_thread():
+            # Ctrl-C / SIGTERM end the input; the server's last frames still arrive.
+            previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            _print(f"sensor-bridge: reading {args.device} at {args.baud} baud ({args.units}), streaming to "
+                   f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
+                   + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
+                      if args.calibrate_seconds else ""))  # fmt: skip
+            result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration)
+        finally:
+            port.close()
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+    st = result.stats
+    reasons = ", ".join(f"{n} {r}" for r, n in sorted(st.corrupt.items()))
+    _print(f"sensor-bridge: {result.end_reason}; {st.lines} lines, {st.corrupt_lines} corrupt skipped"
+           + (f" ({reasons})" if reasons else "")
+           + f"; {st.device_samples} device samples ({st.incomplete_samples} incomplete, {st.calibration_samples} "
+           f"calibrating) → {st.samples_streamed} samples at {info.rate_hz:g} Hz; {len(result.stream.frames)} frames")  # fmt: skip
+    if result.calibration is not None:
+        cal = result.calibration
+        bias = "; ".join(f"{n} ({', '.join(f'{v:+.2f}' for v in b)})" for n, b in zip(info.sensor_names, cal.bias))
+        _print(f"sensor-bridge: calibration bias m/s²: {bias}")
+        for w in cal.warnings:
+            _print(f"sensor-bridge: warning: {w}")
+    if out is not None:
+        if not result.stream.frames:
+            raise GraphsvcError(f"no frames came back; {out} not written")
+        write_bvh(out, result.stream.motion(), scale=100.0)
+        _print(f"wrote {out}: {len(result.stream.frames)} frames")
+    return 0
+
+
+# ---------------------------------------------------------------- parsers
+
+
+def _connection_parent() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR", help="HOST:PORT (default 127.0.0.1:50051)")
+    p.add_argument("--graph", metavar="NAME", help="graph name on the server (default: its only graph)")
+    p.add_argument("--token-file", metavar="F", help="file holding the bearer token")
+    p.add_argument("--tls-ca", metavar="F", help="PEM CA certificate of the server: use TLS")
+    p.add_argument("--tls-server-name", metavar="NAME", help="name to check the server certificate against")
+    p.add_argument("--timeout", type=float, metavar="S", help="deadline per call, seconds (default none)")
+    return p
+
+
+def add_service_parsers(sub) -> None:
+    """Add `serve`, `client` and `sensor-bridge` to graphsvc's subcommands."""
+    from graphsvc.cli import add_search_options
+
+    p = sub.add_parser("serve", help="serve graphs over gRPC (graphsvc.v1)")
+    p.add_argument("--graph", action="append", required=True, metavar="NAME=FILE",
+                   help="a graph to serve under NAME (repeatable)")  # fmt: skip
+    p.add_argument("--host", default="[::]", help="address to bind (default [::]: all interfaces)")
+    p.add_argument("--port", type=int, default=50051, help="TCP port (default 50051; 0: any free port)")
+    p.add_argument("--tls-cert", metavar="F", help="PEM certificate chain: serve TLS (with --tls-key)")
+    p.add_argument("--tls-key", metavar="F", help="PEM private key")
+    p.add_argument("--token-file", metavar="F", help="accepted bearer tokens, one per line: require one")
+    p.add_argument("--max-streams", type=int, default=16, metavar="N",
+                   help="concurrent live streams; more get RESOURCE_EXHAUSTED (default 16)")  # fmt: skip
+    p.add_argument("--max-message-mb", type=float, default=64.0, metavar="M", help="largest message, MiB (default 64)")
+    p.add_argument("--grace-s", type=float, default=10.0, metavar="S",
+                   help="on SIGTERM, time for in-flight calls to finish (default 10)")  # fmt: skip
+    p.set_defaults(run=_cmd_serve)
+
+    connection = _connection_parent()
+    p = sub.add_parser("client", help="call a graphsvc server")
+    client = p.add_subparsers(dest="client_command", required=True, parser_class=type(p))
+
+    c = client.add_parser("graphs", parents=[connection], help="list the server's graphs (--graph: one in full)")
+    c.add_argument("--json", action="store_true")
+    c.set_defaults(run=_cmd_client_graphs)
+
+    c = client.add_parser("synthesize", parents=[connection], help="reconstruct a recording on the server")
+    c.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
+    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
+    c.add_argument("--report", metavar="OUT.json", help="write the search report")
+    add_search_options(c)
+    c.set_defaults(run=_cmd_client_synthesize)
+
+    c = client.add_parser("stream", parents=[connection], help="replay a recording live and print per-frame latency")
+    c.add_argument("recording", metavar="REC")
+    c.add_argument("--speed", type=float, default=1.0, metavar="X", help="replay X times faster than real time")
+    c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
+    c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
+    add_search_options(c)
+    c.set_defaults(run=_cmd_client_stream)
+
+    p = sub.add_parser("sensor-bridge", parents=[connection], help="stream a serial accelerometer device to a server")
+    p.add_argument("--device", required=True, metavar="DEV", help="serial device, e.g. /dev/ttyUSB0")
+    p.add_argument("--baud", type=int, default=115200, metavar="B", help="baud rate (default 115200)")
+    p.add_argument("--units", choices=("m/s2", "g"), default="m/s2", help="units of the device's readings")
+    p.add_argument("--calibrate-seconds", type=float, default=0.0, metavar="S",
+                   help="stand still in the rest pose for the first S seconds to estimate sensor biases")  # fmt: skip
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
+    p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion")
+    add_search_options(p)
+    p.set_defaults(run=_cmd_sensor_bridge)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Standalone entry point with graphsvc's error handling (one line, exit 2)."""
+    from graphsvc import cli
+
+    parser = cli._Parser(prog="graphsvc", description="graphsvc gRPC service commands")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    add_service_parsers(parser.add_subparsers(dest="command", required=True, parser_class=cli._Parser))
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except BrokenPipeError:  # the reader went away (`| head`): not an error
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except (GraphsvcError, OSError) as exc:
+        if args.debug:
+            raise
+        message = str(exc) if isinstance(exc, GraphsvcError) else cli._os_message(exc)
+        print(f"graphsvc: error: {message}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("graphsvc: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

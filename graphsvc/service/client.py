@@ -1,0 +1,281 @@
+"""Client side of graphsvc.v1: connect (plaintext or TLS, optional bearer token),
+list graphs, synthesize a recording, stream samples live.
+
+    conn = connect("127.0.0.1:50051", token=read_token_file("token"))
+    graphs = list_graphs(conn)
+    result = synthesize(conn, "tennis", recording, options_to_proto(latency_s=None))
+    open("out.bvh", "wb").write(result.bvh)
+
+Failures of the call itself (status codes) raise ServiceError, a GraphsvcError, so
+the command line prints one line and exits 2.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import grpc
+import numpy as np
+
+from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.motion.skeleton import Motion, Skeleton
+from graphsvc.sensors.recording import Recording
+from graphsvc.service import convert
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
+
+DEFAULT_SERVER = "127.0.0.1:50051"
+
+
+class ServiceError(GraphsvcError):
+    """A call the server refused or that failed in transport. code: grpc.StatusCode."""
+
+    def __init__(self, code, details: str, method: str = ""):
+        self.code = code
+        self.details = details
+        name = code.name if code is not None else "UNKNOWN"
+        super().__init__(f"{method + ': ' if method else ''}{name}: {details}")
+
+
+def service_error(exc: grpc.RpcError, method: str = "") -> ServiceError:
+    code = exc.code() if hasattr(exc, "code") else None
+    details = exc.details() if hasattr(exc, "details") else str(exc)
+    return ServiceError(code, details or "", method)
+
+
+@dataclass
+class Connection:
+    """A channel, its stub and the metadata every call carries (the bearer token)."""
+
+    channel: grpc.Channel
+    stub: pb_grpc.MotionGraphServiceStub
+    metadata: tuple[tuple[str, str], ...] = ()
+    address: str = ""
+
+    def close(self) -> None:
+        self.channel.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def read_token_file(path) -> str:
+    """The token: the file's first line that is neither blank nor a # comment."""
+    for line in Path(path).read_text(encoding="utf-8").splitlines():
+        if line.strip() and not line.strip().startswith("#"):
+            return line.strip()
+    raise InputError(f"{path}: no token in the token file")
+
+
+def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None, tls_server_name: str | None = None) -> Connection:
+    """A connection to `address` (HOST:PORT). tls_ca: PEM file of the CA that signed
+    the server's certificate (TLS on); None: plaintext. token: sent as
+    `authorization: Bearer <token>` on every call (in the clear without TLS).
+    tls_server_name: the name to check the certificate against, if not the host."""
+    # The server enforces its message limit; the client takes whatever it is sent
+    # (a long recording's motion plus BVH easily exceeds gRPC's 4 MiB default).
+    options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+    if tls_ca is not None:
+        if tls_server_name:
+            options.append(("grpc.ssl_target_name_override", tls_server_name))
+        credentials = grpc.ssl_channel_credentials(root_certificates=Path(tls_ca).read_bytes())
+        channel = grpc.secure_channel(address, credentials, options=options)
+    else:
+        channel = grpc.insecure_channel(address, options=options)
+    metadata = (("authorization", f"Bearer {token}"),) if token else ()
+    return Connection(channel, pb_grpc.MotionGraphServiceStub(channel), metadata, address)
+
+
+def list_graphs(conn: Connection, timeout_s: float | None = 30.0) -> list[pb.GraphInfo]:
+    try:
+        return list(conn.stub.ListGraphs(pb.ListGraphsRequest(), timeout=timeout_s, metadata=conn.metadata).graphs)
+    except grpc.RpcError as exc:
+        raise service_error(exc, "ListGraphs") from None
+
+
+def get_graph(conn: Connection, name: str, timeout_s: float | None = 30.0) -> pb.GraphInfo:
+    try:
+        return conn.stub.GetGraph(pb.GetGraphRequest(name=name), timeout=timeout_s, metadata=conn.metadata).graph
+    except grpc.RpcError as exc:
+        raise service_error(exc, "GetGraph") from None
+
+
+def resolve_graph(conn: Connection, name: str | None, timeout_s: float | None = 30.0) -> pb.GraphInfo:
+    """The named graph, or the server's only graph when no name is given."""
+    if name:
+        return get_graph(conn, name, timeout_s)
+    graphs = list_graphs(conn, timeout_s)
+    if len(graphs) != 1:
+        raise InputError(f"the server has {len(graphs)} graphs ({', '.join(g.name for g in graphs)}); choose one with --graph")
+    return graphs[0]
+
+
+@dataclass
+class BatchResult:
+    """motion: on the graph's skeleton at its rate (float32 precision); node_path
+    (F,) int64; bvh: BVH file bytes (centimetres); report: the search report."""
+
+    motion: Motion
+    node_path: np.ndarray
+    bvh: bytes
+    report: dict
+
+
+def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
+               timeout_s: float | None = None, skeleton: Skeleton | None = None) -> BatchResult:  # fmt: skip
+    """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None)."""
+    if skeleton is None:
+        skeleton = convert.skeleton_from_proto(get_graph(conn, graph).skeleton)
+    request = pb.SynthesizeRequest(graph=graph, recording=convert.recording_to_proto(rec),
+                                   options=options or pb.SynthesisOptions())  # fmt: skip
+    try:
+        response = conn.stub.Synthesize(request, timeout=timeout_s, metadata=conn.metadata)
+    except grpc.RpcError as exc:
+        raise service_error(exc, "Synthesize") from None
+    motion = convert.motion_from_proto(response.motion, skeleton)
+    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.struct_to_dict(response.report))
+
+
+# ---------------------------------------------------------------- live
+
+
+_END = object()
+
+
+class SampleFeed:
+    """The request side of a live stream: a config, then whatever samples are put,
+    until `close()`. Records when each sample left (time.perf_counter seconds), so
+    latency can be measured from the frames' input_sample_index."""
+
+    def __init__(self, config: pb.StreamConfig):
+        self._queue: queue.Queue = queue.Queue()
+        self._config = config
+        self.sent_at: list[float] = []  # perf_counter time each sample was handed to gRPC, by sample index
+
+    def put(self, sample: pb.SensorSample) -> None:
+        self._queue.put(sample)
+
+    def close(self) -> None:
+        self._queue.put(_END)
+
+    def __iter__(self) -> Iterator[pb.StreamSynthesizeRequest]:
+        yield pb.StreamSynthesizeRequest(config=self._config)
+        while True:
+            item = self._queue.get()
+            if item is _END:
+                return
+            self.sent_at.append(time.perf_counter())
+            yield pb.StreamSynthesizeRequest(sample=item)
+
+
+@dataclass
+class StreamResult:
+    """What a live stream returned. started: the StreamStarted; frames: PoseFrames in
+    arrival order; latencies_ms: per frame, arrival − send of the sample that released
+    it (ms; the service's delay beyond the decoder lag); finished: StreamFinished or None."""
+
+    started: pb.StreamStarted | None = None
+    frames: list = field(default_factory=list)
+    latencies_ms: list = field(default_factory=list)
+    finished: pb.StreamFinished | None = None
+
+    def motion(self) -> Motion:
+        if self.started is None:
+            raise InputError("the stream never started")
+        sk = convert.skeleton_from_proto(self.started.skeleton)
+        return convert.frames_to_motion(self.frames, sk, self.started.rate_hz)
+
+
+def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = None, timeout_s: float | None = None,
+               on_call: Callable | None = None) -> StreamResult:  # fmt: skip
+    """Run a StreamSynthesize call fed by `feed` until the server finishes.
+    on_frame(frame, latency_ms) is called per pose frame; on_call(call) gets the
+    call object (call.cancel() ends the stream early)."""
+    result = StreamResult()
+    call = conn.stub.StreamSynthesize(iter(feed), timeout=timeout_s, metadata=conn.metadata)
+    if on_call is not None:
+        on_call(call)
+    try:
+        for response in call:
+            kind = response.WhichOneof("message")
+            if kind == "frame":
+                frame = response.frame
+                now = time.perf_counter()
+                k = frame.input_sample_index
+                latency = (now - feed.sent_at[k]) * 1e3 if 0 <= k < len(feed.sent_at) else float("nan")
+                result.frames.append(frame)
+                result.latencies_ms.append(latency)
+                if on_frame is not None:
+                    on_frame(frame, latency)
+            elif kind == "started":
+                result.started = response.started
+            elif kind == "finished":
+                result.finished = response.finished
+    except grpc.RpcError as exc:
+        raise service_error(exc, "StreamSynthesize") from None
+    finally:
+        feed.close()  # lets the request thread end if the call failed early
+    return result
+
+
+def stream_config(graph: str, options: pb.SynthesisOptions | None = None, sensor_names=()) -> pb.StreamConfig:
+    return pb.StreamConfig(graph=graph, options=options or pb.SynthesisOptions(), sensor_names=list(sensor_names))
+
+
+def recording_samples(rec: Recording) -> Iterator[pb.SensorSample]:
+    """The recording's samples as SensorSamples, in order."""
+    for k in range(rec.num_samples):
+        pos = None if rec.ground_position is None else rec.ground_position[k]
+        head = None if rec.heading is None else float(rec.heading[k])
+        yield convert.sample_to_proto(rec.timestamps_s[k], rec.accelerations[k], pos, head)
+
+
+def replay(rec: Recording, feed: SampleFeed, speed: float = 1.0, stop: threading.Event | None = None) -> None:
+    """Put the recording's samples into `feed` at their timestamps (divided by
+    `speed`: 2 = twice as fast), then close it. Runs in the caller's thread."""
+    if not (speed > 0):
+        raise InputError(f"--speed must be positive, got {speed}")
+    t = rec.timestamps_s
+    start = time.perf_counter()
+    try:
+        for k, sample in enumerate(recording_samples(rec)):
+            delay = start + (t[k] - t[0]) / speed - time.perf_counter()
+            if stop is None:
+                time.sleep(max(delay, 0.0))
+            elif stop.wait(max(delay, 0.0)):
+                return  # the stream ended early
+            feed.put(sample)
+    finally:
+        feed.close()
+
+
+def stream_recording(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
+                     speed: float = 1.0, on_frame: Callable | None = None, timeout_s: float | None = None) -> StreamResult:  # fmt: skip
+    """Replay `rec` in real time (÷ speed) through StreamSynthesize."""
+    feed = SampleFeed(stream_config(graph, options, rec.sensor_names))
+    stop = threading.Event()
+    sender = threading.Thread(target=replay, args=(rec, feed, speed, stop), name="graphsvc-replay", daemon=True)
+    sender.start()
+    try:
+        return run_stream(conn, feed, on_frame, timeout_s)
+    finally:
+        stop.set()
+        sender.join(timeout=5.0)
+
+
+def latency_summary(latencies_ms: Iterable[float]) -> dict:
+    """{"frames", "p50_ms", "p99_ms", "max_ms"} over the finite latencies."""
+    a = np.asarray(list(latencies_ms), np.float64)
+    a = a[np.isfinite(a)]
+    if a.size == 0:
+        return {"frames": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
+    return {"frames": int(a.size), "p50_ms": round(float(np.percentile(a, 50)), 3),
+            "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}  # fmt: skip

@@ -1,0 +1,419 @@
+"""The graphsvc.v1 gRPC server: graph registry, batch and live synthesis, health,
+reflection, bearer-token authentication and optional TLS.
+
+Graphs are loaded once at start (memory-mapped, graphsvc.graph.file.load_graph) and
+shared read-only by every call; each live stream owns its LiveSession. Calls run on
+a thread pool sized for `max_streams` live streams plus a few unary calls; the
+search kernels release the GIL, so streams decode in parallel.
+
+Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unknown
+graph; UNIMPLEMENTED for strategies not built (OLNG, SSG); RESOURCE_EXHAUSTED beyond
+`max_streams` concurrent streams; UNAUTHENTICATED without a valid token; INTERNAL
+(with the traceback on the server's stderr) for bugs — bad input never takes the
+server down.
+"""
+
+from __future__ import annotations
+
+import hmac
+import math
+import signal
+import sys
+import threading
+import traceback
+from concurrent import futures
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import grpc
+from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+from grpc_reflection.v1alpha import reflection
+
+from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
+from graphsvc.service import convert
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
+
+SERVICE_NAME = pb.DESCRIPTOR.services_by_name["MotionGraphService"].full_name  # "graphsvc.v1.MotionGraphService"
+HEALTH_METHOD_PREFIX = "/grpc.health.v1.Health/"  # open without a token: load balancers and probes
+UNARY_WORKERS = 4  # threads beyond the live streams' for ListGraphs/GetGraph/Synthesize and rejections
+
+
+@dataclass(frozen=True)
+class LoadedGraph:
+    """A graph the server serves. info: its GraphInfo, computed once."""
+
+    name: str
+    path: Path
+    graph: object  # graphsvc.graph.model.MotionGraph
+    info: pb.GraphInfo
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """host/port: where to listen (port 0: any free port). tls_cert/tls_key: PEM
+    files (both or neither). tokens: accepted bearer tokens (empty: no
+    authentication). max_streams: concurrent StreamSynthesize calls. max_message_mb:
+    largest message either way, MiB. grace_s: how long SIGTERM lets calls finish."""
+
+    host: str = "[::]"
+    port: int = 50051
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
+    tokens: tuple[str, ...] = ()
+    max_streams: int = 16
+    max_message_mb: float = 64.0
+    grace_s: float = 10.0
+
+
+def parse_graph_spec(text: str) -> tuple[str, Path]:
+    """"NAME=FILE" → (name, path)."""
+    name, sep, path = text.partition("=")
+    name = name.strip()
+    if not sep or not name or not path:
+        raise InputError(f"--graph takes NAME=FILE, got {text!r}")
+    return name, Path(path)
+
+
+def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
+    """Load each "NAME=FILE" graph once (memory-mapped, checksum verified)."""
+    from graphsvc.graph.file import load_graph
+
+    if not specs:
+        raise InputError("no graphs to serve (give --graph NAME=FILE at least once)")
+    graphs: dict[str, LoadedGraph] = {}
+    for spec in specs:
+        name, path = parse_graph_spec(spec)
+        if name in graphs:
+            raise InputError(f"graph name {name!r} given twice")
+        graph = load_graph(path)
+        graphs[name] = LoadedGraph(name, path, graph, convert.graph_info(name, graph, path.stat().st_size))
+    return graphs
+
+
+def read_tokens(path) -> tuple[str, ...]:
+    """Accepted tokens: one per line; blank lines and lines starting with # are
+    skipped. Several lines let a token be rotated without downtime."""
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    tokens = tuple(t.strip() for t in lines if t.strip() and not t.strip().startswith("#"))
+    if not tokens:
+        raise InputError(f"{path}: no token in the token file")
+    return tokens
+
+
+# ---------------------------------------------------------------- authentication
+
+
+class BearerTokenInterceptor(grpc.ServerInterceptor):
+    """UNAUTHENTICATED unless the call carries `authorization: Bearer <token>` with
+    one of `tokens`. Health checks stay open (probes carry no secrets)."""
+
+    def __init__(self, tokens: tuple[str, ...], open_prefixes: tuple[str, ...] = (HEALTH_METHOD_PREFIX,)):
+        self._tokens = tuple(t.encode("utf-8") for t in tokens)
+        self._open = open_prefixes
+
+    def _authorized(self, metadata) -> bool:
+        for key, value in metadata or ():
+            if key != "authorization" or not isinstance(value, str):
+                continue
+            scheme, _, token = value.partition(" ")
+            if scheme.lower() != "bearer":
+                continue
+            given = token.strip().encode("utf-8")
+            # Compare against every token in constant time: no early exit that
+            # would tell an attacker how much of a guess was right.
+            ok = False
+            for t in self._tokens:
+                ok |= hmac.compare_digest(given, t)
+            return ok
+        return False
+
+    def intercept_service(self, continuation, handler_call_details):
+        if handler_call_details.method.startswith(self._open) or self._authorized(handler_call_details.invocation_metadata):
+            return continuation(handler_call_details)
+        handler = continuation(handler_call_details)
+        if handler is None:  # unknown method: gRPC answers UNIMPLEMENTED itself
+            return None
+        return _deny(handler, "missing or invalid bearer token (metadata 'authorization: Bearer <token>')")
+
+
+def _deny(handler: grpc.RpcMethodHandler, message: str) -> grpc.RpcMethodHandler:
+    """A handler of the same shape as `handler` that answers UNAUTHENTICATED."""
+
+    def abort(request_or_iterator, context):
+        context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+
+    if handler.request_streaming and handler.response_streaming:
+        return grpc.stream_stream_rpc_method_handler(abort)
+    if handler.request_streaming:
+        return grpc.stream_unary_rpc_method_handler(abort)
+    if handler.response_streaming:
+        return grpc.unary_stream_rpc_method_handler(abort)
+    return grpc.unary_unary_rpc_method_handler(abort)
+
+
+# ---------------------------------------------------------------- the service
+
+
+class RpcStatus(Exception):
+    """End the call with this status. Raised instead of calling context.abort inside
+    handlers, so one place (_abort_for) turns every failure into exactly one status."""
+
+    def __init__(self, code: grpc.StatusCode, message: str):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+def _abort_for(context: grpc.ServicerContext, exc: BaseException) -> None:
+    """Map an exception to a status and end the call (context.abort raises)."""
+    if isinstance(exc, RpcStatus):
+        context.abort(exc.code, exc.message)
+    if isinstance(exc, StrategyNotImplementedError):
+        context.abort(grpc.StatusCode.UNIMPLEMENTED, str(exc))
+    if isinstance(exc, SearchCancelled):  # the client is gone or out of time; nobody reads this
+        context.abort(grpc.StatusCode.CANCELLED, str(exc))
+    if isinstance(exc, GraphsvcError):
+        context.abort(grpc.StatusCode.INVALID_ARGUMENT, str(exc))
+    # A bug: keep the traceback for the operator, tell the client only what failed.
+    traceback.print_exception(exc, file=sys.stderr)
+    context.abort(grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}); see the server log")
+
+
+class StreamSlots:
+    """At most `limit` live streams at once. A slot is released exactly once, by the
+    handler finishing or by gRPC's termination callback, whichever comes first."""
+
+    def __init__(self, limit: int):
+        self.limit = limit
+        self._active = 0
+        self._lock = threading.Lock()
+
+    @property
+    def active(self) -> int:
+        return self._active
+
+    def try_acquire(self):
+        """A release function, or None when all slots are taken."""
+        with self._lock:
+            if self._active >= self.limit:
+                return None
+            self._active += 1
+        released = threading.Event()
+
+        def release():
+            with self._lock:
+                if not released.is_set():
+                    released.set()
+                    self._active -= 1
+
+        return release
+
+
+class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
+    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int):
+        self.graphs = graphs
+        self.slots = StreamSlots(max_streams)
+
+    def _graph(self, name: str, field: str = "graph") -> LoadedGraph:
+        if not name:
+            raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"{field}: empty graph name (ListGraphs names the graphs)")
+        loaded = self.graphs.get(name)
+        if loaded is None:
+            raise RpcStatus(grpc.StatusCode.NOT_FOUND, f"{field}: no graph named {name!r} "
+                            f"(this server has {', '.join(sorted(self.graphs))})")  # fmt: skip
+        return loaded
+
+    def ListGraphs(self, request, context):
+        return pb.ListGraphsResponse(graphs=[g.info for _, g in sorted(self.graphs.items())])
+
+    def GetGraph(self, request, context):
+        try:
+            return pb.GetGraphResponse(graph=self._graph(request.name, "name").info)
+        except Exception as exc:  # noqa: BLE001
+            _abort_for(context, exc)
+
+    def Synthesize(self, request, context):
+        from graphsvc.motion.bvh import bvh_text
+        from graphsvc.pipeline import reconstruct
+
+        try:
+            graph = self._graph(request.graph).graph
+            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording")
+            options = convert.options_from_proto(request.options, "options")
+            if not context.is_active():  # the deadline passed while waiting for a worker
+                return pb.SynthesizeResponse()
+            # Serial kernels: many calls share the machine. The search polls the call and
+            # stops when the client cancels or its deadline passes.
+            result = reconstruct(graph, rec, options, threads=False, should_stop=lambda: not context.is_active())
+            response = pb.SynthesizeResponse(motion=convert.motion_to_proto(result.motion),
+                                              node_path=result.node_path.tolist(),
+                                              bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
+            convert.report_to_struct(result.report, response.report)
+            return response
+        except Exception as exc:  # noqa: BLE001 — every failure becomes a status, never a dead worker
+            _abort_for(context, exc)
+
+    def StreamSynthesize(self, request_iterator, context):
+        release = self.slots.try_acquire()
+        if release is None:
+            context.abort(grpc.StatusCode.RESOURCE_EXHAUSTED,
+                          f"the server is at its limit of {self.slots.limit} concurrent streams (--max-streams)")
+            return
+        # Released when the call ends for any reason: the handler returning, the
+        # client cancelling, the deadline passing, the server stopping.
+        context.add_callback(release)
+        try:
+            yield from self._stream(request_iterator, context)
+        except grpc.RpcError:
+            return  # the client went away while we waited for its next message
+        except Exception as exc:  # noqa: BLE001
+            _abort_for(context, exc)
+        finally:
+            release()
+
+    def _stream(self, request_iterator, context):
+        from graphsvc.pipeline import LiveSession
+
+        first = next(request_iterator, None)
+        if first is None:
+            return  # the client half-closed without a config: nothing to do
+        if first.WhichOneof("message") != "config":
+            raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, "config: the first message must carry a StreamConfig")
+        config = first.config
+        loaded = self._graph(config.graph, "config.graph")
+        graph = loaded.graph
+        names = graph.sensor_names
+        order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
+        options = convert.options_from_proto(config.options, "config.options")
+        try:
+            session = LiveSession(graph, options, names)
+        except InputError as exc:  # e.g. a constraint label the graph does not have
+            raise convert.FieldError("config.options", str(exc)) from None
+        yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
+            graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames, sensor_names=list(names),
+            skeleton=loaded.info.skeleton))  # fmt: skip
+
+        sample_index = -1
+        previous_t = None
+        frames_out = 0
+        for request in request_iterator:
+            if not context.is_active():
+                return  # cancelled or past the deadline: stop searching now
+            kind = request.WhichOneof("message")
+            if kind == "config":
+                raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: only the first "
+                                "message may carry a config; every later one carries a sample")  # fmt: skip
+            if kind is None:
+                raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
+            sample_index += 1
+            t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t,
+                                                                  f"sample[{sample_index}]")  # fmt: skip
+            previous_t = t
+            try:
+                frames = session.push(t, acc, position, heading)
+            except InputError as exc:
+                raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
+            for frame in frames:
+                yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, sample_index))
+            frames_out += len(frames)
+        if not context.is_active():
+            return
+        for frame in session.flush():
+            yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, max(sample_index, 0)))
+            frames_out += 1
+        yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,
+                                                                     frames_emitted=frames_out))  # fmt: skip
+
+
+# ---------------------------------------------------------------- running
+
+
+@dataclass
+class RunningServer:
+    server: grpc.Server
+    port: int
+    health: health.HealthServicer
+    servicer: MotionGraphServicer
+    graphs: dict[str, LoadedGraph] = field(default_factory=dict)
+
+    def stop(self, grace_s: float | None = None) -> None:
+        """Refuse new calls, let running ones finish within grace_s, then cancel them."""
+        self.health.enter_graceful_shutdown()
+        self.server.stop(grace_s).wait()
+
+
+def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None:
+    """Server reflection, so stock tools (grpcurl, grpc_cli, Postman) can list and
+    call the service without the .proto. grpcio-reflection serves
+    grpc.reflection.v1alpha; v1 has the very same messages under a new package
+    name, so the same servicer answers it too (newer tools ask v1 first)."""
+    from grpc_reflection.v1alpha import reflection_pb2, reflection_pb2_grpc
+
+    servicer = reflection.ReflectionServicer(service_names)
+    reflection_pb2_grpc.add_ServerReflectionServicer_to_server(servicer, server)
+    v1 = grpc.stream_stream_rpc_method_handler(
+        servicer.ServerReflectionInfo,
+        request_deserializer=reflection_pb2.ServerReflectionRequest.FromString,
+        response_serializer=reflection_pb2.ServerReflectionResponse.SerializeToString,
+    )
+    server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(
+        "grpc.reflection.v1.ServerReflection", {"ServerReflectionInfo": v1}),))  # fmt: skip
+
+
+def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig) -> RunningServer:
+    """Build, bind and start the server; returns at once (port: the bound port)."""
+    if config.max_streams < 1:
+        raise InputError(f"--max-streams must be at least 1, got {config.max_streams}")
+    if not (math.isfinite(config.max_message_mb) and config.max_message_mb > 0):
+        raise InputError(f"--max-message-mb must be positive, got {config.max_message_mb}")
+    if (config.tls_cert is None) != (config.tls_key is None):
+        raise InputError("TLS needs both --tls-cert and --tls-key")
+    max_bytes = int(config.max_message_mb * 2**20)
+    options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
+               ("grpc.so_reuseport", 0)]  # fmt: skip  # port 0 must mean a port nobody else holds
+    interceptors = [BearerTokenInterceptor(config.tokens)] if config.tokens else []
+    executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
+    server = grpc.server(executor, interceptors=interceptors, options=options)
+
+    servicer = MotionGraphServicer(graphs, config.max_streams)
+    pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
+    health_servicer = health.HealthServicer(experimental_non_blocking=True,
+                                            experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
+    health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+    for name in ("", SERVICE_NAME):
+        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
+    _add_reflection(server, (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME))
+
+    address = f"{config.host}:{config.port}"
+    if config.tls_cert is not None:
+        credentials = grpc.ssl_server_credentials([(Path(config.tls_key).read_bytes(), Path(config.tls_cert).read_bytes())])
+        port = server.add_secure_port(address, credentials)
+    else:
+        port = server.add_insecure_port(address)
+    if port == 0:
+        raise GraphsvcError(f"cannot listen on {address}")
+    server.start()
+    return RunningServer(server, port, health_servicer, servicer, graphs)
+
+
+def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print) -> int:
+    """Run until SIGTERM or SIGINT, then drain in-flight calls for config.grace_s and
+    return 0. `announce` gets the "listening on" line (port 0 shows the real port)."""
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        running = start_server(graphs, config)
+        security = "TLS" if config.tls_cert else "plaintext"
+        auth = f"{len(config.tokens)} token(s)" if config.tokens else "no authentication"
+        announce(f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "
+                 + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values()))  # fmt: skip
+        while not stop.wait(0.5):  # a timed wait keeps the main thread responsive to signals
+            pass
+        announce(f"graphsvc serve: stopping, {running.servicer.slots.active} stream(s) in flight, grace {config.grace_s:g} s")
+        running.stop(config.grace_s)
+        announce("graphsvc serve: stopped")
+        return 0
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)

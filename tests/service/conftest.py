@@ -1,0 +1,125 @@
+"""Fixtures of the service tests: a small graph built once from the procedural
+knowledge base, a few seconds of simulated input, and real servers on loopback
+ephemeral ports (no mocks of gRPC)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="session")
+def graph_file(tmp_path_factory) -> Path:
+    from graphsvc.graph.build import BuildOptions, build_graph
+    from graphsvc.graph.file import save_graph
+    from graphsvc.motion.procedural import generate_knowledge_base
+    from graphsvc.sensors.layout import load_layout
+
+    kb = generate_knowledge_base(seed=0, minutes=0.5)
+    graph, _ = build_graph(kb, BuildOptions(layout=load_layout("kelly6")))
+    path = tmp_path_factory.mktemp("graph") / "small.graph"
+    save_graph(graph, path)
+    return path
+
+
+@pytest.fixture(scope="session")
+def loaded_graphs(graph_file):
+    from graphsvc.service.server import load_graphs
+
+    return load_graphs([f"small={graph_file}"])
+
+
+@pytest.fixture(scope="session")
+def graph(loaded_graphs):
+    return loaded_graphs["small"].graph
+
+
+@pytest.fixture(scope="session")
+def recording():
+    """3 s of the held-out procedural performance, exact kelly6 readings, ground
+    position and heading."""
+    from graphsvc.motion.procedural import generate_performance
+    from graphsvc.sensors.layout import load_layout
+    from graphsvc.sensors.noise import PRESETS
+    from graphsvc.sensors.simulate import simulate_recording
+
+    motion = generate_performance(seed=1)[0].slice(30, 120)
+    return simulate_recording(motion, load_layout("kelly6"), PRESETS["none"], seed=0)
+
+
+@pytest.fixture(scope="session")
+def rec_file(recording, tmp_path_factory) -> Path:
+    from graphsvc.sensors.recording import save_recording
+
+    path = tmp_path_factory.mktemp("rec") / "perf.rec"
+    save_recording(recording, path)
+    return path
+
+
+def start(loaded_graphs, **config):
+    from graphsvc.service.server import ServerConfig, start_server
+
+    return start_server(loaded_graphs, ServerConfig(host="127.0.0.1", port=0, **config))
+
+
+@pytest.fixture(scope="session")
+def server(loaded_graphs):
+    """An open server (no token, no TLS) shared by the tests that do not change it."""
+    running = start(loaded_graphs, max_streams=4)
+    yield running
+    running.stop(0)
+
+
+@pytest.fixture
+def conn(server):
+    from graphsvc.service.client import connect
+
+    with connect(f"127.0.0.1:{server.port}") as c:
+        yield c
+
+
+def live_frames(graph, recording, options):
+    """What a LiveSession returns for the recording's samples, pushed in order."""
+    from graphsvc.pipeline import LiveSession
+
+    session = LiveSession(graph, options, recording.sensor_names)
+    frames = []
+    for k in range(recording.num_samples):
+        frames += session.push(recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k],
+                               recording.heading[k])  # fmt: skip
+    return frames + session.flush(), session
+
+
+def run_cli(*args, timeout=60, **kwargs) -> subprocess.CompletedProcess:
+    """`python -m graphsvc.service.cli_commands ARGS` (the service commands as a process)."""
+    return subprocess.run([sys.executable, "-m", "graphsvc.service.cli_commands", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout, env=_env(), check=False, **kwargs)  # fmt: skip
+
+
+def popen_cli(*args, **kwargs) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "graphsvc.service.cli_commands", *map(str, args)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), **kwargs)  # fmt: skip
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def assert_frames_equal(expected, received) -> None:
+    """pipeline Frames vs PoseFrame protos: same frames, nodes, labels, poses."""
+    assert [f.index for f in received] == [f.index for f in expected]
+    assert [f.node for f in received] == [f.node for f in expected]
+    assert [f.label for f in received] == [f.label for f in expected]
+    for a, b in zip(expected, received):
+        assert b.time_s == pytest.approx(a.time_s, abs=1e-9)
+        np.testing.assert_array_equal(np.array(b.rotations_wxyz, np.float32), a.rotations.ravel())
+        np.testing.assert_array_equal(np.array(b.translations_m, np.float32), a.translations.ravel())

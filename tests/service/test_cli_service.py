@@ -1,0 +1,105 @@
+"""`graphsvc serve` as a process (token file, port 0, SIGTERM drain) and the
+`graphsvc client` commands against it."""
+
+from __future__ import annotations
+
+import re
+import signal
+import time
+
+import grpc
+import pytest
+
+from graphsvc.service import client as C
+from graphsvc.service.cli_commands import main
+from tests.service.conftest import popen_cli
+
+
+@pytest.fixture
+def served(graph_file, tmp_path):
+    token = tmp_path / "token"
+    token.write_text("# the service's token\nabc123\n")
+    proc = popen_cli("serve", "--graph", f"small={graph_file}", "--host", "127.0.0.1", "--port", "0",
+                     "--token-file", token, "--grace-s", "10", "--max-streams", "2")  # fmt: skip
+    line = proc.stdout.readline()
+    match = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
+    assert match, line + proc.stderr.read() if proc.poll() is not None else line
+    yield proc, f"127.0.0.1:{match.group(1)}", token
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def test_client_commands(served, rec_file, graph, recording, tmp_path, capsys):
+    from graphsvc.motion.bvh import bvh_text
+    from graphsvc.pipeline import Options, reconstruct
+    from graphsvc.search.viterbi import Weights
+
+    _, address, token = served
+    common = ["--server", address, "--token-file", str(token)]
+    assert main(["client", "graphs", *common]) == 0
+    assert capsys.readouterr().out.startswith("small: 2,")
+    assert main(["client", "graphs", *common, "--graph", "small", "--json"]) == 0
+    assert '"layout": "kelly6"' in capsys.readouterr().out
+
+    out = tmp_path / "batch.bvh"
+    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--weights", "0.5,1,1"]) == 0
+    assert f"wrote {out}: {recording.num_samples} frames" in capsys.readouterr().out
+    expected = reconstruct(graph, recording, Options(weights=Weights(0.5, 1, 1)))
+    assert out.read_text() == bvh_text(expected.motion, scale=100.0)
+
+    live = tmp_path / "live.bvh"
+    assert main(["client", "stream", str(rec_file), "-o", str(live), *common, "--speed", "30", "--latency", "0.3"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    frames = [line for line in printed if line.startswith("frame ")]
+    assert len(frames) == recording.num_samples and "latency" in frames[0]
+    assert re.search(r"p50 [\d.]+ ms, p99 [\d.]+ ms", printed[-2])
+    assert live.stat().st_size > 0
+
+    # Errors: one line, exit 2.
+    assert main(["client", "graphs", "--server", address]) == 2
+    assert "UNAUTHENTICATED" in capsys.readouterr().err
+    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--strategy", "ssg"]) == 2
+    assert "UNIMPLEMENTED" in capsys.readouterr().err
+
+
+def test_sigterm_drains_in_flight_streams_then_exits_0(served, recording):
+    proc, address, token = served
+    with C.connect(address, token=C.read_token_file(token)) as conn:
+        feed = C.SampleFeed(C.stream_config("small"))
+        samples = list(C.recording_samples(recording))
+        call = conn.stub.StreamSynthesize(iter(feed), metadata=conn.metadata, timeout=30)
+        responses = iter(call)
+        assert next(responses).WhichOneof("message") == "started"
+        for s in samples[:10]:
+            feed.put(s)
+        proc.send_signal(signal.SIGTERM)
+        assert "stopping, 1 stream(s) in flight" in proc.stdout.readline()
+        time.sleep(0.2)
+        # New calls are refused while draining; the running stream goes on to the end.
+        with pytest.raises(C.ServiceError) as info:
+            C.list_graphs(conn, timeout_s=5)
+        assert info.value.code == grpc.StatusCode.UNAVAILABLE
+        for s in samples[10:]:
+            feed.put(s)
+        feed.close()
+        kinds = [r.WhichOneof("message") for r in responses]
+        assert kinds.count("frame") == recording.num_samples and kinds[-1] == "finished"
+    assert proc.wait(timeout=15) == 0
+    assert "stopped" in proc.stdout.read()
+
+
+def test_serve_refuses_bad_arguments(graph_file, tmp_path, capsys):
+    empty = tmp_path / "empty-token"
+    empty.write_text("\n# nothing\n")
+    cases = {  # arguments → what the one-line error must mention
+        ("--graph", "nofile"): "NAME=FILE",
+        ("--graph", f"a={tmp_path / 'missing.graph'}"): "missing.graph",
+        ("--graph", f"a={graph_file}", "--tls-cert", str(graph_file)): "--tls-key",
+        ("--graph", f"a={graph_file}", "--token-file", str(empty)): "no token",
+        ("--graph", f"a={graph_file}", "--graph", f"a={graph_file}"): "twice",
+    }
+    for args, mention in cases.items():
+        assert main(["serve", "--port", "0", *args]) == 2, args
+        err = capsys.readouterr().err
+        assert mention in err and err.count("\n") == 1, (args, err)

@@ -1,0 +1,387 @@
+"""Real server on a loopback ephemeral port, real client: round trips against the
+library, health and reflection, status codes of bad requests, stream limits,
+deadlines and cancellation."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import grpc
+import numpy as np
+import pytest
+
+from graphsvc.service import client as C
+from graphsvc.service import convert
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from tests.service.conftest import assert_frames_equal, live_frames, start
+
+
+def _code(call, *args, **kwargs):
+    with pytest.raises(grpc.RpcError) as info:
+        result = call(*args, **kwargs)
+        if hasattr(result, "__iter__") and not isinstance(result, pb.SynthesizeResponse):
+            list(result)
+    return info.value.code(), info.value.details()
+
+
+def _requests(config: pb.StreamConfig, samples):
+    yield pb.StreamSynthesizeRequest(config=config)
+    for s in samples:
+        yield pb.StreamSynthesizeRequest(sample=s)
+
+
+# ---------------------------------------------------------------- graphs
+
+
+def test_list_and_get_graph(conn, graph, graph_file):
+    from graphsvc.graph.model import summary
+
+    (info,) = C.list_graphs(conn)
+    assert info.name == "small"
+    got = convert.graph_info_dict(C.get_graph(conn, "small"))
+    assert got == {**summary(graph, graph_file.stat().st_size), "params": got["params"]}
+    assert got["params"]["layout"] == graph.params["layout"] == "kelly6"
+    sk = convert.skeleton_from_proto(info.skeleton)
+    assert sk.names == graph.skeleton.names and np.array_equal(sk.parents, graph.skeleton.parents)
+    rest = np.array(info.rest_pose_accelerations_m_s2).reshape(-1, 3)
+    # The procedural rest pose is a T-pose: arms read +1 g along Z, legs along −X, trunk along +X.
+    np.testing.assert_allclose(np.linalg.norm(rest, axis=1), 9.81, atol=1e-4)
+    np.testing.assert_allclose(rest[0], [0, 0, 9.81], atol=1e-4)
+
+
+# ---------------------------------------------------------------- round trips
+
+
+@pytest.mark.parametrize("latency_s", [None, 0.5])
+def test_synthesize_matches_library(conn, graph, recording, latency_s):
+    from graphsvc.motion.bvh import bvh_text
+    from graphsvc.pipeline import Options, reconstruct
+    from graphsvc.search.viterbi import Weights
+
+    options = Options(weights=Weights(0.5, 1.0, 1.0), latency_s=latency_s)
+    expected = reconstruct(graph, recording, options)
+    got = C.synthesize(conn, "small", recording, convert.options_to_proto(options))
+    np.testing.assert_array_equal(got.node_path, expected.node_path)
+    np.testing.assert_array_equal(got.motion.rotations, expected.motion.rotations.astype(np.float32))
+    np.testing.assert_array_equal(got.motion.translations, expected.motion.translations.astype(np.float32))
+    assert got.bvh == bvh_text(expected.motion, scale=100.0).encode()
+    assert got.report["node_path"] == expected.node_path.tolist()
+    assert got.report["samples"] == recording.num_samples
+
+
+def test_synthesize_reorders_named_sensors(conn, graph, recording):
+    """Sensors may come in any order when named; the result is the same."""
+    from dataclasses import replace
+
+    order = np.arange(recording.num_sensors)[::-1]
+    shuffled = replace(recording, sensor_names=tuple(np.array(recording.sensor_names)[order]),
+                       accelerations=np.ascontiguousarray(recording.accelerations[:, order]))  # fmt: skip
+    a = C.synthesize(conn, "small", recording)
+    b = C.synthesize(conn, "small", shuffled)
+    np.testing.assert_array_equal(a.node_path, b.node_path)
+
+
+def test_stream_matches_live_session(conn, graph, recording):
+    from graphsvc.pipeline import Options
+
+    options = Options(latency_s=0.4)
+    expected, session = live_frames(graph, recording, options)
+    feed = C.SampleFeed(C.stream_config("small", convert.options_to_proto(options)))
+    for sample in C.recording_samples(recording):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert result.started.lag_frames == session.lag_frames
+    assert result.started.rate_hz == graph.rate_hz
+    assert_frames_equal(expected, result.frames)
+    assert result.finished.samples_received == recording.num_samples
+    assert result.finished.frames_emitted == len(expected)
+    # Every frame names the sample that released it, at most lag_frames before it.
+    k = np.array([f.input_sample_index for f in result.frames])
+    assert (np.diff(k) >= 0).all() and k[-1] == recording.num_samples - 1
+    motion = result.motion()
+    assert motion.num_frames == len(expected)
+
+
+def test_replay_in_real_time_reports_latency(conn, recording):
+    from dataclasses import replace
+
+    from graphsvc.pipeline import Options
+
+    short = replace(recording, timestamps_s=recording.timestamps_s[:30], accelerations=recording.accelerations[:30],
+                    ground_position=recording.ground_position[:30], heading=recording.heading[:30])  # fmt: skip
+    seen = []
+    t0 = time.perf_counter()
+    result = C.stream_recording(conn, "small", short, convert.options_to_proto(Options(latency_s=0.2)), speed=4.0,
+                                on_frame=lambda f, ms: seen.append(ms))  # fmt: skip
+    elapsed = time.perf_counter() - t0
+    assert elapsed >= (short.timestamps_s[-1] - short.timestamps_s[0]) / 4.0  # paced, not dumped
+    assert len(seen) == len(result.frames) == 30
+    summary = C.latency_summary(seen)
+    assert summary["frames"] == 30 and 0 <= summary["p50_ms"] <= summary["p99_ms"] < 5000
+
+
+# ---------------------------------------------------------------- health and reflection
+
+
+def test_health(server):
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+    with grpc.insecure_channel(f"127.0.0.1:{server.port}") as channel:
+        stub = health_pb2_grpc.HealthStub(channel)
+        for service in ("", "graphsvc.v1.MotionGraphService"):
+            reply = stub.Check(health_pb2.HealthCheckRequest(service=service), timeout=5)
+            assert reply.status == health_pb2.HealthCheckResponse.SERVING
+        code, _ = _code(stub.Check, health_pb2.HealthCheckRequest(service="nope"), timeout=5)
+        assert code == grpc.StatusCode.NOT_FOUND
+
+
+@pytest.mark.parametrize("version", ["v1alpha", "v1"])
+def test_reflection_lists_and_describes_the_service(server, version):
+    from google.protobuf import descriptor_pb2
+    from grpc_reflection.v1alpha import reflection_pb2
+
+    with grpc.insecure_channel(f"127.0.0.1:{server.port}") as channel:
+        # What grpcurl does: list services, then fetch the file declaring one.
+        call = channel.stream_stream(f"/grpc.reflection.{version}.ServerReflection/ServerReflectionInfo",
+                                     request_serializer=reflection_pb2.ServerReflectionRequest.SerializeToString,
+                                     response_deserializer=reflection_pb2.ServerReflectionResponse.FromString)  # fmt: skip
+        requests = [reflection_pb2.ServerReflectionRequest(list_services=""),
+                    reflection_pb2.ServerReflectionRequest(file_containing_symbol="graphsvc.v1.MotionGraphService")]  # fmt: skip
+        listed, described = list(call(iter(requests), timeout=5))
+    names = {s.name for s in listed.list_services_response.service}
+    assert {"graphsvc.v1.MotionGraphService", "grpc.health.v1.Health"} <= names
+    files = [descriptor_pb2.FileDescriptorProto.FromString(b)
+             for b in described.file_descriptor_response.file_descriptor_proto]  # fmt: skip
+    (mine,) = [f for f in files if f.name == "graphsvc/v1/graphsvc.proto"]
+    (service,) = mine.service
+    assert [m.name for m in service.method] == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize"]
+    assert service.method[3].client_streaming and service.method[3].server_streaming
+
+
+# ---------------------------------------------------------------- bad requests
+
+
+def _recording_request(recording, **changes) -> pb.SynthesizeRequest:
+    request = pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording))
+    for key, value in changes.items():
+        obj = request
+        *path, last = key.split(".")
+        for p in path:
+            obj = getattr(obj, p)
+        if isinstance(value, list):
+            del getattr(obj, last)[:]
+            getattr(obj, last).extend(value)
+        else:
+            setattr(obj, last, value)
+    return request
+
+
+def _bad_cases(recording):
+    t = recording.timestamps_s.tolist()
+    acc = recording.accelerations.ravel().tolist()
+    nan_t = list(t)
+    nan_t[3] = float("nan")
+    back_t = list(t)
+    back_t[5] = back_t[4]
+    inf_acc = list(acc)
+    inf_acc[40] = float("inf")
+    bad_constraint = pb.SynthesisOptions(constraint_sets=[pb.ConstraintSet(constraints=[
+        pb.Constraint(start_s=2.0, end_s=1.0, contact=pb.CONTACT_STATE_LEFT)])])  # fmt: skip
+    unknown_label = pb.SynthesisOptions(constraint_sets=[pb.ConstraintSet(constraints=[
+        pb.Constraint(start_s=0.0, end_s=1.0, label="no-such-label")])])  # fmt: skip
+    INVALID = grpc.StatusCode.INVALID_ARGUMENT
+    return {
+        "unknown graph": ({"graph": "nope"}, grpc.StatusCode.NOT_FOUND, "graph"),
+        "no graph": ({"graph": ""}, INVALID, "graph"),
+        "sensor count": ({"recording.accelerations_m_s2": acc[:-3]}, INVALID, "recording.accelerations_m_s2"),
+        "sensor names": ({"recording.sensor_names": ["a", "b"]}, INVALID, "recording.sensor_names"),
+        "unknown sensor": ({"recording.sensor_names": ["x", *recording.sensor_names[1:]]}, INVALID,
+                           "recording.sensor_names"),
+        "nan time": ({"recording.timestamps_s": nan_t}, INVALID, "recording.timestamps_s[3]"),
+        "time backwards": ({"recording.timestamps_s": back_t}, INVALID, "recording.timestamps_s[5]"),
+        "no samples": ({"recording.timestamps_s": [], "recording.accelerations_m_s2": []}, INVALID,
+                       "recording.timestamps_s"),
+        "inf reading": ({"recording.accelerations_m_s2": inf_acc}, INVALID, "recording.accelerations_m_s2[40]"),
+        "bad rate": ({"recording.rate_hz": 0.0}, INVALID, "recording.rate_hz"),
+        "positions": ({"recording.ground_positions_m": [0.0, 1.0, 2.0]}, INVALID, "recording.ground_positions_m"),
+        "negative weight": ({"options.weights.position": -1.0}, INVALID, "options.weights.position"),
+        "nan latency": ({"options.latency_s": float("nan")}, INVALID, "options.latency_s"),
+        "unknown strategy": ({"options.strategy": 7}, INVALID, "options.strategy"),
+        "olng": ({"options.strategy": pb.STRATEGY_OLNG}, grpc.StatusCode.UNIMPLEMENTED, "olng"),
+        "ssg": ({"options.strategy": pb.STRATEGY_SSG}, grpc.StatusCode.UNIMPLEMENTED, "ssg"),
+        "constraint order": ({"options": bad_constraint}, INVALID, "options.constraint_sets[0].constraints[0]"),
+        "unknown label": ({"options": unknown_label}, INVALID, "no-such-label"),
+    }
+
+
+def test_bad_synthesize_requests_get_the_right_status(conn, recording):
+    for name, (changes, code, mention) in _bad_cases(recording).items():
+        options = changes.pop("options", None)
+        request = _recording_request(recording, **changes)
+        if options is not None:
+            request.options.CopyFrom(options)
+        got, details = _code(conn.stub.Synthesize, request, timeout=10)
+        assert got == code, f"{name}: {got} {details}"
+        assert mention in details, f"{name}: {details!r} does not name {mention!r}"
+    assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples  # still serving
+
+
+def _stream_cases(recording):
+    samples = list(C.recording_samples(recording))[:6]
+    config = C.stream_config("small")
+    back = [pb.SensorSample(time_s=s.time_s, accelerations_m_s2=s.accelerations_m_s2) for s in samples]
+    back[2].time_s = back[1].time_s
+    short = [pb.SensorSample(time_s=0.0, accelerations_m_s2=[0.0] * 17)]
+    inf = [pb.SensorSample(time_s=0.0, accelerations_m_s2=[0.0] * 17 + [float("inf")])]
+    INVALID = grpc.StatusCode.INVALID_ARGUMENT
+    return {
+        "sample first": ([pb.StreamSynthesizeRequest(sample=samples[0])], INVALID, "config"),
+        "config twice": ([pb.StreamSynthesizeRequest(config=config)] * 2, INVALID, "sample[0]"),
+        "unknown graph": (list(_requests(C.stream_config("nope"), samples)), grpc.StatusCode.NOT_FOUND, "nope"),
+        "olng": (list(_requests(C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG)), samples)),
+                 grpc.StatusCode.UNIMPLEMENTED, "olng"),
+        "time backwards": (list(_requests(config, back)), INVALID, "sample[2].time_s"),
+        "sensor count": (list(_requests(config, short)), INVALID, "sample[0].accelerations_m_s2"),
+        "inf reading": (list(_requests(config, inf)), INVALID, "sample[0].accelerations_m_s2[17]"),
+        "sensor names": (list(_requests(C.stream_config("small", None, ["a"]), samples)), INVALID,
+                         "config.sensor_names"),
+        "bad weight": (list(_requests(C.stream_config("small", pb.SynthesisOptions(
+            weights=pb.CostWeights(acceleration=float("nan")))), samples)), INVALID, "config.options.weights"),
+    }
+
+
+def test_bad_stream_requests_get_the_right_status(conn, server, recording):
+    for name, (requests, code, mention) in _stream_cases(recording).items():
+        got, details = _code(lambda requests=requests: list(conn.stub.StreamSynthesize(iter(requests), timeout=10)))
+        assert got == code, f"{name}: {got} {details}"
+        assert mention in details, f"{name}: {details!r} does not name {mention!r}"
+    _wait_for(lambda: server.servicer.slots.active == 0)  # every failed stream gave its slot back
+
+
+def test_message_size_limit(loaded_graphs, recording):
+    running = start(loaded_graphs, max_message_mb=0.001)  # ~1 kB: the recording is larger
+    try:
+        with C.connect(f"127.0.0.1:{running.port}") as conn:
+            code, _ = _code(conn.stub.Synthesize, pb.SynthesizeRequest(graph="small",
+                            recording=convert.recording_to_proto(recording)), timeout=10)  # fmt: skip
+            assert code == grpc.StatusCode.RESOURCE_EXHAUSTED
+            # Small messages still pass: a request for an unknown graph is answered as usual.
+            code, _ = _code(conn.stub.GetGraph, pb.GetGraphRequest(name="nope"), timeout=10)
+            assert code == grpc.StatusCode.NOT_FOUND
+    finally:
+        running.stop(0)
+
+
+# ---------------------------------------------------------------- limits, deadlines, cancellation
+
+
+def _wait_for(condition, timeout_s: float = 5.0) -> None:
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.02)
+
+
+def _rpc_threads_busy() -> int:
+    """Server worker threads inside a StreamSynthesize handler right now."""
+    import sys
+
+    return sum(1 for frame in sys._current_frames().values() if _in_stream_handler(frame))
+
+
+def _in_stream_handler(frame) -> bool:
+    while frame is not None:
+        if frame.f_code.co_name == "_stream" and "service/server.py" in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _open_stream(conn, recording, samples: int = 3):
+    """A stream that has started and taken `samples` samples and stays open."""
+    feed = C.SampleFeed(C.stream_config("small"))
+    call = conn.stub.StreamSynthesize(iter(feed), metadata=conn.metadata)
+    responses = iter(call)
+    assert next(responses).WhichOneof("message") == "started"
+    for s in list(C.recording_samples(recording))[:samples]:
+        feed.put(s)
+    return feed, call, responses
+
+
+@pytest.fixture
+def one_stream_server(loaded_graphs):
+    running = start(loaded_graphs, max_streams=1)
+    yield running
+    running.stop(0)
+
+
+def test_beyond_max_streams_is_resource_exhausted(one_stream_server, recording):
+    with C.connect(f"127.0.0.1:{one_stream_server.port}") as conn:
+        feed, _, responses = _open_stream(conn, recording)
+        code, details = _code(lambda: list(conn.stub.StreamSynthesize(iter([]), timeout=10)))
+        assert code == grpc.StatusCode.RESOURCE_EXHAUSTED and "--max-streams" in details
+        feed.close()
+        kinds = [r.WhichOneof("message") for r in responses]
+        assert kinds[-1] == "finished"
+        _wait_for(lambda: one_stream_server.servicer.slots.active == 0)
+        assert C.synthesize(conn, "small", recording).node_path.size  # unary calls are not streams
+
+
+def test_cancelling_mid_stream_frees_the_worker(one_stream_server, recording):
+    from graphsvc.service.server import UNARY_WORKERS
+
+    with C.connect(f"127.0.0.1:{one_stream_server.port}") as conn:
+        # More cancellations than the pool has threads: a leaked worker would starve it.
+        for _ in range(UNARY_WORKERS + 3):
+            feed, call, _ = _open_stream(conn, recording, samples=5)
+            assert one_stream_server.servicer.slots.active == 1
+            call.cancel()
+            feed.close()
+            _wait_for(lambda: one_stream_server.servicer.slots.active == 0)
+        _wait_for(lambda: _rpc_threads_busy() == 0)
+        # A later stream is served in full.
+        feed = C.SampleFeed(C.stream_config("small"))
+        for s in C.recording_samples(recording):
+            feed.put(s)
+        feed.close()
+        result = C.run_stream(conn, feed, timeout_s=30)
+        assert result.finished.samples_received == recording.num_samples
+
+
+def test_deadline_exceeded(conn, server, recording):
+    code, _ = _code(conn.stub.Synthesize, pb.SynthesizeRequest(graph="small",
+                    recording=convert.recording_to_proto(recording)), timeout=0.001)  # fmt: skip
+    assert code == grpc.StatusCode.DEADLINE_EXCEEDED
+    # A stream whose client keeps it open past the deadline ends, and its slot is freed.
+    feed = C.SampleFeed(C.stream_config("small"))
+    for s in list(C.recording_samples(recording))[:5]:
+        feed.put(s)
+    with pytest.raises(C.ServiceError) as info:
+        C.run_stream(conn, feed, timeout_s=0.5)
+    assert info.value.code == grpc.StatusCode.DEADLINE_EXCEEDED
+    _wait_for(lambda: server.servicer.slots.active == 0)
+
+
+def test_concurrent_streams_are_independent(conn, graph, recording):
+    from graphsvc.pipeline import Options
+
+    expected, _ = live_frames(graph, recording, Options())
+    results = [None] * 3
+
+    def run(i):
+        feed = C.SampleFeed(C.stream_config("small"))
+        for s in C.recording_samples(recording):
+            feed.put(s)
+        feed.close()
+        results[i] = C.run_stream(conn, feed, timeout_s=60)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for r in results:
+        assert_frames_equal(expected, r.frames)

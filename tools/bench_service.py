@@ -1,0 +1,228 @@
+#!/usr/bin/env python3
+"""Benchmark of live synthesis: N concurrent StreamSynthesize calls at the graph rate
+against a `graphsvc serve` subprocess on loopback.
+
+    .venv/bin/python tools/bench_service.py bandai.graph                 # 1, 8, 32, 64 streams × 20 s
+    .venv/bin/python tools/bench_service.py small.graph --levels 1,2 --seconds 2
+
+Prints one JSON object per level:
+    streams        concurrent live streams
+    p50_ms, p99_ms latency from sending a sample to receiving the pose it released,
+                   i.e. beyond the configured decoder lag (PoseFrame.input_sample_index)
+    dropped        frames that never came back (samples sent − frames received, plus
+                   the frames of streams that failed to start)
+    late_sends     samples the clients sent more than one period late (client overload:
+                   the latencies are then not the server's alone)
+    errors         failed streams by status code
+    server_rss_mb  peak resident memory of the server process during the level, MiB
+
+Input: each stream plays a random walk through the graph's own edges (their sensor
+metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without
+recordings. Clients run in several processes (--streams-per-process) so that the
+Python client does not become the bottleneck.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray:
+    """(samples, S, 3) float32 m/s²: a random walk through the graph's edges, each
+    step's edge metadata plus white noise; dead ends jump to a random node."""
+    from graphsvc.graph.file import load_graph
+
+    graph = load_graph(graph_path)
+    rng = np.random.default_rng(seed)
+    order = np.argsort(graph.edge_src, kind="stable")  # edges grouped by source
+    starts = np.searchsorted(graph.edge_src[order], np.arange(graph.num_nodes + 1))
+    node = int(rng.integers(graph.num_nodes))
+    out = np.empty((samples,) + graph.edge_acc.shape[1:], np.float32)
+    for k in range(samples):
+        lo, hi = starts[node], starts[node + 1]
+        while lo == hi:  # dead end
+            node = int(rng.integers(graph.num_nodes))
+            lo, hi = starts[node], starts[node + 1]
+        e = order[int(rng.integers(lo, hi))]
+        out[k] = graph.edge_acc[e]
+        node = int(graph.edge_dst[e])
+    return out + rng.normal(0.0, 0.3, out.shape).astype(np.float32)
+
+
+def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, latency_s, start_at, results):
+    """Run len(stream_ids) paced streams in threads; put one result dict per stream."""
+    from graphsvc.service import client as C
+    from graphsvc.service import convert
+    from graphsvc.service._generated import graphsvc_pb2 as pb
+
+    samples = round(seconds * rate_hz)
+    inputs = {i: random_walk_readings(graph_path, samples, seed=i) for i in stream_ids}
+    options = pb.SynthesisOptions()
+    if latency_s is not None:
+        options.latency_s = latency_s
+    conn = C.connect(address)
+
+    def run(i):
+        feed = C.SampleFeed(C.stream_config(graph_name, options))
+        late = 0
+        stop = threading.Event()
+
+        def pace():
+            nonlocal late
+            try:
+                for k in range(samples):
+                    due = start_at + k / rate_hz
+                    delay = due - time.time()
+                    if delay > 0:
+                        if stop.wait(delay):
+                            return
+                    elif -delay > 1.0 / rate_hz:
+                        late += 1
+                    feed.put(convert.sample_to_proto(k / rate_hz, inputs[i][k]))
+            finally:
+                feed.close()
+
+        sender = threading.Thread(target=pace, daemon=True)
+        sender.start()
+        error = None
+        latencies, frames = [], 0
+        try:
+            result = C.run_stream(conn, feed, timeout_s=seconds + 120)
+            latencies, frames = result.latencies_ms, len(result.frames)
+        except C.ServiceError as exc:
+            error = exc.code.name if exc.code is not None else "UNKNOWN"
+        stop.set()
+        sender.join()
+        results.put({"stream": i, "sent": len(feed.sent_at), "frames": frames, "latencies_ms": latencies,
+                     "late_sends": late, "error": error, "expected": samples})  # fmt: skip
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in stream_ids]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    conn.close()
+
+
+def rss_mb(pid: int) -> float:
+    try:
+        text = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return float("nan")
+    m = re.search(r"VmRSS:\s+(\d+) kB", text)
+    return int(m.group(1)) / 1024 if m else float("nan")
+
+
+def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, latency_s, per_process, server_pid) -> dict:
+    ctx = mp.get_context("spawn")  # no fork after gRPC is loaded
+    results = ctx.Queue()
+    start_at = time.time() + 3.0 + 0.05 * streams  # time for the client processes to load inputs
+    ids = list(range(streams))
+    procs = [ctx.Process(target=_client_process, args=(address, graph_name, graph_path, ids[i:i + per_process], seconds,
+                                                       rate_hz, latency_s, start_at, results))
+             for i in range(0, streams, per_process)]  # fmt: skip
+    for p in procs:
+        p.start()
+    peak = 0.0
+    collected = []
+    while len(collected) < streams:
+        peak = max(peak, rss_mb(server_pid)) if server_pid else peak
+        try:
+            collected.append(results.get(timeout=0.5))
+        except queue.Empty:
+            if not any(p.is_alive() for p in procs) and results.empty():
+                break
+    for p in procs:
+        p.join()
+    latencies = np.concatenate([np.asarray(r["latencies_ms"], float) for r in collected]) if collected else np.zeros(0)
+    latencies = latencies[np.isfinite(latencies)]
+    errors: dict[str, int] = {}
+    for r in collected:
+        if r["error"]:
+            errors[r["error"]] = errors.get(r["error"], 0) + 1
+    expected = round(seconds * rate_hz) * streams
+    return {
+        "streams": streams,
+        "p50_ms": round(float(np.percentile(latencies, 50)), 3) if latencies.size else None,
+        "p99_ms": round(float(np.percentile(latencies, 99)), 3) if latencies.size else None,
+        "dropped": int(expected - sum(r["frames"] for r in collected)),
+        "late_sends": int(sum(r["late_sends"] for r in collected)),
+        "errors": errors,
+        "server_rss_mb": round(peak, 1) if server_pid else None,
+        "seconds": seconds,
+        "rate_hz": rate_hz,
+    }
+
+
+def start_server(graph_path: str, max_streams: int) -> tuple[subprocess.Popen, str]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-m", "graphsvc.service.cli_commands", "serve", "--graph",
+                             f"bench={graph_path}", "--host", "127.0.0.1", "--port", "0", "--max-streams",
+                             str(max_streams), "--grace-s", "2"], cwd=ROOT, stdout=subprocess.PIPE, text=True,
+                            env=env)  # fmt: skip
+    line = proc.stdout.readline()
+    m = re.search(r"listening on (127\.0\.0\.1:\d+)", line)
+    if not m:
+        proc.kill()
+        raise SystemExit(f"the server did not start: {line!r}")
+    return proc, m.group(1)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("graph", metavar="GRAPH_FILE")
+    parser.add_argument("--levels", default="1,8,32,64", help="concurrent streams per level (default 1,8,32,64)")
+    parser.add_argument("--seconds", type=float, default=20.0, help="length of each level (default 20)")
+    parser.add_argument("--rate", type=float, help="samples per second per stream (default: the graph rate)")
+    parser.add_argument("--latency", type=float, help="decoder lag in seconds (default: the server's, 1 s)")
+    parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
+    parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
+    args = parser.parse_args(argv)
+    levels = [int(x) for x in args.levels.split(",") if x]
+
+    from graphsvc.graph.file import load_graph
+
+    graph_path = str(Path(args.graph).resolve())
+    rate = args.rate or float(load_graph(graph_path).rate_hz)
+    proc = None
+    if args.server:
+        address, server_pid = args.server, None
+    else:
+        proc, address = start_server(graph_path, max(levels))
+        server_pid = proc.pid
+    try:
+        # Warm-up: the first stream loads the compiled search kernels.
+        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, args.latency, 1, server_pid)
+        for streams in levels:
+            print(f"level {streams} streams × {args.seconds:g} s ...", file=sys.stderr, flush=True)
+            result = run_level(address, "bench", graph_path, streams, args.seconds, rate, args.latency,
+                               args.streams_per_process, server_pid)  # fmt: skip
+            print(json.dumps(result), flush=True)
+    finally:
+        if proc is not None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
