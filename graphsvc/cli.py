@@ -185,6 +185,96 @@ def _cmd_synthesize(args) -> int:
     return 0
 
 
+def _cmd_evaluate(args) -> int:
+    from dataclasses import replace
+
+    from graphsvc.errors import InputError
+    from graphsvc.evaluate import loo
+    from graphsvc.evaluate.report import format_table
+    from graphsvc.fileio import write_text_atomic
+    from graphsvc.motion.library import find_motion_files, load_motion
+    from graphsvc.pipeline import check_options
+    from graphsvc.sensors.layout import load_layout
+    from graphsvc.sensors.noise import parse_noise
+
+    # Every argument is checked before the (long) build and searches start.
+    options = search_options(args)
+    check_options(options)
+    noise = parse_noise(args.noise)
+    if args.position_noise is not None:
+        if not (args.position_noise >= 0 and args.position_noise != float("inf")):
+            raise InputError(f"--position-noise must be a finite number of metres ≥ 0, got {args.position_noise}")
+        noise = replace(noise, position=args.position_noise)
+    # The tracker stream is there when asked for: --position-noise, or a noise spec
+    # with a tracker σ (the default and harsh presets, position=M).
+    setup = loo.EvalSetup(noise=noise, positions=args.position_noise is not None or noise.position > 0,
+                          options=options, seed=args.seed)  # fmt: skip
+    if options.heading_from_track and not setup.positions:
+        raise InputError("--heading-from-track needs the tracker's positions: give --position-noise M")
+    if args.jobs < 1:
+        raise InputError(f"--jobs must be ≥ 1, got {args.jobs}")
+    if args.graph and args.augment:
+        raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
+    layout = load_layout(args.layout) if args.layout else None
+    if args.json:
+        _check_output(Path(args.json))
+    progress = False if args.quiet else None
+
+    t0 = time.perf_counter()
+    files = find_motion_files(args.kb)
+    names = [f.name for f in files]
+    picked = loo.select_clips(names, args.test)
+    if not picked:
+        raise InputError(f"--test {args.test!r} matches none of the {len(files)} knowledge-base files (matched against "
+                         "file names, e.g. '*_001.bvh')")  # fmt: skip
+    if args.graph:
+        from graphsvc.graph.file import load_graph
+
+        graph = load_graph(args.graph)
+        if layout is not None and layout.name != graph.layout.get("name"):
+            raise InputError(f"{args.graph} was built for layout {graph.layout.get('name')!r}, not {layout.name!r} "
+                             "(rebuild it or run `graphsvc relayout`)")  # fmt: skip
+        tests = [load_motion(files[k]) for k in picked]
+        indices = loo.match_graph_clips(graph, tests)
+        missing = [m.name for m, k in zip(tests, indices) if k is None]
+        if missing:
+            print(f"note: {len(missing)} test clips are not in {args.graph} and are evaluated with nothing hidden: "
+                  + ", ".join(missing[:5]) + (" …" if len(missing) > 5 else ""), file=sys.stderr)  # fmt: skip
+        build_s = time.perf_counter() - t0
+    else:
+        from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
+
+        augment = tuple(a for a in (args.augment or "").split(",") if a)
+        motions = load_knowledge_base([str(f) for f in files], augment=augment, jobs=args.jobs, progress=progress)
+        graph, _ = build_graph(motions, BuildOptions(layout=layout or load_layout("wrists-ankles"), augment=augment,
+                                                     jobs=args.jobs, progress=progress))  # fmt: skip
+        # load_knowledge_base keeps the files' order and appends augmented copies,
+        # so file k is graph clip k.
+        tests = [motions[k] for k in picked]
+        indices = list(picked)
+        build_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rows = loo.run_leave_one_out(graph, list(zip(tests, indices)), setup, jobs=args.jobs, graph_path=args.graph,
+                                 progress=progress)  # fmt: skip
+    eval_s = time.perf_counter() - t0
+    out = loo.summarize_run(rows)
+    out["mean"]["peak_rss_mb"] = round(loo.peak_rss_mb(), 1)
+    out["config"] = {
+        "kb": list(args.kb), "test": args.test, "graph": args.graph, "layout": graph.layout.get("name"),
+        "graph_nodes": graph.num_nodes, "graph_edges": graph.num_edges, "inputs": loo.inputs_description(setup),
+        "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": args.seed,
+        "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2),
+    }  # fmt: skip
+    if args.json:
+        write_text_atomic(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
+    print(format_table(out))
+    w = options.weights
+    print(f"leave-one-out on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
+          f"weights {w.acc:g},{w.position:g},{w.heading:g}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
+          f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
+    return 0
+
+
 def _check_output(path: Path) -> None:
     if not path.parent.exists() or not path.parent.is_dir():
         raise GraphsvcError(f"output folder {path.parent} does not exist")
@@ -246,12 +336,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
 
+    p = sub.add_parser("evaluate", help="leave-one-clip-out evaluation on a knowledge base (SPEC §9)")
+    p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")
+    p.add_argument("--test", required=True, metavar="GLOB", help="test the KB files whose name matches, e.g. '*_00[14].bvh'")
+    p.add_argument("--layout", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
+    p.add_argument("--graph", metavar="FILE", help="a graph built from the same KB, instead of building one")
+    p.add_argument("--augment", metavar="KINDS", help="build with copies: mirror, reverse (held out with their clip)")
+    p.add_argument("--noise", default="default", help="PRESET[,key=value...] (default: SPEC §2's evaluation noise)")
+    p.add_argument("--position-noise", type=float, metavar="M",
+                   help="keep the overhead tracker's positions with this σ in metres (0: exact)")
+    add_search_options(p, constraints=False)
+    p.add_argument("--seed", type=int, default=0, help="noise seed (each clip's is derived from it and its name)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="evaluate N clips at once in worker processes (and build with N threads)")
+    p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=_cmd_evaluate)
+
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--layout", default="kelly6")
     p.add_argument("--minutes", type=float, default=3.0, help="knowledge-base length")
     p.set_defaults(run=_cmd_demo)
+
+    from graphsvc.service.cli_commands import add_service_parsers
+
+    add_service_parsers(sub)
     return parser
 
 

@@ -97,3 +97,67 @@ def test_console_script_exit_code_and_no_traceback(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+
+
+# ---------------------------------------------------------------- evaluate
+
+
+@pytest.fixture(scope="module")
+def procedural_kb(tmp_path_factory):
+    """Five procedural clips (stop, forehand, idle, overhead, backhand) as BVH files."""
+    from graphsvc.motion.procedural import generate_knowledge_base
+
+    folder = tmp_path_factory.mktemp("kb")
+    for m in generate_knowledge_base(seed=0, minutes=0.5):
+        write_bvh(folder / f"{m.name}.bvh", m, scale=100.0)
+    return folder
+
+
+def test_evaluate_writes_json_and_prints_a_table(tmp_path, procedural_kb, capsys):
+    out_json = tmp_path / "eval.json"
+    code, out, err = run(["evaluate", str(procedural_kb), "--test", "idle_*.bvh", "--layout", "kelly6",
+                          "--weights", "0.5,1,1", "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+    assert code == 0, err
+    result = json.loads(out_json.read_text())
+    assert {"clips", "mean"} <= set(result)
+    assert [c["file"] for c in result["clips"]] == ["idle_01.bvh"]
+    for row in (result["clips"][0], result["mean"]):
+        for key in ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc", "samples_per_s"):
+            assert isinstance(row[key], float) and np.isfinite(row[key]), key
+    assert result["clips"][0]["hidden_nodes"] > 0 and result["mean"]["clips"] == 1
+    assert result["config"]["positions"] is True  # the default noise has a tracker
+    lines = out.splitlines()
+    assert lines[0].split()[:2] == ["clip", "frames"]
+    assert any(line.startswith("idle_01.bvh") for line in lines)
+    assert any(line.startswith("mean of 1 clips") for line in lines)
+    assert "leave-one-out" in lines[-1]
+
+
+def test_evaluate_with_a_prebuilt_graph_matches_the_clips(tmp_path, procedural_kb, capsys):
+    graph = tmp_path / "kb.graph"
+    assert run(["build", str(procedural_kb), "-o", str(graph), "--quiet", "--layout", "kelly6"], capsys)[0] == 0
+    code, _, err = run(["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph),
+                        "--noise", "none", "--quiet"], capsys)  # fmt: skip
+    assert code == 0, err
+    assert "note:" not in err  # matched by content hash, so the clip is hidden
+    code, _, err = run(["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph),
+                        "--layout", "wrists-ankles"], capsys)  # fmt: skip
+    assert code == 2 and "kelly6" in err
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--test", "*_009.bvh"], "matches none"),
+    (["--test", "*.bvh", "--layout", "elbows"], "unknown layout"),
+    (["--test", "*.bvh", "--weights", "1,x,1"], "weights"),
+    (["--test", "*.bvh", "--weights", "1,1"], "weights"),
+    (["--test", "*.bvh", "--noise", "loud"], "noise preset"),
+    (["--test", "*.bvh", "--strategy", "ssg"], "not implemented"),
+    (["--test", "*.bvh", "--json", "{tmp}/no/such/dir/x.json"], "does not exist"),
+])
+def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, extra, needle):
+    before = sorted(p.name for p in tmp_path.iterdir())
+    argv = ["evaluate", str(procedural_kb)] + [a.replace("{tmp}", str(tmp_path)) for a in extra]
+    code, _, err = run(argv, capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and needle in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -11,7 +11,8 @@ def test_demo_writes_readable_outputs_deterministically(tmp_path):
     second = run_demo(tmp_path / "b", seed=0, minutes=0.6)
     a, b = tmp_path / "a", tmp_path / "b"
     names = sorted(p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file())
-    assert {"performance.bvh", "performance.rec", "performance.csv", "sensors.png"} <= set(names)
+    assert {"performance.bvh", "performance.rec", "performance.csv", "sensors.png", "reconstruction.bvh",
+            "side_by_side.bvh", "error.png"} <= set(names)
     assert len([n for n in names if n.startswith("kb/")]) == first["kb_clips"]
     for n in names:  # same seed, same bytes, plot included
         assert (a / n).read_bytes() == (b / n).read_bytes(), n
@@ -25,4 +26,34 @@ def test_demo_writes_readable_outputs_deterministically(tmp_path):
     kb_labels = {load_motion(p).labels[0] for p in (a / "kb").glob("*.bvh")}
     assert kb_labels == set(first["kb_seconds_by_label"]) <= set(CONTENT_LABELS)  # file names keep labels
     assert "held-out performance" in format_demo_summary(first)
+
+    # The reconstruction: same skeleton and length as the performance, scored.
+    recon = load_motion(a / "reconstruction.bvh")
+    assert recon.num_frames == perf.num_frames and recon.skeleton.names == perf.skeleton.names
+    np.testing.assert_allclose(recon.skeleton.offsets, perf.skeleton.offsets, atol=1e-6)
+    assert (a / "error.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    metrics = first["metrics"]
+    assert set(metrics) == {"joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc"}
+    assert all(np.isfinite(v) and v >= 0 for v in metrics.values()) and 0 <= metrics["label_acc"] <= 1
+    assert metrics["joint_err_cm"] < 40 and first["samples_per_s"] > 0
+    text = format_demo_summary(first)
+    assert "joint error" in text and "samples/s" in text and "reconstruction.bvh" in text
     assert first["timings"].keys() == second["timings"].keys()
+
+
+def test_side_by_side_holds_both_figures_apart():
+    from graphsvc.demo import side_by_side
+    from graphsvc.motion.kinematics import motion_fk
+    from graphsvc.motion.procedural import generate_knowledge_base
+
+    a, b = generate_knowledge_base(seed=0, minutes=0.2)[:2]
+    n = min(a.num_frames, b.num_frames)
+    a = a.copy(rotations=a.rotations[:n], translations=a.translations[:n])
+    b = b.copy(rotations=b.rotations[:n], translations=b.translations[:n])
+    both = side_by_side(a, b, 1.5)
+    J = a.skeleton.num_joints
+    _, world = motion_fk(both)
+    _, wa = motion_fk(a)
+    _, wb = motion_fk(b)
+    np.testing.assert_allclose(world[:, 1: J + 1], wa, atol=1e-9)
+    np.testing.assert_allclose(world[:, J + 1:], wb + [1.5, 0.0, 0.0], atol=1e-9)

@@ -110,8 +110,10 @@ def label_acc(pred_labels, true_label):
 
     pred_labels: (T,) the content label (str or int) of the source clip each
     synthesized frame was taken from; None marks an unlabelled source and counts as a
-    miss. true_label: the test clip's label. Labels compare as strings, so 3 and "3"
-    match."""
+    miss. true_label: the test clip's label, or a (T,) sequence of per-frame labels
+    (a performance that changes activity, like the demo's); frames whose true label
+    is None are not scored (0 in the per-frame array, left out of the fraction).
+    Labels compare as strings, so 3 and "3" match."""
     labels = list(np.asarray(pred_labels, dtype=object).reshape(-1)) if np.ndim(pred_labels) <= 1 else None
     if labels is None:
         raise InputError(f"pred_labels: expected shape (T,), got {np.shape(pred_labels)}")
@@ -119,9 +121,18 @@ def label_acc(pred_labels, true_label):
         raise InputError("pred_labels: zero frames")
     if true_label is None:
         raise InputError("true_label: the test clip has no content label")
-    want = str(true_label)
-    per_frame = np.array([lab is not None and str(lab) == want for lab in labels], dtype=np.float64)
-    return per_frame, float(per_frame.mean())
+    if isinstance(true_label, (str, bytes, int, np.integer, np.str_)):
+        want = [str(true_label)] * len(labels)
+    else:
+        want = [None if w is None else str(w) for w in np.asarray(true_label, dtype=object).reshape(-1)]
+        if len(want) != len(labels):
+            raise InputError(f"per-frame true labels: {len(want)} frames, predicted {len(labels)}")
+    scored = np.array([w is not None for w in want])
+    if not scored.any():
+        raise InputError("true_label: no frame has a label")
+    per_frame = np.array([lab is not None and w is not None and str(lab) == w for lab, w in zip(labels, want)],
+                         dtype=np.float64)  # fmt: skip
+    return per_frame, float(per_frame[scored].mean())
 
 
 def evaluate_frames(
@@ -137,7 +148,8 @@ def evaluate_frames(
 ) -> dict:
     """All §9 metrics for one clip.
 
-    Shapes as in `joint_err_cm`; pred_labels (Tp,) and true_label as in `label_acc`.
+    Shapes as in `joint_err_cm`; pred_labels (Tp,) and true_label as in `label_acc`
+    (one label, or (Tt,) per-frame labels).
     Within each side the arrays must agree on frame count (pred_*: Tp, true_*: Tt),
     else InputError. Length rule: when Tp ≠ Tt both sides are aligned at frame 0 and
     truncated to T = min(Tp, Tt); the dropped count is reported as `frames_dropped`.
@@ -170,6 +182,12 @@ def evaluate_frames(
     per_frame = {"joint_err_cm": joint, "root_err_cm": root, "heading_err_deg": head, "label_acc": None}
     acc_mean = None
     if pred_labels is not None and true_label is not None:
+        if not isinstance(true_label, (str, bytes, int, np.integer, np.str_)):
+            # Per-frame truth: same length rule as the other true_* arrays.
+            true_label = list(np.asarray(true_label, dtype=object).reshape(-1))
+            if len(true_label) != tt:
+                raise InputError(f"frame counts disagree: true_label={len(true_label)}, true_pos={tt}")
+            true_label = true_label[:n]
         per_frame["label_acc"], acc_mean = label_acc(pred["pred_labels"], true_label)
     return {
         "name": name,

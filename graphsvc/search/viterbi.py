@@ -87,70 +87,69 @@ X, Z, HEADING, COS, SIN = 0, 1, 2, 3, 4
 PLACE_WIDTH = 5
 
 
-def _step_py(
-    incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn, reading_cost,
-    meas_pos, meas_heading, w_acc, w_pos, w_head, ok, allowed,
-    cost_prev, place_prev, det_prev, rank_prev, terms_prev,
-    cost_new, place_new, det_new, rank_new, terms_new, best_edge,
-):  # fmt: skip
-    """One sample: for every node, the best incoming edge from a live path.
+# One step is three passes, each branch-light so the scattered reads of one edge or
+# node overlap with the next (a single loop doing all three stalled on every read):
+# edge totals, then each node's best incoming edge, then the chosen paths' state.
 
-    reading_cost (R,) C_A of each distinct reading this sample, edge_reading (E,) the
-    reading of each edge; edge_turn (E, 2) cos and sin of each edge's heading change
-    (the path's cos/sin are carried by rotation, no trigonometry per node); meas_pos
-    (2,) metres or NaN; meas_heading radians or NaN; ok (γ, N) constraint satisfaction
-    of each node now; allowed (N,) nodes the search may visit (leave-one-out masking).
-    Per node: cost (N,) (inf = no live path), place (N, 5) ground x, z (m), heading
-    (rad), cos, sin; det (N,) non-original edges so far (the tie-break); rank (N, γ)
-    broken constraints; terms (N, 3) accumulated acc (g²), position (m), heading (rad)
-    costs, for reports."""
-    N = cost_prev.shape[0]
-    gamma = rank_prev.shape[1]
+
+def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, meas_pos, meas_heading,
+                    w_acc, w_pos, w_head, cost_prev, place_prev, total):  # fmt: skip
+    """total (E,): the cost of each path extended by each edge, cost_prev[src] + L(e, t)
+    (inf from a dead source). reading_cost (R,) C_A per distinct reading; meas_pos (2,)
+    metres or NaN; meas_heading radians or NaN."""
+    E = edge_src.shape[0]
     use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
     use_head = np.isfinite(meas_heading) and w_head != 0.0
-    carry = use_pos or use_head
+    if not (use_pos or use_head):
+        for e in numba.prange(E):
+            total[e] = cost_prev[edge_src[e]] + w_acc * reading_cost[edge_reading[e]]
+        return
+    for e in numba.prange(E):
+        m = edge_src[e]
+        t = cost_prev[m] + w_acc * reading_cost[edge_reading[e]]
+        if use_pos:
+            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
+            c, s = place_prev[m, COS], place_prev[m, SIN]
+            dx = place_prev[m, X] + c * ox + s * oz - meas_pos[0]
+            dz = place_prev[m, Z] - s * ox + c * oz - meas_pos[1]
+            t += w_pos * np.sqrt(dx * dx + dz * dz)
+        if use_head:
+            t += w_head * abs(_wrap(place_prev[m, HEADING] + edge_heading[e] - meas_heading))
+        total[e] = t
+
+
+def _select_py(incoming, edge_src, edge_kind, total, allowed, det_prev, rank_prev, cost_new, best_edge):
+    """Each node's best incoming edge (−1: none alive, or the node is masked): fewest
+    broken constraints (rank, lexicographic), then lowest total (within TIE counts as
+    equal), then fewer non-original edges so far (det, read only on a near-tie), then
+    the plainer edge kind."""
+    N = incoming.shape[0] - 1
+    gamma = rank_prev.shape[1]
     for n in numba.prange(N):
-        if not allowed[n]:
-            best_edge[n] = -1
-            cost_new[n] = np.inf
-            continue
         best = -1
         best_cost = np.inf
-        best_det = 0.0
-        best_cp = 0.0
-        best_co = 0.0
-        for e in range(incoming[n], incoming[n + 1]):
-            m = edge_src[e]
-            base = cost_prev[m]
-            if base == np.inf:
-                continue
-            total = base + w_acc * reading_cost[edge_reading[e]]
-            cp = 0.0
-            co = 0.0
-            if carry:
-                if use_pos:
-                    ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-                    c, s = place_prev[m, COS], place_prev[m, SIN]
-                    px = place_prev[m, X] + c * ox + s * oz
-                    pz = place_prev[m, Z] - s * ox + c * oz
-                    cp = np.sqrt((px - meas_pos[0]) ** 2 + (pz - meas_pos[1]) ** 2)
-                if use_head:
-                    co = abs(_wrap(place_prev[m, HEADING] + edge_heading[e] - meas_heading))
-                total += w_pos * cp + w_head * co
-            det = -1.0  # read only on a near-tie: one scattered read per edge, not two
-            if best >= 0:
-                mb = edge_src[best]
-                better = False
+        best_det = -1.0
+        if allowed[n]:
+            for e in range(incoming[n], incoming[n + 1]):
+                t = total[e]
+                if t == np.inf:
+                    continue
+                if best < 0:
+                    best, best_cost, best_det = e, t, -1.0
+                    continue
+                m, mb = edge_src[e], edge_src[best]
                 decided = False
+                better = False
                 for k in range(gamma):
                     if rank_prev[m, k] != rank_prev[mb, k]:
                         better = rank_prev[m, k] < rank_prev[mb, k]
                         decided = True
                         break
+                det = -1.0
                 if not decided:
-                    if total < best_cost - TIE:
+                    if t < best_cost - TIE:
                         better = True
-                    elif total > best_cost + TIE:
+                    elif t > best_cost + TIE:
                         better = False
                     else:
                         det = det_prev[m] + (1.0 if edge_kind[e] != 0 else 0.0)
@@ -160,37 +159,59 @@ def _step_py(
                             better = det < best_det
                         else:
                             better = edge_kind[e] < edge_kind[best]
-                if not better:
-                    continue
-            best = e
-            best_cost = total
-            best_det = det
-            best_cp = cp
-            best_co = co
+                if better:
+                    best, best_cost, best_det = e, t, det
         best_edge[n] = best
-        if best < 0:
-            cost_new[n] = np.inf
-            continue
-        m = edge_src[best]
         cost_new[n] = best_cost
-        det_new[n] = det_prev[m] + (1.0 if edge_kind[best] != 0 else 0.0)
-        for k in range(gamma):
-            rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
-        ox, oz = edge_offset[best, 0], edge_offset[best, 1]
+
+
+def _advance_py(best_edge, edge_src, edge_kind, edge_reading, edge_offset, edge_heading, edge_turn, reading_cost,
+                meas_pos, meas_heading, w_pos, w_head, ok, place_prev, det_prev, rank_prev, terms_prev,
+                place_new, det_new, rank_new, terms_new):  # fmt: skip
+    """The new state of every live path from its predecessor's along its best edge:
+    placement (cos/sin carried by rotation, no trigonometry), detour count, broken
+    constraints and the per-term costs for reports."""
+    N = best_edge.shape[0]
+    gamma = rank_prev.shape[1]
+    use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
+    use_head = np.isfinite(meas_heading) and w_head != 0.0
+    for n in numba.prange(N):
+        e = best_edge[n]
+        if e < 0:
+            continue
+        m = edge_src[e]
+        ox, oz = edge_offset[e, 0], edge_offset[e, 1]
         c, s = place_prev[m, COS], place_prev[m, SIN]
-        tc, ts = edge_turn[best, 0], edge_turn[best, 1]
-        place_new[n, X] = place_prev[m, X] + c * ox + s * oz
-        place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
-        place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[best]
+        tc, ts = edge_turn[e, 0], edge_turn[e, 1]
+        x = place_prev[m, X] + c * ox + s * oz
+        z = place_prev[m, Z] - s * ox + c * oz
+        h = place_prev[m, HEADING] + edge_heading[e]
+        place_new[n, X] = x
+        place_new[n, Z] = z
+        place_new[n, HEADING] = h
         place_new[n, COS] = c * tc - s * ts
         place_new[n, SIN] = s * tc + c * ts
-        terms_new[n, 0] = terms_prev[m, 0] + reading_cost[edge_reading[best]]
-        terms_new[n, 1] = terms_prev[m, 1] + best_cp
-        terms_new[n, 2] = terms_prev[m, 2] + best_co
+        det_new[n] = det_prev[m] + (1.0 if edge_kind[e] != 0 else 0.0)
+        for k in range(gamma):
+            rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
+        terms_new[n, 0] = terms_prev[m, 0] + reading_cost[edge_reading[e]]
+        cp = 0.0
+        if use_pos:
+            cp = np.sqrt((x - meas_pos[0]) ** 2 + (z - meas_pos[1]) ** 2)
+        co = 0.0
+        if use_head:
+            co = abs(_wrap(h - meas_heading))
+        terms_new[n, 1] = terms_prev[m, 1] + cp
+        terms_new[n, 2] = terms_prev[m, 2] + co
 
 
-_step = numba.njit(cache=True, nogil=True, parallel=True)(_step_py)
-_step_serial = numba.njit(cache=True, nogil=True)(_step_py)
+def _compile(fn, parallel: bool):
+    return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)
+
+
+_edge_totals, _edge_totals_serial = _compile(_edge_totals_py, True), _compile(_edge_totals_py, False)
+_select, _select_serial = _compile(_select_py, True), _compile(_select_py, False)
+_advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, False)
 
 
 def search_tables(graph: MotionGraph) -> dict:
@@ -442,7 +463,8 @@ class ViterbiSearch:
         spread each step over numba's threads (one search at a time) or not (many
         searches in parallel, e.g. a server's streams)."""
         self.graph = graph
-        self._kernels = (_reading_costs, _step) if threads else (_reading_costs_serial, _step_serial)
+        self._kernels = ((_reading_costs, _edge_totals, _select, _advance) if threads else
+                         (_reading_costs_serial, _edge_totals_serial, _select_serial, _advance_serial))  # fmt: skip
         self.weights = weights
         N = graph.num_nodes
         self.N = N
@@ -467,6 +489,7 @@ class ViterbiSearch:
         self._scratch = (np.zeros(N), np.zeros((N, PLACE_WIDTH)), np.zeros(N), np.zeros((N, gamma), np.int64),
                          np.zeros((N, 3)))  # fmt: skip
         self.best_edge = np.zeros(N, dtype=np.int32)
+        self.total = np.zeros(graph.num_edges)
         self.reading_cost = np.zeros(self.readings.shape[0], dtype=np.float32)
         self._meas = np.zeros(self.readings.shape[1], dtype=np.float32)
         self._mask = np.ones(self.readings.shape[1], dtype=np.float32)
@@ -545,15 +568,18 @@ class ViterbiSearch:
         # Computed even at W_A = 0: the report carries each path's accelerometer cost.
         self._set_measurement(acc)
         present = float(self._mask.sum()) / 3.0
-        reading_costs, step = self._kernels
+        reading_costs, edge_totals, select, advance = self._kernels
         if present:
             reading_costs(self.readings, self._meas, self._mask, np.float32(1.0 / present), self.reading_cost)
         else:
             self.reading_cost[:] = 0.0
-        step(self.incoming, self.edge_src, self.edge_reading, self.edge_kind, self.edge_offset, self.edge_heading,
-              self.edge_turn, self.reading_cost, meas_pos, meas_head, float(w.acc), float(w.position), float(w.heading), self.ok,
-              self.allowed, self.cost, self.place, self.det, self.rank, self.terms,
-              cost, place, det, rank, terms, best_edge)  # fmt: skip
+        wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
+        edge_totals(self.edge_src, self.edge_reading, self.edge_offset, self.edge_heading, self.reading_cost, meas_pos,
+                    meas_head, wa, wp, wh, self.cost, self.place, self.total)
+        select(self.incoming, self.edge_src, self.edge_kind, self.total, self.allowed, self.det, self.rank, cost, best_edge)
+        advance(best_edge, self.edge_src, self.edge_kind, self.edge_reading, self.edge_offset, self.edge_heading,
+                self.edge_turn, self.reading_cost, meas_pos, meas_head, wp, wh, self.ok, self.place, self.det,
+                self.rank, self.terms, place, det, rank, terms)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.block[self.used] = best_edge

@@ -1,0 +1,322 @@
+"""Leave-one-clip-out evaluation (SPEC §9): what `graphsvc evaluate` runs.
+
+The graph is built once from the whole knowledge base. For each test clip, every
+node that carries any of its data is hidden from the search by a node mask
+(`held_out_mask`); the clip's sensors are simulated, the recording is reconstructed
+through `graphsvc.pipeline.reconstruct(..., allowed=mask)` and compared with the clip
+itself (`evaluate_clip`). `run_leave_one_out` does this for many clips, optionally in
+worker processes that memory-map one graph file.
+
+What a test clip hides (its *performance*: the recorded take and its augmented copies,
+as `graphsvc.graph.build._performance` groups them — same source, same name once the
+`_mirror`/`_reverse` suffixes are removed):
+- the original, slow-down and interpolated nodes whose `node_clip` is one of the
+  performance's clips (slow-down nodes and interpolated segments are filed under their
+  clip, interpolated ones under the segment's first clip, `clip_a`);
+- the nodes of interpolated segments whose second clip (`clip_b`) is one of them;
+- the mirrored and reversed copies themselves.
+Edges touching a hidden node are unusable because the search never enters a hidden
+node. The graph's other structure was built with the clip present (the transition
+cap keeps each frame's 8 closest transitions, some of which may have pointed into
+the hidden clip), so a frame may have fewer usable transitions than in a graph built
+without it; rebuilding per clip would cost a full build each.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import math
+import os
+import re
+import resource
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from graphsvc.evaluate.metrics import evaluate_frames, summarize
+from graphsvc.graph.model import MotionGraph
+from graphsvc.motion import signals
+from graphsvc.motion.joints import CANONICAL, joint_map
+from graphsvc.motion.kinematics import motion_fk
+from graphsvc.motion.resample import resample
+from graphsvc.motion.skeleton import Motion
+from graphsvc.pipeline import Options
+from graphsvc.sensors.layout import Layout, layout_from_dict
+from graphsvc.sensors.noise import NoiseModel
+from graphsvc.sensors.recording import Recording
+from graphsvc.sensors.simulate import simulate_recording
+
+_AUGMENT_SUFFIX = re.compile(r"(_mirror|_reverse)+$")
+
+
+# ---------------------------------------------------------------- which clips, which nodes
+
+
+def performance_key(source: str, name: str) -> tuple[str, str]:
+    """What identifies one recorded performance across its augmented copies: the
+    source and the name without `_mirror`/`_reverse` suffixes (the rule of
+    `graphsvc.graph.build._performance`, on a graph's clip records)."""
+    return str(source), _AUGMENT_SUFFIX.sub("", str(name))
+
+
+def is_augmented(name: str) -> bool:
+    """True for the mirrored or reversed copies the builder adds (not files of the KB)."""
+    return _AUGMENT_SUFFIX.search(str(name)) is not None
+
+
+def performance_clips(graph: MotionGraph, clip_index: int) -> np.ndarray:
+    """(k,) int: indices of the graph clips of `clip_index`'s performance (itself included)."""
+    want = performance_key(graph.clips[clip_index]["source"], graph.clips[clip_index]["name"])
+    return np.array([k for k, c in enumerate(graph.clips) if performance_key(c["source"], c["name"]) == want],
+                    dtype=np.int64)  # fmt: skip
+
+
+def held_out_mask(graph: MotionGraph, clip_index: int) -> np.ndarray:
+    """(N,) bool `allowed` node mask for testing graph clip `clip_index`: False on
+    every node derived from its performance (see the module docstring), True elsewhere."""
+    clips = performance_clips(graph, clip_index)
+    hidden = np.isin(np.asarray(graph.node_clip), clips)
+    for seg in graph.segments:  # segments filed under clip_a are already hidden above
+        if seg["clip_a"] in clips or seg["clip_b"] in clips:
+            hidden[seg["first_node"]: seg["first_node"] + seg["count"]] = True
+    return ~hidden
+
+
+def clip_file_name(source: str, name: str) -> str:
+    """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
+    or the clip name for clips without a file (procedural ones)."""
+    src = str(source or "")
+    return Path(src).name if src and ":" not in Path(src).name and Path(src).suffix else str(name)
+
+
+def select_clips(names: list[str], pattern: str) -> list[int]:
+    """Indices of `names` (file names) matching the fnmatch `pattern`, in order.
+    Case-sensitive, so the selection does not depend on the platform."""
+    return [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+
+
+def match_graph_clips(graph: MotionGraph, motions: list[Motion]) -> list[int | None]:
+    """The graph clip index of each motion (None when the graph lacks it): by content
+    hash (`sha256` in graph.clips) and name, else by resolved source path and name —
+    the hash survives moving the knowledge base, the path a re-export."""
+    from graphsvc.graph.build import content_digest
+
+    by_hash = {}
+    by_path = {}
+    for k, c in enumerate(graph.clips):
+        by_hash.setdefault((c.get("sha256"), c["name"]), k)
+        by_path.setdefault((_resolved(c.get("source")), c["name"]), k)
+    out = []
+    for m in motions:
+        k = by_hash.get((content_digest(m), m.name))
+        out.append(k if k is not None else by_path.get((_resolved(m.source), m.name)))
+    return out
+
+
+def _resolved(source) -> str:
+    try:
+        return str(Path(source).resolve()) if source else ""
+    except (OSError, ValueError):
+        return str(source)
+
+
+def clip_seed(seed: int, name: str) -> int:
+    """The noise seed of one test clip: a hash of the run's seed and the clip name,
+    so a clip's noise does not depend on which other clips are tested or on --jobs."""
+    digest = hashlib.sha256(f"{int(seed)}/{name}".encode()).digest()
+    return int.from_bytes(digest[:8], "little")
+
+
+# ---------------------------------------------------------------- one clip
+
+
+@dataclass(frozen=True)
+class EvalSetup:
+    """What every test clip's evaluation shares.
+
+    noise: the sensor/tracker noise model. positions: whether the simulated
+    recording keeps the overhead tracker's ground positions (else they are dropped;
+    heading follows `noise.heading`, where "none" drops it). options: decoding
+    options of `pipeline.reconstruct`. seed: the run's seed (`clip_seed`)."""
+
+    noise: NoiseModel
+    positions: bool
+    options: Options
+    seed: int = 0
+
+
+def inputs_description(setup: EvalSetup) -> str:
+    """Which streams the recordings carry, e.g. "accelerometers + positions (σ 0.1 m) + heading (noisy)"."""
+    parts = ["accelerometers"]
+    if setup.positions:
+        parts.append(f"positions (σ {setup.noise.position:g} m)")
+    if setup.options.heading_from_track:
+        parts.append("heading (from the track, K §6 rule)")
+    elif setup.noise.heading != "none":
+        parts.append(f"heading ({setup.noise.heading})")
+    return " + ".join(parts)
+
+
+def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_hz: float, mapping=None) -> Recording:
+    """The simulated input of a test clip (already at `rate_hz`), noise seeded by
+    `clip_seed`; positions dropped unless `setup.positions`."""
+    rec = simulate_recording(motion, layout, setup.noise, seed=clip_seed(setup.seed, motion.name), rate_hz=rate_hz,
+                             mapping=mapping)  # fmt: skip
+    if not setup.positions:
+        rec = replace(rec, ground_position=None)
+    return rec
+
+
+def _global_signals(world_pos: np.ndarray, table: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(T, 19, 3) canonical joints, (T, 2) ground position, (T,) heading."""
+    canon = world_pos[:, [table[c] for c in CANONICAL]]
+    return canon, signals.ground_position(world_pos, table["pelvis"]), signals.heading(world_pos, table)
+
+
+def place_start(pos, ground, heading, true_ground0, true_heading0, fix_position: bool, fix_heading: bool):
+    """Move a whole predicted motion rigidly so its first frame starts where the truth
+    does, for the streams the recording lacked: without positions the search starts
+    at the origin and without heading facing +Z (`pipeline._start_state`), and the
+    metrics should measure drift, not where the world origin happens to be.
+
+    pos (T, P, 3), ground (T, 2) m, heading (T,) rad → moved copies. Turns about the
+    first frame's ground position by the heading difference (fix_heading), then
+    shifts onto the true first ground position (fix_position)."""
+    d = float(true_heading0 - heading[0]) if fix_heading else 0.0
+    shift = (np.asarray(true_ground0, float) - ground[0]) if fix_position else np.zeros(2)
+    c, s = math.cos(d), math.sin(d)
+    g0 = ground[0].copy()
+    x, z = pos[..., 0] - g0[0], pos[..., 2] - g0[1]
+    pos = pos.copy()
+    # R_y(d) maps (x, z) to (cos d·x + sin d·z, −sin d·x + cos d·z) (metrics.py convention).
+    pos[..., 0] = c * x + s * z + g0[0] + shift[0]
+    pos[..., 2] = -s * x + c * z + g0[1] + shift[1]
+    gx, gz = ground[:, 0] - g0[0], ground[:, 1] - g0[1]
+    ground = np.stack([c * gx + s * gz + g0[0] + shift[0], -s * gx + c * gz + g0[1] + shift[1]], axis=-1)
+    return pos, ground, heading + d
+
+
+def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index: int | None, setup: EvalSetup) -> dict:
+    """Reconstruct one test clip with its performance hidden and score it.
+
+    motion: the test clip as loaded (any rate; resampled to the graph's). clip_index:
+    its index in graph.clips (None: not in the graph, nothing to hide). Returns
+    `evaluate_frames`'s dict (name, frames, the four metrics, per_frame arrays) plus
+    file, label, samples_per_s, search_s, hidden_nodes, in_graph, start_placed, and
+    `node_path` / `pred_labels` ((T,) arrays, for plots; not in the JSON)."""
+    from graphsvc.pipeline import reconstruct
+
+    mapping = graph.params.get("mapping")
+    rate = float(graph.rate_hz)
+    truth = resample(motion, rate)
+    layout = layout_from_dict(graph.layout)
+    rec = simulate_test_input(truth, layout, setup, rate, mapping)
+    if clip_index is None:
+        allowed = np.ones(graph.num_nodes, dtype=bool)
+    else:
+        allowed = held_out_mask(graph, clip_index)
+    result = reconstruct(graph, rec, setup.options, allowed=allowed)
+
+    true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], joint_map(truth.skeleton, mapping))
+    pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1],
+                                                            joint_map(graph.skeleton, mapping))  # fmt: skip
+    fix_position = rec.ground_position is None
+    fix_heading = rec.heading is None and not setup.options.heading_from_track
+    if fix_position or fix_heading:
+        pred_canon, pred_ground, pred_heading = place_start(pred_canon, pred_ground, pred_heading, true_ground[0],
+                                                            true_heading[0], fix_position, fix_heading)  # fmt: skip
+    pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
+    true_label = motion.labels[0] if motion.labels else motion.name
+    row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
+                          pred_labels=pred_labels, true_label=true_label, name=motion.name)  # fmt: skip
+    report = result.report
+    row.update({
+        "file": clip_file_name(motion.source, motion.name),
+        "label": str(true_label),
+        "samples": int(report["samples"]),
+        "samples_per_s": float(report["samples_per_s"]),
+        "search_s": float(report["timings_s"]["search"]),
+        "hidden_nodes": int(np.count_nonzero(~allowed)),
+        "in_graph": clip_index is not None,
+        "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
+        "node_path": np.asarray(result.node_path),
+        "pred_labels": pred_labels,
+    })  # fmt: skip
+    return row
+
+
+# ---------------------------------------------------------------- many clips
+
+_PRIVATE = ("per_frame", "node_path", "pred_labels")
+_worker: dict = {}
+
+
+def _init_worker(graph_path: str, setup: EvalSetup, threads: int) -> None:
+    import numba
+
+    from graphsvc.graph.file import load_graph
+
+    # The search kernels are numba-parallel: share the cores among workers rather
+    # than letting every worker start a thread per core.
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    # The parent wrote (or verified) this file moments ago: skip re-hashing it.
+    _worker["graph"] = load_graph(graph_path, mmap=True, verify=False)
+    _worker["setup"] = setup
+
+
+def _evaluate_in_worker(item: tuple[Motion, int | None]) -> dict:
+    motion, clip_index = item
+    row = evaluate_clip(_worker["graph"], motion, clip_index, _worker["setup"])
+    return {k: v for k, v in row.items() if k not in ("node_path", "pred_labels")}
+
+
+def run_leave_one_out(graph: MotionGraph, tests: list[tuple[Motion, int | None]], setup: EvalSetup, jobs: int = 1,
+                      graph_path=None, progress: bool | None = None) -> list[dict]:  # fmt: skip
+    """`evaluate_clip` for each (motion, graph clip index) in `tests`; rows in the
+    order of `tests` whatever `jobs`. jobs > 1: that many worker processes, each
+    memory-mapping `graph_path` (the graph's file; written to a temporary file when
+    None) and using cores/jobs numba threads."""
+    from tqdm import tqdm
+
+    bar = {"total": len(tests), "desc": "clips", "unit": "clip", "disable": None if progress is None else not progress}
+    jobs = max(1, min(int(jobs), len(tests)))
+    if jobs == 1:
+        return [evaluate_clip(graph, m, k, setup) for m, k in tqdm(tests, **bar)]
+    import multiprocessing
+    import tempfile
+
+    from graphsvc.graph.file import save_graph
+
+    with tempfile.TemporaryDirectory(prefix="graphsvc-eval-") as tmp:
+        if graph_path is None:
+            graph_path = Path(tmp) / "graph.mgraph"
+            save_graph(graph, graph_path)
+        threads = max(1, (os.cpu_count() or 1) // jobs)
+        # spawn, not fork: numba's thread pool in the parent is not fork-safe.
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(str(graph_path), setup, threads)) as pool:  # fmt: skip
+            return list(tqdm(pool.map(_evaluate_in_worker, tests), **bar))
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory (MB) of this process and of its finished workers, the
+    larger of the two (workers share the memory-mapped graph pages)."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return max(own, children) / 1024.0  # Linux reports KiB
+
+
+def summarize_run(rows: list[dict]) -> dict:
+    """JSON-ready {"clips": [...], "mean": {...}} (`metrics.summarize`'s shape), rows
+    without their per-frame arrays, plus samples_per_s: per clip the search speed,
+    overall the total samples over the total search time."""
+    out = summarize([{k: v for k, v in r.items() if k not in _PRIVATE} for r in rows])
+    search_s = sum(r["search_s"] for r in rows)
+    samples = sum(r["samples"] for r in rows)
+    out["mean"]["samples_per_s"] = round(samples / search_s, 1) if search_s > 0 else None
+    return out
+
