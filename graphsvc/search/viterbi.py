@@ -49,7 +49,8 @@ class Weights:
 
 @numba.njit(cache=True, nogil=True)
 def _wrap(a):
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
+    """a wrapped into [−π, π) (floor, not a float modulo: this runs once per edge)."""
+    return a - 2.0 * np.pi * np.floor((a + np.pi) * (0.5 / np.pi))
 
 
 # Costs closer than this are equal (g², m, rad sums: far below any real difference).
@@ -83,8 +84,8 @@ _reading_costs_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_readi
 # incoming edge, from a scattered source node, so it should stay in cache; the
 # placement (ground x, z in m, heading in rad and its cos, sin) is read per edge only
 # when position or heading is measured; the detour count only on near-ties.
-X, Z, HEADING, COS, SIN = 0, 1, 2, 3, 4
-PLACE_WIDTH = 5
+X, Z, HEADING, COS, SIN, DET = 0, 1, 2, 3, 4, 5
+PLACE_WIDTH = 8  # padded: one 64-byte row, one cache line per scattered read
 
 
 # One step is three passes, each branch-light so the scattered reads of one edge or
@@ -118,7 +119,7 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
         total[e] = t
 
 
-def _select_py(incoming, edge_src, edge_kind, total, allowed, det_prev, rank_prev, cost_new, best_edge):
+def _select_py(incoming, edge_src, edge_kind, total, allowed, place_prev, rank_prev, cost_new, best_edge):
     """Each node's best incoming edge (−1: none alive, or the node is masked): fewest
     broken constraints (rank, lexicographic), then lowest total (within TIE counts as
     equal), then fewer non-original edges so far (det, read only on a near-tie), then
@@ -152,9 +153,9 @@ def _select_py(incoming, edge_src, edge_kind, total, allowed, det_prev, rank_pre
                     elif t > best_cost + TIE:
                         better = False
                     else:
-                        det = det_prev[m] + (1.0 if edge_kind[e] != 0 else 0.0)
+                        det = place_prev[m, DET] + (1.0 if edge_kind[e] != 0 else 0.0)
                         if best_det < 0.0:
-                            best_det = det_prev[mb] + (1.0 if edge_kind[best] != 0 else 0.0)
+                            best_det = place_prev[mb, DET] + (1.0 if edge_kind[best] != 0 else 0.0)
                         if det != best_det:
                             better = det < best_det
                         else:
@@ -165,16 +166,13 @@ def _select_py(incoming, edge_src, edge_kind, total, allowed, det_prev, rank_pre
         cost_new[n] = best_cost
 
 
-def _advance_py(best_edge, edge_src, edge_kind, edge_reading, edge_offset, edge_heading, edge_turn, reading_cost,
-                meas_pos, meas_heading, w_pos, w_head, ok, place_prev, det_prev, rank_prev, terms_prev,
-                place_new, det_new, rank_new, terms_new):  # fmt: skip
+def _advance_py(best_edge, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, place_prev, rank_prev,
+                place_new, rank_new):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
     placement (cos/sin carried by rotation, no trigonometry), detour count, broken
-    constraints and the per-term costs for reports."""
+    constraints. (Per-term costs are summed along the final path afterwards.)"""
     N = best_edge.shape[0]
     gamma = rank_prev.shape[1]
-    use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
-    use_head = np.isfinite(meas_heading) and w_head != 0.0
     for n in numba.prange(N):
         e = best_edge[n]
         if e < 0:
@@ -183,26 +181,45 @@ def _advance_py(best_edge, edge_src, edge_kind, edge_reading, edge_offset, edge_
         ox, oz = edge_offset[e, 0], edge_offset[e, 1]
         c, s = place_prev[m, COS], place_prev[m, SIN]
         tc, ts = edge_turn[e, 0], edge_turn[e, 1]
-        x = place_prev[m, X] + c * ox + s * oz
-        z = place_prev[m, Z] - s * ox + c * oz
-        h = place_prev[m, HEADING] + edge_heading[e]
-        place_new[n, X] = x
-        place_new[n, Z] = z
-        place_new[n, HEADING] = h
+        place_new[n, X] = place_prev[m, X] + c * ox + s * oz
+        place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
+        place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[e]
         place_new[n, COS] = c * tc - s * ts
         place_new[n, SIN] = s * tc + c * ts
-        det_new[n] = det_prev[m] + (1.0 if edge_kind[e] != 0 else 0.0)
+        place_new[n, DET] = place_prev[m, DET] + (1.0 if edge_kind[e] != 0 else 0.0)
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
-        terms_new[n, 0] = terms_prev[m, 0] + reading_cost[edge_reading[e]]
-        cp = 0.0
-        if use_pos:
-            cp = np.sqrt((x - meas_pos[0]) ** 2 + (z - meas_pos[1]) ** 2)
-        co = 0.0
-        if use_head:
-            co = abs(_wrap(h - meas_heading))
-        terms_new[n, 1] = terms_prev[m, 1] + cp
-        terms_new[n, 2] = terms_prev[m, 2] + co
+
+
+@numba.njit(cache=True, nogil=True)
+def _path_terms(edges, readings, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
+                meas_heading, use_pos, use_head, x, z, h, c, s):  # fmt: skip
+    """Accumulated acc (g²), position (m) and heading (rad) costs along one path, with
+    the search's arithmetic. edges (T−1,); meas/mask (T, 3S) float32 as the search's
+    measurement vectors; present (T,) sensors present; meas_pos (T, 2), meas_heading
+    (T,); use_* whether each term counted; x, z, h, c, s the start placement."""
+    out = np.zeros(3)
+    D = readings.shape[1]
+    for k in range(edges.shape[0]):
+        t = k + 1
+        e = edges[k]
+        if present[t] > 0:
+            r = edge_reading[e]
+            acc = np.float32(0.0)
+            for j in range(D):
+                d = readings[r, j] - meas[t, j]
+                acc += mask[t, j] * d * d
+            out[0] += acc * np.float32(1.0 / present[t])
+        ox, oz = edge_offset[e, 0], edge_offset[e, 1]
+        tc, ts = edge_turn[e, 0], edge_turn[e, 1]
+        x, z = x + c * ox + s * oz, z - s * ox + c * oz
+        h = h + edge_heading[e]
+        c, s = c * tc - s * ts, s * tc + c * ts
+        if use_pos and np.isfinite(meas_pos[t, 0]) and np.isfinite(meas_pos[t, 1]):
+            out[1] += np.sqrt((x - meas_pos[t, 0]) ** 2 + (z - meas_pos[t, 1]) ** 2)
+        if use_head and np.isfinite(meas_heading[t]):
+            out[2] += abs(_wrap(h - meas_heading[t]))
+    return out
 
 
 def _compile(fn, parallel: bool):
@@ -483,11 +500,8 @@ class ViterbiSearch:
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
         self.cost = np.zeros(N)
         self.place = np.zeros((N, PLACE_WIDTH))
-        self.det = np.zeros(N)
         self.rank = np.zeros((N, gamma), dtype=np.int64)
-        self.terms = np.zeros((N, 3))
-        self._scratch = (np.zeros(N), np.zeros((N, PLACE_WIDTH)), np.zeros(N), np.zeros((N, gamma), np.int64),
-                         np.zeros((N, 3)))  # fmt: skip
+        self._scratch = (np.zeros(N), np.zeros((N, PLACE_WIDTH)), np.zeros((N, gamma), np.int64))
         self.best_edge = np.zeros(N, dtype=np.int32)
         self.total = np.zeros(graph.num_edges)
         self.reading_cost = np.zeros(self.readings.shape[0], dtype=np.float32)
@@ -535,8 +549,7 @@ class ViterbiSearch:
         self.place[:, X], self.place[:, Z] = p
         self.place[:, HEADING], self.place[:, COS], self.place[:, SIN] = h, np.cos(h), np.sin(h)
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
-        self.det[:] = 0.0
-        self.terms[:] = 0.0
+        self.place[:, DET] = 0.0
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
@@ -558,7 +571,7 @@ class ViterbiSearch:
         if self.used == self.BLOCK:
             self.compact()
         self.t += 1
-        cost, place, det, rank, terms = self._scratch
+        cost, place, rank = self._scratch
         best_edge = self.best_edge
         meas_pos = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
         meas_head = np.nan if heading is None else float(heading)
@@ -576,17 +589,17 @@ class ViterbiSearch:
         wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
         edge_totals(self.edge_src, self.edge_reading, self.edge_offset, self.edge_heading, self.reading_cost, meas_pos,
                     meas_head, wa, wp, wh, self.cost, self.place, self.total)
-        select(self.incoming, self.edge_src, self.edge_kind, self.total, self.allowed, self.det, self.rank, cost, best_edge)
-        advance(best_edge, self.edge_src, self.edge_kind, self.edge_reading, self.edge_offset, self.edge_heading,
-                self.edge_turn, self.reading_cost, meas_pos, meas_head, wp, wh, self.ok, self.place, self.det,
-                self.rank, self.terms, place, det, rank, terms)  # fmt: skip
+        select(self.incoming, self.edge_src, self.edge_kind, self.total, self.allowed, self.place, self.rank, cost,
+               best_edge)  # fmt: skip
+        advance(best_edge, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.ok,
+                self.place, self.rank, place, rank)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.block[self.used] = best_edge
         self.used += 1
         # Swap buffers: the new state becomes the previous one.
-        self._scratch = (self.cost, self.place, self.det, self.rank, self.terms)
-        self.cost, self.place, self.det, self.rank, self.terms = cost, place, det, rank, terms
+        self._scratch = (self.cost, self.place, self.rank)
+        self.cost, self.place, self.rank = cost, place, rank
 
     def _set_measurement(self, acc) -> None:
         """Measured accelerations (S, 3) m/s² → the kernel's (3S,) g vector and mask:
@@ -638,7 +651,7 @@ class ViterbiSearch:
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
         alive = np.nonzero(self.alive)[0]
         cost = np.round(self.cost[alive] / TIE) if np.all(np.abs(self.cost[alive]) < 1e6) else self.cost[alive]
-        keys = [alive, self.det[alive], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
+        keys = [alive, self.place[alive, DET], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
         return int(alive[np.lexsort(keys)[0]])
 
     def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -654,6 +667,27 @@ class ViterbiSearch:
         and the edges (t−since,) between them."""
         nodes, edges = self.trace_arrivals(node, since)
         return nodes, edges[1:]
+
+
+def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc, position=None, heading=None) -> dict:
+    """The accelerometer (g²), position (m) and heading (rad) costs accumulated along a
+    path found by `search` (unweighted; a term counts where the search used it)."""
+    T = nodes.shape[0]
+    meas = np.zeros((T, search.readings.shape[1]), np.float32)
+    mask = np.zeros_like(meas)
+    for t in range(T):
+        search._set_measurement(acc[t])
+        meas[t], mask[t] = search._meas, search._mask
+    present = mask.sum(axis=1) / 3.0
+    pos = np.full((T, 2), np.nan) if position is None else np.asarray(position, dtype=np.float64)
+    head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
+    p0 = pos[0] if np.all(np.isfinite(pos[0])) else np.zeros(2)
+    h0 = float(head[0]) if np.isfinite(head[0]) else 0.0
+    w = search.weights
+    out = _path_terms(edges.astype(np.int64), search.readings, search.edge_reading, search.edge_offset,
+                      search.edge_heading, search.edge_turn, meas, mask, present, pos, head, w.position != 0,
+                      w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0))  # fmt: skip
+    return {"acc_g2": float(out[0]), "position_m": float(out[1]), "heading_rad": float(out[2])}
 
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
@@ -687,8 +721,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     best = search.best_node()
     nodes, edges = search.trace(best)
     N = graph.num_nodes
-    terms = {"acc_g2": float(search.terms[best, 0]), "position_m": float(search.terms[best, 1]),
-             "heading_rad": float(search.terms[best, 2])}  # fmt: skip
+    terms = path_terms(search, nodes, edges, acc, position, heading)
     return SearchResult(
         node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
         broken=[int(v) for v in search.rank[best]],
