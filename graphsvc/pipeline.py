@@ -471,3 +471,23 @@ def _blend(a: tuple, b: tuple, w: float):
     elif w >= 0.5 and b[3] is not None or w < 0.5 and a[3] is not None:
         head = b[3] if w >= 0.5 else a[3]
     return acc, pos, head
+
+
+def warm_up(graph: MotionGraph, threads: bool = False) -> float:
+    """Run a few samples through a live session and a batch search, so numba's
+    compilation (or loading from its cache) and the graph's search tables are paid at
+    load, not by the first client. Returns the seconds it took."""
+    t0 = time.perf_counter()
+    S = len(graph.sensor_names)
+    rng = np.random.default_rng(0)
+    T = 48  # past one 32-sample block: the survivor store's code runs too
+    acc = rng.normal(0.0, 1.0, (T, S, 3))
+    acc[:, :, 1] += 9.81
+    position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
+    heading = np.zeros(T)
+    session = LiveSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2), threads=threads)
+    for t in range(T):
+        session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
+    session.flush()
+    viterbi_search(graph, acc, position, heading, Weights(0.5, 1, 1), threads=threads)
+    return time.perf_counter() - t0

@@ -78,6 +78,7 @@ def parse_graph_spec(text: str) -> tuple[str, Path]:
 def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
     """Load each "NAME=FILE" graph once (memory-mapped, checksum verified)."""
     from graphsvc.graph.file import load_graph
+    from graphsvc.pipeline import warm_up
 
     if not specs:
         raise InputError("no graphs to serve (give --graph NAME=FILE at least once)")
@@ -87,6 +88,9 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
         if name in graphs:
             raise InputError(f"graph name {name!r} given twice")
         graph = load_graph(path)
+        # Compile/load the search kernels and build the search tables now, not in
+        # the first client's call.
+        warm_up(graph, threads=False)
         graphs[name] = LoadedGraph(name, path, graph, convert.graph_info(name, graph, path.stat().st_size))
     return graphs
 
