@@ -5,7 +5,8 @@ A generated graph of K's largest size (G_E: 100,686 nodes, 317,600 edges: clips 
 chains of original edges plus random transitions, random 6-sensor metadata), searched
 with 720 samples (24 s at 30 Hz) in modes A (accelerometers), APO (+ position and
 heading) and APO+2constraints; a one-hour input (108,000 samples, mode APO); and the
-plain numpy full-lattice reference against the numba search on a smaller graph.
+plain numpy full-lattice reference against the numba search on a smaller graph; the
+fixed-lag streaming decoder as a server runs it (serial kernels, per-push latency).
 One JSON object per run. Each run is its own process, so peak RSS is its own.
 
 Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000]
@@ -114,12 +115,41 @@ def run_reference(nodes: int, edges: int, samples: int) -> dict:
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
 
 
+def run_stream(nodes: int, edges: int, samples: int) -> dict:
+    """The fixed-lag decoder (1 s lag, APO) as a live server runs it: serial kernels,
+    one push per sample; per-push latency percentiles."""
+    from graphsvc.search.stream import FixedLagDecoder
+    from graphsvc.search.viterbi import Weights
+
+    g = generated_graph(nodes, edges)
+    acc, position, heading = inputs(samples, 6)
+    w = Weights(0.5, 1, 1)
+    warm = FixedLagDecoder(g, w, lag=30, threads=False)
+    for t in range(40):
+        warm.push(acc[t], position[t], heading[t])
+    decoder = FixedLagDecoder(g, w, lag=30, threads=False)
+    times = np.empty(samples)
+    for t in range(samples):
+        t0 = time.perf_counter()
+        decoder.push(acc[t], position[t], heading[t])
+        times[t] = time.perf_counter() - t0
+    decoder.flush()
+    return {"mode": "stream APO, fixed lag 1 s, serial", "nodes": g.num_nodes, "edges": g.num_edges,
+            "samples": samples, "seconds": round(float(times.sum()), 3),
+            "ms_per_sample": round(1000 * float(times.mean()), 3),
+            "p50_ms": round(1000 * float(np.percentile(times, 50)), 3),
+            "p99_ms": round(1000 * float(np.percentile(times, 99)), 3),
+            "revisions": decoder.revisions,
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+
+
 RUNS = {
     "A": lambda a: run("A", 100_686, 317_600, 720),
     "APO": lambda a: run("APO", 100_686, 317_600, 720),
     "APO+2constraints": lambda a: run("APO+2constraints", 100_686, 317_600, 720),
-    "hour": lambda a: run("APO", 100_686, 317_600, a.hour_samples),
+    "hour": lambda a: {**run("APO", 100_686, 317_600, a.hour_samples), "mode": "APO, long input"},
     "reference": lambda a: run_reference(7_577, 9_433, 720),
+    "stream": lambda a: run_stream(100_686, 317_600, 720),
 }
 
 

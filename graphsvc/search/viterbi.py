@@ -269,7 +269,8 @@ def _block_levels(block, used, edge_src, mark, stamp, level_nodes, level_start):
     level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes row k's
     surviving paths pass through. block (B, N) int32 best incoming edges (−1 dead).
     Returns (total, stamp, converged_row): converged_row is the highest row where a
-    single node remains (−1 if none)."""
+    single node remains (−1 if none); total = −1 when level_nodes is too small (the
+    caller grows it and asks again)."""
     N = block.shape[1]
     # Fill from the top row down, at the end of level_nodes, then shift into place.
     end = level_nodes.shape[0]
@@ -279,7 +280,7 @@ def _block_levels(block, used, edge_src, mark, stamp, level_nodes, level_start):
         if block[used - 1, n] >= 0:
             pos -= 1
             level_nodes[pos] = n
-            top_count += 1
+            top_count += 1  # level_nodes holds at least N: the top row always fits
     counts = np.zeros(used, np.int64)
     counts[used - 1] = top_count
     hi = end
@@ -291,6 +292,8 @@ def _block_levels(block, used, edge_src, mark, stamp, level_nodes, level_start):
             m = edge_src[block[k, level_nodes[i]]]
             if mark[m] != stamp:
                 mark[m] = stamp
+                if pos == 0:
+                    return -1, stamp, -1
                 pos -= 1
                 level_nodes[pos] = m
         counts[k - 1] = start - pos
@@ -525,9 +528,9 @@ class ViterbiSearch:
         self.mark = np.zeros(N, dtype=np.int64)
         self.row_of = np.zeros(N, dtype=np.int64)
         self.stamp = 0
-        self.level_nodes = np.zeros(4 * N + 16, dtype=np.int64)
+        self.level_nodes = np.zeros(2 * N + 16, dtype=np.int32)
         self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
-        self.store = np.zeros((4 * N + 16, 4), dtype=np.int64)
+        self.store = np.zeros((2 * N + 16, 4), dtype=np.int64)  # doubles when full
         self.size = 0  # rows of the store in use (live or garbage)
         self.live_rows = 0  # rows alive after the last collection
         self.heads = np.full(N, -1, dtype=np.int64)
@@ -617,10 +620,12 @@ class ViterbiSearch:
         from all live nodes); collect the store's garbage when it has doubled."""
         if self.used == 0:
             return
-        if self.level_nodes.shape[0] < self.used * self.N:  # worst case: nothing merges
-            self.level_nodes = np.zeros(self.used * self.N, dtype=np.int64)
-        total, self.stamp, converged_row = _block_levels(self.block, self.used, self.edge_src, self.mark, self.stamp,
-                                                         self.level_nodes, self.level_start)  # fmt: skip
+        while True:  # grown on demand: the worst case (nothing merges) is used × N
+            total, self.stamp, converged_row = _block_levels(self.block, self.used, self.edge_src, self.mark,
+                                                             self.stamp, self.level_nodes, self.level_start)  # fmt: skip
+            if total >= 0:
+                break
+            self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
         if self.size + total > self.store.shape[0]:
             self._collect()
             if self.size + total > self.store.shape[0] // 2:
