@@ -90,6 +90,10 @@ def test_bad_options_and_constraints(graph, rec):
         reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"label": "swim"}}],)))
     with pytest.raises(InputError, match="ground positions"):
         reconstruct(graph, replace(rec, ground_position=None), Options(heading_from_track=True))
+    empty = replace(rec, timestamps_s=np.zeros(0), accelerations=np.zeros((0, 6, 3), np.float32),
+                    ground_position=None, heading=None)  # fmt: skip
+    with pytest.raises(InputError, match="zero samples"):
+        reconstruct(graph, empty, Options())
 
 
 def test_heading_from_track_replaces_the_heading(graph, rec):
