@@ -257,7 +257,7 @@ def search_tables(graph: MotionGraph) -> dict:
     return tables
 
 
-# Survivor store: rows of one (capacity, 4) int64 array — node, edge used to arrive,
+# Survivor store: rows of one (capacity, 4) int32 array — node, edge used to arrive,
 # parent row, sample. Rows are appended a block at a time in sample order, so a parent
 # always precedes its children and garbage collection is one backward sweep.
 NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
@@ -530,7 +530,7 @@ class ViterbiSearch:
         self.stamp = 0
         self.level_nodes = np.zeros(2 * N + 16, dtype=np.int32)
         self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
-        self.store = np.zeros((2 * N + 16, 4), dtype=np.int64)  # doubles when full
+        self.store = np.zeros((2 * N + 16, 4), dtype=np.int32)  # 16 bytes a row; doubles when full
         self.size = 0  # rows of the store in use (live or garbage)
         self.live_rows = 0  # rows alive after the last collection
         self.heads = np.full(N, -1, dtype=np.int64)
@@ -629,7 +629,7 @@ class ViterbiSearch:
         if self.size + total > self.store.shape[0]:
             self._collect()
             if self.size + total > self.store.shape[0] // 2:
-                bigger = np.zeros((2 * (self.size + total), 4), dtype=np.int64)
+                bigger = np.zeros((2 * (self.size + total), 4), dtype=np.int32)
                 bigger[: self.size] = self.store[: self.size]
                 self.store = bigger
         self.size = _append_block(self.block, self.used, self.t, self.heads, self.edge_src, self.store, self.size,
