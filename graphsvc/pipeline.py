@@ -426,11 +426,10 @@ class LiveSession:
             return []
         self._rot.append(rot)
         self._trans.append(trans)
-        all_nodes = self._node_at
         out = []
         for k in range(rot.shape[0]):
             f = first + k
-            node = all_nodes(f)
+            node = self._node_at(f)
             out.append(Frame(f, self.t0 + f / self.rate, node, self.graph.labels[int(self.graph.node_label[node])],
                              rot[k].astype(np.float32), trans[k].astype(np.float32)))  # fmt: skip
         return out

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphsvc.fileio import atomic_writer
+from graphsvc.sensors.plot import save_figure
 
 
 def _fmt(value, spec: str, scale: float = 1.0) -> str:
@@ -87,10 +87,4 @@ def plot_errors(path, rate_hz: float, per_frame: dict, pred_labels, true_labels,
     for a in axes:
         a.tick_params(labelsize=7)
         a.set_xlim(t[0], t[-1] if T > 1 else t[0] + 1.0 / rate_hz)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    # No software/date metadata: the same errors give the same PNG bytes.
-    with atomic_writer(path) as f:
-        fig.savefig(f, format="png", dpi=90, metadata={"Software": None})
-    plt.close(fig)
+    save_figure(fig, path, title)

@@ -40,8 +40,11 @@ class _Requirements:
         self.gamma = len(self.sets)
         self.rate_hz = float(rate_hz)
         compile_constraints(graph, self.sets, np.zeros(0))  # unknown labels fail now, not mid-stream
+        self._none = (np.zeros(0, np.int64), np.zeros(0, np.int64))
 
     def at(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        if not self.gamma:  # the common case, once per sample: no work
+            return self._none
         kinds, values = compile_constraints(self.graph, self.sets, np.array([t / self.rate_hz]))
         return kinds[:, 0], values[:, 0]
 

@@ -54,10 +54,17 @@ def plot_recording(rec: Recording, path, title: str = "", contacts: np.ndarray |
         ax.set_xlabel("x [m]", fontsize=8)
         ax.set_ylabel("ground track\nz [m]", fontsize=8)
         ax.tick_params(labelsize=7)
+    save_figure(fig, path, title)
+
+
+def save_figure(fig, path, title: str = "") -> None:
+    """Title, lay out and write a matplotlib figure as PNG, atomically, then close it.
+    No software/date metadata: the same data gives the same PNG bytes."""
+    import matplotlib.pyplot as plt
+
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    # Fixed metadata: the same recording gives the same PNG bytes.
     with atomic_writer(path) as f:
         fig.savefig(f, format="png", dpi=90, metadata={"Software": None})
     plt.close(fig)
