@@ -24,7 +24,7 @@ from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import Weights, compile_constraints, viterbi_search
+from graphsvc.search.viterbi import Weights, compile_constraints, needs_placement, viterbi_search
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.synthesis.path import synthesize_motion
@@ -246,7 +246,8 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
                  "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
     else:
         lag = int(round(options.latency_s * rate))
-        decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads)
+        decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
+                                  needs_placement(w, use_pos, use_head))  # fmt: skip
         synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
         node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
         synth_s = 0.0

@@ -7,9 +7,11 @@ with 720 samples (24 s at 30 Hz) in modes A (accelerometers), APO (+ position an
 heading) and APO+2constraints; a one-hour input (108,000 samples, mode APO); and the
 plain numpy full-lattice reference against the numba search on a smaller graph; the
 fixed-lag streaming decoder as a server runs it (serial kernels, per-push latency).
+With --graph, modes A and APO also run on that built graph ("built A", "built APO"),
+fed a noisy random walk through its own edge readings (tools/bench_service.py's).
 One JSON object per run. Each run is its own process, so peak RSS is its own.
 
-Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000]
+Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE]
 """
 
 from __future__ import annotations
@@ -68,11 +70,19 @@ def inputs(T: int, sensors: int, seed: int = 1):
     return acc, position, heading
 
 
-def run(mode: str, nodes: int, edges: int, samples: int) -> dict:
+def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> dict:
     from graphsvc.search.viterbi import Weights, viterbi_search
 
-    g = generated_graph(nodes, edges)
-    acc, position, heading = inputs(samples, 6)
+    if graph_path:
+        from bench_service import random_walk_readings
+        from graphsvc.graph.file import load_graph
+
+        g = load_graph(graph_path)
+        _, position, heading = inputs(samples, 6)
+        acc = random_walk_readings(graph_path, samples, seed=0)
+    else:
+        g = generated_graph(nodes, edges)
+        acc, position, heading = inputs(samples, 6)
     sets = []
     if mode == "A":
         weights, position, heading = Weights(1, 0, 0), None, None
@@ -150,6 +160,8 @@ RUNS = {
     "hour": lambda a: {**run("APO", 100_686, 317_600, a.hour_samples), "mode": "APO, long input"},
     "reference": lambda a: run_reference(7_577, 9_433, 720),
     "stream": lambda a: run_stream(100_686, 317_600, 720),
+    "built A": lambda a: {**run("A", 0, 0, 720, a.graph), "mode": "built A", "graph": a.graph},
+    "built APO": lambda a: {**run("APO", 0, 0, 720, a.graph), "mode": "built APO", "graph": a.graph},
 }
 
 
@@ -157,13 +169,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=sorted(RUNS))
     parser.add_argument("--hour-samples", type=int, default=108_000)
+    parser.add_argument("--graph", help="a built graph file for the 'built A' and 'built APO' runs")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(RUNS[args.child](args)), flush=True)
         return
-    for name in [args.only] if args.only else list(RUNS):
+    names = [args.only] if args.only else [n for n in RUNS if args.graph or not n.startswith("built")]
+    if any(n.startswith("built") for n in names) and not args.graph:
+        parser.error("the 'built' runs need --graph FILE")
+    for name in names:
         cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples)]
+        if args.graph:
+            cmd += ["--graph", args.graph]
         out = subprocess.run(cmd, capture_output=True, text=True)
         print(out.stdout.strip() if out.returncode == 0 else json.dumps({"run": name, "error": out.stderr[-400:]}), flush=True)
 

@@ -57,11 +57,14 @@ class FixedLagDecoder:
     rate → (nodes, arrival_edges) newly final; flush() → the rest."""
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
-                 allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True):  # fmt: skip
+                 allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
+                 placed: bool | None = None):  # fmt: skip
+        """placed: see ViterbiSearch (None: from the weights; a caller that knows no
+        position or heading will come passes False, which makes each step cheaper)."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
-        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads)
+        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed)
         self.emitted = 0  # frames emitted so far
         self.last_node = -1
         self.revisions = 0  # emitted frames not reached from the previous emitted frame

@@ -18,9 +18,16 @@ sweep keeps what the live paths still reach. The compression ratio reported is N
 the peak number of surviving lattice points. Once every survivor passes through one
 point, the prefix up to it is final (the converged-prefix commit of streaming decoders).
 
-Speed: the accelerometer cost is computed once per distinct edge reading (transition
-edges read what their destination reads, so many edges share one), as float32 in g;
-the per-node pass reads each incoming edge's source cost from one compact array.
+Speed (the step is bound by memory traffic; this machine's share of the L3 cache is a
+few MB, so what is read from scattered nodes is kept small):
+- C_A is computed once per distinct edge reading (transition edges read what their
+  destination reads, so many edges share one), as float32 in g, from a transposed
+  table; a batch search does 16 samples per pass over the table.
+- The placement is carried only when position or heading counts. The per-edge
+  position and heading terms read 32-byte float32 rows relative to the measurement.
+- Edges are visited in slot-major order (every node's first incoming edge, then every
+  second one, …), so choosing each node's best edge is a flat, branch-free loop.
+- The walk back through the block scans a byte map per row, 8 nodes at a time.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ import numpy as np
 
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
+from graphsvc.search._llvm import pick as _pick
 from graphsvc.sensors.accelerometer import GRAVITY
 
 REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
@@ -60,18 +68,58 @@ def _wrap(a):
 TIE = 1e-9
 
 
-def _reading_costs_py(readings, meas, mask, scale, out):
-    """C_A (K eq. 4, g²) of every distinct edge reading: readings (R, 3S) float32 in g,
-    meas (3S,) float32 in g with missing sensors zeroed and `mask` 0 there (1
-    elsewhere), scale = 1 / sensors present. One sequential pass: the bulk of the
-    arithmetic, kept apart from the scattered per-node reads."""
-    R, D = readings.shape
-    for r in numba.prange(R):
-        acc = np.float32(0.0)
+def _reading_costs_py(readings_t, meas, mask, scale, out):
+    """C_A (K eq. 4, g²) of every distinct edge reading: readings_t (3S, R) float32 in
+    g, transposed so the inner loop runs along readings (SIMD); meas (3S,) float32 in
+    g; mask (3S,) 0 on the axes of missing sensors (skipped), 1 elsewhere; scale = 1 /
+    sensors present. A chunk of running sums stays in L1 across the axes; the pass is
+    bound by reading the table (10 MB for 144k readings of 6 sensors)."""
+    D, R = readings_t.shape
+    chunk = 1024
+    for c in numba.prange((R + chunk - 1) // chunk):
+        r0 = c * chunk
+        n = min(R, r0 + chunk) - r0
+        sums = np.zeros(chunk, np.float32)
         for j in range(D):
-            d = readings[r, j] - meas[j]
-            acc += mask[j] * d * d
-        out[r] = acc * scale
+            if mask[j] == 0.0:
+                continue
+            m = meas[j]
+            row = readings_t[j, r0:r0 + n]
+            for i in range(n):
+                d = row[i] - m
+                sums[i] += d * d
+        for i in range(n):
+            out[r0 + i] = sums[i] * scale
+
+
+def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
+    """`_reading_costs` for B samples at once: meas, mask (B, 3S); scale (B,); out (B,
+    R). Each chunk of the table is read once for all B samples, so a batch search is
+    bound by arithmetic, not by reading the table once per sample. Same arithmetic, so
+    the same values, as the per-sample kernel."""
+    D, R = readings_t.shape
+    B = meas.shape[0]
+    chunk = 1024
+    for c in numba.prange((R + chunk - 1) // chunk):
+        r0 = c * chunk
+        n = min(R, r0 + chunk) - r0
+        sums = np.zeros((B, chunk), np.float32)
+        for j in range(D):
+            row = readings_t[j, r0:r0 + n]
+            for b in range(B):
+                if mask[b, j] == 0.0:
+                    continue
+                m = meas[b, j]
+                for i in range(n):
+                    d = row[i] - m
+                    sums[b, i] += d * d
+        for b in range(B):
+            for i in range(n):
+                out[b, r0 + i] = sums[b, i] * scale[b]
+
+
+_reading_costs_batch = numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)(_reading_costs_batch_py)
+_reading_costs_batch_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_reading_costs_batch_py)
 
 
 # Each kernel twice: threaded for one search using the whole machine (batch), serial
@@ -80,126 +128,178 @@ _reading_costs = numba.njit(cache=True, nogil=True, parallel=True, fastmath=True
 _reading_costs_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_reading_costs_py)
 
 
-# Per-node path state. The cost is its own array — the one value read for every
-# incoming edge, from a scattered source node, so it should stay in cache; the
-# placement (ground x, z in m, heading in rad and its cos, sin) is read per edge only
-# when position or heading is measured; the detour count only on near-ties.
-X, Z, HEADING, COS, SIN, DET = 0, 1, 2, 3, 4, 5
-PLACE_WIDTH = 8  # padded: one 64-byte row, one cache line per scattered read
+# Per-node path state, one array per field: the cost (float64, read for every incoming
+# edge from a scattered source node), the detour count (int32, read on near-ties and
+# when advancing), the broken-constraint counts (int32, γ per node) and — only when
+# position or heading is measured — the placement: ground x, z in m, heading in rad
+# and its cos, sin (float64 rows, read once per node when advancing; unpadded 40-byte
+# rows beat 64-byte aligned ones, 2.3–2.8 ms against 3.0–4.5 ms on the G_E benchmark:
+# the smaller footprint matters more than alignment on this machine).
+X, Z, HEADING, COS, SIN = 0, 1, 2, 3, 4
+PLACE_WIDTH = 5
+
+# The per-edge position and heading terms read the source's placement relative to
+# this sample's measurement, as float32 in one 32-byte row with the cost:
+# [x − mx, z − mz, cos h, sin h, wrap(h − mh), −, cost as float64]. Scattered reads of
+# 64-byte float64 rows fell off this machine's share of the L3 cache (3.7 ms against
+# 0.8 ms for 32-byte rows over 317,600 edges); the relative float32 values keep
+# ~1e-7 relative precision where it matters, near the measurement.
+RX, RZ, RC, RS, RH = 0, 1, 2, 3, 4
+REL_COST = 3  # float64 slot of the row viewed as (N, 4) float64
+_PI32 = np.float32(np.pi)
+_TWO_PI32 = np.float32(2.0 * np.pi)
+_INV_TWO_PI32 = np.float32(0.5 / np.pi)
 
 
-# One step is three passes, each branch-light so the scattered reads of one edge or
-# node overlap with the next (a single loop doing all three stalled on every read):
-# edge totals, then each node's best incoming edge, then the chosen paths' state.
+# One step is a few passes, each branch-light so the scattered reads of one edge or
+# node overlap with the next (a per-node loop fusing the edge totals and the choice
+# took 3.3 ms against 2.4 ms for the two passes, on the G_E benchmark): the relative
+# rows (when placed), edge totals, each node's best incoming edge, the chosen paths'
+# new state.
 
 
-def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, meas_pos, meas_heading,
-                    w_acc, w_pos, w_head, cost_prev, place_prev, total):  # fmt: skip
-    """total (E,): the cost of each path extended by each edge, cost_prev[src] + L(e, t)
-    (inf from a dead source). reading_cost (R,) C_A per distinct reading; meas_pos (2,)
-    metres or NaN; meas_heading radians or NaN."""
+def _relative_py(place, cost, meas_pos, meas_heading, rel, rel64):
+    """The per-edge pass's source rows (see RX…REL_COST) for this sample's
+    measurement: one sequential pass over the placement. meas_pos (2,) m, zeros when
+    not measured; meas_heading rad, 0 when not measured."""
+    N = cost.shape[0]
+    for n in numba.prange(N):
+        rel64[n, REL_COST] = cost[n]
+        rel[n, RX] = np.float32(place[n, X] - meas_pos[0])
+        rel[n, RZ] = np.float32(place[n, Z] - meas_pos[1])
+        rel[n, RC] = np.float32(place[n, COS])
+        rel[n, RS] = np.float32(place[n, SIN])
+        rel[n, RH] = np.float32(_wrap(place[n, HEADING] - meas_heading))
+
+
+def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, w_acc, w_pos, w_head, use_pos,
+                    use_head, cost, rel, rel64, total):  # fmt: skip
+    """total (E,): the cost of each path extended by each edge, cost[src] + L(e, t)
+    (inf from a dead source). reading_cost (R,) C_A per distinct reading; use_pos /
+    use_head: whether this sample's position / heading term counts (then rel, rel64
+    hold `_relative`'s rows)."""
     E = edge_src.shape[0]
-    use_pos = np.isfinite(meas_pos[0]) and np.isfinite(meas_pos[1]) and w_pos != 0.0
-    use_head = np.isfinite(meas_heading) and w_head != 0.0
     if not (use_pos or use_head):
         for e in numba.prange(E):
-            total[e] = cost_prev[edge_src[e]] + w_acc * reading_cost[edge_reading[e]]
+            total[e] = cost[edge_src[e]] + w_acc * reading_cost[edge_reading[e]]
         return
     for e in numba.prange(E):
         m = edge_src[e]
-        t = cost_prev[m] + w_acc * reading_cost[edge_reading[e]]
+        t = rel64[m, REL_COST] + w_acc * reading_cost[edge_reading[e]]
         if use_pos:
             ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-            c, s = place_prev[m, COS], place_prev[m, SIN]
-            dx = place_prev[m, X] + c * ox + s * oz - meas_pos[0]
-            dz = place_prev[m, Z] - s * ox + c * oz - meas_pos[1]
+            c, s = rel[m, RC], rel[m, RS]
+            dx = rel[m, RX] + c * ox + s * oz
+            dz = rel[m, RZ] - s * ox + c * oz
             t += w_pos * np.sqrt(dx * dx + dz * dz)
         if use_head:
-            t += w_head * abs(_wrap(place_prev[m, HEADING] + edge_heading[e] - meas_heading))
+            a = rel[m, RH] + edge_heading[e]
+            t += w_head * abs(a - _TWO_PI32 * np.floor((a + _PI32) * _INV_TWO_PI32))
         total[e] = t
 
 
-def _select_py(incoming, edge_src, edge_kind, total, allowed, place_prev, rank_prev, cost_new, best_edge):
-    """Each node's best incoming edge (−1: none alive, or the node is masked): fewest
-    broken constraints (rank, lexicographic), then lowest total (within TIE counts as
-    equal), then fewer non-original edges so far (det, read only on a near-tie), then
-    the plainer edge kind."""
-    N = incoming.shape[0] - 1
+def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
+               rank_prev, best_slot, cost_new, best_edge):  # fmt: skip
+    """Each node's best incoming edge (graph edge id, −1: none alive, or the node is
+    masked) and its path's cost: fewest broken constraints (rank, lexicographic), then
+    lowest total (within TIE counts as equal), then fewer non-original edges so far
+    (det, read only on a near-tie), then the plainer edge kind.
+
+    Edges come in slot-major order within chunks of nodes (see `search_tables`): slot
+    j holds every node's j-th incoming edge, so a node's candidates are met in their
+    graph order, one per pass, and a pass is a flat loop over independent nodes — no
+    per-node loop whose varying length the branch predictor keeps missing. total (E+1,)
+    in that order, total[E] = inf; best_slot (N,) scratch, E for nodes without
+    incoming edges."""
+    E = total.shape[0] - 1
     gamma = rank_prev.shape[1]
-    for n in numba.prange(N):
-        best = -1
-        best_cost = np.inf
-        best_det = -1.0
-        if allowed[n]:
-            for e in range(incoming[n], incoming[n + 1]):
-                t = total[e]
-                if t == np.inf:
-                    continue
-                if best < 0:
-                    best, best_cost, best_det = e, t, -1.0
-                    continue
-                m, mb = edge_src[e], edge_src[best]
-                decided = False
-                better = False
-                for k in range(gamma):
-                    if rank_prev[m, k] != rank_prev[mb, k]:
-                        better = rank_prev[m, k] < rank_prev[mb, k]
-                        decided = True
-                        break
-                det = -1.0
-                if not decided:
-                    if t < best_cost - TIE:
-                        better = True
-                    elif t > best_cost + TIE:
-                        better = False
-                    else:
-                        det = place_prev[m, DET] + (1.0 if edge_kind[e] != 0 else 0.0)
-                        if best_det < 0.0:
-                            best_det = place_prev[mb, DET] + (1.0 if edge_kind[best] != 0 else 0.0)
-                        if det != best_det:
-                            better = det < best_det
+    for c in numba.prange(chunk_nodes.shape[0] - 1):
+        for j in range(chunk_slots.shape[1] - 1):
+            first = j == 0
+            for i in range(chunk_slots[c, j], chunk_slots[c, j + 1]):
+                n = slot_dst[i]
+                t = total[i]
+                b = E if first else best_slot[n]
+                cb = total[b]
+                if gamma == 0:
+                    # Branch-free but for the rare near-tie: the comparison's outcome is
+                    # random, and a mispredicted branch per edge cost more than the pass.
+                    better = t < cb - TIE
+                    if abs(t - cb) <= TIE:  # near-tie: fewer detours, then plainer edge
+                        better = _tie_better(i, b, slot_src, slot_kind, det_prev)
+                else:
+                    better = False
+                    if t != np.inf:
+                        if b == E:
+                            better = True
                         else:
-                            better = edge_kind[e] < edge_kind[best]
-                if better:
-                    best, best_cost, best_det = e, t, det
-        best_edge[n] = best
-        cost_new[n] = best_cost
+                            m, mb = slot_src[i], slot_src[b]
+                            decided = False
+                            for k in range(gamma):
+                                if rank_prev[m, k] != rank_prev[mb, k]:
+                                    better = rank_prev[m, k] < rank_prev[mb, k]
+                                    decided = True
+                                    break
+                            if not decided:
+                                better = t < cb - TIE
+                                if abs(t - cb) <= TIE:
+                                    better = _tie_better(i, b, slot_src, slot_kind, det_prev)
+                best_slot[n] = _pick(better & allowed[n], np.int64(i), b)
+        for n in range(chunk_nodes[c], chunk_nodes[c + 1]):
+            b = best_slot[n]
+            best_edge[n] = -1 if b == E else slot_edge[b]
+            cost_new[n] = total[b]
 
 
-def _advance_py(best_edge, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, place_prev, rank_prev,
-                place_new, rank_new):  # fmt: skip
+@numba.njit(inline="always")
+def _tie_better(i, b, slot_src, slot_kind, det_prev):
+    """Between two paths of equal cost (within TIE): fewer non-original edges, then
+    the plainer edge kind."""
+    det = det_prev[slot_src[i]] + (1 if slot_kind[i] != 0 else 0)
+    best_det = det_prev[slot_src[b]] + (1 if slot_kind[b] != 0 else 0)
+    if det != best_det:
+        return det < best_det
+    return slot_kind[i] < slot_kind[b]
+
+
+def _advance_py(best_edge, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, place_prev, det_prev,
+                rank_prev, place_new, det_new, rank_new, parents):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
-    placement (cos/sin carried by rotation, no trigonometry), detour count, broken
-    constraints. (Per-term costs are summed along the final path afterwards.)"""
+    predecessor (parents, −1 dead), detour count, broken constraints and, when placed,
+    the placement (cos/sin carried by rotation, no trigonometry). (Per-term costs are
+    summed along the final path afterwards.)"""
     N = best_edge.shape[0]
     gamma = rank_prev.shape[1]
     for n in numba.prange(N):
         e = best_edge[n]
         if e < 0:
+            parents[n] = -1
             continue
         m = edge_src[e]
-        ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-        c, s = place_prev[m, COS], place_prev[m, SIN]
-        tc, ts = edge_turn[e, 0], edge_turn[e, 1]
-        place_new[n, X] = place_prev[m, X] + c * ox + s * oz
-        place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
-        place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[e]
-        place_new[n, COS] = c * tc - s * ts
-        place_new[n, SIN] = s * tc + c * ts
-        place_new[n, DET] = place_prev[m, DET] + (1.0 if edge_kind[e] != 0 else 0.0)
+        parents[n] = m
+        det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
+        if placed:
+            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
+            c, s = place_prev[m, COS], place_prev[m, SIN]
+            tc, ts = edge_turn[e, 0], edge_turn[e, 1]
+            place_new[n, X] = place_prev[m, X] + c * ox + s * oz
+            place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
+            place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[e]
+            place_new[n, COS] = c * tc - s * ts
+            place_new[n, SIN] = s * tc + c * ts
 
 
 @numba.njit(cache=True, nogil=True)
-def _path_terms(edges, readings, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
+def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
                 meas_heading, use_pos, use_head, x, z, h, c, s):  # fmt: skip
     """Accumulated acc (g²), position (m) and heading (rad) costs along one path, with
     the search's arithmetic. edges (T−1,); meas/mask (T, 3S) float32 as the search's
     measurement vectors; present (T,) sensors present; meas_pos (T, 2), meas_heading
     (T,); use_* whether each term counted; x, z, h, c, s the start placement."""
     out = np.zeros(3)
-    D = readings.shape[1]
+    D = readings_t.shape[0]
     for k in range(edges.shape[0]):
         t = k + 1
         e = edges[k]
@@ -207,7 +307,7 @@ def _path_terms(edges, readings, edge_reading, edge_offset, edge_heading, edge_t
             r = edge_reading[e]
             acc = np.float32(0.0)
             for j in range(D):
-                d = readings[r, j] - meas[t, j]
+                d = readings_t[j, r] - meas[t, j]
                 acc += mask[t, j] * d * d
             out[0] += acc * np.float32(1.0 / present[t])
         ox, oz = edge_offset[e, 0], edge_offset[e, 1]
@@ -226,6 +326,7 @@ def _compile(fn, parallel: bool):
     return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)
 
 
+_relative, _relative_serial = _compile(_relative_py, True), _compile(_relative_py, False)
 _edge_totals, _edge_totals_serial = _compile(_edge_totals_py, True), _compile(_edge_totals_py, False)
 _select, _select_serial = _compile(_select_py, True), _compile(_select_py, False)
 _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, False)
@@ -233,18 +334,23 @@ _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, F
 
 def search_tables(graph: MotionGraph) -> dict:
     """The graph's arrays in the search's layout, made once per graph and cached on
-    it: distinct edge readings (R, 3S) float32 in g and each edge's reading (E,) int32
-    (transition edges read what their destination reads in its own clip, so many
-    edges share one), compact edge arrays."""
+    it: distinct edge readings, transposed (3S, R) float32 in g, numbered in order of
+    first use by an edge so the per-edge pass reads their costs almost sequentially,
+    and each edge's reading (E,) int32 (transition edges read what their destination
+    reads in its own clip, so many edges share one); compact edge arrays."""
     cached = getattr(graph, "_search_tables", None)
     if cached is not None:
         return cached
     E = graph.num_edges
     flat = np.ascontiguousarray(graph.edge_acc, dtype=np.float32).reshape(E, -1)
-    readings, edge_reading = np.unique(flat, axis=0, return_inverse=True)
+    readings, first_edge, edge_reading = np.unique(flat, axis=0, return_index=True, return_inverse=True)
+    by_first_use = np.argsort(first_edge, kind="stable")
+    renumber = np.empty_like(by_first_use)
+    renumber[by_first_use] = np.arange(len(by_first_use))
+    in_g = (readings[by_first_use].astype(np.float64) / GRAVITY).astype(np.float32)
     tables = {
-        "readings": np.ascontiguousarray((readings.astype(np.float64) / GRAVITY).astype(np.float32)),
-        "edge_reading": edge_reading.reshape(-1).astype(np.int32),
+        "readings_t": np.ascontiguousarray(in_g.T),
+        "edge_reading": renumber[edge_reading.reshape(-1)].astype(np.int32),
         "incoming": np.ascontiguousarray(graph.incoming, dtype=np.int64),
         "edge_src": np.ascontiguousarray(graph.edge_src, dtype=np.int32),
         "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
@@ -253,8 +359,42 @@ def search_tables(graph: MotionGraph) -> dict:
         "edge_turn": np.ascontiguousarray(np.stack([np.cos(graph.edge_heading.astype(np.float64)),
                                                     np.sin(graph.edge_heading.astype(np.float64))], axis=-1)),
     }
+    tables.update(_slot_tables(graph, tables, edge_reading=tables["edge_reading"]))
     graph._search_tables = tables
     return tables
+
+
+# Nodes are split into this many chunks (contiguous ranges) for the slot-major select;
+# fixed, so results never depend on the thread count.
+SELECT_CHUNKS = 16
+
+
+def _slot_tables(graph: MotionGraph, tables: dict, edge_reading: np.ndarray) -> dict:
+    """The per-edge arrays the edge and select passes read, permuted into slot-major
+    order within chunks of nodes: chunk c's edges, first every node's first incoming
+    edge (ascending node), then every second one, … chunk_nodes (C+1,) node bounds;
+    chunk_slots (C, D+1) where chunk c's slot j lies; slot_edge (E,) graph edge id."""
+    N, E = graph.num_nodes, graph.num_edges
+    incoming = tables["incoming"]
+    dst = np.repeat(np.arange(N, dtype=np.int64), np.diff(incoming))
+    slot = np.arange(E, dtype=np.int64) - incoming[dst]
+    D = int(slot.max()) + 1 if E else 1
+    chunk_nodes = np.linspace(0, N, SELECT_CHUNKS + 1).astype(np.int64)
+    chunk = np.searchsorted(chunk_nodes, dst, side="right") - 1
+    key = chunk * (D + 1) + slot
+    order = np.lexsort((dst, key))
+    chunk_slots = np.searchsorted(key[order], (np.arange(SELECT_CHUNKS)[:, None] * (D + 1) + np.arange(D + 1)))
+    return {
+        "chunk_nodes": chunk_nodes,
+        "chunk_slots": np.ascontiguousarray(chunk_slots, dtype=np.int64),
+        "slot_edge": order.astype(np.int32),
+        "slot_dst": dst[order].astype(np.int32),
+        "slot_src": tables["edge_src"][order],
+        "slot_kind": tables["edge_kind"][order],
+        "slot_reading": edge_reading[order],
+        "slot_offset": np.ascontiguousarray(tables["edge_offset"][order]),
+        "slot_heading": tables["edge_heading"][order],
+    }
 
 
 # Survivor store: rows of one (capacity, 4) int32 array — node, edge used to arrive,
@@ -264,57 +404,54 @@ NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
 
 
 @numba.njit(cache=True, nogil=True)
-def _block_levels(block, used, edge_src, mark, stamp, level_nodes, level_start):
+def _block_levels(parents, used, alive, alive_words, level_nodes, level_start):
     """Walk back from every node alive at the block's last row, one row at a time:
-    level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes row k's
-    surviving paths pass through. block (B, N) int32 best incoming edges (−1 dead).
-    Returns (total, stamp, converged_row): converged_row is the highest row where a
-    single node remains (−1 if none); total = −1 when level_nodes is too small (the
-    caller grows it and asks again)."""
-    N = block.shape[1]
-    # Fill from the top row down, at the end of level_nodes, then shift into place.
+    level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
+    that row k's surviving paths pass through. parents (B, N) int32: each node's
+    predecessor on its best path (−1 dead); alive (2, N rounded up to 8) uint8 scratch,
+    zero on entry and on return, alive_words the same memory as uint64. A row is one
+    sequential scan of a byte map, 8 nodes at a time where none is alive, and of the
+    parents row; the scattered writes land in N bytes, which stay in cache. Returns
+    (total, converged_row): converged_row is the highest row where a single node
+    remains (−1 if none); total = −1 when level_nodes is too small (the caller grows it
+    and asks again)."""
+    N = parents.shape[1]
+    for n in range(N):
+        alive[0, n] = parents[used - 1, n] >= 0
     end = level_nodes.shape[0]
     pos = end
-    top_count = 0
-    for n in range(N - 1, -1, -1):
-        if block[used - 1, n] >= 0:
-            pos -= 1
-            level_nodes[pos] = n
-            top_count += 1  # level_nodes holds at least N: the top row always fits
     counts = np.zeros(used, np.int64)
-    counts[used - 1] = top_count
-    hi = end
-    lo = pos
-    for k in range(used - 1, 0, -1):
-        stamp += 1
+    cur = 0
+    for k in range(used - 1, -1, -1):
         start = pos
-        for i in range(lo, hi):
-            m = edge_src[block[k, level_nodes[i]]]
-            if mark[m] != stamp:
-                mark[m] = stamp
-                if pos == 0:
-                    return -1, stamp, -1
-                pos -= 1
-                level_nodes[pos] = m
-        counts[k - 1] = start - pos
-        hi = start
-        lo = pos
+        for w in range(alive_words.shape[1] - 1, -1, -1):  # descending, filled downwards: rows end up ascending
+            if alive_words[cur, w] == 0:
+                continue
+            for n in range(min(N, 8 * w + 8) - 1, 8 * w - 1, -1):
+                if alive[cur, n]:
+                    if pos == 0:
+                        alive[:, :] = 0
+                        return -1, -1
+                    pos -= 1
+                    level_nodes[pos] = n
+                    if k > 0:
+                        alive[1 - cur, parents[k, n]] = 1
+            alive_words[cur, w] = 0
+        counts[k] = start - pos
+        cur = 1 - cur
     total = end - pos
-    # Rows in ascending order: row 0's nodes sit lowest already; record the offsets.
     level_nodes[:total] = level_nodes[pos:end].copy()
     level_start[0] = 0
+    converged_row = -1
     for k in range(used):
         level_start[k + 1] = level_start[k] + counts[k]
-    converged_row = -1
-    for k in range(used - 1, -1, -1):
         if counts[k] == 1:
             converged_row = k
-            break
-    return total, stamp, converged_row
+    return total, converged_row
 
 
 @numba.njit(cache=True, nogil=True)
-def _append_block(block, used, t_top, heads, edge_src, store, size, level_nodes, level_start, row_of):
+def _append_block(block, parents, used, t_top, heads, store, size, level_nodes, level_start, row_of):
     """Append the block's surviving lattice points (see `_block_levels`) to the store in
     sample order; heads (N,): each node's row at the sample before the block on entry,
     at the block's last sample on return (−1: not alive). row_of (N,) scratch.
@@ -323,12 +460,10 @@ def _append_block(block, used, t_top, heads, edge_src, store, size, level_nodes,
     for k in range(used):
         for i in range(level_start[k], level_start[k + 1]):
             n = level_nodes[i]
-            e = block[k, n]
-            m = edge_src[e]
-            parent = heads[m] if k == 0 else row_of[m]
+            m = parents[k, n]
             store[size, NODE] = n
-            store[size, EDGE] = e
-            store[size, PARENT] = parent
+            store[size, EDGE] = block[k, n]
+            store[size, PARENT] = heads[m] if k == 0 else row_of[m]
             store[size, TIME] = t0 + k
             size += 1
         # row_of now refers to row k (read by row k+1); a node appears once per row.
@@ -351,7 +486,7 @@ def _collect(store, size, heads):
     for i in range(size - 1, -1, -1):
         if keep[i] and store[i, PARENT] >= 0:
             keep[store[i, PARENT]] = True
-    new_row = np.empty(size, np.int64)
+    new_row = np.empty(size, np.int32)  # store rows are int32 throughout
     j = 0
     for i in range(size):
         if keep[i]:
@@ -477,15 +612,20 @@ class ViterbiSearch:
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
-                 threads: bool = True):  # fmt: skip
+                 threads: bool = True, placed: bool | None = None):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
-        searches in parallel, e.g. a server's streams)."""
+        searches in parallel, e.g. a server's streams). placed: carry each path's
+        ground placement (needed for position and heading costs); default: when the
+        position or heading weight is non-zero. Without it, position and heading
+        measurements are ignored and a step skips the placement passes."""
         self.graph = graph
-        self._kernels = ((_reading_costs, _edge_totals, _select, _advance) if threads else
-                         (_reading_costs_serial, _edge_totals_serial, _select_serial, _advance_serial))  # fmt: skip
+        self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance) if threads else
+                         (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial,
+                          _advance_serial))  # fmt: skip
         self.weights = weights
+        self.placed = bool(weights.position != 0 or weights.heading != 0) if placed is None else bool(placed)
         N = graph.num_nodes
         self.N = N
         self.gamma = gamma
@@ -496,20 +636,26 @@ class ViterbiSearch:
         self.edge_offset = tables["edge_offset"]
         self.edge_heading = tables["edge_heading"]
         self.edge_turn = tables["edge_turn"]
-        self.readings = tables["readings"]
+        self.readings_t = tables["readings_t"]
         self.edge_reading = tables["edge_reading"]
+        self.slots = tuple(tables[k] for k in ("chunk_nodes", "chunk_slots", "slot_dst", "slot_src", "slot_kind",
+                                               "slot_edge", "slot_reading", "slot_offset", "slot_heading"))
         c = graph.node_contacts
         self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
+        P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
         self.cost = np.zeros(N)
-        self.place = np.zeros((N, PLACE_WIDTH))
-        self.rank = np.zeros((N, gamma), dtype=np.int64)
-        self._scratch = (np.zeros(N), np.zeros((N, PLACE_WIDTH)), np.zeros((N, gamma), np.int64))
-        self.best_edge = np.zeros(N, dtype=np.int32)
-        self.total = np.zeros(graph.num_edges)
-        self.reading_cost = np.zeros(self.readings.shape[0], dtype=np.float32)
-        self._meas = np.zeros(self.readings.shape[1], dtype=np.float32)
-        self._mask = np.ones(self.readings.shape[1], dtype=np.float32)
+        self.det = np.zeros(N, dtype=np.int32)
+        self.rank = np.zeros((N, gamma), dtype=np.int32)
+        self.place = np.zeros((P, PLACE_WIDTH))
+        self._scratch = (np.zeros(N), np.zeros(N, np.int32), np.zeros((N, gamma), np.int32), np.zeros((P, PLACE_WIDTH)))
+        self.rel = np.zeros((P, 8), dtype=np.float32)
+        self.rel64 = self.rel.view(np.float64)
+        self.total = np.full(graph.num_edges + 1, np.inf)  # slot order; total[E] = inf (no candidate)
+        self.best_slot = np.full(N, graph.num_edges, dtype=np.int64)
+        self.reading_cost = np.zeros(self.readings_t.shape[1], dtype=np.float32)
+        self._meas = np.zeros(self.readings_t.shape[0], dtype=np.float32)
+        self._mask = np.ones(self.readings_t.shape[0], dtype=np.float32)
         self.ok = np.ones((gamma, N), dtype=bool)
         if allowed is None:
             self.allowed = np.ones(N, dtype=bool)
@@ -522,12 +668,14 @@ class ViterbiSearch:
         self.converged_t = -1  # every sample ≤ this one has a single surviving entry
         # Back-pointers of the last BLOCK samples as a dense (BLOCK, N) lattice, written
         # sequentially each step; every BLOCK samples its surviving points move into the
-        # reference-counted tree (K §5.1's periodic trace-back from all live nodes).
+        # survivor store (K §5.1's periodic trace-back from all live nodes).
+        # Each row holds the best incoming edge and the predecessor of every node (the
+        # predecessor, written by the advance pass, spares the walk a scattered read).
         self.block = np.full((self.BLOCK, N), -1, dtype=np.int32)
+        self.parents = np.full((self.BLOCK, N), -1, dtype=np.int32)
         self.used = 0  # rows of the block filled since the last compaction
-        self.mark = np.zeros(N, dtype=np.int64)
+        self.alive_map = np.zeros((2, 8 * ((N + 7) // 8)), dtype=np.uint8)
         self.row_of = np.zeros(N, dtype=np.int64)
-        self.stamp = 0
         self.level_nodes = np.zeros(2 * N + 16, dtype=np.int32)
         self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
         self.store = np.zeros((2 * N + 16, 4), dtype=np.int32)  # 16 bytes a row; doubles when full
@@ -552,7 +700,7 @@ class ViterbiSearch:
         self.place[:, X], self.place[:, Z] = p
         self.place[:, HEADING], self.place[:, COS], self.place[:, SIN] = h, np.cos(h), np.sin(h)
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
-        self.place[:, DET] = 0.0
+        self.det[:] = 0
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
@@ -569,40 +717,69 @@ class ViterbiSearch:
         self.converged_t = 0 if len(live) == 1 else -1
         self.peak_entries = self.size
 
-    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None):
-        """Advance by one sample."""
+    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
+        """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
+        when a batch caller computed it ahead (else it is computed here)."""
         if self.used == self.BLOCK:
             self.compact()
         self.t += 1
-        cost, place, rank = self._scratch
-        best_edge = self.best_edge
-        meas_pos = np.full(2, np.nan) if position is None else np.asarray(position, dtype=np.float64)
-        meas_head = np.nan if heading is None else float(heading)
+        cost, det, rank, place = self._scratch
+        best_edge, parents = self.block[self.used], self.parents[self.used]
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
-        # Computed even at W_A = 0: the report carries each path's accelerometer cost.
-        self._set_measurement(acc)
-        present = float(self._mask.sum()) / 3.0
-        reading_costs, edge_totals, select, advance = self._kernels
-        if present:
-            reading_costs(self.readings, self._meas, self._mask, np.float32(1.0 / present), self.reading_cost)
-        else:
-            self.reading_cost[:] = 0.0
         wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
-        edge_totals(self.edge_src, self.edge_reading, self.edge_offset, self.edge_heading, self.reading_cost, meas_pos,
-                    meas_head, wa, wp, wh, self.cost, self.place, self.total)
-        select(self.incoming, self.edge_src, self.edge_kind, self.total, self.allowed, self.place, self.rank, cost,
-               best_edge)  # fmt: skip
+        use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
+        use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
+        reading_costs, relative, edge_totals, select, advance = self._kernels
+        if reading_cost is None:
+            # Computed even at W_A = 0: the report carries each path's accelerometer cost.
+            self._set_measurement(acc)
+            present = float(self._mask.sum()) / 3.0
+            if present:
+                reading_costs(self.readings_t, self._meas, self._mask, np.float32(1.0 / present), self.reading_cost)
+            else:
+                self.reading_cost[:] = 0.0
+            reading_cost = self.reading_cost
+        if use_pos or use_head:
+            meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
+            relative(self.place, self.cost, meas_pos, float(heading) if use_head else 0.0, self.rel, self.rel64)
+        chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, slot_heading = \
+            self.slots
+        edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
+                    self.cost, self.rel, self.rel64, self.total)  # fmt: skip
+        select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed, self.det,
+               self.rank, self.best_slot, cost, best_edge)  # fmt: skip
         advance(best_edge, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.ok,
-                self.place, self.rank, place, rank)  # fmt: skip
+                self.placed, self.place, self.det, self.rank, place, det, rank, parents)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
-        self.block[self.used] = best_edge
         self.used += 1
         # Swap buffers: the new state becomes the previous one.
-        self._scratch = (self.cost, self.place, self.rank)
-        self.cost, self.place, self.rank = cost, place, rank
+        self._scratch = (self.cost, self.det, self.rank, self.place)
+        self.cost, self.det, self.rank, self.place = cost, det, rank, place
+
+    def measurements(self, acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accelerations (B, S, 3) m/s² → the kernels' measurement vectors and masks
+        (B, 3S) float32 (see `_set_measurement`) and the sensors present (B,)."""
+        B = len(acc)
+        meas = np.zeros((B, self.readings_t.shape[0]), np.float32)
+        mask = np.zeros_like(meas)
+        for b in range(B):
+            self._set_measurement(acc[b])
+            meas[b], mask[b] = self._meas, self._mask
+        return meas, mask, mask.sum(axis=1) / 3.0
+
+    def reading_costs(self, acc) -> np.ndarray:
+        """C_A (B, R) float32 in g² of every distinct edge reading for B samples of
+        accelerations (B, S, 3) m/s² at once (see `_reading_costs_batch_py`)."""
+        meas, mask, present = self.measurements(acc)
+        B = len(acc)
+        scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
+        out = np.empty((B, self.readings_t.shape[1]), np.float32)
+        kernel = _reading_costs_batch if self._kernels[0] is _reading_costs else _reading_costs_batch_serial
+        kernel(self.readings_t, meas, mask, scale, out)
+        return out
 
     def _set_measurement(self, acc) -> None:
         """Measured accelerations (S, 3) m/s² → the kernel's (3S,) g vector and mask:
@@ -621,18 +798,20 @@ class ViterbiSearch:
         if self.used == 0:
             return
         while True:  # grown on demand: the worst case (nothing merges) is used × N
-            total, self.stamp, converged_row = _block_levels(self.block, self.used, self.edge_src, self.mark,
-                                                             self.stamp, self.level_nodes, self.level_start)  # fmt: skip
+            total, converged_row = _block_levels(self.parents, self.used, self.alive_map,
+                                                 self.alive_map.view(np.uint64), self.level_nodes,
+                                                 self.level_start)  # fmt: skip
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
         if self.size + total > self.store.shape[0]:
             self._collect()
             if self.size + total > self.store.shape[0] // 2:
-                bigger = np.zeros((2 * (self.size + total), 4), dtype=np.int32)
+                # np.empty: rows past `size` are always written before they are read
+                bigger = np.empty((2 * (self.size + total), 4), dtype=np.int32)
                 bigger[: self.size] = self.store[: self.size]
                 self.store = bigger
-        self.size = _append_block(self.block, self.used, self.t, self.heads, self.edge_src, self.store, self.size,
+        self.size = _append_block(self.block, self.parents, self.used, self.t, self.heads, self.store, self.size,
                                   self.level_nodes, self.level_start, self.row_of)  # fmt: skip
         t_first = self.t - self.used + 1
         self.used = 0
@@ -654,10 +833,17 @@ class ViterbiSearch:
     def best_node(self) -> int:
         """The live node whose path ranks first: fewest broken constraints, then cost
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
-        alive = np.nonzero(self.alive)[0]
-        cost = np.round(self.cost[alive] / TIE) if np.all(np.abs(self.cost[alive]) < 1e6) else self.cost[alive]
-        keys = [alive, self.place[alive, DET], cost] + [self.rank[alive, k] for k in range(self.gamma - 1, -1, -1)]
-        return int(alive[np.lexsort(keys)[0]])
+        # Narrowed key by key (a live decoder asks once per sample; a full lexsort of
+        # 100k nodes cost more than the search step).
+        candidates = np.nonzero(self.alive)[0]
+        for k in range(self.gamma):
+            ranks = self.rank[candidates, k]
+            candidates = candidates[ranks == ranks.min()]
+        cost = self.cost[candidates]
+        key = np.round(cost / TIE) if np.all(np.abs(cost) < 1e6) else cost
+        candidates = candidates[key == key.min()]
+        det = self.det[candidates]
+        return int(candidates[det == det.min()][0])
 
     def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
@@ -678,21 +864,29 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
     """The accelerometer (g²), position (m) and heading (rad) costs accumulated along a
     path found by `search` (unweighted; a term counts where the search used it)."""
     T = nodes.shape[0]
-    meas = np.zeros((T, search.readings.shape[1]), np.float32)
-    mask = np.zeros_like(meas)
-    for t in range(T):
-        search._set_measurement(acc[t])
-        meas[t], mask[t] = search._meas, search._mask
-    present = mask.sum(axis=1) / 3.0
+    meas, mask, present = search.measurements(acc[:T])
     pos = np.full((T, 2), np.nan) if position is None else np.asarray(position, dtype=np.float64)
     head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
     p0 = pos[0] if np.all(np.isfinite(pos[0])) else np.zeros(2)
     h0 = float(head[0]) if np.isfinite(head[0]) else 0.0
     w = search.weights
-    out = _path_terms(edges.astype(np.int64), search.readings, search.edge_reading, search.edge_offset,
+    out = _path_terms(edges.astype(np.int64), search.readings_t, search.edge_reading, search.edge_offset,
                       search.edge_heading, search.edge_turn, meas, mask, present, pos, head, w.position != 0,
                       w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0))  # fmt: skip
     return {"acc_g2": float(out[0]), "position_m": float(out[1]), "heading_rad": float(out[2])}
+
+
+def needs_placement(weights: Weights, position=None, heading=None) -> bool:
+    """Whether some sample's position (T, 2) or heading (T,) term will count, so the
+    search must carry each path's placement (see ViterbiSearch's `placed`)."""
+    pos = position is not None and weights.position != 0 and bool(np.isfinite(position).all(axis=-1).any())
+    head = heading is not None and weights.heading != 0 and bool(np.isfinite(heading).any())
+    return pos or head
+
+
+# A batch search computes C_A for this many samples in one pass over the readings
+# table (bound by memory traffic when done one sample at a time).
+READING_BATCH = 16
 
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
@@ -702,7 +896,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
     node mask or None; threads: see ViterbiSearch; should_stop: a callable polled
-    every 32 samples — when it returns true the search raises SearchCancelled (a
+    every READING_BATCH (16) samples — when it returns true the search raises SearchCancelled (a
     server stops work for a client that went away)."""
     acc = np.asarray(acc)
     T = acc.shape[0]
@@ -714,14 +908,16 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
-    search = ViterbiSearch(graph, weights, gamma, allowed, threads)
+    search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading))
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
-    for t in range(1, T):
-        if should_stop is not None and t % 32 == 0 and should_stop():
-            raise SearchCancelled(f"search stopped at sample {t} of {T}")
-        search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t])
+    for t0 in range(1, T, READING_BATCH):
+        if should_stop is not None and should_stop():
+            raise SearchCancelled(f"search stopped at sample {t0} of {T}")
+        costs = search.reading_costs(acc[t0:t0 + READING_BATCH])
+        for t in range(t0, min(T, t0 + READING_BATCH)):
+            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], costs[t - t0])
     search.compact()
     best = search.best_node()
     nodes, edges = search.trace(best)

@@ -11,7 +11,7 @@ from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph, incoming_offsets
 from graphsvc.motion.skeleton import Skeleton
 from graphsvc.search.reference import reference_viterbi
-from graphsvc.search.viterbi import Weights, viterbi_search
+from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
 
 
 def tiny_graph(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None):
@@ -171,3 +171,51 @@ def test_noise_free_input_decodes_to_its_own_clip():
             r = viterbi_search(g, rec.accelerations, rec.ground_position, rec.heading, weights=w)
             np.testing.assert_array_equal(r.node_path, first + np.arange(rec.num_samples), err_msg=kb[c].name)
             assert r.terms["acc_g2"] < 1e-9
+
+
+def test_batch_reading_costs_equal_the_per_sample_kernel():
+    # The batch search computes C_A for 16 samples per pass over the readings table,
+    # a live search one sample at a time: the values must be identical, bit for bit,
+    # missing sensors included (else a stream and a batch run could pick different paths).
+    rng = np.random.default_rng(5)
+    g = random_graph(rng, N=300, out=4, S=3)
+    acc = rng.normal(0, 9.81, (16, 3, 3))
+    acc[rng.random((16, 3)) < 0.3] = np.nan
+    acc[4] = np.nan  # no sensor at all: C_A is 0
+    for threads in (True, False):
+        s = ViterbiSearch(g, Weights(1, 0, 0), threads=threads)
+        batch = s.reading_costs(acc)
+        for t in range(16):
+            s._set_measurement(acc[t])
+            present = s._mask.sum() / 3.0
+            expected = np.zeros_like(s.reading_cost)
+            if present:
+                s._kernels[0](s.readings_t, s._meas, s._mask, np.float32(1.0 / present), expected)
+            np.testing.assert_array_equal(batch[t], expected)
+    # …and against a direct float64 computation, to float32 precision.
+    r_g = s.readings_t.T.astype(np.float64)
+    m = (acc[0].astype(np.float32).astype(np.float64) / 9.81).astype(np.float32).reshape(-1)
+    valid = np.repeat(np.isfinite(acc[0]).all(axis=1), 3)
+    direct = np.sum((r_g[:, valid] - m[valid]) ** 2, axis=1) / (valid.sum() / 3)
+    np.testing.assert_allclose(batch[0], direct, rtol=1e-5)
+
+
+def test_search_without_placement_ignores_position_like_zero_weights():
+    # At W_P = W_O = 0 the placement is not carried; the path and cost equal those of a
+    # search that carries it (placed=True) and multiplies it by zero.
+    rng = np.random.default_rng(8)
+    g = random_graph(rng)
+    T = 60
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    runs = []
+    for placed in (False, True):
+        s = ViterbiSearch(g, Weights(1, 0, 0), placed=placed)
+        assert s.place.shape[0] == (g.num_nodes if placed else 1)
+        s.start(position[0], heading[0])
+        for t in range(1, T):
+            s.step(meas[t], position[t], heading[t])
+        runs.append((s.trace(s.best_node())[0], s.cost.copy()))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
