@@ -94,9 +94,9 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
 
 def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
     """`_reading_costs` for B samples at once: meas, mask (B, 3S); scale (B,); out (B,
-    R). Each chunk of the table is read once for all B samples, so a batch search is
-    bound by arithmetic, not by reading the table once per sample. Same arithmetic, so
-    the same values, as the per-sample kernel."""
+    R). Each chunk of the table is read once for all B samples instead of once per
+    sample. Same arithmetic in the same order, so the same values, bit for bit, as the
+    per-sample kernel (tested)."""
     D, R = readings_t.shape
     B = meas.shape[0]
     chunk = 1024
@@ -359,7 +359,7 @@ def search_tables(graph: MotionGraph) -> dict:
         "edge_turn": np.ascontiguousarray(np.stack([np.cos(graph.edge_heading.astype(np.float64)),
                                                     np.sin(graph.edge_heading.astype(np.float64))], axis=-1)),
     }
-    tables.update(_slot_tables(graph, tables, edge_reading=tables["edge_reading"]))
+    tables.update(_slot_tables(graph, tables))
     graph._search_tables = tables
     return tables
 
@@ -369,7 +369,7 @@ def search_tables(graph: MotionGraph) -> dict:
 SELECT_CHUNKS = 16
 
 
-def _slot_tables(graph: MotionGraph, tables: dict, edge_reading: np.ndarray) -> dict:
+def _slot_tables(graph: MotionGraph, tables: dict) -> dict:
     """The per-edge arrays the edge and select passes read, permuted into slot-major
     order within chunks of nodes: chunk c's edges, first every node's first incoming
     edge (ascending node), then every second one, … chunk_nodes (C+1,) node bounds;
@@ -391,7 +391,7 @@ def _slot_tables(graph: MotionGraph, tables: dict, edge_reading: np.ndarray) -> 
         "slot_dst": dst[order].astype(np.int32),
         "slot_src": tables["edge_src"][order],
         "slot_kind": tables["edge_kind"][order],
-        "slot_reading": edge_reading[order],
+        "slot_reading": tables["edge_reading"][order],
         "slot_offset": np.ascontiguousarray(tables["edge_offset"][order]),
         "slot_heading": tables["edge_heading"][order],
     }
