@@ -1,4 +1,4 @@
-"""Two LLVM instructions numba does not expose, for the search's hot loops."""
+"""An LLVM instruction numba does not expose, for the search's hot loops."""
 
 from __future__ import annotations
 
