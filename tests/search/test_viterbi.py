@@ -219,3 +219,24 @@ def test_search_without_placement_ignores_position_like_zero_weights():
         runs.append((s.trace(s.best_node())[0], s.cost.copy()))
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
+
+
+def test_distinct_rows_groups_bit_identical_rows_in_order_of_first_use():
+    from graphsvc.search.viterbi import distinct_rows
+
+    rng = np.random.default_rng(3)
+    pool = rng.normal(0, 1, (7, 4)).astype(np.float32)
+    pool[5] = pool[4]
+    pool[5, 0] = -0.0 if pool[4, 0] == 0.0 else pool[4, 0]
+    pool[6] = 0.0
+    rows = pool[rng.integers(0, 7, 300)]
+    rows[::7, 1] = -0.0  # -0.0 and 0.0 differ bit for bit, so they are different readings
+    rows[::11, 1] = 0.0
+    # Independent grouping: a dictionary of byte strings, numbered as first seen.
+    seen: dict[bytes, int] = {}
+    expected_label = np.array([seen.setdefault(r.tobytes(), len(seen)) for r in rows])
+    expected_first = np.array([int(np.nonzero(expected_label == k)[0][0]) for k in range(len(seen))])
+    for hashes in (None, np.zeros(len(rows), np.uint64)):  # the real hash, then every row colliding
+        first, label = distinct_rows(rows, hashes)
+        np.testing.assert_array_equal(label, expected_label)
+        np.testing.assert_array_equal(first, expected_first)
