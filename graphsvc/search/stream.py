@@ -99,6 +99,8 @@ class FixedLagDecoder:
             self.revisions += 1
         self.emitted += count
         self.last_node = int(nodes[-1])
+        # Emitted frames are never traced again: their survivors can go.
+        self.search.forget_before(self.emitted)
         return nodes, edges
 
 

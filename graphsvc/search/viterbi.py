@@ -495,15 +495,16 @@ def _append_block(block, parents, used, t_top, heads, store, size, level_nodes, 
 
 
 @numba.njit(cache=True, nogil=True)
-def _collect(store, size, heads):
-    """Keep only rows some live head reaches; renumber parents and heads. Returns
-    (new size, kept rows per sample is left to the caller)."""
+def _collect(store, size, heads, keep_from):
+    """Keep only rows some live head reaches, from sample keep_from on (earlier ones
+    are forgotten: a kept row whose parent is forgotten gets parent −1); renumber
+    parents and heads. Returns the new size."""
     keep = np.zeros(size, np.bool_)
     for n in range(heads.shape[0]):
-        if heads[n] >= 0:
+        if heads[n] >= 0 and store[heads[n], TIME] >= keep_from:
             keep[heads[n]] = True
     for i in range(size - 1, -1, -1):
-        if keep[i] and store[i, PARENT] >= 0:
+        if keep[i] and store[i, PARENT] >= 0 and store[store[i, PARENT], TIME] >= keep_from:
             keep[store[i, PARENT]] = True
     new_row = np.empty(size, np.int32)  # store rows are int32 throughout
     j = 0
@@ -513,12 +514,12 @@ def _collect(store, size, heads):
             p = store[i, PARENT]
             store[j, NODE] = store[i, NODE]
             store[j, EDGE] = store[i, EDGE]
-            store[j, PARENT] = new_row[p] if p >= 0 else -1
+            store[j, PARENT] = new_row[p] if p >= 0 and keep[p] else -1
             store[j, TIME] = store[i, TIME]
             j += 1
     for n in range(heads.shape[0]):
         if heads[n] >= 0:
-            heads[n] = new_row[heads[n]]
+            heads[n] = new_row[heads[n]] if keep[heads[n]] else -1
     return j
 
 
@@ -684,7 +685,8 @@ class ViterbiSearch:
                 raise InputError(f"node mask must have {N} entries, got {self.allowed.shape}")
             if not self.allowed.any():
                 raise InputError("the node mask leaves no node to search")
-        self.converged_t = -1  # every sample ≤ this one has a single surviving entry
+        self.converged_t = -1  # every sample ≤ this one has a single surviving entry (or was forgotten)
+        self.keep_from = 0  # samples before this one are forgotten (see forget_before)
         # Back-pointers of the last BLOCK samples as a dense (BLOCK, N) lattice, written
         # sequentially each step; every BLOCK samples its surviving points move into the
         # survivor store (K §5.1's periodic trace-back from all live nodes).
@@ -838,12 +840,20 @@ class ViterbiSearch:
         if converged_row >= 0:  # one node left at that row: everything up to it is agreed
             self.converged_t = max(self.converged_t, t_first + converged_row)
 
+    def forget_before(self, t: int) -> None:
+        """Let the next garbage collection drop survivors of samples before t: a
+        streaming decoder that has emitted them never traces back past them, and on
+        graphs whose paths rarely merge they are over a third of the store. Traces must
+        then start at t or later; such samples count as agreed (converged_t)."""
+        self.keep_from = max(self.keep_from, min(int(t), self.t))
+
     def _collect(self) -> None:
-        self.size = _collect(self.store, self.size, self.heads)
+        self.size = _collect(self.store, self.size, self.heads, self.keep_from)
         self.live_rows = self.size
         self.peak_entries = max(self.peak_entries, self.size)
         if self.converged_t < self.t:
-            self.converged_t = _converged_until(self.store, self.size, self.converged_t + 1, self.t)
+            t_from = max(self.converged_t + 1, self.keep_from)
+            self.converged_t = max(self.converged_t, _converged_until(self.store, self.size, t_from, self.t))
 
     @property
     def alive(self) -> np.ndarray:
@@ -868,8 +878,9 @@ class ViterbiSearch:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
         the edge each was entered by (−1 at sample 0). Walks back only to `since`, so
         a fixed-lag trace costs the lag, not the input length."""
-        if not 0 <= since <= self.t:
-            raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}")
+        if not self.keep_from <= since <= self.t:
+            raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}"
+                             f" and has forgotten samples before {self.keep_from}")  # fmt: skip
         return _trace(self.block, self.used, self.t, self.heads, self.edge_src, self.store, int(node), int(since))
 
     def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -104,3 +104,31 @@ def test_trace_walks_the_block_and_the_store_alike():
     np.testing.assert_array_equal(g.edge_src[edges[1:]], nodes[:-1])
     with pytest.raises(InputError):
         s.trace_arrivals(best, since=len(meas))
+
+
+def test_fixed_lag_decoder_forgets_emitted_survivors():
+    # After emitting frames the decoder lets the search drop their survivors: the store
+    # then holds nothing older than the next frame to emit, tracing before it is refused,
+    # and the output is that of a decoder which keeps everything.
+    g, meas, position, heading = _problem(4, T=200)
+    w = Weights(0.5, 1, 1)
+    forgetful = FixedLagDecoder(g, w, lag=5)
+    keeper = FixedLagDecoder(g, w, lag=5)
+    keeper.search.forget_before = lambda t: None  # keeps every survivor
+    out_f, out_k = [], []
+    for t in range(len(meas)):
+        out_f.append(forgetful.push(meas[t], position[t], heading[t])[0])
+        out_k.append(keeper.push(meas[t], position[t], heading[t])[0])
+    out_f.append(forgetful.flush()[0])
+    out_k.append(keeper.flush()[0])
+    np.testing.assert_array_equal(np.concatenate(out_f), np.concatenate(out_k))
+    s, k = forgetful.search, keeper.search
+    assert s.keep_from == len(meas) - 1  # everything emitted
+    s._collect()  # a sweep now keeps no survivor older than the cutoff
+    k._collect()
+    assert s.size == 0 or s.store[: s.size, 3].min() >= s.keep_from  # (the newest samples sit in the block)
+    assert k.store[: k.size, 3].min() == 0 and k.size > s.size
+    nodes, _ = s.trace_arrivals(s.best_node(), since=s.keep_from)
+    np.testing.assert_array_equal(nodes, k.trace_arrivals(k.best_node(), since=s.keep_from)[0])
+    with pytest.raises(InputError, match="forgotten"):
+        s.trace_arrivals(s.best_node(), since=0)
