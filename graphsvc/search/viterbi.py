@@ -650,7 +650,6 @@ class ViterbiSearch:
         self.N = N
         self.gamma = gamma
         tables = search_tables(graph)
-        self.incoming = tables["incoming"]
         self.edge_src = tables["edge_src"]
         self.edge_kind = tables["edge_kind"]
         self.edge_offset = tables["edge_offset"]
