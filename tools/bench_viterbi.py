@@ -6,7 +6,8 @@ chains of original edges plus random transitions, random 6-sensor metadata), sea
 with 720 samples (24 s at 30 Hz) in modes A (accelerometers), APO (+ position and
 heading) and APO+2constraints; a one-hour input (108,000 samples, mode APO); and the
 plain numpy full-lattice reference against the numba search on a smaller graph; the
-fixed-lag streaming decoder as a server runs it (serial kernels, per-push latency).
+fixed-lag streaming decoder as a server runs it (serial kernels, per-push latency), and
+with numba threads (one stream using both cores).
 With --graph, modes A and APO also run on that built graph ("built A", "built APO"),
 fed a noisy random walk through its own edge readings (tools/bench_service.py's).
 One JSON object per run. Each run is its own process, so peak RSS is its own.
@@ -125,26 +126,28 @@ def run_reference(nodes: int, edges: int, samples: int) -> dict:
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
 
 
-def run_stream(nodes: int, edges: int, samples: int) -> dict:
+def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> dict:
     """The fixed-lag decoder (1 s lag, APO) as a live server runs it: serial kernels,
-    one push per sample; per-push latency percentiles."""
+    one push per sample; per-push latency percentiles. threads: numba threads per step
+    instead (one stream with the whole machine)."""
     from graphsvc.search.stream import FixedLagDecoder
     from graphsvc.search.viterbi import Weights
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
     w = Weights(0.5, 1, 1)
-    warm = FixedLagDecoder(g, w, lag=30, threads=False)
+    warm = FixedLagDecoder(g, w, lag=30, threads=threads)
     for t in range(40):
         warm.push(acc[t], position[t], heading[t])
-    decoder = FixedLagDecoder(g, w, lag=30, threads=False)
+    decoder = FixedLagDecoder(g, w, lag=30, threads=threads)
     times = np.empty(samples)
     for t in range(samples):
         t0 = time.perf_counter()
         decoder.push(acc[t], position[t], heading[t])
         times[t] = time.perf_counter() - t0
     decoder.flush()
-    return {"mode": "stream APO, fixed lag 1 s, serial", "nodes": g.num_nodes, "edges": g.num_edges,
+    kernels = "threads" if threads else "serial"
+    return {"mode": f"stream APO, fixed lag 1 s, {kernels}", "nodes": g.num_nodes, "edges": g.num_edges,
             "samples": samples, "seconds": round(float(times.sum()), 3),
             "ms_per_sample": round(1000 * float(times.mean()), 3),
             "p50_ms": round(1000 * float(np.percentile(times, 50)), 3),
@@ -160,6 +163,7 @@ RUNS = {
     "hour": lambda a: {**run("APO", 100_686, 317_600, a.hour_samples), "mode": "APO, long input"},
     "reference": lambda a: run_reference(7_577, 9_433, 720),
     "stream": lambda a: run_stream(100_686, 317_600, 720),
+    "stream threads": lambda a: run_stream(100_686, 317_600, 720, threads=True),
     "built A": lambda a: {**run("A", 0, 0, 720, a.graph), "mode": "built A", "graph": a.graph},
     "built APO": lambda a: {**run("APO", 0, 0, 720, a.graph), "mode": "built APO", "graph": a.graph},
 }
