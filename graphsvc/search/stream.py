@@ -56,15 +56,26 @@ class FixedLagDecoder:
     push(acc (S, 3) m/s², position (2,) m or None, heading rad or None) at the graph
     rate → (nodes, arrival_edges) newly final; flush() → the rest."""
 
+    # Longest lag (samples) served by the dense window: (lag + 33) × N × 8 bytes — 210 MB
+    # on a 268k-node graph at 64 — against a survivor store that, on graphs whose paths
+    # rarely merge, outgrows that and costs more time per sample to keep.
+    DENSE_MAX_LAG = 64
+
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
-                 placed: bool | None = None):  # fmt: skip
+                 placed: bool | None = None, store: bool | None = None):  # fmt: skip
         """placed: see ViterbiSearch (None: from the weights; a caller that knows no
-        position or heading will come passes False, which makes each step cheaper)."""
+        position or heading will come passes False, which makes each step cheaper).
+        store: keep survivors in ViterbiSearch's survivor store (True) or only the last
+        lag + 1 samples' back-pointers, dense (False: its `window` mode); None: the
+        window for lags up to DENSE_MAX_LAG samples, the store beyond."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
-        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed)
+        if store is None:
+            store = self.lag > self.DENSE_MAX_LAG
+        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
+                                    window=None if store else self.lag + 1)  # fmt: skip
         self.emitted = 0  # frames emitted so far
         self.last_node = -1
         self.revisions = 0  # emitted frames not reached from the previous emitted frame

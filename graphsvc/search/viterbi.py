@@ -470,6 +470,34 @@ def _block_levels(parents, used, alive, alive_words, level_nodes, level_start):
 
 
 @numba.njit(cache=True, nogil=True)
+def _converged_row(parents, used, lowest, alive, alive_words):
+    """`_block_levels` without the lists, for the dense-window mode: the highest row
+    in [lowest, used) where the paths of every node alive at the last row pass through
+    a single node, or −1. Stops there (every older row then holds one node too)."""
+    N = parents.shape[1]
+    for n in range(N):
+        alive[0, n] = parents[used - 1, n] >= 0
+    cur = 0
+    for k in range(used - 1, lowest - 1, -1):
+        count = 0
+        for w in range(alive_words.shape[1]):
+            if alive_words[cur, w] == 0:
+                continue
+            for n in range(8 * w, min(N, 8 * w + 8)):
+                if alive[cur, n]:
+                    count += 1
+                    if k > lowest:
+                        alive[1 - cur, parents[k, n]] = 1
+            alive_words[cur, w] = 0
+        cur = 1 - cur
+        if count == 1:
+            alive[cur, :] = 0
+            return k
+    alive[cur, :] = 0
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
 def _append_block(block, parents, used, t_top, heads, store, size, level_nodes, level_start, row_of):
     """Append the block's surviving lattice points (see `_block_levels`) to the store in
     sample order; heads (N,): each node's row at the sample before the block on entry,
@@ -632,14 +660,19 @@ class ViterbiSearch:
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
-                 threads: bool = True, placed: bool | None = None):  # fmt: skip
+                 threads: bool = True, placed: bool | None = None, window: int | None = None):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
         searches in parallel, e.g. a server's streams). placed: carry each path's
         ground placement (needed for position and heading costs); default: when the
         position or heading weight is non-zero. Without it, position and heading
-        measurements are ignored and a step skips the placement passes."""
+        measurements are ignored and a step skips the placement passes. window: keep
+        only the back-pointers of the last `window` samples or more, dense, and no
+        survivor store — for a fixed-lag decoder, which never traces back further
+        (traces must start inside the window). It saves the store's appends and sweeps,
+        which dominate on graphs whose paths rarely merge, for (window + 32) × N × 8
+        bytes. None: the survivor store, any trace."""
         self.graph = graph
         self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance) if threads else
                          (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial,
@@ -691,8 +724,10 @@ class ViterbiSearch:
         # survivor store (K §5.1's periodic trace-back from all live nodes).
         # Each row holds the best incoming edge and the predecessor of every node (the
         # predecessor, written by the advance pass, spares the walk a scattered read).
-        self.block = np.full((self.BLOCK, N), -1, dtype=np.int32)
-        self.parents = np.full((self.BLOCK, N), -1, dtype=np.int32)
+        self.window = None if window is None else max(int(window), 1)
+        rows = self.BLOCK if window is None else self.window + self.BLOCK
+        self.block = np.full((rows, N), -1, dtype=np.int32)
+        self.parents = np.full((rows, N), -1, dtype=np.int32)
         self.used = 0  # rows of the block filled since the last compaction
         self.alive_map = np.zeros((2, 8 * ((N + 7) // 8)), dtype=np.uint8)
         self.row_of = np.zeros(N, dtype=np.int64)
@@ -735,13 +770,13 @@ class ViterbiSearch:
         self.live_rows = self.size
         self.used = 0
         self.converged_t = 0 if len(live) == 1 else -1
-        self.peak_entries = self.size
+        self.peak_entries = self.size if self.window is None else self.block.size
 
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
         when a batch caller computed it ahead (else it is computed here)."""
-        if self.used == self.BLOCK:
-            self.compact()
+        if self.used == self.block.shape[0]:
+            self.compact() if self.window is None else self._slide()
         self.t += 1
         cost, det, rank, place = self._scratch
         best_edge, parents = self.block[self.used], self.parents[self.used]
@@ -814,8 +849,9 @@ class ViterbiSearch:
 
     def compact(self) -> None:
         """Move the block's surviving lattice points into the store (K §5.1's trace-back
-        from all live nodes); collect the store's garbage when it has doubled."""
-        if self.used == 0:
+        from all live nodes); collect the store's garbage when it has doubled. Nothing
+        to do in dense-window mode."""
+        if self.used == 0 or self.window is not None:
             return
         while True:  # grown on demand: the worst case (nothing merges) is used × N
             total, converged_row = _block_levels(self.parents, self.used, self.alive_map,
@@ -838,6 +874,21 @@ class ViterbiSearch:
         self.peak_entries = max(self.peak_entries, self.live_rows + total)
         if converged_row >= 0:  # one node left at that row: everything up to it is agreed
             self.converged_t = max(self.converged_t, t_first + converged_row)
+
+    def _slide(self) -> None:
+        """Dense-window mode, block full: note whether the live paths have come to agree
+        on a sample not yet forgotten (the converged-prefix commit), then drop the
+        oldest BLOCK rows."""
+        t_first = self.t - self.used + 1  # the sample of row 0
+        lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
+        if lowest < self.used:
+            row = _converged_row(self.parents, self.used, lowest, self.alive_map, self.alive_map.view(np.uint64))
+            if row >= 0:
+                self.converged_t = max(self.converged_t, t_first + row)
+        keep = self.used - self.BLOCK
+        self.block[:keep] = self.block[self.BLOCK:self.used]
+        self.parents[:keep] = self.parents[self.BLOCK:self.used]
+        self.used = keep
 
     def forget_before(self, t: int) -> None:
         """Let the next garbage collection drop survivors of samples before t: a
@@ -877,9 +928,12 @@ class ViterbiSearch:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
         the edge each was entered by (−1 at sample 0). Walks back only to `since`, so
         a fixed-lag trace costs the lag, not the input length."""
-        if not self.keep_from <= since <= self.t:
+        earliest = self.keep_from
+        if self.window is not None and self.used < self.t:  # the window has slid past sample 0
+            earliest = max(earliest, self.t - self.used + 1)
+        if not earliest <= since <= self.t:
             raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}"
-                             f" and has forgotten samples before {self.keep_from}")  # fmt: skip
+                             f" and has forgotten samples before {earliest}")  # fmt: skip
         return _trace(self.block, self.used, self.t, self.heads, self.edge_src, self.store, int(node), int(since))
 
     def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -112,8 +112,8 @@ def test_fixed_lag_decoder_forgets_emitted_survivors():
     # and the output is that of a decoder which keeps everything.
     g, meas, position, heading = _problem(4, T=200)
     w = Weights(0.5, 1, 1)
-    forgetful = FixedLagDecoder(g, w, lag=5)
-    keeper = FixedLagDecoder(g, w, lag=5)
+    forgetful = FixedLagDecoder(g, w, lag=5, store=True)
+    keeper = FixedLagDecoder(g, w, lag=5, store=True)
     keeper.search.forget_before = lambda t: None  # keeps every survivor
     out_f, out_k = [], []
     for t in range(len(meas)):
@@ -132,3 +132,30 @@ def test_fixed_lag_decoder_forgets_emitted_survivors():
     np.testing.assert_array_equal(nodes, k.trace_arrivals(k.best_node(), since=s.keep_from)[0])
     with pytest.raises(InputError, match="forgotten"):
         s.trace_arrivals(s.best_node(), since=0)
+
+
+@pytest.mark.parametrize("lag", [0, 3, 30, 64])
+def test_dense_window_decoder_equals_the_survivor_store_decoder(lag):
+    # Short lags keep only the last lag + 1 samples' back-pointers (no survivor store):
+    # the frames must be those of the store-backed decoder, each out by its lag. (Frames
+    # that all survivors agree on may come out earlier in either, at other moments: the
+    # two look for agreement at different times.)
+    g, meas, position, heading = _problem(12, T=260)  # the window slides several times
+    w = Weights(0.5, 1, 1)
+    dense = FixedLagDecoder(g, w, lag=lag)
+    stored = FixedLagDecoder(g, w, lag=lag, store=True)
+    assert dense.search.window == lag + 1 and stored.search.window is None
+    out = {"dense": [], "stored": []}
+    for t in range(len(meas)):
+        for name, decoder in (("dense", dense), ("stored", stored)):
+            out[name].extend(decoder.push(meas[t], position[t], heading[t])[0].tolist())
+            assert len(out[name]) >= t + 1 - lag
+    out["dense"].extend(dense.flush()[0].tolist())
+    out["stored"].extend(stored.flush()[0].tolist())
+    assert out["dense"] == out["stored"] and len(out["dense"]) == len(meas)
+    if lag >= 30:
+        assert dense.converged_frames > 0  # agreement is still found and committed early
+    s = dense.search
+    assert s.size == g.num_nodes  # only sample 0's rows: the store is never appended to
+    with pytest.raises(InputError, match="forgotten"):
+        s.trace_arrivals(s.best_node(), since=s.t - s.used)
