@@ -66,3 +66,13 @@ def data_dir() -> Path:
     if not DATA.is_dir():
         pytest.skip(f"../shared/data not found at {DATA} (set GRAPHSVC_DATA to run real-data tests)")
     return DATA
+
+
+def write_procedural_kb(folder: Path, seed: int, minutes: float) -> Path:
+    """A procedural knowledge base written as BVH files (centimetres) into `folder`."""
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.motion.procedural import generate_knowledge_base
+
+    for clip in generate_knowledge_base(seed=seed, minutes=minutes):
+        write_bvh(folder / f"{clip.name}.bvh", clip, scale=100.0)
+    return folder

@@ -9,7 +9,7 @@ import pytest
 
 from graphsvc.cli import main
 from graphsvc.motion.bvh import write_bvh
-from tests.conftest import still_motion
+from tests.conftest import still_motion, write_procedural_kb
 
 
 @pytest.fixture
@@ -105,12 +105,7 @@ def test_console_script_exit_code_and_no_traceback(tmp_path):
 @pytest.fixture(scope="module")
 def procedural_kb(tmp_path_factory):
     """Five procedural clips (stop, forehand, idle, overhead, backhand) as BVH files."""
-    from graphsvc.motion.procedural import generate_knowledge_base
-
-    folder = tmp_path_factory.mktemp("kb")
-    for m in generate_knowledge_base(seed=0, minutes=0.5):
-        write_bvh(folder / f"{m.name}.bvh", m, scale=100.0)
-    return folder
+    return write_procedural_kb(tmp_path_factory.mktemp("kb"), seed=0, minutes=0.5)
 
 
 def test_evaluate_writes_json_and_prints_a_table(tmp_path, procedural_kb, capsys):

@@ -814,22 +814,26 @@ class ViterbiSearch:
         self._scratch = (self.cost, self.det, self.rank, self.place)
         self.cost, self.det, self.rank, self.place = cost, det, rank, place
 
-    def measurements(self, acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Accelerations (B, S, 3) m/s² → the kernels' measurement vectors and masks
-        (B, 3S) float32 (see `_set_measurement`) and the sensors present (B,)."""
-        B = len(acc)
-        meas = np.zeros((B, self.readings_t.shape[0]), np.float32)
-        mask = np.zeros_like(meas)
-        for b in range(B):
-            self._set_measurement(acc[b])
-            meas[b], mask[b] = self._meas, self._mask
+    @staticmethod
+    def measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accelerations (B, S, 3) m/s² → the kernels' measurement vectors (B, 3S)
+        float32 in g, masks (B, 3S) float32 and the sensors present (B,): a sensor with
+        any NaN axis is left out (K eq. 4 averages over sensors present)."""
+        a = np.asarray(acc, dtype=np.float32)
+        a = a.reshape(len(a), -1, 3)
+        valid = np.isfinite(a).all(axis=-1)
+        # float32(m/s²) / g in float64, rounded once — exactly as the readings table.
+        g = (a.astype(np.float64) / GRAVITY).astype(np.float32)
+        meas = np.where(valid[..., None], g, np.float32(0.0)).reshape(len(a), -1)
+        mask = np.repeat(valid, 3, axis=1).astype(np.float32)
         return meas, mask, mask.sum(axis=1) / 3.0
 
-    def reading_costs(self, acc) -> np.ndarray:
+    def reading_costs(self, acc, measured=None) -> np.ndarray:
         """C_A (B, R) float32 in g² of every distinct edge reading for B samples of
-        accelerations (B, S, 3) m/s² at once (see `_reading_costs_batch_py`)."""
-        meas, mask, present = self.measurements(acc)
-        B = len(acc)
+        accelerations (B, S, 3) m/s² at once (see `_reading_costs_batch_py`);
+        measured: their `measurements`, when the caller has them already."""
+        meas, mask, present = self.measurements(acc) if measured is None else measured
+        B = len(meas)
         scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
         out = np.empty((B, self.readings_t.shape[1]), np.float32)
         kernel = _reading_costs_batch if self._kernels[0] is _reading_costs else _reading_costs_batch_serial
@@ -837,15 +841,10 @@ class ViterbiSearch:
         return out
 
     def _set_measurement(self, acc) -> None:
-        """Measured accelerations (S, 3) m/s² → the kernel's (3S,) g vector and mask:
-        a sensor with any NaN axis is left out (K eq. 4 averages over sensors present)."""
-        a = np.asarray(acc, dtype=np.float32).reshape(-1, 3)
-        valid = np.isfinite(a).all(axis=1)
-        # float32(m/s²) / g in float64, rounded once — exactly as the readings table.
-        g = (a.astype(np.float64) / GRAVITY).astype(np.float32)
-        self._meas[:] = np.where(valid[:, None], g, 0.0).reshape(-1)
-        self._mask[:] = np.repeat(valid, 3).astype(np.float32)
-
+        """One sample's accelerations (S, 3) m/s² → self._meas, self._mask (see
+        `measurements`)."""
+        meas, mask, _ = self.measurements(np.asarray(acc)[None])
+        self._meas[:], self._mask[:] = meas[0], mask[0]
 
     def compact(self) -> None:
         """Move the block's surviving lattice points into the store (K §5.1's trace-back
@@ -943,11 +942,13 @@ class ViterbiSearch:
         return nodes, edges[1:]
 
 
-def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc, position=None, heading=None) -> dict:
+def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc, position=None, heading=None,
+               measured=None) -> dict:  # fmt: skip
     """The accelerometer (g²), position (m) and heading (rad) costs accumulated along a
-    path found by `search` (unweighted; a term counts where the search used it)."""
+    path found by `search` (unweighted; a term counts where the search used it).
+    measured: `search.measurements(acc)`, when the caller has it already."""
     T = nodes.shape[0]
-    meas, mask, present = search.measurements(acc[:T])
+    meas, mask, present = search.measurements(acc[:T]) if measured is None else measured
     pos = np.full((T, 2), np.nan) if position is None else np.asarray(position, dtype=np.float64)
     head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
     p0 = pos[0] if np.all(np.isfinite(pos[0])) else np.zeros(2)
@@ -995,17 +996,19 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
+    measured = search.measurements(acc)  # once: the C_A batches and the path's terms share it
     for t0 in range(1, T, READING_BATCH):
         if should_stop is not None and should_stop():
             raise SearchCancelled(f"search stopped at sample {t0} of {T}")
-        costs = search.reading_costs(acc[t0:t0 + READING_BATCH])
+        block = slice(t0, t0 + READING_BATCH)
+        costs = search.reading_costs(acc[block], tuple(m[block] for m in measured))
         for t in range(t0, min(T, t0 + READING_BATCH)):
             search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], costs[t - t0])
     search.compact()
     best = search.best_node()
     nodes, edges = search.trace(best)
     N = graph.num_nodes
-    terms = path_terms(search, nodes, edges, acc, position, heading)
+    terms = path_terms(search, nodes, edges, acc, position, heading, measured)
     return SearchResult(
         node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
         broken=[int(v) for v in search.rank[best]],

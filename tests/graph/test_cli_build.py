@@ -5,16 +5,12 @@ import json
 import pytest
 
 from graphsvc.cli import main
-from graphsvc.motion.bvh import write_bvh
-from graphsvc.motion.procedural import generate_knowledge_base
+from tests.conftest import write_procedural_kb
 
 
 @pytest.fixture(scope="module")
 def kb_dir(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("kb")
-    for clip in generate_knowledge_base(seed=5, minutes=0.8):
-        write_bvh(folder / f"{clip.name}.bvh", clip, scale=100.0)
-    return folder
+    return write_procedural_kb(tmp_path_factory.mktemp("kb"), seed=5, minutes=0.8)
 
 
 def test_build_then_info(kb_dir, tmp_path, capsys):
