@@ -24,7 +24,7 @@ from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import Weights, compile_constraints, needs_placement, viterbi_search
+from graphsvc.search.viterbi import Weights, compile_constraints, needs_placement, viterbi_search, warm_up_search
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.synthesis.path import synthesize_motion
@@ -272,7 +272,7 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
         search_s = time.perf_counter() - t0 - synth_s
         s = decoder.search
         extra = {"lag_samples": lag, "revisions": decoder.revisions, "converged_early_frames": decoder.converged_frames,
-                 "compression": round(graph.num_nodes * T / max(s.peak_entries, 1), 2),
+                 "compression": round(s.compression, 2),
                  "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
     report = {
         "strategy": options.strategy,
@@ -480,7 +480,7 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     t0 = time.perf_counter()
     S = len(graph.sensor_names)
     rng = np.random.default_rng(0)
-    T = 48  # past one 32-sample block: the survivor store's code runs too
+    T = 48
     acc = rng.normal(0.0, 1.0, (T, S, 3))
     acc[:, :, 1] += 9.81
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
@@ -490,4 +490,5 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
         session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
     session.flush()
     viterbi_search(graph, acc, position, heading, Weights(0.5, 1, 1), threads=threads)
+    warm_up_search(graph, threads)
     return time.perf_counter() - t0

@@ -72,7 +72,7 @@ def inputs(T: int, sensors: int, seed: int = 1):
 
 
 def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> dict:
-    from graphsvc.search.viterbi import Weights, viterbi_search
+    from graphsvc.search.viterbi import Weights, viterbi_search, warm_up_search
 
     if graph_path:
         from bench_service import random_walk_readings
@@ -94,6 +94,7 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
                 [{"start_s": 4.0, "end_s": 12.0, "require": {"label": "b"}}]]  # fmt: skip
     viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
                    weights, sets)  # warm-up: numba compilation  # fmt: skip
+    warm_up_search(g, threads=True)  # (and the walk-back kernels, which a 3-sample search never reaches)
     t0 = time.perf_counter()
     r = viterbi_search(g, acc, position, heading, weights, sets)
     seconds = time.perf_counter() - t0
@@ -131,11 +132,12 @@ def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> d
     one push per sample; per-push latency percentiles. threads: numba threads per step
     instead (one stream with the whole machine)."""
     from graphsvc.search.stream import FixedLagDecoder
-    from graphsvc.search.viterbi import Weights
+    from graphsvc.search.viterbi import Weights, warm_up_search
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
     w = Weights(0.5, 1, 1)
+    warm_up_search(g, threads=threads)
     warm = FixedLagDecoder(g, w, lag=30, threads=threads)
     for t in range(40):
         warm.push(acc[t], position[t], heading[t])

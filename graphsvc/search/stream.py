@@ -56,10 +56,10 @@ class FixedLagDecoder:
     push(acc (S, 3) m/s², position (2,) m or None, heading rad or None) at the graph
     rate → (nodes, arrival_edges) newly final; flush() → the rest."""
 
-    # Longest lag (samples) served by the dense window: (lag + 33) × N × 8 bytes — 210 MB
-    # on a 268k-node graph at 64 — against a survivor store that, on graphs whose paths
-    # rarely merge, outgrows that and costs more time per sample to keep.
-    DENSE_MAX_LAG = 64
+    # Longest lag (samples) served by the dense window alone: (lag + 1 + BLOCK) × N
+    # bytes — 103 MB on a 268k-node graph at 256 (8.5 s at 30 Hz) — instead of the
+    # window plus a survivor store, which only pays for much longer lags.
+    DENSE_MAX_LAG = 256
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,

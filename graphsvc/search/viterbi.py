@@ -10,13 +10,16 @@ NaN measurements contribute nothing. With γ annotation constraint sets each pat
 carries γ counts of broken constraints, compared lexicographically before G (K eq. 8).
 
 Memory (K §5.1, after Abbasfar & Yao): instead of the N × T back-pointer lattice the
-search keeps the last 32 samples' back-pointers as a dense (32, N) block, written
-sequentially, and every 32 samples traces back from all live nodes through it,
-appending only the lattice points some live path passes through to a survivor store
-(rows in sample order, parent before child). When the store has doubled, one backward
-sweep keeps what the live paths still reach. The compression ratio reported is N·T over
-the peak number of surviving lattice points. Once every survivor passes through one
-point, the prefix up to it is final (the converged-prefix commit of streaming decoders).
+search keeps the newest samples' lattice rows dense — one byte a node: which of its
+incoming edges its best path arrived by — in a ring of BLOCK + STORE_WINDOW rows.
+When the ring is full it traces back from all live nodes through every row and
+appends only the oldest BLOCK rows' points that some live path passes through to a
+survivor store (rows in sample order, parent before child); by then they are
+STORE_WINDOW samples old and most paths have merged. When the store has doubled, one
+backward sweep keeps what the live paths still reach. The compression ratio reported
+is the full lattice's memory (N·T points of 4 bytes) over the peak memory held for it
+(dense rows plus store rows). Once every survivor passes through one point, the
+prefix up to it is final (the converged-prefix commit of streaming decoders).
 
 Speed (the step is bound by memory traffic; this machine's share of the L3 cache is a
 few MB, so what is read from scattered nodes is kept small):
@@ -27,7 +30,7 @@ few MB, so what is read from scattered nodes is kept small):
   position and heading terms read 32-byte float32 rows relative to the measurement.
 - Edges are visited in slot-major order (every node's first incoming edge, then every
   second one, …), so choosing each node's best edge is a flat, branch-free loop.
-- The walk back through the block scans a byte map per row, 8 nodes at a time.
+- The walk back through the dense rows scans a byte map per row, 8 nodes at a time.
 """
 
 from __future__ import annotations
@@ -262,21 +265,22 @@ def _tie_better(i, b, slot_src, slot_kind, det_prev):
     return slot_kind[i] < slot_kind[b]
 
 
-def _advance_py(best_edge, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, place_prev, det_prev,
-                rank_prev, place_new, det_new, rank_new, parents):  # fmt: skip
+def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, place_prev,
+                det_prev, rank_prev, place_new, det_new, rank_new, arrivals, none):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
-    predecessor (parents, −1 dead), detour count, broken constraints and, when placed,
-    the placement (cos/sin carried by rotation, no trigonometry). (Per-term costs are
-    summed along the final path afterwards.)"""
+    the arrival (which of the node's incoming edges, `none`: dead) into this sample's
+    lattice row, detour count, broken constraints and, when placed, the placement
+    (cos/sin carried by rotation, no trigonometry). (Per-term costs are summed along
+    the final path afterwards.)"""
     N = best_edge.shape[0]
     gamma = rank_prev.shape[1]
     for n in numba.prange(N):
         e = best_edge[n]
         if e < 0:
-            parents[n] = -1
+            arrivals[n] = none
             continue
+        arrivals[n] = e - incoming[n]
         m = edge_src[e]
-        parents[n] = m
         det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
@@ -349,6 +353,7 @@ def search_tables(graph: MotionGraph) -> dict:
         "readings_t": np.ascontiguousarray(in_g.T),
         "edge_reading": edge_reading,
         "incoming": np.ascontiguousarray(graph.incoming, dtype=np.int64),
+        "incoming32": np.ascontiguousarray(graph.incoming, dtype=np.int32),  # E < 2³¹ (edge ids are int32 here)
         "edge_src": np.ascontiguousarray(graph.edge_src, dtype=np.int32),
         "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
         "edge_offset": np.ascontiguousarray(graph.edge_offset, dtype=np.float32),
@@ -423,62 +428,74 @@ NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
 
 
 @numba.njit(cache=True, nogil=True)
-def _block_levels(parents, used, alive, alive_words, level_nodes, level_start):
-    """Walk back from every node alive at the block's last row, one row at a time:
-    level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
-    that row k's surviving paths pass through. parents (B, N) int32: each node's
-    predecessor on its best path (−1 dead); alive (2, N rounded up to 8) uint8 scratch,
-    zero on entry and on return, alive_words the same memory as uint64. A row is one
-    sequential scan of a byte map, 8 nodes at a time where none is alive, and of the
-    parents row; the scattered writes land in N bytes, which stay in cache. Returns
-    (total, converged_row): converged_row is the highest row where a single node
-    remains (−1 if none); total = −1 when level_nodes is too small (the caller grows it
-    and asks again)."""
-    N = parents.shape[1]
+def _block_levels(arrivals, first, used, flush, incoming, edge_src, none, alive, alive_words, level_nodes, level_start):
+    """Walk back from every node alive at the window's newest row, one row at a time,
+    to its oldest: level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes,
+    ascending, that logical row k's surviving paths pass through, listed for the
+    oldest `flush` rows (the newer ones are only walked through). arrivals (R, N) the
+    dense window, a ring: logical row k is physical row (first + k) % R, `used` rows
+    filled; each entry is which of the node's incoming edges its best path arrived by
+    (`none`: dead), so its predecessor is edge_src[incoming[n] + arrival] — read in
+    node order, as CSR edges are numbered by destination. alive (2, N rounded up to 8)
+    uint8 scratch, zero on entry and on return, alive_words the same memory as uint64.
+    A row is one sequential scan of a byte map, 8 nodes at a time where none is alive;
+    the scattered writes land in N bytes, which stay in cache. Returns (total,
+    converged_row): converged_row is the highest row where a single node remains (−1
+    if none); total = −1 when level_nodes is too small (the caller grows it and asks
+    again)."""
+    R, N = arrivals.shape
+    top = (first + used - 1) % R
     for n in range(N):
-        alive[0, n] = parents[used - 1, n] >= 0
+        alive[0, n] = arrivals[top, n] != none
     end = level_nodes.shape[0]
     pos = end
     counts = np.zeros(used, np.int64)
     cur = 0
     for k in range(used - 1, -1, -1):
-        start = pos
+        row = (first + k) % R
+        listed = k < flush
+        count = 0
         for w in range(alive_words.shape[1] - 1, -1, -1):  # descending, filled downwards: rows end up ascending
             if alive_words[cur, w] == 0:
                 continue
             for n in range(min(N, 8 * w + 8) - 1, 8 * w - 1, -1):
                 if alive[cur, n]:
-                    if pos == 0:
-                        alive[:, :] = 0
-                        return -1, -1
-                    pos -= 1
-                    level_nodes[pos] = n
+                    count += 1
+                    if listed:
+                        if pos == 0:
+                            alive[:, :] = 0
+                            return -1, -1
+                        pos -= 1
+                        level_nodes[pos] = n
                     if k > 0:
-                        alive[1 - cur, parents[k, n]] = 1
+                        alive[1 - cur, edge_src[incoming[n] + arrivals[row, n]]] = 1
             alive_words[cur, w] = 0
-        counts[k] = start - pos
+        counts[k] = count
         cur = 1 - cur
     total = end - pos
     level_nodes[:total] = level_nodes[pos:end].copy()
     level_start[0] = 0
+    for k in range(flush):
+        level_start[k + 1] = level_start[k] + counts[k]
     converged_row = -1
     for k in range(used):
-        level_start[k + 1] = level_start[k] + counts[k]
         if counts[k] == 1:
             converged_row = k
     return total, converged_row
 
 
 @numba.njit(cache=True, nogil=True)
-def _converged_row(parents, used, lowest, alive, alive_words):
-    """`_block_levels` without the lists, for the dense-window mode: the highest row
-    in [lowest, used) where the paths of every node alive at the last row pass through
-    a single node, or −1. Stops there (every older row then holds one node too)."""
-    N = parents.shape[1]
+def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, alive, alive_words):
+    """`_block_levels` without the lists, for the dense-window mode: the highest logical
+    row in [lowest, used) where the paths of every node alive at the newest row pass
+    through a single node, or −1. Stops there (every older row then holds one node too)."""
+    R, N = arrivals.shape
+    top = (first + used - 1) % R
     for n in range(N):
-        alive[0, n] = parents[used - 1, n] >= 0
+        alive[0, n] = arrivals[top, n] != none
     cur = 0
     for k in range(used - 1, lowest - 1, -1):
+        row = (first + k) % R
         count = 0
         for w in range(alive_words.shape[1]):
             if alive_words[cur, w] == 0:
@@ -487,7 +504,7 @@ def _converged_row(parents, used, lowest, alive, alive_words):
                 if alive[cur, n]:
                     count += 1
                     if k > lowest:
-                        alive[1 - cur, parents[k, n]] = 1
+                        alive[1 - cur, edge_src[incoming[n] + arrivals[row, n]]] = 1
             alive_words[cur, w] = 0
         cur = 1 - cur
         if count == 1:
@@ -498,26 +515,29 @@ def _converged_row(parents, used, lowest, alive, alive_words):
 
 
 @numba.njit(cache=True, nogil=True)
-def _append_block(block, parents, used, t_top, heads, store, size, level_nodes, level_start, row_of):
-    """Append the block's surviving lattice points (see `_block_levels`) to the store in
-    sample order; heads (N,): each node's row at the sample before the block on entry,
-    at the block's last sample on return (−1: not alive). row_of (N,) scratch.
-    Returns the new size."""
-    t0 = t_top - used + 1
-    for k in range(used):
+def _append_block(arrivals, first, flush, t_first, incoming, edge_src, heads, store, size, level_nodes, level_start,
+                  row_of):  # fmt: skip
+    """Append the surviving lattice points (see `_block_levels`) of the window's
+    oldest `flush` rows (samples t_first…) to the store in sample order; heads (N,):
+    each node's store row at the sample before them on entry, at their last sample on
+    return (−1: no surviving path passes). row_of (N,) scratch. Returns the new size."""
+    R = arrivals.shape[0]
+    for k in range(flush):
+        row = (first + k) % R
         for i in range(level_start[k], level_start[k + 1]):
             n = level_nodes[i]
-            m = parents[k, n]
+            e = incoming[n] + arrivals[row, n]
+            m = edge_src[e]
             store[size, NODE] = n
-            store[size, EDGE] = block[k, n]
+            store[size, EDGE] = e
             store[size, PARENT] = heads[m] if k == 0 else row_of[m]
-            store[size, TIME] = t0 + k
+            store[size, TIME] = t_first + k
             size += 1
         # row_of now refers to row k (read by row k+1); a node appears once per row.
         for i in range(level_start[k], level_start[k + 1]):
             row_of[level_nodes[i]] = size - (level_start[k + 1] - i)
     heads[:] = -1
-    for i in range(level_start[used - 1], level_start[used]):
+    for i in range(level_start[flush - 1], level_start[flush]):
         heads[level_nodes[i]] = row_of[level_nodes[i]]
     return size
 
@@ -569,10 +589,11 @@ def _converged_until(store, size, t_from, t_to):
 
 
 @numba.njit(cache=True, nogil=True)
-def _trace(block, used, t, heads, edge_src, store, node, since):
+def _trace(arrivals, first, used, t, heads, incoming, edge_src, store, node, since):
     """Nodes at samples since..t of the path ending at `node` at sample t, and the
-    edge each was entered by (−1 at sample 0): through the block's rows, then the
-    store."""
+    edge each was entered by (−1 at sample 0): through the dense window's rows (the
+    newest `used` of the ring, see `_block_levels`), then the store."""
+    R = arrivals.shape[0]
     count = t - since + 1
     nodes = np.empty(count, np.int64)
     edges = np.empty(count, np.int64)
@@ -581,7 +602,7 @@ def _trace(block, used, t, heads, edge_src, store, node, since):
     for k in range(used - 1, -1, -1):
         if i < 0:
             break
-        e = block[k, n]
+        e = incoming[n] + arrivals[(first + k) % R, n]
         nodes[i] = n
         edges[i] = e
         n = edge_src[e]
@@ -599,7 +620,8 @@ def _trace(block, used, t, heads, edge_src, store, node, since):
 class SearchResult:
     """node_path (T,), edge_path (T−1,) int64; cost: total weighted cost of the path;
     terms: accumulated acc (g²), position (m) and heading (rad) costs; broken: per
-    constraint set, broken constraints; compression: N·T / peak survivor entries."""
+    constraint set, broken constraints; compression: see `ViterbiSearch.compression`;
+    peak_entries: peak rows in the survivor store."""
 
     node_path: np.ndarray
     edge_path: np.ndarray
@@ -660,7 +682,8 @@ class ViterbiSearch:
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
-                 threads: bool = True, placed: bool | None = None, window: int | None = None):  # fmt: skip
+                 threads: bool = True, placed: bool | None = None, window: int | None = None,
+                 ring: tuple[int, int] | None = None):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
@@ -670,9 +693,10 @@ class ViterbiSearch:
         measurements are ignored and a step skips the placement passes. window: keep
         only the back-pointers of the last `window` samples or more, dense, and no
         survivor store — for a fixed-lag decoder, which never traces back further
-        (traces must start inside the window). It saves the store's appends and sweeps,
-        which dominate on graphs whose paths rarely merge, for (window + 32) × N × 8
-        bytes. None: the survivor store, any trace."""
+        (traces must start inside the window). It saves the store's appends and sweeps
+        for (window + BLOCK) × N bytes. None: the survivor store, any trace. ring:
+        (BLOCK, STORE_WINDOW) instead of the class's (a warm-up makes the rarely run
+        walk-back kernels run within a few samples)."""
         self.graph = graph
         self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance) if threads else
                          (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial,
@@ -719,28 +743,47 @@ class ViterbiSearch:
                 raise InputError("the node mask leaves no node to search")
         self.converged_t = -1  # every sample ≤ this one has a single surviving entry (or was forgotten)
         self.keep_from = 0  # samples before this one are forgotten (see forget_before)
-        # Back-pointers of the last BLOCK samples as a dense (BLOCK, N) lattice, written
-        # sequentially each step; every BLOCK samples its surviving points move into the
-        # survivor store (K §5.1's periodic trace-back from all live nodes).
-        # Each row holds the best incoming edge and the predecessor of every node (the
-        # predecessor, written by the advance pass, spares the walk a scattered read).
+        # The lattice of the newest samples, dense: one row per sample, each node's
+        # arrival (which of its incoming edges its best path came by; 1 byte a node
+        # while no node has 255 incoming edges), written sequentially each step, in a
+        # ring of rows. In store mode (K §5.1's periodic trace-back from all live
+        # nodes), when the ring is full the walk back from the live nodes moves the
+        # surviving points of its oldest BLOCK rows into the survivor store; they are
+        # then STORE_WINDOW samples old, by when most paths have merged (on built
+        # graphs, whose clips run as long single-predecessor chains, a third of the
+        # nodes still had distinct paths 32 samples back, 8 % at 128). In window mode
+        # the oldest rows are dropped instead.
+        self.incoming = tables["incoming32"]
+        most = int(np.diff(self.incoming).max(initial=0))
+        dtype = next(d for d in (np.uint8, np.uint16, np.uint32) if most < np.iinfo(d).max)
+        self.none = int(np.iinfo(dtype).max)  # arrival of a dead node
+        if ring is not None:
+            self.BLOCK, self.STORE_WINDOW = (max(int(v), lowest) for v, lowest in zip(ring, (1, 0)))
         self.window = None if window is None else max(int(window), 1)
-        rows = self.BLOCK if window is None else self.window + self.BLOCK
-        self.block = np.full((rows, N), -1, dtype=np.int32)
-        self.parents = np.full((rows, N), -1, dtype=np.int32)
-        self.used = 0  # rows of the block filled since the last compaction
+        rows = self.BLOCK + (self.STORE_WINDOW if window is None else self.window)
+        self.arrivals = np.full((rows, N), self.none, dtype=dtype)
+        self._best_edge = np.full(N, -1, dtype=np.int32)
+        self.first = 0  # physical row of the oldest filled row
+        self.used = 0  # rows filled
         self.alive_map = np.zeros((2, 8 * ((N + 7) // 8)), dtype=np.uint8)
-        self.row_of = np.zeros(N, dtype=np.int64)
-        self.level_nodes = np.zeros(2 * N + 16, dtype=np.int32)
+        small = window is not None  # window mode never appends to the store
+        self.row_of = np.zeros(1 if small else N, dtype=np.int64)
+        self.level_nodes = np.zeros(16 if small else N + 16, dtype=np.int32)
         self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
-        self.store = np.zeros((2 * N + 16, 4), dtype=np.int32)  # 16 bytes a row; doubles when full
+        self.store = np.zeros((N + 16 if small else 2 * N + 16, 4), dtype=np.int32)  # 16 bytes a row; doubles when full
         self.size = 0  # rows of the store in use (live or garbage)
         self.live_rows = 0  # rows alive after the last collection
         self.heads = np.full(N, -1, dtype=np.int64)
         self.t = -1
         self.peak_entries = 0
+        self.peak_bytes = 0
 
-    BLOCK = 32
+    # Rows moved into the store (or dropped) at a time, and rows kept dense beyond them:
+    # each walk back through the ring is shared by BLOCK samples. On the built Bandai
+    # dataset-2 graph (268k nodes) 128 + 128 took 4.6 ms a sample in steady state,
+    # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms.
+    BLOCK = 128
+    STORE_WINDOW = 128
 
     @property
     def live_entries(self) -> int:
@@ -768,18 +811,20 @@ class ViterbiSearch:
         self.heads[:] = -1
         self.heads[live] = np.arange(self.size)
         self.live_rows = self.size
-        self.used = 0
+        self.first = self.used = 0
         self.converged_t = 0 if len(live) == 1 else -1
-        self.peak_entries = self.size if self.window is None else self.block.size
+        self.peak_entries = self.size
+        self.peak_bytes = self.size * self.store.itemsize * 4
 
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
         when a batch caller computed it ahead (else it is computed here)."""
-        if self.used == self.block.shape[0]:
-            self.compact() if self.window is None else self._slide()
+        rows = self.arrivals.shape[0]
+        if self.used == rows:
+            self._flush() if self.window is None else self._slide()
         self.t += 1
         cost, det, rank, place = self._scratch
-        best_edge, parents = self.block[self.used], self.parents[self.used]
+        best_edge, arrivals = self._best_edge, self.arrivals[(self.first + self.used) % rows]
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
@@ -805,11 +850,13 @@ class ViterbiSearch:
                     self.cost, self.rel, self.rel64, self.total)  # fmt: skip
         select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed, self.det,
                self.rank, self.best_slot, cost, best_edge)  # fmt: skip
-        advance(best_edge, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.ok,
-                self.placed, self.place, self.det, self.rank, place, det, rank, parents)  # fmt: skip
+        advance(best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading,
+                self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank, place, det, rank, arrivals,
+                self.none)  # fmt: skip
         if not np.any(best_edge >= 0):
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
+        self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
         # Swap buffers: the new state becomes the previous one.
         self._scratch = (self.cost, self.det, self.rank, self.place)
         self.cost, self.det, self.rank, self.place = cost, det, rank, place
@@ -846,48 +893,61 @@ class ViterbiSearch:
         meas, mask, _ = self.measurements(np.asarray(acc)[None])
         self._meas[:], self._mask[:] = meas[0], mask[0]
 
-    def compact(self) -> None:
-        """Move the block's surviving lattice points into the store (K §5.1's trace-back
-        from all live nodes); collect the store's garbage when it has doubled. Nothing
-        to do in dense-window mode."""
-        if self.used == 0 or self.window is not None:
-            return
+    @property
+    def lattice_bytes(self) -> int:
+        """Memory held for the trace-back now: the dense rows filled and the store's rows
+        in use (survivors and garbage not yet collected)."""
+        return self.used * self.arrivals.shape[1] * self.arrivals.itemsize + self.size * self.store.itemsize * 4
+
+    @property
+    def compression(self) -> float:
+        """K §5.1's memory reduction: the full back-pointer lattice (N·T points of 4
+        bytes) over the peak memory the search held for it (`lattice_bytes`)."""
+        return self.N * (self.t + 1) * 4 / max(self.peak_bytes, 1)
+
+    def _flush(self) -> None:
+        """Store mode, ring full: walk back from the live nodes through every dense row
+        and move the surviving points of the oldest BLOCK rows into the store (collect
+        the store's garbage first when it has doubled); those rows are then free."""
         while True:  # grown on demand: the worst case (nothing merges) is used × N
-            total, converged_row = _block_levels(self.parents, self.used, self.alive_map,
-                                                 self.alive_map.view(np.uint64), self.level_nodes,
-                                                 self.level_start)  # fmt: skip
+            total, converged_row = _block_levels(self.arrivals, self.first, self.used, self.BLOCK, self.incoming,
+                                                 self.edge_src, self.none, self.alive_map, self.alive_map.view(np.uint64),
+                                                 self.level_nodes, self.level_start)  # fmt: skip
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
-        if self.size + total > self.store.shape[0]:
+        flush = self.BLOCK
+        appended = int(self.level_start[flush])
+        if self.size + appended > self.store.shape[0]:
             self._collect()
-            if self.size + total > self.store.shape[0] // 2:
+            if self.size + appended > self.store.shape[0] // 2:
                 # np.empty: rows past `size` are always written before they are read
-                bigger = np.empty((2 * (self.size + total), 4), dtype=np.int32)
+                bigger = np.empty((2 * (self.size + appended), 4), dtype=np.int32)
                 bigger[: self.size] = self.store[: self.size]
                 self.store = bigger
-        self.size = _append_block(self.block, self.parents, self.used, self.t, self.heads, self.store, self.size,
-                                  self.level_nodes, self.level_start, self.row_of)  # fmt: skip
-        t_first = self.t - self.used + 1
-        self.used = 0
-        self.peak_entries = max(self.peak_entries, self.live_rows + total)
+        t_first = self.t - self.used + 1  # the sample of the oldest row
+        self.size = _append_block(self.arrivals, self.first, flush, t_first, self.incoming, self.edge_src, self.heads,
+                                  self.store, self.size, self.level_nodes, self.level_start, self.row_of)  # fmt: skip
+        self.peak_entries = max(self.peak_entries, self.live_rows + appended)
+        self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
+        self.first = (self.first + flush) % self.arrivals.shape[0]
+        self.used -= flush
         if converged_row >= 0:  # one node left at that row: everything up to it is agreed
             self.converged_t = max(self.converged_t, t_first + converged_row)
 
     def _slide(self) -> None:
-        """Dense-window mode, block full: note whether the live paths have come to agree
+        """Dense-window mode, ring full: note whether the live paths have come to agree
         on a sample not yet forgotten (the converged-prefix commit), then drop the
         oldest BLOCK rows."""
-        t_first = self.t - self.used + 1  # the sample of row 0
+        t_first = self.t - self.used + 1  # the sample of the oldest row
         lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
         if lowest < self.used:
-            row = _converged_row(self.parents, self.used, lowest, self.alive_map, self.alive_map.view(np.uint64))
+            row = _converged_row(self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none,
+                                 self.alive_map, self.alive_map.view(np.uint64))  # fmt: skip
             if row >= 0:
                 self.converged_t = max(self.converged_t, t_first + row)
-        keep = self.used - self.BLOCK
-        self.block[:keep] = self.block[self.BLOCK:self.used]
-        self.parents[:keep] = self.parents[self.BLOCK:self.used]
-        self.used = keep
+        self.first = (self.first + self.BLOCK) % self.arrivals.shape[0]
+        self.used -= self.BLOCK
 
     def forget_before(self, t: int) -> None:
         """Let the next garbage collection drop survivors of samples before t: a
@@ -933,7 +993,8 @@ class ViterbiSearch:
         if not earliest <= since <= self.t:
             raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}"
                              f" and has forgotten samples before {earliest}")  # fmt: skip
-        return _trace(self.block, self.used, self.t, self.heads, self.edge_src, self.store, int(node), int(since))
+        return _trace(self.arrivals, self.first, self.used, self.t, self.heads, self.incoming, self.edge_src, self.store,
+                      int(node), int(since))  # fmt: skip
 
     def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now,
@@ -966,6 +1027,23 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
     pos = position is not None and weights.position != 0 and bool(np.isfinite(position).all(axis=-1).any())
     head = heading is not None and weights.heading != 0 and bool(np.isfinite(heading).any())
     return pos or head
+
+
+def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
+    """Run a few random samples through searches with a tiny ring, in store and in
+    window mode, placed: numba compiles (or loads from its cache) the step kernels and
+    the walk back through the dense rows for this graph's array types now, not when a
+    search first fills its ring (every BLOCK samples)."""
+    rng = np.random.default_rng(0)
+    T = 16
+    acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
+    position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
+    for window in (None, 2):
+        search = ViterbiSearch(graph, Weights(0.5, 1, 1), threads=threads, window=window, ring=(4, 2))
+        search.start(position[0], 0.0)
+        for t in range(1, T):
+            search.step(acc[t], position[t], 0.0)
+        search.trace(search.best_node(), since=search.t - 1)
 
 
 # A batch search computes C_A for this many samples in one pass over the readings
@@ -1004,13 +1082,11 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
         costs = search.reading_costs(acc[block], tuple(m[block] for m in measured))
         for t in range(t0, min(T, t0 + READING_BATCH)):
             search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], costs[t - t0])
-    search.compact()
     best = search.best_node()
     nodes, edges = search.trace(best)
-    N = graph.num_nodes
     terms = path_terms(search, nodes, edges, acc, position, heading, measured)
     return SearchResult(
         node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
         broken=[int(v) for v in search.rank[best]],
-        compression=float(N * T / max(search.peak_entries, 1)), peak_entries=int(search.peak_entries),
+        compression=float(search.compression), peak_entries=int(search.peak_entries),
     )  # fmt: skip

@@ -102,7 +102,7 @@ def random_graph(rng, N=40, out=3, S=2):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_pruned_survivor_tree_equals_full_lattice(seed):
+def test_pruned_survivor_tree_equals_full_lattice(seed, ring):
     rng = np.random.default_rng(seed)
     g = random_graph(rng)
     T = 120
@@ -119,6 +119,8 @@ def test_pruned_survivor_tree_equals_full_lattice(seed):
         np.testing.assert_array_equal(fast.node_path, ref_path)
         assert fast.cost == pytest.approx(ref_cost, rel=1e-6)  # float32 per-step C_A sums
         assert fast.compression > 1.0 and fast.peak_entries < g.num_nodes * T
+        if ring is not None:  # lattice points did go through the store
+            assert fast.peak_entries > g.num_nodes
 
 
 def test_constraints_beat_sensor_cost_lexicographically():
@@ -240,3 +242,49 @@ def test_distinct_rows_groups_bit_identical_rows_in_order_of_first_use():
         first, label = distinct_rows(rows, hashes)
         np.testing.assert_array_equal(label, expected_label)
         np.testing.assert_array_equal(first, expected_first)
+
+
+@pytest.mark.parametrize("ring", [(8, 5)], indirect=True)
+def test_a_node_with_300_incoming_edges_keeps_every_arrival(ring):
+    # Dense lattice rows hold which incoming edge each node arrived by, one byte a node
+    # while in-degrees stay below 255; a hub with 300 incoming edges needs two bytes, and
+    # the path through it — arriving by its 300th edge among others — must survive the
+    # ring and the survivor store intact (the reference keeps the full lattice).
+    rng = np.random.default_rng(21)
+    hub, spokes = 0, np.arange(1, 301)
+    src = np.concatenate([spokes, np.full(300, hub), [hub]])
+    dst = np.concatenate([np.full(300, hub), spokes, [hub]])  # hub ← every spoke ← hub, hub ↻
+    acc = rng.normal(0, 9.81, (len(src), 1, 3))
+    g = tiny_graph(src, dst, acc)
+    assert np.diff(g.incoming).max() == 301
+    # Noise-free input along hub → spoke 300 → hub → spoke 7 → hub …
+    walk = [0, 300, 0, 7, 0, 300, 0, 299] * 6
+    edges = [int(np.nonzero((g.edge_src == a) & (g.edge_dst == b))[0][0]) for a, b in zip(walk[:-1], walk[1:])]
+    meas = np.concatenate([acc[:1], g.edge_acc[edges].astype(np.float64)])
+    s = ViterbiSearch(g, Weights(1, 0, 0))
+    assert s.arrivals.dtype == np.uint16
+    fast = viterbi_search(g, meas, weights=Weights(1, 0, 0))
+    np.testing.assert_array_equal(fast.node_path[1:], walk[1:])
+    np.testing.assert_array_equal(fast.edge_path, edges)
+    ref_path, _ = reference_viterbi(g, meas, weights=Weights(1, 0, 0))
+    np.testing.assert_array_equal(fast.node_path, ref_path)
+
+
+def test_warm_up_search_runs_the_walk_back_kernels():
+    # A server warms up at load; the kernels that walk back through the dense rows run
+    # only every BLOCK samples, so the warm-up must reach them itself. A fresh process:
+    # here other tests have already compiled them.
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from graphsvc.search import viterbi as V\n"
+        "from tests.search.test_viterbi import random_graph\n"
+        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace)\n"
+        "assert not any(k.signatures for k in kernels)\n"
+        "V.warm_up_search(random_graph(np.random.default_rng(0)))\n"
+        "assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
