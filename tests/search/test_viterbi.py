@@ -288,3 +288,35 @@ def test_warm_up_search_runs_the_walk_back_kernels():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id():
+    from graphsvc.search.viterbi import TIE, _best_node
+
+    def narrowed(cost, rank, det):  # the definition, by numpy narrowing key by key
+        candidates = np.nonzero(np.isfinite(cost))[0]
+        for k in range(rank.shape[1]):
+            candidates = candidates[rank[candidates, k] == rank[candidates, k].min()]
+        c = cost[candidates]
+        key = np.round(c / TIE) if np.all(np.abs(c) < 1e6) else c
+        candidates = candidates[key == key.min()]
+        return int(candidates[det[candidates] == det[candidates].min()][0])
+
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        N, gamma = int(rng.integers(1, 60)), int(rng.integers(0, 3))
+        cost = rng.choice([0.0, 1.0, 1.0 + 0.3 * TIE, 1.0 + 3 * TIE, 2.0, np.inf], N)
+        if trial % 7 == 0:
+            cost[rng.integers(0, N)] = 3e6  # no rounding once a candidate is this large
+        if not np.isfinite(cost).any():
+            cost[0] = 1.0
+        rank = rng.integers(0, 2, (N, gamma)).astype(np.int32)
+        det = rng.integers(0, 3, N).astype(np.int32)
+        assert _best_node(cost, rank, det) == narrowed(cost, rank, det)
+    # A hand-checked case: node 2 breaks fewer constraints despite its cost; of nodes 3
+    # and 4, equal within TIE, 4 has fewer detours.
+    cost = np.array([0.0, np.inf, 5.0, 6.0, 6.0 + 0.4 * TIE])
+    rank = np.array([[1], [0], [0], [0], [0]], np.int32)
+    assert _best_node(cost, rank, np.array([0, 0, 0, 2, 1], np.int32)) == 2
+    rank[2] = 1
+    assert _best_node(cost, rank, np.array([0, 0, 0, 2, 1], np.int32)) == 4
