@@ -90,8 +90,8 @@ def test_sliding_window_matches_a_fresh_search_over_each_window():
         SlidingWindowDecoder(g, w, window=3, lag=2)
 
 
-def test_trace_walks_the_block_and_the_store_alike(ring):
-    g, meas, position, heading = _problem(11, T=150)  # several compactions
+def test_trace_walks_the_dense_rows_and_the_store_alike(ring):
+    g, meas, position, heading = _problem(11, T=150)  # several flushes with the small rings
     s = ViterbiSearch(g, Weights(0.5, 1, 1))
     s.start(position[0], heading[0])
     for t in range(1, len(meas)):
@@ -127,7 +127,7 @@ def test_fixed_lag_decoder_forgets_emitted_survivors(ring):
     assert s.keep_from == len(meas) - 1  # everything emitted
     s._collect()  # a sweep now keeps no survivor older than the cutoff
     k._collect()
-    assert s.size == 0 or s.store[: s.size, 3].min() >= s.keep_from  # (the newest samples sit in the block)
+    assert s.size == 0 or s.store[: s.size, 3].min() >= s.keep_from  # (the newest samples sit in the dense rows)
     assert k.store[: k.size, 3].min() == 0 and k.size > s.size
     nodes, _ = s.trace_arrivals(s.best_node(), since=s.keep_from)
     np.testing.assert_array_equal(nodes, k.trace_arrivals(k.best_node(), since=s.keep_from)[0])
@@ -135,7 +135,7 @@ def test_fixed_lag_decoder_forgets_emitted_survivors(ring):
         s.trace_arrivals(s.best_node(), since=0)
 
 
-@pytest.mark.parametrize("lag", [0, 3, 30, 64])
+@pytest.mark.parametrize("lag", [0, 3, 30, 64, 200])
 def test_dense_window_decoder_equals_the_survivor_store_decoder(lag, ring):
     # Short lags keep only the last lag + 1 samples' back-pointers (no survivor store):
     # the frames must be those of the store-backed decoder, each out by its lag. (Frames
@@ -154,7 +154,7 @@ def test_dense_window_decoder_equals_the_survivor_store_decoder(lag, ring):
     out["dense"].extend(dense.flush()[0].tolist())
     out["stored"].extend(stored.flush()[0].tolist())
     assert out["dense"] == out["stored"] and len(out["dense"]) == len(meas)
-    if lag >= 30:
+    if lag >= 30 and len(meas) > dense.search.arrivals.shape[0]:  # (looked for when the ring is full)
         assert dense.converged_frames > 0  # agreement is still found and committed early
     s = dense.search
     assert s.size == g.num_nodes  # only sample 0's rows: the store is never appended to
