@@ -271,14 +271,16 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
     the arrival (which of the node's incoming edges, `none`: dead) into this sample's
     lattice row, detour count, broken constraints and, when placed, the placement
     (cos/sin carried by rotation, no trigonometry). (Per-term costs are summed along
-    the final path afterwards.)"""
+    the final path afterwards.) Returns how many nodes are live."""
     N = best_edge.shape[0]
     gamma = rank_prev.shape[1]
+    live = 0
     for n in numba.prange(N):
         e = best_edge[n]
         if e < 0:
             arrivals[n] = none
             continue
+        live += 1
         arrivals[n] = e - incoming[n]
         m = edge_src[e]
         det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
@@ -293,6 +295,7 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
             place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[e]
             place_new[n, COS] = c * tc - s * ts
             place_new[n, SIN] = s * tc + c * ts
+    return live
 
 
 @numba.njit(cache=True, nogil=True)
@@ -352,8 +355,7 @@ def search_tables(graph: MotionGraph) -> dict:
     tables = {
         "readings_t": np.ascontiguousarray(in_g.T),
         "edge_reading": edge_reading,
-        "incoming": np.ascontiguousarray(graph.incoming, dtype=np.int64),
-        "incoming32": np.ascontiguousarray(graph.incoming, dtype=np.int32),  # E < 2³¹ (edge ids are int32 here)
+        "incoming": np.ascontiguousarray(graph.incoming, dtype=np.int32),  # E < 2³¹ (edge ids are int32 here)
         "edge_src": np.ascontiguousarray(graph.edge_src, dtype=np.int32),
         "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
         "edge_offset": np.ascontiguousarray(graph.edge_offset, dtype=np.float32),
@@ -803,12 +805,12 @@ class ViterbiSearch:
         # graphs, whose clips run as long single-predecessor chains, a third of the
         # nodes still had distinct paths 32 samples back, 8 % at 128). In window mode
         # the oldest rows are dropped instead.
-        self.incoming = tables["incoming32"]
+        self.incoming = tables["incoming"]
         most = int(np.diff(self.incoming).max(initial=0))
         dtype = next(d for d in (np.uint8, np.uint16, np.uint32) if most < np.iinfo(d).max)
         self.none = int(np.iinfo(dtype).max)  # arrival of a dead node
         if ring is not None:
-            self.BLOCK, self.STORE_WINDOW = (max(int(v), lowest) for v, lowest in zip(ring, (1, 0)))
+            self.BLOCK, self.STORE_WINDOW = max(int(ring[0]), 1), max(int(ring[1]), 0)
         self.window = None if window is None else max(int(window), 1)
         rows = self.BLOCK + (self.STORE_WINDOW if window is None else self.window)
         self.arrivals = np.full((rows, N), self.none, dtype=dtype)
@@ -864,7 +866,7 @@ class ViterbiSearch:
         self.first = self.used = 0
         self.converged_t = 0 if len(live) == 1 else -1
         self.peak_entries = self.size
-        self.peak_bytes = self.size * self.store.itemsize * 4
+        self.peak_bytes = self.lattice_bytes
 
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
@@ -900,10 +902,10 @@ class ViterbiSearch:
                     self.cost, self.rel, self.rel64, self.total)  # fmt: skip
         select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed, self.det,
                self.rank, self.best_slot, cost, best_edge)  # fmt: skip
-        advance(best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading,
-                self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank, place, det, rank, arrivals,
-                self.none)  # fmt: skip
-        if not np.any(best_edge >= 0):
+        live = advance(best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading,
+                       self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank, place, det, rank,
+                       arrivals, self.none)  # fmt: skip
+        if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
