@@ -21,8 +21,14 @@ is the full lattice's memory (N·T points of 4 bytes) over the peak memory held 
 (dense rows plus store rows). Once every survivor passes through one point, the
 prefix up to it is final (the converged-prefix commit of streaming decoders).
 
-Speed (the step is bound by memory traffic; this machine's share of the L3 cache is a
-few MB, so what is read from scattered nodes is kept small):
+Speed (a step is bound by scattered reads of the source nodes' state and, with
+position and heading, by the arithmetic per edge; this machine's share of the L3
+cache is a few MB, so what is read from scattered nodes is kept small):
+- Each node's best incoming edge is chosen in float32, with the chosen path's cost
+  then recomputed in float64; nodes whose two best candidates are closer than
+  float32 rounding could blur are decided again in float64 (see `_approx_select_py`),
+  so paths, costs and ties are exactly the float64 search's. Constrained searches
+  (γ > 0) keep the float64 passes throughout.
 - C_A is computed once per distinct edge reading (transition edges read what their
   destination reads, so many edges share one), as float32 in g, from a transposed
   table; a batch search does 16 samples per pass over the table.
@@ -42,7 +48,11 @@ import numpy as np
 
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
+from graphsvc.search._llvm import fmax as _fmax
+from graphsvc.search._llvm import fmin as _fmin
 from graphsvc.search._llvm import pick as _pick
+from graphsvc.search._llvm import prefetch as _prefetch
+from graphsvc.search._llvm import tag as _tag
 from graphsvc.sensors.accelerometer import GRAVITY
 
 REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
@@ -143,44 +153,94 @@ PLACE_WIDTH = 5
 
 # The per-edge position and heading terms read the source's placement relative to
 # this sample's measurement, as float32 in one 32-byte row with the cost:
-# [x − mx, z − mz, cos h, sin h, wrap(h − mh), −, cost as float64]. Scattered reads of
-# 64-byte float64 rows fell off this machine's share of the L3 cache (3.7 ms against
-# 0.8 ms for 32-byte rows over 317,600 edges); the relative float32 values keep
-# ~1e-7 relative precision where it matters, near the measurement.
-RX, RZ, RC, RS, RH = 0, 1, 2, 3, 4
+# [x − mx, z − mz, cos h, sin h, wrap(h − mh), cost − base as float32, cost as
+# float64]. Scattered reads of 64-byte float64 rows fell off this machine's share of
+# the L3 cache (3.7 ms against 0.8 ms for 32-byte rows over 317,600 edges); the
+# relative float32 values keep ~1e-7 relative precision where it matters, near the
+# measurement.
+RX, RZ, RC, RS, RH, RC32 = 0, 1, 2, 3, 4, 5
 REL_COST = 3  # float64 slot of the row viewed as (N, 4) float64
 _PI32 = np.float32(np.pi)
 _TWO_PI32 = np.float32(2.0 * np.pi)
 _INV_TWO_PI32 = np.float32(0.5 / np.pi)
 
 
-# One step is a few passes, each branch-light so the scattered reads of one edge or
-# node overlap with the next (a per-node loop fusing the edge totals and the choice
-# took 3.3 ms against 2.4 ms for the two passes, on the G_E benchmark): the relative
-# rows (when placed), edge totals, each node's best incoming edge, the chosen paths'
-# new state.
+# One step (K eq. 3 for every node) in two passes over float32 approximations and
+# exact float64 fix-ups, because a pass over the 317,600 edges is bound by its
+# scattered reads of the source nodes' state and float32 halves them:
+# 1. `_approx_select`: every edge's total in float32 (the source's cost relative to
+#    the lowest live cost, plus the edge's terms), each node keeping its lowest and
+#    second-lowest candidate; the lowest carries which incoming edge it is in its low
+#    mantissa bits (`tag`), so keeping the minimum is two min instructions, no branch.
+# 2. `_finish`: per node, if the float32 gap between its two best candidates exceeds
+#    what float32 rounding could have hidden (plus TIE), the lowest is the node's best
+#    edge exactly as the float64 rule would choose it; otherwise (a near-tie, a few
+#    nodes a sample) the node's candidates are compared again in float64 with the
+#    full rule. Then the chosen path's new state, its cost recomputed in float64, so
+#    costs, paths and ties are bit for bit those of the float64 search (tested against
+#    the float64 kernels below, which constrained searches still use).
+# Bound: a float32 total t differs from the float64 one less the base by at most
+# alpha·t + beta/2: up to 5 roundings of 2^-24 relative to the sum of non-negative
+# terms, the tag's 2^(k−23) (k label bits), and float64 roundings of 2^-52·(base + t).
+# The search takes alpha = 2^-20 (3× the first) + 2^(k−22) and beta = 2^-48·base; a
+# node whose second-best exceeds its best by more than TIE + alpha·(both) + beta
+# keeps the float32 choice.
+DEAD32 = np.float32(1e38)  # float32 cost of a dead path (finite, so tagging keeps it ordered)
+DEAD_BELOW = np.float32(1e37)  # a live path's relative cost never comes near this
+PREFETCH_AHEAD = np.uint64(16)  # edges ahead whose source row is prefetched (measured best at 8–16)
 
 
-def _relative_py(place, cost, meas_pos, meas_heading, rel, rel64):
+@numba.njit(inline="always")
+def _place_terms(rx, rz, c, s, rh, ox, oz, dh):
+    """Position (m) and heading (rad) terms of an edge (offset ox, oz in the source's
+    frame, turn dh) from its source's relative row, in float32: the same arithmetic
+    for the float32 pass and the float64 totals."""
+    dx = rx + c * ox + s * oz
+    dz = rz - s * ox + c * oz
+    a = rh + dh
+    return np.sqrt(dx * dx + dz * dz), abs(a - _TWO_PI32 * np.floor((a + _PI32) * _INV_TWO_PI32))
+
+
+@numba.njit(inline="always")
+def _exact_total(cost_m, rx, rz, c, s, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+    """L(e, t) + G(m, t−1) in float64 for an edge from m: cost_m its source's cost,
+    rx … rh the source's relative row (`_relative_row`), ca the edge reading's C_A;
+    the position / heading terms only where they count."""
+    t = cost_m + w_acc * ca
+    if use_pos or use_head:
+        p, h = _place_terms(rx, rz, c, s, rh, ox, oz, dh)
+        if use_pos:
+            t += w_pos * p
+        if use_head:
+            t += w_head * h
+    return t
+
+
+@numba.njit(inline="always")
+def _relative_row(place, n, meas_x, meas_z, meas_heading):
+    """Node n's placement relative to the measurement, float32 (RX … RH)."""
+    return (np.float32(place[n, X] - meas_x), np.float32(place[n, Z] - meas_z), np.float32(place[n, COS]),
+            np.float32(place[n, SIN]), np.float32(_wrap(place[n, HEADING] - meas_heading)))
+
+
+def _relative_py(place, cost, meas_pos, meas_heading, base, rel, rel64):
     """The per-edge pass's source rows (see RX…REL_COST) for this sample's
     measurement: one sequential pass over the placement. meas_pos (2,) m, zeros when
-    not measured; meas_heading rad, 0 when not measured."""
+    not measured; meas_heading rad, 0 when not measured; base ≤ every live cost."""
     N = cost.shape[0]
     for n in numba.prange(N):
         rel64[n, REL_COST] = cost[n]
-        rel[n, RX] = np.float32(place[n, X] - meas_pos[0])
-        rel[n, RZ] = np.float32(place[n, Z] - meas_pos[1])
-        rel[n, RC] = np.float32(place[n, COS])
-        rel[n, RS] = np.float32(place[n, SIN])
-        rel[n, RH] = np.float32(_wrap(place[n, HEADING] - meas_heading))
+        rel[n, RC32] = np.float32(cost[n] - base) if cost[n] != np.inf else DEAD32
+        rel[n, RX], rel[n, RZ], rel[n, RC], rel[n, RS], rel[n, RH] = _relative_row(place, n, meas_pos[0], meas_pos[1],
+                                                                                  meas_heading)  # fmt: skip
 
 
 def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, w_acc, w_pos, w_head, use_pos,
                     use_head, cost, rel, rel64, total):  # fmt: skip
     """total (E,): the cost of each path extended by each edge, cost[src] + L(e, t)
-    (inf from a dead source). reading_cost (R,) C_A per distinct reading; use_pos /
-    use_head: whether this sample's position / heading term counts (then rel, rel64
-    hold `_relative`'s rows)."""
+    (inf from a dead source), float64 (the constrained search's pass). reading_cost
+    (R,) C_A per distinct reading; use_pos / use_head: whether this sample's position
+    / heading term counts (then rel, rel64 hold `_relative`'s rows)."""
     E = edge_src.shape[0]
     if not (use_pos or use_head):
         for e in numba.prange(E):
@@ -188,17 +248,9 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
         return
     for e in numba.prange(E):
         m = edge_src[e]
-        t = rel64[m, REL_COST] + w_acc * reading_cost[edge_reading[e]]
-        if use_pos:
-            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-            c, s = rel[m, RC], rel[m, RS]
-            dx = rel[m, RX] + c * ox + s * oz
-            dz = rel[m, RZ] - s * ox + c * oz
-            t += w_pos * np.sqrt(dx * dx + dz * dz)
-        if use_head:
-            a = rel[m, RH] + edge_heading[e]
-            t += w_head * abs(a - _TWO_PI32 * np.floor((a + _PI32) * _INV_TWO_PI32))
-        total[e] = t
+        total[e] = _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH],
+                                reading_cost[edge_reading[e]], edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
+                                w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
 
 
 def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
@@ -298,6 +350,155 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
     return live
 
 
+@numba.njit(inline="always")
+def _keep_two(best, second, p, t):
+    """Node slot p keeps its lowest and second-lowest tagged candidate (branch-free)."""
+    b = best[p]
+    second[p] = _fmin(second[p], _fmax(t, b))
+    best[p] = _fmin(t, b)
+
+
+def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_offset, slot_heading, reading_cost,
+                      w_acc, w_pos, w_head, rows, c32, rel, keep, best, second):  # fmt: skip
+    """Pass 1 of a step (see above): best[p], second[p] (N,) float32, the lowest and
+    second-lowest float32 total among the incoming edges of the node at layout
+    position p (`search_tables`: within each chunk, nodes by descending in-degree, so
+    slot j's entries are positions n0, n0+1, … — no destination index to read);
+    best's low bits (`keep` clears them) hold which incoming edge it is; DEAD32: none.
+    rows: read sources from the relative rows (placed searches; w_pos / w_head 0 when
+    that term does not count this sample) instead of c32 (N,) (cost − base, float32).
+    All indices unsigned: numba's negative-index fix-up on signed ones cost half the
+    pass's speed (fewer loads in flight)."""
+    E = np.uint64(slot_src.shape[0])
+    for c in numba.prange(chunk_nodes.shape[0] - 1):
+        n0 = chunk_nodes[c]
+        for p in range(n0, chunk_nodes[c + 1]):
+            best[p] = DEAD32
+            second[p] = DEAD32
+        for j in range(chunk_slots.shape[1] - 1):
+            s0, s1 = chunk_slots[c, j], chunk_slots[c, j + 1]
+            label = np.uint32(j)
+            shift = n0 - s0  # slot entry i belongs to position i + shift (uint64, wraps)
+            if rows:
+                for i in range(s0, s1):
+                    if i + PREFETCH_AHEAD < E:
+                        _prefetch(rel, slot_src[i + PREFETCH_AHEAD])
+                    m = slot_src[i]
+                    pos, head = _place_terms(rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], slot_offset[i, 0],
+                                             slot_offset[i, 1], slot_heading[i])  # fmt: skip
+                    t = rel[m, RC32] + w_acc * reading_cost[slot_reading[i]] + w_pos * pos + w_head * head
+                    _keep_two(best, second, i + shift, _tag(t, keep, label))
+            else:
+                for i in range(s0, s1):
+                    t = c32[slot_src[i]] + w_acc * reading_cost[slot_reading[i]]
+                    _keep_two(best, second, i + shift, _tag(t, keep, label))
+
+
+@numba.njit(inline="always")
+def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, w_acc, w_pos,
+                  w_head, use_pos, use_head, rows, cost, rel, rel64, det_prev):  # fmt: skip
+    """Node n's best incoming edge by the float64 rule of `_select_py` (candidates in
+    graph order; lower total beyond TIE, else fewer detours, then plainer kind) as its
+    arrival index, −1 if none is alive."""
+    first = np.int64(incoming[n])
+    best = np.int64(-1)
+    cb = np.inf
+    for e in range(first, np.int64(incoming[n + 1])):
+        m = np.int64(edge_src[e])
+        ca = reading_cost[edge_reading[e]]
+        if rows:
+            t = _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], ca,
+                             edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos,
+                             use_head)  # fmt: skip
+        else:
+            t = cost[m] + w_acc * ca
+        better = t < cb - TIE
+        if abs(t - cb) <= TIE:
+            det = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+            b = np.int64(edge_src[best])
+            best_det = det_prev[b] + (1 if edge_kind[best] != 0 else 0)
+            better = det < best_det if det != best_det else edge_kind[e] < edge_kind[best]
+        if better:
+            best, cb = e, t
+    return best - first if best >= 0 else np.int64(-1)
+
+
+def _finish_py(chunk_nodes, node_pos, best, second, best_bits, low, alpha, beta, incoming, edge_src, edge_reading,
+               edge_kind, edge_offset, edge_heading, edge_turn, allowed, reading_cost, w_acc, w_pos, w_head, use_pos,
+               use_head, meas_pos, meas_heading, rows, cost, rel, rel64, det_prev, placed, place_prev, c32_base,
+               cost_new, det_new, place_new, c32_new, arrivals, none, lowest):  # fmt: skip
+    """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
+    the float64 rule's on a near-tie), the arrival into this sample's lattice row
+    (`none`: dead or masked), the chosen path's float64 cost, detours, placement
+    (carried by rotation when placed) and, without rows, its float32 cost relative to
+    c32_base (≤ every new cost: the lowest cost before the step). meas_pos (2,),
+    meas_heading: as given to `_relative`. lowest (C,) each chunk's lowest new cost.
+    Returns (live nodes, near-ties resolved in float64).
+
+    Per chunk, first every node's choice, prefetching its source's state; then the
+    new states: the source reads are scattered over megabytes, and one loop doing
+    both kept too few of them in flight."""
+    live = 0
+    near_ties = 0
+    for c in numba.prange(chunk_nodes.shape[0] - 1):
+        n0, n1 = chunk_nodes[c], chunk_nodes[c + 1]
+        source = np.empty(n1 - n0, np.uint32)
+        for n in range(n0, n1):
+            p = node_pos[n]
+            b1 = best[p]
+            if b1 >= DEAD_BELOW or not allowed[n]:
+                arrivals[n] = none
+                continue
+            b2 = second[p]
+            if b2 < DEAD_BELOW and np.float64(b2) - np.float64(b1) <= TIE + alpha * (np.float64(b1) + b2) + beta:
+                near_ties += 1
+                a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
+                                  reading_cost, w_acc, w_pos, w_head, use_pos, use_head, rows, cost, rel, rel64,
+                                  det_prev)  # fmt: skip
+                arrival = np.uint32(a)  # a ≥ 0: a live candidate exists (b1 < DEAD_BELOW)
+            else:
+                arrival = np.uint32(best_bits[p] & low)
+            arrivals[n] = arrival
+            m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
+            source[n - n0] = m
+            _prefetch(cost, m)
+            _prefetch(det_prev, m)
+            if placed:
+                _prefetch(place_prev, m)
+        chunk_low = np.inf
+        for n in range(n0, n1):
+            arrival = arrivals[n]
+            if arrival == none:
+                cost_new[n] = np.inf
+                if not rows:
+                    c32_new[n] = DEAD32
+                continue
+            live += 1
+            e = np.uint64(incoming[n]) + np.uint64(arrival)
+            m = source[n - n0]
+            ca = reading_cost[edge_reading[e]]
+            ox, oz, dh = edge_offset[e, 0], edge_offset[e, 1], edge_heading[e]
+            if rows:
+                rx, rz, rc, rs, rh = _relative_row(place_prev, m, meas_pos[0], meas_pos[1], meas_heading)
+                t = _exact_total(cost[m], rx, rz, rc, rs, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+            else:
+                t = cost[m] + w_acc * ca
+                c32_new[n] = np.float32(t - c32_base)
+            cost_new[n] = t
+            chunk_low = _fmin(chunk_low, t)
+            det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+            if placed:
+                cm, sm = place_prev[m, COS], place_prev[m, SIN]
+                tc, ts = edge_turn[e, 0], edge_turn[e, 1]
+                place_new[n, X] = place_prev[m, X] + cm * ox + sm * oz
+                place_new[n, Z] = place_prev[m, Z] - sm * ox + cm * oz
+                place_new[n, HEADING] = place_prev[m, HEADING] + dh
+                place_new[n, COS] = cm * tc - sm * ts
+                place_new[n, SIN] = sm * tc + cm * ts
+        lowest[c] = chunk_low
+    return live, near_ties
+
+
 @numba.njit(cache=True, nogil=True)
 def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
                 meas_heading, use_pos, use_head, x, z, h, c, s):  # fmt: skip
@@ -337,6 +538,8 @@ _relative, _relative_serial = _compile(_relative_py, True), _compile(_relative_p
 _edge_totals, _edge_totals_serial = _compile(_edge_totals_py, True), _compile(_edge_totals_py, False)
 _select, _select_serial = _compile(_select_py, True), _compile(_select_py, False)
 _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, False)
+_approx_select, _approx_select_serial = _compile(_approx_select_py, True), _compile(_approx_select_py, False)
+_finish, _finish_serial = _compile(_finish_py, True), _compile(_finish_py, False)
 
 
 def search_tables(graph: MotionGraph) -> dict:
@@ -390,29 +593,38 @@ def distinct_rows(rows: np.ndarray, hashes: np.ndarray | None = None) -> tuple[n
     return first[by_first_use], label[group.reshape(-1)]
 
 
-# Nodes are split into this many chunks (contiguous ranges) for the slot-major select;
-# fixed, so results never depend on the thread count.
-SELECT_CHUNKS = 16
+# Nodes are split into this many chunks (contiguous ranges) for the slot-major passes
+# (a chunk's float32 best / second-best pair, 8 bytes a node, stays in L1); fixed, so
+# results never depend on the thread count.
+SELECT_CHUNKS = 64
 
 
 def _slot_tables(graph: MotionGraph, tables: dict) -> dict:
     """The per-edge arrays the edge and select passes read, permuted into slot-major
     order within chunks of nodes: chunk c's edges, first every node's first incoming
-    edge (ascending node), then every second one, … chunk_nodes (C+1,) node bounds;
-    chunk_slots (C, D+1) where chunk c's slot j lies; slot_edge (E,) graph edge id."""
+    edge, then every second one, … Within a chunk nodes are laid out by descending
+    in-degree (then id), so slot j holds the chunk's first count_j layout positions in
+    order. chunk_nodes (C+1,) node bounds; chunk_slots (C, D+1) where chunk c's slot j
+    lies; node_pos (N,) uint32 each node's layout position; slot_dst (E,) each entry's
+    node; slot_edge (E,) graph edge id."""
     N, E = graph.num_nodes, graph.num_edges
     incoming = tables["incoming"]
-    dst = np.repeat(np.arange(N, dtype=np.int64), np.diff(incoming))
+    degree = np.diff(incoming).astype(np.int64)
+    dst = np.repeat(np.arange(N, dtype=np.int64), degree)
     slot = np.arange(E, dtype=np.int64) - incoming[dst]
     D = int(slot.max()) + 1 if E else 1
     chunk_nodes = np.linspace(0, N, SELECT_CHUNKS + 1).astype(np.int64)
-    chunk = np.searchsorted(chunk_nodes, dst, side="right") - 1
-    key = chunk * (D + 1) + slot
-    order = np.lexsort((dst, key))
+    node_chunk = np.searchsorted(chunk_nodes, np.arange(N), side="right") - 1
+    layout = np.lexsort((np.arange(N), -degree, node_chunk))  # chunk, then descending degree, then id
+    node_pos = np.empty(N, dtype=np.int64)
+    node_pos[layout] = np.arange(N)
+    key = node_chunk[dst] * (D + 1) + slot
+    order = np.lexsort((node_pos[dst], key))
     chunk_slots = np.searchsorted(key[order], (np.arange(SELECT_CHUNKS)[:, None] * (D + 1) + np.arange(D + 1)))
     return {
         "chunk_nodes": chunk_nodes,
         "chunk_slots": np.ascontiguousarray(chunk_slots, dtype=np.int64),
+        "node_pos": node_pos.astype(np.uint32),
         "slot_edge": order.astype(np.int32),
         "slot_dst": dst[order].astype(np.int32),
         "slot_src": tables["edge_src"][order],
@@ -750,9 +962,12 @@ class ViterbiSearch:
         (BLOCK, STORE_WINDOW) instead of the class's (a warm-up makes the rarely run
         walk-back kernels run within a few samples)."""
         self.graph = graph
-        self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance) if threads else
+        self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance, _approx_select, _finish)
+                         if threads else
                          (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial,
-                          _advance_serial))  # fmt: skip
+                          _advance_serial, _approx_select_serial, _finish_serial))  # fmt: skip
+        if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
+            raise InputError(f"weights must be finite and ≥ 0, got {weights}")
         self.weights = weights
         self.placed = bool(weights.position != 0 or weights.heading != 0) if placed is None else bool(placed)
         N = graph.num_nodes
@@ -766,6 +981,7 @@ class ViterbiSearch:
         self.edge_turn = tables["edge_turn"]
         self.readings_t = tables["readings_t"]
         self.edge_reading = tables["edge_reading"]
+        self.node_pos = tables["node_pos"]
         self.slots = tuple(tables[k] for k in ("chunk_nodes", "chunk_slots", "slot_dst", "slot_src", "slot_kind",
                                                "slot_edge", "slot_reading", "slot_offset", "slot_heading"))
         c = graph.node_contacts
@@ -779,8 +995,25 @@ class ViterbiSearch:
         self._scratch = (np.zeros(N), np.zeros(N, np.int32), np.zeros((N, gamma), np.int32), np.zeros((P, PLACE_WIDTH)))
         self.rel = np.zeros((P, 8), dtype=np.float32)
         self.rel64 = self.rel.view(np.float64)
-        self.total = np.full(graph.num_edges + 1, np.inf)  # slot order; total[E] = inf (no candidate)
-        self.best_slot = np.full(N, graph.num_edges, dtype=np.int64)
+        # The float32 pass and float64 fix-ups (see `_approx_select_py`) for searches
+        # without constraint sets; constrained ones keep the float64 passes (rank first).
+        label_bits = int(self.slots[1].shape[1] - 2).bit_length()  # bits for an arrival index < max in-degree
+        # (weights ≤ 1e6 keep every live float32 total far from overflow)
+        self.approx = gamma == 0 and label_bits <= 12 and max(weights.acc, weights.position, weights.heading) <= 1e6
+        self.near_ties = 0  # nodes whose choice the float64 rule settled (a check on the bound's width)
+        if self.approx:
+            self._keep = np.uint32(0xFFFFFFFF ^ ((1 << label_bits) - 1))
+            self._label_mask = np.uint32((1 << label_bits) - 1)
+            self._alpha = 2.0**-20 + 2.0 ** (label_bits - 22)
+            self._best32, self._second32 = np.empty(N, np.float32), np.empty(N, np.float32)
+            self._chunk_low = np.empty(len(self.slots[0]) - 1)
+            self.c32 = np.zeros(N if not self.placed else 1, dtype=np.float32)
+            self._c32_new = np.zeros_like(self.c32)
+        else:
+            self.total = np.full(graph.num_edges + 1, np.inf)  # slot order; total[E] = inf (no candidate)
+            self.best_slot = np.full(N, graph.num_edges, dtype=np.int64)
+        self.low = 0.0  # lowest live cost (the float32 costs' base)
+        self.c32_base = 0.0  # what c32 is relative to
         self.reading_cost = np.zeros(self.readings_t.shape[1], dtype=np.float32)
         self._meas = np.zeros(self.readings_t.shape[0], dtype=np.float32)
         self._mask = np.ones(self.readings_t.shape[0], dtype=np.float32)
@@ -851,6 +1084,9 @@ class ViterbiSearch:
         self.place[:, HEADING], self.place[:, COS], self.place[:, SIN] = h, np.cos(h), np.sin(h)
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
         self.det[:] = 0
+        self.low = self.c32_base = 0.0
+        if self.approx and not self.placed:
+            self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
@@ -871,19 +1107,18 @@ class ViterbiSearch:
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
         when a batch caller computed it ahead (else it is computed here)."""
-        rows = self.arrivals.shape[0]
-        if self.used == rows:
+        if self.used == self.arrivals.shape[0]:
             self._flush() if self.window is None else self._slide()
         self.t += 1
         cost, det, rank, place = self._scratch
-        best_edge, arrivals = self._best_edge, self.arrivals[(self.first + self.used) % rows]
+        arrivals = self.arrivals[(self.first + self.used) % self.arrivals.shape[0]]
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
         wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
         use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
-        reading_costs, relative, edge_totals, select, advance = self._kernels
+        reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
         if reading_cost is None:
             # Computed even at W_A = 0: the report carries each path's accelerometer cost.
             self._set_measurement(acc)
@@ -893,18 +1128,40 @@ class ViterbiSearch:
             else:
                 self.reading_cost[:] = 0.0
             reading_cost = self.reading_cost
-        if use_pos or use_head:
-            meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
-            relative(self.place, self.cost, meas_pos, float(heading) if use_head else 0.0, self.rel, self.rel64)
+        # Placed searches read their sources' relative rows (which hold the float32 cost)
+        # every sample, whether or not this sample's position or heading counts.
+        rows = self.placed and (self.approx or use_pos or use_head)
+        meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
+        meas_heading = float(heading) if use_head else 0.0
+        if rows:
+            relative(self.place, self.cost, meas_pos, meas_heading, self.low, self.rel, self.rel64)
         chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, slot_heading = \
             self.slots
-        edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
-                    self.cost, self.rel, self.rel64, self.total)  # fmt: skip
-        select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed, self.det,
-               self.rank, self.best_slot, cost, best_edge)  # fmt: skip
-        live = advance(best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset, self.edge_heading,
-                       self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank, place, det, rank,
-                       arrivals, self.none)  # fmt: skip
+        if self.approx:
+            approx_select(chunk_nodes.view(np.uint64), chunk_slots.view(np.uint64), slot_src.view(np.uint32),
+                          slot_reading.view(np.uint32), slot_offset, slot_heading, reading_cost, np.float32(wa),
+                          np.float32(wp if use_pos else 0.0), np.float32(wh if use_head else 0.0), rows, self.c32,
+                          self.rel, self._keep, self._best32, self._second32)  # fmt: skip
+            base = self.low if rows else self.c32_base  # what the float32 costs just read are relative to
+            live, near_ties = finish(
+                chunk_nodes.view(np.uint64), self.node_pos, self._best32, self._second32, self._best32.view(np.uint32),
+                self._label_mask, self._alpha, 2.0**-48 * base + 1e-30, self.incoming.view(np.uint32),
+                self.edge_src.view(np.uint32), self.edge_reading.view(np.uint32), self.edge_kind, self.edge_offset,
+                self.edge_heading, self.edge_turn, self.allowed, reading_cost, wa, wp, wh, use_pos, use_head,
+                meas_pos, meas_heading, rows, self.cost, self.rel, self.rel64, self.det, self.placed, self.place, self.low, cost, det, place,
+                self._c32_new, arrivals, self.none, self._chunk_low)  # fmt: skip
+            self.near_ties += near_ties
+            if live:
+                self.c32_base, self.low = self.low, float(self._chunk_low.min())
+                self.c32, self._c32_new = self._c32_new, self.c32
+        else:
+            edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
+                        self.cost, self.rel, self.rel64, self.total)  # fmt: skip
+            select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed,
+                   self.det, self.rank, self.best_slot, cost, self._best_edge)  # fmt: skip
+            live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
+                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank,
+                           place, det, rank, arrivals, self.none)  # fmt: skip
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
@@ -1073,18 +1330,20 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
 
 def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     """Run a few random samples through searches with a tiny ring, in store and in
-    window mode, placed: numba compiles (or loads from its cache) the step kernels and
-    the walk back through the dense rows for this graph's array types now, not when a
-    search first fills its ring (every BLOCK samples)."""
+    window mode, placed, and with a constraint set (the float64 passes): numba compiles
+    (or loads from its cache) the step kernels and the walk back through the dense
+    rows for this graph's array types now, not when a search first fills its ring
+    (every BLOCK samples) or first meets constraints."""
     rng = np.random.default_rng(0)
     T = 16
     acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
-    for window in (None, 2):
-        search = ViterbiSearch(graph, Weights(0.5, 1, 1), threads=threads, window=window, ring=(4, 2))
-        search.start(position[0], 0.0)
+    free = np.zeros(1, np.int64)
+    for window, gamma in ((None, 0), (2, 0), (None, 1)):
+        search = ViterbiSearch(graph, Weights(0.5, 1, 1), gamma, threads=threads, window=window, ring=(4, 2))
+        search.start(position[0], 0.0, free[:gamma], free[:gamma])
         for t in range(1, T):
-            search.step(acc[t], position[t], 0.0)
+            search.step(acc[t], position[t], 0.0, free[:gamma], free[:gamma])
         search.trace(search.best_node(), since=search.t - 1)
 
 

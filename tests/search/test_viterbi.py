@@ -272,8 +272,9 @@ def test_a_node_with_300_incoming_edges_keeps_every_arrival(ring):
 
 def test_warm_up_search_runs_the_walk_back_kernels():
     # A server warms up at load; the kernels that walk back through the dense rows run
-    # only every BLOCK samples, so the warm-up must reach them itself. A fresh process:
-    # here other tests have already compiled them.
+    # only every BLOCK samples, and the float64 passes only for constrained searches, so
+    # the warm-up must reach them itself. A fresh process: here other tests have already
+    # compiled them.
     import subprocess
     import sys
 
@@ -281,7 +282,8 @@ def test_warm_up_search_runs_the_walk_back_kernels():
         "import numpy as np\n"
         "from graphsvc.search import viterbi as V\n"
         "from tests.search.test_viterbi import random_graph\n"
-        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace)\n"
+        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace, V._approx_select, V._finish,\n"
+        "           V._edge_totals, V._select, V._advance)\n"
         "assert not any(k.signatures for k in kernels)\n"
         "V.warm_up_search(random_graph(np.random.default_rng(0)))\n"
         "assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]\n"
@@ -320,3 +322,123 @@ def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id()
     assert _best_node(cost, rank, np.array([0, 0, 0, 2, 1], np.int32)) == 2
     rank[2] = 1
     assert _best_node(cost, rank, np.array([0, 0, 0, 2, 1], np.int32)) == 4
+
+
+def _lockstep(g, meas, position, heading, weights, allowed=None):
+    """Run the float32-pass search (no constraint sets) and the float64 one (one
+    constraint set that requires nothing, so ranks never differ) side by side; every
+    sample's costs, detours, placements and lattice rows must be identical, bit for bit.
+    Returns the float32-pass search."""
+    fast = ViterbiSearch(g, weights, 0, allowed)
+    exact = ViterbiSearch(g, weights, 1, allowed)
+    assert fast.approx and not exact.approx
+    free = np.zeros(1, np.int64)
+    fast.start(position[0], heading[0])
+    exact.start(position[0], heading[0], free, free)
+    for t in range(1, len(meas)):
+        fast.step(meas[t], position[t], heading[t])
+        exact.step(meas[t], position[t], heading[t], free, free)
+        row = (fast.first + fast.used - 1) % fast.arrivals.shape[0]
+        np.testing.assert_array_equal(fast.arrivals[row], exact.arrivals[row], err_msg=f"sample {t}")
+        np.testing.assert_array_equal(fast.cost, exact.cost, err_msg=f"sample {t}")
+        np.testing.assert_array_equal(fast.det, exact.det, err_msg=f"sample {t}")
+        np.testing.assert_array_equal(fast.place, exact.place, err_msg=f"sample {t}")
+    assert fast.best_node() == exact.best_node()
+    np.testing.assert_array_equal(fast.trace(fast.best_node())[0], exact.trace(exact.best_node())[0])
+    return fast
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_float32_pass_equals_float64_search_with_exact_ties(seed):
+    # Readings from three levels, measurements on the same grid: many paths cost exactly
+    # the same, and the choice falls to detours and edge kind (the float64 rule).
+    rng = np.random.default_rng(seed)
+    N, out = 50, 4
+    src = np.repeat(np.arange(N), out)
+    dst = rng.integers(0, N, len(src))
+    pairs = np.unique(np.stack([src, dst], 1), axis=0)
+    E = len(pairs)
+    acc = rng.integers(-1, 2, (E, 2, 3)) * 9.81
+    g = tiny_graph(pairs[:, 0], pairs[:, 1], acc, kinds=rng.integers(0, 4, E))
+    T = 80
+    meas = rng.integers(-1, 2, (T, 2, 3)) * 9.81
+    none = [None] * T
+    fast = _lockstep(g, meas, none, none, Weights(1, 0, 0))
+    assert fast.near_ties > 0  # exact ties go to the float64 rule
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_float32_pass_equals_float64_search_placed_with_masks_and_gaps(seed):
+    rng = np.random.default_rng(10 + seed)
+    g = random_graph(rng, N=60, out=4)
+    T = 90
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    meas[rng.random((T, 2)) < 0.1] = np.nan
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    position[rng.random(T) < 0.15] = np.nan  # some samples without a position, some without a heading
+    heading[rng.random(T) < 0.15] = np.nan
+    allowed = rng.random(g.num_nodes) < 0.8
+    for weights in (Weights(0.5, 1, 1), Weights(1, 2, 0), Weights(0, 0, 1)):
+        _lockstep(g, meas, position, heading, weights, allowed)
+
+
+def test_float32_pass_resolves_differences_below_float32_resolution_in_float64():
+    # Readings come in pairs a hair apart (1e-6 g: costs differ by ~1e-6 g², far above
+    # TIE but below float32's resolution once costs reach tens): the float32 pass cannot
+    # tell such candidates apart, so the float64 rule must decide — the same way the
+    # float64 search does.
+    rng = np.random.default_rng(5)
+    N, out = 60, 4
+    src = np.repeat(np.arange(N), out)
+    dst = rng.integers(0, N, len(src))
+    pairs = np.unique(np.stack([src, dst], 1), axis=0)
+    E = len(pairs)
+    pool = rng.normal(0, 1, (6, 1, 3)).astype(np.float32)
+    twins = pool.copy()
+    twins[:, 0, 0] = np.nextafter(np.nextafter(pool[:, 0, 0], np.float32(9)), np.float32(9))  # 2 ulps up
+    readings = np.concatenate([pool, twins])
+    acc = readings[rng.integers(0, len(readings), E)].astype(np.float64) * 9.81
+    g = tiny_graph(pairs[:, 0], pairs[:, 1], acc)
+    T = 150
+    meas = readings[rng.integers(0, len(readings), T)].astype(np.float64) * 9.81 + rng.normal(0, 0.3, (T, 1, 3))
+    none = [None] * T
+    fast = _lockstep(g, meas, none, none, Weights(1, 0, 0))
+    assert fast.near_ties > 0
+
+
+def test_tagged_minimum_keeps_the_lowest_value_and_its_label():
+    import numba
+
+    from graphsvc.search._llvm import fmin, tag
+
+    @numba.njit
+    def tagged_min(values, keep):
+        best = np.float32(1e38)
+        for j in range(values.shape[0]):
+            best = fmin(tag(values[j], keep, np.uint32(j)), best)
+        return best
+
+    rng = np.random.default_rng(2)
+    for bits in (0, 2, 4, 9):
+        keep = np.uint32(0xFFFFFFFF ^ ((1 << bits) - 1))
+        for _ in range(200):
+            k = int(rng.integers(1, 1 << bits)) if bits else 1
+            values = (rng.random(k) * 10.0 ** rng.integers(-3, 4)).astype(np.float32)
+            values[rng.random(k) < 0.3] = values[0]  # exact ties
+            got = tagged_min(values, keep)
+            label = int(np.float32(got).view(np.uint32)) & ((1 << bits) - 1)
+            lowest = values.min()
+            # Within 2^bits ulps of the true minimum, labelled by a candidate holding it
+            # (the lowest-numbered one, unless tagging reordered values closer than that).
+            assert abs(float(got) - float(lowest)) <= 2.0 ** (bits - 23) * float(lowest)
+            assert abs(float(values[label]) - float(lowest)) <= 2.0 ** (bits - 22) * float(lowest)
+            if np.all((values == lowest) | (values > lowest * (1 + 2.0 ** (bits - 21)))):
+                assert label == int(np.argmax(values == lowest))
+
+
+def test_negative_or_infinite_weights_are_refused():
+    g = random_graph(np.random.default_rng(0))
+    for w in (Weights(-1, 0, 0), Weights(1, np.inf, 0), Weights(1, 0, np.nan)):
+        with pytest.raises(InputError, match="weights"):
+            ViterbiSearch(g, w)
