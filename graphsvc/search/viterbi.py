@@ -352,7 +352,7 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
 
 @numba.njit(inline="always")
 def _keep_two(best, second, p, t):
-    """Node slot p keeps its lowest and second-lowest tagged candidate (branch-free)."""
+    """Layout position p keeps its lowest and second-lowest tagged candidate (branch-free)."""
     b = best[p]
     second[p] = _fmin(second[p], _fmax(t, b))
     best[p] = _fmin(t, b)
@@ -384,8 +384,8 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
                     if i + PREFETCH_AHEAD < E:
                         _prefetch(rel, slot_src[i + PREFETCH_AHEAD])
                     m = slot_src[i]
-                    pos, head = _place_terms(rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], slot_offset[i, 0],
-                                             slot_offset[i, 1], slot_heading[i])  # fmt: skip
+                    pos, head = _place_terms(rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH],
+                                             slot_offset[i, 0], slot_offset[i, 1], slot_heading[i])  # fmt: skip
                     t = rel[m, RC32] + w_acc * reading_cost[slot_reading[i]] + w_pos * pos + w_head * head
                     _keep_two(best, second, i + shift, _tag(t, keep, label))
             else:
@@ -423,7 +423,8 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
     return best - first if best >= 0 else np.int64(-1)
 
 
-def _finish_py(chunk_nodes, node_pos, best, second, best_bits, low, alpha, beta, incoming, edge_src, edge_reading,
+def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha, beta, incoming, edge_src,
+               edge_reading,
                edge_kind, edge_offset, edge_heading, edge_turn, allowed, reading_cost, w_acc, w_pos, w_head, use_pos,
                use_head, meas_pos, meas_heading, rows, cost, rel, rel64, det_prev, placed, place_prev, c32_base,
                cost_new, det_new, place_new, c32_new, arrivals, none, lowest):  # fmt: skip
@@ -457,7 +458,7 @@ def _finish_py(chunk_nodes, node_pos, best, second, best_bits, low, alpha, beta,
                                   det_prev)  # fmt: skip
                 arrival = np.uint32(a)  # a ≥ 0: a live candidate exists (b1 < DEAD_BELOW)
             else:
-                arrival = np.uint32(best_bits[p] & low)
+                arrival = np.uint32(best_bits[p] & label_mask)
             arrivals[n] = arrival
             m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
             source[n - n0] = m
@@ -960,7 +961,10 @@ class ViterbiSearch:
         (traces must start inside the window). It saves the store's appends and sweeps
         for (window + BLOCK) × N bytes. None: the survivor store, any trace. ring:
         (BLOCK, STORE_WINDOW) instead of the class's (a warm-up makes the rarely run
-        walk-back kernels run within a few samples)."""
+        walk-back kernels run within a few samples). Weights must be finite and ≥ 0
+        (InputError); the float32 pass serves searches without constraint sets whose
+        weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
+        the float64 passes the rest, with the same results."""
         self.graph = graph
         self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance, _approx_select, _finish)
                          if threads else
@@ -999,13 +1003,21 @@ class ViterbiSearch:
         # without constraint sets; constrained ones keep the float64 passes (rank first).
         label_bits = int(self.slots[1].shape[1] - 2).bit_length()  # bits for an arrival index < max in-degree
         # (weights ≤ 1e6 keep every live float32 total far from overflow)
-        self.approx = gamma == 0 and label_bits <= 12 and max(weights.acc, weights.position, weights.heading) <= 1e6
+        heaviest = max(weights.acc, weights.position, weights.heading)
+        self.float32_pass = gamma == 0 and label_bits <= 12 and heaviest <= 1e6
         self.near_ties = 0  # nodes whose choice the float64 rule settled (a check on the bound's width)
-        if self.approx:
+        if self.float32_pass:
             self._keep = np.uint32(0xFFFFFFFF ^ ((1 << label_bits) - 1))
             self._label_mask = np.uint32((1 << label_bits) - 1)
             self._alpha = 2.0**-20 + 2.0 ** (label_bits - 22)
             self._best32, self._second32 = np.empty(N, np.float32), np.empty(N, np.float32)
+            # unsigned views of the index tables the float32 pass reads (see `_approx_select_py`)
+            self._unsigned = {
+                "chunk_nodes": self.slots[0].view(np.uint64), "chunk_slots": self.slots[1].view(np.uint64),
+                "slot_src": self.slots[3].view(np.uint32), "slot_reading": self.slots[6].view(np.uint32),
+                "incoming": tables["incoming"].view(np.uint32), "edge_src": tables["edge_src"].view(np.uint32),
+                "edge_reading": tables["edge_reading"].view(np.uint32),
+            }  # fmt: skip
             self._chunk_low = np.empty(len(self.slots[0]) - 1)
             self.c32 = np.zeros(N if not self.placed else 1, dtype=np.float32)
             self._c32_new = np.zeros_like(self.c32)
@@ -1085,7 +1097,7 @@ class ViterbiSearch:
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
         self.det[:] = 0
         self.low = self.c32_base = 0.0
-        if self.approx and not self.placed:
+        if self.float32_pass and not self.placed:
             self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
@@ -1130,26 +1142,27 @@ class ViterbiSearch:
             reading_cost = self.reading_cost
         # Placed searches read their sources' relative rows (which hold the float32 cost)
         # every sample, whether or not this sample's position or heading counts.
-        rows = self.placed and (self.approx or use_pos or use_head)
+        rows = self.placed and (self.float32_pass or use_pos or use_head)
         meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
         meas_heading = float(heading) if use_head else 0.0
         if rows:
             relative(self.place, self.cost, meas_pos, meas_heading, self.low, self.rel, self.rel64)
         chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, slot_heading = \
             self.slots
-        if self.approx:
-            approx_select(chunk_nodes.view(np.uint64), chunk_slots.view(np.uint64), slot_src.view(np.uint32),
-                          slot_reading.view(np.uint32), slot_offset, slot_heading, reading_cost, np.float32(wa),
-                          np.float32(wp if use_pos else 0.0), np.float32(wh if use_head else 0.0), rows, self.c32,
-                          self.rel, self._keep, self._best32, self._second32)  # fmt: skip
+        if self.float32_pass:
+            u = self._unsigned
+            approx_select(u["chunk_nodes"], u["chunk_slots"], u["slot_src"], u["slot_reading"], slot_offset,
+                          slot_heading, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
+                          np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._best32,
+                          self._second32)  # fmt: skip
             base = self.low if rows else self.c32_base  # what the float32 costs just read are relative to
             live, near_ties = finish(
-                chunk_nodes.view(np.uint64), self.node_pos, self._best32, self._second32, self._best32.view(np.uint32),
-                self._label_mask, self._alpha, 2.0**-48 * base + 1e-30, self.incoming.view(np.uint32),
-                self.edge_src.view(np.uint32), self.edge_reading.view(np.uint32), self.edge_kind, self.edge_offset,
-                self.edge_heading, self.edge_turn, self.allowed, reading_cost, wa, wp, wh, use_pos, use_head,
-                meas_pos, meas_heading, rows, self.cost, self.rel, self.rel64, self.det, self.placed, self.place, self.low, cost, det, place,
-                self._c32_new, arrivals, self.none, self._chunk_low)  # fmt: skip
+                u["chunk_nodes"], self.node_pos, self._best32, self._second32, self._best32.view(np.uint32),
+                self._label_mask, self._alpha, 2.0**-48 * base + 1e-30, u["incoming"], u["edge_src"],
+                u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.allowed,
+                reading_cost, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, rows, self.cost, self.rel,
+                self.rel64, self.det, self.placed, self.place, self.low, cost, det, place, self._c32_new, arrivals,
+                self.none, self._chunk_low)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())

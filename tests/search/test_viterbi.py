@@ -331,7 +331,7 @@ def _lockstep(g, meas, position, heading, weights, allowed=None):
     Returns the float32-pass search."""
     fast = ViterbiSearch(g, weights, 0, allowed)
     exact = ViterbiSearch(g, weights, 1, allowed)
-    assert fast.approx and not exact.approx
+    assert fast.float32_pass and not exact.float32_pass
     free = np.zeros(1, np.int64)
     fast.start(position[0], heading[0])
     exact.start(position[0], heading[0], free, free)

@@ -1,0 +1,77 @@
+#!/usr/bin/env python3
+"""Benchmark: the batch search of two or more checkouts, alternating.
+
+This machine's speed drifts by up to ±50 % within minutes (a shared VM), so a before /
+after comparison from two separate benchmark runs says little. This script runs each
+checkout's own `viterbi_search` on the same generated G_E-size graph and input
+(`tools/bench_viterbi.py`'s), in turn, in fresh processes, several rounds, and prints one
+JSON object per process (`tree`, `mode`, `seconds` per search, `node_path_sum` and
+`cost`, which must agree across checkouts whose search is exact), then one summary
+object per checkout (`min_s`, `median_s` over every search).
+
+Usage: tools/bench_compare.py CHECKOUT... [--mode A|APO] [--rounds 2] [--searches 4]
+  e.g. git worktree add /tmp/before HEAD~1 && tools/bench_compare.py /tmp/before .
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+CHILD = r"""
+import json, sys, time
+sys.path[:0] = [{tree!r}, {tools!r}]
+import bench_viterbi as B
+from graphsvc.search.viterbi import Weights, viterbi_search, warm_up_search
+g = B.generated_graph(100_686, 317_600)
+acc, position, heading = B.inputs(720, 6)
+if {mode!r} == "A":
+    weights, position, heading = Weights(1, 0, 0), None, None
+else:
+    weights = Weights(0.5, 1, 1)
+viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
+               weights)
+warm_up_search(g)
+seconds = []
+for _ in range({searches}):
+    t0 = time.perf_counter()
+    r = viterbi_search(g, acc, position, heading, weights)
+    seconds.append(round(time.perf_counter() - t0, 3))
+print(json.dumps({{"seconds": seconds, "node_path_sum": int(r.node_path.sum()), "cost": r.cost}}))
+"""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("trees", nargs="+", help="checkouts (directories holding graphsvc/ and tools/)")
+    parser.add_argument("--mode", choices=("A", "APO"), default="A")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--searches", type=int, default=4, help="searches per process")
+    args = parser.parse_args()
+    trees = [str(Path(t).resolve()) for t in args.trees]
+    for tree in trees:
+        if not (Path(tree, "graphsvc").is_dir() and Path(tree, "tools", "bench_viterbi.py").is_file()):
+            parser.error(f"{tree} is not a graphsvc checkout")
+    times: dict[str, list[float]] = {t: [] for t in trees}
+    for _ in range(args.rounds):
+        for tree in trees:
+            code = CHILD.format(tree=tree, tools=str(Path(tree, "tools")), mode=args.mode, searches=args.searches)
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tree)
+            if out.returncode != 0:
+                print(json.dumps({"tree": tree, "error": out.stderr[-400:]}), flush=True)
+                continue
+            run = json.loads(out.stdout.strip().splitlines()[-1])
+            times[tree] += run["seconds"]
+            print(json.dumps({"tree": tree, "mode": args.mode, **run}), flush=True)
+    for tree, seconds in times.items():
+        if seconds:
+            ordered = sorted(seconds)
+            print(json.dumps({"tree": tree, "mode": args.mode, "searches": len(ordered), "min_s": ordered[0],
+                              "median_s": ordered[len(ordered) // 2]}))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
