@@ -190,12 +190,18 @@ class Reconstruction:
 
 
 def _start_state(position, heading) -> tuple[np.ndarray, float]:
+    """Where the search starts every path (`ViterbiSearch._anchor`): the first measured
+    ground position (T, 2) m and heading (T,) rad, else the origin facing +Z."""
     g = np.zeros(2)
-    if position is not None and position.shape[0] and np.all(np.isfinite(position[0])):
-        g = np.asarray(position[0], dtype=np.float64)
+    if position is not None:
+        measured = np.nonzero(np.isfinite(position).all(axis=1))[0]
+        if len(measured):
+            g = np.asarray(position[measured[0]], dtype=np.float64)
     h = 0.0
-    if heading is not None and heading.shape[0] and np.isfinite(heading[0]):
-        h = float(heading[0])
+    if heading is not None:
+        measured = np.nonzero(np.isfinite(heading))[0]
+        if len(measured):
+            h = float(heading[measured[0]])
     return g, h
 
 
@@ -412,13 +418,20 @@ class LiveSession:
         self.next_tick += 1
         if self.track is not None:
             heading = self.track.push(position)
-        if self.synth is None:
-            g = position if position is not None and np.all(np.isfinite(position)) else np.zeros(2)
-            h = heading if heading is not None and math.isfinite(heading) else 0.0
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
         w = self.options.weights
         nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
-        return self._frames(nodes, self.synth.add(nodes, edges))
+        if self.synth is None and not len(nodes):
+            return []
+        return self._frames(nodes, self._synthesizer().add(nodes, edges))
+
+    def _synthesizer(self) -> StreamingSynthesizer:
+        """Made when the first frames are final, starting where the search starts its
+        paths — the first measured position and heading so far (one measured only
+        later moves the search's paths but not frames already out)."""
+        if self.synth is None:
+            g, h = self.decoder.search.start_placement
+            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
+        return self.synth
 
     def _frames(self, nodes, synthesized) -> list[Frame]:
         self._nodes.append(nodes)
@@ -441,12 +454,13 @@ class LiveSession:
 
     def flush(self) -> list[Frame]:
         """The frames still held back, at the end of the stream."""
-        if self.flushed or self.synth is None:
+        if self.flushed or self.next_tick == 0:
             self.flushed = True
             return []
         self.flushed = True
         nodes, edges = self.decoder.flush()
-        first, rot, trans = _join(self.synth.add(nodes, edges), self.synth.finish())
+        synth = self._synthesizer()
+        first, rot, trans = _join(synth.add(nodes, edges), synth.finish())
         return self._frames(nodes, (first, rot, trans))
 
     def motion(self) -> Motion:

@@ -41,8 +41,10 @@ def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weig
     cost = np.zeros(N)
     alive = np.ones(N, dtype=bool)
     rank = (~ok(0)).T.astype(np.int64) if gamma else np.zeros((N, 0), np.int64)
-    p0 = position[0] if position is not None and np.all(np.isfinite(position[0])) else np.zeros(2)
-    h0 = heading[0] if heading is not None and np.isfinite(heading[0]) else 0.0
+    # Paths start at the first measured position and heading (the origin facing +Z
+    # without): until one is measured no term of it counts, so it may as well be sample 0's.
+    p0 = next((p for p in ([] if position is None else position) if np.all(np.isfinite(p))), np.zeros(2))
+    h0 = next((h for h in ([] if heading is None else heading) if np.isfinite(h)), 0.0)
     pos = np.tile(p0, (N, 1)).astype(float)
     head = np.full(N, float(h0))
     lattice = np.full((T, N), -1, dtype=np.int64)

@@ -1088,12 +1088,14 @@ class ViterbiSearch:
         return self.size
 
     def start(self, position=None, heading=None, kinds_t=None, values_t=None):
-        """Sample 0: every node starts a path at the first measured position/heading."""
+        """Sample 0: every node starts a path at the measured position / heading; one
+        not measured yet is taken from the first sample that has it (see `_anchor`)."""
         self.t = 0
-        p = np.zeros(2) if position is None or not np.all(np.isfinite(position)) else np.asarray(position, float)
-        h = 0.0 if heading is None or not np.isfinite(heading) else float(heading)
-        self.place[:, X], self.place[:, Z] = p
-        self.place[:, HEADING], self.place[:, COS], self.place[:, SIN] = h, np.cos(h), np.sin(h)
+        self.anchor_position = None  # every path's start, once measured: (2,) m
+        self.anchor_heading = None  # rad
+        self.place[:, X] = self.place[:, Z] = self.place[:, HEADING] = self.place[:, SIN] = 0.0
+        self.place[:, COS] = 1.0
+        self._anchor(position, heading)
         self.cost[:] = np.where(self.allowed, 0.0, np.inf)
         self.det[:] = 0
         self.low = self.c32_base = 0.0
@@ -1116,9 +1118,40 @@ class ViterbiSearch:
         self.peak_entries = self.size
         self.peak_bytes = self.lattice_bytes
 
+    def _anchor(self, position, heading) -> None:
+        """Until a position (a heading) has been measured, paths run from the origin
+        (facing +Z) and no position (heading) term has counted, so the first one
+        measured can become every path's start: all placements are turned about the
+        start by the heading and moved onto the position, rigidly — the same as if the
+        search had started there (as a batch search given them at sample 0 does)."""
+        place = self.place  # (a single dummy row when not placed)
+        if self.anchor_heading is None and heading is not None and np.isfinite(heading):
+            self.anchor_heading = h = float(heading)
+            ax, az = (0.0, 0.0) if self.anchor_position is None else self.anchor_position
+            c, s = np.cos(h), np.sin(h)
+            dx, dz = place[:, X] - ax, place[:, Z] - az
+            place[:, X], place[:, Z] = ax + c * dx + s * dz, az - s * dx + c * dz
+            cos, sin = place[:, COS].copy(), place[:, SIN].copy()
+            place[:, HEADING] += h
+            place[:, COS], place[:, SIN] = cos * c - sin * s, sin * c + cos * s
+        if self.anchor_position is None and position is not None and np.all(np.isfinite(position)):
+            self.anchor_position = p = (float(position[0]), float(position[1]))
+            place[:, X] += p[0]
+            place[:, Z] += p[1]
+
+    @property
+    def start_placement(self) -> tuple[np.ndarray, float]:
+        """Where every path starts: ground position (2,) m and heading rad (the origin and
+        +Z for what has not been measured yet)."""
+        p = np.zeros(2) if self.anchor_position is None else np.asarray(self.anchor_position, dtype=np.float64)
+        return p, 0.0 if self.anchor_heading is None else self.anchor_heading
+
     def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
         when a batch caller computed it ahead (else it is computed here)."""
+        if (self.anchor_position is None and position is not None) or (self.anchor_heading is None and
+                                                                           heading is not None):
+            self._anchor(position, heading)
         if self.used == self.arrivals.shape[0]:
             self._flush() if self.window is None else self._slide()
         self.t += 1
@@ -1324,8 +1357,7 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
     meas, mask, present = search.measurements(acc[:T]) if measured is None else measured
     pos = np.full((T, 2), np.nan) if position is None else np.asarray(position, dtype=np.float64)
     head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
-    p0 = pos[0] if np.all(np.isfinite(pos[0])) else np.zeros(2)
-    h0 = float(head[0]) if np.isfinite(head[0]) else 0.0
+    p0, h0 = search.start_placement
     w = search.weights
     out = _path_terms(edges.astype(np.int64), search.readings_t, search.edge_reading, search.edge_offset,
                       search.edge_heading, search.edge_turn, meas, mask, present, pos, head, w.position != 0,

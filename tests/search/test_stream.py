@@ -20,8 +20,11 @@ def _problem(seed, T=70):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_flushed_stream_equals_batch_search(seed, ring):
+@pytest.mark.parametrize("unmeasured", [0, 4])
+def test_flushed_stream_equals_batch_search(seed, unmeasured, ring):
     g, meas, position, heading = _problem(seed)
+    position[:unmeasured] = np.nan  # paths start at the first measured position and heading
+    heading[: unmeasured // 2] = np.nan
     w = Weights(0.5, 1, 1)
     batch = viterbi_search(g, meas, position, heading, w)
     # A lag longer than the input emits everything at flush: the batch path exactly.

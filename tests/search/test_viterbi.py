@@ -442,3 +442,36 @@ def test_negative_or_infinite_weights_are_refused():
     for w in (Weights(-1, 0, 0), Weights(1, np.inf, 0), Weights(1, 0, np.nan)):
         with pytest.raises(InputError, match="weights"):
             ViterbiSearch(g, w)
+
+
+def test_paths_start_at_the_first_measured_position_and_heading():
+    # The track's first samples are missing: every path must start where the track
+    # does (its first measured position and heading), not at the origin — so moving
+    # the whole track moves nothing but the placements, and the reference (which
+    # starts there at sample 0) finds the same path.
+    rng = np.random.default_rng(4)
+    g = random_graph(rng, N=50, out=4)
+    T = 70
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.array([40.0, -25.0]) + np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = 1.0 + np.cumsum(rng.normal(0, 0.05, T))
+    position[:4] = np.nan
+    heading[:2] = np.nan
+    w = Weights(0.5, 1, 1)
+    fast = viterbi_search(g, meas, position, heading, w)
+    ref_path, ref_cost = reference_viterbi(g, meas, position, heading, w)
+    np.testing.assert_array_equal(fast.node_path, ref_path)
+    assert fast.cost == pytest.approx(ref_cost, rel=1e-6)
+    moved = viterbi_search(g, meas, position + np.array([100.0, -50.0]), heading, w)
+    np.testing.assert_array_equal(moved.node_path, fast.node_path)
+    assert moved.cost == pytest.approx(fast.cost, rel=1e-9)
+    # The search's own record of the start, and the per-term costs integrated from it.
+    s = ViterbiSearch(g, w)
+    s.start(position[0], heading[0])
+    for t in range(1, 6):
+        s.step(meas[t], position[t], heading[t])
+    p0, h0 = s.start_placement
+    np.testing.assert_array_equal(p0, position[4])
+    assert h0 == heading[2]
+    assert fast.terms["position_m"] * w.position + fast.terms["heading_rad"] * w.heading + \
+        fast.terms["acc_g2"] * w.acc == pytest.approx(fast.cost, rel=1e-6)
