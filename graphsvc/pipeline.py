@@ -356,6 +356,8 @@ class LiveSession:
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
                                        self.rate, threads)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
+        self.start_position: np.ndarray | None = None  # first measured, (2,) m
+        self.start_heading: float | None = None  # first measured (or from the track), rad
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
         self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
@@ -418,6 +420,10 @@ class LiveSession:
         self.next_tick += 1
         if self.track is not None:
             heading = self.track.push(position)
+        if self.start_position is None and position is not None and np.all(np.isfinite(position)):
+            self.start_position = np.asarray(position, dtype=np.float64)
+        if self.start_heading is None and heading is not None and math.isfinite(heading):
+            self.start_heading = float(heading)
         w = self.options.weights
         nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
         if self.synth is None and not len(nodes):
@@ -426,10 +432,11 @@ class LiveSession:
 
     def _synthesizer(self) -> StreamingSynthesizer:
         """Made when the first frames are final, starting where the search starts its
-        paths — the first measured position and heading so far (one measured only
-        later moves the search's paths but not frames already out)."""
+        paths (`_start_state`): the first position and heading measured so far (one
+        measured only later moves the search's paths, not frames already out)."""
         if self.synth is None:
-            g, h = self.decoder.search.start_placement
+            g = np.zeros(2) if self.start_position is None else self.start_position
+            h = 0.0 if self.start_heading is None else self.start_heading
             self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
         return self.synth
 

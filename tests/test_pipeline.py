@@ -125,19 +125,20 @@ def test_paths_start_where_the_track_starts_when_its_first_samples_lack_it(graph
     heading = rec.heading.copy()
     heading[:2] = np.nan
     gappy = replace(rec, ground_position=position, heading=heading)
-    opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5)
-    batch = reconstruct(graph, gappy, opts)
-    live = LiveSession(graph, opts, rec.sensor_names)
-    frames = []
-    for k in range(rec.num_samples):
-        frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], position[k], heading[k])
-    frames += live.flush()
-    assert [f.node for f in frames] == batch.node_path.tolist()
-    np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
-    # The root at frame 3 stands where the track first reports (within the root's own
-    # offset from the ground point, a few cm), not 36 m away at the origin.
-    root = batch.motion.translations[3, 0]
-    assert np.hypot(root[0] - position[3, 0], root[2] - position[3, 1]) < 0.3
+    for weights in (Weights(0.5, 1, 1), Weights(1, 0, 0)):  # with the track searched, and only placing the output
+        opts = Options(weights=weights, latency_s=0.5)
+        batch = reconstruct(graph, gappy, opts)
+        live = LiveSession(graph, opts, rec.sensor_names)
+        frames = []
+        for k in range(rec.num_samples):
+            frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], position[k], heading[k])
+        frames += live.flush()
+        assert [f.node for f in frames] == batch.node_path.tolist()
+        np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
+        # The root at frame 3 stands where the track first reports (within the root's own
+        # offset from the ground point, a few cm), not 36 m away at the origin.
+        root = batch.motion.translations[3, 0]
+        assert np.hypot(root[0] - position[3, 0], root[2] - position[3, 1]) < 0.3
 
 
 def test_live_session_with_a_long_lag_equals_the_whole_input_search(graph, rec):
