@@ -71,8 +71,10 @@ def inputs(T: int, sensors: int, seed: int = 1):
     return acc, position, heading
 
 
-def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> dict:
-    from graphsvc.search.viterbi import Weights, viterbi_search, warm_up_search
+def problem(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> tuple:
+    """A run's (graph, acc, position, heading, weights, constraint sets): a generated
+    graph and random input, or a built graph and a random walk through its readings."""
+    from graphsvc.search.viterbi import Weights
 
     if graph_path:
         from bench_service import random_walk_readings
@@ -92,6 +94,13 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
     if mode == "APO+2constraints":
         sets = [[{"start_s": 2.0, "end_s": 6.0, "require": {"contact": "both"}}],
                 [{"start_s": 4.0, "end_s": 12.0, "require": {"label": "b"}}]]  # fmt: skip
+    return g, acc, position, heading, weights, sets
+
+
+def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> dict:
+    from graphsvc.search.viterbi import viterbi_search, warm_up_search
+
+    g, acc, position, heading, weights, sets = problem(mode, nodes, edges, samples, graph_path)
     viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
                    weights, sets)  # warm-up: numba compilation  # fmt: skip
     warm_up_search(g, threads=True)  # (and the walk-back kernels, which a 3-sample search never reaches)

@@ -204,7 +204,7 @@ def _place_terms(rx, rz, c, s, rh, ox, oz, dh):
 @numba.njit(inline="always")
 def _exact_total(cost_m, rx, rz, c, s, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     """L(e, t) + G(m, t−1) in float64 for an edge from m: cost_m its source's cost,
-    rx … rh the source's relative row (`_relative_row`), ca the edge reading's C_A;
+    rx … rh the source's relative row (`_relative`), ca the edge reading's C_A;
     the position / heading terms only where they count."""
     t = cost_m + w_acc * ca
     if use_pos or use_head:
@@ -217,10 +217,10 @@ def _exact_total(cost_m, rx, rz, c, s, rh, ca, ox, oz, dh, w_acc, w_pos, w_head,
 
 
 @numba.njit(inline="always")
-def _relative_row(place, n, meas_x, meas_z, meas_heading):
-    """Node n's placement relative to the measurement, float32 (RX … RH)."""
-    return (np.float32(place[n, X] - meas_x), np.float32(place[n, Z] - meas_z), np.float32(place[n, COS]),
-            np.float32(place[n, SIN]), np.float32(_wrap(place[n, HEADING] - meas_heading)))
+def _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+    """`_exact_total` for an edge from m, read from m's relative row (`_relative`)."""
+    return _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], ca, ox, oz, dh,
+                        w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
 
 
 def _relative_py(place, cost, meas_pos, meas_heading, base, rel, rel64):
@@ -231,8 +231,23 @@ def _relative_py(place, cost, meas_pos, meas_heading, base, rel, rel64):
     for n in numba.prange(N):
         rel64[n, REL_COST] = cost[n]
         rel[n, RC32] = np.float32(cost[n] - base) if cost[n] != np.inf else DEAD32
-        rel[n, RX], rel[n, RZ], rel[n, RC], rel[n, RS], rel[n, RH] = _relative_row(place, n, meas_pos[0], meas_pos[1],
-                                                                                  meas_heading)  # fmt: skip
+        rel[n, RX] = np.float32(place[n, X] - meas_pos[0])
+        rel[n, RZ] = np.float32(place[n, Z] - meas_pos[1])
+        rel[n, RC] = np.float32(place[n, COS])
+        rel[n, RS] = np.float32(place[n, SIN])
+        rel[n, RH] = np.float32(_wrap(place[n, HEADING] - meas_heading))
+
+
+@numba.njit(inline="always")
+def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts):
+    """Node n's placement: m's advanced by an edge (offset ox, oz in m's frame, turn dh
+    with cos tc, sin ts), cos/sin carried by rotation — no trigonometry."""
+    c, s = place_prev[m, COS], place_prev[m, SIN]
+    place_new[n, X] = place_prev[m, X] + c * ox + s * oz
+    place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
+    place_new[n, HEADING] = place_prev[m, HEADING] + dh
+    place_new[n, COS] = c * tc - s * ts
+    place_new[n, SIN] = s * tc + c * ts
 
 
 def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, w_acc, w_pos, w_head, use_pos,
@@ -247,10 +262,8 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
             total[e] = cost[edge_src[e]] + w_acc * reading_cost[edge_reading[e]]
         return
     for e in numba.prange(E):
-        m = edge_src[e]
-        total[e] = _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH],
-                                reading_cost[edge_reading[e]], edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                                w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
+        total[e] = _row_total(rel, rel64, edge_src[e], reading_cost[edge_reading[e]], edge_offset[e, 0],
+                              edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
 
 
 def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
@@ -339,14 +352,8 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
         if placed:
-            ox, oz = edge_offset[e, 0], edge_offset[e, 1]
-            c, s = place_prev[m, COS], place_prev[m, SIN]
-            tc, ts = edge_turn[e, 0], edge_turn[e, 1]
-            place_new[n, X] = place_prev[m, X] + c * ox + s * oz
-            place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
-            place_new[n, HEADING] = place_prev[m, HEADING] + edge_heading[e]
-            place_new[n, COS] = c * tc - s * ts
-            place_new[n, SIN] = s * tc + c * ts
+            _carry_placement(place_prev, m, place_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
+                             edge_turn[e, 0], edge_turn[e, 1])  # fmt: skip
     return live
 
 
@@ -407,33 +414,28 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
         m = np.int64(edge_src[e])
         ca = reading_cost[edge_reading[e]]
         if rows:
-            t = _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], ca,
-                             edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos,
-                             use_head)  # fmt: skip
+            t = _row_total(rel, rel64, m, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos,
+                           w_head, use_pos, use_head)  # fmt: skip
         else:
             t = cost[m] + w_acc * ca
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
-            det = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
-            b = np.int64(edge_src[best])
-            best_det = det_prev[b] + (1 if edge_kind[best] != 0 else 0)
-            better = det < best_det if det != best_det else edge_kind[e] < edge_kind[best]
+            better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
         if better:
             best, cb = e, t
     return best - first if best >= 0 else np.int64(-1)
 
 
 def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha, beta, incoming, edge_src,
-               edge_reading,
-               edge_kind, edge_offset, edge_heading, edge_turn, allowed, reading_cost, w_acc, w_pos, w_head, use_pos,
-               use_head, meas_pos, meas_heading, rows, cost, rel, rel64, det_prev, placed, place_prev, c32_base,
-               cost_new, det_new, place_new, c32_new, arrivals, none, lowest):  # fmt: skip
+               edge_reading, edge_kind, edge_offset, edge_heading, edge_turn, allowed, reading_cost, w_acc, w_pos,
+               w_head, use_pos, use_head, rows, cost, rel, rel64, det_prev, placed, place_prev, c32_base, cost_new,
+               det_new, place_new, c32_new, arrivals, none, lowest):  # fmt: skip
     """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
     the float64 rule's on a near-tie), the arrival into this sample's lattice row
     (`none`: dead or masked), the chosen path's float64 cost, detours, placement
     (carried by rotation when placed) and, without rows, its float32 cost relative to
-    c32_base (≤ every new cost: the lowest cost before the step). meas_pos (2,),
-    meas_heading: as given to `_relative`. lowest (C,) each chunk's lowest new cost.
+    c32_base (≤ every new cost: the lowest cost before the step). lowest (C,) each
+    chunk's lowest new cost.
     Returns (live nodes, near-ties resolved in float64).
 
     Per chunk, first every node's choice, prefetching its source's state; then the
@@ -462,7 +464,10 @@ def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha
             arrivals[n] = arrival
             m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
             source[n - n0] = m
-            _prefetch(cost, m)
+            if rows:
+                _prefetch(rel, m)
+            else:
+                _prefetch(cost, m)
             _prefetch(det_prev, m)
             if placed:
                 _prefetch(place_prev, m)
@@ -480,8 +485,7 @@ def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha
             ca = reading_cost[edge_reading[e]]
             ox, oz, dh = edge_offset[e, 0], edge_offset[e, 1], edge_heading[e]
             if rows:
-                rx, rz, rc, rs, rh = _relative_row(place_prev, m, meas_pos[0], meas_pos[1], meas_heading)
-                t = _exact_total(cost[m], rx, rz, rc, rs, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+                t = _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
             else:
                 t = cost[m] + w_acc * ca
                 c32_new[n] = np.float32(t - c32_base)
@@ -489,13 +493,7 @@ def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha
             chunk_low = _fmin(chunk_low, t)
             det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
             if placed:
-                cm, sm = place_prev[m, COS], place_prev[m, SIN]
-                tc, ts = edge_turn[e, 0], edge_turn[e, 1]
-                place_new[n, X] = place_prev[m, X] + cm * ox + sm * oz
-                place_new[n, Z] = place_prev[m, Z] - sm * ox + cm * oz
-                place_new[n, HEADING] = place_prev[m, HEADING] + dh
-                place_new[n, COS] = cm * tc - sm * ts
-                place_new[n, SIN] = sm * tc + cm * ts
+                _carry_placement(place_prev, m, place_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
         lowest[c] = chunk_low
     return live, near_ties
 
@@ -1193,9 +1191,9 @@ class ViterbiSearch:
                 u["chunk_nodes"], self.node_pos, self._best32, self._second32, self._best32.view(np.uint32),
                 self._label_mask, self._alpha, 2.0**-48 * base + 1e-30, u["incoming"], u["edge_src"],
                 u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.allowed,
-                reading_cost, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, rows, self.cost, self.rel,
-                self.rel64, self.det, self.placed, self.place, self.low, cost, det, place, self._c32_new, arrivals,
-                self.none, self._chunk_low)  # fmt: skip
+                reading_cost, wa, wp, wh, use_pos, use_head, rows, self.cost, self.rel, self.rel64, self.det,
+                self.placed, self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
+                self._chunk_low)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
