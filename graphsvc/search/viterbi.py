@@ -172,19 +172,21 @@ _INV_TWO_PI32 = np.float32(0.5 / np.pi)
 #    the lowest live cost, plus the edge's terms), each node keeping its lowest and
 #    second-lowest candidate; the lowest carries which incoming edge it is in its low
 #    mantissa bits (`tag`), so keeping the minimum is two min instructions, no branch.
-# 2. `_finish`: per node, if the float32 gap between its two best candidates exceeds
-#    what float32 rounding could have hidden (plus TIE), the lowest is the node's best
-#    edge exactly as the float64 rule would choose it; otherwise (a near-tie, a few
-#    nodes a sample) the node's candidates are compared again in float64 with the
-#    full rule. Then the chosen path's new state, its cost recomputed in float64, so
-#    costs, paths and ties are bit for bit those of the float64 search (tested against
-#    the float64 kernels below, which constrained searches still use).
+#    Once a chunk's nodes are final, it marks the near-ties: nodes whose float32 gap
+#    between their two best candidates is within what float32 rounding could have
+#    hidden (plus TIE), a few a sample.
+# 2. `_finish`: per node, unless marked, the lowest is the node's best edge exactly
+#    as the float64 rule would choose it; a near-tie's candidates are compared again
+#    in float64 with the full rule. Then the chosen path's new state, its cost
+#    recomputed in float64, so costs, paths and ties are bit for bit those of the
+#    float64 search (tested against the float64 kernels below, which constrained
+#    searches still use).
 # Bound: a float32 total t differs from the float64 one less the base by at most
 # alpha·t + beta/2: up to 5 roundings of 2^-24 relative to the sum of non-negative
 # terms, the tag's 2^(k−23) (k label bits), and float64 roundings of 2^-52·(base + t).
 # The search takes alpha = 2^-20 (3× the first) + 2^(k−22) and beta = 2^-48·base; a
 # node whose second-best exceeds its best by more than TIE + alpha·(both) + beta
-# keeps the float32 choice.
+# keeps the float32 choice. (k counts the all-ones label too, which marks near-ties.)
 DEAD32 = np.float32(1e38)  # float32 cost of a dead path (finite, so tagging keeps it ordered)
 DEAD_BELOW = np.float32(1e37)  # a live path's relative cost never comes near this
 PREFETCH_AHEAD = np.uint64(16)  # edges ahead whose source row is prefetched (measured best at 8–16)
@@ -366,7 +368,8 @@ def _keep_two(best, second, p, t):
 
 
 def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_offset, slot_heading, reading_cost,
-                      w_acc, w_pos, w_head, rows, c32, rel, keep, best, second):  # fmt: skip
+                      w_acc, w_pos, w_head, rows, c32, rel, keep, allowed_pos, alpha, beta, best,
+                      second):  # fmt: skip
     """Pass 1 of a step (see above): best[p], second[p] (N,) float32, the lowest and
     second-lowest float32 total among the incoming edges of the node at layout
     position p (`search_tables`: within each chunk, nodes by descending in-degree, so
@@ -374,6 +377,11 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
     best's low bits (`keep` clears them) hold which incoming edge it is; DEAD32: none.
     rows: read sources from the relative rows (placed searches; w_pos / w_head 0 when
     that term does not count this sample) instead of c32 (N,) (cost − base, float32).
+    Then, per chunk: positions masked out (allowed_pos (N,) bool, layout order) become
+    DEAD32, and near-ties (the bound above: alpha, beta) get all ones as their label
+    (no incoming edge has that label), so pass 2 reads one word a node. (No uint32 view
+    of best is written here: numba compiles a parallel loop's body as if its arrays
+    did not overlap.)
     All indices unsigned: numba's negative-index fix-up on signed ones cost half the
     pass's speed (fewer loads in flight)."""
     E = np.uint64(slot_src.shape[0])
@@ -399,6 +407,14 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
                 for i in range(s0, s1):
                     t = c32[slot_src[i]] + w_acc * reading_cost[slot_reading[i]]
                     _keep_two(best, second, i + shift, _tag(t, keep, label))
+        # The chunk's positions are final: mark masked nodes dead and near-ties (the
+        # label all ones, which no incoming edge has), so pass 2 reads one word a node.
+        for p in range(n0, chunk_nodes[c + 1]):
+            b1, b2 = best[p], second[p]
+            if not allowed_pos[p]:
+                best[p] = DEAD32
+            elif b2 < DEAD_BELOW and np.float64(b2) - np.float64(b1) <= TIE + alpha * (np.float64(b1) + b2) + beta:
+                best[p] = _tag(b1, keep, ~keep)
 
 
 @numba.njit(inline="always")
@@ -426,76 +442,80 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
     return best - first if best >= 0 else np.int64(-1)
 
 
-def _finish_py(chunk_nodes, node_pos, best, second, best_bits, label_mask, alpha, beta, incoming, edge_src,
-               edge_reading, edge_kind, edge_offset, edge_heading, edge_turn, allowed, reading_cost, w_acc, w_pos,
-               w_head, use_pos, use_head, rows, cost, rel, rel64, det_prev, placed, place_prev, c32_base, cost_new,
-               det_new, place_new, c32_new, arrivals, none, lowest):  # fmt: skip
-    """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
-    the float64 rule's on a near-tie), the arrival into this sample's lattice row
-    (`none`: dead or masked), the chosen path's float64 cost, detours, placement
-    (carried by rotation when placed) and, without rows, its float32 cost relative to
-    c32_base (≤ every new cost: the lowest cost before the step). lowest (C,) each
-    chunk's lowest new cost.
-    Returns (live nodes, near-ties resolved in float64).
+def _finish_kernel(placed: bool, parallel: bool):
+    """`_finish` compiled for placed or unplaced searches (a placed search's float32
+    pass always reads the relative rows): with the flag a constant, the other kind's
+    branches compile away (one generic kernel took 1.4× as long in mode A)."""
 
-    Per chunk, first every node's choice, prefetching its source's state; then the
-    new states: the source reads are scattered over megabytes, and one loop doing
-    both kept too few of them in flight."""
-    live = 0
-    near_ties = 0
-    for c in numba.prange(chunk_nodes.shape[0] - 1):
-        n0, n1 = chunk_nodes[c], chunk_nodes[c + 1]
-        source = np.empty(n1 - n0, np.uint32)
-        for n in range(n0, n1):
-            p = node_pos[n]
-            b1 = best[p]
-            if b1 >= DEAD_BELOW or not allowed[n]:
-                arrivals[n] = none
-                continue
-            b2 = second[p]
-            if b2 < DEAD_BELOW and np.float64(b2) - np.float64(b1) <= TIE + alpha * (np.float64(b1) + b2) + beta:
-                near_ties += 1
-                a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
-                                  reading_cost, w_acc, w_pos, w_head, use_pos, use_head, rows, cost, rel, rel64,
-                                  det_prev)  # fmt: skip
-                arrival = np.uint32(a)  # a ≥ 0: a live candidate exists (b1 < DEAD_BELOW)
-            else:
-                arrival = np.uint32(best_bits[p] & label_mask)
-            arrivals[n] = arrival
-            m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
-            source[n - n0] = m
-            if rows:
-                _prefetch(rel, m)
-            else:
-                _prefetch(cost, m)
-            _prefetch(det_prev, m)
-            if placed:
-                _prefetch(place_prev, m)
-        chunk_low = np.inf
-        for n in range(n0, n1):
-            arrival = arrivals[n]
-            if arrival == none:
-                cost_new[n] = np.inf
-                if not rows:
-                    c32_new[n] = DEAD32
-                continue
-            live += 1
-            e = np.uint64(incoming[n]) + np.uint64(arrival)
-            m = source[n - n0]
-            ca = reading_cost[edge_reading[e]]
-            ox, oz, dh = edge_offset[e, 0], edge_offset[e, 1], edge_heading[e]
-            if rows:
-                t = _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
-            else:
-                t = cost[m] + w_acc * ca
-                c32_new[n] = np.float32(t - c32_base)
-            cost_new[n] = t
-            chunk_low = _fmin(chunk_low, t)
-            det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
-            if placed:
-                _carry_placement(place_prev, m, place_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
-        lowest[c] = chunk_low
-    return live, near_ties
+    def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
+               edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, cost, rel,
+               rel64, det_prev, place_prev, c32_base, cost_new, det_new, place_new, c32_new, arrivals, none,
+               lowest):  # fmt: skip
+        """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
+        the float64 rule's on a near-tie: best_bits' label all ones), the arrival into this sample's lattice row
+        (`none`: dead or masked), the chosen path's float64 cost, detours, placement
+        (carried by rotation when placed) and, unplaced, its float32 cost relative to
+        c32_base (≤ every new cost: the lowest cost before the step). lowest (C,) each
+        chunk's lowest new cost.
+        Returns (live nodes, near-ties resolved in float64).
+
+        Per chunk, first every node's choice, prefetching its source's state; then the
+        new states: the source reads are scattered over megabytes, and one loop doing
+        both kept too few of them in flight."""
+        live = 0
+        near_ties = 0
+        for c in numba.prange(chunk_nodes.shape[0] - 1):
+            n0, n1 = chunk_nodes[c], chunk_nodes[c + 1]
+            source = np.empty(n1 - n0, np.uint32)
+            for n in range(n0, n1):
+                p = node_pos[n]
+                if best[p] >= DEAD_BELOW:  # no live candidate, or masked
+                    arrivals[n] = none
+                    continue
+                arrival = best_bits[p] & label_mask
+                if arrival == label_mask:  # a near-tie (marked by pass 1)
+                    near_ties += 1
+                    a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
+                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, cost, rel, rel64,
+                                      det_prev)  # fmt: skip
+                    arrival = np.uint32(a)  # a ≥ 0: a live candidate exists
+                arrivals[n] = arrival
+                m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
+                source[n - n0] = m
+                if placed:
+                    _prefetch(rel, m)
+                else:
+                    _prefetch(cost, m)
+                _prefetch(det_prev, m)
+                if placed:
+                    _prefetch(place_prev, m)
+            chunk_low = np.inf
+            for n in range(n0, n1):
+                arrival = arrivals[n]
+                if arrival == none:
+                    cost_new[n] = np.inf
+                    if not placed:
+                        c32_new[n] = DEAD32
+                    continue
+                live += 1
+                e = np.uint64(incoming[n]) + np.uint64(arrival)
+                m = source[n - n0]
+                ca = reading_cost[edge_reading[e]]
+                ox, oz, dh = edge_offset[e, 0], edge_offset[e, 1], edge_heading[e]
+                if placed:
+                    t = _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+                else:
+                    t = cost[m] + w_acc * ca
+                    c32_new[n] = np.float32(t - c32_base)
+                cost_new[n] = t
+                chunk_low = _fmin(chunk_low, t)
+                det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+                if placed:
+                    _carry_placement(place_prev, m, place_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
+            lowest[c] = chunk_low
+        return live, near_ties
+
+    return numba.njit(cache=True, nogil=True, parallel=parallel)(finish)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -538,7 +558,8 @@ _edge_totals, _edge_totals_serial = _compile(_edge_totals_py, True), _compile(_e
 _select, _select_serial = _compile(_select_py, True), _compile(_select_py, False)
 _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, False)
 _approx_select, _approx_select_serial = _compile(_approx_select_py, True), _compile(_approx_select_py, False)
-_finish, _finish_serial = _compile(_finish_py, True), _compile(_finish_py, False)
+_finish = {placed: _finish_kernel(placed, True) for placed in (False, True)}
+_finish_serial = {placed: _finish_kernel(placed, False) for placed in (False, True)}
 
 
 def search_tables(graph: MotionGraph) -> dict:
@@ -999,7 +1020,8 @@ class ViterbiSearch:
         self.rel64 = self.rel.view(np.float64)
         # The float32 pass and float64 fix-ups (see `_approx_select_py`) for searches
         # without constraint sets; constrained ones keep the float64 passes (rank first).
-        label_bits = int(self.slots[1].shape[1] - 2).bit_length()  # bits for an arrival index < max in-degree
+        # bits for an arrival index < max in-degree, and all ones (which none is) marking a near-tie
+        label_bits = int(self.slots[1].shape[1] - 1).bit_length()
         # (weights ≤ 1e6 keep every live float32 total far from overflow)
         heaviest = max(weights.acc, weights.position, weights.heading)
         self.float32_pass = gamma == 0 and label_bits <= 12 and heaviest <= 1e6
@@ -1036,6 +1058,9 @@ class ViterbiSearch:
                 raise InputError(f"node mask must have {N} entries, got {self.allowed.shape}")
             if not self.allowed.any():
                 raise InputError("the node mask leaves no node to search")
+        if self.float32_pass:
+            self._allowed_pos = np.empty(N, dtype=bool)  # in the float32 pass's layout order
+            self._allowed_pos[self.node_pos] = self.allowed
         self.converged_t = -1  # every sample ≤ this one has a single surviving entry (or was forgotten)
         self.keep_from = 0  # samples before this one are forgotten (see forget_before)
         # The lattice of the newest samples, dense: one row per sample, each node's
@@ -1182,17 +1207,16 @@ class ViterbiSearch:
             self.slots
         if self.float32_pass:
             u = self._unsigned
+            base = self.low if rows else self.c32_base  # what the float32 costs read are relative to
             approx_select(u["chunk_nodes"], u["chunk_slots"], u["slot_src"], u["slot_reading"], slot_offset,
                           slot_heading, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
-                          np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._best32,
-                          self._second32)  # fmt: skip
-            base = self.low if rows else self.c32_base  # what the float32 costs just read are relative to
-            live, near_ties = finish(
-                u["chunk_nodes"], self.node_pos, self._best32, self._second32, self._best32.view(np.uint32),
-                self._label_mask, self._alpha, 2.0**-48 * base + 1e-30, u["incoming"], u["edge_src"],
-                u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading, self.edge_turn, self.allowed,
-                reading_cost, wa, wp, wh, use_pos, use_head, rows, self.cost, self.rel, self.rel64, self.det,
-                self.placed, self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
+                          np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._allowed_pos,
+                          self._alpha, 2.0**-48 * base + 1e-30, self._best32, self._second32)  # fmt: skip
+            live, near_ties = finish[self.placed](
+                u["chunk_nodes"], self.node_pos, self._best32, self._best32.view(np.uint32), self._label_mask,
+                u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
+                self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, self.cost, self.rel, self.rel64, self.det,
+                self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
                 self._chunk_low)  # fmt: skip
             self.near_ties += near_ties
             if live:
@@ -1373,7 +1397,7 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
 
 def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     """Run a few random samples through searches with a tiny ring, in store and in
-    window mode, placed, and with a constraint set (the float64 passes): numba compiles
+    window mode, placed and not, and with a constraint set (the float64 passes): numba compiles
     (or loads from its cache) the step kernels and the walk back through the dense
     rows for this graph's array types now, not when a search first fills its ring
     (every BLOCK samples) or first meets constraints."""
@@ -1382,8 +1406,9 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     free = np.zeros(1, np.int64)
-    for window, gamma in ((None, 0), (2, 0), (None, 1)):
-        search = ViterbiSearch(graph, Weights(0.5, 1, 1), gamma, threads=threads, window=window, ring=(4, 2))
+    for window, gamma, weights in ((None, 0, Weights(0.5, 1, 1)), (2, 0, Weights(0.5, 1, 1)), (None, 0, Weights(1, 0, 0)),
+                                   (None, 1, Weights(0.5, 1, 1))):
+        search = ViterbiSearch(graph, weights, gamma, threads=threads, window=window, ring=(4, 2))
         search.start(position[0], 0.0, free[:gamma], free[:gamma])
         for t in range(1, T):
             search.step(acc[t], position[t], 0.0, free[:gamma], free[:gamma])

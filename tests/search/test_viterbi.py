@@ -272,8 +272,9 @@ def test_a_node_with_300_incoming_edges_keeps_every_arrival(ring):
 
 def test_warm_up_search_runs_the_walk_back_kernels():
     # A server warms up at load; the kernels that walk back through the dense rows run
-    # only every BLOCK samples, and the float64 passes only for constrained searches, so
-    # the warm-up must reach them itself. A fresh process: here other tests have already
+    # only every BLOCK samples, the float64 passes only for constrained searches, and
+    # the float32 pass's second half is compiled apart for placed and unplaced ones, so
+    # the warm-up must reach them all itself. A fresh process: here other tests have already
     # compiled them.
     import subprocess
     import sys
@@ -282,8 +283,8 @@ def test_warm_up_search_runs_the_walk_back_kernels():
         "import numpy as np\n"
         "from graphsvc.search import viterbi as V\n"
         "from tests.search.test_viterbi import random_graph\n"
-        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace, V._approx_select, V._finish,\n"
-        "           V._edge_totals, V._select, V._advance)\n"
+        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace, V._approx_select,\n"
+        "           *V._finish.values(), V._edge_totals, V._select, V._advance)\n"
         "assert not any(k.signatures for k in kernels)\n"
         "V.warm_up_search(random_graph(np.random.default_rng(0)))\n"
         "assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]\n"
@@ -405,6 +406,25 @@ def test_float32_pass_resolves_differences_below_float32_resolution_in_float64()
     none = [None] * T
     fast = _lockstep(g, meas, none, none, Weights(1, 0, 0))
     assert fast.near_ties > 0
+
+
+def test_near_ties_are_marked_only_where_float32_cannot_decide():
+    # Node 4's incoming edges (arrivals 0–3, from nodes 0–3) read 1, 2, 3 and 0 g on one
+    # axis, measured 0 g: arrival 3 wins by 1 g², far beyond float32 rounding, so the
+    # float32 choice stands — its label must not be the all-ones mark (which it would
+    # be with one label bit too few). Node 5's two edges read the same: an exact tie,
+    # the one near-tie, which the float64 rule decides (fewer detours: the plain edge).
+    readings = np.array([1.0, 2.0, 3.0, 0.0, 0.5, 0.5])
+    acc = np.zeros((6, 1, 3))
+    acc[:, 0, 0] = readings * 9.81
+    g = tiny_graph([0, 1, 2, 3, 0, 1], [4, 4, 4, 4, 5, 5], acc, kinds=[0, 0, 0, 0, 1, 0])
+    search = ViterbiSearch(g, Weights(1, 0, 0))
+    assert search.float32_pass
+    search.start()
+    search.step(np.zeros((1, 3)))
+    assert search.near_ties == 1
+    np.testing.assert_array_equal(search.arrivals[0, 4:], [3, 1])
+    assert search.cost[4] == 0.0 and search.cost[5] == 0.25
 
 
 def test_tagged_minimum_keeps_the_lowest_value_and_its_label():
