@@ -5,7 +5,7 @@ import pytest
 from graphsvc.search.viterbi import ViterbiSearch
 
 
-@pytest.fixture(params=[None, (8, 5), (3, 0)], ids=["ring-default", "ring-8+5", "ring-3+0"])
+@pytest.fixture(params=[None, (8, 5), (3, 0), (4, 9)], ids=["ring-default", "ring-8+5", "ring-3+0", "ring-4+9"])
 def ring(request, monkeypatch):
     """The dense lattice window's sizes (rows moved or dropped at a time, rows kept
     beyond them): the defaults, which short test inputs never fill, and small ones

@@ -270,6 +270,44 @@ def test_a_node_with_300_incoming_edges_keeps_every_arrival(ring):
     np.testing.assert_array_equal(fast.node_path, ref_path)
 
 
+def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_row(ring):
+    # A flush starts its walk back at the sample where it last took every live path's
+    # node (its ancestor), not at the newest row: the survivors it lists must be those
+    # of the walk through every row, for rings whose blocks are longer, equal to or
+    # shorter than the rows kept beyond them, placed or not, in the float32 pass and in
+    # the float64 passes.
+    from graphsvc.search import viterbi as V
+
+    flushes = []
+
+    class Checked(ViterbiSearch):
+        def _flush(self):
+            level_nodes = np.zeros(self.N * self.used + 16, np.int32)
+            level_start = np.zeros(self.BLOCK + 1, np.int64)
+            whole = np.arange(self.N, dtype=np.int32)  # every live node is its own ancestor at the newest row
+            total, _ = V._block_levels(self.arrivals, self.first, self.used, self.BLOCK, self.incoming, self.edge_src,
+                                       self.alive_map, self.alive_map.view(np.uint64), level_nodes, level_start, whole,
+                                       self.cost)  # fmt: skip
+            super()._flush()
+            np.testing.assert_array_equal(self.level_start, level_start)
+            np.testing.assert_array_equal(self.level_nodes[:total], level_nodes[:total])
+            flushes.append(self.t)
+
+    rng = np.random.default_rng(7)
+    g = random_graph(rng, N=40, out=2)
+    T = 300
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    free = np.zeros(1, np.int64)  # one constraint set that requires nothing: the float64 passes
+    for weights, gamma in ((Weights(1, 0, 0), 0), (Weights(0.5, 1, 0), 0), (Weights(0.5, 1, 0), 1)):
+        search = Checked(g, weights, gamma)
+        search.start(position[0], None, free[:gamma], free[:gamma])
+        for t in range(1, T):
+            search.step(meas[t], position[t], None, free[:gamma], free[:gamma])
+        assert len(search.trace(search.best_node())[0]) == T
+    assert len(flushes) >= 3
+
+
 def test_warm_up_search_runs_the_walk_back_kernels():
     # A server warms up at load; the kernels that walk back through the dense rows run
     # only every BLOCK samples, the float64 passes only for constrained searches, and
