@@ -9,7 +9,7 @@ rounds, and prints one JSON object per process (`tree`, `mode`, `seconds` per se
 `node_path_sum` and `cost`, which must agree across checkouts whose search is exact),
 then one summary object per checkout (`min_s`, `median_s` over every search).
 
-Usage: tools/bench_compare.py CHECKOUT... [--mode A|APO] [--rounds 2] [--searches 4]
+Usage: tools/bench_compare.py CHECKOUT... [--mode A|APO] [--rounds 2] [--searches 4] [--graph FILE]
   e.g. git worktree add /tmp/before HEAD~1 && tools/bench_compare.py /tmp/before .
 """
 
@@ -27,7 +27,7 @@ sys.path.insert(0, {tools!r})
 import bench_viterbi as B  # this checkout's problem set-up; it puts this checkout first on the path,
 sys.path.insert(0, {tree!r})  # so the checkout measured goes before it
 from graphsvc.search.viterbi import viterbi_search, warm_up_search
-g, acc, position, heading, weights, _ = B.problem({mode!r}, 100_686, 317_600, 720)
+g, acc, position, heading, weights, _ = B.problem({mode!r}, 100_686, 317_600, 720, {graph!r})
 viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
                weights)
 warm_up_search(g)
@@ -47,6 +47,7 @@ def main() -> None:
     parser.add_argument("--mode", choices=("A", "APO"), default="A")
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--searches", type=int, default=4, help="searches per process")
+    parser.add_argument("--graph", help="a built graph file instead of the generated one (bench_viterbi's --graph)")
     args = parser.parse_args()
     trees = [str(Path(t).resolve()) for t in args.trees]
     for tree in trees:
@@ -56,7 +57,7 @@ def main() -> None:
     for _ in range(args.rounds):
         for tree in trees:
             code = CHILD.format(tree=tree, tools=str(Path(__file__).resolve().parent), mode=args.mode,
-                                searches=args.searches)
+                                searches=args.searches, graph=args.graph and str(Path(args.graph).resolve()))
             out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tree)
             if out.returncode != 0:
                 print(json.dumps({"tree": tree, "error": out.stderr[-400:]}), flush=True)
