@@ -41,6 +41,7 @@ cache is a few MB, so what is read from scattered nodes is kept small):
 
 from __future__ import annotations
 
+import types
 from dataclasses import dataclass, field
 
 import numba
@@ -131,14 +132,26 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
                 out[b, r0 + i] = sums[b, i] * scale[b]
 
 
-_reading_costs_batch = numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)(_reading_costs_batch_py)
-_reading_costs_batch_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_reading_costs_batch_py)
+def _compile(fn, parallel: bool, fastmath: bool = False):
+    """fn compiled threaded (its prange loops spread over numba's threads) or serial.
+    Each kernel is compiled both ways: threaded for one search using the whole machine
+    (batch), serial for many searches side by side (a server's streams), where threads
+    would only fight. The serial one is compiled from a copy of fn named …_serial:
+    numba's disk cache files a function under its name and line and tells entries
+    apart by signature, bytecode and closure, not by compile flags, so the two would
+    load each other's machine code — whichever was cached first served both (seen:
+    "serial" streams running threaded kernels)."""
+    if not parallel:
+        qualname = fn.__qualname__ + "_serial"
+        fn = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__, fn.__closure__)
+        fn.__qualname__ = qualname
+    return numba.njit(cache=True, nogil=True, parallel=parallel, fastmath=fastmath)(fn)
 
 
-# Each kernel twice: threaded for one search using the whole machine (batch), serial
-# for many searches side by side (a server's streams), where threads would only fight.
-_reading_costs = numba.njit(cache=True, nogil=True, parallel=True, fastmath=True)(_reading_costs_py)
-_reading_costs_serial = numba.njit(cache=True, nogil=True, fastmath=True)(_reading_costs_py)
+_reading_costs_batch = _compile(_reading_costs_batch_py, True, fastmath=True)
+_reading_costs_batch_serial = _compile(_reading_costs_batch_py, False, fastmath=True)
+_reading_costs = _compile(_reading_costs_py, True, fastmath=True)
+_reading_costs_serial = _compile(_reading_costs_py, False, fastmath=True)
 
 
 # Per-node path state, one array per field: the cost (float64, read for every incoming
@@ -523,7 +536,7 @@ def _finish_kernel(placed: bool, parallel: bool):
             lowest[c] = chunk_low
         return live, near_ties
 
-    return numba.njit(cache=True, nogil=True, parallel=parallel)(finish)
+    return _compile(finish, parallel)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -555,10 +568,6 @@ def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge
         if use_head and np.isfinite(meas_heading[t]):
             out[2] += abs(_wrap(h - meas_heading[t]))
     return out
-
-
-def _compile(fn, parallel: bool):
-    return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)
 
 
 _relative, _relative_serial = _compile(_relative_py, True), _compile(_relative_py, False)

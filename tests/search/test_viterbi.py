@@ -2,6 +2,7 @@
 
 import itertools
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -306,6 +307,52 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
             search.step(meas[t], position[t], None, free[:gamma], free[:gamma])
         assert len(search.trace(search.best_node())[0]) == T
     assert len(flushes) >= 3
+
+
+def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
+    # numba's disk cache tells a function's entries apart by signature, bytecode and
+    # closure, not by compile flags: a later process must not be served a kernel
+    # compiled threaded when it asks for the serial one (a server's streams would run
+    # threaded kernels side by side).
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from graphsvc.search import viterbi as V\n"
+        "k = V.{name}\n"
+        "rel = np.zeros((4, 8), np.float32)\n"
+        "k(np.zeros((4, 5)), np.zeros(4), np.zeros(2), 0.0, 0.0, rel, rel.view(np.float64))\n"
+        "print(sum(k.stats.cache_hits.values()))\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+
+    def cache_hits(name):
+        done = subprocess.run([sys.executable, "-c", code.format(name=name)], env=env, capture_output=True, text=True,
+                              timeout=600)  # fmt: skip
+        assert done.returncode == 0, done.stderr[-2000:]
+        return int(done.stdout.split()[-1])
+
+    assert cache_hits("_relative") == 0  # compiled and cached threaded
+    assert cache_hits("_relative_serial") == 0  # compiled afresh, not the threaded code
+    assert cache_hits("_relative_serial") == 1  # and cached in its own right
+    assert cache_hits("_relative") == 1
+
+
+def test_every_kernel_is_compiled_once_per_cache_entry():
+    # The same check for every kernel: no two dispatchers with different compile flags
+    # share a function name and line (which is what numba files cache entries under).
+    from graphsvc.search import viterbi as V
+
+    dispatchers = [d for d in vars(V).values() if isinstance(d, numba.core.registry.CPUDispatcher)]
+    dispatchers += [d for k in (V._finish, V._finish_serial) for d in k.values()]
+    seen = {}
+    for d in dispatchers:
+        key = (d.py_func.__qualname__, d.py_func.__code__.co_firstlineno)
+        flags = tuple(sorted((k, str(v)) for k, v in d.targetoptions.items()))
+        assert seen.setdefault(key, flags) == flags, key
+    assert ("_relative_py_serial", V._relative_py.__code__.co_firstlineno) in seen
 
 
 def test_warm_up_search_runs_the_walk_back_kernels():
