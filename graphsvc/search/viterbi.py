@@ -1113,13 +1113,16 @@ class ViterbiSearch:
         self.size = 0  # rows of the store in use (live or garbage)
         self.live_rows = 0  # rows alive after the last collection
         self.heads = np.full(N, -1, dtype=np.int64)
-        # Store mode: each live path's node at sample ancestor_t (one gather a node a
-        # step), so a flush walks back from there instead of through the newest rows,
-        # where most paths are still apart (on the built kelly6 graph the walk was a
-        # quarter of a step's time: 80k of 268k nodes on distinct paths 32 samples back).
+        # Store mode, while paths stay apart (see ANCESTOR_SHARE): each live path's node
+        # at sample ancestor_t (one gather a node a step), so a flush walks back from
+        # there instead of through the newest rows (on the built kelly6 graph that walk
+        # was a quarter of a step's time: 80k of 268k nodes on distinct paths 32
+        # samples back).
         self._identity = np.arange(0 if small else N, dtype=np.int32)
         self.ancestor, self._ancestor_new = self._identity.copy(), self._identity.copy()
-        self.ancestor_t = 0
+        self._no_ancestors = np.zeros(0, dtype=np.int32)  # the kernels' "not carried"
+        self.carry_ancestors = False  # decided at each flush
+        self.ancestor_t = -1  # −1: not carried since the last flush
         self.t = -1
         self.peak_entries = 0
         self.peak_bytes = 0
@@ -1130,6 +1133,12 @@ class ViterbiSearch:
     # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms.
     BLOCK = 128
     STORE_WINDOW = 128
+    # Carry ancestors (see __init__) while more than this share of the nodes are distinct
+    # paths' nodes at the newest row a flush lists: then the walk through the newer rows
+    # costs more than a gather a node a step (built kelly6 graph: 7.5 %, where carrying
+    # took a flush from 0.83 to 0.28 ms a sample; generated G_E: under 0.05 %, where
+    # carrying cost 4 % of a step and saved nothing).
+    ANCESTOR_SHARE = 0.01
 
     @property
     def live_entries(self) -> int:
@@ -1163,6 +1172,7 @@ class ViterbiSearch:
         self.heads[live] = np.arange(self.size)
         self.live_rows = self.size
         self.first = self.used = 0
+        self.carry_ancestors, self.ancestor_t = False, -1
         self.converged_t = 0 if len(live) == 1 else -1
         self.peak_entries = self.size
         self.peak_bytes = self.lattice_bytes
@@ -1231,6 +1241,8 @@ class ViterbiSearch:
             relative(self.place, self.cost, meas_pos, meas_heading, self.low, self.rel, self.rel64)
         chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, slot_heading = \
             self.slots
+        ancestors = ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
+                     (self._no_ancestors, self._no_ancestors))  # fmt: skip
         if self.float32_pass:
             u = self._unsigned
             base = self.low if rows else self.c32_base  # what the float32 costs read are relative to
@@ -1243,7 +1255,7 @@ class ViterbiSearch:
                 u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, self.cost, self.rel, self.rel64, self.det,
                 self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
-                self._chunk_low, self.ancestor, self._ancestor_new)  # fmt: skip
+                self._chunk_low, *ancestors)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
@@ -1255,11 +1267,12 @@ class ViterbiSearch:
                    self.det, self.rank, self.best_slot, cost, self._best_edge)  # fmt: skip
             live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
                            self.edge_heading, self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank,
-                           place, det, rank, arrivals, self.none, self.ancestor, self._ancestor_new)  # fmt: skip
+                           place, det, rank, arrivals, self.none, *ancestors)  # fmt: skip
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
-        self.ancestor, self._ancestor_new = self._ancestor_new, self.ancestor
+        if self.carry_ancestors:
+            self.ancestor, self._ancestor_new = self._ancestor_new, self.ancestor
         if self.used == self.BLOCK:  # the newest row is the next flush's newest listed one
             self._restart_ancestors()
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
@@ -1314,15 +1327,19 @@ class ViterbiSearch:
     def _flush(self) -> None:
         """Store mode, ring full: walk back from the live nodes through every dense row
         and move the surviving points of the oldest BLOCK rows into the store (collect
-        the store's garbage first when it has doubled); those rows are then free. The
-        walk starts at the row of ancestor_t, from the live paths' nodes there."""
+        the store's garbage first when it has doubled); those rows are then free. With
+        ancestors carried, the walk starts at the row of ancestor_t, from the live
+        paths' nodes there; else at the newest row."""
         t_first = self.t - self.used + 1  # the sample of the oldest row
-        walk = self.ancestor_t - t_first + 1  # rows walked through: up to ancestor_t's
-        assert self.BLOCK <= walk <= self.used, (walk, self.BLOCK, self.used)
+        if self.ancestor_t >= 0:
+            walk, ancestor = self.ancestor_t - t_first + 1, self.ancestor  # rows walked through: to ancestor_t's
+            assert self.BLOCK <= walk <= self.used, (walk, self.BLOCK, self.used)
+        else:
+            walk, ancestor = self.used, self._identity
         while True:  # grown on demand: the worst case (nothing merges) is used × N
             total, converged_row = _block_levels(self.arrivals, self.first, walk, self.BLOCK, self.incoming,
                                                  self.edge_src, self.alive_map, self.alive_map.view(np.uint64),
-                                                 self.level_nodes, self.level_start, self.ancestor, self.cost)  # fmt: skip
+                                                 self.level_nodes, self.level_start, ancestor, self.cost)  # fmt: skip
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
@@ -1341,15 +1358,20 @@ class ViterbiSearch:
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
         self.first = (self.first + flush) % self.arrivals.shape[0]
         self.used -= flush
+        apart = self.level_start[flush] - self.level_start[flush - 1]  # distinct nodes at the newest listed row
+        self.carry_ancestors = bool(apart > self.ANCESTOR_SHARE * self.N)
+        self.ancestor_t = -1
         if self.used >= self.BLOCK:  # (else when the row BLOCK − 1 is written)
             self._restart_ancestors()
         if converged_row >= 0:  # one node left at that row: everything up to it is agreed
             self.converged_t = max(self.converged_t, t_first + converged_row)
 
     def _restart_ancestors(self) -> None:
-        """From now on, ancestor[n] is node n's path's node at this sample."""
-        self.ancestor[:] = self._identity
-        self.ancestor_t = self.t
+        """When carrying them: from now on, ancestor[n] is node n's path's node at this
+        sample."""
+        if self.carry_ancestors:
+            self.ancestor[:] = self._identity
+            self.ancestor_t = self.t
 
     def _slide(self) -> None:
         """Dense-window mode, ring full: note whether the live paths have come to agree

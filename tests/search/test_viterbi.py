@@ -271,15 +271,18 @@ def test_a_node_with_300_incoming_edges_keeps_every_arrival(ring):
     np.testing.assert_array_equal(fast.node_path, ref_path)
 
 
-def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_row(ring):
+@pytest.mark.parametrize("share", [-1.0, 2.0], ids=["carried", "not-carried"])
+def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_row(ring, share, monkeypatch):
     # A flush starts its walk back at the sample where it last took every live path's
-    # node (its ancestor), not at the newest row: the survivors it lists must be those
-    # of the walk through every row, for rings whose blocks are longer, equal to or
-    # shorter than the rows kept beyond them, placed or not, in the float32 pass and in
-    # the float64 passes.
+    # node (its ancestor), not at the newest row, when ancestors are carried (share −1:
+    # from the second flush on; 2: never): the survivors it lists must be those of the
+    # walk through every row, for rings whose blocks are longer, equal to or shorter
+    # than the rows kept beyond them, placed or not, in the float32 pass and in the
+    # float64 passes.
     from graphsvc.search import viterbi as V
 
-    flushes = []
+    monkeypatch.setattr(ViterbiSearch, "ANCESTOR_SHARE", share)
+    flushes = []  # whether each walked from the ancestors
 
     class Checked(ViterbiSearch):
         def _flush(self):
@@ -289,14 +292,14 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
             total, _ = V._block_levels(self.arrivals, self.first, self.used, self.BLOCK, self.incoming, self.edge_src,
                                        self.alive_map, self.alive_map.view(np.uint64), level_nodes, level_start, whole,
                                        self.cost)  # fmt: skip
+            flushes.append(self.ancestor_t >= 0)
             super()._flush()
             np.testing.assert_array_equal(self.level_start, level_start)
             np.testing.assert_array_equal(self.level_nodes[:total], level_nodes[:total])
-            flushes.append(self.t)
 
     rng = np.random.default_rng(7)
     g = random_graph(rng, N=40, out=2)
-    T = 300
+    T = 400  # the default ring flushes at samples 256 and 384
     meas = rng.normal(0, 9.81, (T, 2, 3))
     position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
     free = np.zeros(1, np.int64)  # one constraint set that requires nothing: the float64 passes
@@ -307,6 +310,7 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
             search.step(meas[t], position[t], None, free[:gamma], free[:gamma])
         assert len(search.trace(search.best_node())[0]) == T
     assert len(flushes) >= 3
+    assert any(flushes) == (share < 0) and not flushes[0]
 
 
 def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
