@@ -469,11 +469,12 @@ def _finish_kernel(placed: bool, parallel: bool):
                rel64, det_prev, place_prev, c32_base, cost_new, det_new, place_new, c32_new, arrivals, none,
                lowest, ancestor_prev, ancestor_new):  # fmt: skip
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
-        the float64 rule's on a near-tie: best_bits' label all ones), the arrival into this sample's lattice row
-        (`none`: dead or masked), the chosen path's float64 cost, detours, placement
-        (carried by rotation when placed) and, unplaced, its float32 cost relative to
-        c32_base (≤ every new cost: the lowest cost before the step); its ancestor as in
-        `_advance_py`. lowest (C,) each chunk's lowest new cost.
+        the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
+        this sample's lattice row (`none`: dead or masked), the chosen path's float64
+        cost, detours, placement (carried by rotation when placed) and, unplaced, its
+        float32 cost relative to c32_base (≤ every new cost: the lowest cost before the
+        step); its ancestor as in `_advance_py`. lowest (C,) each chunk's lowest new
+        cost.
         Returns (live nodes, near-ties resolved in float64).
 
         Per chunk, first every node's choice, prefetching its source's state; then the
@@ -694,8 +695,8 @@ def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive
     A row is one sequential scan of a byte map, 8 nodes at a time where none is alive;
     the scattered writes land in N bytes, which stay in cache. Returns (total,
     converged_row): converged_row is the highest row walked where a single node
-    remains (−1 if none); total = −1 when level_nodes is too small (the caller grows it and asks
-    again)."""
+    remains (−1 if none); total = −1 when level_nodes is too small (the caller grows
+    it and asks again)."""
     R, N = arrivals.shape
     for n in range(N):
         if cost[n] != np.inf:
