@@ -1051,6 +1051,7 @@ class ViterbiSearch:
             self._label_mask = np.uint32((1 << label_bits) - 1)
             self._alpha = 2.0**-20 + 2.0 ** (label_bits - 22)
             self._best32, self._second32 = np.empty(N, np.float32), np.empty(N, np.float32)
+            self._best_bits = self._best32.view(np.uint32)  # pass 2 reads the labels through it
             # unsigned views of the index tables the float32 pass reads (see `_approx_select_py`)
             self._unsigned = {
                 "chunk_nodes": self.slots[0].view(np.uint64), "chunk_slots": self.slots[1].view(np.uint64),
@@ -1252,7 +1253,7 @@ class ViterbiSearch:
                           np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._allowed_pos,
                           self._alpha, 2.0**-48 * base + 1e-30, self._best32, self._second32)  # fmt: skip
             live, near_ties = finish[self.placed](
-                u["chunk_nodes"], self.node_pos, self._best32, self._best32.view(np.uint32), self._label_mask,
+                u["chunk_nodes"], self.node_pos, self._best32, self._best_bits, self._label_mask,
                 u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, self.cost, self.rel, self.rel64, self.det,
                 self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
@@ -1459,17 +1460,17 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
 
 def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     """Run a few random samples through searches with a tiny ring, in store and in
-    window mode, placed and not, and with a constraint set (the float64 passes): numba compiles
-    (or loads from its cache) the step kernels and the walk back through the dense
-    rows for this graph's array types now, not when a search first fills its ring
+    window mode, placed and not, and with a constraint set (the float64 passes): numba
+    compiles (or loads from its cache) the step kernels and the walk back through the
+    dense rows for this graph's array types now, not when a search first fills its ring
     (every BLOCK samples) or first meets constraints."""
     rng = np.random.default_rng(0)
     T = 16
     acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     free = np.zeros(1, np.int64)
-    for window, gamma, weights in ((None, 0, Weights(0.5, 1, 1)), (2, 0, Weights(0.5, 1, 1)), (None, 0, Weights(1, 0, 0)),
-                                   (None, 1, Weights(0.5, 1, 1))):
+    placed, unplaced = Weights(0.5, 1, 1), Weights(1, 0, 0)
+    for window, gamma, weights in ((None, 0, placed), (2, 0, placed), (None, 0, unplaced), (None, 1, placed)):
         search = ViterbiSearch(graph, weights, gamma, threads=threads, window=window, ring=(4, 2))
         search.start(position[0], 0.0, free[:gamma], free[:gamma])
         for t in range(1, T):
