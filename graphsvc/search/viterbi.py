@@ -154,25 +154,36 @@ _reading_costs = _compile(_reading_costs_py, True, fastmath=True)
 _reading_costs_serial = _compile(_reading_costs_py, False, fastmath=True)
 
 
-# Per-node path state, one array per field: the cost (float64, read for every incoming
-# edge from a scattered source node), the detour count (int32, read on near-ties and
-# when advancing), the broken-constraint counts (int32, γ per node) and — only when
-# position or heading is measured — the placement: ground x, z in m, heading in rad
-# and its cos, sin (float64 rows, read once per node when advancing; unpadded 40-byte
-# rows beat 64-byte aligned ones, 2.3–2.8 ms against 3.0–4.5 ms on the G_E benchmark:
-# the smaller footprint matters more than alignment on this machine).
-X, Z, HEADING, COS, SIN = 0, 1, 2, 3, 4
-PLACE_WIDTH = 5
+# Per-node path state, one float64 row a node: the cost, the detour count (a whole
+# number, exact in float64) and — only when position or heading is measured — the
+# placement: ground x, z in m, heading in rad and its cos, sin. Pass 2 reads a
+# scattered source's whole state for every node, so the fields share a row: 16 bytes
+# unplaced, 64 bytes placed (a spare slot pads it to one cache line, aligned), where
+# separate arrays (cost, detours, 40-byte placements straddling lines) cost 3–4
+# scattered lines a node. The broken-constraint counts (int32, γ per node) stay apart:
+# only constrained searches read them.
+COST, DET = 0, 1
+X, Z, HEADING, COS, SIN = 2, 3, 4, 5, 6
+PLACED_WIDTH, UNPLACED_WIDTH = 8, 2
+
+
+def _state_rows(n: int, width: int) -> np.ndarray:
+    """(n, width) float64 zeros whose rows start on 64-byte boundaries (numpy only
+    aligns to 16), so a placed row is one cache line."""
+    raw = np.zeros(n * width + 8)
+    skip = (-raw.ctypes.data % 64) // 8
+    return raw[skip:skip + n * width].reshape(n, width)
+
 
 # The per-edge position and heading terms read the source's placement relative to
-# this sample's measurement, as float32 in one 32-byte row with the cost:
-# [x − mx, z − mz, cos h, sin h, wrap(h − mh), cost − base as float32, cost as
-# float64]. Scattered reads of 64-byte float64 rows fell off this machine's share of
-# the L3 cache (3.7 ms against 0.8 ms for 32-byte rows over 317,600 edges); the
-# relative float32 values keep ~1e-7 relative precision where it matters, near the
-# measurement.
-RX, RZ, RC, RS, RH, RC32 = 0, 1, 2, 3, 4, 5
-REL_COST = 3  # float64 slot of the row viewed as (N, 4) float64
+# this sample's measurement, in the source's own frame, as float32 in one 16-byte row
+# with the cost: [q, wrap(h − mh), cost − base] where q = R(h)ᵀ(p − m) (x, z), so an
+# edge's offset o (in the source's frame) lands at distance |q + o| from the
+# measurement — two additions an edge instead of a rotation. Scattered reads of
+# 64-byte float64 rows fell off this machine's share of the L3 cache (3.7 ms against
+# 0.8 ms for 32-byte rows over 317,600 edges); the relative float32 values keep ~1e-7
+# relative precision where it matters, near the measurement.
+QX, QZ, RH, RC32 = 0, 1, 2, 3
 _PI32 = np.float32(np.pi)
 _TWO_PI32 = np.float32(2.0 * np.pi)
 _INV_TWO_PI32 = np.float32(0.5 / np.pi)
@@ -206,24 +217,24 @@ PREFETCH_AHEAD = np.uint64(16)  # edges ahead whose source row is prefetched (me
 
 
 @numba.njit(inline="always")
-def _place_terms(rx, rz, c, s, rh, ox, oz, dh):
+def _place_terms(qx, qz, rh, ox, oz, dh):
     """Position (m) and heading (rad) terms of an edge (offset ox, oz in the source's
     frame, turn dh) from its source's relative row, in float32: the same arithmetic
     for the float32 pass and the float64 totals."""
-    dx = rx + c * ox + s * oz
-    dz = rz - s * ox + c * oz
+    dx = qx + ox
+    dz = qz + oz
     a = rh + dh
     return np.sqrt(dx * dx + dz * dz), abs(a - _TWO_PI32 * np.floor((a + _PI32) * _INV_TWO_PI32))
 
 
 @numba.njit(inline="always")
-def _exact_total(cost_m, rx, rz, c, s, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+def _exact_total(cost_m, qx, qz, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     """L(e, t) + G(m, t−1) in float64 for an edge from m: cost_m its source's cost,
-    rx … rh the source's relative row (`_relative`), ca the edge reading's C_A;
+    qx, qz, rh the source's relative row (`_relative`), ca the edge reading's C_A;
     the position / heading terms only where they count."""
     t = cost_m + w_acc * ca
     if use_pos or use_head:
-        p, h = _place_terms(rx, rz, c, s, rh, ox, oz, dh)
+        p, h = _place_terms(qx, qz, rh, ox, oz, dh)
         if use_pos:
             t += w_pos * p
         if use_head:
@@ -232,31 +243,49 @@ def _exact_total(cost_m, rx, rz, c, s, rh, ca, ox, oz, dh, w_acc, w_pos, w_head,
 
 
 @numba.njit(inline="always")
-def _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+def _row_total(rel, state, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     """`_exact_total` for an edge from m, read from m's relative row (`_relative`)."""
-    return _exact_total(rel64[m, REL_COST], rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH], ca, ox, oz, dh,
-                        w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
+    return _exact_total(state[m, COST], rel[m, QX], rel[m, QZ], rel[m, RH], ca, ox, oz, dh, w_acc, w_pos, w_head,
+                        use_pos, use_head)  # fmt: skip
 
 
-def _relative_py(place, cost, meas_pos, meas_heading, base, rel, rel64):
-    """The per-edge pass's source rows (see RX…REL_COST) for this sample's
-    measurement: one sequential pass over the placement. meas_pos (2,) m, zeros when
-    not measured; meas_heading rad, 0 when not measured; base ≤ every live cost."""
-    N = cost.shape[0]
+@numba.njit(inline="always")
+def _relative_row(state, m, mx, mz, mh):
+    """m's relative row (QX, QZ, RH; see above) from its state and the measurement
+    (mx, mz m, mh rad): q = R(h)ᵀ(p − m) in float64, rounded once."""
+    rx, rz = state[m, X] - mx, state[m, Z] - mz
+    c, s = state[m, COS], state[m, SIN]
+    return np.float32(c * rx - s * rz), np.float32(s * rx + c * rz), np.float32(_wrap(state[m, HEADING] - mh))
+
+
+@numba.njit(inline="always")
+def _state_total(state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+    """`_row_total` from m's state row instead of its relative row: the same float32
+    values (`_relative_row`), so the same total, bit for bit, with one scattered line
+    read instead of two."""
+    if use_pos or use_head:
+        qx, qz, rh = _relative_row(state, m, mx, mz, mh)
+    else:
+        qx = qz = rh = np.float32(0.0)
+    return _exact_total(state[m, COST], qx, qz, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+
+
+def _relative_py(state, meas_pos, meas_heading, base, rel):
+    """The per-edge pass's source rows (see QX…RC32) for this sample's measurement:
+    one sequential pass over the states. meas_pos (2,) m, zeros when not measured;
+    meas_heading rad, 0 when not measured; base ≤ every live cost."""
+    N = state.shape[0]
     for n in numba.prange(N):
-        rel64[n, REL_COST] = cost[n]
-        rel[n, RC32] = np.float32(cost[n] - base) if cost[n] != np.inf else DEAD32
-        rel[n, RX] = np.float32(place[n, X] - meas_pos[0])
-        rel[n, RZ] = np.float32(place[n, Z] - meas_pos[1])
-        rel[n, RC] = np.float32(place[n, COS])
-        rel[n, RS] = np.float32(place[n, SIN])
-        rel[n, RH] = np.float32(_wrap(place[n, HEADING] - meas_heading))
+        rel[n, QX], rel[n, QZ], rel[n, RH] = _relative_row(state, n, meas_pos[0], meas_pos[1], meas_heading)
+        cost = state[n, COST]
+        rel[n, RC32] = np.float32(cost - base) if cost != np.inf else DEAD32
 
 
 @numba.njit(inline="always")
 def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts):
-    """Node n's placement: m's advanced by an edge (offset ox, oz in m's frame, turn dh
-    with cos tc, sin ts), cos/sin carried by rotation — no trigonometry."""
+    """Node n's placement (state columns X…SIN): m's advanced by an edge (offset ox,
+    oz in m's frame, turn dh with cos tc, sin ts), cos/sin carried by rotation — no
+    trigonometry."""
     c, s = place_prev[m, COS], place_prev[m, SIN]
     place_new[n, X] = place_prev[m, X] + c * ox + s * oz
     place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
@@ -266,27 +295,29 @@ def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts):
 
 
 def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, w_acc, w_pos, w_head, use_pos,
-                    use_head, cost, rel, rel64, total):  # fmt: skip
-    """total (E,): the cost of each path extended by each edge, cost[src] + L(e, t)
-    (inf from a dead source), float64 (the constrained search's pass). reading_cost
+                    use_head, state, rel, total):  # fmt: skip
+    """total (E,): the cost of each path extended by each edge, G(src) + L(e, t)
+    (inf from a dead source; state (N, W) the sources' states), float64 (the
+    constrained search's pass). reading_cost
     (R,) C_A per distinct reading; use_pos / use_head: whether this sample's position
-    / heading term counts (then rel, rel64 hold `_relative`'s rows)."""
+    / heading term counts (then rel holds `_relative`'s rows)."""
     E = edge_src.shape[0]
     if not (use_pos or use_head):
         for e in numba.prange(E):
-            total[e] = cost[edge_src[e]] + w_acc * reading_cost[edge_reading[e]]
+            total[e] = state[edge_src[e], COST] + w_acc * reading_cost[edge_reading[e]]
         return
     for e in numba.prange(E):
-        total[e] = _row_total(rel, rel64, edge_src[e], reading_cost[edge_reading[e]], edge_offset[e, 0],
+        total[e] = _row_total(rel, state, edge_src[e], reading_cost[edge_reading[e]], edge_offset[e, 0],
                               edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
 
 
-def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
-               rank_prev, best_slot, cost_new, best_edge):  # fmt: skip
+def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, state_prev,
+               rank_prev, best_slot, state_new, best_edge):  # fmt: skip
     """Each node's best incoming edge (graph edge id, −1: none alive, or the node is
-    masked) and its path's cost: fewest broken constraints (rank, lexicographic), then
-    lowest total (within TIE counts as equal), then fewer non-original edges so far
-    (det, read only on a near-tie), then the plainer edge kind.
+    masked) and its path's cost (state_new's COST): fewest broken constraints (rank,
+    lexicographic), then lowest total (within TIE counts as equal), then fewer
+    non-original edges so far (state_prev's DET, read only on a near-tie), then the
+    plainer edge kind.
 
     Edges come in slot-major order within chunks of nodes (see `search_tables`): slot
     j holds every node's j-th incoming edge, so a node's candidates are met in their
@@ -309,7 +340,7 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
                     # random, and a mispredicted branch per edge cost more than the pass.
                     better = t < cb - TIE
                     if abs(t - cb) <= TIE:  # near-tie: fewer detours, then plainer edge
-                        better = _tie_better(i, b, slot_src, slot_kind, det_prev)
+                        better = _tie_better(i, b, slot_src, slot_kind, state_prev)
                 else:
                     better = False
                     if t != np.inf:
@@ -326,28 +357,27 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
                             if not decided:
                                 better = t < cb - TIE
                                 if abs(t - cb) <= TIE:
-                                    better = _tie_better(i, b, slot_src, slot_kind, det_prev)
+                                    better = _tie_better(i, b, slot_src, slot_kind, state_prev)
                 best_slot[n] = _pick(better & allowed[n], np.int64(i), b)
         for n in range(chunk_nodes[c], chunk_nodes[c + 1]):
             b = best_slot[n]
             best_edge[n] = -1 if b == E else slot_edge[b]
-            cost_new[n] = total[b]
+            state_new[n, COST] = total[b]
 
 
 @numba.njit(inline="always")
-def _tie_better(i, b, slot_src, slot_kind, det_prev):
+def _tie_better(i, b, slot_src, slot_kind, state_prev):
     """Between two paths of equal cost (within TIE): fewer non-original edges, then
     the plainer edge kind."""
-    det = det_prev[slot_src[i]] + (1 if slot_kind[i] != 0 else 0)
-    best_det = det_prev[slot_src[b]] + (1 if slot_kind[b] != 0 else 0)
+    det = state_prev[slot_src[i], DET] + (1 if slot_kind[i] != 0 else 0)
+    best_det = state_prev[slot_src[b], DET] + (1 if slot_kind[b] != 0 else 0)
     if det != best_det:
         return det < best_det
     return slot_kind[i] < slot_kind[b]
 
 
-def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, place_prev,
-                det_prev, rank_prev, place_new, det_new, rank_new, arrivals, none, ancestor_prev,
-                ancestor_new):  # fmt: skip
+def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, state_prev,
+                rank_prev, state_new, rank_new, arrivals, none, ancestor_prev, ancestor_new):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
     the arrival (which of the node's incoming edges, `none`: dead) into this sample's
     lattice row, detour count, broken constraints, its node at an earlier sample
@@ -365,13 +395,13 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
         live += 1
         arrivals[n] = e - incoming[n]
         m = edge_src[e]
-        det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+        state_new[n, DET] = state_prev[m, DET] + (1 if edge_kind[e] != 0 else 0)
         if ancestor_prev.shape[0]:
             ancestor_new[n] = ancestor_prev[m]
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
         if placed:
-            _carry_placement(place_prev, m, place_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
+            _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
                              edge_turn[e, 0], edge_turn[e, 1])  # fmt: skip
     return live
 
@@ -416,8 +446,8 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
                     if i + PREFETCH_AHEAD < E:
                         _prefetch(rel, slot_src[i + PREFETCH_AHEAD])
                     m = slot_src[i]
-                    pos, head = _place_terms(rel[m, RX], rel[m, RZ], rel[m, RC], rel[m, RS], rel[m, RH],
-                                             slot_offset[i, 0], slot_offset[i, 1], slot_heading[i])  # fmt: skip
+                    pos, head = _place_terms(rel[m, QX], rel[m, QZ], rel[m, RH], slot_offset[i, 0], slot_offset[i, 1],
+                                             slot_heading[i])  # fmt: skip
                     t = rel[m, RC32] + w_acc * reading_cost[slot_reading[i]] + w_pos * pos + w_head * head
                     _keep_two(best, second, i + shift, _tag(t, keep, label))
             else:
@@ -436,7 +466,7 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
 
 @numba.njit(inline="always")
 def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, w_acc, w_pos,
-                  w_head, use_pos, use_head, rows, cost, rel, rel64, det_prev):  # fmt: skip
+                  w_head, use_pos, use_head, rows, state, rel):  # fmt: skip
     """Node n's best incoming edge by the float64 rule of `_select_py` (candidates in
     graph order; lower total beyond TIE, else fewer detours, then plainer kind) as its
     arrival index, −1 if none is alive."""
@@ -447,13 +477,13 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
         m = np.int64(edge_src[e])
         ca = reading_cost[edge_reading[e]]
         if rows:
-            t = _row_total(rel, rel64, m, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos,
+            t = _row_total(rel, state, m, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos,
                            w_head, use_pos, use_head)  # fmt: skip
         else:
-            t = cost[m] + w_acc * ca
+            t = state[m, COST] + w_acc * ca
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
-            better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
+            better = _tie_better(e, best, edge_src, edge_kind, state)  # (graph order instead of slot order)
         if better:
             best, cb = e, t
     return best - first if best >= 0 else np.int64(-1)
@@ -465,16 +495,17 @@ def _finish_kernel(placed: bool, parallel: bool):
     branches compile away (one generic kernel took 1.4× as long in mode A)."""
 
     def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
-               edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, cost, rel,
-               rel64, det_prev, place_prev, c32_base, cost_new, det_new, place_new, c32_new, arrivals, none,
-               lowest, ancestor_prev, ancestor_new):  # fmt: skip
+               edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
+               state_prev, rel, c32_base, state_new, c32_new, arrivals, none, lowest, ancestor_prev,
+               ancestor_new):  # fmt: skip
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
         the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
-        this sample's lattice row (`none`: dead or masked), the chosen path's float64
-        cost, detours, placement (carried by rotation when placed) and, unplaced, its
-        float32 cost relative to c32_base (≤ every new cost: the lowest cost before the
-        step); its ancestor as in `_advance_py`. lowest (C,) each chunk's lowest new
-        cost.
+        this sample's lattice row (`none`: dead or masked), the chosen path's new state
+        (float64 cost, detours and, placed, placement carried by rotation; the cost from
+        the source's state row and this sample's measurement mx, mz m, mh rad, as
+        `_relative` would give) and, unplaced, its float32 cost relative to c32_base (≤
+        every new cost: the lowest cost before the step); its ancestor as in
+        `_advance_py`. lowest (C,) each chunk's lowest new cost.
         Returns (live nodes, near-ties resolved in float64).
 
         Per chunk, first every node's choice, prefetching its source's state; then the
@@ -494,26 +525,19 @@ def _finish_kernel(placed: bool, parallel: bool):
                 if arrival == label_mask:  # a near-tie (marked by pass 1)
                     near_ties += 1
                     a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
-                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, cost, rel, rel64,
-                                      det_prev)  # fmt: skip
+                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, state_prev, rel)
                     arrival = np.uint32(a)  # a ≥ 0: a live candidate exists
                 arrivals[n] = arrival
                 m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
                 source[n - n0] = m
-                if placed:
-                    _prefetch(rel, m)
-                else:
-                    _prefetch(cost, m)
-                _prefetch(det_prev, m)
+                _prefetch(state_prev, m)
                 if ancestor_prev.shape[0]:
                     _prefetch(ancestor_prev, m)
-                if placed:
-                    _prefetch(place_prev, m)
             chunk_low = np.inf
             for n in range(n0, n1):
                 arrival = arrivals[n]
                 if arrival == none:
-                    cost_new[n] = np.inf
+                    state_new[n, COST] = np.inf
                     if not placed:
                         c32_new[n] = DEAD32
                     continue
@@ -523,17 +547,17 @@ def _finish_kernel(placed: bool, parallel: bool):
                 ca = reading_cost[edge_reading[e]]
                 ox, oz, dh = edge_offset[e, 0], edge_offset[e, 1], edge_heading[e]
                 if placed:
-                    t = _row_total(rel, rel64, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+                    t = _state_total(state_prev, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
                 else:
-                    t = cost[m] + w_acc * ca
+                    t = state_prev[m, COST] + w_acc * ca
                     c32_new[n] = np.float32(t - c32_base)
-                cost_new[n] = t
+                state_new[n, COST] = t
                 chunk_low = _fmin(chunk_low, t)
-                det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+                state_new[n, DET] = state_prev[m, DET] + (1 if edge_kind[e] != 0 else 0)
                 if ancestor_prev.shape[0]:
                     ancestor_new[n] = ancestor_prev[m]
                 if placed:
-                    _carry_placement(place_prev, m, place_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
+                    _carry_placement(state_prev, m, state_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
             lowest[c] = chunk_low
         return live, near_ties
 
@@ -681,12 +705,12 @@ NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
 
 @numba.njit(cache=True, nogil=True)
 def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive_words, level_nodes, level_start,
-                  ancestor, cost):  # fmt: skip
+                  ancestor, state):  # fmt: skip
     """Walk back from logical row used − 1, one row at a time, to the oldest:
     level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
     that logical row k's surviving paths pass through, listed for the oldest `flush`
-    rows (the newer ones are only walked through). The paths alive now (cost (N,)
-    finite) pass through ancestor[n] (N,) at row used − 1. arrivals (R, N) the dense
+    rows (the newer ones are only walked through). The paths alive now (state (N, W)
+    with a finite cost) pass through ancestor[n] (N,) at row used − 1. arrivals (R, N) the dense
     window, a ring: logical row k is physical row (first + k) % R; each entry is
     which of the node's incoming edges its best path arrived by, so its predecessor is
     edge_src[incoming[n] + arrival] — read in node order, as CSR edges are numbered by
@@ -699,7 +723,7 @@ def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive
     it and asks again)."""
     R, N = arrivals.shape
     for n in range(N):
-        if cost[n] != np.inf:
+        if state[n, COST] != np.inf:
             alive[0, ancestor[n]] = 1
     end = level_nodes.shape[0]
     pos = end
@@ -930,13 +954,15 @@ def _satisfied(kinds_t, values_t, contact_code, label, ok):
 
 
 @numba.njit(cache=True, nogil=True)
-def _best_node(cost, rank, det):
+def _best_node(state, rank):
     """`ViterbiSearch.best_node` in sequential passes over the nodes (a live decoder asks
-    once per sample; numpy's narrowing took 0.65 ms on 100k nodes): the live nodes
-    (finite cost) with the fewest broken constraints, lexicographically; among them the
-    lowest cost, costs compared as round(cost / TIE) while all are below 1e6 (then as
-    they are); then the fewest non-original edges; then the lowest id. −1: none live."""
+    once per sample; numpy's narrowing took 0.65 ms on 100k nodes), from state (N, W)
+    and rank (N, γ): the live nodes (finite cost) with the fewest broken constraints,
+    lexicographically; among them the lowest cost, costs compared as round(cost / TIE)
+    while all are below 1e6 (then as they are); then the fewest non-original edges;
+    then the lowest id. −1: none live."""
     N, gamma = rank.shape
+    cost = state[:, COST]
     first = -1  # a node with the best constraint counts
     for n in range(N):
         if not np.isfinite(cost[n]):
@@ -966,7 +992,7 @@ def _best_node(cost, rank, det):
     for n in range(first, N):
         if cost[n] <= near and (gamma == 0 or _same_rank(rank, n, first)):
             key = np.round(cost[n] / TIE) if small else cost[n]
-            if best < 0 or key < best_key or key == best_key and det[n] < det[best]:
+            if best < 0 or key < best_key or key == best_key and state[n, DET] < state[best, DET]:
                 best, best_key = n, key
     return best
 
@@ -1031,13 +1057,10 @@ class ViterbiSearch:
         self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
         P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
-        self.cost = np.zeros(N)
-        self.det = np.zeros(N, dtype=np.int32)
-        self.rank = np.zeros((N, gamma), dtype=np.int32)
-        self.place = np.zeros((P, PLACE_WIDTH))
-        self._scratch = (np.zeros(N), np.zeros(N, np.int32), np.zeros((N, gamma), np.int32), np.zeros((P, PLACE_WIDTH)))
-        self.rel = np.zeros((P, 8), dtype=np.float32)
-        self.rel64 = self.rel.view(np.float64)
+        width = PLACED_WIDTH if self.placed else UNPLACED_WIDTH
+        self.state, self._state_new = _state_rows(N, width), _state_rows(N, width)  # (see COST…SIN)
+        self.rank, self._rank_new = np.zeros((N, gamma), dtype=np.int32), np.zeros((N, gamma), dtype=np.int32)
+        self.rel = np.zeros((P, 4), dtype=np.float32)
         # The float32 pass and float64 fix-ups (see `_approx_select_py`) for searches
         # without constraint sets; constrained ones keep the float64 passes (rank first).
         # bits for an arrival index < max in-degree, and all ones (which none is) marking a near-tie
@@ -1143,6 +1166,22 @@ class ViterbiSearch:
     ANCESTOR_SHARE = 0.01
 
     @property
+    def cost(self) -> np.ndarray:
+        """(N,) float64 each node's best path's cost (inf: none alive), a view."""
+        return self.state[:, COST]
+
+    @property
+    def det(self) -> np.ndarray:
+        """(N,) float64 each node's best path's count of non-original edges, a view."""
+        return self.state[:, DET]
+
+    @property
+    def place(self) -> np.ndarray | None:
+        """(N, 5) float64 each node's best path's placement (x, z m, heading rad, its
+        cos, sin), a view; None when the search is not placed."""
+        return self.state[:, X:SIN + 1] if self.placed else None
+
+    @property
     def live_entries(self) -> int:
         """Store rows in use (survivors plus garbage not yet collected)."""
         return self.size
@@ -1153,11 +1192,12 @@ class ViterbiSearch:
         self.t = 0
         self.anchor_position = None  # every path's start, once measured: (2,) m
         self.anchor_heading = None  # rad
-        self.place[:, X] = self.place[:, Z] = self.place[:, HEADING] = self.place[:, SIN] = 0.0
-        self.place[:, COS] = 1.0
+        if self.placed:
+            self.state[:, X] = self.state[:, Z] = self.state[:, HEADING] = self.state[:, SIN] = 0.0
+            self.state[:, COS] = 1.0
         self._anchor(position, heading)
-        self.cost[:] = np.where(self.allowed, 0.0, np.inf)
-        self.det[:] = 0
+        self.state[:, COST] = np.where(self.allowed, 0.0, np.inf)
+        self.state[:, DET] = 0.0
         self.low = self.c32_base = 0.0
         if self.float32_pass and not self.placed:
             self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
@@ -1185,7 +1225,7 @@ class ViterbiSearch:
         measured can become every path's start: all placements are turned about the
         start by the heading and moved onto the position, rigidly — the same as if the
         search had started there (as a batch search given them at sample 0 does)."""
-        place = self.place  # (a single dummy row when not placed)
+        place = self.state if self.placed else np.zeros((1, PLACED_WIDTH))  # (unplaced: only noted)
         if self.anchor_heading is None and heading is not None and np.isfinite(heading):
             self.anchor_heading = h = float(heading)
             ax, az = (0.0, 0.0) if self.anchor_position is None else self.anchor_position
@@ -1216,7 +1256,6 @@ class ViterbiSearch:
         if self.used == self.arrivals.shape[0]:
             self._flush() if self.window is None else self._slide()
         self.t += 1
-        cost, det, rank, place = self._scratch
         arrivals = self.arrivals[(self.first + self.used) % self.arrivals.shape[0]]
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
@@ -1240,7 +1279,7 @@ class ViterbiSearch:
         meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
         meas_heading = float(heading) if use_head else 0.0
         if rows:
-            relative(self.place, self.cost, meas_pos, meas_heading, self.low, self.rel, self.rel64)
+            relative(self.state, meas_pos, meas_heading, self.low, self.rel)
         chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, slot_heading = \
             self.slots
         ancestors = ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
@@ -1255,21 +1294,21 @@ class ViterbiSearch:
             live, near_ties = finish[self.placed](
                 u["chunk_nodes"], self.node_pos, self._best32, self._best_bits, self._label_mask,
                 u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
-                self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, self.cost, self.rel, self.rel64, self.det,
-                self.place, self.low, cost, det, place, self._c32_new, arrivals, self.none,
-                self._chunk_low, *ancestors)  # fmt: skip
+                self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
+                self.state, self.rel, self.low, self._state_new, self._c32_new, arrivals, self.none, self._chunk_low,
+                *ancestors)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
                 self.c32, self._c32_new = self._c32_new, self.c32
         else:
             edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
-                        self.cost, self.rel, self.rel64, self.total)  # fmt: skip
+                        self.state, self.rel, self.total)  # fmt: skip
             select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed,
-                   self.det, self.rank, self.best_slot, cost, self._best_edge)  # fmt: skip
+                   self.state, self.rank, self.best_slot, self._state_new, self._best_edge)  # fmt: skip
             live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
-                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.place, self.det, self.rank,
-                           place, det, rank, arrivals, self.none, *ancestors)  # fmt: skip
+                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.rank,
+                           self._state_new, self._rank_new, arrivals, self.none, *ancestors)  # fmt: skip
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
@@ -1279,8 +1318,8 @@ class ViterbiSearch:
             self._restart_ancestors()
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
         # Swap buffers: the new state becomes the previous one.
-        self._scratch = (self.cost, self.det, self.rank, self.place)
-        self.cost, self.det, self.rank, self.place = cost, det, rank, place
+        self.state, self._state_new = self._state_new, self.state
+        self.rank, self._rank_new = self._rank_new, self.rank
 
     @staticmethod
     def measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1341,7 +1380,7 @@ class ViterbiSearch:
         while True:  # grown on demand: the worst case (nothing merges) is used × N
             total, converged_row = _block_levels(self.arrivals, self.first, walk, self.BLOCK, self.incoming,
                                                  self.edge_src, self.alive_map, self.alive_map.view(np.uint64),
-                                                 self.level_nodes, self.level_start, ancestor, self.cost)  # fmt: skip
+                                                 self.level_nodes, self.level_start, ancestor, self.state)  # fmt: skip
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
@@ -1411,7 +1450,7 @@ class ViterbiSearch:
     def best_node(self) -> int:
         """The live node whose path ranks first: fewest broken constraints, then cost
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
-        return int(_best_node(self.cost, self.rank, self.det))
+        return int(_best_node(self.state, self.rank))
 
     def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
