@@ -339,7 +339,7 @@ class LiveSession:
     frames behind it, SYNTH_BATCH frames at a time. `lag_frames` is the most a frame
     waits, in graph frames, between its sample arriving and its pose coming out.
     threads: numba threads per step — off by default, since a live server runs many
-    sessions side by side."""
+    sessions side by side (it turns them on while a session runs alone: `threads`)."""
 
     DEFAULT_LATENCY_S = 1.0
     SYNTH_BATCH = 3  # 0.1 s at 30 Hz
@@ -370,6 +370,16 @@ class LiveSession:
         self._trans: list[np.ndarray] = []
         self._nodes: list[np.ndarray] = []
         self.flushed = False
+
+    @property
+    def threads(self) -> bool:
+        """Whether the search steps use numba's threads; may change between pushes
+        (same frames either way — see `graphsvc.search.threads`)."""
+        return self.decoder.search.threads
+
+    @threads.setter
+    def threads(self, on: bool) -> None:
+        self.decoder.search.threads = on
 
     def _check(self, t_s, acc, position, heading):
         if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):

@@ -602,6 +602,9 @@ _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, F
 _approx_select, _approx_select_serial = _compile(_approx_select_py, True), _compile(_approx_select_py, False)
 _finish = {placed: _finish_kernel(placed, True) for placed in (False, True)}
 _finish_serial = {placed: _finish_kernel(placed, False) for placed in (False, True)}
+_THREADED = (_reading_costs, _relative, _edge_totals, _select, _advance, _approx_select, _finish)
+_SERIAL = (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial, _advance_serial,
+           _approx_select_serial, _finish_serial)  # fmt: skip
 
 
 def search_tables(graph: MotionGraph) -> dict:
@@ -1031,10 +1034,7 @@ class ViterbiSearch:
         weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
         the float64 passes the rest, with the same results."""
         self.graph = graph
-        self._kernels = ((_reading_costs, _relative, _edge_totals, _select, _advance, _approx_select, _finish)
-                         if threads else
-                         (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial,
-                          _advance_serial, _approx_select_serial, _finish_serial))  # fmt: skip
+        self.threads = threads
         if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
             raise InputError(f"weights must be finite and ≥ 0, got {weights}")
         self.weights = weights
@@ -1164,6 +1164,17 @@ class ViterbiSearch:
     # took a flush from 0.83 to 0.28 ms a sample; generated G_E: under 0.05 %, where
     # carrying cost 4 % of a step and saved nothing).
     ANCESTOR_SHARE = 0.01
+
+    @property
+    def threads(self) -> bool:
+        """Whether steps spread over numba's threads (see __init__). May change between
+        steps — a server gives them to a stream while it is the only one running —
+        without changing any result: both kinds of kernel compute the same values."""
+        return self._kernels is _THREADED
+
+    @threads.setter
+    def threads(self, on: bool) -> None:
+        self._kernels = _THREADED if on else _SERIAL
 
     @property
     def cost(self) -> np.ndarray:
@@ -1343,7 +1354,7 @@ class ViterbiSearch:
         B = len(meas)
         scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
         out = np.empty((B, self.readings_t.shape[1]), np.float32)
-        kernel = _reading_costs_batch if self._kernels[0] is _reading_costs else _reading_costs_batch_serial
+        kernel = _reading_costs_batch if self.threads else _reading_costs_batch_serial
         kernel(self.readings_t, meas, mask, scale, out)
         return out
 

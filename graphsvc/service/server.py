@@ -30,6 +30,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
+from graphsvc.search.threads import ThreadShare
 from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
@@ -88,9 +89,10 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
         if name in graphs:
             raise InputError(f"graph name {name!r} given twice")
         graph = load_graph(path)
-        # Compile/load the search kernels and build the search tables now, not in
-        # the first client's call.
+        # Compile/load the search kernels (serial, and threaded for a stream running
+        # alone) and build the search tables now, not in the first client's call.
         warm_up(graph, threads=False)
+        warm_up(graph, threads=True)
         graphs[name] = LoadedGraph(name, path, graph, convert.graph_info(name, graph, path.stat().st_size))
     return graphs
 
@@ -218,6 +220,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int):
         self.graphs = graphs
         self.slots = StreamSlots(max_streams)
+        self.threads = ThreadShare()  # numba's threads for a live stream's steps while it runs alone
 
     def _graph(self, name: str, field: str = "graph") -> LoadedGraph:
         if not name:
@@ -247,9 +250,11 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             options = convert.options_from_proto(request.options, "options")
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
-            # Serial kernels: many calls share the machine. The search polls the call and
+            # Serial kernels: many calls share the machine (and while this one runs, a
+            # live stream does not take the threads). The search polls the call and
             # stops when the client cancels or its deadline passes.
-            result = reconstruct(graph, rec, options, threads=False, should_stop=lambda: not context.is_active())
+            with self.threads.running():
+                result = reconstruct(graph, rec, options, threads=False, should_stop=lambda: not context.is_active())
             response = pb.SynthesizeResponse(motion=convert.motion_to_proto(result.motion),
                                               node_path=result.node_path.tolist(),
                                               bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
@@ -268,7 +273,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         # client cancelling, the deadline passing, the server stopping.
         context.add_callback(release)
         try:
-            yield from self._stream(request_iterator, context)
+            with self.threads.running():
+                yield from self._stream(request_iterator, context)
         except grpc.RpcError:
             return  # the client went away while we waited for its next message
         except Exception as exc:  # noqa: BLE001
@@ -315,7 +321,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                                                                   f"sample[{sample_index}]")  # fmt: skip
             previous_t = t
             try:
-                frames = session.push(t, acc, position, heading)
+                with self.threads.step() as threaded:  # the threads while this stream runs alone
+                    session.threads = threaded
+                    frames = session.push(t, acc, position, heading)
             except InputError as exc:
                 raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
             for frame in frames:
@@ -323,7 +331,10 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             frames_out += len(frames)
         if not context.is_active():
             return
-        for frame in session.flush():
+        with self.threads.step() as threaded:
+            session.threads = threaded
+            frames = session.flush()
+        for frame in frames:
             yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, max(sample_index, 0)))
             frames_out += 1
         yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,

@@ -104,6 +104,28 @@ def test_stream_matches_live_session(conn, graph, recording):
     assert motion.num_frames == len(expected)
 
 
+def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(conn, server, graph, recording,
+                                                                            monkeypatch):  # fmt: skip
+    # While a stream runs alone the server gives its steps numba's threads; the frames
+    # are those of a serial LiveSession all the same.
+    from graphsvc.pipeline import LiveSession, Options
+
+    expected, _ = live_frames(graph, recording, Options())
+    used = []  # whether each push and the flush ran with the threads
+    push, flush = LiveSession.push, LiveSession.flush
+    monkeypatch.setattr(LiveSession, "push", lambda self, *a: used.append(self.threads) or push(self, *a))
+    monkeypatch.setattr(LiveSession, "flush", lambda self: used.append(self.threads) or flush(self))
+    assert server.servicer.threads.running_searches == 0
+    feed = C.SampleFeed(C.stream_config("small"))
+    for sample in C.recording_samples(recording):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert_frames_equal(expected, result.frames)
+    assert used == [True] * (recording.num_samples + 1)
+    assert server.servicer.threads.running_searches == 0
+
+
 def test_replay_in_real_time_reports_latency(conn, recording):
     from dataclasses import replace
 

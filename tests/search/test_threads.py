@@ -1,0 +1,57 @@
+import threading
+
+import numpy as np
+import pytest
+
+from graphsvc.search.threads import ThreadShare
+from graphsvc.search.viterbi import ViterbiSearch, Weights
+from tests.search.test_viterbi import random_graph
+
+
+def test_threads_go_to_a_lone_search_one_step_at_a_time():
+    share = ThreadShare()
+    with share.step() as threaded:
+        assert not threaded  # no search registered
+    with share.running():
+        with share.step() as threaded:
+            assert threaded
+            with share.step() as inner:  # a second step while the first holds them
+                assert not inner
+            seen = []
+            other = threading.Thread(target=lambda: seen.append(share.step().__enter__()))
+            other.start()
+            other.join()
+            assert seen == [False]
+        with share.running():  # a second search: both step serial
+            with share.step() as threaded:
+                assert not threaded
+        with share.step() as threaded:  # alone again
+            assert threaded
+    assert share.running_searches == 0
+    with pytest.raises(RuntimeError), share.running():
+        raise RuntimeError("a search that fails still unregisters")
+    assert share.running_searches == 0
+
+
+@pytest.mark.parametrize("weights", [Weights(1, 0, 0), Weights(0.5, 1, 1)])
+def test_switching_threads_between_steps_changes_nothing(weights):
+    rng = np.random.default_rng(12)
+    g = random_graph(rng)
+    T = 40
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    runs = []
+    for switching in (False, True):
+        s = ViterbiSearch(g, weights, threads=False)
+        s.start(position[0], heading[0])
+        rows, costs = [], []
+        for t in range(1, T):
+            s.threads = switching and t % 3 != 0
+            assert s.threads == (switching and t % 3 != 0)
+            s.step(meas[t], position[t], heading[t])
+            rows.append(s.arrivals[(s.first + s.used - 1) % s.arrivals.shape[0]].copy())
+            costs.append(s.cost.copy())
+        runs.append((np.array(rows), np.array(costs), s.trace(s.best_node())[0]))
+    for serial, switched in zip(*runs):
+        np.testing.assert_array_equal(serial, switched)
