@@ -154,17 +154,18 @@ _reading_costs = _compile(_reading_costs_py, True, fastmath=True)
 _reading_costs_serial = _compile(_reading_costs_py, False, fastmath=True)
 
 
-# Per-node path state, one float64 row a node: the cost, the detour count (a whole
-# number, exact in float64) and — only when position or heading is measured — the
-# placement: ground x, z in m, heading in rad and its cos, sin. Pass 2 reads a
-# scattered source's whole state for every node, so the fields share a row: 16 bytes
-# unplaced, 64 bytes placed (a spare slot pads it to one cache line, aligned), where
-# separate arrays (cost, detours, 40-byte placements straddling lines) cost 3–4
-# scattered lines a node. The broken-constraint counts (int32, γ per node) stay apart:
-# only constrained searches read them.
-COST, DET = 0, 1
-X, Z, HEADING, COS, SIN = 2, 3, 4, 5, 6
-PLACED_WIDTH, UNPLACED_WIDTH = 8, 2
+# Per-node path state, one float64 row a node: the cost and — only when position or
+# heading is measured — the placement: ground x, z in m, heading in rad and its cos,
+# sin. Pass 2 reads a scattered source's whole state for every node, so the fields
+# share a row: 64 bytes placed (spare slots pad it to one cache line, aligned), where a
+# cost array and 40-byte placement rows straddling lines cost 2–3 scattered lines a
+# node. The detour counts (int32) and the broken-constraint counts (int32, γ per node)
+# stay apart: in a row the detours cost unplaced searches on built graphs, whose sources
+# are mostly the previous node, 20 % of pass 2 in bytes moved (1.33 against 1.10 ms a
+# sample on the kelly6 graph below), and only constrained searches read the ranks.
+COST = 0
+X, Z, HEADING, COS, SIN = 1, 2, 3, 4, 5
+PLACED_WIDTH, UNPLACED_WIDTH = 8, 1
 
 
 def _state_rows(n: int, width: int) -> np.ndarray:
@@ -311,12 +312,12 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
                               edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
 
 
-def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, state_prev,
+def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
                rank_prev, best_slot, state_new, best_edge):  # fmt: skip
     """Each node's best incoming edge (graph edge id, −1: none alive, or the node is
     masked) and its path's cost (state_new's COST): fewest broken constraints (rank,
     lexicographic), then lowest total (within TIE counts as equal), then fewer
-    non-original edges so far (state_prev's DET, read only on a near-tie), then the
+    non-original edges so far (det_prev, read only on a near-tie), then the
     plainer edge kind.
 
     Edges come in slot-major order within chunks of nodes (see `search_tables`): slot
@@ -340,7 +341,7 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
                     # random, and a mispredicted branch per edge cost more than the pass.
                     better = t < cb - TIE
                     if abs(t - cb) <= TIE:  # near-tie: fewer detours, then plainer edge
-                        better = _tie_better(i, b, slot_src, slot_kind, state_prev)
+                        better = _tie_better(i, b, slot_src, slot_kind, det_prev)
                 else:
                     better = False
                     if t != np.inf:
@@ -357,7 +358,7 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
                             if not decided:
                                 better = t < cb - TIE
                                 if abs(t - cb) <= TIE:
-                                    better = _tie_better(i, b, slot_src, slot_kind, state_prev)
+                                    better = _tie_better(i, b, slot_src, slot_kind, det_prev)
                 best_slot[n] = _pick(better & allowed[n], np.int64(i), b)
         for n in range(chunk_nodes[c], chunk_nodes[c + 1]):
             b = best_slot[n]
@@ -366,18 +367,19 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
 
 
 @numba.njit(inline="always")
-def _tie_better(i, b, slot_src, slot_kind, state_prev):
+def _tie_better(i, b, slot_src, slot_kind, det_prev):
     """Between two paths of equal cost (within TIE): fewer non-original edges, then
     the plainer edge kind."""
-    det = state_prev[slot_src[i], DET] + (1 if slot_kind[i] != 0 else 0)
-    best_det = state_prev[slot_src[b], DET] + (1 if slot_kind[b] != 0 else 0)
+    det = det_prev[slot_src[i]] + (1 if slot_kind[i] != 0 else 0)
+    best_det = det_prev[slot_src[b]] + (1 if slot_kind[b] != 0 else 0)
     if det != best_det:
         return det < best_det
     return slot_kind[i] < slot_kind[b]
 
 
 def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, state_prev,
-                rank_prev, state_new, rank_new, arrivals, none, ancestor_prev, ancestor_new):  # fmt: skip
+                det_prev, rank_prev, state_new, det_new, rank_new, arrivals, none, ancestor_prev,
+                ancestor_new):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
     the arrival (which of the node's incoming edges, `none`: dead) into this sample's
     lattice row, detour count, broken constraints, its node at an earlier sample
@@ -395,7 +397,7 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
         live += 1
         arrivals[n] = e - incoming[n]
         m = edge_src[e]
-        state_new[n, DET] = state_prev[m, DET] + (1 if edge_kind[e] != 0 else 0)
+        det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
         if ancestor_prev.shape[0]:
             ancestor_new[n] = ancestor_prev[m]
         for k in range(gamma):
@@ -466,7 +468,7 @@ def _approx_select_py(chunk_nodes, chunk_slots, slot_src, slot_reading, slot_off
 
 @numba.njit(inline="always")
 def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, w_acc, w_pos,
-                  w_head, use_pos, use_head, rows, state, rel):  # fmt: skip
+                  w_head, use_pos, use_head, rows, state, rel, det_prev):  # fmt: skip
     """Node n's best incoming edge by the float64 rule of `_select_py` (candidates in
     graph order; lower total beyond TIE, else fewer detours, then plainer kind) as its
     arrival index, −1 if none is alive."""
@@ -483,7 +485,7 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
             t = state[m, COST] + w_acc * ca
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
-            better = _tie_better(e, best, edge_src, edge_kind, state)  # (graph order instead of slot order)
+            better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
         if better:
             best, cb = e, t
     return best - first if best >= 0 else np.int64(-1)
@@ -496,16 +498,16 @@ def _finish_kernel(placed: bool, parallel: bool):
 
     def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
                edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
-               state_prev, rel, c32_base, state_new, c32_new, arrivals, none, lowest, ancestor_prev,
-               ancestor_new):  # fmt: skip
+               state_prev, det_prev, rel, c32_base, state_new, det_new, c32_new, arrivals, none, lowest,
+               ancestor_prev, ancestor_new):  # fmt: skip
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
         the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
         this sample's lattice row (`none`: dead or masked), the chosen path's new state
-        (float64 cost, detours and, placed, placement carried by rotation; the cost from
-        the source's state row and this sample's measurement mx, mz m, mh rad, as
-        `_relative` would give) and, unplaced, its float32 cost relative to c32_base (≤
-        every new cost: the lowest cost before the step); its ancestor as in
-        `_advance_py`. lowest (C,) each chunk's lowest new cost.
+        (float64 cost and, placed, placement carried by rotation; the cost from the
+        source's state row and this sample's measurement mx, mz m, mh rad, as
+        `_relative` would give), detours and, unplaced, its float32 cost relative to
+        c32_base (≤ every new cost: the lowest cost before the step); its ancestor as
+        in `_advance_py`. lowest (C,) each chunk's lowest new cost.
         Returns (live nodes, near-ties resolved in float64).
 
         Per chunk, first every node's choice, prefetching its source's state; then the
@@ -525,12 +527,14 @@ def _finish_kernel(placed: bool, parallel: bool):
                 if arrival == label_mask:  # a near-tie (marked by pass 1)
                     near_ties += 1
                     a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
-                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, state_prev, rel)
+                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, state_prev, rel,
+                                      det_prev)  # fmt: skip
                     arrival = np.uint32(a)  # a ≥ 0: a live candidate exists
                 arrivals[n] = arrival
                 m = edge_src[np.uint64(incoming[n]) + np.uint64(arrival)]
                 source[n - n0] = m
                 _prefetch(state_prev, m)
+                _prefetch(det_prev, m)
                 if ancestor_prev.shape[0]:
                     _prefetch(ancestor_prev, m)
             chunk_low = np.inf
@@ -553,7 +557,7 @@ def _finish_kernel(placed: bool, parallel: bool):
                     c32_new[n] = np.float32(t - c32_base)
                 state_new[n, COST] = t
                 chunk_low = _fmin(chunk_low, t)
-                state_new[n, DET] = state_prev[m, DET] + (1 if edge_kind[e] != 0 else 0)
+                det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
                 if ancestor_prev.shape[0]:
                     ancestor_new[n] = ancestor_prev[m]
                 if placed:
@@ -957,10 +961,10 @@ def _satisfied(kinds_t, values_t, contact_code, label, ok):
 
 
 @numba.njit(cache=True, nogil=True)
-def _best_node(state, rank):
+def _best_node(state, rank, det):
     """`ViterbiSearch.best_node` in sequential passes over the nodes (a live decoder asks
-    once per sample; numpy's narrowing took 0.65 ms on 100k nodes), from state (N, W)
-    and rank (N, γ): the live nodes (finite cost) with the fewest broken constraints,
+    once per sample; numpy's narrowing took 0.65 ms on 100k nodes), from state (N, W),
+    rank (N, γ) and det (N,): the live nodes (finite cost) with the fewest broken constraints,
     lexicographically; among them the lowest cost, costs compared as round(cost / TIE)
     while all are below 1e6 (then as they are); then the fewest non-original edges;
     then the lowest id. −1: none live."""
@@ -995,7 +999,7 @@ def _best_node(state, rank):
     for n in range(first, N):
         if cost[n] <= near and (gamma == 0 or _same_rank(rank, n, first)):
             key = np.round(cost[n] / TIE) if small else cost[n]
-            if best < 0 or key < best_key or key == best_key and state[n, DET] < state[best, DET]:
+            if best < 0 or key < best_key or key == best_key and det[n] < det[best]:
                 best, best_key = n, key
     return best
 
@@ -1059,6 +1063,7 @@ class ViterbiSearch:
         P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
         width = PLACED_WIDTH if self.placed else UNPLACED_WIDTH
         self.state, self._state_new = _state_rows(N, width), _state_rows(N, width)  # (see COST…SIN)
+        self.det, self._det_new = np.zeros(N, dtype=np.int32), np.zeros(N, dtype=np.int32)  # detour counts
         self.rank, self._rank_new = np.zeros((N, gamma), dtype=np.int32), np.zeros((N, gamma), dtype=np.int32)
         self.rel = np.zeros((P, 4), dtype=np.float32)
         # The float32 pass and float64 fix-ups (see `_approx_select_py`) for searches
@@ -1182,11 +1187,6 @@ class ViterbiSearch:
         return self.state[:, COST]
 
     @property
-    def det(self) -> np.ndarray:
-        """(N,) float64 each node's best path's count of non-original edges, a view."""
-        return self.state[:, DET]
-
-    @property
     def place(self) -> np.ndarray | None:
         """(N, 5) float64 each node's best path's placement (x, z m, heading rad, its
         cos, sin), a view; None when the search is not placed."""
@@ -1208,7 +1208,7 @@ class ViterbiSearch:
             self.state[:, COS] = 1.0
         self._anchor(position, heading)
         self.state[:, COST] = np.where(self.allowed, 0.0, np.inf)
-        self.state[:, DET] = 0.0
+        self.det[:] = 0
         self.low = self.c32_base = 0.0
         if self.float32_pass and not self.placed:
             self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
@@ -1306,8 +1306,8 @@ class ViterbiSearch:
                 u["chunk_nodes"], self.node_pos, self._best32, self._best_bits, self._label_mask,
                 u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
-                self.state, self.rel, self.low, self._state_new, self._c32_new, arrivals, self.none, self._chunk_low,
-                *ancestors)  # fmt: skip
+                self.state, self.det, self.rel, self.low, self._state_new, self._det_new, self._c32_new, arrivals,
+                self.none, self._chunk_low, *ancestors)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
@@ -1316,10 +1316,11 @@ class ViterbiSearch:
             edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
                         self.state, self.rel, self.total)  # fmt: skip
             select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed,
-                   self.state, self.rank, self.best_slot, self._state_new, self._best_edge)  # fmt: skip
+                   self.det, self.rank, self.best_slot, self._state_new, self._best_edge)  # fmt: skip
             live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
-                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.rank,
-                           self._state_new, self._rank_new, arrivals, self.none, *ancestors)  # fmt: skip
+                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.det, self.rank,
+                           self._state_new, self._det_new, self._rank_new, arrivals, self.none,
+                           *ancestors)  # fmt: skip
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
@@ -1330,6 +1331,7 @@ class ViterbiSearch:
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
         # Swap buffers: the new state becomes the previous one.
         self.state, self._state_new = self._state_new, self.state
+        self.det, self._det_new = self._det_new, self.det
         self.rank, self._rank_new = self._rank_new, self.rank
 
     @staticmethod
@@ -1461,7 +1463,7 @@ class ViterbiSearch:
     def best_node(self) -> int:
         """The live node whose path ranks first: fewest broken constraints, then cost
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
-        return int(_best_node(self.state, self.rank))
+        return int(_best_node(self.state, self.rank, self.det))
 
     def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and

@@ -385,8 +385,8 @@ def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id()
     from graphsvc.search.viterbi import TIE
     from graphsvc.search.viterbi import _best_node as best_of_state
 
-    def _best_node(cost, rank, det):  # the kernel reads cost and detours from state rows
-        return best_of_state(np.stack([cost, det.astype(np.float64)], axis=1), rank)
+    def _best_node(cost, rank, det):  # the kernel reads the costs from state rows
+        return best_of_state(cost[:, None].copy(), rank, det)
 
     def narrowed(cost, rank, det):  # the definition, by numpy narrowing key by key
         candidates = np.nonzero(np.isfinite(cost))[0]
