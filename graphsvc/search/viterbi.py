@@ -45,6 +45,7 @@ import types
 from dataclasses import dataclass, field
 
 import numba
+import numba.extending
 import numpy as np
 
 from graphsvc.errors import InputError, SearchCancelled
@@ -157,23 +158,53 @@ _reading_costs_serial = _compile(_reading_costs_py, False, fastmath=True)
 # Per-node path state, one float64 row a node: the cost and — only when position or
 # heading is measured — the placement: ground x, z in m, heading in rad and its cos,
 # sin. Pass 2 reads a scattered source's whole state for every node, so the fields
-# share a row: 64 bytes placed (spare slots pad it to one cache line, aligned), where a
-# cost array and 40-byte placement rows straddling lines cost 2–3 scattered lines a
-# node. The detour counts (int32) and the broken-constraint counts (int32, γ per node)
-# stay apart: in a row the detours cost unplaced searches on built graphs, whose sources
-# are mostly the previous node, 20 % of pass 2 in bytes moved (1.33 against 1.10 ms a
-# sample on the kelly6 graph below), and only constrained searches read the ranks.
+# share a row (48 bytes placed), where a cost array and 40-byte placement rows cost 2–3
+# scattered lines a node. Unpadded: rows padded to one 64-byte line were 1–3 % faster
+# on the generated G_E graph but 5 % slower on a built one, whose sources are mostly the
+# previous node, so bytes moved count more than lines. The detour counts (int32) and
+# the broken-constraint counts (int32, γ per node) stay apart: in the row, the detours
+# cost unplaced searches on built graphs 20 % of pass 2 in bytes moved (1.33 against
+# 1.10 ms a sample on the kelly6 graph), and only constrained searches read the ranks.
 COST = 0
 X, Z, HEADING, COS, SIN = 1, 2, 3, 4, 5
-PLACED_WIDTH, UNPLACED_WIDTH = 8, 1
+PLACED_WIDTH, UNPLACED_WIDTH = 6, 1
 
 
-def _state_rows(n: int, width: int) -> np.ndarray:
-    """(n, width) float64 zeros whose rows start on 64-byte boundaries (numpy only
-    aligns to 16), so a placed row is one cache line."""
-    raw = np.zeros(n * width + 8)
-    skip = (-raw.ctypes.data % 64) // 8
-    return raw[skip:skip + n * width].reshape(n, width)
+def _cost_at(state, m):
+    """Node m's cost from state rows (N, W), or from the cost column alone (N,)."""
+    return state[m] if state.ndim == 1 else state[m, COST]
+
+
+@numba.extending.overload(_cost_at, inline="always")
+def _cost_at_kernel(state, m):
+    # Unplaced searches hand pass 2 the cost column as a 1-D array: indexing an (N, 1)
+    # array, whose row length numba only knows at run time, cost that pass 5–8 %.
+    if state.ndim == 1:
+        return lambda state, m: state[m]
+    return lambda state, m: state[m, COST]
+
+
+def _set_cost(state, n, value):
+    """Set node n's cost in state rows (N, W) or in the cost column alone (N,)."""
+    if state.ndim == 1:
+        state[n] = value
+    else:
+        state[n, COST] = value
+
+
+@numba.extending.overload(_set_cost, inline="always")
+def _set_cost_kernel(state, n, value):
+    if state.ndim == 1:
+
+        def set_column(state, n, value):
+            state[n] = value
+
+        return set_column
+
+    def set_row(state, n, value):
+        state[n, COST] = value
+
+    return set_row
 
 
 # The per-edge position and heading terms read the source's placement relative to
@@ -246,7 +277,7 @@ def _exact_total(cost_m, qx, qz, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_p
 @numba.njit(inline="always")
 def _row_total(rel, state, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     """`_exact_total` for an edge from m, read from m's relative row (`_relative`)."""
-    return _exact_total(state[m, COST], rel[m, QX], rel[m, QZ], rel[m, RH], ca, ox, oz, dh, w_acc, w_pos, w_head,
+    return _exact_total(_cost_at(state, m), rel[m, QX], rel[m, QZ], rel[m, RH], ca, ox, oz, dh, w_acc, w_pos, w_head,
                         use_pos, use_head)  # fmt: skip
 
 
@@ -482,7 +513,7 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
             t = _row_total(rel, state, m, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos,
                            w_head, use_pos, use_head)  # fmt: skip
         else:
-            t = state[m, COST] + w_acc * ca
+            t = _cost_at(state, m) + w_acc * ca
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
             better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
@@ -541,7 +572,7 @@ def _finish_kernel(placed: bool, parallel: bool):
             for n in range(n0, n1):
                 arrival = arrivals[n]
                 if arrival == none:
-                    state_new[n, COST] = np.inf
+                    _set_cost(state_new, n, np.inf)
                     if not placed:
                         c32_new[n] = DEAD32
                     continue
@@ -553,9 +584,9 @@ def _finish_kernel(placed: bool, parallel: bool):
                 if placed:
                     t = _state_total(state_prev, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
                 else:
-                    t = state_prev[m, COST] + w_acc * ca
+                    t = _cost_at(state_prev, m) + w_acc * ca
                     c32_new[n] = np.float32(t - c32_base)
-                state_new[n, COST] = t
+                _set_cost(state_new, n, t)
                 chunk_low = _fmin(chunk_low, t)
                 det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
                 if ancestor_prev.shape[0]:
@@ -1062,7 +1093,7 @@ class ViterbiSearch:
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
         P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
         width = PLACED_WIDTH if self.placed else UNPLACED_WIDTH
-        self.state, self._state_new = _state_rows(N, width), _state_rows(N, width)  # (see COST…SIN)
+        self.state, self._state_new = np.zeros((N, width)), np.zeros((N, width))  # (see COST…SIN)
         self.det, self._det_new = np.zeros(N, dtype=np.int32), np.zeros(N, dtype=np.int32)  # detour counts
         self.rank, self._rank_new = np.zeros((N, gamma), dtype=np.int32), np.zeros((N, gamma), dtype=np.int32)
         self.rel = np.zeros((P, 4), dtype=np.float32)
@@ -1302,12 +1333,14 @@ class ViterbiSearch:
                           slot_heading, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
                           np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._allowed_pos,
                           self._alpha, 2.0**-48 * base + 1e-30, self._best32, self._second32)  # fmt: skip
+            # (unplaced: the cost column alone, 1-D — see `_cost_at`)
+            state, state_new = (self.state, self._state_new) if self.placed else (self.cost, self._state_new[:, COST])
             live, near_ties = finish[self.placed](
                 u["chunk_nodes"], self.node_pos, self._best32, self._best_bits, self._label_mask,
                 u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
-                self.state, self.det, self.rel, self.low, self._state_new, self._det_new, self._c32_new, arrivals,
-                self.none, self._chunk_low, *ancestors)  # fmt: skip
+                state, self.det, self.rel, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
+                self._chunk_low, *ancestors)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
