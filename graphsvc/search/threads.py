@@ -1,7 +1,7 @@
 """Sharing numba's threads between searches running side by side in one process.
 
 A search step spread over numba's threads takes about half as long on two cores
-(G_E, 100,686 nodes: a live step 3.5 against 6.3 ms a sample), but several searches
+(G_E, 100,686 nodes: a live push 3.3–3.5 against 6.8–6.9 ms), but several searches
 doing so at once only fight over the cores, and numba's `workqueue` threading layer
 must not be entered by two threads at once. So a server gives the threads to a step
 only while a single search is running, and to one step at a time. Results never

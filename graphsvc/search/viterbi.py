@@ -211,10 +211,11 @@ def _set_cost_kernel(state, n, value):
 # this sample's measurement, in the source's own frame, as float32 in one 16-byte row
 # with the cost: [q, wrap(h − mh), cost − base] where q = R(h)ᵀ(p − m) (x, z), so an
 # edge's offset o (in the source's frame) lands at distance |q + o| from the
-# measurement — two additions an edge instead of a rotation. Scattered reads of
-# 64-byte float64 rows fell off this machine's share of the L3 cache (3.7 ms against
-# 0.8 ms for 32-byte rows over 317,600 edges); the relative float32 values keep ~1e-7
-# relative precision where it matters, near the measurement.
+# measurement — two additions an edge instead of a rotation (the APO pass 1: 0.91
+# against 1.12 ms a sample with 32-byte rows of relative x, z, cos, sin). Scattered
+# reads of 64-byte float64 rows fell off this machine's share of the L3 cache (3.7 ms
+# against 0.8 ms for 32-byte rows over 317,600 edges); the relative float32 values keep
+# ~1e-7 relative precision where it matters, near the measurement.
 QX, QZ, RH, RC32 = 0, 1, 2, 3
 _PI32 = np.float32(np.pi)
 _TWO_PI32 = np.float32(2.0 * np.pi)
@@ -330,9 +331,9 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
                     use_head, state, rel, total):  # fmt: skip
     """total (E,): the cost of each path extended by each edge, G(src) + L(e, t)
     (inf from a dead source; state (N, W) the sources' states), float64 (the
-    constrained search's pass). reading_cost
-    (R,) C_A per distinct reading; use_pos / use_head: whether this sample's position
-    / heading term counts (then rel holds `_relative`'s rows)."""
+    constrained search's pass). reading_cost (R,) C_A per distinct reading; use_pos /
+    use_head: whether this sample's position / heading term counts (then rel holds
+    `_relative`'s rows)."""
     E = edge_src.shape[0]
     if not (use_pos or use_head):
         for e in numba.prange(E):
@@ -748,8 +749,8 @@ def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive
     level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
     that logical row k's surviving paths pass through, listed for the oldest `flush`
     rows (the newer ones are only walked through). The paths alive now (state (N, W)
-    with a finite cost) pass through ancestor[n] (N,) at row used − 1. arrivals (R, N) the dense
-    window, a ring: logical row k is physical row (first + k) % R; each entry is
+    with a finite cost) pass through ancestor[n] (N,) at row used − 1. arrivals (R, N)
+    the dense window, a ring: logical row k is physical row (first + k) % R; each entry is
     which of the node's incoming edges its best path arrived by, so its predecessor is
     edge_src[incoming[n] + arrival] — read in node order, as CSR edges are numbered by
     destination. alive (2, N rounded up to 8)
@@ -995,10 +996,10 @@ def _satisfied(kinds_t, values_t, contact_code, label, ok):
 def _best_node(state, rank, det):
     """`ViterbiSearch.best_node` in sequential passes over the nodes (a live decoder asks
     once per sample; numpy's narrowing took 0.65 ms on 100k nodes), from state (N, W),
-    rank (N, γ) and det (N,): the live nodes (finite cost) with the fewest broken constraints,
-    lexicographically; among them the lowest cost, costs compared as round(cost / TIE)
-    while all are below 1e6 (then as they are); then the fewest non-original edges;
-    then the lowest id. −1: none live."""
+    rank (N, γ) and det (N,): the live nodes (finite cost) with the fewest broken
+    constraints, lexicographically; among them the lowest cost, costs compared as
+    round(cost / TIE) while all are below 1e6 (then as they are); then the fewest
+    non-original edges; then the lowest id. −1: none live."""
     N, gamma = rank.shape
     cost = state[:, COST]
     first = -1  # a node with the best constraint counts
