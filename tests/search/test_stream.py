@@ -7,22 +7,13 @@ import pytest
 from graphsvc.errors import InputError
 from graphsvc.search.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
 from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
-from tests.search.test_viterbi import random_graph
-
-
-def _problem(seed, T=70):
-    rng = np.random.default_rng(seed)
-    g = random_graph(rng)
-    meas = rng.normal(0, 9.81, (T, 2, 3))
-    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
-    heading = np.cumsum(rng.normal(0, 0.05, T))
-    return g, meas, position, heading
+from tests.search.test_viterbi import random_walk_problem
 
 
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("unmeasured", [0, 4])
 def test_flushed_stream_equals_batch_search(seed, unmeasured, ring):
-    g, meas, position, heading = _problem(seed)
+    g, meas, position, heading = random_walk_problem(seed)
     position[:unmeasured] = np.nan  # paths start at the first measured position and heading
     heading[: unmeasured // 2] = np.nan
     w = Weights(0.5, 1, 1)
@@ -36,7 +27,7 @@ def test_flushed_stream_equals_batch_search(seed, unmeasured, ring):
 
 @pytest.mark.parametrize("lag", [0, 3, 40])
 def test_fixed_lag_emits_frame_t_minus_lag_of_the_best_prefix_path(lag, ring):
-    g, meas, position, heading = _problem(7)
+    g, meas, position, heading = random_walk_problem(7)
     w = Weights(0.5, 1, 1)
     T = len(meas)
     decoder = FixedLagDecoder(g, w, lag=lag)
@@ -62,7 +53,7 @@ def test_converged_prefix_is_emitted_before_its_lag(ring):
     # Paths through a random graph merge: once all survivors share a prefix it is
     # final and comes out long before the (huge) lag. (Agreement is looked for whenever
     # the oldest dense rows move to the store: with the default ring, from sample 257.)
-    g, meas, position, heading = _problem(5, T=300)
+    g, meas, position, heading = random_walk_problem(5, T=300)
     w = Weights(1, 0, 0)
     decoder = FixedLagDecoder(g, w, lag=10_000)
     out = []
@@ -75,7 +66,7 @@ def test_converged_prefix_is_emitted_before_its_lag(ring):
 
 
 def test_sliding_window_matches_a_fresh_search_over_each_window():
-    g, meas, position, heading = _problem(3, T=30)
+    g, meas, position, heading = random_walk_problem(3, T=30)
     w = Weights(0.5, 1, 1)
     window, lag = 8, 2
     decoder = SlidingWindowDecoder(g, w, window=window, lag=lag)
@@ -94,7 +85,7 @@ def test_sliding_window_matches_a_fresh_search_over_each_window():
 
 
 def test_trace_walks_the_dense_rows_and_the_store_alike(ring):
-    g, meas, position, heading = _problem(11, T=150)  # several flushes with the small rings
+    g, meas, position, heading = random_walk_problem(11, T=150)  # several flushes with the small rings
     s = ViterbiSearch(g, Weights(0.5, 1, 1))
     s.start(position[0], heading[0])
     for t in range(1, len(meas)):
@@ -114,7 +105,7 @@ def test_fixed_lag_decoder_forgets_emitted_survivors(ring):
     # After emitting frames the decoder lets the search drop their survivors: the store
     # then holds nothing older than the next frame to emit, tracing before it is refused,
     # and the output is that of a decoder which keeps everything.
-    g, meas, position, heading = _problem(4, T=200)
+    g, meas, position, heading = random_walk_problem(4, T=200)
     w = Weights(0.5, 1, 1)
     forgetful = FixedLagDecoder(g, w, lag=5, store=True)
     keeper = FixedLagDecoder(g, w, lag=5, store=True)
@@ -144,7 +135,7 @@ def test_dense_window_decoder_equals_the_survivor_store_decoder(lag, ring):
     # the frames must be those of the store-backed decoder, each out by its lag. (Frames
     # that all survivors agree on may come out earlier in either, at other moments: the
     # two look for agreement at different times.)
-    g, meas, position, heading = _problem(12, T=260)  # the window slides several times
+    g, meas, position, heading = random_walk_problem(12, T=260)  # the window slides several times
     w = Weights(0.5, 1, 1)
     dense = FixedLagDecoder(g, w, lag=lag)
     stored = FixedLagDecoder(g, w, lag=lag, store=True)

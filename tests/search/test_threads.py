@@ -5,7 +5,7 @@ import pytest
 
 from graphsvc.search.threads import ThreadShare
 from graphsvc.search.viterbi import ViterbiSearch, Weights
-from tests.search.test_viterbi import random_graph
+from tests.search.test_viterbi import random_walk_problem
 
 
 def test_threads_go_to_a_lone_search_one_step_at_a_time():
@@ -35,12 +35,8 @@ def test_threads_go_to_a_lone_search_one_step_at_a_time():
 
 @pytest.mark.parametrize("weights", [Weights(1, 0, 0), Weights(0.5, 1, 1)])
 def test_switching_threads_between_steps_changes_nothing(weights):
-    rng = np.random.default_rng(12)
-    g = random_graph(rng)
     T = 40
-    meas = rng.normal(0, 9.81, (T, 2, 3))
-    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
-    heading = np.cumsum(rng.normal(0, 0.05, T))
+    g, meas, position, heading = random_walk_problem(12, T)
     runs = []
     for switching in (False, True):
         s = ViterbiSearch(g, weights, threads=False)

@@ -102,6 +102,17 @@ def random_graph(rng, N=40, out=3, S=2):
                       labels=rng.integers(0, 2, N))  # fmt: skip
 
 
+def random_walk_problem(seed, T=70):
+    """random_graph and T samples for it: random readings (T, 2, 3) m/s², a random-walk
+    ground track (T, 2) m and heading (T,) rad."""
+    rng = np.random.default_rng(seed)
+    g = random_graph(rng)
+    meas = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    return g, meas, position, heading
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_pruned_survivor_tree_equals_full_lattice(seed, ring):
     rng = np.random.default_rng(seed)
@@ -206,12 +217,8 @@ def test_batch_reading_costs_equal_the_per_sample_kernel():
 def test_search_without_placement_ignores_position_like_zero_weights():
     # At W_P = W_O = 0 the placement is not carried; the path and cost equal those of a
     # search that carries it (placed=True) and multiplies it by zero.
-    rng = np.random.default_rng(8)
-    g = random_graph(rng)
     T = 60
-    meas = rng.normal(0, 9.81, (T, 2, 3))
-    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
-    heading = np.cumsum(rng.normal(0, 0.05, T))
+    g, meas, position, heading = random_walk_problem(8, T)
     runs = []
     for placed in (False, True):
         s = ViterbiSearch(g, Weights(1, 0, 0), placed=placed)
