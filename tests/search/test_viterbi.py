@@ -556,6 +556,160 @@ def test_tagged_minimum_keeps_the_lowest_value_and_its_label():
                 assert label == int(np.argmax(values == lowest))
 
 
+def shared_reading_graph(rng, N=1200, out=3, S=2):
+    """A graph shaped like a built one: edges mostly read their destination's own
+    reading (a node's shared edges), a fifth of the rest a reading of their own; big
+    enough (N / SELECT_CHUNKS ≫ 8) that pass 1 runs its eight-wide loops."""
+    src = np.repeat(np.arange(N), out)
+    dst = rng.integers(0, N, len(src))
+    pairs = np.unique(np.stack([src, dst], 1), axis=0)
+    E = len(pairs)
+    node_reading = rng.normal(0, 9.81, (N, S, 3))
+    acc = node_reading[pairs[:, 1]]
+    own = rng.random(E) < 0.2
+    acc[own] = rng.normal(0, 9.81, (int(own.sum()), S, 3))
+    return tiny_graph(pairs[:, 0], pairs[:, 1], acc, offsets=rng.normal(0, 0.05, (E, 2)),
+                      dheading=rng.normal(0, 0.03, E), kinds=(rng.random(E) < 0.3).astype(np.uint8))  # fmt: skip
+
+
+def test_search_tables_give_every_edge_its_own_reading_and_pass_1_every_edge_once():
+    from graphsvc.search.viterbi import GRAVITY, float32_tables, search_tables
+
+    g = shared_reading_graph(np.random.default_rng(3))
+    tables, pass1 = search_tables(g), float32_tables(g)
+    N, E = g.num_nodes, g.num_edges
+    readings = tables["readings_t"].T[tables["edge_reading"]]  # each edge's column
+    expected = (g.edge_acc.reshape(E, -1).astype(np.float64) / GRAVITY).astype(np.float32)
+    np.testing.assert_array_equal(readings, expected)
+    dst = np.repeat(np.arange(N), np.diff(g.incoming))
+    shared = tables["edge_shared"]
+    assert 0.7 < shared.mean() < 0.95  # most edges share their node's reading, not all
+    # a shared edge's column is its destination's layout position
+    np.testing.assert_array_equal(tables["edge_reading"][shared], tables["node_pos"][dst[shared]])
+    # pass 1 sees each edge once, at its destination's position, labelled with its arrival
+    seen = []
+    chunk_nodes, slots = pass1["chunk_nodes"].astype(np.int64), pass1["shared_slots"].astype(np.int64)
+    for c in range(len(chunk_nodes) - 1):
+        for j in range(slots.shape[1] - 1):
+            for i in range(slots[c, j], slots[c, j + 1]):
+                seen.append((chunk_nodes[c] + i - slots[c, j], pass1["shared_src"][i], pass1["shared_arrival"][i]))
+    own = slice(None)
+    seen += zip(pass1["own_pos"][own], pass1["own_src"][own], pass1["own_arrival"][own])
+    position = tables["node_pos"][dst]
+    arrival = np.arange(E) - g.incoming[dst]
+    assert sorted((int(p), int(m), int(a)) for p, m, a in seen) == sorted(zip(position.tolist(), g.edge_src.tolist(),
+                                                                             arrival.tolist()))  # fmt: skip
+    assert pass1["own_bounds"][-1] == len(pass1["own_src"]) == E - shared.sum()
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_float32_pass_eight_wide_equals_float64_search_on_a_built_like_graph(seed):
+    rng = np.random.default_rng(20 + seed)
+    g = shared_reading_graph(rng)
+    T = 40
+    meas = g.edge_acc[rng.integers(0, g.num_edges, T)] + rng.normal(0, 2.0, (T, 2, 3))
+    meas[rng.random((T, 2)) < 0.05] = np.nan
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    allowed = rng.random(g.num_nodes) < 0.9
+    none = [None] * T
+    _lockstep(g, meas, none, none, Weights(1, 0, 0), allowed)
+    _lockstep(g, meas, position, heading, Weights(0.5, 1, 1), allowed)
+
+
+def _keep_two_scalar_and_eight_wide(placed):
+    """Two kernels over one run of slot entries: `_keep_two` one entry at a time with
+    pass 1's float32 arithmetic, and the eight-wide intrinsic."""
+    from graphsvc.search._llvm import keep_two_gathered8, keep_two_placed8
+    from graphsvc.search.viterbi import RC32, _keep_two, _place_terms, _tag
+
+    @numba.njit
+    def scalar(best, second, rel, c32, src, labels, offset, turn, extra, w, keep):
+        for i in range(src.shape[0]):
+            m = src[i]
+            if placed:
+                pos, head = _place_terms(rel[m, 0], rel[m, 1], rel[m, 2], offset[i, 0], offset[i, 1], turn[i])
+                t = rel[m, RC32] + w[0] * extra[i] + w[1] * pos + w[2] * head
+            else:
+                t = c32[m] + w[0] * extra[i]
+            _keep_two(best, second, i, _tag(t, keep, labels[i]))
+
+    @numba.njit
+    def wide(best, second, rel, c32, src, labels, offset, turn, extra, w, keep):
+        for i in range(0, src.shape[0], 8):
+            u = np.uint64(i)
+            if placed:
+                keep_two_placed8(best, second, u, rel, src, u, offset, turn, extra, w[0], w[1], w[2], keep, labels)
+            else:
+                keep_two_gathered8(best, second, u, c32, src, u, extra, w[0], keep, labels)
+
+    return scalar, wide
+
+
+@pytest.mark.parametrize("placed", [False, True])
+def test_eight_wide_candidates_equal_the_scalar_loop_bit_for_bit(placed):
+    scalar, wide = _keep_two_scalar_and_eight_wide(placed)
+    rng = np.random.default_rng(4)
+    R, n = 500, 64
+    rel = np.empty((R, 4), np.float32)
+    rel[:, :2] = rng.normal(0, 3, (R, 2))
+    rel[:, 2] = rng.uniform(-3.2, 3.2, R)  # wrapped heading differences, a few past ±π after a turn
+    rel[:, 3] = rng.random(R) * 50
+    c32 = (rng.random(R) * 50).astype(np.float32)
+    w = np.array([0.5, 1.0, 2.0], np.float32)
+    keep = np.uint32(0xFFFFFFF0)
+    for labels_dtype in (np.uint8, np.uint16):
+        for _ in range(20):
+            src = rng.integers(0, R, n).astype(np.uint32)
+            labels = rng.integers(0, 15, n).astype(labels_dtype)
+            offset = rng.normal(0, 0.1, (n, 2)).astype(np.float32)
+            turn = rng.normal(0, 0.5, n).astype(np.float32)
+            extra = (rng.random(n) * 5).astype(np.float32)
+            start = (rng.random(n) * 60).astype(np.float32)
+            start[rng.random(n) < 0.3] = np.float32(1e38)  # no candidate yet
+            out = []
+            for kernel in (scalar, wide):
+                best, second = start.copy(), np.full(n, np.float32(1e38))
+                second[::3] = start[::3] + np.float32(1.0)
+                kernel(best, second, rel, c32, src, labels, offset, turn, extra, w, keep)
+                out.append((best.view(np.uint32), second.view(np.uint32)))
+            np.testing.assert_array_equal(out[0][0], out[1][0])
+            np.testing.assert_array_equal(out[0][1], out[1][1])
+    from numba.core.registry import cpu_target
+
+    if not placed and "+avx2" in cpu_target.target_context.codegen()._tm_features.split(","):
+        assert "vgatherdps" in "".join(wide.inspect_asm().values())  # the gather path is the one run here
+
+
+def test_eight_wide_candidates_without_avx2_load_one_by_one_and_agree(tmp_path):
+    # A target without AVX2 (NUMBA_CPU_FEATURES) gets eight loads instead of vgatherdps,
+    # with the same values.
+    import subprocess
+    import sys
+
+    from numba.core.registry import cpu_target
+
+    features = cpu_target.target_context.codegen()._tm_features
+    if "+avx2" not in features.split(","):
+        pytest.skip("this machine has no AVX2: the gather path is the one not tested")
+    code = (
+        "import numpy as np, sys\n"
+        "sys.path.insert(0, '.')\n"
+        "from tests.search.test_viterbi import test_eight_wide_candidates_equal_the_scalar_loop_bit_for_bit as t\n"
+        "from tests.search.test_viterbi import _keep_two_scalar_and_eight_wide as k\n"
+        "t(False)\n"
+        "scalar, wide = k(False)\n"
+        "asm = ''.join(wide.inspect_asm().values())\n"
+        "print('vgatherdps' in asm, 'vpgatherdd' in asm)\n"
+    )  # fmt: skip
+    env = {"NUMBA_CPU_FEATURES": features.replace("+avx2", "-avx2"), "NUMBA_CACHE_DIR": str(tmp_path),
+           "PATH": "/usr/bin:/bin"}  # fmt: skip
+    root = str(__import__("pathlib").Path(__file__).resolve().parents[2])
+    done = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["False", "False"]
+
+
 def test_negative_or_infinite_weights_are_refused():
     g = random_graph(np.random.default_rng(0))
     for w in (Weights(-1, 0, 0), Weights(1, np.inf, 0), Weights(1, 0, np.nan)):
