@@ -478,7 +478,7 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
     """Pass 1 of a step (see above): best[p], second[p] (N,) float32, the lowest and
     second-lowest float32 total among the incoming edges of the node at layout
     position p (`search_tables`); best's low bits (`keep` clears them) hold which of
-    the node's incoming edges it is, in its pass-1 order (`float32_tables`); DEAD32:
+    the node's incoming edges it is (its arrival index, `float32_tables`); DEAD32:
     none. Per chunk of nodes:
     1. Shared edges, in slot-major order: slot j's entries are positions n0, n0+1, …
        — no destination index to read — and their C_A is reading_cost[p], read in
@@ -1488,7 +1488,8 @@ class ViterbiSearch:
             # (unplaced: the cost column alone, 1-D — see `_cost_at`)
             state, state_new = (self.state, self._state_new) if self.placed else (self.cost, self._state_new[:, COST])
             live, near_ties = finish[self.placed](
-                self._pass1[0], self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"], u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
+                self._pass1[0], self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
+                u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
                 state, self.det, self.rel, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
                 self._chunk_low, *ancestors)  # fmt: skip

@@ -593,8 +593,7 @@ def test_search_tables_give_every_edge_its_own_reading_and_pass_1_every_edge_onc
         for j in range(slots.shape[1] - 1):
             for i in range(slots[c, j], slots[c, j + 1]):
                 seen.append((chunk_nodes[c] + i - slots[c, j], pass1["shared_src"][i], pass1["shared_arrival"][i]))
-    own = slice(None)
-    seen += zip(pass1["own_pos"][own], pass1["own_src"][own], pass1["own_arrival"][own])
+    seen += zip(pass1["own_pos"], pass1["own_src"], pass1["own_arrival"])
     position = tables["node_pos"][dst]
     arrival = np.arange(E) - g.incoming[dst]
     assert sorted((int(p), int(m), int(a)) for p, m, a in seen) == sorted(zip(position.tolist(), g.edge_src.tolist(),
