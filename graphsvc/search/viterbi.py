@@ -695,7 +695,7 @@ def search_tables(graph: MotionGraph) -> dict:
     read (the first-met among equals; on built graphs the node's own frame: 79–86 % of
     the edges read their destination's), and those edges are its shared ones. Nodes
     are laid out (node_pos (N,) uint32 each node's position) in SELECT_CHUNKS chunks
-    of consecutive ids (chunk_nodes (C+1,)), within a chunk by descending count of
+    of consecutive ids (`_chunks`), within a chunk by descending count of
     shared edges, then id. The readings, transposed (3S, R) float32 in g: column p the
     shared reading of the node at layout position p (zeros for a node without
     incoming edges), then the readings only other edges read (distinct, in order of
@@ -710,7 +710,7 @@ def search_tables(graph: MotionGraph) -> dict:
     first_edge, distinct = distinct_rows(flat)
     in_g = (flat[first_edge].astype(np.float64) / GRAVITY).astype(np.float32)
     incoming = np.ascontiguousarray(graph.incoming, dtype=np.int32)  # E < 2³¹ (edge ids are int32 here)
-    dst = np.repeat(np.arange(N, dtype=np.int64), np.diff(incoming))
+    dst = graph.edge_dst.astype(np.int64)  # (edges are numbered by destination)
     # each node's shared reading: its longest run of one reading, sorted by node and reading
     by_reading = np.lexsort((distinct, dst))
     run_dst, run_reading = dst[by_reading], distinct[by_reading].astype(np.int64)
@@ -722,7 +722,7 @@ def search_tables(graph: MotionGraph) -> dict:
     node_shared = np.full(N, -1, dtype=np.int64)  # −1: no incoming edges
     node_shared[run_dst[first]] = run_reading[first]
     edge_shared = distinct == node_shared[dst]
-    chunk_nodes, node_chunk = _chunks(N)
+    _, node_chunk = _chunks(N)
     shared_degree = np.bincount(dst[edge_shared], minlength=N)
     layout = np.lexsort((np.arange(N), -shared_degree, node_chunk))  # chunk, descending shared edges, id
     node_pos = np.empty(N, dtype=np.int64)
@@ -743,7 +743,6 @@ def search_tables(graph: MotionGraph) -> dict:
         "edge_reading": edge_reading,
         "edge_shared": edge_shared,
         "node_pos": node_pos.astype(np.uint32),
-        "chunk_nodes": chunk_nodes,
         "incoming": incoming,
         "edge_src": np.ascontiguousarray(graph.edge_src, dtype=np.int32),
         "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
@@ -817,7 +816,7 @@ def slot_tables(graph: MotionGraph) -> dict:
     N, E = graph.num_nodes, graph.num_edges
     incoming = tables["incoming"]
     degree = np.diff(incoming).astype(np.int64)
-    dst = np.repeat(np.arange(N, dtype=np.int64), degree)
+    dst = graph.edge_dst.astype(np.int64)
     slot = np.arange(E, dtype=np.int64) - incoming[dst]
     D = int(slot.max()) + 1 if E else 1
     chunk_nodes, node_chunk = _chunks(N)
@@ -858,7 +857,7 @@ def float32_tables(graph: MotionGraph) -> dict:
     tables = search_tables(graph)
     N, E = graph.num_nodes, graph.num_edges
     incoming, shared = tables["incoming"].astype(np.int64), tables["edge_shared"]
-    dst = np.repeat(np.arange(N, dtype=np.int64), np.diff(incoming))
+    dst = graph.edge_dst.astype(np.int64)
     arrival = np.arange(E, dtype=np.int64) - incoming[dst]
     chunk_nodes, node_chunk = _chunks(N)
     node_pos = tables["node_pos"].astype(np.int64)
