@@ -254,3 +254,19 @@ def keep_two_placed8(typingctx, best, second, p, rel, src, i, offset, turn, extr
         return context.get_dummy_value()
 
     return types.none(best, second, p, rel, src, i, offset, turn, extra, w_acc, w_pos, w_head, keep, labels), codegen
+
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """a · b + c rounded once (llvm.fma): the same value on every target, where whether
+    numba's fastmath fuses a multiply and an add depends on how LLVM schedules them."""
+    if not (isinstance(a, types.Float) and a == b == c):
+        return None
+
+    def codegen(context, builder, signature, args):
+        t = args[0].type
+        name = "llvm.fma.f32" if t == _F32 else "llvm.fma.f64"
+        return builder.call(cgutils.get_or_insert_function(builder.module, ir.FunctionType(t, [t, t, t]), name), args)
+
+    return a(a, b, c), codegen
+

@@ -53,6 +53,7 @@ import numpy as np
 
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
+from graphsvc.search._llvm import fma as _fma
 from graphsvc.search._llvm import fmax as _fmax
 from graphsvc.search._llvm import fmin as _fmin
 from graphsvc.search._llvm import keep_two_gathered8 as _keep_two_gathered8
@@ -92,8 +93,10 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
     """C_A (K eq. 4, g²) of every distinct edge reading: readings_t (3S, R) float32 in
     g, transposed so the inner loop runs along readings (SIMD); meas (3S,) float32 in
     g; mask (3S,) 0 on the axes of missing sensors (skipped), 1 elsewhere; scale = 1 /
-    sensors present. A chunk of running sums stays in L1 across the axes; the pass is
-    bound by reading the table (10 MB for 144k readings of 6 sensors)."""
+    sensors present. Each axis adds d² by one fused multiply-add, as every C_A kernel
+    does (so a live and a batch search get the same values, bit for bit). A chunk of
+    running sums stays in L1 across the axes; the pass is bound by reading the table
+    (10 MB for 144k readings of 6 sensors)."""
     D, R = readings_t.shape
     chunk = 1024
     for c in numba.prange((R + chunk - 1) // chunk):
@@ -107,7 +110,7 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
             row = readings_t[j, r0:r0 + n]
             for i in range(n):
                 d = row[i] - m
-                sums[i] += d * d
+                sums[i] = _fma(d, d, sums[i])
         for i in range(n):
             out[r0 + i] = sums[i] * scale
 
@@ -116,7 +119,9 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
     """`_reading_costs` for B samples at once: meas, mask (B, 3S); scale (B,); out (B,
     R). Each chunk of the table is read once for all B samples instead of once per
     sample. Same arithmetic in the same order, so the same values, bit for bit, as the
-    per-sample kernel (tested)."""
+    per-sample kernel (tested). (In the search this pass is bound by memory traffic —
+    the table, and the costs written and read back: a version keeping 8 × 8 sums in
+    registers ran twice as fast alone and no faster in the search.)"""
     D, R = readings_t.shape
     B = meas.shape[0]
     chunk = 128  # B × 128 running sums (8 KB at B = 16) stay in L1; 1,024 took 0.17 against 0.145 ms a sample
@@ -132,13 +137,13 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
                 m = meas[b, j]
                 for i in range(n):
                     d = row[i] - m
-                    sums[b, i] += d * d
+                    sums[b, i] = _fma(d, d, sums[b, i])
         for b in range(B):
             for i in range(n):
                 out[b, r0 + i] = sums[b, i] * scale[b]
 
 
-def _compile(fn, parallel: bool, fastmath: bool = False):
+def _compile(fn, parallel: bool):
     """fn compiled threaded (its prange loops spread over numba's threads) or serial.
     Each kernel is compiled both ways: threaded for one search using the whole machine
     (batch), serial for many searches side by side (a server's streams), where threads
@@ -151,13 +156,13 @@ def _compile(fn, parallel: bool, fastmath: bool = False):
         qualname = fn.__qualname__ + "_serial"
         fn = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__, fn.__closure__)
         fn.__qualname__ = qualname
-    return numba.njit(cache=True, nogil=True, parallel=parallel, fastmath=fastmath)(fn)
+    return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)
 
 
-_reading_costs_batch = _compile(_reading_costs_batch_py, True, fastmath=True)
-_reading_costs_batch_serial = _compile(_reading_costs_batch_py, False, fastmath=True)
-_reading_costs = _compile(_reading_costs_py, True, fastmath=True)
-_reading_costs_serial = _compile(_reading_costs_py, False, fastmath=True)
+_reading_costs_batch = _compile(_reading_costs_batch_py, True)
+_reading_costs_batch_serial = _compile(_reading_costs_batch_py, False)
+_reading_costs = _compile(_reading_costs_py, True)
+_reading_costs_serial = _compile(_reading_costs_py, False)
 
 
 # Per-node path state, one float64 row a node: the cost and — only when position or
@@ -662,8 +667,9 @@ def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge
             r = edge_reading[e]
             acc = np.float32(0.0)
             for j in range(D):
-                d = readings_t[j, r] - meas[t, j]
-                acc += mask[t, j] * d * d
+                if mask[t, j] != 0.0:
+                    d = readings_t[j, r] - meas[t, j]
+                    acc = _fma(d, d, acc)  # as the C_A kernels: the search's values, bit for bit
             out[0] += acc * np.float32(1.0 / present[t])
         ox, oz = edge_offset[e, 0], edge_offset[e, 1]
         tc, ts = edge_turn[e, 0], edge_turn[e, 1]

@@ -191,15 +191,20 @@ def test_batch_reading_costs_equal_the_per_sample_kernel():
     # The batch search computes C_A for 16 samples per pass over the readings table,
     # a live search one sample at a time: the values must be identical, bit for bit,
     # missing sensors included (else a stream and a batch run could pick different paths).
+    # 21 samples (no multiple of the SIMD width), missing sensors in some, none in others;
+    # the readings' count is no multiple of 8 either.
     rng = np.random.default_rng(5)
     g = random_graph(rng, N=300, out=4, S=3)
-    acc = rng.normal(0, 9.81, (16, 3, 3))
-    acc[rng.random((16, 3)) < 0.3] = np.nan
+    acc = rng.normal(0, 9.81, (21, 3, 3))
+    acc[:8][rng.random((8, 3)) < 0.3] = np.nan
     acc[4] = np.nan  # no sensor at all: C_A is 0
+    acc[18, 1, 2] = np.nan
     for threads in (True, False):
         s = ViterbiSearch(g, Weights(1, 0, 0), threads=threads)
+        assert s.readings_t.shape[1] % 8 != 0
         batch = s.reading_costs(acc)
-        for t in range(16):
+        assert batch.shape == (21, s.readings_t.shape[1])
+        for t in range(21):
             s._set_measurement(acc[t])
             present = s._mask.sum() / 3.0
             expected = np.zeros_like(s.reading_cost)
@@ -208,10 +213,24 @@ def test_batch_reading_costs_equal_the_per_sample_kernel():
             np.testing.assert_array_equal(batch[t], expected)
     # …and against a direct float64 computation, to float32 precision.
     r_g = s.readings_t.T.astype(np.float64)
-    m = (acc[0].astype(np.float32).astype(np.float64) / 9.81).astype(np.float32).reshape(-1)
-    valid = np.repeat(np.isfinite(acc[0]).all(axis=1), 3)
-    direct = np.sum((r_g[:, valid] - m[valid]) ** 2, axis=1) / (valid.sum() / 3)
-    np.testing.assert_allclose(batch[0], direct, rtol=1e-5)
+    for t in (0, 10, 18, 20):
+        m = (acc[t].astype(np.float32).astype(np.float64) / 9.81).astype(np.float32).reshape(-1)
+        valid = np.repeat(np.isfinite(acc[t]).all(axis=1), 3)
+        direct = np.sum((r_g[:, valid] - m[valid]) ** 2, axis=1) / (valid.sum() / 3)
+        np.testing.assert_allclose(batch[t], direct, rtol=1e-5)
+
+
+def test_reported_accelerometer_term_is_the_search_cost_exactly():
+    # The report integrates C_A along the path with the search's own arithmetic (one
+    # fused multiply-add an axis), so at weights (1, 0, 0) it is the search's cost to
+    # the last bit, missing sensors included.
+    rng = np.random.default_rng(11)
+    g = random_graph(rng, N=200, out=4, S=3)
+    acc = rng.normal(0, 9.81, (40, 3, 3))
+    acc[rng.random((40, 3)) < 0.2] = np.nan
+    r = viterbi_search(g, acc, weights=Weights(1, 0, 0))
+    assert r.cost > 0
+    assert r.terms["acc_g2"] == r.cost
 
 
 def test_search_without_placement_ignores_position_like_zero_weights():
