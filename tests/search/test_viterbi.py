@@ -339,6 +339,67 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
     assert any(flushes) == (share < 0) and not flushes[0]
 
 
+def _levels_by_sets(arrivals, first, used, flush, incoming, edge_src, ancestor, cost):
+    """`_block_levels` written plainly with Python sets: each row's distinct nodes."""
+    R = arrivals.shape[0]
+    alive = {int(ancestor[n]) for n in np.nonzero(np.isfinite(cost))[0]}
+    levels = [None] * used
+    for k in range(used - 1, -1, -1):
+        row = (first + k) % R
+        levels[k] = sorted(alive)
+        alive = {int(edge_src[incoming[n] + arrivals[row, n]]) for n in alive}
+    counts = [len(level) for level in levels]
+    converged = max([k for k in range(used) if counts[k] == 1], default=-1)
+    return [n for level in levels[:flush] for n in level], np.cumsum([0] + counts[:flush]), converged
+
+
+def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
+    # The walk back scans byte maps while rows hold many nodes and switches to sorted
+    # lists once they hold few (≤ 16 here): every row's nodes, the converged row, and a
+    # level list too short (in either phase) reported without leaving a mark behind.
+    from graphsvc.search import viterbi as V
+
+    counts = []  # every row's
+
+    class Checked(ViterbiSearch):
+        def _flush(self):
+            ancestor = np.arange(self.N, dtype=np.int32)
+            args = (self.arrivals, self.first, self.used)
+            scratch = (self.incoming, self.edge_src, self.alive_map, self.alive_map.view(np.uint64))
+            for listed in (self.BLOCK, self.used):  # the flush's rows, and every row walked
+                want_nodes, want_start, want_converged = _levels_by_sets(*args, listed, self.incoming, self.edge_src,
+                                                                         ancestor, self.cost)  # fmt: skip
+                for short in (len(want_nodes) - 1, len(want_nodes) // 2, 0):  # runs out: -1, nothing left marked
+                    total, _ = V._block_levels(*args, listed, *scratch, np.zeros(short, np.int32),
+                                               np.zeros(listed + 1, np.int64), ancestor, self.state)  # fmt: skip
+                    assert total == -1 and not self.alive_map.any()
+                level_nodes, level_start = np.zeros(len(want_nodes), np.int32), np.zeros(listed + 1, np.int64)
+                total, converged = V._block_levels(*args, listed, *scratch, level_nodes, level_start, ancestor,
+                                                   self.state)  # fmt: skip
+                assert not self.alive_map.any()
+                assert total == len(want_nodes)
+                np.testing.assert_array_equal(level_nodes, want_nodes)
+                np.testing.assert_array_equal(level_start, want_start)
+                assert converged == want_converged
+            counts.extend(np.diff(want_start))
+            super()._flush()
+
+    rng = np.random.default_rng(9)
+    g = random_graph(rng, N=1500, out=3)
+    T = 300
+    edges, node = [], 0  # readings along a random walk, for paths to merge into
+    for _ in range(T):
+        edges.append(rng.choice(np.nonzero(g.edge_src == node)[0]))
+        node = g.edge_dst[edges[-1]]
+    meas = g.edge_acc[edges].astype(np.float64) + rng.normal(0, 0.5, (T, 2, 3))
+    search = Checked(g, Weights(1, 0, 0), ring=(40, 24))  # flushes every 40 samples, walking 64 rows
+    search.start()
+    for t in range(1, T):
+        search.step(meas[t])
+    assert len(counts) >= 5 * 64
+    assert max(counts) > 16 and min(counts) == 1  # both ways of listing, and converged rows
+
+
 def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
     # numba's disk cache tells a function's entries apart by signature, bytecode and
     # closure, not by compile flags: a later process must not be served a kernel
