@@ -39,7 +39,8 @@ cache is a few MB, so what is read from scattered nodes is kept small):
 - Edges are visited in slot-major order (every node's first incoming edge, then every
   second one, …), so choosing each node's best edge is a flat, branch-free loop; the
   float32 pass takes eight edges at a time (AVX2 gathers, or eight 16-byte row loads).
-- The walk back through the dense rows scans a byte map per row, 8 nodes at a time.
+- The walk back through the dense rows marks each row's predecessors in a byte map and
+  lists them by scanning it, 8 nodes at a time; rows with few nodes go as lists.
 """
 
 from __future__ import annotations
@@ -898,103 +899,98 @@ def float32_tables(graph: MotionGraph) -> dict:
 NODE, EDGE, PARENT, TIME = 0, 1, 2, 3
 
 
-# The walk back lists a row's nodes by scanning its byte map while it holds more than
-# 1 / SPARSE_SHARE of the nodes (or 16), then as a list (on G_E a flush walks 256 rows,
-# all but the newest few with 1–8 nodes: 5.2 ms a flush against 9.5 scanning 100k bytes
-# for each). Not sooner: on the built wrists-ankles graph, whose paths stay apart for
-# longer, switching at 1 / 256 made flushes 15 % slower (sorting the listed rows).
-SPARSE_SHARE = 2048
+# The walks back list each row's nodes: its predecessors are marked in a byte map and
+# listed by scanning it while they are more than 1 / SPARSE_SHARE of the nodes (or 16),
+# then deduplicated as a list (the byte map only telling repeats apart) and sorted only
+# where the flush lists them. On G_E a flush walks 256 rows, all but the newest few
+# with 1–8 nodes: 3.1 ms against 9.5 scanning the whole map for each row while marking
+# the next; on the built kelly6 graph, whose paths stay apart for longer, 0.28 against
+# 0.48 ms a sample (marking in a loop of its own keeps more writes in flight). Shares
+# from 1/256 to 1/16384 measured alike.
+SPARSE_SHARE = 256
+
+
+@numba.njit(inline="always")
+def _marked(alive, alive_words, nodes):
+    """The nodes marked in the byte map alive (see `_block_levels`), ascending, into
+    nodes; clears the map, 8 nodes at a time where none is marked. Returns their count."""
+    count = 0
+    for w in range(alive_words.shape[0]):
+        if alive_words[w] == 0:
+            continue
+        for n in range(8 * w, 8 * w + 8):
+            if alive[n]:
+                nodes[count] = n
+                count += 1
+        alive_words[w] = 0
+    return count
+
+
+@numba.njit(inline="always")
+def _predecessors(nodes, count, arrivals, row, incoming, edge_src, alive, few, preds):
+    """The distinct predecessors at physical row `row` of nodes[:count], into nodes;
+    preds (N,) scratch. Many (count > few): marked in the byte map alive, then listed
+    by scanning it, ascending; few: listed as first met, the map only telling repeats
+    apart. The map is left clear. Returns (their count, whether ascending)."""
+    if count > few:
+        for i in range(count):
+            n = nodes[i]
+            alive[edge_src[incoming[n] + arrivals[row, n]]] = 1
+        return _marked(alive, alive.view(np.uint64), nodes), True
+    distinct = 0
+    for i in range(count):
+        n = nodes[i]
+        m = edge_src[incoming[n] + arrivals[row, n]]
+        if not alive[m]:
+            alive[m] = 1
+            preds[distinct] = m
+            distinct += 1
+    for i in range(distinct):
+        alive[preds[i]] = 0
+        nodes[i] = preds[i]
+    return distinct, False
 
 
 @numba.njit(cache=True, nogil=True)
-def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive_words, level_nodes, level_start,
-                  ancestor, state):  # fmt: skip
+def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, level_nodes, level_start, ancestor,
+                  state):  # fmt: skip
     """Walk back from logical row used − 1, one row at a time, to the oldest:
     level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
     that logical row k's surviving paths pass through, listed for the oldest `flush`
     rows (the newer ones are only walked through). The paths alive now (state (N, W)
     with a finite cost) pass through ancestor[n] (N,) at row used − 1. arrivals (R, N)
-    the dense window, a ring: logical row k is physical row (first + k) % R; each entry is
-    which of the node's incoming edges its best path arrived by, so its predecessor is
-    edge_src[incoming[n] + arrival] — read in node order, as CSR edges are numbered by
-    destination. alive (2, N rounded up to 8)
-    uint8 scratch, zero on entry and on return, alive_words the same memory as uint64.
-    A row with many nodes is one sequential scan of a byte map, 8 nodes at a time
-    where none is alive (the scattered writes land in N bytes, which stay in cache);
-    once a row has few (see SPARSE_SHARE), the rest go as sorted lists, the byte map
-    only telling repeats apart. Returns (total,
-    converged_row): converged_row is the highest row walked where a single node
-    remains (−1 if none); total = −1 when level_nodes is too small (the caller grows
-    it and asks again)."""
+    the dense window, a ring: logical row k is physical row (first + k) % R; each entry
+    is which of the node's incoming edges its best path arrived by, so its predecessor
+    is edge_src[incoming[n] + arrival]. alive (N rounded up to 8,) uint8 scratch, zero
+    on entry and on return. A row's predecessors are marked in that byte map and
+    listed by one sequential scan of it while they are many (the scattered writes land
+    in N bytes, which stay in cache); once few (see SPARSE_SHARE), as a list.
+    Returns (total, converged_row): converged_row is the highest row walked where a
+    single node remains (−1 if none); total = −1 when level_nodes is too small (the
+    caller grows it and asks again)."""
     R, N = arrivals.shape
     for n in range(N):
         if state[n, COST] != np.inf:
-            alive[0, ancestor[n]] = 1
-    end = level_nodes.shape[0]
-    pos = end
-    counts = np.zeros(used, np.int64)
-    cur = 0
+            alive[ancestor[n]] = 1
+    nodes, preds = np.empty(N, np.int32), np.empty(N, np.int32)
+    count, ascending = _marked(alive, alive.view(np.uint64), nodes), True
     few = max(N // SPARSE_SHARE, 16)
-    k = used - 1
-    while k >= 0:  # rows with many nodes: scan the byte map
+    end = level_nodes.shape[0]
+    pos = end  # filled downwards, newest row first: rows end up in order
+    counts = np.zeros(used, np.int64)
+    for k in range(used - 1, -1, -1):
         row = (first + k) % R
-        listed = k < flush
-        count = 0
-        for w in range(alive_words.shape[1] - 1, -1, -1):  # descending, filled downwards: rows end up ascending
-            if alive_words[cur, w] == 0:
-                continue
-            for n in range(min(N, 8 * w + 8) - 1, 8 * w - 1, -1):
-                if alive[cur, n]:
-                    count += 1
-                    if listed:
-                        if pos == 0:
-                            alive[:, :] = 0
-                            return -1, -1
-                        pos -= 1
-                        level_nodes[pos] = n
-                    if k > 0:
-                        alive[1 - cur, edge_src[incoming[n] + arrivals[row, n]]] = 1
-            alive_words[cur, w] = 0
-        counts[k] = count
-        cur = 1 - cur
-        k -= 1
-        if count <= few:
-            break
-    if k >= 0:  # the rest (no more nodes than the last row): a sorted list a row
-        nodes, preds = np.empty(few + 1, np.int32), np.empty(few + 1, np.int32)
-        count = 0
-        for w in range(alive_words.shape[1]):
-            if alive_words[cur, w] == 0:
-                continue
-            for n in range(8 * w, min(N, 8 * w + 8)):
-                if alive[cur, n]:
-                    nodes[count] = n
-                    count += 1
-            alive_words[cur, w] = 0
-        while k >= 0:
-            row = (first + k) % R
-            if k < flush:  # (the rows only walked through need no order)
-                if pos < count:
-                    return -1, -1  # (the byte map is clear)
+        if k < flush:
+            if pos < count:
+                return -1, -1  # (the byte map is clear)
+            if not ascending:
                 nodes[:count].sort()
-                for i in range(count - 1, -1, -1):
-                    pos -= 1
-                    level_nodes[pos] = nodes[i]
-            counts[k] = count
-            if k > 0:
-                distinct = 0
-                for i in range(count):
-                    n = nodes[i]
-                    m = edge_src[incoming[n] + arrivals[row, n]]
-                    if not alive[cur, m]:
-                        alive[cur, m] = 1
-                        preds[distinct] = m
-                        distinct += 1
-                for i in range(distinct):
-                    alive[cur, preds[i]] = 0
-                nodes, preds = preds, nodes
-                count = distinct
-            k -= 1
+            for i in range(count - 1, -1, -1):
+                pos -= 1
+                level_nodes[pos] = nodes[i]
+        counts[k] = count
+        if k > 0:
+            count, ascending = _predecessors(nodes, count, arrivals, row, incoming, edge_src, alive, few, preds)
     total = end - pos
     level_nodes[:total] = level_nodes[pos:end].copy()
     level_start[0] = 0
@@ -1008,32 +1004,24 @@ def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, alive
 
 
 @numba.njit(cache=True, nogil=True)
-def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, alive, alive_words):
+def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, alive):
     """`_block_levels` without the lists, for the dense-window mode: the highest logical
     row in [lowest, used) where the paths of every node alive at the newest row pass
     through a single node, or −1. Stops there (every older row then holds one node too)."""
     R, N = arrivals.shape
     top = (first + used - 1) % R
+    nodes, preds = np.empty(N, np.int32), np.empty(N, np.int32)
+    count = 0
     for n in range(N):
-        alive[0, n] = arrivals[top, n] != none
-    cur = 0
+        if arrivals[top, n] != none:
+            nodes[count] = n
+            count += 1
+    few = max(N // SPARSE_SHARE, 16)
     for k in range(used - 1, lowest - 1, -1):
-        row = (first + k) % R
-        count = 0
-        for w in range(alive_words.shape[1]):
-            if alive_words[cur, w] == 0:
-                continue
-            for n in range(8 * w, min(N, 8 * w + 8)):
-                if alive[cur, n]:
-                    count += 1
-                    if k > lowest:
-                        alive[1 - cur, edge_src[incoming[n] + arrivals[row, n]]] = 1
-            alive_words[cur, w] = 0
-        cur = 1 - cur
         if count == 1:
-            alive[cur, :] = 0
             return k
-    alive[cur, :] = 0
+        if k > lowest:
+            count, _ = _predecessors(nodes, count, arrivals, (first + k) % R, incoming, edge_src, alive, few, preds)
     return -1
 
 
@@ -1375,7 +1363,7 @@ class ViterbiSearch:
         self._best_edge = np.full(N, -1, dtype=np.int32)
         self.first = 0  # physical row of the oldest filled row
         self.used = 0  # rows filled
-        self.alive_map = np.zeros((2, 8 * ((N + 7) // 8)), dtype=np.uint8)
+        self.alive_map = np.zeros(8 * ((N + 7) // 8), dtype=np.uint8)
         small = window is not None  # window mode never appends to the store
         self.row_of = np.zeros(1 if small else N, dtype=np.int64)
         self.level_nodes = np.zeros(16 if small else N + 16, dtype=np.int32)
@@ -1634,8 +1622,8 @@ class ViterbiSearch:
             walk, ancestor = self.used, self._identity
         while True:  # grown on demand: the worst case (nothing merges) is used × N
             total, converged_row = _block_levels(self.arrivals, self.first, walk, self.BLOCK, self.incoming,
-                                                 self.edge_src, self.alive_map, self.alive_map.view(np.uint64),
-                                                 self.level_nodes, self.level_start, ancestor, self.state)  # fmt: skip
+                                                 self.edge_src, self.alive_map, self.level_nodes, self.level_start,
+                                                 ancestor, self.state)  # fmt: skip
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
@@ -1677,7 +1665,7 @@ class ViterbiSearch:
         lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
         if lowest < self.used:
             row = _converged_row(self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none,
-                                 self.alive_map, self.alive_map.view(np.uint64))  # fmt: skip
+                                 self.alive_map)  # fmt: skip
             if row >= 0:
                 self.converged_t = max(self.converged_t, t_first + row)
         self.first = (self.first + self.BLOCK) % self.arrivals.shape[0]

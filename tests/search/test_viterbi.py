@@ -316,7 +316,7 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
             level_start = np.zeros(self.BLOCK + 1, np.int64)
             whole = np.arange(self.N, dtype=np.int32)  # every live node is its own ancestor at the newest row
             total, _ = V._block_levels(self.arrivals, self.first, self.used, self.BLOCK, self.incoming, self.edge_src,
-                                       self.alive_map, self.alive_map.view(np.uint64), level_nodes, level_start, whole,
+                                       self.alive_map, level_nodes, level_start, whole,
                                        self.state)  # fmt: skip
             flushes.append(self.ancestor_t >= 0)
             super()._flush()
@@ -339,8 +339,9 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
     assert any(flushes) == (share < 0) and not flushes[0]
 
 
-def _levels_by_sets(arrivals, first, used, flush, incoming, edge_src, ancestor, cost):
-    """`_block_levels` written plainly with Python sets: each row's distinct nodes."""
+def _levels_by_sets(arrivals, first, used, flush, incoming, edge_src, ancestor, cost, lowest=0):
+    """`_block_levels` written plainly with Python sets: each row's distinct nodes, and
+    the highest row from `lowest` on holding one."""
     R = arrivals.shape[0]
     alive = {int(ancestor[n]) for n in np.nonzero(np.isfinite(cost))[0]}
     levels = [None] * used
@@ -349,13 +350,13 @@ def _levels_by_sets(arrivals, first, used, flush, incoming, edge_src, ancestor, 
         levels[k] = sorted(alive)
         alive = {int(edge_src[incoming[n] + arrivals[row, n]]) for n in alive}
     counts = [len(level) for level in levels]
-    converged = max([k for k in range(used) if counts[k] == 1], default=-1)
+    converged = max([k for k in range(lowest, used) if counts[k] == 1], default=-1)
     return [n for level in levels[:flush] for n in level], np.cumsum([0] + counts[:flush]), converged
 
 
 def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
-    # The walk back scans byte maps while rows hold many nodes and switches to sorted
-    # lists once they hold few (≤ 16 here): every row's nodes, the converged row, and a
+    # The walks back scan byte maps while rows hold many nodes and switch to lists once
+    # they hold few (≤ 16 here): every row's nodes, the converged row (both walks), and a
     # level list too short (in either phase) reported without leaving a mark behind.
     from graphsvc.search import viterbi as V
 
@@ -365,7 +366,7 @@ def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
         def _flush(self):
             ancestor = np.arange(self.N, dtype=np.int32)
             args = (self.arrivals, self.first, self.used)
-            scratch = (self.incoming, self.edge_src, self.alive_map, self.alive_map.view(np.uint64))
+            scratch = (self.incoming, self.edge_src, self.alive_map)
             for listed in (self.BLOCK, self.used):  # the flush's rows, and every row walked
                 want_nodes, want_start, want_converged = _levels_by_sets(*args, listed, self.incoming, self.edge_src,
                                                                          ancestor, self.cost)  # fmt: skip
@@ -382,6 +383,13 @@ def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
                 np.testing.assert_array_equal(level_start, want_start)
                 assert converged == want_converged
             counts.extend(np.diff(want_start))
+            # …and the dense-window mode's walk, from the nodes alive at the newest row
+            newest = self.arrivals[(self.first + self.used - 1) % self.arrivals.shape[0]]
+            cost = np.where(newest != self.none, 0.0, np.inf)
+            for lowest in (0, self.used // 2, self.used - 1):
+                want = _levels_by_sets(*args, 0, self.incoming, self.edge_src, ancestor, cost, lowest)[2]
+                assert V._converged_row(*args, lowest, *scratch[:2], self.none, self.alive_map) == want
+                assert not self.alive_map.any()
             super()._flush()
 
     rng = np.random.default_rng(9)
