@@ -11,7 +11,8 @@ carries γ counts of broken constraints, compared lexicographically before G (K 
 
 Memory (K §5.1, after Abbasfar & Yao): instead of the N × T back-pointer lattice the
 search keeps the newest samples' lattice rows dense — one byte a node: which of its
-incoming edges its best path arrived by — in a ring of BLOCK + STORE_WINDOW rows.
+incoming edges its best path arrived by — in a ring of BLOCK + STORE_WINDOW rows
+(a batch search: twice both).
 When the ring is full it traces back from all live nodes through every row and
 appends only the oldest BLOCK rows' points that some live path passes through to a
 survivor store (rows in sample order, parent before child); by then they are
@@ -1389,9 +1390,14 @@ class ViterbiSearch:
     # Rows moved into the store (or dropped) at a time, and rows kept dense beyond them:
     # each walk back through the ring is shared by BLOCK samples. On the built Bandai
     # dataset-2 graph (268k nodes) 128 + 128 took 4.6 ms a sample in steady state,
-    # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms.
+    # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms. A batch
+    # search, which has no latency to keep low, takes BATCH_RING_SCALE times both: fewer,
+    # longer walks, over paths that have merged more (built kelly6 graph, 2,880 samples:
+    # mode A 2.28 against 2.47–2.54 ms a sample, APO 5.80 against 6.01; 4 times, 2.21
+    # and 5.62 for a ring of 1.5 times the memory; G_E unchanged).
     BLOCK = 128
     STORE_WINDOW = 128
+    BATCH_RING_SCALE = 2
     # Carry ancestors (see __init__) while more than this share of the nodes are distinct
     # paths' nodes at the newest row a flush lists: then the walk through the newer rows
     # costs more than a gather a node a step (built kelly6 graph: 7.5 %, where carrying
@@ -1784,7 +1790,9 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
-    search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading))
+    scale = ViterbiSearch.BATCH_RING_SCALE
+    search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading),
+                           ring=(scale * ViterbiSearch.BLOCK, scale * ViterbiSearch.STORE_WINDOW))  # fmt: skip
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
