@@ -1393,8 +1393,8 @@ class ViterbiSearch:
     # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms. A batch
     # search, which has no latency to keep low, takes BATCH_RING_SCALE times both: fewer,
     # longer walks, over paths that have merged more (built kelly6 graph, 2,880 samples:
-    # mode A 2.28 against 2.47–2.54 ms a sample, APO 5.80 against 6.01; 4 times, 2.21
-    # and 5.62 for a ring of 1.5 times the memory; G_E unchanged).
+    # mode A 2.28 against 2.47–2.54 ms a sample, APO 5.80 against 6.01; 512 + 256 rows
+    # 2.21 and 5.62, for 1.5 times the memory; G_E unchanged).
     BLOCK = 128
     STORE_WINDOW = 128
     BATCH_RING_SCALE = 2
