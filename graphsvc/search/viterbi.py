@@ -465,6 +465,15 @@ def _keep_two(best, second, p, t):
 
 
 @numba.njit(inline="always")
+def _placed_total32(rel, m, ca, ox, oz, dh, w_acc, w_pos, w_head):
+    """Pass 1's float32 total of an edge (offset ox, oz, turn dh, reading's C_A ca) from
+    its source m's relative row: cost − base + w_acc · C_A + w_pos · position + w_head ·
+    heading (`keep_two_placed8` computes the same, eight at a time, bit for bit)."""
+    pos, head = _place_terms(rel[m, QX], rel[m, QZ], rel[m, RH], ox, oz, dh)
+    return rel[m, RC32] + w_acc * ca + w_pos * pos + w_head * head
+
+
+@numba.njit(inline="always")
 def _keep_two_run(best, second, shift, costs, src, labels, reading_cost, w_acc, s0, s1, keep):
     """`_keep_two` at positions p = i + shift of costs[src[i]] + w_acc · reading_cost[p]
     tagged with labels[i], for i in s0…s1−1 (uint64; shift wraps), eight at a time
@@ -520,10 +529,8 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
                                       reading_cost, w_acc, w_pos, w_head, keep, shared_arrival)  # fmt: skip
                     i += np.uint64(8)
                 while i < s1:
-                    m = shared_src[i]
-                    pos, head = _place_terms(rel[m, QX], rel[m, QZ], rel[m, RH], shared_offset[i, 0],
-                                             shared_offset[i, 1], shared_heading[i])  # fmt: skip
-                    t = rel[m, RC32] + w_acc * reading_cost[i + shift] + w_pos * pos + w_head * head
+                    t = _placed_total32(rel, shared_src[i], reading_cost[i + shift], shared_offset[i, 0],
+                                        shared_offset[i, 1], shared_heading[i], w_acc, w_pos, w_head)  # fmt: skip
                     _keep_two(best, second, i + shift, _tag(t, keep, shared_arrival[i]))
                     i += np.uint64(1)
             else:
@@ -531,9 +538,8 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
         for i in range(own_bounds[c], own_bounds[c + 1]):
             m = own_src[i]
             if rows:
-                pos, head = _place_terms(rel[m, QX], rel[m, QZ], rel[m, RH], own_offset[i, 0], own_offset[i, 1],
-                                         own_heading[i])  # fmt: skip
-                t = rel[m, RC32] + w_acc * reading_cost[own_reading[i]] + w_pos * pos + w_head * head
+                t = _placed_total32(rel, m, reading_cost[own_reading[i]], own_offset[i, 0], own_offset[i, 1],
+                                    own_heading[i], w_acc, w_pos, w_head)  # fmt: skip
             else:
                 t = c32[m] + w_acc * reading_cost[own_reading[i]]
             _keep_two(best, second, np.uint64(own_pos[i]), _tag(t, keep, own_arrival[i]))
@@ -731,10 +737,7 @@ def search_tables(graph: MotionGraph) -> dict:
     node_shared[run_dst[first]] = run_reading[first]
     edge_shared = distinct == node_shared[dst]
     _, node_chunk = _chunks(N)
-    shared_degree = np.bincount(dst[edge_shared], minlength=N)
-    layout = np.lexsort((np.arange(N), -shared_degree, node_chunk))  # chunk, descending shared edges, id
-    node_pos = np.empty(N, dtype=np.int64)
-    node_pos[layout] = np.arange(N)
+    node_pos = _layout(node_chunk, np.bincount(dst[edge_shared], minlength=N))  # by shared edges
     # columns: one per layout position, then the readings no node shares, by first use
     column = np.full(len(first_edge), N, dtype=np.int64)
     holders = np.flatnonzero(node_shared >= 0)
@@ -798,6 +801,14 @@ def _chunks(N: int) -> tuple[np.ndarray, np.ndarray]:
     return chunk_nodes, np.searchsorted(chunk_nodes, np.arange(N), side="right") - 1
 
 
+def _layout(node_chunk: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Each node's layout position (N,) int64: by chunk, then descending count, then id."""
+    N = len(count)
+    node_pos = np.empty(N, dtype=np.int64)
+    node_pos[np.lexsort((np.arange(N), -count, node_chunk))] = np.arange(N)
+    return node_pos
+
+
 def _slot_major(dst: np.ndarray, slot: np.ndarray, node_chunk: np.ndarray, node_pos: np.ndarray, D: int):
     """Entries (one per edge: destination node, slot) in slot-major order within chunks:
     chunk c's entries, slot 0's first, each slot's in layout order; and (C, D+1) where
@@ -828,9 +839,7 @@ def slot_tables(graph: MotionGraph) -> dict:
     slot = np.arange(E, dtype=np.int64) - incoming[dst]
     D = int(slot.max()) + 1 if E else 1
     chunk_nodes, node_chunk = _chunks(N)
-    layout = np.lexsort((np.arange(N), -degree, node_chunk))  # chunk, then descending degree, then id
-    node_pos = np.empty(N, dtype=np.int64)
-    node_pos[layout] = np.arange(N)
+    node_pos = _layout(node_chunk, degree)
     order, chunk_slots = _slot_major(dst, slot, node_chunk, node_pos, D)
     graph._slot_tables = {
         "chunk_nodes": chunk_nodes,
