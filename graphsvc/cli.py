@@ -179,7 +179,8 @@ def _cmd_synthesize(args) -> int:
     print(f"wrote {out}: {result.motion.num_frames} frames at {graph.rate_hz:g} Hz from {r['samples']} samples"
           + (f" (resampled from {r['input_rate_hz']:g} Hz)" if r["resampled"] else ""))  # fmt: skip
     print(f"path: {labels}{more}")
-    print(f"search {r['timings_s']['search']:.2f} s ({r['samples_per_s']:,.0f} samples/s), "
+    print(f"warm-up {r['timings_s']['warm_up']:.2f} s, search {r['timings_s']['search']:.2f} s "
+          f"({r['samples_per_s']:,.0f} samples/s), "
           f"synthesis {r['timings_s']['synthesis']:.2f} s, compression {r['compression']:g}:1"
           + (f", {r['revisions']} revisions at lag {r['lag_samples']} samples" if "revisions" in r else ""))  # fmt: skip
     return 0

@@ -24,7 +24,8 @@ from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import Weights, compile_constraints, needs_placement, viterbi_search, warm_up_search
+from graphsvc.search.viterbi import (Weights, compile_constraints, needs_placement, viterbi_search, warm_up_search,
+                                     warm_up_search_once)  # fmt: skip
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.synthesis.path import synthesize_motion
@@ -217,6 +218,9 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     rec.validate()
     check_layout(graph, rec.sensor_names)
     constraints = check_constraints(rec.constraints if options.constraints is None else options.constraints, graph)
+    # numba compiles (or loads) the search kernels and the graph's search tables are
+    # made once per process, timed apart: the search time is the search's own.
+    warm_up_s = warm_up_search_once(graph, threads)
     t_start = time.perf_counter()
     acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
     rate = float(graph.rate_hz)
@@ -292,7 +296,8 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
         **extra,
         "labels": path_labels(graph, nodes),
         "node_path": nodes.tolist(),
-        "timings_s": {"prepare": round(prepare_s, 4), "search": round(search_s, 4), "synthesis": round(synth_s, 4)},
+        "timings_s": {"warm_up": round(warm_up_s, 4), "prepare": round(prepare_s, 4), "search": round(search_s, 4),
+                      "synthesis": round(synth_s, 4)},  # fmt: skip
         "samples_per_s": round(T / max(search_s, 1e-9), 1),
     }
     return Reconstruction(motion, nodes, edges, report)

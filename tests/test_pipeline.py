@@ -203,3 +203,18 @@ def test_cli_synthesize(graph, rec, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("graphsvc: error:") for line in err)
     assert not bad.exists()
+
+
+def test_reconstruct_warms_up_the_search_once_per_graph_and_thread_mode(graph, rec):
+    # The first reconstruction on a graph (in each thread mode) runs the search's
+    # warm-up — numba compiles or loads the kernels — and times it apart from the
+    # search; later ones skip it. The results do not depend on it.
+    import copy
+
+    fresh = copy.copy(graph)
+    fresh.__dict__.pop("_search_warmed", None)
+    options = Options(weights=Weights(0.5, 1, 1))
+    first, again, threaded = (reconstruct(fresh, rec, options, threads=t).report for t in (False, False, True))
+    assert first["timings_s"]["warm_up"] > 0 and threaded["timings_s"]["warm_up"] > 0
+    assert again["timings_s"]["warm_up"] == 0.0
+    assert first["node_path"] == again["node_path"] == threaded["node_path"]

@@ -46,6 +46,7 @@ cache is a few MB, so what is read from scattered nodes is kept small):
 
 from __future__ import annotations
 
+import time
 import types
 from dataclasses import dataclass, field
 
@@ -1777,6 +1778,17 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
         for t in range(1, T):
             search.step(acc[t], position[t], 0.0, free[:gamma], free[:gamma])
         search.trace(search.best_node(), since=search.t - 1)
+    graph.__dict__.setdefault("_search_warmed", set()).add(bool(threads))
+
+
+def warm_up_search_once(graph: MotionGraph, threads: bool = True) -> float:
+    """`warm_up_search` unless it has run for this graph and thread mode in this
+    process (a server warms up at load). Returns the seconds it took, 0.0 if it had run."""
+    if bool(threads) in graph.__dict__.get("_search_warmed", ()):
+        return 0.0
+    t0 = time.perf_counter()
+    warm_up_search(graph, threads)
+    return time.perf_counter() - t0
 
 
 # A batch search computes C_A for this many samples in one pass over the readings
