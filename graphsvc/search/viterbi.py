@@ -1762,10 +1762,11 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
 
 def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     """Run a few random samples through searches with a tiny ring, in store and in
-    window mode, placed and not, and with a constraint set (the float64 passes): numba
-    compiles (or loads from its cache) the step kernels and the walk back through the
-    dense rows for this graph's array types now, not when a search first fills its ring
-    (every BLOCK samples) or first meets constraints."""
+    window mode, placed and not, and with a constraint set (the float64 passes), then
+    through batch searches: numba compiles (or loads from its cache) the step kernels,
+    the walk back through the dense rows, the batch C_A and the path's terms for this
+    graph's array types now, not when a search first fills its ring (every BLOCK
+    samples) or first meets constraints."""
     rng = np.random.default_rng(0)
     T = 16
     acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
@@ -1778,6 +1779,8 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
         for t in range(1, T):
             search.step(acc[t], position[t], 0.0, free[:gamma], free[:gamma])
         search.trace(search.best_node(), since=search.t - 1)
+    for weights, pos, head in ((placed, position, np.zeros(T)), (unplaced, None, None)):  # batch C_A, path terms
+        viterbi_search(graph, acc, pos, head, weights, threads=threads)
     graph.__dict__.setdefault("_search_warmed", set()).add(bool(threads))
 
 
