@@ -218,9 +218,6 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     rec.validate()
     check_layout(graph, rec.sensor_names)
     constraints = check_constraints(rec.constraints if options.constraints is None else options.constraints, graph)
-    # numba compiles (or loads) the search kernels and the graph's search tables are
-    # made once per process, timed apart: the search time is the search's own.
-    warm_up_s = warm_up_search_once(graph, threads)
     t_start = time.perf_counter()
     acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
     rate = float(graph.rate_hz)
@@ -240,6 +237,9 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     use_pos = position if w.position else None
     use_head = heading if w.heading else None
     prepare_s = time.perf_counter() - t_start
+    # numba compiles (or loads) the search kernels and the graph's search tables are
+    # made once per process, timed apart: the search time is the search's own.
+    warm_up_s = warm_up_search_once(graph, threads)
 
     t0 = time.perf_counter()
     start_ground, start_heading = _start_state(position, heading)
