@@ -11,6 +11,9 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+_I32, _I64, _F32 = ir.IntType(32), ir.IntType(64), ir.FloatType()
+_V8F, _V8I = ir.VectorType(_F32, 8), ir.VectorType(_I32, 8)
+
 
 @intrinsic
 def pick(typingctx, cond, if_true, if_false):
@@ -60,14 +63,12 @@ def tag(typingctx, value, keep, label):
         return None
 
     def codegen(context, builder, signature, args):
-        i32 = ir.IntType(32)
-
         def as_i32(v):
-            return v if v.type.width == 32 else builder.trunc(v, i32) if v.type.width > 32 else builder.zext(v, i32)
+            return v if v.type.width == 32 else builder.trunc(v, _I32) if v.type.width > 32 else builder.zext(v, _I32)
 
-        bits = builder.bitcast(args[0], i32)
+        bits = builder.bitcast(args[0], _I32)
         out = builder.or_(builder.and_(bits, as_i32(args[1])), as_i32(args[2]))
-        return builder.bitcast(out, ir.FloatType())
+        return builder.bitcast(out, _F32)
 
     return types.float32(value, keep, label), codegen
 
@@ -87,10 +88,9 @@ def prefetch(typingctx, array, index):
         indices = [row] + [context.get_constant(types.intp, 0)] * (array_type.ndim - 1)
         ptr = cgutils.get_item_pointer(context, builder, array_type, ary, indices, wraparound=False, boundscheck=False)
         i8p = ir.IntType(8).as_pointer()
-        i32 = ir.IntType(32)
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, _I32, _I32, _I32]),
                                             "llvm.prefetch.p0i8")  # fmt: skip
-        builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(_I32, 0), ir.Constant(_I32, 3), ir.Constant(_I32, 1)])
         return context.get_dummy_value()
 
     return types.none(array, index), codegen
@@ -100,10 +100,6 @@ def _gathers(context) -> bool:
     """Whether the code numba makes may use AVX2's gather instructions (the target's
     features, as numba sets them: the host's unless NUMBA_CPU_FEATURES says otherwise)."""
     return "+avx2" in str(getattr(context.codegen(), "_tm_features", "")).split(",")
-
-
-_I32, _I64, _F32 = ir.IntType(32), ir.IntType(64), ir.FloatType()
-_V8F, _V8I = ir.VectorType(_F32, 8), ir.VectorType(_I32, 8)
 
 
 class _Lanes:

@@ -1781,13 +1781,13 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
         search.trace(search.best_node(), since=search.t - 1)
     for weights, pos, head in ((placed, position, np.zeros(T)), (unplaced, None, None)):  # batch C_A, path terms
         viterbi_search(graph, acc, pos, head, weights, threads=threads)
-    graph.__dict__.setdefault("_search_warmed", set()).add(bool(threads))
+    graph._search_warmed = getattr(graph, "_search_warmed", frozenset()) | {bool(threads)}  # (as the table caches)
 
 
 def warm_up_search_once(graph: MotionGraph, threads: bool = True) -> float:
     """`warm_up_search` unless it has run for this graph and thread mode in this
     process (a server warms up at load). Returns the seconds it took, 0.0 if it had run."""
-    if bool(threads) in graph.__dict__.get("_search_warmed", ()):
+    if bool(threads) in getattr(graph, "_search_warmed", ()):
         return 0.0
     t0 = time.perf_counter()
     warm_up_search(graph, threads)
