@@ -512,11 +512,44 @@ def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id()
     assert _best_node(cost, rank, np.array([0, 0, 0, 2, 1], np.int32)) == 4
 
 
+def test_best_node_from_the_chunks_lowest_and_highest_costs_equals_reading_every_node():
+    # Costs on a grid finer and coarser than TIE, ties across chunk boundaries, chunks
+    # with no live node, a cost ≥ 1e6 now and then (no rounding then), detours.
+    from graphsvc.search.viterbi import COST, TIE, _best_in_chunks, _best_node
+
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        N = int(rng.integers(1, 80))
+        chunk_nodes = np.unique(np.r_[0, rng.integers(0, N + 1, int(rng.integers(0, 6))), N]).astype(np.uint64)
+        cost = rng.choice([0.0, 1.0, 1.0 + 0.3 * TIE, 1.0 + 1.5 * TIE, 1.0 + 3 * TIE, 2.0, np.inf], N)
+        if trial % 5 == 0:
+            cost[rng.integers(0, N)] = 3e6
+        state = np.zeros((N, 6))
+        state[:, COST] = cost
+        det = rng.integers(0, 3, N).astype(np.int32)
+        live = np.where(np.isfinite(cost), cost, np.nan)
+        bounds = list(zip(chunk_nodes[:-1].astype(int), chunk_nodes[1:].astype(int)))
+        lowest = np.array([np.nanmin(live[a:b], initial=np.inf) for a, b in bounds])
+        highest = np.array([np.nanmax(live[a:b], initial=-np.inf) for a, b in bounds])
+        expect = _best_node(state, np.zeros((N, 0), np.int32), det)
+        assert _best_in_chunks(state, det, chunk_nodes, lowest, highest) == expect, trial
+    # by hand: node 3 (chunk 1) is within TIE of node 1 (chunk 0) and has fewer detours
+    state = np.zeros((5, 6))
+    state[:, COST] = [5.0, 2.0, np.inf, 2.0 + 0.4 * TIE, 3.0]
+    chunks = np.array([0, 2, 5], np.uint64)
+    det = np.array([0, 2, 0, 1, 0], np.int32)
+    assert _best_in_chunks(state, det, chunks, np.array([2.0, 2.0 + 0.4 * TIE]), np.array([5.0, 3.0])) == 3
+    state[4, COST] = 2e6  # a cost ≥ 1e6: compared as they are, so node 1's lower cost wins
+    assert _best_in_chunks(state, det, chunks, np.array([2.0, 2.0 + 0.4 * TIE]), np.array([5.0, 2e6])) == 1
+
+
 def _lockstep(g, meas, position, heading, weights, allowed=None):
     """Run the float32-pass search (no constraint sets) and the float64 one (one
     constraint set that requires nothing, so ranks never differ) side by side; every
     sample's costs, detours, placements and lattice rows must be identical, bit for bit.
     Returns the float32-pass search."""
+    from graphsvc.search.viterbi import _best_node as every_node
+
     fast = ViterbiSearch(g, weights, 0, allowed)
     exact = ViterbiSearch(g, weights, 1, allowed)
     assert fast.float32_pass and not exact.float32_pass
@@ -531,7 +564,8 @@ def _lockstep(g, meas, position, heading, weights, allowed=None):
         np.testing.assert_array_equal(fast.cost, exact.cost, err_msg=f"sample {t}")
         np.testing.assert_array_equal(fast.det, exact.det, err_msg=f"sample {t}")
         np.testing.assert_array_equal(fast.place, exact.place, err_msg=f"sample {t}")
-    assert fast.best_node() == exact.best_node()
+        # the best node from the chunks' lowest and highest costs, as from every node's
+        assert fast.best_node() == exact.best_node() == every_node(fast.state, fast.rank, fast.det), f"sample {t}"
     np.testing.assert_array_equal(fast.trace(fast.best_node())[0], exact.trace(exact.best_node())[0])
     return fast
 
