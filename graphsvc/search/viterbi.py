@@ -815,6 +815,14 @@ def _layout(node_chunk: np.ndarray, count: np.ndarray) -> np.ndarray:
     return node_pos
 
 
+def _arrivals(graph: MotionGraph, incoming: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each edge's destination (E,) int64 and its index among the destination's
+    incoming edges (its arrival index, or slot) (E,) int64 (edges are numbered by
+    destination)."""
+    dst = graph.edge_dst.astype(np.int64)
+    return dst, np.arange(graph.num_edges, dtype=np.int64) - incoming.astype(np.int64)[dst]
+
+
 def _slot_major(dst: np.ndarray, slot: np.ndarray, node_chunk: np.ndarray, node_pos: np.ndarray, D: int):
     """Entries (one per edge: destination node, slot) in slot-major order within chunks:
     chunk c's entries, slot 0's first, each slot's in layout order; and (C, D+1) where
@@ -839,10 +847,8 @@ def slot_tables(graph: MotionGraph) -> dict:
         return cached
     tables = search_tables(graph)
     N, E = graph.num_nodes, graph.num_edges
-    incoming = tables["incoming"]
-    degree = np.diff(incoming).astype(np.int64)
-    dst = graph.edge_dst.astype(np.int64)
-    slot = np.arange(E, dtype=np.int64) - incoming[dst]
+    degree = np.diff(tables["incoming"]).astype(np.int64)
+    dst, slot = _arrivals(graph, tables["incoming"])
     D = int(slot.max()) + 1 if E else 1
     chunk_nodes, node_chunk = _chunks(N)
     node_pos = _layout(node_chunk, degree)
@@ -878,10 +884,9 @@ def float32_tables(graph: MotionGraph) -> dict:
     if cached is not None:
         return cached
     tables = search_tables(graph)
-    N, E = graph.num_nodes, graph.num_edges
-    incoming, shared = tables["incoming"].astype(np.int64), tables["edge_shared"]
-    dst = graph.edge_dst.astype(np.int64)
-    arrival = np.arange(E, dtype=np.int64) - incoming[dst]
+    N = graph.num_nodes
+    shared = tables["edge_shared"]
+    dst, arrival = _arrivals(graph, tables["incoming"])
     chunk_nodes, node_chunk = _chunks(N)
     node_pos = tables["node_pos"].astype(np.int64)
     shared_edges = np.flatnonzero(shared)  # (by node, then graph order)
@@ -1240,10 +1245,19 @@ def _best_node(state, rank, det):
     best_key = np.inf
     for n in range(first, N):
         if cost[n] <= near and (gamma == 0 or _same_rank(rank, n, first)):
-            key = np.round(cost[n] / TIE) if small else cost[n]
-            if best < 0 or key < best_key or key == best_key and det[n] < det[best]:
-                best, best_key = n, key
+            best, best_key = _ranked(n, cost[n], det, small, best, best_key)
     return best
+
+
+@numba.njit(inline="always")
+def _ranked(n, cost, det, small, best, best_key):
+    """`_best_node`'s running choice (best, best_key) after candidate n (cost its cost):
+    the lower key — round(cost / TIE) if small, else the cost — then fewer detours;
+    among equals the earlier node stays. best −1: none yet."""
+    key = np.round(cost / TIE) if small else cost
+    if best < 0 or key < best_key or key == best_key and det[n] < det[best]:
+        return n, key
+    return best, best_key
 
 
 @numba.njit(inline="always")
@@ -1277,11 +1291,8 @@ def _best_in_chunks(state, det, chunk_nodes, lowest, highest):
         if lowest[c] > near:
             continue
         for n in range(np.int64(chunk_nodes[c]), np.int64(chunk_nodes[c + 1])):
-            cost = state[n, COST]
-            if cost <= near:
-                key = np.round(cost / TIE) if small else cost
-                if best < 0 or key < best_key or key == best_key and det[n] < det[best]:
-                    best, best_key = n, key
+            if state[n, COST] <= near:
+                best, best_key = _ranked(n, state[n, COST], det, small, best, best_key)
     return best
 
 
@@ -1587,7 +1598,7 @@ class ViterbiSearch:
             # (unplaced: the cost column alone, 1-D — see `_cost_at`)
             state, state_new = (self.state, self._state_new) if self.placed else (self.cost, self._state_new[:, COST])
             live, near_ties = finish[self.placed](
-                self._pass1[0], self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
+                self._chunk_nodes, self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
                 u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
                 state, self.det, self.rel, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
