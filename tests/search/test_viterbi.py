@@ -831,6 +831,39 @@ def test_eight_wide_candidates_without_avx2_load_one_by_one_and_agree(tmp_path):
     assert done.stdout.split() == ["False", "False"]
 
 
+def test_a_short_batch_search_makes_only_the_rows_it_fills_and_finds_the_same_path(monkeypatch):
+    # An input too short to fill a block of the batch ring never flushes it: one row a
+    # sample is enough, and the search must be the one the full ring gives.
+    from graphsvc.search import viterbi as V
+
+    rng = np.random.default_rng(7)
+    g = random_graph(rng, N=60, out=4)
+    T = 40
+    acc = rng.normal(0, 9.81, (T, 2, 3))
+    position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
+    heading = np.cumsum(rng.normal(0, 0.05, T))
+    made = []
+    original = V.ViterbiSearch.__init__
+
+    def recording(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(V.ViterbiSearch, "__init__", recording)
+    short = V.viterbi_search(g, acc, position, heading, Weights(0.5, 1, 1))
+    assert made[-1].arrivals.shape[0] == T
+    scale = V.ViterbiSearch.BATCH_RING_SCALE
+    full_ring = (scale * V.ViterbiSearch.BLOCK, scale * V.ViterbiSearch.STORE_WINDOW)
+    assert V.batch_ring(full_ring[0]) == (full_ring[0], 0) and V.batch_ring(full_ring[0] + 1) == full_ring
+    monkeypatch.setattr(V, "batch_ring", lambda samples: full_ring)
+    full = V.viterbi_search(g, acc, position, heading, Weights(0.5, 1, 1))
+    assert made[-1].arrivals.shape[0] == sum(full_ring)
+    np.testing.assert_array_equal(short.node_path, full.node_path)
+    np.testing.assert_array_equal(short.edge_path, full.edge_path)
+    assert (short.cost, short.compression, short.peak_entries) == (full.cost, full.compression, full.peak_entries)
+    np.testing.assert_array_equal(short.terms, full.terms)
+
+
 def test_negative_or_infinite_weights_are_refused():
     g = random_graph(np.random.default_rng(0))
     for w in (Weights(-1, 0, 0), Weights(1, np.inf, 0), Weights(1, 0, np.nan)):
