@@ -135,7 +135,7 @@ def search_options(args):
     constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
     return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
                    heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
-                   speed_threshold=args.speed_threshold, constraints=constraints)  # fmt: skip
+                   speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam)  # fmt: skip
 
 
 def add_search_options(p, constraints: bool = True) -> None:
@@ -153,6 +153,9 @@ def add_search_options(p, constraints: bool = True) -> None:
     p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
                    help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
     p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S", help="default 2 m/s (Kelly et al.)")
+    p.add_argument("--beam", type=float, metavar="COST",
+                   help="beam search: after each sample keep only the paths within COST of the best (faster; default:"
+                        " the exact search)")
 
 
 def _cmd_synthesize(args) -> int:
@@ -271,7 +274,8 @@ def _cmd_evaluate(args) -> int:
     print(format_table(out))
     w = options.weights
     print(f"leave-one-out on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
-          f"weights {w.acc:g},{w.position:g},{w.heading:g}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
+          f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else "") +
+          f"; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
     return 0
 

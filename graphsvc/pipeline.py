@@ -40,7 +40,10 @@ class Options:
     (s) of the streaming decoder; None in batch = search the whole input at once.
     heading_from_track: derive heading from the ground positions (K §6: direction of
     travel above `speed_threshold` m/s, else `rest_heading_deg`). constraints:
-    annotation constraint sets in priority order (None: the recording's own)."""
+    annotation constraint sets in priority order (None: the recording's own). beam: a
+    cost; after each sample only the paths within it of the best one go on (faster
+    on built graphs, no longer always the cheapest path; None: the exact search; see
+    `ViterbiSearch`)."""
 
     strategy: str = "viterbi"
     weights: Weights = Weights()
@@ -49,6 +52,7 @@ class Options:
     rest_heading_deg: float = 0.0
     speed_threshold: float = 2.0
     constraints: tuple | None = None
+    beam: float | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -70,6 +74,9 @@ def check_options(options: Options) -> None:
             raise InputError(f"weight {name} must be a finite number ≥ 0, got {v!r}")
     if options.latency_s is not None and (not math.isfinite(options.latency_s) or options.latency_s < 0):
         raise InputError(f"latency must be a finite number of seconds ≥ 0, got {options.latency_s}")
+    if options.beam is not None and (isinstance(options.beam, bool) or not isinstance(options.beam, (int, float))
+                                     or not math.isfinite(options.beam) or options.beam <= 0):
+        raise InputError(f"beam must be a finite cost > 0, got {options.beam!r}")
     if not math.isfinite(options.rest_heading_deg):
         raise InputError(f"rest heading must be finite, got {options.rest_heading_deg}")
     if not (math.isfinite(options.speed_threshold) and options.speed_threshold >= 0):
@@ -246,7 +253,7 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     extra = {}
     if options.latency_s is None:
         result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                should_stop=should_stop)  # fmt: skip
+                                should_stop=should_stop, beam=options.beam)  # fmt: skip
         nodes, edges = result.node_path, result.edge_path
         search_s = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -257,7 +264,7 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     else:
         lag = int(round(options.latency_s * rate))
         decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
-                                  needs_placement(w, use_pos, use_head))  # fmt: skip
+                                  needs_placement(w, use_pos, use_head), beam=options.beam)  # fmt: skip
         synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
         node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
         synth_s = 0.0
@@ -359,7 +366,7 @@ class LiveSession:
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
-                                       self.rate, threads)  # fmt: skip
+                                       self.rate, threads, beam=options.beam)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
         self.start_position: np.ndarray | None = None  # first measured, (2,) m
         self.start_heading: float | None = None  # first measured (or from the track), rad

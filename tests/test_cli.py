@@ -147,6 +147,8 @@ def test_evaluate_with_a_prebuilt_graph_matches_the_clips(tmp_path, procedural_k
     (["--test", "*.bvh", "--weights", "1,1"], "weights"),
     (["--test", "*.bvh", "--noise", "loud"], "noise preset"),
     (["--test", "*.bvh", "--strategy", "ssg"], "not implemented"),
+    (["--test", "*.bvh", "--beam", "0"], "beam"),
+    (["--test", "*.bvh", "--beam", "nan"], "beam"),
     (["--test", "*.bvh", "--json", "{tmp}/no/such/dir/x.json"], "does not exist"),
 ])
 def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, extra, needle):

@@ -63,19 +63,20 @@ class FixedLagDecoder:
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
-                 placed: bool | None = None, store: bool | None = None):  # fmt: skip
+                 placed: bool | None = None, store: bool | None = None, beam: float | None = None):  # fmt: skip
         """placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
         lag + 1 samples' back-pointers, dense (False: its `window` mode); None: the
-        window for lags up to DENSE_MAX_LAG samples, the store beyond."""
+        window for lags up to DENSE_MAX_LAG samples, the store beyond. beam: see
+        ViterbiSearch (None: the exact search)."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
         if store is None:
             store = self.lag > self.DENSE_MAX_LAG
         self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
-                                    window=None if store else self.lag + 1)  # fmt: skip
+                                    window=None if store else self.lag + 1, beam=beam)  # fmt: skip
         self.emitted = 0  # frames emitted so far
         self.last_node = -1
         self.revisions = 0  # emitted frames not reached from the previous emitted frame

@@ -1296,6 +1296,264 @@ def _best_in_chunks(state, det, chunk_nodes, lowest, highest):
     return best
 
 
+# ----------------------------------------------------------------------------------
+# Beam search (opt-in): only the paths within `beam` of the best survive a step, and a
+# step visits only the nodes they reach, where the exact search's dense passes visit
+# every node and edge. On a walk through the built kelly6 graph (268k nodes) beam 10
+# kept a median of 40 nodes live with positions and heading, 170 without
+# (`tools/bench_beam.py`).
+
+
+@numba.njit(cache=True, nogil=True)
+def _immortal(incoming, edge_src, allowed):
+    """(N,) bool: the allowed nodes from which a path through allowed nodes can go on
+    forever (it reaches a cycle). The others run into a dead end within a bounded
+    number of samples; peeled off sink by sink through the incoming edges (edges are
+    numbered by destination)."""
+    N = allowed.shape[0]
+    ahead = np.zeros(N, np.int64)  # allowed out-edges of each allowed node not yet peeled
+    for n in range(N):
+        if allowed[n]:
+            for e in range(incoming[n], incoming[n + 1]):
+                if allowed[edge_src[e]]:
+                    ahead[edge_src[e]] += 1
+    immortal = allowed.copy()
+    stack = np.empty(N, np.int64)
+    top = 0
+    for n in range(N):
+        if allowed[n] and ahead[n] == 0:
+            stack[top] = n
+            top += 1
+    while top:
+        top -= 1
+        n = stack[top]
+        immortal[n] = False
+        for e in range(incoming[n], incoming[n + 1]):
+            m = edge_src[e]
+            if allowed[m]:
+                ahead[m] -= 1
+                if ahead[m] == 0:
+                    stack[top] = m
+                    top += 1
+    return immortal
+
+
+@numba.njit(inline="always")
+def _reading_cost(readings, r, meas, mask, scale):
+    """C_A of reading r alone, from its row of readings (R, 3S) float32 in g: the same
+    arithmetic in the same order as `_reading_costs_py`, so the same value, bit for
+    bit (a beam step computes only the readings its edges read)."""
+    total = np.float32(0.0)
+    for j in range(readings.shape[1]):
+        if mask[j] != 0.0:
+            d = readings[r, j] - meas[j]
+            total = _fma(d, d, total)
+    return total * scale
+
+
+@numba.njit(inline="always")
+def _state_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, readings, meas, mask,
+                  scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, state, det_prev):  # fmt: skip
+    """Node n's best incoming edge by the float64 rule of `_exact_choice`, its totals
+    computed from the sources' state rows as pass 2 computes them (`_state_total`), so
+    bit for bit the dense search's: (arrival index, −1 if no source is alive; total).
+    C_A computed for the edges of live sources only (`_reading_cost`)."""
+    first = np.int64(incoming[n])
+    best = np.int64(-1)
+    cb = np.inf
+    for e in range(first, np.int64(incoming[n + 1])):
+        m = np.int64(edge_src[e])
+        if state[m, COST] == np.inf:  # (its C_A is not worth computing)
+            continue
+        ca = _reading_cost(readings, edge_reading[e], meas, mask, scale)
+        if placed:
+            t = _state_total(state, m, mx, mz, mh, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc,
+                             w_pos, w_head, use_pos, use_head)  # fmt: skip
+        else:
+            t = state[m, COST] + w_acc * ca
+        better = t < cb - TIE
+        if abs(t - cb) <= TIE:
+            better = _tie_better(e, best, edge_src, edge_kind, det_prev)
+        if better:
+            best, cb = e, t
+    return (best - first if best >= 0 else np.int64(-1)), cb
+
+
+BEAM_CHUNKS = 64
+
+
+def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks, marks_words, touched, total, keep,
+                  survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
+                  readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, beam,
+                  state_prev, det_prev, state_new, det_new, arrivals, none, ancestor_prev, ancestor_new,
+                  chunk_low):  # fmt: skip
+    """One step of a beam search (γ = 0) while few nodes are live (see
+    `ViterbiSearch.BEAM_DENSE_SHARE`; else the exact step and `_beam_prune`).
+
+    In: active[:n_active], the live nodes at t−1, ascending (every other row of
+    state_prev has cost inf); state_new with cost inf at every row; this sample's
+    measurement as `_reading_costs_py` takes it (meas, mask (3S,), scale; readings
+    (R, 3S) row by row, `beam_tables`) and as pass 2 takes the rest.
+
+    1. The nodes the live ones reach (out_start, out_dst: `beam_tables`; only allowed
+       ones) are marked in marks ((8·⌈N/8⌉,) uint8, zero, left zero; marks_words its
+       uint64 view, scanned eight nodes at a time) and listed ascending in touched.
+    2. Each takes its best incoming edge by the float64 rule (`_state_choice`): the
+       dense search's choice and total, bit for bit, as long as the sources the dense
+       search would pick are live (always with an infinite beam).
+    3. Survive: the nodes whose total is within beam of the lowest total of an
+       immortal node (`_immortal`; of any node when none is reached), so a path that
+       can go on always survives, whatever dead ends lie ahead of the others. Their
+       new state (cost, detours, ancestor, placement) is written as pass 2 writes it,
+       their arrival into this sample's lattice row (every other entry `none`), and
+       they are listed ascending in survivors_out (N,).
+
+    total (N,) float64, keep (N,) uint8, chunk_low (BEAM_CHUNKS, 2): scratch. Returns
+    the number of survivors and the lowest cost (which always survives)."""
+    arrivals[:] = none
+    for i in range(n_active):
+        m = active[i]
+        for k in range(out_start[m], out_start[m + 1]):
+            n = out_dst[k]
+            if allowed[n]:
+                marks[n] = 1
+    count = 0
+    for w in range(marks_words.shape[0]):  # eight marks at a time: most words are empty
+        if marks_words[w]:
+            for n in range(8 * w, 8 * w + 8):
+                if marks[n]:
+                    marks[n] = 0
+                    touched[count] = n
+                    count += 1
+    per = (count + BEAM_CHUNKS - 1) // BEAM_CHUNKS
+    for c in numba.prange(BEAM_CHUNKS):
+        low, low_immortal = np.inf, np.inf
+        for i in range(c * per, min(count, (c + 1) * per)):
+            n = touched[i]
+            a, t = _state_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, readings,
+                                 meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed,
+                                 state_prev, det_prev)  # fmt: skip
+            total[i] = t
+            if a >= 0:
+                arrivals[n] = a
+                low = min(low, t)
+                if immortal[n]:
+                    low_immortal = min(low_immortal, t)
+        chunk_low[c, 0], chunk_low[c, 1] = low, low_immortal
+    low, low_immortal = np.inf, np.inf
+    for c in range(BEAM_CHUNKS):
+        low, low_immortal = min(low, chunk_low[c, 0]), min(low_immortal, chunk_low[c, 1])
+    limit = (low_immortal if low_immortal != np.inf else low) + beam
+    for c in numba.prange(BEAM_CHUNKS):
+        for i in range(c * per, min(count, (c + 1) * per)):
+            n = touched[i]
+            t = total[i]
+            if t == np.inf or not t <= limit:
+                arrivals[n] = none
+                keep[i] = 0
+                continue
+            keep[i] = 1
+            e = np.int64(incoming[n]) + np.int64(arrivals[n])
+            m = edge_src[e]
+            state_new[n, COST] = t
+            det_new[n] = det_prev[m] + (1 if edge_kind[e] != 0 else 0)
+            if ancestor_prev.shape[0]:
+                ancestor_new[n] = ancestor_prev[m]
+            if placed:
+                _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
+                                 edge_turn[e, 0], edge_turn[e, 1])  # fmt: skip
+    survivors = 0
+    for i in range(count):
+        if keep[i]:
+            survivors_out[survivors] = touched[i]
+            survivors += 1
+    return survivors, low
+
+
+@numba.njit(cache=True, nogil=True)
+def _best_in_list(state, det, nodes, count):
+    """`_best_node` without constraint sets over the live nodes nodes[:count] (every
+    other node dead), ascending: the same node. −1: none."""
+    low, high = np.inf, -np.inf
+    for i in range(count):
+        c = state[nodes[i], COST]
+        low, high = min(low, c), max(high, c)
+    if count == 0:
+        return -1
+    small = high < 1e6
+    near = low + 2 * TIE if small else low
+    best = -1
+    best_key = np.inf
+    for i in range(count):
+        n = nodes[i]
+        if state[n, COST] <= near:
+            best, best_key = _ranked(n, state[n, COST], det, small, best, best_key)
+    return best
+
+
+@numba.njit(cache=True, nogil=True)
+def _reset_costs(state, nodes, count):
+    """The cost of nodes[:count] in state (N, W) set to inf (dead)."""
+    for i in range(count):
+        state[nodes[i], COST] = np.inf
+
+
+@numba.njit(cache=True, nogil=True)
+def _beam_prune(state, immortal, beam, arrivals, none, c32, live_out):
+    """The beam's cut after an exact step (state (N, W) its new states; every node with
+    a live candidate has a finite cost): the nodes beyond the beam (the rule of
+    `_beam_step_py`) get cost inf, arrival `none` and, when c32 is the unplaced float32
+    pass's (N,) costs, DEAD32; the survivors are listed ascending in live_out. Returns
+    their number and the lowest cost. Branch-free, one array a loop, so each loop
+    vectorises: with one loop writing all (with or without branches), 0.5–0.7 ms on
+    G_E's 100k nodes, against 0.13 split."""
+    N = state.shape[0]
+    low, low_immortal = np.inf, np.inf
+    for n in range(N):
+        c = state[n, COST]
+        low = _fmin(low, c)
+        low_immortal = _fmin(low_immortal, _pick(immortal[n], c, np.inf))
+    limit = (low_immortal if low_immortal != np.inf else low) + beam
+    count = 0
+    for n in range(N):
+        live_out[count] = n
+        count += state[n, COST] <= limit
+    for n in range(N):
+        c = state[n, COST]
+        arrivals[n] = _pick((c != np.inf) & (c > limit), none, arrivals[n])
+    if c32.shape[0] == N:
+        for n in range(N):
+            c = state[n, COST]
+            c32[n] = _pick((c != np.inf) & (c > limit), DEAD32, c32[n])
+    for n in range(N):
+        c = state[n, COST]
+        state[n, COST] = _pick(c <= limit, c, np.inf)
+    return count, low
+
+
+_beam_step, _beam_step_serial = _compile(_beam_step_py, True), _compile(_beam_step_py, False)
+
+
+def beam_tables(graph: MotionGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a beam step reads besides `search_tables`: each node's successors, out_start
+    (N+1,) int64 and out_dst (E,) int32 (node m's at out_dst[out_start[m]:out_start[m+1]],
+    in edge order), and the readings row by row, (R, 3S) float32 in g (the transpose of
+    readings_t: a step computes C_A reading by reading; 25 MB on the 268k-node kelly6
+    graph, plus 4 MB of successors).
+    Made once per graph and cached on it (as `search_tables`)."""
+    cached = getattr(graph, "_beam_tables", None)
+    if cached is not None:
+        return cached
+    src = np.asarray(graph.edge_src, dtype=np.int64)
+    order = np.argsort(src, kind="stable")
+    out_start = np.zeros(graph.num_nodes + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=graph.num_nodes), out=out_start[1:])
+    readings = np.ascontiguousarray(search_tables(graph)["readings_t"].T)
+    tables = (out_start, np.ascontiguousarray(graph.edge_dst[order], dtype=np.int32), readings)
+    graph._beam_tables = tables
+    return tables
+
+
 class ViterbiSearch:
     """Incremental search: `start(first sample)`, `step(sample)` per sample, then
     `trace(best_node())`. Used by the batch search and by streaming decoders alike.
@@ -1304,7 +1562,7 @@ class ViterbiSearch:
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
                  threads: bool = True, placed: bool | None = None, window: int | None = None,
-                 ring: tuple[int, int] | None = None):  # fmt: skip
+                 ring: tuple[int, int] | None = None, beam: float | None = None):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
@@ -1317,7 +1575,11 @@ class ViterbiSearch:
         (traces must start inside the window). It saves the store's appends and sweeps
         for (window + BLOCK) × N bytes. None: the survivor store, any trace. ring:
         (BLOCK, STORE_WINDOW) instead of the class's (a warm-up makes the rarely run
-        walk-back kernels run within a few samples). Weights must be finite and ≥ 0
+        walk-back kernels run within a few samples). beam: keep only the paths whose
+        cost is within this much of the best one's after each sample (see
+        `_beam_step_py`), and visit only the nodes they reach — faster, but the path is
+        no longer always the cheapest (None: the exact search; no constraint sets; inf:
+        the exact search's results by the beam's step). Weights must be finite and ≥ 0
         (InputError); the float32 pass serves searches without constraint sets whose
         weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
         the float64 passes the rest, with the same results."""
@@ -1400,6 +1662,26 @@ class ViterbiSearch:
         if self.float32_pass:
             self._allowed_pos = np.empty(N, dtype=bool)  # in the float32 pass's layout order
             self._allowed_pos[self.node_pos] = self.allowed
+        self.beam = None if beam is None else float(beam)
+        if self.beam is not None:
+            if not self.beam > 0:
+                raise InputError(f"the beam must be a cost > 0 (or inf), got {beam}")
+            if gamma:
+                raise InputError("a beam search takes no constraint sets (their counts rank before the cost)")
+            self._out_start, self._out_dst, self._readings = beam_tables(graph)
+            self._immortal = _immortal(tables["incoming"], self.edge_src, self.allowed)
+            self._marks = np.zeros(8 * ((N + 7) // 8), dtype=np.uint8)
+            self._marks_words = self._marks.view(np.uint64)
+            # live nodes ascending: at the newest sample (state's), at the one before
+            # (_state_new's, whose costs a step resets to inf before writing)
+            self._live, self._live_before = np.empty(N, dtype=np.int32), np.empty(N, dtype=np.int32)
+            self._n_live = self._n_live_before = 0
+            self._touched, self._total = np.empty(N, dtype=np.int32), np.empty(N)
+            self._survives = np.empty(N, dtype=np.uint8)
+            self._beam_low = np.empty((BEAM_CHUNKS, 2))
+            self._no_c32 = np.zeros(0, dtype=np.float32)
+            self._step_seconds = (None, None)  # sparse steps' seconds a live node, dense steps' (see `narrow`)
+        self._c32_stale = False  # (see `_rebase_c32`)
         self.converged_t = -1  # every sample ≤ this one has a single surviving entry (or was forgotten)
         self.keep_from = 0  # samples before this one are forgotten (see forget_before)
         # The lattice of the newest samples, dense: one row per sample, each node's
@@ -1465,6 +1747,18 @@ class ViterbiSearch:
     # took a flush from 0.83 to 0.28 ms a sample; generated G_E: under 0.05 %, where
     # carrying cost 4 % of a step and saved nothing).
     ANCESTOR_SHARE = 0.01
+    # A beam search steps sparsely (`_beam_step_py`: only the nodes its live paths reach,
+    # C_A only for the edges read) while at most BEAM_DENSE_SHARE of the nodes are live,
+    # by the exact search's passes and then a cut (`_beam_prune`) while more than
+    # BEAM_SPARSE_SHARE are, and in between by whichever its past steps predict to be
+    # faster (`narrow`). The same survivors and states either way, but which is faster
+    # depends on the graph: with a fifth of the nodes live, sparse steps took 4 times an
+    # exact step on the generated G_E (random transitions, three incoming edges a node)
+    # and were the faster on the built kelly6 graph (evaluation with beam 10: 418–449
+    # samples/s switching at a quarter, 288–307 at 5 %, 291–330 always sparse); with
+    # every node live they took 3 times an exact step on G_E.
+    BEAM_DENSE_SHARE = 0.05
+    BEAM_SPARSE_SHARE = 0.5
 
     @property
     def threads(self) -> bool:
@@ -1505,6 +1799,11 @@ class ViterbiSearch:
         self._anchor(position, heading)
         self.state[:, COST] = np.where(self.allowed, 0.0, np.inf)
         self.det[:] = 0
+        if self.beam is not None:
+            live = np.flatnonzero(self.allowed)
+            self._live[: len(live)], self._n_live, self._n_live_before = live, len(live), 0
+            self._state_new[:, COST] = np.inf
+        self._c32_stale = False
         self.low = self.c32_base = 0.0
         self._chunks_t = -1
         if self.float32_pass and not self.placed:
@@ -1572,7 +1871,11 @@ class ViterbiSearch:
         use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
         reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
-        if reading_cost is None:
+        narrow = self.narrow
+        started, live_before = time.perf_counter(), self._n_live if self.beam is not None else 0
+        if narrow:
+            self._set_measurement(acc)  # (a narrow beam step computes the C_A it reads from it)
+        elif reading_cost is None:
             # Computed even at W_A = 0: the report carries each path's accelerometer cost.
             self._set_measurement(acc)
             present = float(self._mask.sum()) / 3.0
@@ -1586,11 +1889,15 @@ class ViterbiSearch:
         rows = self.placed and (self.float32_pass or use_pos or use_head)
         meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
         meas_heading = float(heading) if use_head else 0.0
-        if rows:
-            relative(self.state, meas_pos, meas_heading, self.low, self.rel)
         ancestors = ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
                      (self._no_ancestors, self._no_ancestors))  # fmt: skip
-        if self.float32_pass:
+        if rows and not narrow:
+            relative(self.state, meas_pos, meas_heading, self.low, self.rel)
+        if narrow:
+            live = self._beam_step(wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors)
+        elif self.float32_pass:
+            if self._c32_stale and not self.placed:  # (narrow beam steps leave the unplaced float32 costs behind)
+                self._rebase_c32()
             u = self._unsigned
             base = self.low if rows else self.c32_base  # what the float32 costs read are relative to
             approx_select(*self._pass1, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
@@ -1620,6 +1927,10 @@ class ViterbiSearch:
                            self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.det, self.rank,
                            self._state_new, self._det_new, self._rank_new, arrivals, self.none,
                            *ancestors)  # fmt: skip
+        if self.beam is not None:
+            if not narrow and live:
+                live = self._cut(arrivals)
+            self._time_beam_step(narrow, time.perf_counter() - started, live_before)
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
@@ -1632,6 +1943,75 @@ class ViterbiSearch:
         self.state, self._state_new = self._state_new, self.state
         self.det, self._det_new = self._det_new, self.det
         self.rank, self._rank_new = self._rank_new, self.rank
+
+    @property
+    def narrow(self) -> bool:
+        """Whether the next step is a beam search's sparse one: always while few nodes are
+        live, never while most are, else whichever this search's steps so far predict to
+        be faster (sparse steps cost about the same per live node; the results are the
+        same either way, so timing only chooses the work)."""
+        if self.beam is None:
+            return False
+        if self._n_live <= self.BEAM_DENSE_SHARE * self.N:
+            return True
+        if self._n_live > self.BEAM_SPARSE_SHARE * self.N:
+            return False
+        per_node, dense = self._step_seconds
+        if per_node is None or dense is None:
+            return dense is not None  # (each kind tried once before comparing)
+        return per_node * self._n_live < dense
+
+    def _time_beam_step(self, narrow: bool, seconds: float, live_before: int) -> None:
+        """Fold a beam step's time into `narrow`'s estimates (running means, recent steps
+        weighted most): seconds a live node for sparse steps, a step for dense ones."""
+        per_node, dense = self._step_seconds
+        if narrow:
+            x = seconds / max(live_before, 1)
+            per_node = x if per_node is None else 0.75 * per_node + 0.25 * x
+        else:
+            dense = seconds if dense is None else 0.75 * dense + 0.25 * seconds
+        self._step_seconds = (per_node, dense)
+
+    def _beam_step(self, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors) -> int:
+        """`step`'s passes for a beam search while few nodes are live (`_beam_step_py`);
+        returns the survivors."""
+        _reset_costs(self._state_new, self._live_before, self._n_live_before)
+        kernel = _beam_step if self.threads else _beam_step_serial
+        present = float(self._mask.sum()) / 3.0
+        scale = np.float32(1.0 / present) if present else np.float32(0.0)
+        live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
+                           self._marks, self._marks_words, self._touched, self._total, self._survives,
+                           self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
+                           self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
+                           scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
+                           meas_heading, self.placed, self.beam, self.state, self.det, self._state_new,
+                           self._det_new, arrivals, self.none, *ancestors, self._beam_low)  # fmt: skip
+        self._live, self._live_before = self._live_before, self._live
+        self._n_live, self._n_live_before = live, self._n_live
+        if live:
+            self.low = low
+        self._c32_stale = True
+        return live
+
+    def _cut(self, arrivals) -> int:
+        """A beam search's cut after an exact step (`_beam_prune`); returns the survivors."""
+        c32 = self.c32 if self.float32_pass else self._no_c32  # (swapped in by the step already)
+        none = arrivals.dtype.type(self.none)  # (the arrivals' own type, for a select)
+        live, low = _beam_prune(self._state_new, self._immortal, self.beam, arrivals, none, c32, self._live_before)
+        self._live, self._live_before = self._live_before, self._live
+        self._n_live, self._n_live_before = live, self._n_live
+        self.low = low
+        return live
+
+    def _rebase_c32(self) -> None:
+        """The unplaced float32 pass's costs from the cost column, relative to the
+        lowest live cost (any base at most every live cost keeps the pass's bound)."""
+        cost = self.cost
+        live = np.isfinite(cost)
+        self.c32[:] = DEAD32
+        self.c32[live] = (cost[live] - self.low).astype(np.float32)
+        self.c32_base = self.low
+        self._c32_stale = False
 
     @staticmethod
     def measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1762,6 +2142,8 @@ class ViterbiSearch:
     def best_node(self) -> int:
         """The live node whose path ranks first: fewest broken constraints, then cost
         (within TIE counts as equal), then fewer non-original edges, then lower node id."""
+        if self.beam is not None:
+            return int(_best_in_list(self.state, self.det, self._live, self._n_live))
         if self._chunks_t == self.t:  # (the float32 pass's steps: γ = 0)
             return int(_best_in_chunks(self.state, self.det, self._chunk_nodes, self._chunk_low, self._chunk_high))
         return int(_best_node(self.state, self.rank, self.det))
@@ -1813,8 +2195,9 @@ def needs_placement(weights: Weights, position=None, heading=None) -> bool:
 
 def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     """Run a few random samples through searches with a tiny ring, in store and in
-    window mode, placed and not, and with a constraint set (the float64 passes), then
-    through batch searches: numba compiles (or loads from its cache) the step kernels,
+    window mode, placed and not, with a constraint set (the float64 passes) and with a
+    narrow beam (one exact step and cut, then sparse steps), then through batch
+    searches: numba compiles (or loads from its cache) the step kernels,
     the walk back through the dense rows, the batch C_A and the path's terms for this
     graph's array types now, not when a search first fills its ring (every BLOCK
     samples) or first meets constraints."""
@@ -1824,8 +2207,9 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     free = np.zeros(1, np.int64)
     placed, unplaced = Weights(0.5, 1, 1), Weights(1, 0, 0)
-    for window, gamma, weights in ((None, 0, placed), (2, 0, placed), (None, 0, unplaced), (None, 1, placed)):
-        search = ViterbiSearch(graph, weights, gamma, threads=threads, window=window, ring=(4, 2))
+    for window, gamma, weights, beam in ((None, 0, placed, None), (2, 0, placed, None), (None, 0, unplaced, None),
+                                         (None, 1, placed, None), (2, 0, placed, 1e-6)):  # fmt: skip
+        search = ViterbiSearch(graph, weights, gamma, threads=threads, window=window, ring=(4, 2), beam=beam)
         search.start(position[0], 0.0, free[:gamma], free[:gamma])
         for t in range(1, T):
             search.step(acc[t], position[t], 0.0, free[:gamma], free[:gamma])
@@ -1864,13 +2248,14 @@ def batch_ring(samples: int) -> tuple[int, int]:
 
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
                    constraint_sets: list | None = None, rate_hz: float | None = None,
-                   allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> SearchResult:  # fmt: skip
+                   allowed: np.ndarray | None = None, threads: bool = True, should_stop=None,
+                   beam: float | None = None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
     node mask or None; threads: see ViterbiSearch; should_stop: a callable polled
     every READING_BATCH (16) samples — when it returns true the search raises SearchCancelled (a
-    server stops work for a client that went away)."""
+    server stops work for a client that went away); beam: see ViterbiSearch."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -1882,7 +2267,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
     search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading),
-                           ring=batch_ring(T))  # fmt: skip
+                           ring=batch_ring(T), beam=beam)  # fmt: skip
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
@@ -1891,9 +2276,10 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
         if should_stop is not None and should_stop():
             raise SearchCancelled(f"search stopped at sample {t0} of {T}")
         block = slice(t0, t0 + READING_BATCH)
-        costs = search.reading_costs(acc[block], tuple(m[block] for m in measured))
+        # (a beam search's sparse steps compute only the readings they read)
+        costs = None if search.narrow else search.reading_costs(acc[block], tuple(m[block] for m in measured))
         for t in range(t0, min(T, t0 + READING_BATCH)):
-            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], costs[t - t0])
+            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], None if costs is None else costs[t - t0])
     best = search.best_node()
     nodes, edges = search.trace(best)
     terms = path_terms(search, nodes, edges, acc, position, heading, measured)

@@ -357,6 +357,8 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
                               speed_threshold_m_s=float(options.speed_threshold))  # fmt: skip
     if options.latency_s is not None:
         msg.latency_s = float(options.latency_s)
+    if options.beam is not None:
+        msg.beam = float(options.beam)
     sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
     msg.constraint_sets.extend(constraints_to_proto(sets))
     return msg
@@ -396,6 +398,10 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
         if not (math.isfinite(v) and v >= 0):
             raise FieldError(f"{field}.speed_threshold_m_s", f"must be a finite speed ≥ 0, got {v}")
         extra["speed_threshold"] = v
+    if msg.HasField("beam"):
+        if not (math.isfinite(msg.beam) and msg.beam > 0):
+            raise FieldError(f"{field}.beam", f"must be a finite cost > 0, got {msg.beam}")
+        extra["beam"] = msg.beam
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
     return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=msg.heading_from_track,
                    rest_heading_deg=msg.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip

@@ -455,10 +455,10 @@ def test_every_kernel_is_compiled_once_per_cache_entry():
 
 def test_warm_up_search_runs_the_walk_back_kernels():
     # A server warms up at load; the kernels that walk back through the dense rows run
-    # only every BLOCK samples, the float64 passes only for constrained searches, and
-    # the float32 pass's second half is compiled apart for placed and unplaced ones, so
-    # the warm-up must reach them all itself. A fresh process: here other tests have already
-    # compiled them.
+    # only every BLOCK samples, the float64 passes only for constrained searches, the
+    # beam step only for beam searches, and the float32 pass's second half is compiled
+    # apart for placed and unplaced ones, so the warm-up must reach them all itself. A
+    # fresh process: here other tests have already compiled them.
     import subprocess
     import sys
 
@@ -467,7 +467,8 @@ def test_warm_up_search_runs_the_walk_back_kernels():
         "from graphsvc.search import viterbi as V\n"
         "from tests.search.test_viterbi import random_graph\n"
         "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace, V._approx_select,\n"
-        "           *V._finish.values(), V._edge_totals, V._select, V._advance)\n"
+        "           *V._finish.values(), V._edge_totals, V._select, V._advance, V._beam_step, V._immortal,\n"
+        "           V._best_in_list, V._reset_costs, V._beam_prune)\n"
         "assert not any(k.signatures for k in kernels)\n"
         "V.warm_up_search(random_graph(np.random.default_rng(0)))\n"
         "assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]\n"

@@ -53,13 +53,13 @@ def test_list_and_get_graph(conn, graph, graph_file):
 # ---------------------------------------------------------------- round trips
 
 
-@pytest.mark.parametrize("latency_s", [None, 0.5])
-def test_synthesize_matches_library(conn, graph, recording, latency_s):
+@pytest.mark.parametrize("latency_s, beam", [(None, None), (0.5, None), (None, 2.0), (0.5, 2.0)])
+def test_synthesize_matches_library(conn, graph, recording, latency_s, beam):
     from graphsvc.motion.bvh import bvh_text
     from graphsvc.pipeline import Options, reconstruct
     from graphsvc.search.viterbi import Weights
 
-    options = Options(weights=Weights(0.5, 1.0, 1.0), latency_s=latency_s)
+    options = Options(weights=Weights(0.5, 1.0, 1.0), latency_s=latency_s, beam=beam)
     expected = reconstruct(graph, recording, options)
     got = C.synthesize(conn, "small", recording, convert.options_to_proto(options))
     np.testing.assert_array_equal(got.node_path, expected.node_path)
@@ -230,6 +230,7 @@ def _bad_cases(recording):
         "positions": ({"recording.ground_positions_m": [0.0, 1.0, 2.0]}, INVALID, "recording.ground_positions_m"),
         "negative weight": ({"options.weights.position": -1.0}, INVALID, "options.weights.position"),
         "nan latency": ({"options.latency_s": float("nan")}, INVALID, "options.latency_s"),
+        "zero beam": ({"options.beam": 0.0}, INVALID, "options.beam"),
         "unknown strategy": ({"options.strategy": 7}, INVALID, "options.strategy"),
         "olng": ({"options.strategy": pb.STRATEGY_OLNG}, grpc.StatusCode.UNIMPLEMENTED, "olng"),
         "ssg": ({"options.strategy": pb.STRATEGY_SSG}, grpc.StatusCode.UNIMPLEMENTED, "ssg"),

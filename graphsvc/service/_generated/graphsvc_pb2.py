@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import struct_pb2 as google_dot_protobuf_dot_struct__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1agraphsvc/v1/graphsvc.proto\x12\x0bgraphsvc.v1\x1a\x1cgoogle/protobuf/struct.proto\"\x13\n\x11ListGraphsRequest\"<\n\x12ListGraphsResponse\x12&\n\x06graphs\x18\x01 \x03(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\x1f\n\x0fGetGraphRequest\x12\x0c\n\x04name\x18\x01 \x01(\t\"9\n\x10GetGraphResponse\x12%\n\x05graph\x18\x01 \x01(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\xad\x05\n\tGraphInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x12\n\nnode_count\x18\x02 \x01(\x03\x12\x12\n\nedge_count\x18\x03 \x01(\x03\x12I\n\x13node_counts_by_kind\x18\x04 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.NodeCountsByKindEntry\x12I\n\x13\x65\x64ge_counts_by_kind\x18\x05 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.EdgeCountsByKindEntry\x12\x16\n\x0e\x64\x65\x61\x64_end_count\x18\x06 \x01(\x03\x12\x12\n\nclip_count\x18\x07 \x01(\x03\x12\x16\n\x0ekb_frame_count\x18\x08 \x01(\x03\x12\x12\n\nkb_minutes\x18\t \x01(\x01\x12\x0e\n\x06labels\x18\n \x03(\t\x12\x0e\n\x06layout\x18\x0b \x01(\t\x12\x14\n\x0csensor_names\x18\x0c \x03(\t\x12\x0f\n\x07rate_hz\x18\r \x01(\x01\x12\x13\n\x0bjoint_count\x18\x0e \x01(\x05\x12\"\n\x1ainterpolated_segment_count\x18\x0f \x01(\x03\x12\x12\n\nfile_bytes\x18\x10 \x01(\x03\x12\'\n\x06params\x18\x11 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\'\n\x08skeleton\x18\x12 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\x12$\n\x1crest_pose_accelerations_m_s2\x18\x13 \x03(\x02\x1a\x37\n\x15NodeCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\x1a\x37\n\x15\x45\x64geCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\"\x8b\x01\n\x08Skeleton\x12\x13\n\x0bjoint_names\x18\x01 \x03(\t\x12\x16\n\x0eparent_indices\x18\x02 \x03(\x05\x12\x11\n\toffsets_m\x18\x03 \x03(\x01\x12,\n\x08\x63hannels\x18\x04 \x03(\x0b\x32\x1a.graphsvc.v1.JointChannels\x12\x11\n\tend_sites\x18\x05 \x03(\x08\"\x1e\n\rJointChannels\x12\r\n\x05names\x18\x01 \x03(\t\"\xb1\x02\n\x10SynthesisOptions\x12\'\n\x08strategy\x18\x01 \x01(\x0e\x32\x15.graphsvc.v1.Strategy\x12)\n\x07weights\x18\x02 \x01(\x0b\x32\x18.graphsvc.v1.CostWeights\x12\x16\n\tlatency_s\x18\x03 \x01(\x01H\x00\x88\x01\x01\x12\x1a\n\x12heading_from_track\x18\x04 \x01(\x08\x12\x18\n\x10rest_heading_deg\x18\x05 \x01(\x01\x12\x33\n\x0f\x63onstraint_sets\x18\x06 \x03(\x0b\x32\x1a.graphsvc.v1.ConstraintSet\x12 \n\x13speed_threshold_m_s\x18\x07 \x01(\x01H\x01\x88\x01\x01\x42\x0c\n\n_latency_sB\x16\n\x14_speed_threshold_m_s\"F\n\x0b\x43ostWeights\x12\x14\n\x0c\x61\x63\x63\x65leration\x18\x01 \x01(\x01\x12\x10\n\x08position\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\"=\n\rConstraintSet\x12,\n\x0b\x63onstraints\x18\x01 \x03(\x0b\x32\x17.graphsvc.v1.Constraint\"z\n\nConstraint\x12\x0f\n\x07start_s\x18\x01 \x01(\x01\x12\r\n\x05\x65nd_s\x18\x02 \x01(\x01\x12,\n\x07\x63ontact\x18\x03 \x01(\x0e\x32\x19.graphsvc.v1.ContactStateH\x00\x12\x0f\n\x05label\x18\x04 \x01(\tH\x00\x42\r\n\x0brequirement\"\x96\x01\n\tRecording\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x14\n\x0csensor_names\x18\x02 \x03(\t\x12\x14\n\x0ctimestamps_s\x18\x03 \x03(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x04 \x03(\x02\x12\x1a\n\x12ground_positions_m\x18\x05 \x03(\x01\x12\x14\n\x0cheadings_rad\x18\x06 \x03(\x01\"}\n\x11SynthesizeRequest\x12\r\n\x05graph\x18\x01 \x01(\t\x12)\n\trecording\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.Recording\x12.\n\x07options\x18\x03 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\"\x82\x01\n\x12SynthesizeResponse\x12#\n\x06motion\x18\x01 \x01(\x0b\x32\x13.graphsvc.v1.Motion\x12\x11\n\tnode_path\x18\x02 \x03(\x03\x12\x0b\n\x03\x62vh\x18\x03 \x01(\x0c\x12\'\n\x06report\x18\x04 \x01(\x0b\x32\x17.google.protobuf.Struct\"s\n\x06Motion\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x13\n\x0b\x66rame_count\x18\x02 \x01(\x05\x12\x13\n\x0bjoint_count\x18\x03 \x01(\x05\x12\x16\n\x0erotations_wxyz\x18\x04 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x05 \x03(\x02\"~\n\x17StreamSynthesizeRequest\x12+\n\x06\x63onfig\x18\x01 \x01(\x0b\x32\x19.graphsvc.v1.StreamConfigH\x00\x12+\n\x06sample\x18\x02 \x01(\x0b\x32\x19.graphsvc.v1.SensorSampleH\x00\x42\t\n\x07message\"c\n\x0cStreamConfig\x12\r\n\x05graph\x18\x01 \x01(\t\x12.\n\x07options\x18\x02 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\x12\x14\n\x0csensor_names\x18\x03 \x03(\t\"\x9a\x01\n\x0cSensorSample\x12\x0e\n\x06time_s\x18\x01 \x01(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x02 \x03(\x02\x12\x34\n\x0fground_position\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.GroundPosition\x12\x18\n\x0bheading_rad\x18\x04 \x01(\x01H\x00\x88\x01\x01\x42\x0e\n\x0c_heading_rad\"*\n\x0eGroundPosition\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03z_m\x18\x02 \x01(\x01\"\xae\x01\n\x18StreamSynthesizeResponse\x12-\n\x07started\x18\x01 \x01(\x0b\x32\x1a.graphsvc.v1.StreamStartedH\x00\x12\'\n\x05\x66rame\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.PoseFrameH\x00\x12/\n\x08\x66inished\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.StreamFinishedH\x00\x42\t\n\x07message\"\x82\x01\n\rStreamStarted\x12\r\n\x05graph\x18\x01 \x01(\t\x12\x0f\n\x07rate_hz\x18\x02 \x01(\x01\x12\x12\n\nlag_frames\x18\x03 \x01(\x05\x12\x14\n\x0csensor_names\x18\x04 \x03(\t\x12\'\n\x08skeleton\x18\x05 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\"\x93\x01\n\tPoseFrame\x12\r\n\x05index\x18\x01 \x01(\x03\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\x0c\n\x04node\x18\x03 \x01(\x03\x12\r\n\x05label\x18\x04 \x01(\t\x12\x16\n\x0erotations_wxyz\x18\x05 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x06 \x03(\x02\x12\x1a\n\x12input_sample_index\x18\x07 \x01(\x03\"B\n\x0eStreamFinished\x12\x18\n\x10samples_received\x18\x01 \x01(\x03\x12\x16\n\x0e\x66rames_emitted\x18\x02 \x01(\x03*_\n\x08Strategy\x12\x18\n\x14STRATEGY_UNSPECIFIED\x10\x00\x12\x14\n\x10STRATEGY_VITERBI\x10\x01\x12\x11\n\rSTRATEGY_OLNG\x10\x02\x12\x10\n\x0cSTRATEGY_SSG\x10\x03*\x8e\x01\n\x0c\x43ontactState\x12\x1d\n\x19\x43ONTACT_STATE_UNSPECIFIED\x10\x00\x12\x16\n\x12\x43ONTACT_STATE_LEFT\x10\x01\x12\x17\n\x13\x43ONTACT_STATE_RIGHT\x10\x02\x12\x16\n\x12\x43ONTACT_STATE_BOTH\x10\x03\x12\x16\n\x12\x43ONTACT_STATE_NONE\x10\x04\x32\xe0\x02\n\x12MotionGraphService\x12M\n\nListGraphs\x12\x1e.graphsvc.v1.ListGraphsRequest\x1a\x1f.graphsvc.v1.ListGraphsResponse\x12G\n\x08GetGraph\x12\x1c.graphsvc.v1.GetGraphRequest\x1a\x1d.graphsvc.v1.GetGraphResponse\x12M\n\nSynthesize\x12\x1e.graphsvc.v1.SynthesizeRequest\x1a\x1f.graphsvc.v1.SynthesizeResponse\x12\x63\n\x10StreamSynthesize\x12$.graphsvc.v1.StreamSynthesizeRequest\x1a%.graphsvc.v1.StreamSynthesizeResponse(\x01\x30\x01\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1agraphsvc/v1/graphsvc.proto\x12\x0bgraphsvc.v1\x1a\x1cgoogle/protobuf/struct.proto\"\x13\n\x11ListGraphsRequest\"<\n\x12ListGraphsResponse\x12&\n\x06graphs\x18\x01 \x03(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\x1f\n\x0fGetGraphRequest\x12\x0c\n\x04name\x18\x01 \x01(\t\"9\n\x10GetGraphResponse\x12%\n\x05graph\x18\x01 \x01(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\xad\x05\n\tGraphInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x12\n\nnode_count\x18\x02 \x01(\x03\x12\x12\n\nedge_count\x18\x03 \x01(\x03\x12I\n\x13node_counts_by_kind\x18\x04 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.NodeCountsByKindEntry\x12I\n\x13\x65\x64ge_counts_by_kind\x18\x05 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.EdgeCountsByKindEntry\x12\x16\n\x0e\x64\x65\x61\x64_end_count\x18\x06 \x01(\x03\x12\x12\n\nclip_count\x18\x07 \x01(\x03\x12\x16\n\x0ekb_frame_count\x18\x08 \x01(\x03\x12\x12\n\nkb_minutes\x18\t \x01(\x01\x12\x0e\n\x06labels\x18\n \x03(\t\x12\x0e\n\x06layout\x18\x0b \x01(\t\x12\x14\n\x0csensor_names\x18\x0c \x03(\t\x12\x0f\n\x07rate_hz\x18\r \x01(\x01\x12\x13\n\x0bjoint_count\x18\x0e \x01(\x05\x12\"\n\x1ainterpolated_segment_count\x18\x0f \x01(\x03\x12\x12\n\nfile_bytes\x18\x10 \x01(\x03\x12\'\n\x06params\x18\x11 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\'\n\x08skeleton\x18\x12 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\x12$\n\x1crest_pose_accelerations_m_s2\x18\x13 \x03(\x02\x1a\x37\n\x15NodeCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\x1a\x37\n\x15\x45\x64geCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\"\x8b\x01\n\x08Skeleton\x12\x13\n\x0bjoint_names\x18\x01 \x03(\t\x12\x16\n\x0eparent_indices\x18\x02 \x03(\x05\x12\x11\n\toffsets_m\x18\x03 \x03(\x01\x12,\n\x08\x63hannels\x18\x04 \x03(\x0b\x32\x1a.graphsvc.v1.JointChannels\x12\x11\n\tend_sites\x18\x05 \x03(\x08\"\x1e\n\rJointChannels\x12\r\n\x05names\x18\x01 \x03(\t\"\xcd\x02\n\x10SynthesisOptions\x12\'\n\x08strategy\x18\x01 \x01(\x0e\x32\x15.graphsvc.v1.Strategy\x12)\n\x07weights\x18\x02 \x01(\x0b\x32\x18.graphsvc.v1.CostWeights\x12\x16\n\tlatency_s\x18\x03 \x01(\x01H\x00\x88\x01\x01\x12\x1a\n\x12heading_from_track\x18\x04 \x01(\x08\x12\x18\n\x10rest_heading_deg\x18\x05 \x01(\x01\x12\x33\n\x0f\x63onstraint_sets\x18\x06 \x03(\x0b\x32\x1a.graphsvc.v1.ConstraintSet\x12 \n\x13speed_threshold_m_s\x18\x07 \x01(\x01H\x01\x88\x01\x01\x12\x11\n\x04\x62\x65\x61m\x18\x08 \x01(\x01H\x02\x88\x01\x01\x42\x0c\n\n_latency_sB\x16\n\x14_speed_threshold_m_sB\x07\n\x05_beam\"F\n\x0b\x43ostWeights\x12\x14\n\x0c\x61\x63\x63\x65leration\x18\x01 \x01(\x01\x12\x10\n\x08position\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\"=\n\rConstraintSet\x12,\n\x0b\x63onstraints\x18\x01 \x03(\x0b\x32\x17.graphsvc.v1.Constraint\"z\n\nConstraint\x12\x0f\n\x07start_s\x18\x01 \x01(\x01\x12\r\n\x05\x65nd_s\x18\x02 \x01(\x01\x12,\n\x07\x63ontact\x18\x03 \x01(\x0e\x32\x19.graphsvc.v1.ContactStateH\x00\x12\x0f\n\x05label\x18\x04 \x01(\tH\x00\x42\r\n\x0brequirement\"\x96\x01\n\tRecording\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x14\n\x0csensor_names\x18\x02 \x03(\t\x12\x14\n\x0ctimestamps_s\x18\x03 \x03(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x04 \x03(\x02\x12\x1a\n\x12ground_positions_m\x18\x05 \x03(\x01\x12\x14\n\x0cheadings_rad\x18\x06 \x03(\x01\"}\n\x11SynthesizeRequest\x12\r\n\x05graph\x18\x01 \x01(\t\x12)\n\trecording\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.Recording\x12.\n\x07options\x18\x03 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\"\x82\x01\n\x12SynthesizeResponse\x12#\n\x06motion\x18\x01 \x01(\x0b\x32\x13.graphsvc.v1.Motion\x12\x11\n\tnode_path\x18\x02 \x03(\x03\x12\x0b\n\x03\x62vh\x18\x03 \x01(\x0c\x12\'\n\x06report\x18\x04 \x01(\x0b\x32\x17.google.protobuf.Struct\"s\n\x06Motion\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x13\n\x0b\x66rame_count\x18\x02 \x01(\x05\x12\x13\n\x0bjoint_count\x18\x03 \x01(\x05\x12\x16\n\x0erotations_wxyz\x18\x04 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x05 \x03(\x02\"~\n\x17StreamSynthesizeRequest\x12+\n\x06\x63onfig\x18\x01 \x01(\x0b\x32\x19.graphsvc.v1.StreamConfigH\x00\x12+\n\x06sample\x18\x02 \x01(\x0b\x32\x19.graphsvc.v1.SensorSampleH\x00\x42\t\n\x07message\"c\n\x0cStreamConfig\x12\r\n\x05graph\x18\x01 \x01(\t\x12.\n\x07options\x18\x02 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\x12\x14\n\x0csensor_names\x18\x03 \x03(\t\"\x9a\x01\n\x0cSensorSample\x12\x0e\n\x06time_s\x18\x01 \x01(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x02 \x03(\x02\x12\x34\n\x0fground_position\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.GroundPosition\x12\x18\n\x0bheading_rad\x18\x04 \x01(\x01H\x00\x88\x01\x01\x42\x0e\n\x0c_heading_rad\"*\n\x0eGroundPosition\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03z_m\x18\x02 \x01(\x01\"\xae\x01\n\x18StreamSynthesizeResponse\x12-\n\x07started\x18\x01 \x01(\x0b\x32\x1a.graphsvc.v1.StreamStartedH\x00\x12\'\n\x05\x66rame\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.PoseFrameH\x00\x12/\n\x08\x66inished\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.StreamFinishedH\x00\x42\t\n\x07message\"\x82\x01\n\rStreamStarted\x12\r\n\x05graph\x18\x01 \x01(\t\x12\x0f\n\x07rate_hz\x18\x02 \x01(\x01\x12\x12\n\nlag_frames\x18\x03 \x01(\x05\x12\x14\n\x0csensor_names\x18\x04 \x03(\t\x12\'\n\x08skeleton\x18\x05 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\"\x93\x01\n\tPoseFrame\x12\r\n\x05index\x18\x01 \x01(\x03\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\x0c\n\x04node\x18\x03 \x01(\x03\x12\r\n\x05label\x18\x04 \x01(\t\x12\x16\n\x0erotations_wxyz\x18\x05 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x06 \x03(\x02\x12\x1a\n\x12input_sample_index\x18\x07 \x01(\x03\"B\n\x0eStreamFinished\x12\x18\n\x10samples_received\x18\x01 \x01(\x03\x12\x16\n\x0e\x66rames_emitted\x18\x02 \x01(\x03*_\n\x08Strategy\x12\x18\n\x14STRATEGY_UNSPECIFIED\x10\x00\x12\x14\n\x10STRATEGY_VITERBI\x10\x01\x12\x11\n\rSTRATEGY_OLNG\x10\x02\x12\x10\n\x0cSTRATEGY_SSG\x10\x03*\x8e\x01\n\x0c\x43ontactState\x12\x1d\n\x19\x43ONTACT_STATE_UNSPECIFIED\x10\x00\x12\x16\n\x12\x43ONTACT_STATE_LEFT\x10\x01\x12\x17\n\x13\x43ONTACT_STATE_RIGHT\x10\x02\x12\x16\n\x12\x43ONTACT_STATE_BOTH\x10\x03\x12\x16\n\x12\x43ONTACT_STATE_NONE\x10\x04\x32\xe0\x02\n\x12MotionGraphService\x12M\n\nListGraphs\x12\x1e.graphsvc.v1.ListGraphsRequest\x1a\x1f.graphsvc.v1.ListGraphsResponse\x12G\n\x08GetGraph\x12\x1c.graphsvc.v1.GetGraphRequest\x1a\x1d.graphsvc.v1.GetGraphResponse\x12M\n\nSynthesize\x12\x1e.graphsvc.v1.SynthesizeRequest\x1a\x1f.graphsvc.v1.SynthesizeResponse\x12\x63\n\x10StreamSynthesize\x12$.graphsvc.v1.StreamSynthesizeRequest\x1a%.graphsvc.v1.StreamSynthesizeResponse(\x01\x30\x01\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -36,10 +36,10 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_GRAPHINFO_NODECOUNTSBYKINDENTRY']._serialized_options = b'8\001'
   _globals['_GRAPHINFO_EDGECOUNTSBYKINDENTRY']._loaded_options = None
   _globals['_GRAPHINFO_EDGECOUNTSBYKINDENTRY']._serialized_options = b'8\001'
-  _globals['_STRATEGY']._serialized_start=3165
-  _globals['_STRATEGY']._serialized_end=3260
-  _globals['_CONTACTSTATE']._serialized_start=3263
-  _globals['_CONTACTSTATE']._serialized_end=3405
+  _globals['_STRATEGY']._serialized_start=3193
+  _globals['_STRATEGY']._serialized_end=3288
+  _globals['_CONTACTSTATE']._serialized_start=3291
+  _globals['_CONTACTSTATE']._serialized_end=3433
   _globals['_LISTGRAPHSREQUEST']._serialized_start=73
   _globals['_LISTGRAPHSREQUEST']._serialized_end=92
   _globals['_LISTGRAPHSRESPONSE']._serialized_start=94
@@ -59,37 +59,37 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_JOINTCHANNELS']._serialized_start=1078
   _globals['_JOINTCHANNELS']._serialized_end=1108
   _globals['_SYNTHESISOPTIONS']._serialized_start=1111
-  _globals['_SYNTHESISOPTIONS']._serialized_end=1416
-  _globals['_COSTWEIGHTS']._serialized_start=1418
-  _globals['_COSTWEIGHTS']._serialized_end=1488
-  _globals['_CONSTRAINTSET']._serialized_start=1490
-  _globals['_CONSTRAINTSET']._serialized_end=1551
-  _globals['_CONSTRAINT']._serialized_start=1553
-  _globals['_CONSTRAINT']._serialized_end=1675
-  _globals['_RECORDING']._serialized_start=1678
-  _globals['_RECORDING']._serialized_end=1828
-  _globals['_SYNTHESIZEREQUEST']._serialized_start=1830
-  _globals['_SYNTHESIZEREQUEST']._serialized_end=1955
-  _globals['_SYNTHESIZERESPONSE']._serialized_start=1958
-  _globals['_SYNTHESIZERESPONSE']._serialized_end=2088
-  _globals['_MOTION']._serialized_start=2090
-  _globals['_MOTION']._serialized_end=2205
-  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_start=2207
-  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_end=2333
-  _globals['_STREAMCONFIG']._serialized_start=2335
-  _globals['_STREAMCONFIG']._serialized_end=2434
-  _globals['_SENSORSAMPLE']._serialized_start=2437
-  _globals['_SENSORSAMPLE']._serialized_end=2591
-  _globals['_GROUNDPOSITION']._serialized_start=2593
-  _globals['_GROUNDPOSITION']._serialized_end=2635
-  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_start=2638
-  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_end=2812
-  _globals['_STREAMSTARTED']._serialized_start=2815
-  _globals['_STREAMSTARTED']._serialized_end=2945
-  _globals['_POSEFRAME']._serialized_start=2948
-  _globals['_POSEFRAME']._serialized_end=3095
-  _globals['_STREAMFINISHED']._serialized_start=3097
-  _globals['_STREAMFINISHED']._serialized_end=3163
-  _globals['_MOTIONGRAPHSERVICE']._serialized_start=3408
-  _globals['_MOTIONGRAPHSERVICE']._serialized_end=3760
+  _globals['_SYNTHESISOPTIONS']._serialized_end=1444
+  _globals['_COSTWEIGHTS']._serialized_start=1446
+  _globals['_COSTWEIGHTS']._serialized_end=1516
+  _globals['_CONSTRAINTSET']._serialized_start=1518
+  _globals['_CONSTRAINTSET']._serialized_end=1579
+  _globals['_CONSTRAINT']._serialized_start=1581
+  _globals['_CONSTRAINT']._serialized_end=1703
+  _globals['_RECORDING']._serialized_start=1706
+  _globals['_RECORDING']._serialized_end=1856
+  _globals['_SYNTHESIZEREQUEST']._serialized_start=1858
+  _globals['_SYNTHESIZEREQUEST']._serialized_end=1983
+  _globals['_SYNTHESIZERESPONSE']._serialized_start=1986
+  _globals['_SYNTHESIZERESPONSE']._serialized_end=2116
+  _globals['_MOTION']._serialized_start=2118
+  _globals['_MOTION']._serialized_end=2233
+  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_start=2235
+  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_end=2361
+  _globals['_STREAMCONFIG']._serialized_start=2363
+  _globals['_STREAMCONFIG']._serialized_end=2462
+  _globals['_SENSORSAMPLE']._serialized_start=2465
+  _globals['_SENSORSAMPLE']._serialized_end=2619
+  _globals['_GROUNDPOSITION']._serialized_start=2621
+  _globals['_GROUNDPOSITION']._serialized_end=2663
+  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_start=2666
+  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_end=2840
+  _globals['_STREAMSTARTED']._serialized_start=2843
+  _globals['_STREAMSTARTED']._serialized_end=2973
+  _globals['_POSEFRAME']._serialized_start=2976
+  _globals['_POSEFRAME']._serialized_end=3123
+  _globals['_STREAMFINISHED']._serialized_start=3125
+  _globals['_STREAMFINISHED']._serialized_end=3191
+  _globals['_MOTIONGRAPHSERVICE']._serialized_start=3436
+  _globals['_MOTIONGRAPHSERVICE']._serialized_end=3788
 # @@protoc_insertion_point(module_scope)

@@ -131,7 +131,7 @@ class JointChannels(_message.Message):
     def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SynthesisOptions(_message.Message):
-    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s")
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam")
     STRATEGY_FIELD_NUMBER: _ClassVar[int]
     WEIGHTS_FIELD_NUMBER: _ClassVar[int]
     LATENCY_S_FIELD_NUMBER: _ClassVar[int]
@@ -139,6 +139,7 @@ class SynthesisOptions(_message.Message):
     REST_HEADING_DEG_FIELD_NUMBER: _ClassVar[int]
     CONSTRAINT_SETS_FIELD_NUMBER: _ClassVar[int]
     SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
+    BEAM_FIELD_NUMBER: _ClassVar[int]
     strategy: Strategy
     weights: CostWeights
     latency_s: float
@@ -146,7 +147,8 @@ class SynthesisOptions(_message.Message):
     rest_heading_deg: float
     constraint_sets: _containers.RepeatedCompositeFieldContainer[ConstraintSet]
     speed_threshold_m_s: float
-    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ...) -> None: ...
+    beam: float
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ...) -> None: ...
 
 class CostWeights(_message.Message):
     __slots__ = ("acceleration", "position", "heading")

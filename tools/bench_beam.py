@@ -1,0 +1,125 @@
+"""Benchmark the beam search against the exact one on a built graph; prints one JSON
+object per run.
+
+The input is a walk through the graph itself: at each sample a random outgoing edge
+(dead ends jump to a random node), the edge's readings plus white noise (0.3 m/s²),
+and, for mode APO, the walk's own ground track and heading (its edges' offsets and
+turns, integrated as the search integrates them) plus tracker noise (σ 0.1 m, 10°).
+So positions agree with the readings, as they do in a real recording; the generated
+G_E input of `bench_viterbi.py` is random, on which any beam is meaningless.
+
+Per beam (none = the exact search): a batch search with numba threads (seconds, cost,
+the share of samples on the exact search's node path), and a live stream (fixed lag,
+serial kernels, as a server runs one): per-push milliseconds after the first 50
+pushes (mean, p50, p99) and over the first 10, when every node is still live.
+
+    python tools/bench_beam.py --graph /tmp/bandai2_k6.graph --beams 10,3
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def graph_walk(graph, samples: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(nodes (T,), acc (T, S, 3) m/s², ground position (T, 2) m, heading (T,) rad): a
+    random walk through the graph's edges with noisy readings and a noisy track."""
+    rng = np.random.default_rng(seed)
+    order = np.argsort(graph.edge_src, kind="stable")  # edges grouped by source
+    starts = np.searchsorted(graph.edge_src[order], np.arange(graph.num_nodes + 1))
+    nodes = np.empty(samples, np.int64)
+    acc = np.empty((samples,) + graph.edge_acc.shape[1:], np.float32)
+    position = np.zeros((samples, 2))
+    heading = np.zeros(samples)
+    node = int(rng.integers(graph.num_nodes))
+    x = z = h = 0.0
+    acc[0] = graph.edge_acc[graph.incoming[node]] if graph.incoming[node + 1] > graph.incoming[node] else 0.0
+    nodes[0] = node
+    for k in range(1, samples):
+        lo, hi = starts[node], starts[node + 1]
+        while lo == hi:  # dead end
+            node = int(rng.integers(graph.num_nodes))
+            lo, hi = starts[node], starts[node + 1]
+        e = order[int(rng.integers(lo, hi))]
+        ox, oz = (float(v) for v in graph.edge_offset[e])
+        c, s = np.cos(h), np.sin(h)
+        x, z, h = x + c * ox + s * oz, z - s * ox + c * oz, h + float(graph.edge_heading[e])
+        acc[k], position[k], heading[k] = graph.edge_acc[e], (x, z), h
+        node = int(graph.edge_dst[e])
+        nodes[k] = node
+    acc += rng.normal(0.0, 0.3, acc.shape).astype(np.float32)
+    position += rng.normal(0.0, 0.1, position.shape)
+    heading += rng.normal(0.0, np.radians(10.0), samples)
+    return nodes, acc, position, heading
+
+
+def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path=None) -> dict:
+    from graphsvc.search.stream import FixedLagDecoder
+    from graphsvc.search.viterbi import Weights, viterbi_search
+
+    _, acc, position, heading = graph_walk(graph, samples)
+    if mode == "A":
+        weights, position, heading = Weights(1, 0, 0), None, None
+    else:
+        weights = Weights(0.5, 1, 1)
+    viterbi_search(graph, acc[:300], None if position is None else position[:300],
+                   None if heading is None else heading[:300], weights, beam=beam)  # fmt: skip (warm: ring, tables)
+    t0 = time.perf_counter()
+    result = viterbi_search(graph, acc, position, heading, weights, beam=beam)
+    batch_s = time.perf_counter() - t0
+    decoder = FixedLagDecoder(graph, weights, lag=lag, threads=False, beam=beam)
+    times = np.empty(samples)
+    live = np.zeros(samples)
+    for t in range(samples):
+        t0 = time.perf_counter()
+        decoder.push(acc[t], None if position is None else position[t], None if heading is None else heading[t])
+        times[t] = time.perf_counter() - t0
+        live[t] = decoder.search._n_live if beam is not None else np.isfinite(decoder.search.cost).sum()
+    steady = times[50:]
+    out = {"mode": f"{mode}, {'exact' if beam is None else f'beam {beam:g}'}", "beam": beam,
+           "nodes": graph.num_nodes, "edges": graph.num_edges, "samples": samples,
+           "batch_seconds": round(batch_s, 3), "cost": result.cost,
+           "stream_ms_per_sample": round(1000 * float(steady.mean()), 3),
+           "stream_p50_ms": round(1000 * float(np.percentile(steady, 50)), 3),
+           "stream_p99_ms": round(1000 * float(np.percentile(steady, 99)), 3),
+           "stream_first10_ms": round(1000 * float(times[:10].mean()), 3),
+           "live_share_median": round(float(np.median(live[50:])) / graph.num_nodes, 5),
+           "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+    if exact_path is not None:
+        out["same_nodes_as_exact"] = round(float(np.mean(result.node_path == exact_path)), 4)
+    return out, result.node_path
+
+
+def main() -> None:
+    from graphsvc.graph.file import load_graph
+    from graphsvc.search.viterbi import warm_up_search
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--graph", required=True, help="a built graph file")
+    parser.add_argument("--beams", default="10,3", help="beam widths to compare with the exact search")
+    parser.add_argument("--samples", type=int, default=720)
+    parser.add_argument("--lag", type=int, default=30, help="the stream's fixed lag in samples (default 1 s)")
+    parser.add_argument("--modes", default="A,APO")
+    args = parser.parse_args()
+    graph = load_graph(args.graph)
+    warm_up_search(graph, threads=True)
+    warm_up_search(graph, threads=False)
+    for mode in args.modes.split(","):
+        row, exact_path = run(graph, mode, None, args.samples, args.lag)
+        print(json.dumps(row), flush=True)
+        for beam in (float(b) for b in args.beams.split(",")):
+            row, _ = run(graph, mode, beam, args.samples, args.lag, exact_path)
+            print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
