@@ -65,17 +65,16 @@ def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray
     return out + rng.normal(0.0, 0.3, out.shape).astype(np.float32)
 
 
-def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, latency_s, start_at, results):
-    """Run len(stream_ids) paced streams in threads; put one result dict per stream."""
+def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, options_bytes, start_at, results):
+    """Run len(stream_ids) paced streams in threads; put one result dict per stream.
+    options_bytes: the streams' SynthesisOptions, serialized."""
     from graphsvc.service import client as C
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
 
     samples = round(seconds * rate_hz)
     inputs = {i: random_walk_readings(graph_path, samples, seed=i) for i in stream_ids}
-    options = pb.SynthesisOptions()
-    if latency_s is not None:
-        options.latency_s = latency_s
+    options = pb.SynthesisOptions.FromString(options_bytes)
     conn = C.connect(address)
 
     def run(i):
@@ -129,13 +128,14 @@ def rss_mb(pid: int) -> float:
     return int(m.group(1)) / 1024 if m else float("nan")
 
 
-def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, latency_s, per_process, server_pid) -> dict:
+def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, options_bytes, per_process,
+              server_pid) -> dict:  # fmt: skip
     ctx = mp.get_context("spawn")  # no fork after gRPC is loaded
     results = ctx.Queue()
     start_at = time.time() + 3.0 + 0.05 * streams  # time for the client processes to load inputs
     ids = list(range(streams))
     procs = [ctx.Process(target=_client_process, args=(address, graph_name, graph_path, ids[i:i + per_process], seconds,
-                                                       rate_hz, latency_s, start_at, results))
+                                                       rate_hz, options_bytes, start_at, results))
              for i in range(0, streams, per_process)]  # fmt: skip
     for p in procs:
         p.start()
@@ -191,12 +191,14 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=20.0, help="length of each level (default 20)")
     parser.add_argument("--rate", type=float, help="samples per second per stream (default: the graph rate)")
     parser.add_argument("--latency", type=float, help="decoder lag in seconds (default: the server's, 1 s)")
+    parser.add_argument("--beam", type=float, metavar="COST", help="beam search (default: the exact search)")
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
 
     from graphsvc.graph.file import load_graph
+    from graphsvc.service._generated import graphsvc_pb2 as pb
 
     graph_path = str(Path(args.graph).resolve())
     rate = args.rate or float(load_graph(graph_path).rate_hz)
@@ -206,12 +208,18 @@ def main(argv=None) -> int:
     else:
         proc, address = start_server(graph_path, max(levels))
         server_pid = proc.pid
+    options = pb.SynthesisOptions()
+    if args.latency is not None:
+        options.latency_s = args.latency
+    if args.beam is not None:
+        options.beam = args.beam
+    options_bytes = options.SerializeToString()
     try:
         # Warm-up: the first stream loads the compiled search kernels.
-        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, args.latency, 1, server_pid)
+        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid)
         for streams in levels:
             print(f"level {streams} streams × {args.seconds:g} s ...", file=sys.stderr, flush=True)
-            result = run_level(address, "bench", graph_path, streams, args.seconds, rate, args.latency,
+            result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
                                args.streams_per_process, server_pid)  # fmt: skip
             print(json.dumps(result), flush=True)
     finally:
