@@ -71,8 +71,9 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
         weights, position, heading = Weights(1, 0, 0), None, None
     else:
         weights = Weights(0.5, 1, 1)
+    # a shorter search first: the beam's tables, and the first touch of the ring's memory
     viterbi_search(graph, acc[:300], None if position is None else position[:300],
-                   None if heading is None else heading[:300], weights, beam=beam)  # fmt: skip (warm: ring, tables)
+                   None if heading is None else heading[:300], weights, beam=beam)  # fmt: skip
     t0 = time.perf_counter()
     result = viterbi_search(graph, acc, position, heading, weights, beam=beam)
     batch_s = time.perf_counter() - t0

@@ -7,13 +7,7 @@ import pytest
 
 from graphsvc.errors import InputError
 from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import (
-    COST,
-    ViterbiSearch,
-    Weights,
-    _immortal,
-    viterbi_search,
-)
+from graphsvc.search.viterbi import COST, ViterbiSearch, Weights, _immortal, viterbi_search
 from graphsvc.sensors.accelerometer import GRAVITY
 from tests.search.test_viterbi import random_graph, tiny_graph
 
@@ -152,9 +146,12 @@ def test_beam_is_refused_unless_a_positive_cost_without_constraint_sets():
         viterbi_search(g, meas, constraint_sets=sets, beam=1.0)
 
 
-def test_a_live_beam_search_resets_only_what_it_wrote():
+@pytest.mark.parametrize("steps", [SPARSE, DENSE, OWN], ids=["sparse", "dense", "own"])
+def test_a_beam_search_keeps_every_dead_node_at_cost_inf_and_without_arrival(steps, monkeypatch):
     # The dense invariants other parts read (flush, trace, best node): every node not
-    # live has cost inf, at every sample, in both state buffers' turns.
+    # live has cost inf and arrival `none`, at every sample, in both state buffers'
+    # turns; the live list is ascending.
+    _steps(monkeypatch, steps)
     rng = np.random.default_rng(5)
     g = random_graph(rng, N=60, out=3)
     meas, position, heading = _inputs(rng, g, 50)
@@ -162,7 +159,8 @@ def test_a_live_beam_search_resets_only_what_it_wrote():
     search.start(position[0], heading[0])
     for t in range(1, len(meas)):
         search.step(meas[t], position[t], heading[t])
-        live = np.sort(search._live[: search._n_live])
+        live = search._live[: search._n_live]
+        assert np.all(np.diff(live) > 0)
         np.testing.assert_array_equal(np.flatnonzero(np.isfinite(search.state[:, COST])), live)
         np.testing.assert_array_equal(np.flatnonzero(search.arrivals[(search.first + search.used - 1) %
                                                                      search.arrivals.shape[0]] != search.none), live)
