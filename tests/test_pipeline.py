@@ -200,9 +200,16 @@ def test_cli_synthesize(graph, rec, tmp_path, capsys):
     cfile.write_text('[[{"start_s": 1, "end_s": 0.5, "require": {"contact": "left"}}]]')
     assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--constraints", str(cfile)]) == 2
     assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--strategy", "ssg"]) == 2
+    cfile.write_text('[[{"start_s": 0.5, "end_s": 1, "require": {"contact": "left"}}]]')
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(bad), "--constraints", str(cfile), "--beam", "2"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 3 and all(line.startswith("graphsvc: error:") for line in err)
+    assert len(err) == 4 and all(line.startswith("graphsvc: error:") for line in err)
+    assert "constraint sets" in err[-1]
     assert not bad.exists()
+    # With a beam: the report names it.
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(out), "--weights", "0.5,1,1", "--beam", "2",
+                 "--report", str(report)]) == 0  # fmt: skip
+    assert json.loads(report.read_text())["options"]["beam"] == 2.0
 
 
 def test_reconstruct_warms_up_the_search_once_per_graph_and_thread_mode(graph, rec):
