@@ -32,30 +32,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def graph_walk(graph, samples: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(nodes (T,), acc (T, S, 3) m/s², ground position (T, 2) m, heading (T,) rad): a
-    random walk through the graph's edges with noisy readings and a noisy track."""
+    random walk through the graph's edges (`bench_service.random_walk`) with noisy
+    readings and a noisy track."""
+    from bench_service import random_walk
+
     rng = np.random.default_rng(seed)
-    order = np.argsort(graph.edge_src, kind="stable")  # edges grouped by source
-    starts = np.searchsorted(graph.edge_src[order], np.arange(graph.num_nodes + 1))
-    nodes = np.empty(samples, np.int64)
+    node, edges = random_walk(graph, samples - 1, rng)
+    nodes = np.concatenate([[node], graph.edge_dst[edges]]).astype(np.int64)
     acc = np.empty((samples,) + graph.edge_acc.shape[1:], np.float32)
+    acc[0] = graph.edge_acc[graph.incoming[node]] if graph.incoming[node + 1] > graph.incoming[node] else 0.0
+    acc[1:] = graph.edge_acc[edges]
     position = np.zeros((samples, 2))
     heading = np.zeros(samples)
-    node = int(rng.integers(graph.num_nodes))
     x = z = h = 0.0
-    acc[0] = graph.edge_acc[graph.incoming[node]] if graph.incoming[node + 1] > graph.incoming[node] else 0.0
-    nodes[0] = node
-    for k in range(1, samples):
-        lo, hi = starts[node], starts[node + 1]
-        while lo == hi:  # dead end
-            node = int(rng.integers(graph.num_nodes))
-            lo, hi = starts[node], starts[node + 1]
-        e = order[int(rng.integers(lo, hi))]
+    for k, e in enumerate(edges, start=1):  # the track, integrated as the search integrates it
         ox, oz = (float(v) for v in graph.edge_offset[e])
         c, s = np.cos(h), np.sin(h)
         x, z, h = x + c * ox + s * oz, z - s * ox + c * oz, h + float(graph.edge_heading[e])
-        acc[k], position[k], heading[k] = graph.edge_acc[e], (x, z), h
-        node = int(graph.edge_dst[e])
-        nodes[k] = node
+        position[k], heading[k] = (x, z), h
     acc += rng.normal(0.0, 0.3, acc.shape).astype(np.float32)
     position += rng.normal(0.0, 0.1, position.shape)
     heading += rng.normal(0.0, np.radians(10.0), samples)

@@ -43,25 +43,32 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray:
-    """(samples, S, 3) float32 m/s²: a random walk through the graph's edges, each
-    step's edge metadata plus white noise; dead ends jump to a random node."""
-    from graphsvc.graph.file import load_graph
-
-    graph = load_graph(graph_path)
-    rng = np.random.default_rng(seed)
+def random_walk(graph, steps: int, rng: np.random.Generator) -> tuple[int, np.ndarray]:
+    """(first node, edges (steps,) int64): a random walk through the graph's edges from a
+    random node, each step a random outgoing edge; dead ends jump to a random node."""
     order = np.argsort(graph.edge_src, kind="stable")  # edges grouped by source
     starts = np.searchsorted(graph.edge_src[order], np.arange(graph.num_nodes + 1))
-    node = int(rng.integers(graph.num_nodes))
-    out = np.empty((samples,) + graph.edge_acc.shape[1:], np.float32)
-    for k in range(samples):
+    first = node = int(rng.integers(graph.num_nodes))
+    edges = np.empty(steps, np.int64)
+    for k in range(steps):
         lo, hi = starts[node], starts[node + 1]
         while lo == hi:  # dead end
             node = int(rng.integers(graph.num_nodes))
             lo, hi = starts[node], starts[node + 1]
-        e = order[int(rng.integers(lo, hi))]
-        out[k] = graph.edge_acc[e]
+        edges[k] = e = order[int(rng.integers(lo, hi))]
         node = int(graph.edge_dst[e])
+    return first, edges
+
+
+def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray:
+    """(samples, S, 3) float32 m/s²: a random walk through the graph's edges
+    (`random_walk`), each step's edge metadata plus white noise."""
+    from graphsvc.graph.file import load_graph
+
+    graph = load_graph(graph_path)
+    rng = np.random.default_rng(seed)
+    _, edges = random_walk(graph, samples, rng)
+    out = np.asarray(graph.edge_acc[edges], dtype=np.float32)
     return out + rng.normal(0.0, 0.3, out.shape).astype(np.float32)
 
 

@@ -55,7 +55,7 @@ import numba.extending
 import numpy as np
 
 from graphsvc.errors import InputError, SearchCancelled
-from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.model import MotionGraph, incoming_offsets
 from graphsvc.search._llvm import fma as _fma
 from graphsvc.search._llvm import fmax as _fmax
 from graphsvc.search._llvm import fmin as _fmin
@@ -559,28 +559,74 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
 
 
 @numba.njit(inline="always")
-def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, w_acc, w_pos,
-                  w_head, use_pos, use_head, rows, state, rel, det_prev):  # fmt: skip
+def _reading_cost(readings, r, meas, mask, scale):
+    """C_A of reading r alone, from its row of readings (R, 3S) float32 in g: the same
+    arithmetic in the same order as `_reading_costs_py`, so the same value, bit for
+    bit (a beam step computes only the readings its edges read)."""
+    total = np.float32(0.0)
+    for j in range(readings.shape[1]):
+        if mask[j] != 0.0:
+            d = readings[r, j] - meas[j]
+            total = _fma(d, d, total)
+    return total * scale
+
+
+def _edge_ca(reading_cost, readings, meas, mask, scale, r):
+    """C_A of reading r: reading_cost[r] (every reading's, (R,)), or, where
+    reading_cost is None, computed from its row (`_reading_cost`)."""
+
+
+@numba.extending.overload(_edge_ca, inline="always")
+def _edge_ca_kernel(reading_cost, readings, meas, mask, scale, r):
+    if isinstance(reading_cost, numba.types.NoneType):
+        return lambda reading_cost, readings, meas, mask, scale, r: _reading_cost(readings, r, meas, mask, scale)
+    return lambda reading_cost, readings, meas, mask, scale, r: reading_cost[r]
+
+
+def _source_total(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+    """An edge's total from its source m's state: `_state_total` when placed, else the
+    cost plus W_A·C_A; state (N, W) or the cost column alone (N,) (see `_cost_at`)."""
+
+
+@numba.extending.overload(_source_total, inline="always")
+def _source_total_kernel(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+    if state.ndim == 1:  # (unplaced pass 2 hands over the cost column)
+        return lambda placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head: \
+            state[m] + w_acc * ca
+
+    def total(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
+        if placed:
+            return _state_total(state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head)
+        return state[m, COST] + w_acc * ca
+
+    return total
+
+
+@numba.njit(inline="always")
+def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, readings,
+                  meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, state,
+                  det_prev):  # fmt: skip
     """Node n's best incoming edge by the float64 rule of `_select_py` (candidates in
-    graph order; lower total beyond TIE, else fewer detours, then plainer kind) as its
-    arrival index, −1 if none is alive."""
+    graph order; lower total beyond TIE, else fewer detours, then plainer kind), each
+    total from its source's state as pass 2 computes it (`_source_total`; the relative
+    rows' values, bit for bit): (arrival index, −1 if no source is live; the total).
+    C_A: see `_edge_ca` (pass 2's near-ties pass every reading's, a beam step None)."""
     first = np.int64(incoming[n])
     best = np.int64(-1)
     cb = np.inf
     for e in range(first, np.int64(incoming[n + 1])):
         m = np.int64(edge_src[e])
-        ca = reading_cost[edge_reading[e]]
-        if rows:
-            t = _row_total(rel, state, m, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc, w_pos,
-                           w_head, use_pos, use_head)  # fmt: skip
-        else:
-            t = _cost_at(state, m) + w_acc * ca
+        if _cost_at(state, m) == np.inf:  # (never the better; its C_A is not worth computing)
+            continue
+        ca = _edge_ca(reading_cost, readings, meas, mask, scale, edge_reading[e])
+        t = _source_total(placed, state, m, mx, mz, mh, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
+                          w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
             better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
         if better:
             best, cb = e, t
-    return best - first if best >= 0 else np.int64(-1)
+    return (best - first if best >= 0 else np.int64(-1)), cb
 
 
 def _finish_kernel(placed: bool, parallel: bool):
@@ -590,7 +636,7 @@ def _finish_kernel(placed: bool, parallel: bool):
 
     def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
                edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
-               state_prev, det_prev, rel, c32_base, state_new, det_new, c32_new, arrivals, none, lowest, highest,
+               state_prev, det_prev, c32_base, state_new, det_new, c32_new, arrivals, none, lowest, highest,
                ancestor_prev, ancestor_new):  # fmt: skip
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
         the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
@@ -619,9 +665,9 @@ def _finish_kernel(placed: bool, parallel: bool):
                 label = best_bits[p] & label_mask
                 if label == label_mask:  # a near-tie (marked by pass 1)
                     near_ties += 1
-                    a = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
-                                      reading_cost, w_acc, w_pos, w_head, use_pos, use_head, placed, state_prev, rel,
-                                      det_prev)  # fmt: skip
+                    a, _ = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
+                                         reading_cost, None, None, None, None, w_acc, w_pos, w_head, use_pos,
+                                         use_head, mx, mz, mh, placed, state_prev, det_prev)  # fmt: skip
                     arrival = np.uint32(a)  # a ≥ 0: a live candidate exists
                 else:
                     arrival = label
@@ -1338,47 +1384,6 @@ def _immortal(incoming, edge_src, allowed):
     return immortal
 
 
-@numba.njit(inline="always")
-def _reading_cost(readings, r, meas, mask, scale):
-    """C_A of reading r alone, from its row of readings (R, 3S) float32 in g: the same
-    arithmetic in the same order as `_reading_costs_py`, so the same value, bit for
-    bit (a beam step computes only the readings its edges read)."""
-    total = np.float32(0.0)
-    for j in range(readings.shape[1]):
-        if mask[j] != 0.0:
-            d = readings[r, j] - meas[j]
-            total = _fma(d, d, total)
-    return total * scale
-
-
-@numba.njit(inline="always")
-def _state_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, readings, meas, mask,
-                  scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, state, det_prev):  # fmt: skip
-    """Node n's best incoming edge by the float64 rule of `_exact_choice`, its totals
-    computed from the sources' state rows as pass 2 computes them (`_state_total`), so
-    bit for bit the dense search's: (arrival index, −1 if no source is alive; total).
-    C_A computed for the edges of live sources only (`_reading_cost`)."""
-    first = np.int64(incoming[n])
-    best = np.int64(-1)
-    cb = np.inf
-    for e in range(first, np.int64(incoming[n + 1])):
-        m = np.int64(edge_src[e])
-        if state[m, COST] == np.inf:  # (its C_A is not worth computing)
-            continue
-        ca = _reading_cost(readings, edge_reading[e], meas, mask, scale)
-        if placed:
-            t = _state_total(state, m, mx, mz, mh, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e], w_acc,
-                             w_pos, w_head, use_pos, use_head)  # fmt: skip
-        else:
-            t = state[m, COST] + w_acc * ca
-        better = t < cb - TIE
-        if abs(t - cb) <= TIE:
-            better = _tie_better(e, best, edge_src, edge_kind, det_prev)
-        if better:
-            best, cb = e, t
-    return (best - first if best >= 0 else np.int64(-1)), cb
-
-
 BEAM_CHUNKS = 64
 
 
@@ -1398,7 +1403,7 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
     1. The nodes the live ones reach (out_start, out_dst: `beam_tables`; only allowed
        ones) are marked in marks ((8·⌈N/8⌉,) uint8, zero, left zero; marks_words its
        uint64 view, scanned eight nodes at a time) and listed ascending in touched.
-    2. Each takes its best incoming edge by the float64 rule (`_state_choice`): the
+    2. Each takes its best incoming edge by the float64 rule (`_exact_choice`): the
        dense search's choice and total, bit for bit, as long as the sources the dense
        search would pick are live (always with an infinite beam).
     3. Survive: the nodes whose total is within beam of the lowest total of an
@@ -1430,9 +1435,9 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
         low, low_immortal = np.inf, np.inf
         for i in range(c * per, min(count, (c + 1) * per)):
             n = touched[i]
-            a, t = _state_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, readings,
-                                 meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed,
-                                 state_prev, det_prev)  # fmt: skip
+            a, t = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, None,
+                                 readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
+                                 placed, state_prev, det_prev)  # fmt: skip
             total[i] = t
             if a >= 0:
                 arrivals[n] = a
@@ -1546,8 +1551,7 @@ def beam_tables(graph: MotionGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         return cached
     src = np.asarray(graph.edge_src, dtype=np.int64)
     order = np.argsort(src, kind="stable")
-    out_start = np.zeros(graph.num_nodes + 1, dtype=np.int64)
-    np.cumsum(np.bincount(src, minlength=graph.num_nodes), out=out_start[1:])
+    out_start = incoming_offsets(src, graph.num_nodes)  # (the same offsets, by source)
     readings = np.ascontiguousarray(search_tables(graph)["readings_t"].T)
     tables = (out_start, np.ascontiguousarray(graph.edge_dst[order], dtype=np.int32), readings)
     graph._beam_tables = tables
@@ -1650,6 +1654,7 @@ class ViterbiSearch:
         self.reading_cost = np.zeros(self.readings_t.shape[1], dtype=np.float32)
         self._meas = np.zeros(self.readings_t.shape[0], dtype=np.float32)
         self._mask = np.ones(self.readings_t.shape[0], dtype=np.float32)
+        self._scale = np.float32(1.0)  # (see `_set_measurement`)
         self.ok = np.ones((gamma, N), dtype=bool)
         if allowed is None:
             self.allowed = np.ones(N, dtype=bool)
@@ -1872,15 +1877,15 @@ class ViterbiSearch:
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
         reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
         narrow = self.narrow
-        started, live_before = time.perf_counter(), self._n_live if self.beam is not None else 0
+        if self.beam is not None:
+            started, live_before = time.perf_counter(), self._n_live
         if narrow:
             self._set_measurement(acc)  # (a narrow beam step computes the C_A it reads from it)
         elif reading_cost is None:
             # Computed even at W_A = 0: the report carries each path's accelerometer cost.
             self._set_measurement(acc)
-            present = float(self._mask.sum()) / 3.0
-            if present:
-                reading_costs(self.readings_t, self._meas, self._mask, np.float32(1.0 / present), self.reading_cost)
+            if self._scale:
+                reading_costs(self.readings_t, self._meas, self._mask, self._scale, self.reading_cost)
             else:
                 self.reading_cost[:] = 0.0
             reading_cost = self.reading_cost
@@ -1909,7 +1914,7 @@ class ViterbiSearch:
                 self._chunk_nodes, self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
                 u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
-                state, self.det, self.rel, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
+                state, self.det, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
                 self._chunk_low, self._chunk_high, *ancestors)  # fmt: skip
             self.near_ties += near_ties
             if live:
@@ -1977,13 +1982,11 @@ class ViterbiSearch:
         returns the survivors."""
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
         kernel = _beam_step if self.threads else _beam_step_serial
-        present = float(self._mask.sum()) / 3.0
-        scale = np.float32(1.0 / present) if present else np.float32(0.0)
         live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
                            self._marks, self._marks_words, self._touched, self._total, self._survives,
                            self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
                            self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
-                           scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
+                           self._scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
                            meas_heading, self.placed, self.beam, self.state, self.det, self._state_new,
                            self._det_new, arrivals, self.none, *ancestors, self._beam_low)  # fmt: skip
         self._live, self._live_before = self._live_before, self._live
@@ -2041,9 +2044,10 @@ class ViterbiSearch:
 
     def _set_measurement(self, acc) -> None:
         """One sample's accelerations (S, 3) m/s² → self._meas, self._mask (see
-        `measurements`)."""
-        meas, mask, _ = self.measurements(np.asarray(acc)[None])
+        `measurements`) and self._scale, float32 1 / sensors present (0: none)."""
+        meas, mask, present = self.measurements(np.asarray(acc)[None])
         self._meas[:], self._mask[:] = meas[0], mask[0]
+        self._scale = np.float32(1.0 / float(present[0])) if present[0] else np.float32(0.0)
 
     @property
     def lattice_bytes(self) -> int:
