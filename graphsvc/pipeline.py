@@ -28,7 +28,7 @@ from graphsvc.search.viterbi import (Weights, compile_constraints, needs_placeme
                                      warm_up_search_once)  # fmt: skip
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording, validate_constraints
-from graphsvc.synthesis.path import synthesize_motion
+from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
 
 STRATEGIES = ("viterbi", "olng", "ssg")
@@ -244,9 +244,12 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     use_pos = position if w.position else None
     use_head = heading if w.heading else None
     prepare_s = time.perf_counter() - t_start
-    # numba compiles (or loads) the search kernels and the graph's search tables are
-    # made once per process, timed apart: the search time is the search's own.
-    warm_up_s = warm_up_search_once(graph, threads)
+    # numba compiles (or loads) the search and synthesis kernels and the graph's tables
+    # are made once per process, timed apart: the search time is the search's own.
+    t0 = time.perf_counter()
+    warm_up_search_once(graph, threads)
+    warm_up_synthesis(graph)
+    warm_up_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     start_ground, start_heading = _start_state(position, heading)
@@ -533,4 +536,5 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
         session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
     session.flush()
     warm_up_search(graph, threads)  # (batch searches too)
+    warm_up_synthesis(graph)
     return time.perf_counter() - t0

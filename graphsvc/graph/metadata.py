@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from graphsvc.motion import quat, signals
@@ -91,14 +92,25 @@ def apply_offsets(ground: np.ndarray, heading: float, offset: np.ndarray, dheadi
 def integrate_path(
     ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets."""
+    """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets:
+    `apply_offsets` step by step (the same float64 arithmetic, compiled, since a live
+    stream integrates a few edges many times a second)."""
     K = offsets.shape[0]
     ground = np.empty((K + 1, 2))
     heading = np.empty(K + 1)
     ground[0], heading[0] = ground0, heading0
-    for k in range(K):
-        ground[k + 1], heading[k + 1] = apply_offsets(ground[k], heading[k], offsets[k], dheadings[k])
+    _integrate(np.ascontiguousarray(offsets, dtype=np.float64), np.ascontiguousarray(dheadings, dtype=np.float64),
+               ground, heading)  # fmt: skip
     return ground, heading
+
+
+@numba.njit(cache=True, nogil=True)
+def _integrate(offsets, dheadings, ground, heading):
+    for k in range(offsets.shape[0]):
+        c, s = np.cos(heading[k]), np.sin(heading[k])
+        ground[k + 1, 0] = ground[k, 0] + (c * offsets[k, 0] + s * offsets[k, 1])
+        ground[k + 1, 1] = ground[k, 1] + (-s * offsets[k, 0] + c * offsets[k, 1])
+        heading[k + 1] = (heading[k] + dheadings[k] + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray) -> np.ndarray:

@@ -21,10 +21,20 @@ Pipeline, all on flat (T, ...) arrays:
    extra motion the synthesis added is removed by an accumulated world offset,
    solved with analytic two-bone IK on hip–knee–ankle (knee bend plane kept) plus a
    foot swing for the toe, blended out over a short window after the span.
+
+Stages 2–4 are numba kernels looping over frames: a live stream re-synthesizes a
+trailing stretch of a few dozen frames several times a second, where numpy's per-call
+overhead on (K, 4) arrays cost more than the arithmetic (about 5 ms a call against
+well under 1 ms). The graph's path tables (each node's predecessor in its own
+sequence, each edge's continuity, the joint map) are made once per graph.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
+import numba
 import numpy as np
 
 from graphsvc.errors import InputError
@@ -37,7 +47,6 @@ from graphsvc.graph.model import (
     NODE_SLOW,
     MotionGraph,
 )
-from graphsvc.motion import quat
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.skeleton import Motion
@@ -45,76 +54,119 @@ from graphsvc.motion.skeleton import Motion
 FOOT_BLEND_S = 0.1  # blend-out of the foot pinning after a contact span (s)
 
 
-# ---------------------------------------------------------------- small helpers
+# ---------------------------------------------------------------- quaternion scalars
+#
+# (w, x, y, z) as four floats, the same formulas and operation order as `quat`, so the
+# kernels give what the vectorised helpers give.
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_jit_scalar = numba.njit(cache=True, error_model="numpy")
 
 
-def smoothstep(x: np.ndarray) -> np.ndarray:
+@_jit_scalar
+def _qmul(aw, ax, ay, az, bw, bx, by, bz):
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)  # fmt: skip
+
+
+@_jit_scalar
+def _qrot(w, x, y, z, vx, vy, vz):
+    """v rotated by the unit quaternion (w, x, y, z): v + w·t + u × t, t = 2·u × v."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx)
+
+
+@_jit_scalar
+def _qlog(w, x, y, z):
+    """Rotation vector (rad) of a unit quaternion, shortest arc."""
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
+    # angle / s → 2 as s → 0 (first order), so small rotations stay exact.
+    scale = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
+    return x * scale, y * scale, z * scale
+
+
+@_jit_scalar
+def _qexp(rx, ry, rz):
+    """Unit quaternion of a rotation vector (rad)."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    half = 0.5 * angle
+    k = math.sin(half) / angle if angle > 1e-12 else 0.5
+    return math.cos(half), rx * k, ry * k, rz * k
+
+
+@_jit_scalar
+def _norm3(x, y, z):
+    return math.sqrt(x * x + y * y + z * z)
+
+
+@_jit_scalar
+def _diff3(a, b):
+    """a − b for length-3 arrays, as three floats."""
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
+@_jit_scalar
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@_jit_scalar
+def _between(ux, uy, uz, vx, vy, vz):
+    """Shortest rotation taking direction u onto direction v."""
+    nu, nv = _norm3(ux, uy, uz), _norm3(vx, vy, vz)
+    ux, uy, uz, vx, vy, vz = ux / nu, uy / nu, uz / nu, vx / nv, vy / nv, vz / nv
+    w = 1.0 + (ux * vx + uy * vy + uz * vz)
+    ax, ay, az = _cross(ux, uy, uz, vx, vy, vz)
+    if w < 1e-9:  # opposite directions: any axis orthogonal to u
+        ax, ay, az = _cross(ux, uy, uz, 1.0, 0.0, 0.0)
+        if _norm3(ax, ay, az) < 1e-6:
+            ax, ay, az = _cross(ux, uy, uz, 0.0, 1.0, 0.0)
+        w = 0.0
+    n = math.sqrt(w * w + ax * ax + ay * ay + az * az)
+    return w / n, ax / n, ay / n, az / n
+
+
+@_jit_scalar
+def _smoothstep(x):
     """3x² − 2x³ on x clipped to [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
+    x = min(max(x, 0.0), 1.0)
     return x * x * (3.0 - 2.0 * x)
 
-
-def quat_log(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (..., 3) (axis × angle, rad) of unit quaternions (..., 4),
-    shortest arc."""
-    q = np.where(q[..., :1] < 0.0, -q, q)
-    v = q[..., 1:]
-    s = np.linalg.norm(v, axis=-1, keepdims=True)
-    angle = 2.0 * np.arctan2(s, q[..., :1])
-    # angle/s → 2 as s → 0 (first-order), so small rotations stay exact.
-    scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)
-    return v * scale
-
-
-def quat_exp(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) of rotation vectors (..., 3) (rad)."""
-    angle = np.linalg.norm(r, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    k = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
-    return np.concatenate([np.cos(half), r * k], axis=-1)
-
-
-def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
-    """Strict ancestors of `joint`, root first."""
-    out = []
-    p = int(parents[joint])
-    while p >= 0:
-        out.append(p)
-        p = int(parents[p])
-    return out[::-1]
-
-
-def _descendant_mask(parents: np.ndarray, joint: int) -> np.ndarray:
-    """(J,) bool: `joint` and every joint below it (topological order)."""
-    mask = np.zeros(parents.shape[0], dtype=bool)
-    mask[joint] = True
-    for j in range(joint + 1, parents.shape[0]):
-        if parents[j] >= 0 and mask[parents[j]]:
-            mask[j] = True
-    return mask
-
-
-def _has_position(channels: tuple[str, ...]) -> bool:
-    return any(c.endswith("position") for c in channels)
 
 
 # ---------------------------------------------------------------- path structure
 
 
-def continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
-    """(K,) bool: the edge plays on inside one source sequence (original, slow-down,
-    speed-up, or a step inside an interpolated segment) — no pose jump."""
+@dataclass(frozen=True)
+class PathTables:
+    """Per-graph lookups for synthesis, made once (`path_tables`).
+
+    predecessor (N,) int64: the node one step before each node in its own source
+    sequence (itself where a sequence starts); continuous (E,) bool: the edge plays on
+    inside one sequence; joints: the default joint map; below (J,) bool: joints under
+    the pelvis; carrier: the joint that carries the placement (see `_place`)."""
+
+    predecessor: np.ndarray
+    continuous: np.ndarray
+    joints: dict
+    below: np.ndarray
+    carrier: int
+
+
+def _continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
     kind = graph.edge_kind[edges]
     src, dst = graph.edge_src[edges], graph.edge_dst[edges]
     inside_segment = (graph.node_kind[src] == NODE_INTERP) & (graph.node_kind[dst] == NODE_INTERP) & (dst == src + 1)
     return (kind != EDGE_TRANSITION) & ((kind != EDGE_INTERP) | inside_segment)
 
 
-def predecessor_nodes(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
-    """(K,) the node one step before each node in its own source sequence (the clip
-    or interpolated segment it belongs to); the node itself when it starts one.
-    Used to continue the entered clip backwards across a transition."""
-    nodes = np.asarray(nodes, dtype=np.int64)
+def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
     kind = graph.node_kind[nodes]
     frame = graph.node_frame[nodes]
     first = np.array([c["first_node"] for c in graph.clips], dtype=np.int64)[graph.node_clip[nodes]]
@@ -127,6 +179,54 @@ def predecessor_nodes(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
     interp = (kind == NODE_INTERP) & ~np.isin(nodes, seg_first)
     out[interp] = nodes[interp] - 1
     return out
+
+
+def _joint_tables(skeleton, joints: dict) -> tuple[np.ndarray, int]:
+    """Joints under the pelvis (J,) bool, and the carrier joint: the pelvis or its
+    nearest ancestor with position channels (joint 0 otherwise), where the placement
+    is realised so every joint above and below keeps its local values."""
+    parents = skeleton.parents
+    pelvis = joints["pelvis"]
+    below = np.zeros(parents.shape[0], dtype=bool)
+    below[pelvis] = True
+    for j in range(pelvis + 1, parents.shape[0]):  # topological order
+        if parents[j] >= 0 and below[parents[j]]:
+            below[j] = True
+    below[pelvis] = False  # the pelvis itself is blended through its relative rotation
+    chain = [pelvis]
+    while parents[chain[-1]] >= 0:
+        chain.append(int(parents[chain[-1]]))
+    carrier = next((j for j in chain if any(c.endswith("position") for c in skeleton.channels[j])), 0)
+    return below, carrier
+
+
+def path_tables(graph: MotionGraph) -> PathTables:
+    """The graph's synthesis lookups, made once and cached on it."""
+    cached = getattr(graph, "_path_tables", None)
+    if cached is not None:
+        return cached
+    joints = joint_map(graph.skeleton, graph.params.get("mapping"))
+    below, carrier = _joint_tables(graph.skeleton, joints)
+    tables = PathTables(
+        predecessor=_predecessors(graph, np.arange(graph.num_nodes, dtype=np.int64)),
+        continuous=_continuous_edges(graph, np.arange(graph.num_edges, dtype=np.int64)),
+        joints=joints, below=below, carrier=carrier,
+    )  # fmt: skip
+    graph._path_tables = tables
+    return tables
+
+
+def continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
+    """(K,) bool: the edge plays on inside one source sequence (original, slow-down,
+    speed-up, or a step inside an interpolated segment) — no pose jump."""
+    return path_tables(graph).continuous[np.asarray(edges, dtype=np.int64)]
+
+
+def predecessor_nodes(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
+    """(K,) the node one step before each node in its own source sequence (the clip
+    or interpolated segment it belongs to); the node itself when it starts one.
+    Used to continue the entered clip backwards across a transition."""
+    return path_tables(graph).predecessor[np.asarray(nodes, dtype=np.int64)]
 
 
 def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray, allow_jumps: bool = False) -> None:
@@ -145,106 +245,257 @@ def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray,
         raise InputError("edge path does not connect the node path")
 
 
-# ---------------------------------------------------------------- pose description
-
-
-def _relative_pose(graph: MotionGraph, nodes: np.ndarray, pelvis: int):
-    """Node poses with their source placement removed: pelvis world rotation with the
-    node heading taken off (K, 4), pelvis height (K,) (m), plus source-clip world
-    rotations/positions (K, J, 4/3) from FK."""
-    world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes], graph.node_translations[nodes], graph.skeleton.parents)
-    rel = quat.mul(quat.about_y(-graph.node_heading[nodes].astype(np.float64)), world_rot[:, pelvis])
-    return rel, world_pos[:, pelvis, 1].copy(), world_rot, world_pos
-
-
-def _blend_offsets(T: int, cuts: np.ndarray, values: np.ndarray, half_widths: np.ndarray) -> np.ndarray:
-    """(T, ...) sum of offset-blend contributions: for each cut k (a jump between
-    frames cuts[k]−1 and cuts[k]) with difference values[k] (entered − left) and
-    window half-width half_widths[k] (frames): +α·D before the cut, −(1−α)·D after,
-    α = smoothstep across [cut − ½ − h, cut − ½ + h]."""
-    out = np.zeros((T,) + values.shape[1:])
-    t = np.arange(T, dtype=np.float64)
-    for cut, d, h in zip(cuts, values, half_widths):
-        lo, hi = max(0, int(np.floor(cut - 0.5 - h))), min(T, int(np.ceil(cut - 0.5 + h)) + 1)
-        tt = t[lo:hi]
-        alpha = smoothstep((tt - (cut - 0.5) + h) / (2.0 * h))
-        w = np.where(tt < cut, alpha, alpha - 1.0)
-        out[lo:hi] += w.reshape((-1,) + (1,) * d.ndim) * d
-    return out
-
-
-# ---------------------------------------------------------------- IK
-
-
-def two_bone_ik(
-    rotations: np.ndarray, world_rot: np.ndarray, world_pos: np.ndarray, parents: np.ndarray,
-    hip: int, knee: int, ankle: int, toe: int, ankle_target: np.ndarray, toe_target: np.ndarray,
-    lateral: np.ndarray,
-) -> None:
-    """Analytic two-bone IK on frames (K,) of one leg, in place on local `rotations`
-    (K, J, 4), given FK world rotations/positions (K, J, 4/3) of the current pose.
-
-    The knee flexes in the leg's current bend plane (normal hip→knee × knee→ankle;
-    `lateral` (K, 3), the pelvis's right→left axis, for a straight leg) to reach the
-    target hip–ankle distance, then the hip swings the leg by the shortest rotation
-    onto the target. The foot keeps its world orientation except for the shortest
-    swing that points it at `toe_target`. Targets (K, 3) in metres."""
-    a, b, c = world_pos[:, hip], world_pos[:, knee], world_pos[:, ankle]
-    l1 = np.linalg.norm(b - a, axis=-1)
-    l2 = np.linalg.norm(c - b, axis=-1)
-    d = np.clip(np.linalg.norm(ankle_target - a, axis=-1), np.abs(l1 - l2) + 1e-4, l1 + l2 - 1e-4)
-    cos_now = np.sum((a - b) * (c - b), axis=-1) / (l1 * l2)
-    cos_new = (l1 * l1 + l2 * l2 - d * d) / (2.0 * l1 * l2)
-    # Rotating knee→ankle about (knee→ankle) × (knee→hip) = (hip→knee) × (knee→ankle)
-    # by +φ closes the knee angle by φ.
-    n = np.cross(b - a, c - b)
-    nn = np.linalg.norm(n, axis=-1, keepdims=True)
-    n = np.where(nn > 1e-4 * (l1 * l2)[:, None], n / np.maximum(nn, 1e-12), lateral)
-    bend = np.arccos(np.clip(cos_now, -1, 1)) - np.arccos(np.clip(cos_new, -1, 1))
-    knee_delta = quat.from_axis_angle(n, bend)
-    c1 = b + quat.rotate(knee_delta, c - b)
-    swing = quat.between(c1 - a, ankle_target - a)
-    hip_w = quat.mul(swing, world_rot[:, hip])
-    knee_w = quat.mul(swing, quat.mul(knee_delta, world_rot[:, knee]))
-    # Foot: keep its world orientation, then swing ankle→toe onto the toe target.
-    foot = world_pos[:, toe] - world_pos[:, ankle]  # unchanged by moving the leg above it
-    foot_w = quat.mul(quat.between(foot, toe_target - ankle_target), world_rot[:, ankle])
-    parent_w = world_rot[:, parents[hip]]
-    rotations[:, hip] = quat.mul(quat.conjugate(parent_w), hip_w)
-    rotations[:, knee] = quat.mul(quat.conjugate(hip_w), knee_w)
-    rotations[:, ankle] = quat.mul(quat.conjugate(knee_w), foot_w)
-
-
 def contact_spans(flags: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) runs of True in a (T,) bool array."""
     edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
     return list(zip(np.nonzero(edges == 1)[0].tolist(), np.nonzero(edges == -1)[0].tolist()))
 
 
-def foot_corrections(out_pos: np.ndarray, intended: np.ndarray, flags: np.ndarray, blend_frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """World offsets (T, 3) (m) that remove a joint's skate and their weights (T,).
+# ---------------------------------------------------------------- kernels
 
-    out_pos (T, 3): the joint's synthesized trajectory; intended (T, 3): the
+
+@_jit
+def _relative_pose(world_rot, world_pos, heading, pelvis):
+    """Pelvis world rotation with the node heading (K,) (rad) taken off (K, 4), and
+    pelvis height (K,) (m), from source-clip FK (K, J, 4/3)."""
+    K = world_rot.shape[0]
+    rel = np.empty((K, 4))
+    height = np.empty(K)
+    for k in range(K):
+        half = 0.5 * -heading[k]
+        p = world_rot[k, pelvis]
+        rel[k] = _qmul(math.cos(half), 0.0, math.sin(half), 0.0, p[0], p[1], p[2], p[3])
+        height[k] = world_pos[k, pelvis, 1]
+    return rel, height
+
+
+@_jit
+def _blend(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, entered_rel, entered_height,
+           half, half_root):  # fmt: skip
+    """Offset blending at the cuts, in place on rot (T, J, 4), trans (T, J, 3), rel
+    (T, 4) and height (T,). Cut c is a jump between frames cuts[c] − 1 and cuts[c];
+    entered_* are the entered clip's own frame before it (rotations, translations,
+    relative pelvis rotation, pelvis height). The difference D = entered − left is
+    spread over a window of half-width half[c] frames (half_root[c] for the pelvis):
+    +α·D before the cut, −(1−α)·D after, α a smoothstep across the window; rotations
+    as left-multiplied rotation vectors, several windows adding up."""
+    T, J, C = rot.shape[0], rot.shape[1], cuts.shape[0]
+    # The differences entered − left, before any frame changes.
+    d_rot, d_trans = np.zeros((C, J, 3)), np.zeros((C, J, 3))
+    d_rel, d_height = np.empty((C, 3)), np.empty(C)
+    for c in range(C):
+        left = cuts[c] - 1
+        for j in range(J):
+            if below[j]:
+                a, b = entered_rot[c, j], rot[left, j]
+                d_rot[c, j] = _qlog(*_qmul(a[0], a[1], a[2], a[3], b[0], -b[1], -b[2], -b[3]))
+                for i in range(3):
+                    d_trans[c, j, i] = entered_trans[c, j, i] - trans[left, j, i]
+        a, b = entered_rel[c], rel[left]
+        d_rel[c] = _qlog(*_qmul(a[0], a[1], a[2], a[3], b[0], -b[1], -b[2], -b[3]))
+        d_height[c] = entered_height[c] - height[left]
+    off_rot, off_trans = np.zeros((T, J, 3)), np.zeros((T, J, 3))
+    off_rel, off_height = np.zeros((T, 3)), np.zeros(T)
+    for c in range(C):
+        cut = cuts[c]
+        centre = cut - 0.5
+        h = half[c]
+        for t in range(max(0, int(math.floor(centre - h))), min(T, int(math.ceil(centre + h)) + 1)):
+            alpha = _smoothstep((t - centre + h) / (2.0 * h))
+            w = alpha if t < cut else alpha - 1.0
+            for j in range(J):
+                for i in range(3):
+                    off_rot[t, j, i] += w * d_rot[c, j, i]
+                    off_trans[t, j, i] += w * d_trans[c, j, i]
+        h = half_root[c]
+        for t in range(max(0, int(math.floor(centre - h))), min(T, int(math.ceil(centre + h)) + 1)):
+            alpha = _smoothstep((t - centre + h) / (2.0 * h))
+            w = alpha if t < cut else alpha - 1.0
+            for i in range(3):
+                off_rel[t, i] += w * d_rel[c, i]
+            off_height[t] += w * d_height[c]
+    for t in range(T):
+        for j in range(J):
+            if below[j]:
+                q = rot[t, j]
+                rot[t, j] = _qmul(*_qexp(off_rot[t, j, 0], off_rot[t, j, 1], off_rot[t, j, 2]), q[0], q[1], q[2], q[3])
+                for i in range(3):
+                    trans[t, j, i] += off_trans[t, j, i]
+        q = rel[t]
+        rel[t] = _qmul(*_qexp(off_rel[t, 0], off_rel[t, 1], off_rel[t, 2]), q[0], q[1], q[2], q[3])
+        height[t] += off_height[t]
+
+
+@_jit
+def _place(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier):
+    """Re-place each frame, in place on rot (T, J, 4) and trans (T, J, 3): the pelvis
+    world transform from the integrated ground (T, 2) (m) and heading (T,) (rad), the
+    relative pelvis rotation (T, 4) and height (T,), realised at the carrier joint
+    through the source pose (src_rot, src_pos (T, J, 4/3)) between it and the pelvis."""
+    for t in range(rot.shape[0]):
+        half = 0.5 * heading[t]
+        r = rel[t]
+        tw, tx, ty, tz = _qmul(math.cos(half), 0.0, math.sin(half), 0.0, r[0], r[1], r[2], r[3])
+        ca, pe = src_rot[t, carrier], src_rot[t, pelvis]
+        cw, cx, cy, cz = _qmul(ca[0], -ca[1], -ca[2], -ca[3], pe[0], pe[1], pe[2], pe[3])
+        px, py, pz = _qrot(ca[0], -ca[1], -ca[2], -ca[3], *_diff3(src_pos[t, pelvis], src_pos[t, carrier]))
+        qw, qx, qy, qz = _qmul(tw, tx, ty, tz, cw, -cx, -cy, -cz)
+        vx, vy, vz = _qrot(qw, qx, qy, qz, px, py, pz)
+        x, y, z = ground[t, 0] - vx, height[t] - vy, ground[t, 1] - vz
+        if carrier > 0:
+            p = parents[carrier]
+            pr = src_rot[t, p]
+            qw, qx, qy, qz = _qmul(pr[0], -pr[1], -pr[2], -pr[3], qw, qx, qy, qz)
+            x, y, z = _qrot(pr[0], -pr[1], -pr[2], -pr[3], *_diff3((x, y, z), src_pos[t, p]))
+        rot[t, carrier] = (qw, qx, qy, qz)
+        trans[t, carrier] = (x, y, z)
+
+
+@_jit
+def _foot_targets(world_pos, intended, flags, blend_frames, target, weight):
+    """Skate-free targets (T, 3) (m) of one joint and their weights (T,), in place.
+
+    world_pos (T, 3): the joint's synthesized trajectory; intended (T, 3): the
     displacement it should have from frame t−1 to t (its source clip's own motion,
     placed; row 0 unused); flags (T,): contact. Inside a span the offset is the
-    accumulated difference (so the joint moves exactly as intended from the span's
-    first frame); after the span it decays to zero over `blend_frames`."""
-    T = out_pos.shape[0]
+    accumulated difference, so the joint moves exactly as intended from the span's
+    first frame; after the span it decays to zero over `blend_frames`, never into the
+    next span. Returns the offsets (T, 3)."""
+    T = world_pos.shape[0]
     offset = np.zeros((T, 3))
-    weight = np.zeros(T)
-    skate = np.zeros((T, 3))
-    skate[1:] = out_pos[1:] - out_pos[:-1] - intended[1:]
-    for s, e in contact_spans(flags):
-        offset[s:e] = -np.cumsum(np.concatenate([np.zeros((1, 3)), skate[s + 1:e]]), axis=0)
-        weight[s:e] = 1.0
-        k = np.arange(1, blend_frames + 1)
-        k = k[(e - 1 + k < T)]
-        free = ~flags[e - 1 + k]  # never overwrite the next span
-        k = k[free]
-        w = 1.0 - smoothstep(k / (blend_frames + 1.0))
-        offset[e - 1 + k] = offset[e - 1] * w[:, None]
-        weight[e - 1 + k] = w
-    return offset, weight
+    weight[:] = 0.0
+    t = 0
+    while t < T:
+        if not flags[t]:
+            t += 1
+            continue
+        s = t
+        acc = np.zeros(3)
+        offset[s] = -acc
+        weight[s] = 1.0
+        t += 1
+        while t < T and flags[t]:
+            for i in range(3):
+                acc[i] += world_pos[t, i] - world_pos[t - 1, i] - intended[t, i]
+                offset[t, i] = -acc[i]
+            weight[t] = 1.0
+            t += 1
+        last = t - 1
+        for k in range(1, blend_frames + 1):
+            f = last + k
+            if f >= T:
+                break
+            if flags[f]:
+                continue
+            w = 1.0 - _smoothstep(k / (blend_frames + 1.0))
+            for i in range(3):
+                offset[f, i] = offset[last, i] * w
+            weight[f] = w
+    for f in range(T):
+        for i in range(3):
+            target[f, i] = world_pos[f, i] + offset[f, i]
+    return offset
+
+
+@_jit
+def _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankle_target, toe_target, lateral, t):
+    """Analytic two-bone IK of one leg at frame t, in place on local rotations rot
+    (T, J, 4), given FK world rotations/positions (T, J, 4/3) of the current pose.
+
+    The knee flexes in the leg's current bend plane (normal hip→knee × knee→ankle;
+    `lateral` (3,), the pelvis's right→left axis, for a straight leg) to reach the
+    target hip–ankle distance, then the hip swings the leg by the shortest rotation
+    onto the target. The foot keeps its world orientation except for the shortest
+    swing that points it at the toe target. Targets (3,) in metres."""
+    a, b, c = world_pos[t, hip], world_pos[t, knee], world_pos[t, ankle]
+    thigh, shin, reach = _diff3(b, a), _diff3(c, b), _diff3(ankle_target, a)
+    l1, l2 = _norm3(*thigh), _norm3(*shin)
+    d = min(max(_norm3(*reach), abs(l1 - l2) + 1e-4), l1 + l2 - 1e-4)
+    up = _diff3(a, b)
+    cos_now = (up[0] * shin[0] + up[1] * shin[1] + up[2] * shin[2]) / (l1 * l2)
+    cos_new = (l1 * l1 + l2 * l2 - d * d) / (2.0 * l1 * l2)
+    # Rotating knee→ankle about (knee→ankle) × (knee→hip) = (hip→knee) × (knee→ankle)
+    # by +φ closes the knee angle by φ.
+    nx, ny, nz = _cross(*thigh, *shin)
+    nn = _norm3(nx, ny, nz)
+    if nn > 1e-4 * (l1 * l2):
+        m = max(nn, 1e-12)
+        nx, ny, nz = nx / m, ny / m, nz / m
+    else:
+        nx, ny, nz = lateral[0], lateral[1], lateral[2]
+    bend = math.acos(min(max(cos_now, -1.0), 1.0)) - math.acos(min(max(cos_new, -1.0), 1.0))
+    m = _norm3(nx, ny, nz)
+    half = 0.5 * bend
+    s = math.sin(half)
+    kw, kx, ky, kz = math.cos(half), s * (nx / m), s * (ny / m), s * (nz / m)
+    cx, cy, cz = _qrot(kw, kx, ky, kz, *shin)
+    sw, sx, sy, sz = _between(*_diff3((b[0] + cx, b[1] + cy, b[2] + cz), a), *reach)
+    h, k, an = world_rot[t, hip], world_rot[t, knee], world_rot[t, ankle]
+    hw = _qmul(sw, sx, sy, sz, h[0], h[1], h[2], h[3])
+    kd = _qmul(kw, kx, ky, kz, k[0], k[1], k[2], k[3])
+    knw = _qmul(sw, sx, sy, sz, kd[0], kd[1], kd[2], kd[3])
+    # Foot: keep its world orientation, then swing ankle→toe onto the toe target.
+    e, f = world_pos[t, ankle], world_pos[t, toe]
+    fs = _between(*_diff3(f, e), *_diff3(toe_target, ankle_target))
+    fw = _qmul(fs[0], fs[1], fs[2], fs[3], an[0], an[1], an[2], an[3])
+    p = world_rot[t, parents[hip]]
+    rot[t, hip] = _qmul(p[0], -p[1], -p[2], -p[3], hw[0], hw[1], hw[2], hw[3])
+    rot[t, knee] = _qmul(hw[0], -hw[1], -hw[2], -hw[3], knw[0], knw[1], knw[2], knw[3])
+    rot[t, ankle] = _qmul(knw[0], -knw[1], -knw[2], -knw[3], fw[0], fw[1], fw[2], fw[3])
+
+
+@_jit
+def _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, turn_angle, contacts, parents, legs, hips, blend_frames):
+    """Footskate clean-up, in place on local rotations rot (T, J, 4): while a foot's
+    contact flag (contacts (T, 2), left/right) is on, its ankle and toe move only as
+    they moved in their source clip (src_pos − pred_pos (T, J, 3), turned into the
+    output by turn_angle (T,) rad); IK on hip–knee–ankle removes the difference.
+    legs (2, 4): hip, knee, ankle, toe of each side; hips: (left, right) hip joints."""
+    T = rot.shape[0]
+    lateral = np.empty((T, 3))
+    for t in range(T):
+        lx = world_pos[t, hips[0], 0] - world_pos[t, hips[1], 0]
+        ly = world_pos[t, hips[0], 1] - world_pos[t, hips[1], 1]
+        lz = world_pos[t, hips[0], 2] - world_pos[t, hips[1], 2]
+        m = max(_norm3(lx, ly, lz), 1e-12)
+        lateral[t] = (lx / m, ly / m, lz / m)
+    intended = np.empty((T, 3))
+    ankle_target, toe_target = np.empty((T, 3)), np.empty((T, 3))
+    weight, toe_weight = np.empty(T), np.empty(T)
+    for side in range(2):
+        hip, knee, ankle, toe = legs[side, 0], legs[side, 1], legs[side, 2], legs[side, 3]
+        flags = contacts[:, side]
+        if not flags.any():
+            continue
+        _intended(src_pos, pred_pos, turn_angle, ankle, intended)
+        ankle_offset = _foot_targets(world_pos[:, ankle], intended, flags, blend_frames, ankle_target, weight)
+        _intended(src_pos, pred_pos, turn_angle, toe, intended)
+        toe_offset = _foot_targets(world_pos[:, toe], intended, flags, blend_frames, toe_target, toe_weight)
+        for t in range(T):
+            moved = _norm3(ankle_offset[t, 0], ankle_offset[t, 1], ankle_offset[t, 2]) > 1e-6 or _norm3(
+                toe_offset[t, 0], toe_offset[t, 1], toe_offset[t, 2]) > 1e-6
+            if weight[t] > 0.0 and moved:
+                _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankle_target[t], toe_target[t],
+                             lateral[t], t)  # fmt: skip
+
+
+@_jit
+def _intended(src_pos, pred_pos, turn_angle, joint, out):
+    """The displacement (T, 3) (m) joint should make into each frame: its source
+    clip's own, from the predecessor node's pose (T, J, 3) to the node's, turned about
+    +Y by turn_angle (T,) (rad), the frame's placement against its source's. In place."""
+    for t in range(src_pos.shape[0]):
+        half = 0.5 * turn_angle[t]
+        out[t] = _qrot(math.cos(half), 0.0, math.sin(half), 0.0, *_diff3(src_pos[t, joint], pred_pos[t, joint]))
+
+
+@_jit
+def _normalize(rot):
+    for t in range(rot.shape[0]):
+        for j in range(rot.shape[1]):
+            q = rot[t, j]
+            n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+            rot[t, j] = (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
 # ---------------------------------------------------------------- main entry
@@ -273,10 +524,14 @@ def synthesize_motion(
     edge_path = np.asarray(edge_path, dtype=np.int64).reshape(-1)
     check_path(graph, node_path, edge_path, allow_jumps)
     sk = graph.skeleton
-    parents = sk.parents
-    T = node_path.shape[0]
-    table = joint_map(sk, mapping if mapping is not None else graph.params.get("mapping"))
-    pelvis = table["pelvis"]
+    parents = np.ascontiguousarray(sk.parents, dtype=np.int64)
+    tables = path_tables(graph)
+    if mapping is None:
+        joints, below, carrier = tables.joints, tables.below, tables.carrier
+    else:
+        joints = joint_map(sk, mapping)
+        below, carrier = _joint_tables(sk, joints)
+    pelvis = joints["pelvis"]
     rate = float(graph.rate_hz)
 
     # a. Root path.
@@ -288,83 +543,63 @@ def synthesize_motion(
     # b. Poses relative to their source placement.
     rot = graph.node_rotations[node_path].astype(np.float64)
     trans = graph.node_translations[node_path].astype(np.float64)
-    rel, height, src_rot, src_pos = _relative_pose(graph, node_path, pelvis)
-    below = _descendant_mask(parents, pelvis)
-    below[pelvis] = False  # the pelvis itself is blended through `rel`
+    src_rot, src_pos = forward_kinematics(rot, trans, parents)
+    node_heading = graph.node_heading[node_path].astype(np.float64)
+    rel, height = _relative_pose(src_rot, src_pos, node_heading, pelvis)
 
     # c. Offset blending at discontinuities.
-    cont = continuous_edges(graph, edge_path) & (graph.edge_src[edge_path] == node_path[:-1])
+    cont = tables.continuous[edge_path] & (graph.edge_src[edge_path] == node_path[:-1])
     cuts = np.nonzero(~cont)[0] + 1  # frame index right after each jump
     pred = node_path.copy()
-    pred[1:] = np.where(cont, node_path[:-1], predecessor_nodes(graph, node_path[1:]))
+    pred[1:] = np.where(cont, node_path[:-1], tables.predecessor[node_path[1:]])
     if cuts.size and blend_s > 0:
         left, entered = node_path[cuts - 1], pred[cuts]
-        rel_e, height_e, _, _ = _relative_pose(graph, entered, pelvis)
-        # Differences entered − left, as left-multiplied rotation vectors.
-        d_rot = quat_log(quat.mul(graph.node_rotations[entered].astype(np.float64),
-                                  quat.conjugate(graph.node_rotations[left].astype(np.float64))))  # fmt: skip
-        d_rel = quat_log(quat.mul(rel_e, quat.conjugate(rel[cuts - 1])))
-        d_trans = graph.node_translations[entered].astype(np.float64) - trans[cuts - 1]
-        d_height = height_e - height[cuts - 1]
+        entered_rot = graph.node_rotations[entered].astype(np.float64)
+        entered_trans = graph.node_translations[entered].astype(np.float64)
+        e_rot, e_pos = forward_kinematics(entered_rot, entered_trans, parents)
+        rel_e, height_e = _relative_pose(e_rot, e_pos, graph.node_heading[entered].astype(np.float64), pelvis)
         half = np.full(cuts.size, 0.5 * blend_s * rate)
         airborne = ~graph.node_contacts[left].any(axis=1) & ~graph.node_contacts[node_path[cuts]].any(axis=1)
         half_root = np.where(airborne, 0.5 * flight_root_blend_s * rate, half)
-        off_rot = _blend_offsets(T, cuts, d_rot[:, below], half)
-        rot[:, below] = quat.mul(quat_exp(off_rot), rot[:, below])
-        trans[:, below] += _blend_offsets(T, cuts, d_trans[:, below], half)
-        rel = quat.mul(quat_exp(_blend_offsets(T, cuts, d_rel, half_root)), rel)
-        height = height + _blend_offsets(T, cuts, d_height, half_root)
+        _blend(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, rel_e, height_e, half, half_root)
 
-    # Re-place: pelvis world transform from the integrated path, realised at the
-    # "carrier" joint — the pelvis or its nearest ancestor with position channels
-    # (joint 0 otherwise) — so every joint above and below keeps its local values.
-    target_rot = quat.mul(quat.about_y(heading), rel)
-    target_pos = np.stack([ground[:, 0], height, ground[:, 1]], axis=-1)
-    chain = _ancestors(parents, pelvis) + [pelvis]
-    carrier = next((j for j in chain[::-1] if _has_position(sk.channels[j])), 0)
-    c_rot = quat.mul(quat.conjugate(src_rot[:, carrier]), src_rot[:, pelvis])
-    c_pos = quat.inv_rotate(src_rot[:, carrier], src_pos[:, pelvis] - src_pos[:, carrier])
-    carrier_rot = quat.mul(target_rot, quat.conjugate(c_rot))
-    carrier_pos = target_pos - quat.rotate(carrier_rot, c_pos)
-    if carrier > 0:
-        q = parents[carrier]
-        carrier_rot = quat.mul(quat.conjugate(src_rot[:, q]), carrier_rot)
-        carrier_pos = quat.inv_rotate(src_rot[:, q], carrier_pos - src_pos[:, q])
-    rot[:, carrier] = carrier_rot
-    trans[:, carrier] = carrier_pos
+    # Re-place at the integrated root path.
+    _place(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier)
 
     # d. Footskate clean-up.
     if fix_feet:
-        world_rot, world_pos = forward_kinematics(rot, trans, parents)
-        # Source motion of each frame's node since the frame before (its own clip),
-        # rotated into the output by the frame's placement.
-        _, pred_pos = forward_kinematics(graph.node_rotations[pred], graph.node_translations[pred], parents)
-        turn = quat.about_y(heading - graph.node_heading[node_path].astype(np.float64))
-        lateral = world_pos[:, table["l_hip"]] - world_pos[:, table["r_hip"]]
-        lateral /= np.maximum(np.linalg.norm(lateral, axis=-1, keepdims=True), 1e-12)
-        blend_frames = max(1, round(FOOT_BLEND_S * rate))
-        for side, s in enumerate(("l", "r")):
-            hip, knee, ankle, toe = (table[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe"))
-            flags = graph.node_contacts[node_path, side].astype(bool)
-            if not flags.any():
-                continue
-            targets = []
-            for j in (ankle, toe):
-                intended = quat.rotate(turn, src_pos[:, j] - pred_pos[:, j])
-                off, w = foot_corrections(world_pos[:, j], intended, flags, blend_frames)
-                targets.append((world_pos[:, j] + off, off, w))
-            (ank_t, ank_off, w), (toe_t, toe_off, _) = targets
-            moved = np.nonzero((w > 0) & ((np.linalg.norm(ank_off, axis=-1) > 1e-6) | (np.linalg.norm(toe_off, axis=-1) > 1e-6)))[0]
-            if moved.size == 0:
-                continue
-            sub = rot[moved]
-            two_bone_ik(sub, world_rot[moved], world_pos[moved], parents, hip, knee, ankle, toe,
-                        ank_t[moved], toe_t[moved], lateral[moved])  # fmt: skip
-            rot[moved] = sub
+        contacts = np.ascontiguousarray(graph.node_contacts[node_path], dtype=np.bool_)
+        if contacts.any():
+            world_rot, world_pos = forward_kinematics(rot, trans, parents)
+            # Source motion of each frame's node since the frame before (its own clip),
+            # turned into the output by the frame's placement.
+            _, pred_pos = forward_kinematics(graph.node_rotations[pred], graph.node_translations[pred], parents)
+            legs = np.array([[joints[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")],
+                            dtype=np.int64)  # fmt: skip
+            _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, heading - node_heading, contacts, parents, legs,
+                      legs[:, 0].copy(), max(1, round(FOOT_BLEND_S * rate)))  # fmt: skip
 
-    return Motion(sk, quat.normalize(rot), trans, rate, name="synthesized", source="graph path")
+    _normalize(rot)
+    return Motion(sk, rot, trans, rate, name="synthesized", source="graph path")
 
 
 def path_world_positions(motion: Motion) -> np.ndarray:
     """(T, J, 3) world joint positions (m) of a synthesized motion."""
     return motion_fk(motion)[1]
+
+
+def warm_up_synthesis(graph: MotionGraph) -> None:
+    """Synthesize a two-frame path with a cut into a node in contact, so numba
+    compiles (or loads from its cache) every synthesis kernel and the graph's path
+    tables are made now, not on a client's first frames. Once per graph."""
+    if getattr(graph, "_synthesis_warmed", False):
+        return
+    graph._synthesis_warmed = True  # (as the table caches)
+    path_tables(graph)
+    in_contact = np.flatnonzero(graph.node_contacts.any(axis=1))
+    node = int(in_contact[0]) if in_contact.size else 0
+    edge = int(np.flatnonzero(graph.edge_dst == node)[0]) if np.any(graph.edge_dst == node) else -1
+    if edge < 0:
+        return
+    before = (int(graph.edge_src[edge]) + 1) % graph.num_nodes  # not the edge's source: a cut
+    synthesize_motion(graph, np.array([before, node]), np.array([edge]), np.zeros(2), 0.0, allow_jumps=True)

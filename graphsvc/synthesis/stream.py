@@ -55,12 +55,13 @@ class StreamingSynthesizer:
         """Append decided frames; return the frames now final."""
         nodes = np.asarray(nodes, dtype=np.int64)
         edges = np.asarray(arrival_edges, dtype=np.int64)
-        for e in edges[(1 if self.base + self.nodes.size == 0 else 0):]:
-            # The same float64 steps as integrate_path, so the root matches a batch synthesis.
-            g, h = meta.apply_offsets(self.ground[-1], self.heading[-1], self.graph.edge_offset[e].astype(np.float64),
-                                      float(self.graph.edge_heading[e]))  # fmt: skip
-            self.ground.append(g)
-            self.heading.append(h)
+        new = edges[(1 if self.base + self.nodes.size == 0 else 0):]
+        if new.size:
+            # integrate_path, as a batch synthesis does: the same float64 steps, so the same root.
+            g, h = meta.integrate_path(self.ground[-1], self.heading[-1], self.graph.edge_offset[new],
+                                       self.graph.edge_heading[new])  # fmt: skip
+            self.ground.extend(g[1:])
+            self.heading.extend(h[1:].tolist())
         self.nodes = np.concatenate([self.nodes, nodes])
         self.edges = np.concatenate([self.edges, edges])
         until = self.base + self.nodes.size - self.lookahead

@@ -13,6 +13,12 @@ from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.synthesis.path import (
+    _between,
+    _qexp,
+    _qlog,
+    _qmul,
+    _qrot,
+    _two_bone_ik,
     contact_spans,
     path_world_positions,
     predecessor_nodes,
@@ -153,3 +159,51 @@ def test_rejects_a_broken_path(graph):
     g = graph
     with pytest.raises(InputError):
         synthesize_motion(g, np.array([0, 5]), np.array([_edge(g, 0, 1)]), np.zeros(2), 0.0)
+
+
+def test_quaternion_kernels_agree_with_the_quat_module():
+    rng = np.random.default_rng(5)
+    q = quat.normalize(rng.normal(size=(50, 4)))
+    p = quat.normalize(rng.normal(size=(50, 4)))
+    v = rng.normal(size=(50, 3))
+    u = rng.normal(size=(50, 3))
+    u[:3] = -v[:3] * np.array([[0.5], [2.0], [1.0]])  # opposite directions
+    u[3], v[3] = [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]  # opposite along an axis ⟂ x
+    for k in range(50):
+        np.testing.assert_allclose(_qmul(*q[k], *p[k]), quat.mul(q[k], p[k]), atol=1e-15)
+        np.testing.assert_allclose(_qrot(*q[k], *v[k]), quat.rotate(q[k], v[k]), atol=1e-15)
+        back = np.array(_qexp(*_qlog(*q[k])))
+        np.testing.assert_allclose(back * np.sign(back[0] * q[k, 0]), q[k], atol=1e-12)  # q and −q: one rotation
+        turn = np.array(_between(*u[k], *v[k]))
+        np.testing.assert_allclose(np.linalg.norm(turn), 1.0, atol=1e-12)
+        direction = quat.rotate(turn, u[k] / np.linalg.norm(u[k]))
+        np.testing.assert_allclose(direction, v[k] / np.linalg.norm(v[k]), atol=1e-9)
+    assert _qlog(1.0, 0.0, 0.0, 0.0) == (0.0, 0.0, 0.0) and _qexp(0.0, 0.0, 0.0) == (1.0, 0.0, 0.0, 0.0)
+
+
+def test_two_bone_ik_puts_the_ankle_and_toe_on_reachable_targets(graph):
+    g = graph
+    table = joint_map(g.skeleton)
+    parents = g.skeleton.parents.astype(np.int64)
+    rot = quat.normalize(g.node_rotations[[40]].astype(np.float64))  # float32-stored: unit only to ~1e-7
+    trans = g.node_translations[[40]].astype(np.float64)
+    world_rot, world_pos = forward_kinematics(rot, trans, parents)
+    hip, knee, ankle, toe = (table[f"l_{n}"] for n in ("hip", "knee", "ankle", "toe"))
+    ankle_target = world_pos[0, ankle] + [0.04, 0.05, -0.03]  # the knee is bent: within reach
+    toe_dir = world_pos[0, toe] - world_pos[0, ankle] + [0.0, -0.02, 0.01]
+    toe_target = ankle_target + toe_dir
+    lateral = np.array([1.0, 0.0, 0.0])
+    _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankle_target, toe_target, lateral, 0)
+    _, after = forward_kinematics(rot, trans, parents)
+    np.testing.assert_allclose(after[0, ankle], ankle_target, atol=1e-9)
+    foot = after[0, toe] - after[0, ankle]
+    np.testing.assert_allclose(foot / np.linalg.norm(foot), toe_dir / np.linalg.norm(toe_dir), atol=1e-9)
+    np.testing.assert_allclose(after[0, hip], world_pos[0, hip], atol=1e-12)  # only the leg below it moved
+    for a, b in ((hip, knee), (knee, ankle), (ankle, toe)):  # bones keep their lengths
+        length = np.linalg.norm(world_pos[0, b] - world_pos[0, a])
+        np.testing.assert_allclose(np.linalg.norm(after[0, b] - after[0, a]), length, atol=1e-12)
+    right = table["r_ankle"]
+    np.testing.assert_array_equal(after[0, right], world_pos[0, right])
+    # The knee bends the way it bent (a mirrored knee reaches the same ankle position).
+    before_plane, after_plane = (np.cross(p[knee] - p[hip], p[ankle] - p[knee]) for p in (world_pos[0], after[0]))
+    assert before_plane @ after_plane / np.linalg.norm(before_plane) / np.linalg.norm(after_plane) > 0.9
