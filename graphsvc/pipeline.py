@@ -354,13 +354,16 @@ class LiveSession:
     frames behind it, SYNTH_BATCH frames at a time. `lag_frames` is the most a frame
     waits, in graph frames, between its sample arriving and its pose coming out.
     threads: numba threads per step — off by default, since a live server runs many
-    sessions side by side (it turns them on while a session runs alone: `threads`)."""
+    sessions side by side (it turns them on while a session runs alone: `threads`).
+    keep_motion: keep every frame emitted, for `motion()`; that grows by J × 56 bytes a
+    frame (190 MB an hour at 31 joints and 30 Hz), so a server streaming whole matches
+    passes False and keeps only what later frames need."""
 
     DEFAULT_LATENCY_S = 1.0
     SYNTH_BATCH = 3  # 0.1 s at 30 Hz
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
         check_options(options)
         check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
         self.graph = graph
@@ -381,9 +384,9 @@ class LiveSession:
         self.prev: tuple | None = None  # last raw sample (t, acc, position, heading)
         self.next_tick = 0  # index of the next graph-rate sample to produce
         self.samples_in = 0
+        self.keep_motion = keep_motion
         self._rot: list[np.ndarray] = []
         self._trans: list[np.ndarray] = []
-        self._nodes: list[np.ndarray] = []
         self.flushed = False
 
     @property
@@ -453,7 +456,7 @@ class LiveSession:
         nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
         if self.synth is None and not len(nodes):
             return []
-        return self._frames(nodes, self._synthesizer().add(nodes, edges))
+        return self._frames(self._synthesizer().add(nodes, edges))
 
     def _synthesizer(self) -> StreamingSynthesizer:
         """Made when the first frames are final, starting where the search starts its
@@ -465,13 +468,13 @@ class LiveSession:
             self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
         return self.synth
 
-    def _frames(self, nodes, synthesized) -> list[Frame]:
-        self._nodes.append(nodes)
+    def _frames(self, synthesized) -> list[Frame]:
         first, rot, trans = synthesized
         if not len(rot):
             return []
-        self._rot.append(rot)
-        self._trans.append(trans)
+        if self.keep_motion:
+            self._rot.append(rot)
+            self._trans.append(trans)
         out = []
         for k in range(rot.shape[0]):
             f = first + k
@@ -493,10 +496,12 @@ class LiveSession:
         nodes, edges = self.decoder.flush()
         synth = self._synthesizer()
         first, rot, trans = _join(synth.add(nodes, edges), synth.finish())
-        return self._frames(nodes, (first, rot, trans))
+        return self._frames((first, rot, trans))
 
     def motion(self) -> Motion:
-        """Everything emitted so far as one motion."""
+        """Everything emitted so far as one motion (a session made with keep_motion)."""
+        if not self.keep_motion:
+            raise InputError("this live session was made with keep_motion=False: it keeps no frames for motion()")
         J = self.graph.skeleton.num_joints
         rot = np.concatenate(self._rot) if self._rot else np.zeros((0, J, 4))
         trans = np.concatenate(self._trans) if self._trans else np.zeros((0, J, 3))

@@ -117,6 +117,25 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec):
     np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
 
 
+def test_a_live_session_keeping_no_motion_emits_the_same_frames(graph, rec):
+    opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5)
+    sessions = [LiveSession(graph, opts, rec.sensor_names, keep_motion=keep) for keep in (True, False)]
+    frames = [[], []]
+    for k in range(rec.num_samples):
+        sample = float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k], rec.heading[k]
+        for session, out in zip(sessions, frames):
+            out += session.push(*sample)
+    for session, out in zip(sessions, frames):
+        out += session.flush()
+    assert len(frames[0]) == rec.num_samples
+    for kept, lean in zip(*frames):
+        assert (kept.index, kept.node, kept.label) == (lean.index, lean.node, lean.label)
+        np.testing.assert_array_equal(kept.rotations, lean.rotations)
+        np.testing.assert_array_equal(kept.translations, lean.translations)
+    with pytest.raises(InputError, match="keep_motion"):
+        sessions[1].motion()
+
+
 def test_paths_start_where_the_track_starts_when_its_first_samples_lack_it(graph, rec):
     # The tracker's first samples are missing (and the track is far from the origin):
     # batch and live reconstructions both start where the track first reports, and agree.

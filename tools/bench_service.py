@@ -9,12 +9,21 @@ Prints one JSON object per level:
     streams        concurrent live streams
     p50_ms, p99_ms latency from sending a sample to receiving the pose it released,
                    i.e. beyond the configured decoder lag (PoseFrame.input_sample_index)
+    p99_settled_ms p99 of the samples sent after the first SETTLE_S seconds: all streams
+                   start together, and a search's first samples keep most nodes live
+                   (a beam search's too), so the start is a burst the rest is not
     dropped        frames that never came back (samples sent − frames received, plus
                    the frames of streams that failed to start)
     late_sends     samples the clients sent more than one period late (client overload:
                    the latencies are then not the server's alone)
     errors         failed streams by status code
     server_rss_mb  peak resident memory of the server process during the level, MiB
+    server_cores   the server process's CPU time during the level's sending, in cores
+                   (CPU seconds a second)
+    machine_cores  the whole machine's busy CPU time over the same span, in cores; the
+                   clients run on the same machine, so server_cores near the machine's
+                   core count minus the clients' share means the machine, not the
+                   server alone, is the limit
 
 Input: each stream plays a random walk through the graph's own edges (their sensor
 metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without
@@ -40,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+SETTLE_S = 3.0  # p99_settled_ms leaves out the samples sent in a level's first seconds
 sys.path.insert(0, str(ROOT))
 
 
@@ -107,15 +117,17 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
         sender = threading.Thread(target=pace, daemon=True)
         sender.start()
         error = None
-        latencies, frames = [], 0
+        latencies, frames, released_by = [], 0, []
         try:
             result = C.run_stream(conn, feed, timeout_s=seconds + 120)
             latencies, frames = result.latencies_ms, len(result.frames)
+            released_by = [f.input_sample_index for f in result.frames]
         except C.ServiceError as exc:
             error = exc.code.name if exc.code is not None else "UNKNOWN"
         stop.set()
         sender.join()
         results.put({"stream": i, "sent": len(feed.sent_at), "frames": frames, "latencies_ms": latencies,
+                     "released_by": released_by,
                      "late_sends": late, "error": error, "expected": samples})  # fmt: skip
 
     threads = [threading.Thread(target=run, args=(i,)) for i in stream_ids]
@@ -124,6 +136,21 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
     for t in threads:
         t.join()
     conn.close()
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time (s) of a process so far."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def machine_busy_seconds() -> float:
+    """Busy CPU time (s) of all cores so far (/proc/stat: everything but idle and iowait)."""
+    values = [int(x) for x in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    return (sum(values[:8]) - values[3] - values[4]) / os.sysconf("SC_CLK_TCK")
 
 
 def rss_mb(pid: int) -> float:
@@ -148,16 +175,24 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         p.start()
     peak = 0.0
     collected = []
+    cpu = []  # (wall, server CPU, machine busy) when the sending starts and ends
     while len(collected) < streams:
         peak = max(peak, rss_mb(server_pid)) if server_pid else peak
+        now = time.time()
+        if server_pid and len(cpu) < 2 and now >= start_at + (seconds if cpu else 0.0):
+            cpu.append((now, cpu_seconds(server_pid), machine_busy_seconds()))
         try:
             collected.append(results.get(timeout=0.5))
         except queue.Empty:
             if not any(p.is_alive() for p in procs) and results.empty():
                 break
+    if len(cpu) == 1:  # every stream ended within the last poll
+        cpu.append((time.time(), cpu_seconds(server_pid), machine_busy_seconds()))
     for p in procs:
         p.join()
     latencies = np.concatenate([np.asarray(r["latencies_ms"], float) for r in collected]) if collected else np.zeros(0)
+    released_by = np.concatenate([np.asarray(r["released_by"], float) for r in collected]) if collected else np.zeros(0)
+    settled = latencies[np.isfinite(latencies) & (released_by >= SETTLE_S * rate_hz)]
     latencies = latencies[np.isfinite(latencies)]
     errors: dict[str, int] = {}
     for r in collected:
@@ -168,10 +203,13 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "streams": streams,
         "p50_ms": round(float(np.percentile(latencies, 50)), 3) if latencies.size else None,
         "p99_ms": round(float(np.percentile(latencies, 99)), 3) if latencies.size else None,
+        "p99_settled_ms": round(float(np.percentile(settled, 99)), 3) if settled.size else None,
         "dropped": int(expected - sum(r["frames"] for r in collected)),
         "late_sends": int(sum(r["late_sends"] for r in collected)),
         "errors": errors,
         "server_rss_mb": round(peak, 1) if server_pid else None,
+        "server_cores": round((cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
+        "machine_cores": round((cpu[1][2] - cpu[0][2]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "seconds": seconds,
         "rate_hz": rate_hz,
     }

@@ -297,7 +297,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
         options = convert.options_from_proto(config.options, "config.options")
         try:
-            session = LiveSession(graph, options, names)
+            session = LiveSession(graph, options, names, keep_motion=False)  # the client keeps the frames
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise convert.FieldError("config.options", str(exc)) from None
         yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(

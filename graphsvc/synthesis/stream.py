@@ -104,4 +104,6 @@ class StreamingSynthesizer:
             self.nodes, self.edges = self.nodes[drop:], self.edges[drop:]
             del self.ground[:drop], self.heading[:drop]
             self.base += drop
-        return first, motion.rotations[lo:hi], motion.translations[lo:hi]
+        # Copies: a view would keep the whole window's arrays alive with the frames
+        # (135 kB a frame held by a session that keeps its motion, instead of 1.7).
+        return first, motion.rotations[lo:hi].copy(), motion.translations[lo:hi].copy()
