@@ -20,10 +20,9 @@ Prints one JSON object per level:
     server_rss_mb  peak resident memory of the server process during the level, MiB
     server_cores   the server process's CPU time during the level's sending, in cores
                    (CPU seconds a second)
-    machine_cores  the whole machine's busy CPU time over the same span, in cores; the
-                   clients run on the same machine, so server_cores near the machine's
-                   core count minus the clients' share means the machine, not the
-                   server alone, is the limit
+    machine_cores  the whole machine's busy CPU time over the same span, in cores: the
+                   clients run on the same machine, so when this nears the core count
+                   the machine, not the server alone, is the limit
 
 Input: each stream plays a random walk through the graph's own edges (their sensor
 metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without

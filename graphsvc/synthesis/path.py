@@ -445,6 +445,16 @@ def _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankl
 
 
 @_jit
+def _intended(src_pos, pred_pos, turn_angle, joint, out):
+    """The displacement (T, 3) (m) joint should make into each frame: its source
+    clip's own, from the predecessor node's pose (T, J, 3) to the node's, turned about
+    +Y by turn_angle (T,) (rad), the frame's placement against its source's. In place."""
+    for t in range(src_pos.shape[0]):
+        half = 0.5 * turn_angle[t]
+        out[t] = _qrot(math.cos(half), 0.0, math.sin(half), 0.0, *_diff3(src_pos[t, joint], pred_pos[t, joint]))
+
+
+@_jit
 def _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, turn_angle, contacts, parents, legs, hips, blend_frames):
     """Footskate clean-up, in place on local rotations rot (T, J, 4): while a foot's
     contact flag (contacts (T, 2), left/right) is on, its ankle and toe move only as
@@ -477,16 +487,6 @@ def _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, turn_angle, contacts
             if weight[t] > 0.0 and moved:
                 _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankle_target[t], toe_target[t],
                              lateral[t], t)  # fmt: skip
-
-
-@_jit
-def _intended(src_pos, pred_pos, turn_angle, joint, out):
-    """The displacement (T, 3) (m) joint should make into each frame: its source
-    clip's own, from the predecessor node's pose (T, J, 3) to the node's, turned about
-    +Y by turn_angle (T,) (rad), the frame's placement against its source's. In place."""
-    for t in range(src_pos.shape[0]):
-        half = 0.5 * turn_angle[t]
-        out[t] = _qrot(math.cos(half), 0.0, math.sin(half), 0.0, *_diff3(src_pos[t, joint], pred_pos[t, joint]))
 
 
 @_jit
