@@ -4,7 +4,7 @@ object per run.
 The input is a walk through the graph itself: at each sample a random outgoing edge
 (dead ends jump to a random node), the edge's readings plus white noise (0.3 m/s²),
 and, for mode APO, the walk's own ground track and heading (its edges' offsets and
-turns, integrated as the search integrates them) plus tracker noise (σ 0.1 m, 10°).
+turns, integrated as a synthesis integrates them) plus tracker noise (σ 0.1 m, 10°).
 So positions agree with the readings, as they do in a real recording; the generated
 G_E input of `bench_viterbi.py` is random, on which any beam is meaningless.
 
@@ -36,20 +36,15 @@ def graph_walk(graph, samples: int, seed: int = 0) -> tuple[np.ndarray, np.ndarr
     readings and a noisy track."""
     from bench_service import random_walk
 
+    from graphsvc.graph.metadata import integrate_path
+
     rng = np.random.default_rng(seed)
     node, edges = random_walk(graph, samples - 1, rng)
     nodes = np.concatenate([[node], graph.edge_dst[edges]]).astype(np.int64)
     acc = np.empty((samples,) + graph.edge_acc.shape[1:], np.float32)
     acc[0] = graph.edge_acc[graph.incoming[node]] if graph.incoming[node + 1] > graph.incoming[node] else 0.0
     acc[1:] = graph.edge_acc[edges]
-    position = np.zeros((samples, 2))
-    heading = np.zeros(samples)
-    x = z = h = 0.0
-    for k, e in enumerate(edges, start=1):  # the track, integrated as the search integrates it
-        ox, oz = (float(v) for v in graph.edge_offset[e])
-        c, s = np.cos(h), np.sin(h)
-        x, z, h = x + c * ox + s * oz, z - s * ox + c * oz, h + float(graph.edge_heading[e])
-        position[k], heading[k] = (x, z), h
+    position, heading = integrate_path(np.zeros(2), 0.0, graph.edge_offset[edges], graph.edge_heading[edges])
     acc += rng.normal(0.0, 0.3, acc.shape).astype(np.float32)
     position += rng.normal(0.0, 0.1, position.shape)
     heading += rng.normal(0.0, np.radians(10.0), samples)

@@ -84,17 +84,16 @@ def local_offsets(
 def apply_offsets(ground: np.ndarray, heading: float, offset: np.ndarray, dheading: float) -> tuple[np.ndarray, float]:
     """Inverse of `local_offsets` for one step: the destination's ground position
     and heading given the source's and an edge's offsets."""
-    c, s = np.cos(heading), np.sin(heading)
-    world = np.array([c * offset[0] + s * offset[1], -s * offset[0] + c * offset[1]])
-    return ground + world, float(quat.wrap_angle(heading + dheading))
+    g, h = integrate_path(ground, heading, np.asarray(offset, np.float64)[None], np.array([dheading], np.float64))
+    return g[1], float(h[1])
 
 
 def integrate_path(
     ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets:
-    `apply_offsets` step by step (the same float64 arithmetic, compiled, since a live
-    stream integrates a few edges many times a second)."""
+    """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets,
+    `apply_offsets` step by step (compiled: a live stream integrates a few edges many
+    times a second)."""
     K = offsets.shape[0]
     ground = np.empty((K + 1, 2))
     heading = np.empty(K + 1)

@@ -13,25 +13,35 @@ import numpy as np
 from graphsvc.motion.skeleton import Motion
 
 
+@numba.njit(cache=True)
+def qmul4(aw, ax, ay, az, bw, bx, by, bz):
+    """a ⊗ b on (w, x, y, z) components, as four floats (the formula of `quat.mul`)."""
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def qrot3(w, x, y, z, vx, vy, vz):
+    """v rotated by the unit quaternion (w, x, y, z), as three floats: v + w·t + u × t,
+    t = 2·u × v (the formula of `quat.rotate`)."""
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx)
+
+
 @numba.njit(cache=True, inline="always")
 def qmul(a, b, out):
     """out = a ⊗ b for length-4 (w, x, y, z) arrays; out may not alias a or b."""
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+    out[0], out[1], out[2], out[3] = qmul4(a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3])
 
 
 @numba.njit(cache=True, inline="always")
 def qrot(q, v, out):
     """out = q · v · q* for a length-4 quaternion and a length-3 vector."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    tx = 2.0 * (y * v[2] - z * v[1])
-    ty = 2.0 * (z * v[0] - x * v[2])
-    tz = 2.0 * (x * v[1] - y * v[0])
-    out[0] = v[0] + w * tx + (y * tz - z * ty)
-    out[1] = v[1] + w * ty + (z * tx - x * tz)
-    out[2] = v[2] + w * tz + (x * ty - y * tx)
+    out[0], out[1], out[2] = qrot3(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
 
 
 @numba.njit(cache=True, nogil=True)

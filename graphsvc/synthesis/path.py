@@ -49,6 +49,8 @@ from graphsvc.graph.model import (
 )
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
+from graphsvc.motion.kinematics import qmul4 as _qmul
+from graphsvc.motion.kinematics import qrot3 as _qrot
 from graphsvc.motion.skeleton import Motion
 
 FOOT_BLEND_S = 0.1  # blend-out of the foot pinning after a contact span (s)
@@ -57,27 +59,10 @@ FOOT_BLEND_S = 0.1  # blend-out of the foot pinning after a contact span (s)
 # ---------------------------------------------------------------- quaternion scalars
 #
 # (w, x, y, z) as four floats, the same formulas and operation order as `quat`, so the
-# kernels give what the vectorised helpers give.
+# kernels give what the vectorised helpers give (products and rotations: `kinematics`).
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 _jit_scalar = numba.njit(cache=True, error_model="numpy")
-
-
-@_jit_scalar
-def _qmul(aw, ax, ay, az, bw, bx, by, bz):
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)  # fmt: skip
-
-
-@_jit_scalar
-def _qrot(w, x, y, z, vx, vy, vz):
-    """v rotated by the unit quaternion (w, x, y, z): v + w·t + u × t, t = 2·u × v."""
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx)
 
 
 @_jit_scalar
@@ -160,6 +145,8 @@ class PathTables:
 
 
 def _continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
+    """(K,) bool: the edge plays on inside one source sequence (original, slow-down,
+    speed-up, or a step inside an interpolated segment) — no pose jump."""
     kind = graph.edge_kind[edges]
     src, dst = graph.edge_src[edges], graph.edge_dst[edges]
     inside_segment = (graph.node_kind[src] == NODE_INTERP) & (graph.node_kind[dst] == NODE_INTERP) & (dst == src + 1)
@@ -214,12 +201,6 @@ def path_tables(graph: MotionGraph) -> PathTables:
     )  # fmt: skip
     graph._path_tables = tables
     return tables
-
-
-def continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
-    """(K,) bool: the edge plays on inside one source sequence (original, slow-down,
-    speed-up, or a step inside an interpolated segment) — no pose jump."""
-    return path_tables(graph).continuous[np.asarray(edges, dtype=np.int64)]
 
 
 def predecessor_nodes(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
