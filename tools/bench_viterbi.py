@@ -10,9 +10,15 @@ fixed-lag streaming decoder as a server runs it (serial kernels, per-push latenc
 with numba threads (one stream using both cores).
 With --graph, modes A and APO also run on that built graph ("built A", "built APO"),
 fed a noisy random walk through its own edge readings (tools/bench_service.py's).
-One JSON object per run. Each run is its own process, so peak RSS is its own.
+The "beam" runs search G_E with the beam (width --beam, default 10) on an input a
+graph can explain: a noisy walk through G_E itself, readings and ground track
+(`bench_beam.graph_walk`; on the random input no beam can cut safely). "beam A" and
+"beam APO" also run the exact search and the exact stream on the same input in the
+same process and report whether the beam found the exact search's path
+(`same_nodes_as_exact`: the share of samples on it); "beam hour" is a one-hour walk,
+beam only. One JSON object per run. Each run is its own process, so peak RSS is its own.
 
-Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE]
+Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE] [--beam 10]
 """
 
 from __future__ import annotations
@@ -171,6 +177,46 @@ def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> d
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
 
 
+def run_beam(mode: str, beam: float, samples: int) -> dict:
+    """The beam search on G_E against the exact one, both on a walk through G_E
+    (`bench_beam.run`: a batch search with numba threads, then a fixed-lag stream with
+    serial kernels, 1 s lag)."""
+    import bench_beam
+
+    from graphsvc.search.viterbi import warm_up_search
+
+    g = generated_graph(100_686, 317_600)
+    warm_up_search(g, threads=True)
+    warm_up_search(g, threads=False)
+    exact, exact_path = bench_beam.run(g, mode, None, samples, lag=30)
+    row, _ = bench_beam.run(g, mode, beam, samples, lag=30, exact_path=exact_path)
+    return {**row, "seconds": row["batch_seconds"], "ms_per_sample": round(1000 * row["batch_seconds"] / samples, 3),
+            "exact_seconds": exact["batch_seconds"], "exact_stream_ms_per_sample": exact["stream_ms_per_sample"],
+            "same_cost_as_exact": row["cost"] == exact["cost"]}  # fmt: skip
+
+
+def run_beam_hour(beam: float, samples: int) -> dict:
+    """The beam search (APO, batch, numba threads) over a long walk through G_E: time and
+    peak memory (the exact search is not run: it takes minutes)."""
+    import bench_beam
+
+    from graphsvc.search.viterbi import Weights, viterbi_search, warm_up_search
+
+    g = generated_graph(100_686, 317_600)
+    _, acc, position, heading = bench_beam.graph_walk(g, samples)
+    weights = Weights(0.5, 1, 1)
+    warm_up_search(g, threads=True)
+    viterbi_search(g, acc[:600], position[:600], heading[:600], weights, beam=beam)  # the beam's tables, the ring
+    t0 = time.perf_counter()
+    r = viterbi_search(g, acc, position, heading, weights, beam=beam)
+    seconds = time.perf_counter() - t0
+    return {"mode": f"APO, long input, beam {beam:g}", "beam": beam, "input": "graph walk", "nodes": g.num_nodes,
+            "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),
+            "ms_per_sample": round(1000 * seconds / samples, 4),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "compression": round(r.compression, 1), "peak_entries": r.peak_entries}  # fmt: skip
+
+
 RUNS = {
     "A": lambda a: run("A", 100_686, 317_600, 720),
     "APO": lambda a: run("APO", 100_686, 317_600, 720),
@@ -179,6 +225,9 @@ RUNS = {
     "reference": lambda a: run_reference(7_577, 9_433, 720),
     "stream": lambda a: run_stream(100_686, 317_600, 720),
     "stream threads": lambda a: run_stream(100_686, 317_600, 720, threads=True),
+    "beam A": lambda a: run_beam("A", a.beam, 720),
+    "beam APO": lambda a: run_beam("APO", a.beam, 720),
+    "beam hour": lambda a: run_beam_hour(a.beam, a.hour_samples),
     "built A": lambda a: {**run("A", 0, 0, 720, a.graph), "mode": "built A", "graph": a.graph},
     "built APO": lambda a: {**run("APO", 0, 0, 720, a.graph), "mode": "built APO", "graph": a.graph},
 }
@@ -189,6 +238,7 @@ def main() -> None:
     parser.add_argument("--only", choices=sorted(RUNS))
     parser.add_argument("--hour-samples", type=int, default=108_000)
     parser.add_argument("--graph", help="a built graph file for the 'built A' and 'built APO' runs")
+    parser.add_argument("--beam", type=float, default=10.0, help="the beam runs' width (default 10)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -198,7 +248,8 @@ def main() -> None:
     if any(n.startswith("built") for n in names) and not args.graph:
         parser.error("the 'built' runs need --graph FILE")
     for name in names:
-        cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples)]
+        cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples),
+               "--beam", str(args.beam)]
         if args.graph:
             cmd += ["--graph", args.graph]
         out = subprocess.run(cmd, capture_output=True, text=True)
