@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
-"""Probe: how far a positioned search's root and heading stray from the truth over a long
-input, exact search against beams.
+"""Probe: how far a search's path, root and heading stray from the truth over a long input,
+exact search against beams.
 
 The input is `bench_beam.graph_walk`'s noisy walk through a graph (the generated G_E of
-`bench_viterbi.py`, or --graph FILE), mode APO (weights 0.5, 1, 1), batch with numba
-threads. Each search's path is integrated from the first measured position and heading
-(as synthesis does) and compared with the walk's noise-free track. One JSON object per
+`bench_viterbi.py`, or --graph FILE), mode APO (weights 0.5, 1, 1) or A (1, 0, 0:
+accelerometers alone), batch with numba threads. Each search's path is integrated from
+the first measured position and heading (as synthesis does) and compared with the
+walk's noise-free track. One JSON object per
 search: seconds, cost, mean root error (m) overall and by quarter of the input, mean
 heading error (deg), the share of samples on the walk's nodes, and, for beams, on the
 exact search's path (when it ran).
 
     python tools/probe_beam_drift.py --samples 108000 --beams 10   # about 8 minutes
+    python tools/probe_beam_drift.py --samples 108000 --beams 10 --mode A
 """
 
 from __future__ import annotations
@@ -36,25 +38,28 @@ def main() -> None:
     parser.add_argument("--graph", help="a built graph file (default: bench_viterbi.py's generated G_E graph)")
     parser.add_argument("--samples", type=int, default=108_000)
     parser.add_argument("--beams", default="10", help="beam widths, comma-separated")
+    parser.add_argument("--mode", choices=("A", "APO"), default="APO")
     parser.add_argument("--no-exact", action="store_true", help="skip the exact search")
     args = parser.parse_args()
     graph = bench_beam.benchmark_graph(args.graph)
     walk_nodes, acc, position, heading = bench_beam.graph_walk(graph, args.samples)
     _, _, true_position, true_heading = bench_beam.graph_walk(graph, args.samples, noise=False)
-    weights = Weights(0.5, 1, 1)
-    viterbi_search(graph, acc[:600], position[:600], heading[:600], weights, beam=1.0)  # compile, tables
+    weights = Weights(0.5, 1, 1) if args.mode == "APO" else Weights(1, 0, 0)
+    measured = (position, heading) if args.mode == "APO" else (None, None)
+    viterbi_search(graph, acc[:600], *(None if m is None else m[:600] for m in measured), weights,
+                   beam=1.0)  # compile, tables  # fmt: skip
     searches = ([] if args.no_exact else [None]) + [float(b) for b in args.beams.split(",")]
     exact_path = None
     quarters = np.linspace(0, args.samples, 5).astype(int)
     for beam in searches:
         t0 = time.perf_counter()
-        r = viterbi_search(graph, acc, position, heading, weights, beam=beam)
+        r = viterbi_search(graph, acc, *measured, weights, beam=beam)
         seconds = time.perf_counter() - t0
         track, turn = integrate_path(position[0], heading[0], graph.edge_offset[r.edge_path],
                                      graph.edge_heading[r.edge_path])  # fmt: skip
         root_err = np.linalg.norm(track - true_position, axis=1)
         heading_err = np.abs((turn - true_heading + np.pi) % (2 * np.pi) - np.pi)
-        row = {"search": "exact" if beam is None else f"beam {beam:g}", "nodes": graph.num_nodes,
+        row = {"search": "exact" if beam is None else f"beam {beam:g}", "mode": args.mode, "nodes": graph.num_nodes,
                "samples": args.samples, "seconds": round(seconds, 1), "cost": round(r.cost, 1),
                "root_err_m": round(float(root_err.mean()), 3),
                "root_err_m_by_quarter": [round(float(root_err[a:b].mean()), 3) for a, b in zip(quarters, quarters[1:])],
