@@ -124,7 +124,6 @@ def _smoothstep(x):
     return x * x * (3.0 - 2.0 * x)
 
 
-
 # ---------------------------------------------------------------- path structure
 
 
@@ -531,13 +530,14 @@ def synthesize_motion(
     # c. Offset blending at discontinuities.
     cont = tables.continuous[edge_path] & (graph.edge_src[edge_path] == node_path[:-1])
     cuts = np.nonzero(~cont)[0] + 1  # frame index right after each jump
-    pred = node_path.copy()
-    pred[1:] = np.where(cont, node_path[:-1], tables.predecessor[node_path[1:]])
+    # The node one step before each frame's node in its own clip: the previous frame's
+    # node where the path plays on, at a cut the entered clip's own frame before it.
+    entered = tables.predecessor[node_path[cuts]]
+    entered_rot = graph.node_rotations[entered].astype(np.float64)
+    entered_trans = graph.node_translations[entered].astype(np.float64)
+    e_rot, e_pos = forward_kinematics(entered_rot, entered_trans, parents)
     if cuts.size and blend_s > 0:
-        left, entered = node_path[cuts - 1], pred[cuts]
-        entered_rot = graph.node_rotations[entered].astype(np.float64)
-        entered_trans = graph.node_translations[entered].astype(np.float64)
-        e_rot, e_pos = forward_kinematics(entered_rot, entered_trans, parents)
+        left = node_path[cuts - 1]
         rel_e, height_e = _relative_pose(e_rot, e_pos, graph.node_heading[entered].astype(np.float64), pelvis)
         half = np.full(cuts.size, 0.5 * blend_s * rate)
         airborne = ~graph.node_contacts[left].any(axis=1) & ~graph.node_contacts[node_path[cuts]].any(axis=1)
@@ -553,8 +553,11 @@ def synthesize_motion(
         if contacts.any():
             world_rot, world_pos = forward_kinematics(rot, trans, parents)
             # Source motion of each frame's node since the frame before (its own clip),
-            # turned into the output by the frame's placement.
-            _, pred_pos = forward_kinematics(graph.node_rotations[pred], graph.node_translations[pred], parents)
+            # turned into the output by the frame's placement: the predecessors' poses
+            # are the previous frames' source poses, and the entered frames' at cuts.
+            pred_pos = np.empty_like(src_pos)
+            pred_pos[0], pred_pos[1:] = src_pos[0], src_pos[:-1]
+            pred_pos[cuts] = e_pos
             legs = np.array([[joints[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")],
                             dtype=np.int64)  # fmt: skip
             _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, heading - node_heading, contacts, parents, legs,
