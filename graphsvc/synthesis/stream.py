@@ -2,9 +2,10 @@
 
 A frame's pose depends on the path around it: a blend centred on a cut reaches half
 its window before the cut, and the foot clean-up accumulates from the start of the
-contact span. So a frame is final once the path is known `lookahead` frames past it,
-and each update re-synthesizes a trailing stretch that starts early enough to hold
-those influences (the open contact spans, at most `max_back_s`), from the root
+contact span (and fades out over a short window after it). So a frame is final once the
+path is known `lookahead` frames past it, and each update re-synthesizes a trailing
+stretch that starts early enough to hold those influences (the contact spans open or
+fading out, at most `max_back_s`), from the root
 position and heading the stream has reached there. Frames come out once, in order.
 """
 
@@ -16,7 +17,7 @@ import numpy as np
 
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
-from graphsvc.synthesis.path import synthesize_motion
+from graphsvc.synthesis.path import FOOT_BLEND_S, path_tables, synthesize_motion
 
 
 def lookahead_frames(rate_hz: float, blend_s: float = 0.7) -> int:
@@ -43,6 +44,7 @@ class StreamingSynthesizer:
         # adds up to batch − 1 frames of delay.
         self.batch = max(1, int(batch))
         self.max_back = int(math.ceil(max_back_s * rate))
+        self.foot_blend = max(1, round(FOOT_BLEND_S * rate))  # synthesis' blend-out after a contact span
         # The trailing stretch of the path still needed: frames base, base+1, ...
         self.base = 0
         self.nodes = np.zeros(0, np.int64)
@@ -73,6 +75,24 @@ class StreamingSynthesizer:
     def finish(self):
         return self._synthesize(self.base + self.nodes.size)
 
+    def _before_cuts(self, start: int, lo: int) -> int:
+        """Move a window's first frame back before every cut whose blend reaches it: a
+        cut blends the frames up to half a window after it, and the window must hold
+        the frame before the cut to blend them as a whole-path synthesis does."""
+        b = self.base
+        half = int(math.ceil(0.5 * self.blend_s * self.graph.rate_hz))
+        continuous = path_tables(self.graph).continuous
+        while start > lo:
+            t = np.arange(max(lo + 1, start - half), start + 1)  # frames a cut at t would reach start from
+            if t.size == 0:
+                break
+            e = self.edges[t - b]
+            cut = ~continuous[e] | (self.graph.edge_src[e] != self.nodes[t - 1 - b])
+            if not cut.any():
+                break
+            start = int(t[np.argmax(cut)]) - 1  # the earliest such cut, from its frame before
+        return start
+
     def _synthesize(self, until: int):
         J = self.graph.skeleton.num_joints
         if until <= self.done:
@@ -80,15 +100,20 @@ class StreamingSynthesizer:
         b = self.base
         start = max(b, self.done - self.lookahead - 1)
         if self.fix_feet and self.done > 0:
-            # Reach back to where the contact spans open at `done` began.
+            # Reach back to where the contact spans still acting at `done` began: those
+            # open there, and those that ended in the blend-out before it (their offset,
+            # accumulated over the whole span, is still being faded out).
             lo = max(b, self.done - self.max_back)
             contacts = self.graph.node_contacts[self.nodes[lo - b : self.done + 1 - b]]
+            fade = self.foot_blend + 1
             for side in range(2):
-                run = contacts[::-1, side]
-                if run[0]:
+                recent = np.flatnonzero(contacts[-fade:, side])
+                if recent.size:
+                    last = contacts.shape[0] - min(fade, contacts.shape[0]) + int(recent[-1])
+                    run = contacts[last::-1, side]
                     length = run.size if run.all() else int(np.argmin(run))
-                    start = min(start, self.done + 1 - length)
-            start = max(lo, start)
+                    start = min(start, lo + last + 1 - length)
+            start = max(lo, self._before_cuts(start, lo))
         k = start - b
         motion = synthesize_motion(
             self.graph, self.nodes[k:], self.edges[k + 1 :], self.ground[k], self.heading[k],
