@@ -70,6 +70,7 @@ def _cmd_demo(args) -> int:
 
 def _cmd_build(args) -> int:
     from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
+    from graphsvc.graph.connectivity import connectivity, format_connectivity
     from graphsvc.graph.file import save_graph
     from graphsvc.graph.model import format_summary, summary
     from graphsvc.motion.joints import load_mapping_file
@@ -81,8 +82,8 @@ def _cmd_build(args) -> int:
     augment = tuple(a for a in (args.augment or "").split(",") if a)
     mapping = load_mapping_file(args.mapping) if args.mapping else None
     options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
-                           interp=not args.no_interp, augment=augment, mapping=mapping, jobs=args.jobs,
-                           progress=progress)  # fmt: skip
+                           interp=not args.no_interp, bridges=not args.no_bridges, augment=augment, mapping=mapping,
+                           jobs=args.jobs, progress=progress)  # fmt: skip
     t0 = time.perf_counter()
     motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
     load_s = time.perf_counter() - t0
@@ -92,6 +93,9 @@ def _cmd_build(args) -> int:
     timings = {"load_s": load_s, **report.timings, "write_s": time.perf_counter() - t0}
     print(f"wrote {out}")
     print(format_summary(summary(graph, out.stat().st_size)))
+    t0 = time.perf_counter()
+    print(format_connectivity(connectivity(graph)))
+    timings["connectivity_s"] = time.perf_counter() - t0
     if report.still_clips:
         print(f"{len(report.still_clips)} clips without foot-contact changes get transition candidates every "
               f"{options.still_clip_step_s:g} s")  # fmt: skip
@@ -100,13 +104,19 @@ def _cmd_build(args) -> int:
 
 
 def _cmd_info(args) -> int:
+    from graphsvc.graph.connectivity import connectivity, format_connectivity
     from graphsvc.graph.file import load_graph
     from graphsvc.graph.model import format_summary, summary
 
     graph = load_graph(args.graph)
     info = summary(graph, Path(args.graph).stat().st_size)
     info["params"] = graph.params
-    print(json.dumps(info, indent=2, sort_keys=True) if args.json else format_summary(info))
+    info["connectivity"] = connectivity(graph)
+    if args.json:
+        print(json.dumps(info, indent=2, sort_keys=True))
+    else:
+        print(format_summary(info))
+        print(format_connectivity(info["connectivity"]))
     return 0
 
 
@@ -217,6 +227,8 @@ def _cmd_evaluate(args) -> int:
         raise InputError("--heading-from-track needs the tracker's positions: give --position-noise M")
     if args.jobs < 1:
         raise InputError(f"--jobs must be ≥ 1, got {args.jobs}")
+    if args.mixed is not None and args.mixed < 2:
+        raise InputError(f"--mixed needs at least 2 clips a performance, got {args.mixed}")
     if args.graph and args.augment:
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
     layout = load_layout(args.layout) if args.layout else None
@@ -257,8 +269,16 @@ def _cmd_evaluate(args) -> int:
         tests = [motions[k] for k in picked]
         indices = list(picked)
         build_s = time.perf_counter() - t0
+    items = list(zip(tests, indices))
+    if args.mixed is not None:
+        from graphsvc.evaluate.mixed import mixed_items
+
+        items = mixed_items(tests, indices, args.mixed, float(graph.rate_hz), graph.params.get("mapping"), args.seed)
+        if not items:
+            raise InputError(f"--mixed {args.mixed}: the test clips of no one performer cover {args.mixed} different "
+                             "labels")  # fmt: skip
     t0 = time.perf_counter()
-    rows = loo.run_leave_one_out(graph, list(zip(tests, indices)), setup, jobs=args.jobs, graph_path=args.graph,
+    rows = loo.run_leave_one_out(graph, items, setup, jobs=args.jobs, graph_path=args.graph,
                                  progress=progress)  # fmt: skip
     eval_s = time.perf_counter() - t0
     out = loo.summarize_run(rows)
@@ -267,13 +287,14 @@ def _cmd_evaluate(args) -> int:
         "kb": list(args.kb), "test": args.test, "graph": args.graph, "layout": graph.layout.get("name"),
         "graph_nodes": graph.num_nodes, "graph_edges": graph.num_edges, "inputs": loo.inputs_description(setup),
         "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": args.seed,
-        "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2),
+        "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": args.mixed,
     }  # fmt: skip
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
     print(format_table(out))
     w = options.weights
-    print(f"leave-one-out on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
+    what = f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out"
+    print(f"{what} on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
           f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else "") +
           f"; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
@@ -314,6 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layout", default="wrists-ankles", help="sensor layout for the edge metadata")
     p.add_argument("--no-msv", action="store_true", help="no slow-down nodes or speed-up edges")
     p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
+    p.add_argument("--no-bridges", action="store_true", help="no bridges between actions (blended transitions)")
     p.add_argument("--exclude", action="append", metavar="GLOB", help="leave out matching files (repeatable)")
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
     p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for skeletons graphsvc does not know")
@@ -354,6 +376,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="noise seed (each clip's is derived from it and its name)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="evaluate N clips at once in worker processes (and build with N threads)")
+    p.add_argument("--mixed", type=int, metavar="N",
+                   help="score performances of N test clips with N different labels joined end to end (one performer "
+                        "each; their clips hidden together) instead of each clip alone")
     p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)

@@ -140,8 +140,26 @@ def test_evaluate_with_a_prebuilt_graph_matches_the_clips(tmp_path, procedural_k
     assert code == 2 and "kelly6" in err
 
 
+def test_evaluate_mixed_joins_the_test_clips(tmp_path, procedural_kb, capsys):
+    out_json = tmp_path / "mixed.json"
+    code, out, err = run(["evaluate", str(procedural_kb), "--test", "*.bvh", "--mixed", "2", "--noise", "none",
+                          "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+    assert code == 0, err
+    result = json.loads(out_json.read_text())
+    rows = result["clips"]
+    assert len(rows) == 2 and [r["file"] for r in rows] == ["mixed_01", "mixed_02"]  # five clips: two pairs
+    for r in rows:
+        parts = r["joined"].split(" + ")
+        assert len(parts) == 2 and parts[0].split("_")[0] != parts[1].split("_")[0]
+        assert r["hidden_nodes"] > 0 and r["label"] == "mixed"
+    assert result["config"]["mixed"] == 2
+    assert "2 joined performances of 2 actions" in out.splitlines()[-1]
+
+
 @pytest.mark.parametrize("extra, needle", [
     (["--test", "*_009.bvh"], "matches none"),
+    (["--test", "idle_*.bvh", "--mixed", "2"], "--mixed 2"),
+    (["--test", "*.bvh", "--mixed", "1"], "at least 2"),
     (["--test", "*.bvh", "--layout", "elbows"], "unknown layout"),
     (["--test", "*.bvh", "--weights", "1,x,1"], "weights"),
     (["--test", "*.bvh", "--weights", "1,1"], "weights"),

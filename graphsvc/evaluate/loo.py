@@ -13,7 +13,9 @@ as `graphsvc.graph.build._performance` groups them — same source, same name on
 - the original, slow-down and interpolated nodes whose `node_clip` is one of the
   performance's clips (slow-down nodes and interpolated segments are filed under their
   clip, interpolated ones under the segment's first clip, `clip_a`);
-- the nodes of interpolated segments whose second clip (`clip_b`) is one of them;
+- the nodes of interpolated segments whose second clip (`clip_b`) is one of them, and
+  of bridges from or to one of them (a bridge's nodes are filed under the clip that
+  dominates each, so a bridge is hidden whole);
 - the mirrored and reversed copies themselves.
 Edges touching a hidden node are unusable because the search never enters a hidden
 node. The graph's other structure was built with the clip present (the transition
@@ -74,12 +76,14 @@ def performance_clips(graph: MotionGraph, clip_index: int) -> np.ndarray:
                     dtype=np.int64)  # fmt: skip
 
 
-def held_out_mask(graph: MotionGraph, clip_index: int) -> np.ndarray:
-    """(N,) bool `allowed` node mask for testing graph clip `clip_index`: False on
-    every node derived from its performance (see the module docstring), True elsewhere."""
-    clips = performance_clips(graph, clip_index)
+def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray:
+    """(N,) bool `allowed` node mask for testing graph clip `clip_index` (or several,
+    a joined performance's): False on every node derived from its performance (see
+    the module docstring), True elsewhere."""
+    indices = [clip_index] if np.ndim(clip_index) == 0 else list(clip_index)
+    clips = np.unique(np.concatenate([performance_clips(graph, int(k)) for k in indices]))
     hidden = np.isin(np.asarray(graph.node_clip), clips)
-    for seg in graph.segments:  # segments filed under clip_a are already hidden above
+    for seg in (*graph.segments, *graph.bridges):
         if seg["clip_a"] in clips or seg["clip_b"] in clips:
             hidden[seg["first_node"]: seg["first_node"] + seg["count"]] = True
     return ~hidden
@@ -199,11 +203,13 @@ def place_start(pos, ground, heading, true_ground0, true_heading0, fix_position:
     return pos, ground, heading + d
 
 
-def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index: int | None, setup: EvalSetup) -> dict:
+def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSetup, true_labels=None) -> dict:
     """Reconstruct one test clip with its performance hidden and score it.
 
-    motion: the test clip as loaded (any rate; resampled to the graph's). clip_index:
-    its index in graph.clips (None: not in the graph, nothing to hide). Returns
+    motion: the test clip as loaded (any rate; resampled to the graph's), or a joined
+    performance (`mixed.join_clips`) with its (F,) per-frame `true_labels` at the
+    graph rate. clip_index: its index in graph.clips, a list of them (a joined
+    performance's clips), or None (not in the graph, nothing to hide). Returns
     `evaluate_frames`'s dict (name, frames, the four metrics, per_frame arrays) plus
     file, label, samples_per_s, search_s, hidden_nodes, in_graph, start_placed, and
     `node_path` / `pred_labels` ((T,) arrays, for plots; not in the JSON)."""
@@ -214,10 +220,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index: int | None, se
     truth = resample(motion, rate)
     layout = layout_from_dict(graph.layout)
     rec = simulate_test_input(truth, layout, setup, rate, mapping)
-    if clip_index is None:
-        allowed = np.ones(graph.num_nodes, dtype=bool)
-    else:
-        allowed = held_out_mask(graph, clip_index)
+    in_graph = clip_index is not None and np.size(clip_index) > 0
+    allowed = held_out_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
     result = reconstruct(graph, rec, setup.options, allowed=allowed)
 
     true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], joint_map(truth.skeleton, mapping))
@@ -231,7 +235,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index: int | None, se
     pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
     true_label = motion.labels[0] if motion.labels else motion.name
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
-                          pred_labels=pred_labels, true_label=true_label, name=motion.name)  # fmt: skip
+                          pred_labels=pred_labels, true_label=true_label if true_labels is None else true_labels,
+                          name=motion.name)  # fmt: skip
     report = result.report
     row.update({
         "file": clip_file_name(motion.source, motion.name),
@@ -240,7 +245,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index: int | None, se
         "samples_per_s": float(report["samples_per_s"]),
         "search_s": float(report["timings_s"]["search"]),
         "hidden_nodes": int(np.count_nonzero(~allowed)),
-        "in_graph": clip_index is not None,
+        "in_graph": in_graph,
+        **({"joined": motion.source} if true_labels is not None else {}),
         "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
         "node_path": np.asarray(result.node_path),
         "pred_labels": pred_labels,
@@ -267,16 +273,16 @@ def _init_worker(graph_path: str, setup: EvalSetup, threads: int) -> None:
     _worker["setup"] = setup
 
 
-def _evaluate_in_worker(item: tuple[Motion, int | None]) -> dict:
-    motion, clip_index = item
-    row = evaluate_clip(_worker["graph"], motion, clip_index, _worker["setup"])
+def _evaluate_in_worker(item: tuple) -> dict:
+    row = evaluate_clip(_worker["graph"], *item[:2], _worker["setup"], *item[2:])
     return {k: v for k, v in row.items() if k not in ("node_path", "pred_labels")}
 
 
-def run_leave_one_out(graph: MotionGraph, tests: list[tuple[Motion, int | None]], setup: EvalSetup, jobs: int = 1,
+def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, jobs: int = 1,
                       graph_path=None, progress: bool | None = None) -> list[dict]:  # fmt: skip
-    """`evaluate_clip` for each (motion, graph clip index) in `tests`; rows in the
-    order of `tests` whatever `jobs`. jobs > 1: that many worker processes, each
+    """`evaluate_clip` for each (motion, graph clip index) in `tests` — or (motion,
+    clip indices, per-frame labels) for a joined performance; rows in the order of
+    `tests` whatever `jobs`. jobs > 1: that many worker processes, each
     memory-mapping `graph_path` (the graph's file; written to a temporary file when
     None) and using cores/jobs numba threads."""
     from tqdm import tqdm
@@ -284,7 +290,7 @@ def run_leave_one_out(graph: MotionGraph, tests: list[tuple[Motion, int | None]]
     bar = {"total": len(tests), "desc": "clips", "unit": "clip", "disable": None if progress is None else not progress}
     jobs = max(1, min(int(jobs), len(tests)))
     if jobs == 1:
-        return [evaluate_clip(graph, m, k, setup) for m, k in tqdm(tests, **bar)]
+        return [evaluate_clip(graph, *item[:2], setup, *item[2:]) for item in tqdm(tests, **bar)]
     import multiprocessing
     import tempfile
 

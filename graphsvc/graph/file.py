@@ -15,7 +15,8 @@ from graphsvc.motion.skeleton import Skeleton
 from graphsvc.store import read_container, read_header, write_container
 
 KIND = "graph"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: bridge nodes and edges (kind 3 / 5) and their records
+READABLE_VERSIONS = (1, 2)
 ARRAYS = ("clip_offsets", "node_kind", "node_clip", "node_frame", "node_contacts", "node_label", "node_rotations",
           "node_translations", "node_ground", "node_heading", "edge_src", "edge_dst", "edge_kind", "edge_acc",
           "edge_offset", "edge_heading", "incoming")  # fmt: skip
@@ -33,6 +34,7 @@ def save_graph(graph: MotionGraph, path) -> None:
         "labels": list(graph.labels),
         "params": graph.params,
         "segments": graph.segments,
+        "bridges": graph.bridges,
         "counts": {"nodes": graph.num_nodes, "edges": graph.num_edges},
     }
     write_container(path, KIND, meta, {name: getattr(graph, name) for name in ARRAYS}, FORMAT_VERSION)
@@ -41,8 +43,9 @@ def save_graph(graph: MotionGraph, path) -> None:
 def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
     """Load a graph file; refuses truncated, corrupted or foreign files (FormatError)."""
     meta, arrays, version = read_container(path, kind=KIND, mmap=mmap, verify=verify)
-    if version != FORMAT_VERSION:
-        raise FormatError(path, f"graph format version {version} is not supported (this graphsvc reads {FORMAT_VERSION})")
+    if version not in READABLE_VERSIONS:
+        raise FormatError(path, f"graph format version {version} is not supported (this graphsvc reads "
+                                f"{', '.join(map(str, READABLE_VERSIONS))})")  # fmt: skip
     missing = [a for a in ARRAYS if a not in arrays]
     if missing:
         raise FormatError(path, f"graph file lacks arrays: {', '.join(missing)}")
@@ -52,7 +55,7 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
                             tuple(tuple(c) for c in s["channels"]), np.array(s["end_site"]))  # fmt: skip
         graph = MotionGraph(rate_hz=float(meta["rate_hz"]), skeleton=skeleton, layout=meta["layout"],
                             clips=meta["clips"], labels=tuple(meta["labels"]), params=meta["params"],
-                            segments=meta.get("segments", []),
+                            segments=meta.get("segments", []), bridges=meta.get("bridges", []),
                             **{name: arrays[name] for name in ARRAYS})  # fmt: skip
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None

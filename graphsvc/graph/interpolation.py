@@ -234,6 +234,29 @@ def aligned_segments(
     return out
 
 
+def trim_to_reachable(path: np.ndarray, span_a: tuple[int, int], span_b: tuple[int, int], rate_hz: float,
+                      min_seconds: float = 0.5) -> np.ndarray | None:  # fmt: skip
+    """An aligned path (K, 2) shortened so that its segment can be entered and left:
+    a segment is entered from the frame before its first cell in either clip and
+    leaves to the frame after its last, and only frames inside a clip's reachable
+    span [first, last] (`bridges.reachable_span`) are reached and have a way on. Cells
+    are dropped from the front until one clip's frame before the first cell is ≥ its
+    span's first, and from the back until one clip's frame after the last cell is ≤
+    its span's last. None when what remains is shorter than min_seconds on either side."""
+    (fa, la), (fb, lb) = span_a, span_b
+    k0, k1 = 0, path.shape[0]
+    while k0 < k1 and not (path[k0, 0] - 1 >= fa or path[k0, 1] - 1 >= fb):
+        k0 += 1
+    while k1 > k0 and not (path[k1 - 1, 0] + 1 <= la or path[k1 - 1, 1] + 1 <= lb):
+        k1 -= 1
+    if k1 - k0 < 2:
+        return None
+    out = path[k0:k1]
+    span = out[-1] - out[0]
+    min_span = min_seconds * rate_hz - 1e-9
+    return out if span[0] >= min_span and span[1] >= min_span else None
+
+
 # --------------------------------------------------------------------------- blending
 
 

@@ -162,4 +162,47 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     out[slow_edges] = half[dst[slow_edges]]
     fast = ekind == EDGE_SPEEDUP
     out[fast] = double[dst[fast]]
+    if graph.bridges:
+        _bridge_accelerations(graph, layout, mapping, clip_skeleton, out)
     return out
+
+
+def _bridge_accelerations(graph, layout, mapping, clip_skeleton, out) -> None:
+    """Bridge edges' readings for `layout`, in place on out (E, S, 3), from the stored
+    poses of the bridges and of the clip frames around them (`bridges.bridge_readings`)."""
+    from graphsvc.graph.bridges import bridge_readings
+    from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE
+    from graphsvc.sensors.layout import place
+
+    sk = graph.skeleton
+    N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
+    ctx_rot, ctx_pos = forward_kinematics(graph.node_rotations[:N0].astype(np.float64),
+                                          graph.node_translations[:N0].astype(np.float64), sk.parents)  # fmt: skip
+    recs = graph.bridges
+    first_node = np.array([b["first_node"] for b in recs], dtype=np.int64)
+    count = np.array([b["count"] for b in recs], dtype=np.int64)
+    clip_start = np.array([c["first_node"] for c in graph.clips] + [N0], dtype=np.int64)
+    ca = np.array([b["clip_a"] for b in recs], dtype=np.int64)
+    cb = np.array([b["clip_b"] for b in recs], dtype=np.int64)
+    nodes = np.concatenate([f + np.arange(n) for f, n in zip(first_node, count)])
+    node_rot, node_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                            graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    first = np.zeros(len(recs), dtype=np.int64)
+    np.cumsum(count[:-1], out=first[1:])
+    readings = bridge_readings(
+        ctx_rot, ctx_pos, graph.node_ground[:N0].astype(np.float64), graph.node_heading[:N0].astype(np.float64),
+        node_rot, node_pos, graph.node_ground[nodes].astype(np.float64), graph.node_heading[nodes].astype(np.float64),
+        first, count, clip_start[ca] + np.array([b["a_entry"] for b in recs]),
+        clip_start[cb] + np.array([b["b_exit"] for b in recs]), clip_start[ca], clip_start[ca + 1], clip_start[cb],
+        clip_start[cb + 1], [place(layout, clip_skeleton(int(c)), mapping) for c in ca], graph.rate_hz,
+    )  # fmt: skip
+    # Row of each bridge node's entering edge, and of each bridge's exit edge.
+    row_of_node = np.full(graph.num_nodes, -1, dtype=np.int64)
+    row_of_node[nodes] = np.arange(nodes.size) + np.repeat(np.arange(len(recs)), count)
+    exit_row = first + np.arange(len(recs)) + count
+    bridge_of_last = np.full(graph.num_nodes, -1, dtype=np.int64)
+    bridge_of_last[first_node + count - 1] = np.arange(len(recs))
+    edges = np.flatnonzero(graph.edge_kind == EDGE_BRIDGE)
+    into = graph.node_kind[graph.edge_dst[edges]] == NODE_BRIDGE
+    out[edges[into]] = readings[row_of_node[graph.edge_dst[edges[into]]]]
+    out[edges[~into]] = readings[exit_row[bridge_of_last[graph.edge_src[edges[~into]]]]]

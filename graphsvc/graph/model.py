@@ -1,9 +1,10 @@
 """The motion graph as flat arrays (SPEC §3).
 
 Nodes are poses: every knowledge-base frame (original), half-way frames for playing
-slower (slow-down), and blends of similar segments (interpolated). Each node keeps
-its full local pose, so sensor metadata for any layout can be recomputed from the
-graph alone (`graph.metadata.recompute_accelerations`).
+slower (slow-down), blends of similar segments (interpolated), and the blended frames
+of bridges that carry one clip into another of a different action (`bridges.py`).
+Each node keeps its full local pose, so sensor metadata for any layout can be
+recomputed from the graph alone (`graph.metadata.recompute_accelerations`).
 
 An edge m → n says "after pose m, pose n may follow, one sample later". Its metadata
 (K §4.3): the accelerations the layout's sensors read on arriving at n that way
@@ -21,10 +22,10 @@ import numpy as np
 
 from graphsvc.motion.skeleton import Skeleton
 
-NODE_ORIGINAL, NODE_SLOW, NODE_INTERP = 0, 1, 2
-NODE_KINDS = ("original", "slow-down", "interpolated")
-EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, EDGE_INTERP = 0, 1, 2, 3, 4
-EDGE_KINDS = ("original", "slow-down", "speed-up", "transition", "interpolated")
+NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
+NODE_KINDS = ("original", "slow-down", "interpolated", "bridge")
+EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, EDGE_INTERP, EDGE_BRIDGE = 0, 1, 2, 3, 4, 5
+EDGE_KINDS = ("original", "slow-down", "speed-up", "transition", "interpolated", "bridge")
 
 
 @dataclass(eq=False)
@@ -69,6 +70,10 @@ class MotionGraph:
     # Interpolated segments: first_node, count, clip_a, clip_b, a_start, a_end,
     # b_start, b_end (source frames, inclusive), the alignment theta/translation of b onto a.
     segments: list[dict] = field(default_factory=list)
+    # Bridges (`bridges.py`): first_node, count, clip_a, clip_b, a_entry (the frame of a
+    # it is entered from), b_exit (the frame of b it leaves to), a_match, b_match,
+    # distance_m, kind ("label", "end", "start").
+    bridges: list[dict] = field(default_factory=list)
 
     @property
     def num_nodes(self) -> int:
@@ -113,6 +118,7 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
         "rate_hz": graph.rate_hz,
         "joints": graph.skeleton.num_joints,
         "interpolated_segments": len(graph.segments),
+        "bridges": len(graph.bridges),
     }
     if file_size is not None:
         out["file_bytes"] = int(file_size)
@@ -120,7 +126,7 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
 
 
 def format_summary(s: dict) -> str:
-    kinds = lambda d: ", ".join(f"{k} {v:,}" for k, v in d.items())  # noqa: E731
+    kinds = lambda d: ", ".join(f"{k} {v:,}" for k, v in d.items() if v or k != "bridge")  # noqa: E731
     lines = [
         f"nodes {s['nodes']:,} ({kinds(s['nodes_by_kind'])})",
         f"edges {s['edges']:,} ({kinds(s['edges_by_kind'])})",

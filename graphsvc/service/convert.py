@@ -100,6 +100,7 @@ def graph_info(name: str, graph: MotionGraph, file_bytes: int | None) -> pb.Grap
         rate_hz=s["rate_hz"],
         joint_count=s["joints"],
         interpolated_segment_count=s["interpolated_segments"],
+        bridge_count=s["bridges"],
         file_bytes=s.get("file_bytes", 0),
         skeleton=skeleton_to_proto(graph.skeleton),
         rest_pose_accelerations_m_s2=rest_pose_readings(graph).ravel().tolist(),
@@ -128,6 +129,7 @@ def graph_info_dict(info: pb.GraphInfo) -> dict:
         "rate_hz": info.rate_hz,
         "joints": info.joint_count,
         "interpolated_segments": info.interpolated_segment_count,
+        "bridges": info.bridge_count,
         "file_bytes": info.file_bytes,
         "params": MessageToDict(info.params),
     }

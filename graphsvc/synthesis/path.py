@@ -40,8 +40,10 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import (
+    EDGE_BRIDGE,
     EDGE_INTERP,
     EDGE_TRANSITION,
+    NODE_BRIDGE,
     NODE_INTERP,
     NODE_ORIGINAL,
     NODE_SLOW,
@@ -145,11 +147,16 @@ class PathTables:
 
 def _continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
     """(K,) bool: the edge plays on inside one source sequence (original, slow-down,
-    speed-up, or a step inside an interpolated segment) — no pose jump."""
+    speed-up, a step inside an interpolated segment, or into a bridge's node: a bridge
+    is its clip a's sequence blending into b) — no pose jump. A bridge's last edge,
+    into clip b, lands in b's own frame, so it counts as a cut (of what is left of
+    the blend: its last node is nearly b's frame before the exit)."""
     kind = graph.edge_kind[edges]
     src, dst = graph.edge_src[edges], graph.edge_dst[edges]
     inside_segment = (graph.node_kind[src] == NODE_INTERP) & (graph.node_kind[dst] == NODE_INTERP) & (dst == src + 1)
-    return (kind != EDGE_TRANSITION) & ((kind != EDGE_INTERP) | inside_segment)
+    into_bridge = graph.node_kind[dst] == NODE_BRIDGE
+    return ((kind != EDGE_TRANSITION) & ((kind != EDGE_INTERP) | inside_segment)
+            & ((kind != EDGE_BRIDGE) | into_bridge))  # fmt: skip
 
 
 def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
@@ -164,6 +171,15 @@ def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
     seg_first = np.array([s["first_node"] for s in graph.segments], dtype=np.int64)
     interp = (kind == NODE_INTERP) & ~np.isin(nodes, seg_first)
     out[interp] = nodes[interp] - 1
+    # A bridge's nodes follow one another; its first follows the frame of a it is entered from.
+    bridge = kind == NODE_BRIDGE
+    out[bridge] = nodes[bridge] - 1
+    if graph.bridges:
+        first = np.array([b["first_node"] for b in graph.bridges], dtype=np.int64)
+        entry = np.array([graph.clips[b["clip_a"]]["first_node"] + b["a_entry"] for b in graph.bridges], dtype=np.int64)
+        at = np.searchsorted(first, nodes[bridge])
+        hit = (at < first.size) & (first[np.minimum(at, first.size - 1)] == nodes[bridge])
+        out[np.flatnonzero(bridge)[hit]] = entry[at[hit]]
     return out
 
 

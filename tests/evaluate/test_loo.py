@@ -6,7 +6,7 @@ import pytest
 
 from graphsvc.evaluate import loo
 from graphsvc.graph.build import BuildOptions, _performance, build_graph
-from graphsvc.graph.model import NODE_INTERP, NODE_ORIGINAL, NODE_SLOW
+from graphsvc.graph.model import NODE_BRIDGE, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW
 from graphsvc.motion.augment import mirror_motion, reverse_motion
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.pipeline import Options
@@ -68,8 +68,15 @@ def test_mask_hides_exactly_the_clip_its_slow_downs_its_blends_and_its_mirror(kb
             as_b |= seg["clip_b"] in (k, mirror) and seg["clip_a"] not in (k, mirror)
     assert as_b, "fixture should blend another clip with this one as its second clip"
     assert np.array_equal(hidden & (kind == NODE_INTERP), involved)
+    # Bridge nodes: those of every bridge from or to either clip, nothing else.
+    bridged = np.zeros(graph.num_nodes, dtype=bool)
+    for b in graph.bridges:
+        if {b["clip_a"], b["clip_b"]} & {k, mirror}:
+            bridged[b["first_node"]: b["first_node"] + b["count"]] = True
+    assert bridged.any(), "fixture should bridge this clip to others"
+    assert np.array_equal(hidden & (kind == NODE_BRIDGE), bridged)
     # Other clips' original and slow-down nodes all stay.
-    assert allowed[(kind != NODE_INTERP) & ~mine].all()
+    assert allowed[np.isin(kind, (NODE_ORIGINAL, NODE_SLOW)) & ~mine].all()
     # And the search never walks through a hidden node.
     row = loo.evaluate_clip(graph, kb[names.index("punch_01")], k, EXACT)
     assert allowed[row["node_path"]].all()

@@ -23,6 +23,22 @@ def test_build_then_info(kb_dir, tmp_path, capsys):
     assert info["layout"] == "kelly6" and info["nodes"] > info["kb_frames"] > 0
     assert info["file_bytes"] == out.stat().st_size
     assert set(info["labels"]) <= {"walk", "run", "stop", "idle", "forehand", "backhand", "overhead", "punch"}
+    assert "largest strongly connected component" in printed and "reach from a typical node" in printed
+    conn = info["connectivity"]
+    assert conn["nodes"] == info["nodes"] and 0 < conn["largest_share"] <= 1
+    assert set(conn["reach"]) == set(info["labels"])
+    assert info["bridges"] > 0 and info["nodes_by_kind"]["bridge"] > 0
+    assert main(["info", str(out)]) == 0
+    assert "reach from a typical node" in capsys.readouterr().out
+
+
+def test_no_bridges(kb_dir, tmp_path, capsys):
+    out = tmp_path / "plain.graph"
+    assert main(["build", str(kb_dir), "--no-bridges", "-o", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["bridges"] == 0 and info["nodes_by_kind"]["bridge"] == 0 and info["params"]["bridges"] is False
 
 
 def test_exclude_and_no_msv(kb_dir, tmp_path, capsys):
