@@ -52,7 +52,7 @@ closes at about 0.5 m/s of added joint speed at most, a ground-speed difference 
 2 m/s² (a walker stops in about half a second), never shorter than the 0.3 s a
 transition needs to look like one.
 
-**Readings** (`bridge_readings`). The layout's sensors are simulated on each blend with
+**Readings** (`metadata.bridge_readings`). The layout's sensors are simulated on each blend with
 two frames of a before it and three of b after it (moved rigidly onto the blend's
 end), so the edge into node k reads node k and the edge out to b's frame q reads b's
 frame q as it follows the blend. The same function recomputes them for another
@@ -72,7 +72,7 @@ from graphsvc.graph.transitions import _pair_distances, _state_code
 from graphsvc.motion import quat
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.sensors.accelerometer import simulate_accelerations
-from graphsvc.synthesis.path import _joint_tables, _place, _relative_pose
+from graphsvc.motion.placement import joint_tables, place_poses, relative_pose
 
 DEFAULT_THRESHOLD_M = 0.25  # loosest D a bridge between labels may span
 DEFAULT_END_THRESHOLD_M = 0.35  # loosest D of a bridge out of a clip's end or into its start
@@ -85,7 +85,6 @@ FEATURE_DIMS = 24
 SAMPLE_DT_S = 0.1  # candidate frames this far apart
 CANDIDATES_SCORED = 3  # per slot, the feature's best few are scored by D
 MAX_LABELS_PER_STRETCH = 8  # labels a stretch of a clip bridges to (and from), the nearest
-BEFORE, AFTER = 2, 3  # context frames of a blend's readings (the 5-point stencil's reach, and b's frame q)
 _ROWS = 512  # source rows per block of the candidate distance matrix
 
 
@@ -505,7 +504,7 @@ def blend_bridges(kb: KBFrames, matches: Matches, skeleton, joints: dict, placem
     placement_of_clip(c): the layout placed on clip c's skeleton (a bridge's readings
     use clip a's). Bridges are blended about chunk_nodes nodes at a time, so the
     float64 working arrays stay a few hundred MB on any knowledge base."""
-    rel_all, height_all = _relative_pose(kb.world_rot, kb.world_pos, kb.heading, joints["pelvis"])
+    rel_all, height_all = relative_pose(kb.world_rot, kb.world_pos, kb.heading, joints["pelvis"])
     ends = np.cumsum(matches.length)
     parts = []
     b0 = 0
@@ -530,7 +529,7 @@ def blend_bridges(kb: KBFrames, matches: Matches, skeleton, joints: dict, placem
 def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placement_of_clip, rate_hz: float,
                  rel_all: np.ndarray, height_all: np.ndarray) -> BridgeNodes:  # fmt: skip
     """`blend_bridges` of a few bridges; rel_all, height_all: every KB frame's pelvis
-    rotation relative to its heading and pelvis height (`synthesis.path._relative_pose`)."""
+    rotation relative to its heading and pelvis height (`motion.placement.relative_pose`)."""
     B = len(matches)
     count = matches.length
     first = np.zeros(B, dtype=np.int64)
@@ -559,7 +558,7 @@ def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placeme
 
     # Poses relative to their own placement, blended, then placed on the bridge's root path.
     pelvis = joints["pelvis"]
-    below, carrier = _joint_tables(skeleton, joints)
+    below, carrier = joint_tables(skeleton, joints)
     rot = np.empty((M,) + kb.rotations.shape[1:])
     trans = np.empty((M,) + kb.translations.shape[1:])
     rel = np.empty((M, 4))
@@ -567,7 +566,7 @@ def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placeme
     _blend_poses(kb.rotations, kb.translations, rel_all, height_all, ga, gb, w, below, rot, trans, rel, height)
     parents = np.ascontiguousarray(skeleton.parents, dtype=np.int64)
     src_rot, src_pos = forward_kinematics(rot, trans, parents)
-    _place(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier)
+    place_poses(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier)
     rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
 
     dominant_b = w >= 0.5
@@ -586,7 +585,7 @@ def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placeme
     step_offset[~inner], step_heading[~inner] = step_off[exit_frame], step_dh[exit_frame]
 
     world_rot, world_pos = forward_kinematics(rot, trans, parents)
-    readings = bridge_readings(
+    readings = meta.bridge_readings(
         kb.world_rot, kb.world_pos, kb.ground, kb.heading, world_rot, world_pos, ground, heading, first, count,
         entry, exit_frame, kb.start[matches.clip_a], kb.start[matches.clip_a + 1],
         kb.start[matches.clip_b], kb.start[matches.clip_b + 1],
@@ -594,64 +593,3 @@ def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placeme
     )  # fmt: skip
     return BridgeNodes(rot.astype(np.float32), trans.astype(np.float32), ground, heading, contacts, source_clip,
                        source_frame, first, count, step_offset, step_heading, readings)  # fmt: skip
-
-
-def bridge_readings(ctx_rot, ctx_pos, ctx_ground, ctx_heading, node_rot, node_pos, node_ground, node_heading,
-                    first, count, entry, exit_frame, a_lo, a_hi, b_lo, b_hi, placements, rate_hz) -> np.ndarray:  # fmt: skip
-    """(M + B, S, 3) float32 readings of B bridges, in the order of `BridgeNodes`.
-
-    ctx_*: world poses (rotations, positions), ground positions and headings of the
-    clip frames (indexed by frame on one axis); node_*: those of the bridges' M nodes
-    (bridge b's are rows first[b] … first[b] + count[b] − 1). entry, exit_frame (B,):
-    the clip frames each bridge is entered from and leaves to; a_lo, a_hi, b_lo, b_hi
-    (B,): the frame ranges [lo, hi) of its two clips, for clamping the context;
-    placements: the layout placed on each bridge's clip a. A bridge plays BEFORE frames
-    of a, its nodes, then AFTER frames of b moved rigidly so that b's frame before the
-    exit lands on the bridge's last node. Bridges with equal placements are simulated
-    in one call, their sequences end to end: the context frames keep each row's
-    stencil inside its own sequence."""
-    B = first.shape[0]
-    S = len(placements[0].segment) if B else 0
-    out = np.zeros((int(count.sum()) + B, S, 3), dtype=np.float32)
-    if not B:
-        return out
-    before = np.clip(entry[:, None] + np.arange(1 - BEFORE, 1)[None, :], a_lo[:, None], a_hi[:, None] - 1)
-    after = np.clip(exit_frame[:, None] + np.arange(AFTER)[None, :], b_lo[:, None], b_hi[:, None] - 1)
-    last = first + count - 1
-    anchor = np.maximum(exit_frame - 1, b_lo)
-    turn = node_heading[last] - ctx_heading[anchor]
-    c, s = np.cos(turn)[:, None, None], np.sin(turn)[:, None, None]
-    rel = ctx_pos[after] - np.stack([ctx_ground[anchor, 0], np.zeros(B), ctx_ground[anchor, 1]], axis=-1)[:, None, None]
-    moved = np.empty_like(rel)  # (B, AFTER, J, 3)
-    moved[..., 0] = c * rel[..., 0] + s * rel[..., 2] + node_ground[last, 0][:, None, None]
-    moved[..., 1] = rel[..., 1]
-    moved[..., 2] = -s * rel[..., 0] + c * rel[..., 2] + node_ground[last, 1][:, None, None]
-    moved_rot = quat.mul(quat.about_y(turn)[:, None, None], ctx_rot[after])
-    # One pool of poses: the frames of a before each bridge, the bridges' nodes, then the
-    # moved frames of b after each.
-    M = node_rot.shape[0]
-    pool_rot = np.concatenate([ctx_rot[before.ravel()], node_rot, moved_rot.reshape((-1,) + ctx_rot.shape[1:])])
-    pool_pos = np.concatenate([ctx_pos[before.ravel()], node_pos, moved.reshape((-1,) + ctx_pos.shape[1:])])
-    N = B * BEFORE
-    length = BEFORE + count + AFTER
-    groups: dict = {}
-    for bi in range(B):
-        groups.setdefault(id(placements[bi]), []).append(bi)
-    for members in groups.values():
-        members = np.asarray(members)
-        n = length[members]
-        starts = np.zeros(members.size, dtype=np.int64)
-        np.cumsum(n[:-1], out=starts[1:])
-        owner = np.repeat(np.arange(members.size), n)
-        k = np.arange(int(n.sum())) - starts[owner]  # position within its bridge's sequence
-        bm = members[owner]
-        seq = np.where(k < BEFORE, bm * BEFORE + np.minimum(k, BEFORE - 1), 0)
-        in_nodes = (k >= BEFORE) & (k < BEFORE + count[bm])
-        seq = np.where(in_nodes, N + first[bm] + (k - BEFORE), seq)
-        in_after = k >= BEFORE + count[bm]
-        seq = np.where(in_after, N + M + bm * AFTER + np.clip(k - BEFORE - count[bm], 0, AFTER - 1), seq)
-        readings = simulate_accelerations(pool_rot[seq], pool_pos[seq], placements[members[0]], rate_hz)
-        # Rows BEFORE … BEFORE + count of each sequence: the nodes, then b's first frame.
-        keep = (k >= BEFORE) & (k <= BEFORE + count[bm])
-        out[(first[bm] + bm + k - BEFORE)[keep]] = readings[keep]
-    return out

@@ -9,6 +9,9 @@ speed. Original edges therefore reproduce the clip's simulated stream exactly, a
 a transition — only allowed between frames whose windowed poses match — reads what
 its destination reads in its own clip.
 
+A bridge (`bridges.py`) reads what its blend plays: `bridge_readings` simulates the
+blend with the frames of its two clips around it.
+
 The same functions run at build time on the clips' float64 poses and later on the
 graph's stored float32 poses, for another layout (`recompute_accelerations`).
 """
@@ -25,6 +28,8 @@ from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.resample import resample_arrays
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.layout import Placement
+
+BEFORE, AFTER = 2, 3  # context frames of a bridge's readings: the 5-point stencil's reach, and b's frame q
 
 
 @dataclass(frozen=True)
@@ -118,6 +123,67 @@ def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray
     return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], axis=-1) + translation
 
 
+def bridge_readings(ctx_rot, ctx_pos, ctx_ground, ctx_heading, node_rot, node_pos, node_ground, node_heading,
+                    first, count, entry, exit_frame, a_lo, a_hi, b_lo, b_hi, placements, rate_hz) -> np.ndarray:  # fmt: skip
+    """(M + B, S, 3) float32 readings of B bridges, in the order of `BridgeNodes`.
+
+    ctx_*: world poses (rotations, positions), ground positions and headings of the
+    clip frames (indexed by frame on one axis); node_*: those of the bridges' M nodes
+    (bridge b's are rows first[b] … first[b] + count[b] − 1). entry, exit_frame (B,):
+    the clip frames each bridge is entered from and leaves to; a_lo, a_hi, b_lo, b_hi
+    (B,): the frame ranges [lo, hi) of its two clips, for clamping the context;
+    placements: the layout placed on each bridge's clip a. A bridge plays BEFORE frames
+    of a, its nodes, then AFTER frames of b moved rigidly so that b's frame before the
+    exit lands on the bridge's last node. Bridges with equal placements are simulated
+    in one call, their sequences end to end: the context frames keep each row's
+    stencil inside its own sequence."""
+    B = first.shape[0]
+    S = len(placements[0].segment) if B else 0
+    out = np.zeros((int(count.sum()) + B, S, 3), dtype=np.float32)
+    if not B:
+        return out
+    before = np.clip(entry[:, None] + np.arange(1 - BEFORE, 1)[None, :], a_lo[:, None], a_hi[:, None] - 1)
+    after = np.clip(exit_frame[:, None] + np.arange(AFTER)[None, :], b_lo[:, None], b_hi[:, None] - 1)
+    last = first + count - 1
+    anchor = np.maximum(exit_frame - 1, b_lo)
+    turn = node_heading[last] - ctx_heading[anchor]
+    c, s = np.cos(turn)[:, None, None], np.sin(turn)[:, None, None]
+    rel = ctx_pos[after] - np.stack([ctx_ground[anchor, 0], np.zeros(B), ctx_ground[anchor, 1]], axis=-1)[:, None, None]
+    moved = np.empty_like(rel)  # (B, AFTER, J, 3)
+    moved[..., 0] = c * rel[..., 0] + s * rel[..., 2] + node_ground[last, 0][:, None, None]
+    moved[..., 1] = rel[..., 1]
+    moved[..., 2] = -s * rel[..., 0] + c * rel[..., 2] + node_ground[last, 1][:, None, None]
+    moved_rot = quat.mul(quat.about_y(turn)[:, None, None], ctx_rot[after])
+    # One pool of poses: the frames of a before each bridge, the bridges' nodes, then the
+    # moved frames of b after each.
+    M = node_rot.shape[0]
+    pool_rot = np.concatenate([ctx_rot[before.ravel()], node_rot, moved_rot.reshape((-1,) + ctx_rot.shape[1:])])
+    pool_pos = np.concatenate([ctx_pos[before.ravel()], node_pos, moved.reshape((-1,) + ctx_pos.shape[1:])])
+    N = B * BEFORE
+    length = BEFORE + count + AFTER
+    groups: dict = {}
+    for bi in range(B):
+        groups.setdefault(id(placements[bi]), []).append(bi)
+    for members in groups.values():
+        members = np.asarray(members)
+        n = length[members]
+        starts = np.zeros(members.size, dtype=np.int64)
+        np.cumsum(n[:-1], out=starts[1:])
+        owner = np.repeat(np.arange(members.size), n)
+        k = np.arange(int(n.sum())) - starts[owner]  # position within its bridge's sequence
+        bm = members[owner]
+        seq = np.where(k < BEFORE, bm * BEFORE + np.minimum(k, BEFORE - 1), 0)
+        in_nodes = (k >= BEFORE) & (k < BEFORE + count[bm])
+        seq = np.where(in_nodes, N + first[bm] + (k - BEFORE), seq)
+        in_after = k >= BEFORE + count[bm]
+        seq = np.where(in_after, N + M + bm * AFTER + np.clip(k - BEFORE - count[bm], 0, AFTER - 1), seq)
+        readings = simulate_accelerations(pool_rot[seq], pool_pos[seq], placements[members[0]], rate_hz)
+        # Rows BEFORE … BEFORE + count of each sequence: the nodes, then b's first frame.
+        keep = (k >= BEFORE) & (k <= BEFORE + count[bm])
+        out[(first[bm] + bm + k - BEFORE)[keep]] = readings[keep]
+    return out
+
+
 def recompute_accelerations(graph, layout) -> np.ndarray:
     """(E, S, 3) float32 edge readings of `layout` for an existing graph, from the
     poses it stores (no knowledge base needed). Equal to the built metadata up to
@@ -169,8 +235,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
 
 def _bridge_accelerations(graph, layout, mapping, clip_skeleton, out) -> None:
     """Bridge edges' readings for `layout`, in place on out (E, S, 3), from the stored
-    poses of the bridges and of the clip frames around them (`bridges.bridge_readings`)."""
-    from graphsvc.graph.bridges import bridge_readings
+    poses of the bridges and of the clip frames around them (`bridge_readings`)."""
     from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE
     from graphsvc.sensors.layout import place
 

@@ -32,6 +32,12 @@ def qrot3(w, x, y, z, vx, vy, vz):
     return vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx)
 
 
+@numba.njit(cache=True)
+def diff3(a, b):
+    """a − b for length-3 arrays, as three floats."""
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
 @numba.njit(cache=True, inline="always")
 def qmul(a, b, out):
     """out = a ⊗ b for length-4 (w, x, y, z) arrays; out may not alias a or b."""
