@@ -68,7 +68,7 @@ def benchmark_graph(path: str | None):
         from graphsvc.graph.file import load_graph
 
         return load_graph(path)
-    from bench_viterbi import generated_graph
+    from synthetic_graph import generated_graph
 
     return generated_graph(100_686, 317_600)
 

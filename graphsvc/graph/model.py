@@ -138,3 +138,35 @@ def format_summary(s: dict) -> str:
     if "file_bytes" in s:
         lines.append(f"file size {s['file_bytes'] / 2**20:.1f} MiB")
     return "\n".join(lines)
+
+
+def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None,
+                     rate_hz: float = 30.0) -> MotionGraph:  # fmt: skip
+    """A MotionGraph of bare edges, for synthetic studies (benchmarks, tests): N nodes
+    (the largest index + 1) on a one-joint skeleton, without poses or clips. src, dst
+    (E,) node indices; acc (E, S, 3) readings (m/s²); offsets (E, 2) m, dheading (E,)
+    rad (default 0); contacts (N, 2) bool (default all planted); labels (N,) int into
+    ("a", "b") (default 0); kinds (E,) edge kinds (default original). Edges are
+    sorted by destination, as a built graph's."""
+    src, dst = np.asarray(src), np.asarray(dst)
+    N = int(max(src.max(), dst.max())) + 1
+    order = np.lexsort((src, dst))
+    E = len(src)
+    sk = Skeleton(("root",), np.array([-1]), np.zeros((1, 3)), (("Xposition",),), np.zeros(1, bool))
+    offsets = np.zeros((E, 2)) if offsets is None else np.asarray(offsets)
+    dheading = np.zeros(E) if dheading is None else np.asarray(dheading)
+    contacts = np.ones((N, 2), bool) if contacts is None else np.asarray(contacts)
+    labels = np.zeros(N, np.int32) if labels is None else np.asarray(labels, np.int32)
+    kinds = np.zeros(E, np.uint8) if kinds is None else np.asarray(kinds, np.uint8)
+    S = acc.shape[1]
+    return MotionGraph(
+        rate_hz=rate_hz, skeleton=sk, layout={"name": "t", "sensors": [{"name": f"s{i}"} for i in range(S)]},
+        clips=[], labels=("a", "b"), params={}, clip_offsets=np.zeros((1, 1, 3)),
+        node_kind=np.zeros(N, np.uint8), node_clip=np.zeros(N, np.int32), node_frame=np.zeros(N, np.float32),
+        node_contacts=contacts, node_label=labels, node_rotations=np.zeros((N, 1, 4), np.float32),
+        node_translations=np.zeros((N, 1, 3), np.float32), node_ground=np.zeros((N, 2), np.float32),
+        node_heading=np.zeros(N, np.float32), edge_src=src[order].astype(np.int32), edge_dst=dst[order].astype(np.int32),
+        edge_kind=kinds[order], edge_acc=np.asarray(acc, np.float32)[order],
+        edge_offset=offsets[order].astype(np.float32), edge_heading=dheading[order].astype(np.float32),
+        incoming=incoming_offsets(dst[order], N),
+    )

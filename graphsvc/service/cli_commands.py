@@ -16,6 +16,7 @@ import sys
 import threading
 from pathlib import Path
 
+from graphsvc.cli_args import Parser, add_search_options, os_message, search_options
 from graphsvc.errors import GraphsvcError
 
 
@@ -55,8 +56,7 @@ def _connect(args):
 
 
 def _options(args, constraints=None):
-    """SynthesisOptions from the strategy flags (graphsvc.cli.search_options)."""
-    from graphsvc.cli import search_options
+    """SynthesisOptions from the strategy flags (graphsvc.cli_args.search_options)."""
     from graphsvc.service.convert import options_to_proto
 
     return options_to_proto(search_options(args), constraints)
@@ -212,7 +212,6 @@ def _connection_parent() -> argparse.ArgumentParser:
 
 def add_service_parsers(sub) -> None:
     """Add `serve`, `client` and `sensor-bridge` to graphsvc's subcommands."""
-    from graphsvc.cli import add_search_options
 
     p = sub.add_parser("serve", help="serve graphs over gRPC (graphsvc.v1)")
     p.add_argument("--graph", action="append", required=True, metavar="NAME=FILE",
@@ -266,11 +265,9 @@ def add_service_parsers(sub) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Standalone entry point with graphsvc's error handling (one line, exit 2)."""
-    from graphsvc import cli
-
-    parser = cli._Parser(prog="graphsvc", description="graphsvc gRPC service commands")
+    parser = Parser(prog="graphsvc", description="graphsvc gRPC service commands")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    add_service_parsers(parser.add_subparsers(dest="command", required=True, parser_class=cli._Parser))
+    add_service_parsers(parser.add_subparsers(dest="command", required=True, parser_class=Parser))
     args = parser.parse_args(argv)
     try:
         return args.run(args)
@@ -282,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     except (GraphsvcError, OSError) as exc:
         if args.debug:
             raise
-        message = str(exc) if isinstance(exc, GraphsvcError) else cli._os_message(exc)
+        message = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         print(f"graphsvc: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -9,36 +9,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from graphsvc.errors import InputError
-from graphsvc.graph.model import MotionGraph, incoming_offsets
-from graphsvc.motion.skeleton import Skeleton
+from graphsvc.graph.model import graph_from_edges
 from graphsvc.search.reference import reference_viterbi
 from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
 
 
 def tiny_graph(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None):
     """A MotionGraph with N nodes and the given edges (sorted by destination here)."""
-    src, dst = np.asarray(src), np.asarray(dst)
-    N = int(max(src.max(), dst.max())) + 1
-    order = np.lexsort((src, dst))
-    E = len(src)
-    sk = Skeleton(("root",), np.array([-1]), np.zeros((1, 3)), (("Xposition",),), np.zeros(1, bool))
-    offsets = np.zeros((E, 2)) if offsets is None else np.asarray(offsets)
-    dheading = np.zeros(E) if dheading is None else np.asarray(dheading)
-    contacts = np.ones((N, 2), bool) if contacts is None else np.asarray(contacts)
-    labels = np.zeros(N, np.int32) if labels is None else np.asarray(labels, np.int32)
-    kinds = np.zeros(E, np.uint8) if kinds is None else np.asarray(kinds, np.uint8)
-    S = acc.shape[1]
-    return MotionGraph(
-        rate_hz=30.0, skeleton=sk, layout={"name": "t", "sensors": [{"name": f"s{i}"} for i in range(S)]},
-        clips=[], labels=("a", "b"), params={}, clip_offsets=np.zeros((1, 1, 3)),
-        node_kind=np.zeros(N, np.uint8), node_clip=np.zeros(N, np.int32), node_frame=np.zeros(N, np.float32),
-        node_contacts=contacts, node_label=labels, node_rotations=np.zeros((N, 1, 4), np.float32),
-        node_translations=np.zeros((N, 1, 3), np.float32), node_ground=np.zeros((N, 2), np.float32),
-        node_heading=np.zeros(N, np.float32), edge_src=src[order].astype(np.int32), edge_dst=dst[order].astype(np.int32),
-        edge_kind=kinds[order], edge_acc=np.asarray(acc, np.float32)[order],
-        edge_offset=offsets[order].astype(np.float32), edge_heading=dheading[order].astype(np.float32),
-        incoming=incoming_offsets(dst[order], N),
-    )
+    return graph_from_edges(src, dst, acc, offsets, dheading, contacts, labels, kinds)
 
 
 def path_cost(g, nodes, meas):

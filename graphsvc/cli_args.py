@@ -1,0 +1,46 @@
+"""Argument helpers the command line and the service commands share: the parser that
+fails in one line, the strategy flags, and how an OSError reads."""
+
+from __future__ import annotations
+
+import argparse
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, like every other user error
+        self.exit(2, f"graphsvc: error: {message} (see --help)\n")
+
+
+def search_options(args):
+    """Options from the strategy flags shared by `synthesize`, `evaluate` and `client`."""
+    from graphsvc.pipeline import Options, load_constraints, parse_weights
+
+    constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
+    return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
+                   heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
+                   speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam)  # fmt: skip
+
+
+def add_search_options(p, constraints: bool = True) -> None:
+    from graphsvc.pipeline import STRATEGIES
+
+    p.add_argument("--strategy", default="viterbi", choices=STRATEGIES, help="search strategy (default viterbi)")
+    p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
+                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
+    if constraints:
+        p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help="fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")
+    p.add_argument("--heading-from-track", action="store_true",
+                   help="derive heading from the ground positions: direction of travel above --speed-threshold")
+    p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
+                   help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
+    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S", help="default 2 m/s (Kelly et al.)")
+    p.add_argument("--beam", type=float, metavar="COST",
+                   help="beam search: after each sample keep only the paths within COST of the best (faster; default:"
+                        " the exact search)")
+
+
+def os_message(exc: OSError) -> str:
+    where = f"{exc.filename}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc}"
