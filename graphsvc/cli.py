@@ -150,6 +150,8 @@ def _cmd_synthesize(args) -> int:
     rec = read_recording(args.recording)
     result = reconstruct(graph, rec, options)
     write_bvh(out, result.motion, scale=args.scale)
+    result.report["files"] = {"output": str(out.resolve()), "graph": str(Path(args.graph).resolve()),
+                              "recording": str(Path(args.recording).resolve())}  # fmt: skip
     if args.report:
         write_text_atomic(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
     r = result.report
@@ -160,8 +162,11 @@ def _cmd_synthesize(args) -> int:
     print(f"path: {labels}{more}")
     print(f"warm-up {r['timings_s']['warm_up']:.2f} s, search {r['timings_s']['search']:.2f} s "
           f"({r['samples_per_s']:,.0f} samples/s), "
-          f"synthesis {r['timings_s']['synthesis']:.2f} s, compression {r['compression']:g}:1"
-          + (f", {r['revisions']} revisions at lag {r['lag_samples']} samples" if "revisions" in r else ""))  # fmt: skip
+          f"synthesis {r['timings_s']['synthesis']:.2f} s"
+          + (f", compression {r['compression']:g}:1" if "compression" in r else "")
+          + (f", {r['revisions']} revisions at lag {r['lag_samples']} samples" if "revisions" in r else "")
+          + (f"; ignored: {', '.join(r.get('ignored_inputs', []) + r.get('ignored_options', []))}"
+             if r.get("ignored_inputs") or r.get("ignored_options") else ""))  # fmt: skip
     return 0
 
 

@@ -22,9 +22,10 @@ def search_options(args):
 
 
 def add_search_options(p, constraints: bool = True) -> None:
-    from graphsvc.pipeline import STRATEGIES
+    from graphsvc.strategies import names
 
-    p.add_argument("--strategy", default="viterbi", choices=STRATEGIES, help="search strategy (default viterbi)")
+    p.add_argument("--strategy", default="viterbi", choices=names(),
+                   help="reconstruction strategy (default viterbi; nearest: the per-sample baseline)")
     p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
                    help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
     if constraints:

@@ -172,6 +172,22 @@ def read_header(path, verify: bool = False) -> dict:
     return _check(path, _load_bytes(path, True), verify)
 
 
+def file_checksum(path) -> str:
+    """The SHA-256 a container's trailer records (hex), read without loading the file:
+    what identifies its contents (caches beside a graph are keyed by it). Structural
+    checks only; `read_container(verify=True)` is what proves the bytes match it."""
+    path = Path(path)
+    size = path.stat().st_size
+    if size < _PREAMBLE.size + _TRAILER.size:
+        raise FormatError(path, "too short to be a graphsvc container")
+    with path.open("rb") as f:
+        f.seek(size - _TRAILER.size)
+        end_magic, total, digest = _TRAILER.unpack(f.read(_TRAILER.size))
+    if end_magic != END_MAGIC or total != size:
+        raise FormatError(path, "no container trailer (truncated or not a graphsvc file)")
+    return digest.hex()
+
+
 # ---------------------------------------------------------------- atomic output
 
 

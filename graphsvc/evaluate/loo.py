@@ -1,22 +1,14 @@
 """Leave-one-clip-out evaluation (SPEC §9): what `graphsvc evaluate` runs.
 
 The graph is built once from the whole knowledge base. For each test clip, every
-node that carries any of its data is hidden from the search by a node mask
-(`held_out_mask`); the clip's sensors are simulated, the recording is reconstructed
+node that carries any of its data is hidden by the strategy's mask
+(`Strategy.allowed_mask`; for the graph strategies `graph.holdout.held_out_mask`); the
+clip's sensors are simulated, the recording is reconstructed
 through `graphsvc.pipeline.reconstruct(..., allowed=mask)` and compared with the clip
 itself (`evaluate_clip`). `run_leave_one_out` does this for many clips, optionally in
 worker processes that memory-map one graph file.
 
-What a test clip hides (its *performance*: the recorded take and its augmented copies,
-as `graphsvc.graph.build._performance` groups them — same source, same name once the
-`_mirror`/`_reverse` suffixes are removed):
-- the original, slow-down and interpolated nodes whose `node_clip` is one of the
-  performance's clips (slow-down nodes and interpolated segments are filed under their
-  clip, interpolated ones under the segment's first clip, `clip_a`);
-- the nodes of interpolated segments whose second clip (`clip_b`) is one of them, and
-  of bridges from or to one of them (a bridge's nodes are filed under the clip that
-  dominates each, so a bridge is hidden whole);
-- the mirrored and reversed copies themselves.
+What a test clip hides is in `graph.holdout`.
 Edges touching a hidden node are unusable because the search never enters a hidden
 node. The graph's other structure was built with the clip present (the transition
 cap keeps each frame's 8 closest transitions, some of which may have pointed into
@@ -30,7 +22,6 @@ import fnmatch
 import hashlib
 import math
 import os
-import re
 import resource
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
@@ -39,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.evaluate.metrics import evaluate_frames, summarize
+from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import signals
 from graphsvc.motion.joints import CANONICAL, joint_map
@@ -46,48 +38,11 @@ from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
 from graphsvc.pipeline import Options
+from graphsvc.strategies import get as get_strategy
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
 from graphsvc.sensors.simulate import simulate_recording
-
-_AUGMENT_SUFFIX = re.compile(r"(_mirror|_reverse)+$")
-
-
-# ---------------------------------------------------------------- which clips, which nodes
-
-
-def performance_key(source: str, name: str) -> tuple[str, str]:
-    """What identifies one recorded performance across its augmented copies: the
-    source and the name without `_mirror`/`_reverse` suffixes (the rule of
-    `graphsvc.graph.build._performance`, on a graph's clip records)."""
-    return str(source), _AUGMENT_SUFFIX.sub("", str(name))
-
-
-def is_augmented(name: str) -> bool:
-    """True for the mirrored or reversed copies the builder adds (not files of the KB)."""
-    return _AUGMENT_SUFFIX.search(str(name)) is not None
-
-
-def performance_clips(graph: MotionGraph, clip_index: int) -> np.ndarray:
-    """(k,) int: indices of the graph clips of `clip_index`'s performance (itself included)."""
-    want = performance_key(graph.clips[clip_index]["source"], graph.clips[clip_index]["name"])
-    return np.array([k for k, c in enumerate(graph.clips) if performance_key(c["source"], c["name"]) == want],
-                    dtype=np.int64)  # fmt: skip
-
-
-def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray:
-    """(N,) bool `allowed` node mask for testing graph clip `clip_index` (or several,
-    a joined performance's): False on every node derived from its performance (see
-    the module docstring), True elsewhere."""
-    indices = [clip_index] if np.ndim(clip_index) == 0 else list(clip_index)
-    clips = np.unique(np.concatenate([performance_clips(graph, int(k)) for k in indices]))
-    hidden = np.isin(np.asarray(graph.node_clip), clips)
-    for seg in (*graph.segments, *graph.bridges):
-        if seg["clip_a"] in clips or seg["clip_b"] in clips:
-            hidden[seg["first_node"]: seg["first_node"] + seg["count"]] = True
-    return ~hidden
-
 
 def clip_file_name(source: str, name: str) -> str:
     """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
@@ -183,7 +138,7 @@ def _global_signals(world_pos: np.ndarray, table: dict) -> tuple[np.ndarray, np.
 def place_start(pos, ground, heading, true_ground0, true_heading0, fix_position: bool, fix_heading: bool):
     """Move a whole predicted motion rigidly so its first frame starts where the truth
     does, for the streams the recording lacked: without positions the search starts
-    at the origin and without heading facing +Z (`pipeline._start_state`), and the
+    at the origin and without heading facing +Z (`strategies.base.start_state`), and the
     metrics should measure drift, not where the world origin happens to be.
 
     pos (T, P, 3), ground (T, 2) m, heading (T,) rad → moved copies. Turns about the
@@ -221,7 +176,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     layout = layout_from_dict(graph.layout)
     rec = simulate_test_input(truth, layout, setup, rate, mapping)
     in_graph = clip_index is not None and np.size(clip_index) > 0
-    allowed = held_out_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
+    strategy = get_strategy(setup.options.strategy)
+    allowed = strategy.allowed_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
     result = reconstruct(graph, rec, setup.options, allowed=allowed)
 
     true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], joint_map(truth.skeleton, mapping))

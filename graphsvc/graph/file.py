@@ -12,7 +12,7 @@ import numpy as np
 from graphsvc.errors import FormatError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Skeleton
-from graphsvc.store import read_container, read_header, write_container
+from graphsvc.store import file_checksum, read_container, read_header, write_container
 
 KIND = "graph"
 FORMAT_VERSION = 2  # 2: bridge nodes and edges (kind 3 / 5) and their records
@@ -62,6 +62,7 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
     N, E = graph.num_nodes, graph.num_edges
     if meta.get("counts") != {"nodes": N, "edges": E} or graph.incoming.shape != (N + 1,):
         raise FormatError(path, "graph arrays disagree with its header counts")
+    graph.source_path, graph.checksum = str(Path(path).resolve()), file_checksum(path)
     return graph
 
 

@@ -74,6 +74,10 @@ class MotionGraph:
     # it is entered from), b_exit (the frame of b it leaves to), a_match, b_match,
     # distance_m, kind ("label", "end", "start").
     bridges: list[dict] = field(default_factory=list)
+    # Where the graph was loaded from and that file's SHA-256 (`store.file_checksum`),
+    # or None for a graph built in memory: what a strategy's cached index is keyed by.
+    source_path: str | None = None
+    checksum: str | None = None
 
     @property
     def num_nodes(self) -> int:

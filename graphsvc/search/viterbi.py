@@ -65,18 +65,10 @@ from graphsvc.search._llvm import pick as _pick
 from graphsvc.search._llvm import prefetch as _prefetch
 from graphsvc.search._llvm import tag as _tag
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.strategies.options import Weights  # noqa: F401  (the value type; imported here by older callers)
 
 REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
 CONTACT_CODES = {"none": 0, "left": 1, "right": 2, "both": 3}  # bit 0 left, bit 1 right
-
-
-@dataclass(frozen=True)
-class Weights:
-    """K eq. 6: accelerometers (per g²), position (per metre), orientation (per radian)."""
-
-    acc: float = 1.0
-    position: float = 1.0
-    heading: float = 1.0
 
 
 @numba.njit(cache=True, nogil=True)

@@ -1,15 +1,18 @@
 """Input streams on disk: the native `.rec` container and CSV for real devices.
 
-A Recording is what the body-worn accelerometers and the overhead tracker reported:
-timestamps, per-sensor accelerations in each sensor's own frame, optional ground
-position and heading, annotation constraint sets, the sensor layout and provenance.
+A Recording is what the body-worn sensors, an optical capture and the overhead tracker
+reported, each stream optional: timestamps, per-sensor accelerations in each sensor's
+own frame, per-sensor orientations (quaternions, as a real IMU reports them), labelled
+marker positions, ground position and heading, annotation constraint sets, the sensor
+layout and provenance.
 
 Native format (`.rec`)
     A graphsvc container (graphsvc/store.py) of kind "recording", format_version 1.
-    Arrays: ``timestamps_s`` (T,) <f8, ``accelerations`` (T, S, 3) <f4, and when
-    present ``ground_position`` (T, 2) <f8 and ``heading`` (T,) <f8. The JSON meta
-    holds ``rate_hz``, ``sensor_names``, ``constraints``, ``layout`` and ``meta``.
-    Everything round-trips exactly.
+    Arrays: ``timestamps_s`` (T,) <f8 and, when present, ``accelerations`` (T, S, 3)
+    <f4, ``orientations`` (T, S, 4) <f4, ``marker_positions`` (T, M, 3) <f8,
+    ``ground_position`` (T, 2) <f8 and ``heading`` (T,) <f8. The JSON meta holds
+    ``rate_hz``, ``sensor_names``, ``marker_names`` (when there are markers),
+    ``constraints``, ``layout`` and ``meta``. Everything round-trips exactly.
 
 CSV format
     UTF-8 text, comma-separated, one header row then one row per sample::
@@ -24,9 +27,14 @@ CSV format
       devices may have none.
     - ``t_s``: seconds, required, finite, strictly increasing.
     - ``<sensor>_ax, <sensor>_ay, <sensor>_az``: acceleration in the sensor's frame,
-      m/s² (or g with ``import_csv(..., units="g")``, converted with 9.81 m/s²). Each
-      sensor needs all three columns, in any column order; sensors are numbered in
-      the order their first column appears.
+      m/s² (or g with ``import_csv(..., units="g")``, converted with 9.81 m/s²).
+      ``<sensor>_qw … _qz``: the sensor's orientation, a unit quaternion. A sensor has
+      all three (all four) columns or none, in any column order; sensors are numbered
+      in the order their first column appears; a sensor without acceleration columns,
+      in a file where others have them, reads NaN (missing).
+    - ``<marker>_px, <marker>_py, <marker>_pz``: a labelled optical marker's position,
+      m, Y up; empty = not seen. Markers are numbered in the order their first column
+      appears.
     - ``pos_x_m, pos_z_m`` (both or neither): overhead-tracker ground position, m.
     - ``heading_rad``: facing about +Y, radians. Optional.
     - An empty cell or ``nan`` (any case) means missing (NaN); ``inf`` is refused.
@@ -60,7 +68,10 @@ CSV_MAGIC = "# graphsvc recording v1"
 CONTACTS = ("left", "right", "both", "none")
 UNITS = ("m/s2", "g")
 _AXES = ("x", "y", "z")
+_QUAT = ("w", "x", "y", "z")
 _SENSOR_COLUMN = re.compile(r"^(.+)_a([xyz])$")
+_ORIENTATION_COLUMN = re.compile(r"^(.+)_q([wxyz])$")
+_MARKER_COLUMN = re.compile(r"^(.+)_p([xyz])$")
 _POSITION_COLUMNS = ("pos_x_m", "pos_z_m")
 _HEADING_COLUMN = "heading_rad"
 _BAD_NAME_CHARS = set(',"\r\n')
@@ -72,11 +83,14 @@ class Recording:
 
     rate_hz: nominal sample rate, Hz. timestamps_s: (T,) float64 s, finite, strictly
     increasing. accelerations: (T, S, 3) float32 m/s² in each sensor's frame, NaN =
-    missing. ground_position: (T, 2) float64 m (x, z) or None. heading: (T,) float64
-    rad about +Y or None. constraints: annotation constraint sets in priority order,
-    each a list of {"start_s", "end_s", "require": {"contact": left|right|both|none}
-    or {"label": NAME}}. layout: the sensor layout description (JSON-able) or None.
-    meta: provenance (JSON-able)."""
+    missing, or None. ground_position: (T, 2) float64 m (x, z) or None. heading: (T,)
+    float64 rad about +Y or None. constraints: annotation constraint sets in priority
+    order, each a list of {"start_s", "end_s", "require": {"contact":
+    left|right|both|none} or {"label": NAME}}. layout: the sensor layout description
+    (JSON-able) or None. meta: provenance (JSON-able). orientations: (T, S, 4) float32
+    unit quaternions (w, x, y, z), each sensor's frame in the world, NaN = missing, or
+    None. marker_names: M names; marker_positions: (T, M, 3) float64 m, NaN = not
+    seen, or None."""
 
     rate_hz: float
     timestamps_s: np.ndarray
@@ -87,6 +101,9 @@ class Recording:
     constraints: list = field(default_factory=list)
     layout: dict | None = None
     meta: dict = field(default_factory=dict)
+    orientations: np.ndarray | None = None
+    marker_names: tuple[str, ...] = ()
+    marker_positions: np.ndarray | None = None
 
     @property
     def num_samples(self) -> int:
@@ -128,15 +145,19 @@ def validate_recording(rec: Recording) -> None:
         i = int(np.argmax(steps <= 0)) + 1
         raise InputError(f"timestamps_s must be strictly increasing (sample {i}: {t[i]} after {t[i - 1]})")
     names = rec.sensor_names
-    if not isinstance(names, tuple) or not all(isinstance(n, str) for n in names):
-        raise InputError("sensor_names must be a tuple of strings")
-    for n in names:
-        if not n or n != n.strip() or _BAD_NAME_CHARS & set(n):
-            raise InputError(f"bad sensor name {n!r} (non-empty, no commas, quotes, newlines or edge spaces)")
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise InputError(f"duplicate sensor names: {', '.join(dup)}")
-    _check_readings("accelerations", rec.accelerations, (T, len(names), 3))
+    _check_names("sensor", names)
+    if rec.accelerations is not None:
+        _check_readings("accelerations", rec.accelerations, (T, len(names), 3))
+    if rec.orientations is not None:
+        _check_readings("orientations", rec.orientations, (T, len(names), 4))
+        q = rec.orientations[np.all(np.isfinite(rec.orientations), axis=-1)]
+        if q.size and np.max(np.abs(np.linalg.norm(q, axis=-1) - 1.0)) > 1e-3:
+            raise InputError("orientations must be unit quaternions (w, x, y, z), or NaN for missing")
+    if rec.marker_positions is not None:
+        _check_names("marker", rec.marker_names)
+        _check_readings("marker_positions", rec.marker_positions, (T, len(rec.marker_names), 3))
+    elif rec.marker_names:
+        raise InputError("marker_names given without marker_positions")
     if rec.ground_position is not None:
         _check_readings("ground_position", rec.ground_position, (T, 2))
     if rec.heading is not None:
@@ -146,6 +167,17 @@ def validate_recording(rec: Recording) -> None:
         raise InputError(f"layout must be a dict or None, got {type(rec.layout).__name__}")
     if not isinstance(rec.meta, dict):
         raise InputError(f"meta must be a dict, got {type(rec.meta).__name__}")
+
+
+def _check_names(what: str, names) -> None:
+    if not isinstance(names, tuple) or not all(isinstance(n, str) for n in names):
+        raise InputError(f"{what}_names must be a tuple of strings")
+    for n in names:
+        if not n or n != n.strip() or _BAD_NAME_CHARS & set(n):
+            raise InputError(f"bad {what} name {n!r} (non-empty, no commas, quotes, newlines or edge spaces)")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"duplicate {what} names: {', '.join(dup)}")
 
 
 def _check_readings(name: str, a, shape: tuple[int, ...]) -> None:
@@ -197,10 +229,13 @@ def save_recording(rec: Recording, path) -> None:
     """Validate `rec` and write it atomically as a `.rec` container. Equal
     recordings give byte-identical files."""
     rec.validate()
-    arrays = {
-        "timestamps_s": np.asarray(rec.timestamps_s, dtype=np.float64),
-        "accelerations": np.asarray(rec.accelerations, dtype=np.float32),
-    }
+    arrays = {"timestamps_s": np.asarray(rec.timestamps_s, dtype=np.float64)}
+    if rec.accelerations is not None:
+        arrays["accelerations"] = np.asarray(rec.accelerations, dtype=np.float32)
+    if rec.orientations is not None:
+        arrays["orientations"] = np.asarray(rec.orientations, dtype=np.float32)
+    if rec.marker_positions is not None:
+        arrays["marker_positions"] = np.asarray(rec.marker_positions, dtype=np.float64)
     if rec.ground_position is not None:
         arrays["ground_position"] = np.asarray(rec.ground_position, dtype=np.float64)
     if rec.heading is not None:
@@ -212,6 +247,8 @@ def save_recording(rec: Recording, path) -> None:
         "layout": rec.layout,
         "meta": rec.meta,
     }
+    if rec.marker_positions is not None:
+        meta["marker_names"] = list(rec.marker_names)
     write_container(path, KIND, meta, arrays, FORMAT_VERSION)
 
 
@@ -232,12 +269,15 @@ def load_recording(path) -> Recording:
             rate_hz=rate,
             timestamps_s=arrays["timestamps_s"],
             sensor_names=tuple(names),
-            accelerations=arrays["accelerations"],
+            accelerations=arrays.get("accelerations"),
             ground_position=arrays.get("ground_position"),
             heading=arrays.get("heading"),
             constraints=meta["constraints"],
             layout=meta["layout"],
             meta=meta["meta"],
+            orientations=arrays.get("orientations"),
+            marker_names=tuple(meta.get("marker_names", ())),
+            marker_positions=arrays.get("marker_positions"),
         )
     except (KeyError, TypeError) as e:
         raise FormatError(path, f"not a valid recording: missing or bad {e}") from None
@@ -253,7 +293,13 @@ def load_recording(path) -> Recording:
 
 def csv_columns(rec: Recording) -> list[str]:
     """The CSV header export_csv writes for `rec`."""
-    cols = ["t_s"] + [f"{n}_a{k}" for n in rec.sensor_names for k in _AXES]
+    cols = ["t_s"]
+    if rec.accelerations is not None:
+        cols += [f"{n}_a{k}" for n in rec.sensor_names for k in _AXES]
+    if rec.orientations is not None:
+        cols += [f"{n}_q{k}" for n in rec.sensor_names for k in _QUAT]
+    if rec.marker_positions is not None:
+        cols += [f"{n}_p{k}" for n in rec.marker_names for k in _AXES]
     if rec.ground_position is not None:
         cols += list(_POSITION_COLUMNS)
     if rec.heading is not None:
@@ -266,8 +312,10 @@ def export_csv(rec: Recording, path) -> None:
     cell, numbers as '%.9g', so equal recordings give identical files."""
     rec.validate()
     T = rec.num_samples
-    parts = [rec.timestamps_s.astype(np.float64)[:, None],
-             rec.accelerations.astype(np.float64).reshape(T, -1)]  # fmt: skip
+    parts = [rec.timestamps_s.astype(np.float64)[:, None]]
+    for a in (rec.accelerations, rec.orientations, rec.marker_positions):
+        if a is not None:
+            parts.append(a.astype(np.float64).reshape(T, -1))
     if rec.ground_position is not None:
         parts.append(rec.ground_position.astype(np.float64))
     if rec.heading is not None:
@@ -332,7 +380,7 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
         raise FormatError(path, "no samples after the header", line=header_line)
 
     table = np.array(rows, dtype=np.float64)
-    t_col, sensor_names, acc_cols, pos_cols, heading_col = layout_cols
+    t_col, sensor_names, acc_cols, pos_cols, heading_col, quat_cols, marker_names, marker_cols = layout_cols
     t = table[:, t_col]
     missing = np.isnan(t)
     if missing.any():
@@ -353,18 +401,31 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
             raise InputError(f"{path}: cannot infer the sample rate from one sample; pass rate_hz")
         rate_hz = 1.0 / float(np.median(np.diff(t)))
 
-    acc = table[:, acc_cols].reshape(len(t), len(sensor_names), 3)
-    if units == "g":
+    def gather(cols, width):  # per sensor, its columns or NaN where it has none
+        if all(c is None for c in cols):
+            return None
+        out = np.full((len(t), len(cols)), np.nan)
+        for k, c in enumerate(cols):
+            if c is not None:
+                out[:, k] = table[:, c]
+        return out.reshape(len(t), -1, width)
+
+    acc = gather(acc_cols, 3)
+    if acc is not None and units == "g":
         acc = acc * GRAVITY
+    orientations = gather(quat_cols, 4)
     rec = Recording(
         rate_hz=float(rate_hz),
         timestamps_s=np.ascontiguousarray(t),
         sensor_names=sensor_names,
-        accelerations=acc.astype(np.float32),
+        accelerations=None if acc is None else acc.astype(np.float32),
         ground_position=np.ascontiguousarray(table[:, pos_cols]) if pos_cols else None,
         heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
         layout=layout,
         meta={"source": str(path), "imported_from": "csv", "units": units},
+        orientations=None if orientations is None else orientations.astype(np.float32),
+        marker_names=marker_names,
+        marker_positions=np.ascontiguousarray(table[:, marker_cols].reshape(len(t), -1, 3)) if marker_cols else None,
     )
     rec.validate()
     return rec
@@ -382,27 +443,47 @@ def _parse_header(path: Path, cols: list[str], lineno: int):
         seen[c] = k
     if "t_s" not in seen:
         raise FormatError(path, "missing t_s column (seconds)", line=lineno)
-    sensors: dict[str, dict[str, int]] = {}
+    sensors: dict[str, dict[str, dict[str, int]]] = {}  # name → {"a": axes, "q": components}
+    markers: dict[str, dict[str, int]] = {}
     for c, k in seen.items():
-        m = _SENSOR_COLUMN.match(c)
+        m, q, p = _SENSOR_COLUMN.match(c), _ORIENTATION_COLUMN.match(c), _MARKER_COLUMN.match(c)
         if m:
-            sensors.setdefault(m.group(1), {})[m.group(2)] = k
+            sensors.setdefault(m.group(1), {}).setdefault("a", {})[m.group(2)] = k
+        elif q:
+            sensors.setdefault(q.group(1), {}).setdefault("q", {})[q.group(2)] = k
+        elif p:
+            markers.setdefault(p.group(1), {})[p.group(2)] = k
         elif c not in ("t_s", _HEADING_COLUMN, *_POSITION_COLUMNS):
-            raise FormatError(path, f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, "
-                              f"{', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})", line=lineno)  # fmt: skip
-    acc_cols = []
-    for name, axes in sensors.items():
-        absent = [f"{name}_a{a}" for a in _AXES if a not in axes]
-        if absent:
-            raise FormatError(path, f"sensor {name!r} lacks column(s) {', '.join(absent)}", line=lineno)
+            raise FormatError(path, f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, <sensor>_qw…_qz, "
+                              f"<marker>_px/_py/_pz, {', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})",
+                              line=lineno)  # fmt: skip
+    acc_cols, quat_cols = [], []
+    any_acc = any("a" in v for v in sensors.values())
+    any_quat = any("q" in v for v in sensors.values())
+    for name, kinds in sensors.items():
         if name != name.strip() or '"' in name:
             raise FormatError(path, f"bad sensor name {name!r}", line=lineno)
-        acc_cols += [axes[a] for a in _AXES]
+        for key, parts, cols, wanted in (("a", _AXES, acc_cols, any_acc), ("q", _QUAT, quat_cols, any_quat)):
+            got = kinds.get(key)
+            if got is not None:
+                absent = [f"{name}_{key}{a}" for a in parts if a not in got]
+                if absent:
+                    raise FormatError(path, f"sensor {name!r} lacks column(s) {', '.join(absent)}", line=lineno)
+                cols += [got[a] for a in parts]
+            elif wanted:
+                cols += [None] * len(parts)
+    marker_cols = []
+    for name, axes in markers.items():
+        absent = [f"{name}_p{a}" for a in _AXES if a not in axes]
+        if absent:
+            raise FormatError(path, f"marker {name!r} lacks column(s) {', '.join(absent)}", line=lineno)
+        marker_cols += [axes[a] for a in _AXES]
     have_pos = [c in seen for c in _POSITION_COLUMNS]
     if any(have_pos) and not all(have_pos):
         raise FormatError(path, "pos_x_m and pos_z_m must both be present or both absent", line=lineno)
     pos_cols = [seen[c] for c in _POSITION_COLUMNS] if all(have_pos) else []
-    return seen["t_s"], tuple(sensors), acc_cols, pos_cols, seen.get(_HEADING_COLUMN)
+    return (seen["t_s"], tuple(sensors), acc_cols, pos_cols, seen.get(_HEADING_COLUMN), quat_cols, tuple(markers),
+            marker_cols)  # fmt: skip
 
 
 def _parse_cell(path: Path, cell: str, column: str, lineno: int) -> float:
@@ -428,7 +509,11 @@ def describe_recording(rec: Recording) -> dict:
     "channels" (e.g. "l_wrist.ax", ..., "ground_position.x", "ground_position.z",
     "heading"), "rate_hz", "duration_s", "has_ground_position", "has_heading",
     "constraint_sets"}."""
-    channels = [f"{n}.a{k}" for n in rec.sensor_names for k in _AXES]
+    channels = [f"{n}.a{k}" for n in rec.sensor_names for k in _AXES] if rec.accelerations is not None else []
+    if rec.orientations is not None:
+        channels += [f"{n}.q{k}" for n in rec.sensor_names for k in _QUAT]
+    if rec.marker_positions is not None:
+        channels += [f"{n}.p{k}" for n in rec.marker_names for k in _AXES]
     if rec.ground_position is not None:
         channels += ["ground_position.x", "ground_position.z"]
     if rec.heading is not None:

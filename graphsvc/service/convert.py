@@ -19,8 +19,9 @@ from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.service._generated import graphsvc_pb2 as pb
 
 STRATEGY_NAMES = {pb.STRATEGY_UNSPECIFIED: "viterbi", pb.STRATEGY_VITERBI: "viterbi", pb.STRATEGY_OLNG: "olng",
-                  pb.STRATEGY_SSG: "ssg"}  # fmt: skip
-STRATEGY_VALUES = {"viterbi": pb.STRATEGY_VITERBI, "olng": pb.STRATEGY_OLNG, "ssg": pb.STRATEGY_SSG}
+                  pb.STRATEGY_SSG: "ssg", pb.STRATEGY_NEAREST: "nearest"}  # fmt: skip
+STRATEGY_VALUES = {"viterbi": pb.STRATEGY_VITERBI, "olng": pb.STRATEGY_OLNG, "ssg": pb.STRATEGY_SSG,
+                   "nearest": pb.STRATEGY_NEAREST}  # fmt: skip
 CONTACT_NAMES = {pb.CONTACT_STATE_LEFT: "left", pb.CONTACT_STATE_RIGHT: "right", pb.CONTACT_STATE_BOTH: "both",
                  pb.CONTACT_STATE_NONE: "none"}  # fmt: skip
 CONTACT_VALUES = {v: k for k, v in CONTACT_NAMES.items()}
@@ -185,7 +186,13 @@ def _check_no_inf(field: str, values: np.ndarray, per_item: int) -> None:
 def recording_to_proto(rec: Recording) -> pb.Recording:
     msg = pb.Recording(rate_hz=float(rec.rate_hz), sensor_names=list(rec.sensor_names))
     msg.timestamps_s.extend(np.asarray(rec.timestamps_s, np.float64).tolist())
-    msg.accelerations_m_s2.extend(np.asarray(rec.accelerations, np.float32).ravel().tolist())
+    if rec.accelerations is not None:
+        msg.accelerations_m_s2.extend(np.asarray(rec.accelerations, np.float32).ravel().tolist())
+    if rec.orientations is not None:
+        msg.orientations_wxyz.extend(np.asarray(rec.orientations, np.float32).ravel().tolist())
+    if rec.marker_positions is not None:
+        msg.marker_names.extend(rec.marker_names)
+        msg.marker_positions_m.extend(np.asarray(rec.marker_positions, np.float64).ravel().tolist())
     if rec.ground_position is not None:
         msg.ground_positions_m.extend(np.asarray(rec.ground_position, np.float64).ravel().tolist())
     if rec.heading is not None:
@@ -206,14 +213,17 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
     _check_times(t, f"{field}.timestamps_s")
     order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
     S = len(graph_names)
-    acc = np.array(msg.accelerations_m_s2, np.float32)
-    if acc.shape[0] != T * S * 3:
-        raise FieldError(f"{field}.accelerations_m_s2", f"expected T×S×3 = {T}×{S}×3 = {T * S * 3} values "
-                         f"({T} timestamps, {S} sensors), got {acc.shape[0]}")  # fmt: skip
-    _check_no_inf(f"{field}.accelerations_m_s2", acc, S * 3)
-    acc = acc.reshape(T, S, 3)
-    if order is not None:
-        acc = np.ascontiguousarray(acc[:, order])
+    acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order)
+    orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order)
+    marker_names, markers = tuple(msg.marker_names), None
+    if len(msg.marker_positions_m) or marker_names:
+        M = len(marker_names)
+        markers = np.array(msg.marker_positions_m, np.float64)
+        if markers.shape[0] != T * M * 3:
+            raise FieldError(f"{field}.marker_positions_m", f"expected T×M×3 = {T}×{M}×3 = {T * M * 3} values "
+                             f"({T} timestamps, {M} marker names), got {markers.shape[0]}")  # fmt: skip
+        _check_no_inf(f"{field}.marker_positions_m", markers, 3)
+        markers = markers.reshape(T, M, 3)
     position = heading = None
     if len(msg.ground_positions_m):
         position = np.array(msg.ground_positions_m, np.float64)
@@ -227,12 +237,27 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
             raise FieldError(f"{field}.headings_rad", f"expected 0 or T = {T} values, got {heading.shape[0]}")
         _check_no_inf(f"{field}.headings_rad", heading, 1)
     rec = Recording(rate_hz=float(rate), timestamps_s=t, sensor_names=tuple(graph_names), accelerations=acc,
-                    ground_position=position, heading=heading, meta={"source": "grpc"})  # fmt: skip
+                    ground_position=position, heading=heading, meta={"source": "grpc"}, orientations=orientations,
+                    marker_names=marker_names, marker_positions=markers)  # fmt: skip
     try:
         rec.validate()
     except InputError as exc:  # anything the checks above missed still names the message
         raise FieldError(field, str(exc)) from None
     return rec
+
+
+def _per_sensor(values, T: int, S: int, width: int, field: str, order) -> np.ndarray | None:
+    """(T, S, width) float32 in the graph's sensor order from a flat proto field, None
+    when it is empty."""
+    a = np.array(values, np.float32)
+    if a.shape[0] == 0:
+        return None
+    if a.shape[0] != T * S * width:
+        raise FieldError(field, f"expected T×S×{width} = {T}×{S}×{width} = {T * S * width} values "
+                         f"({T} timestamps, {S} sensors), got {a.shape[0]}")  # fmt: skip
+    _check_no_inf(field, a, S * width)
+    a = a.reshape(T, S, width)
+    return np.ascontiguousarray(a[:, order]) if order is not None else a
 
 
 def _check_times(t: np.ndarray, field: str) -> None:
@@ -353,14 +378,16 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
         raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
     w = options.weights
     msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[options.strategy],
-                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading),
-                              heading_from_track=bool(options.heading_from_track),
-                              rest_heading_deg=float(options.rest_heading_deg),
-                              speed_threshold_m_s=float(options.speed_threshold))  # fmt: skip
+                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading))
     if options.latency_s is not None:
         msg.latency_s = float(options.latency_s)
+    # The heading rule and the beam in ViterbiOptions; the old flat fields too, which
+    # a server before ViterbiOptions reads.
+    msg.viterbi.heading_from_track = msg.heading_from_track = bool(options.heading_from_track)
+    msg.viterbi.rest_heading_deg = msg.rest_heading_deg = float(options.rest_heading_deg)
+    msg.viterbi.speed_threshold_m_s = msg.speed_threshold_m_s = float(options.speed_threshold)
     if options.beam is not None:
-        msg.beam = float(options.beam)
+        msg.viterbi.beam = msg.beam = float(options.beam)
     sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
     msg.constraint_sets.extend(constraints_to_proto(sets))
     return msg
@@ -368,15 +395,14 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
 
 def strategy_from_proto(value: int, field: str) -> str:
     if value not in STRATEGY_NAMES:
-        raise FieldError(field, f"unknown strategy {value} (VITERBI = 1, OLNG = 2, SSG = 3)")
+        raise FieldError(field, f"unknown strategy {value} (VITERBI = 1, OLNG = 2, SSG = 3, NEAREST = 4)")
     return STRATEGY_NAMES[value]
 
 
 def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
     """pipeline.Options from a SynthesisOptions, every value checked (FieldError).
     Whether the strategy is built is left to the pipeline (StrategyNotImplementedError)."""
-    from graphsvc.pipeline import Options
-    from graphsvc.search.viterbi import Weights
+    from graphsvc.strategies.options import Options, Weights
 
     strategy = strategy_from_proto(msg.strategy, f"{field}.strategy")
     weights = Weights()
@@ -392,21 +418,23 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
         latency = msg.latency_s
         if not (math.isfinite(latency) and latency >= 0):
             raise FieldError(f"{field}.latency_s", f"must be a finite number of seconds ≥ 0, got {latency}")
-    if not math.isfinite(msg.rest_heading_deg):
-        raise FieldError(f"{field}.rest_heading_deg", f"must be finite, got {msg.rest_heading_deg}")
+    # ViterbiOptions when given, else the flat fields it supersedes (older clients).
+    own, where = (msg.viterbi, f"{field}.viterbi") if msg.HasField("viterbi") else (msg, field)
+    if not math.isfinite(own.rest_heading_deg):
+        raise FieldError(f"{where}.rest_heading_deg", f"must be finite, got {own.rest_heading_deg}")
     extra = {}
-    if msg.HasField("speed_threshold_m_s"):
-        v = msg.speed_threshold_m_s
+    if own.HasField("speed_threshold_m_s"):
+        v = own.speed_threshold_m_s
         if not (math.isfinite(v) and v >= 0):
-            raise FieldError(f"{field}.speed_threshold_m_s", f"must be a finite speed ≥ 0, got {v}")
+            raise FieldError(f"{where}.speed_threshold_m_s", f"must be a finite speed ≥ 0, got {v}")
         extra["speed_threshold"] = v
-    if msg.HasField("beam"):
-        if not (math.isfinite(msg.beam) and msg.beam > 0):
-            raise FieldError(f"{field}.beam", f"must be a finite cost > 0, got {msg.beam}")
-        extra["beam"] = msg.beam
+    if own.HasField("beam"):
+        if not (math.isfinite(own.beam) and own.beam > 0):
+            raise FieldError(f"{where}.beam", f"must be a finite cost > 0, got {own.beam}")
+        extra["beam"] = own.beam
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
-    return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=msg.heading_from_track,
-                   rest_heading_deg=msg.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
+    return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=own.heading_from_track,
+                   rest_heading_deg=own.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
 
 
 # ---------------------------------------------------------------- motion and frames
@@ -434,6 +462,17 @@ def frame_to_proto(frame, input_sample_index: int) -> pb.PoseFrame:
                        input_sample_index=int(input_sample_index))  # fmt: skip
     msg.rotations_wxyz.extend(np.asarray(frame.rotations, np.float32).ravel().tolist())
     msg.translations_m.extend(np.asarray(frame.translations, np.float32).ravel().tolist())
+    msg.sources.extend(pb.FrameSource(clip=c, frame=f, weight=w) for c, f, w in frame.sources)
+    return msg
+
+
+def provenance_to_proto(prov) -> pb.Provenance:
+    """A strategies.base.Provenance → Provenance."""
+    msg = pb.Provenance(sources_per_frame=int(prov.clip.shape[1]))
+    msg.clips.extend(np.asarray(prov.clip, np.int64).ravel().tolist())
+    msg.frames.extend(np.asarray(prov.frame, np.float64).ravel().tolist())
+    msg.weights.extend(np.asarray(prov.weight, np.float64).ravel().tolist())
+    msg.labels.extend(str(x) for x in prov.label)
     return msg
 
 

@@ -89,8 +89,8 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
         if name in graphs:
             raise InputError(f"graph name {name!r} given twice")
         graph = load_graph(path)
-        # Compile/load the search kernels (serial, and threaded for a stream running
-        # alone) and build the search tables now, not in the first client's call.
+        # Every strategy's index, and its kernels compiled or loaded (serial, and
+        # threaded for a stream running alone), now, not in the first client's call.
         warm_up(graph, threads=False)
         warm_up(graph, threads=True)
         graphs[name] = LoadedGraph(name, path, graph, convert.graph_info(name, graph, path.stat().st_size))
@@ -256,8 +256,10 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             with self.threads.running():
                 result = reconstruct(graph, rec, options, threads=False, should_stop=lambda: not context.is_active())
             response = pb.SynthesizeResponse(motion=convert.motion_to_proto(result.motion),
-                                              node_path=result.node_path.tolist(),
+                                              node_path=[] if result.node_path is None else result.node_path.tolist(),
                                               bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
+            if result.provenance is not None:
+                response.provenance.CopyFrom(convert.provenance_to_proto(result.provenance))
             convert.report_to_struct(result.report, response.report)
             return response
         except Exception as exc:  # noqa: BLE001 — every failure becomes a status, never a dead worker

@@ -291,3 +291,62 @@ def test_describe():
     }  # fmt: skip
     bare = describe_recording(make_recording(optional=False))
     assert bare["channels"][-1] == "r_ankle.az" and not bare["has_heading"] and bare["constraint_sets"] == 0
+
+
+# ---------------------------------------------------------------- orientations and markers
+
+
+def with_orientations_and_markers(rec: Recording, accelerations: bool = True) -> Recording:
+    from dataclasses import replace
+
+    rng = np.random.default_rng(8)
+    T, S = rec.num_samples, rec.num_sensors
+    q = rng.normal(size=(T, S, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q = q.astype(np.float32)
+    q[3, 1] = np.nan
+    markers = rng.normal(size=(T, 3, 3))
+    markers[[1, 2, 6], 2] = np.nan  # a marker flickering out
+    return replace(rec, accelerations=rec.accelerations if accelerations else None, orientations=q,
+                   marker_names=("LFHD", "RWRA", "LTOE"), marker_positions=markers)
+
+
+@pytest.mark.parametrize("accelerations", [True, False])
+def test_orientations_and_markers_round_trip_through_rec_and_csv(tmp_path, accelerations):
+    rec = with_orientations_and_markers(make_recording(), accelerations)
+    for path, read, write, exact in ((tmp_path / "r.rec", load_recording, save_recording, True),
+                                     (tmp_path / "r.csv", import_csv, export_csv, False)):
+        write(rec, path)
+        back = read(path)
+        assert back.marker_names == rec.marker_names and back.sensor_names == rec.sensor_names
+        np.testing.assert_array_equal(back.orientations, rec.orientations)  # float32: exact even via '%.9g'
+        assert back.orientations.dtype == np.float32
+        if exact:
+            np.testing.assert_array_equal(back.marker_positions, rec.marker_positions)
+        else:
+            np.testing.assert_allclose(back.marker_positions, rec.marker_positions, rtol=1e-8)
+        assert np.isnan(back.marker_positions[[1, 2, 6], 2]).all()
+        if accelerations:
+            np.testing.assert_array_equal(back.accelerations, rec.accelerations)
+        else:
+            assert back.accelerations is None
+    d = describe_recording(rec)
+    assert "LFHD.px" in d["channels"] and "l_wrist.qw" in d["channels"]
+    # A recording made before orientations and markers reads as it did: none of either.
+    plain = make_recording()
+    save_recording(plain, tmp_path / "plain.rec")
+    back = load_recording(tmp_path / "plain.rec")
+    assert back.orientations is None and back.marker_positions is None and back.marker_names == ()
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: r.orientations.__setitem__((0, 0), [2.0, 0, 0, 0]), "unit quaternions"),
+    (lambda r: r.orientations.__setitem__((0, 0, 0), np.inf), "infinite"),
+    (lambda r: setattr(r, "marker_names", ("A", "A", "B")), "duplicate marker names"),
+    (lambda r: setattr(r, "marker_positions", r.marker_positions[:, :2]), "marker_positions has shape"),
+])
+def test_orientation_and_marker_checks(change, message):
+    rec = with_orientations_and_markers(make_recording())
+    change(rec)
+    with pytest.raises(InputError, match=message):
+        rec.validate()

@@ -44,5 +44,7 @@ def test_descriptor_names_the_proto_package():
     assert pb.DESCRIPTOR.package == "graphsvc.v1"
     methods = [m.name for m in pb.DESCRIPTOR.services_by_name["MotionGraphService"].methods]
     assert methods == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize"]
-    assert [v.name for v in pb.Strategy.DESCRIPTOR.values] == ["STRATEGY_UNSPECIFIED", "STRATEGY_VITERBI",
-                                                               "STRATEGY_OLNG", "STRATEGY_SSG"]  # fmt: skip
+    # The values a client already sends keep their numbers; strategies added since follow.
+    assert [(v.name, v.number) for v in pb.Strategy.DESCRIPTOR.values][:4] == [
+        ("STRATEGY_UNSPECIFIED", 0), ("STRATEGY_VITERBI", 1), ("STRATEGY_OLNG", 2), ("STRATEGY_SSG", 3)]
+    assert pb.Strategy.Value("STRATEGY_NEAREST") == 4

@@ -408,3 +408,73 @@ def test_concurrent_streams_are_independent(conn, graph, recording):
         t.join()
     for r in results:
         assert_frames_equal(expected, r.frames)
+
+
+# ---------------------------------------------------------------- every strategy through the service
+
+
+def test_nearest_through_synthesize_and_stream(conn, graph, recording):
+    from graphsvc.pipeline import Options, reconstruct
+
+    options = Options(strategy="nearest")
+    expected = reconstruct(graph, recording, options)
+    got = C.synthesize(conn, "small", recording, convert.options_to_proto(options))
+    np.testing.assert_array_equal(got.node_path, expected.node_path)
+    np.testing.assert_array_equal(got.motion.rotations, expected.motion.rotations.astype(np.float32))
+    assert got.report["strategy"] == "nearest"
+    # Provenance: one source a frame, the node's clip and frame.
+    request = _recording_request(recording)
+    request.options.CopyFrom(convert.options_to_proto(options))
+    prov = conn.stub.Synthesize(request, timeout=30).provenance
+    assert prov.sources_per_frame == 1 and list(prov.clips) == graph.node_clip[expected.node_path].tolist()
+    assert list(prov.labels) == [graph.labels[k] for k in graph.node_label[expected.node_path]]
+
+    live, _ = live_frames(graph, recording, options)
+    feed = C.SampleFeed(C.stream_config("small", convert.options_to_proto(options)))
+    for sample in C.recording_samples(recording):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert_frames_equal(live, result.frames)
+    assert [(s.clip, s.frame, s.weight) for s in result.frames[0].sources] == [
+        (live[0].sources[0][0], pytest.approx(live[0].sources[0][1]), 1.0)]
+
+
+def test_a_strategy_asked_for_an_input_it_lacks_answers_invalid_argument(conn, recording):
+    request = _recording_request(recording)
+    del request.recording.accelerations_m_s2[:]  # no accelerations at all: only the track
+    for strategy in (pb.STRATEGY_VITERBI, pb.STRATEGY_NEAREST):
+        request.options.strategy = strategy
+        got, details = _code(conn.stub.Synthesize, request, timeout=10)
+        assert got == grpc.StatusCode.INVALID_ARGUMENT and "needs accelerations" in details, details
+
+
+def test_viterbi_options_supersede_the_flat_fields():
+    from graphsvc.pipeline import Options
+
+    msg = convert.options_to_proto(Options(beam=4.0, heading_from_track=True, rest_heading_deg=30.0))
+    assert msg.viterbi.beam == msg.beam == 4.0 and msg.viterbi.heading_from_track
+    back = convert.options_from_proto(msg)
+    assert back.beam == 4.0 and back.heading_from_track and back.rest_heading_deg == 30.0
+    old = pb.SynthesisOptions(beam=2.5, heading_from_track=True, rest_heading_deg=10.0)  # an older client
+    back = convert.options_from_proto(old)
+    assert back.beam == 2.5 and back.heading_from_track and back.rest_heading_deg == 10.0
+    new = pb.SynthesisOptions(beam=2.5, viterbi=pb.ViterbiOptions(beam=7.0))  # the new message wins
+    assert convert.options_from_proto(new).beam == 7.0 and not convert.options_from_proto(new).heading_from_track
+    with pytest.raises(Exception, match="options.viterbi.beam"):
+        convert.options_from_proto(pb.SynthesisOptions(viterbi=pb.ViterbiOptions(beam=0.0)))
+
+
+def test_recordings_with_orientations_and_markers_cross_the_wire(graph, recording):
+    from dataclasses import replace
+
+    T, S = recording.num_samples, recording.num_sensors
+    q = np.zeros((T, S, 4), np.float32)
+    q[..., 0] = 1.0
+    markers = np.full((T, 2, 3), np.nan)
+    markers[::2] = 0.5
+    rec = replace(recording, orientations=q, marker_names=("LFHD", "RTOE"), marker_positions=markers)
+    back = convert.recording_from_proto(convert.recording_to_proto(rec), graph.sensor_names)
+    np.testing.assert_array_equal(back.orientations, q)
+    assert back.marker_names == ("LFHD", "RTOE")
+    np.testing.assert_array_equal(back.marker_positions, markers)

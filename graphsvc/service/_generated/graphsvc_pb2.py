@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import struct_pb2 as google_dot_protobuf_dot_struct__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1agraphsvc/v1/graphsvc.proto\x12\x0bgraphsvc.v1\x1a\x1cgoogle/protobuf/struct.proto\"\x13\n\x11ListGraphsRequest\"<\n\x12ListGraphsResponse\x12&\n\x06graphs\x18\x01 \x03(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\x1f\n\x0fGetGraphRequest\x12\x0c\n\x04name\x18\x01 \x01(\t\"9\n\x10GetGraphResponse\x12%\n\x05graph\x18\x01 \x01(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\xc3\x05\n\tGraphInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x12\n\nnode_count\x18\x02 \x01(\x03\x12\x12\n\nedge_count\x18\x03 \x01(\x03\x12I\n\x13node_counts_by_kind\x18\x04 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.NodeCountsByKindEntry\x12I\n\x13\x65\x64ge_counts_by_kind\x18\x05 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.EdgeCountsByKindEntry\x12\x16\n\x0e\x64\x65\x61\x64_end_count\x18\x06 \x01(\x03\x12\x12\n\nclip_count\x18\x07 \x01(\x03\x12\x16\n\x0ekb_frame_count\x18\x08 \x01(\x03\x12\x12\n\nkb_minutes\x18\t \x01(\x01\x12\x0e\n\x06labels\x18\n \x03(\t\x12\x0e\n\x06layout\x18\x0b \x01(\t\x12\x14\n\x0csensor_names\x18\x0c \x03(\t\x12\x0f\n\x07rate_hz\x18\r \x01(\x01\x12\x13\n\x0bjoint_count\x18\x0e \x01(\x05\x12\"\n\x1ainterpolated_segment_count\x18\x0f \x01(\x03\x12\x12\n\nfile_bytes\x18\x10 \x01(\x03\x12\'\n\x06params\x18\x11 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\'\n\x08skeleton\x18\x12 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\x12$\n\x1crest_pose_accelerations_m_s2\x18\x13 \x03(\x02\x12\x14\n\x0c\x62ridge_count\x18\x14 \x01(\x03\x1a\x37\n\x15NodeCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\x1a\x37\n\x15\x45\x64geCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\"\x8b\x01\n\x08Skeleton\x12\x13\n\x0bjoint_names\x18\x01 \x03(\t\x12\x16\n\x0eparent_indices\x18\x02 \x03(\x05\x12\x11\n\toffsets_m\x18\x03 \x03(\x01\x12,\n\x08\x63hannels\x18\x04 \x03(\x0b\x32\x1a.graphsvc.v1.JointChannels\x12\x11\n\tend_sites\x18\x05 \x03(\x08\"\x1e\n\rJointChannels\x12\r\n\x05names\x18\x01 \x03(\t\"\xcd\x02\n\x10SynthesisOptions\x12\'\n\x08strategy\x18\x01 \x01(\x0e\x32\x15.graphsvc.v1.Strategy\x12)\n\x07weights\x18\x02 \x01(\x0b\x32\x18.graphsvc.v1.CostWeights\x12\x16\n\tlatency_s\x18\x03 \x01(\x01H\x00\x88\x01\x01\x12\x1a\n\x12heading_from_track\x18\x04 \x01(\x08\x12\x18\n\x10rest_heading_deg\x18\x05 \x01(\x01\x12\x33\n\x0f\x63onstraint_sets\x18\x06 \x03(\x0b\x32\x1a.graphsvc.v1.ConstraintSet\x12 \n\x13speed_threshold_m_s\x18\x07 \x01(\x01H\x01\x88\x01\x01\x12\x11\n\x04\x62\x65\x61m\x18\x08 \x01(\x01H\x02\x88\x01\x01\x42\x0c\n\n_latency_sB\x16\n\x14_speed_threshold_m_sB\x07\n\x05_beam\"F\n\x0b\x43ostWeights\x12\x14\n\x0c\x61\x63\x63\x65leration\x18\x01 \x01(\x01\x12\x10\n\x08position\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\"=\n\rConstraintSet\x12,\n\x0b\x63onstraints\x18\x01 \x03(\x0b\x32\x17.graphsvc.v1.Constraint\"z\n\nConstraint\x12\x0f\n\x07start_s\x18\x01 \x01(\x01\x12\r\n\x05\x65nd_s\x18\x02 \x01(\x01\x12,\n\x07\x63ontact\x18\x03 \x01(\x0e\x32\x19.graphsvc.v1.ContactStateH\x00\x12\x0f\n\x05label\x18\x04 \x01(\tH\x00\x42\r\n\x0brequirement\"\x96\x01\n\tRecording\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x14\n\x0csensor_names\x18\x02 \x03(\t\x12\x14\n\x0ctimestamps_s\x18\x03 \x03(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x04 \x03(\x02\x12\x1a\n\x12ground_positions_m\x18\x05 \x03(\x01\x12\x14\n\x0cheadings_rad\x18\x06 \x03(\x01\"}\n\x11SynthesizeRequest\x12\r\n\x05graph\x18\x01 \x01(\t\x12)\n\trecording\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.Recording\x12.\n\x07options\x18\x03 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\"\x82\x01\n\x12SynthesizeResponse\x12#\n\x06motion\x18\x01 \x01(\x0b\x32\x13.graphsvc.v1.Motion\x12\x11\n\tnode_path\x18\x02 \x03(\x03\x12\x0b\n\x03\x62vh\x18\x03 \x01(\x0c\x12\'\n\x06report\x18\x04 \x01(\x0b\x32\x17.google.protobuf.Struct\"s\n\x06Motion\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x13\n\x0b\x66rame_count\x18\x02 \x01(\x05\x12\x13\n\x0bjoint_count\x18\x03 \x01(\x05\x12\x16\n\x0erotations_wxyz\x18\x04 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x05 \x03(\x02\"~\n\x17StreamSynthesizeRequest\x12+\n\x06\x63onfig\x18\x01 \x01(\x0b\x32\x19.graphsvc.v1.StreamConfigH\x00\x12+\n\x06sample\x18\x02 \x01(\x0b\x32\x19.graphsvc.v1.SensorSampleH\x00\x42\t\n\x07message\"c\n\x0cStreamConfig\x12\r\n\x05graph\x18\x01 \x01(\t\x12.\n\x07options\x18\x02 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\x12\x14\n\x0csensor_names\x18\x03 \x03(\t\"\x9a\x01\n\x0cSensorSample\x12\x0e\n\x06time_s\x18\x01 \x01(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x02 \x03(\x02\x12\x34\n\x0fground_position\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.GroundPosition\x12\x18\n\x0bheading_rad\x18\x04 \x01(\x01H\x00\x88\x01\x01\x42\x0e\n\x0c_heading_rad\"*\n\x0eGroundPosition\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03z_m\x18\x02 \x01(\x01\"\xae\x01\n\x18StreamSynthesizeResponse\x12-\n\x07started\x18\x01 \x01(\x0b\x32\x1a.graphsvc.v1.StreamStartedH\x00\x12\'\n\x05\x66rame\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.PoseFrameH\x00\x12/\n\x08\x66inished\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.StreamFinishedH\x00\x42\t\n\x07message\"\x82\x01\n\rStreamStarted\x12\r\n\x05graph\x18\x01 \x01(\t\x12\x0f\n\x07rate_hz\x18\x02 \x01(\x01\x12\x12\n\nlag_frames\x18\x03 \x01(\x05\x12\x14\n\x0csensor_names\x18\x04 \x03(\t\x12\'\n\x08skeleton\x18\x05 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\"\x93\x01\n\tPoseFrame\x12\r\n\x05index\x18\x01 \x01(\x03\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\x0c\n\x04node\x18\x03 \x01(\x03\x12\r\n\x05label\x18\x04 \x01(\t\x12\x16\n\x0erotations_wxyz\x18\x05 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x06 \x03(\x02\x12\x1a\n\x12input_sample_index\x18\x07 \x01(\x03\"B\n\x0eStreamFinished\x12\x18\n\x10samples_received\x18\x01 \x01(\x03\x12\x16\n\x0e\x66rames_emitted\x18\x02 \x01(\x03*_\n\x08Strategy\x12\x18\n\x14STRATEGY_UNSPECIFIED\x10\x00\x12\x14\n\x10STRATEGY_VITERBI\x10\x01\x12\x11\n\rSTRATEGY_OLNG\x10\x02\x12\x10\n\x0cSTRATEGY_SSG\x10\x03*\x8e\x01\n\x0c\x43ontactState\x12\x1d\n\x19\x43ONTACT_STATE_UNSPECIFIED\x10\x00\x12\x16\n\x12\x43ONTACT_STATE_LEFT\x10\x01\x12\x17\n\x13\x43ONTACT_STATE_RIGHT\x10\x02\x12\x16\n\x12\x43ONTACT_STATE_BOTH\x10\x03\x12\x16\n\x12\x43ONTACT_STATE_NONE\x10\x04\x32\xe0\x02\n\x12MotionGraphService\x12M\n\nListGraphs\x12\x1e.graphsvc.v1.ListGraphsRequest\x1a\x1f.graphsvc.v1.ListGraphsResponse\x12G\n\x08GetGraph\x12\x1c.graphsvc.v1.GetGraphRequest\x1a\x1d.graphsvc.v1.GetGraphResponse\x12M\n\nSynthesize\x12\x1e.graphsvc.v1.SynthesizeRequest\x1a\x1f.graphsvc.v1.SynthesizeResponse\x12\x63\n\x10StreamSynthesize\x12$.graphsvc.v1.StreamSynthesizeRequest\x1a%.graphsvc.v1.StreamSynthesizeResponse(\x01\x30\x01\x62\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x1agraphsvc/v1/graphsvc.proto\x12\x0bgraphsvc.v1\x1a\x1cgoogle/protobuf/struct.proto\"\x13\n\x11ListGraphsRequest\"<\n\x12ListGraphsResponse\x12&\n\x06graphs\x18\x01 \x03(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\x1f\n\x0fGetGraphRequest\x12\x0c\n\x04name\x18\x01 \x01(\t\"9\n\x10GetGraphResponse\x12%\n\x05graph\x18\x01 \x01(\x0b\x32\x16.graphsvc.v1.GraphInfo\"\xc3\x05\n\tGraphInfo\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\x12\n\nnode_count\x18\x02 \x01(\x03\x12\x12\n\nedge_count\x18\x03 \x01(\x03\x12I\n\x13node_counts_by_kind\x18\x04 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.NodeCountsByKindEntry\x12I\n\x13\x65\x64ge_counts_by_kind\x18\x05 \x03(\x0b\x32,.graphsvc.v1.GraphInfo.EdgeCountsByKindEntry\x12\x16\n\x0e\x64\x65\x61\x64_end_count\x18\x06 \x01(\x03\x12\x12\n\nclip_count\x18\x07 \x01(\x03\x12\x16\n\x0ekb_frame_count\x18\x08 \x01(\x03\x12\x12\n\nkb_minutes\x18\t \x01(\x01\x12\x0e\n\x06labels\x18\n \x03(\t\x12\x0e\n\x06layout\x18\x0b \x01(\t\x12\x14\n\x0csensor_names\x18\x0c \x03(\t\x12\x0f\n\x07rate_hz\x18\r \x01(\x01\x12\x13\n\x0bjoint_count\x18\x0e \x01(\x05\x12\"\n\x1ainterpolated_segment_count\x18\x0f \x01(\x03\x12\x12\n\nfile_bytes\x18\x10 \x01(\x03\x12\'\n\x06params\x18\x11 \x01(\x0b\x32\x17.google.protobuf.Struct\x12\'\n\x08skeleton\x18\x12 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\x12$\n\x1crest_pose_accelerations_m_s2\x18\x13 \x03(\x02\x12\x14\n\x0c\x62ridge_count\x18\x14 \x01(\x03\x1a\x37\n\x15NodeCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\x1a\x37\n\x15\x45\x64geCountsByKindEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x03:\x02\x38\x01\"\x8b\x01\n\x08Skeleton\x12\x13\n\x0bjoint_names\x18\x01 \x03(\t\x12\x16\n\x0eparent_indices\x18\x02 \x03(\x05\x12\x11\n\toffsets_m\x18\x03 \x03(\x01\x12,\n\x08\x63hannels\x18\x04 \x03(\x0b\x32\x1a.graphsvc.v1.JointChannels\x12\x11\n\tend_sites\x18\x05 \x03(\x08\"\x1e\n\rJointChannels\x12\r\n\x05names\x18\x01 \x03(\t\"\x91\x03\n\x10SynthesisOptions\x12\'\n\x08strategy\x18\x01 \x01(\x0e\x32\x15.graphsvc.v1.Strategy\x12)\n\x07weights\x18\x02 \x01(\x0b\x32\x18.graphsvc.v1.CostWeights\x12\x16\n\tlatency_s\x18\x03 \x01(\x01H\x01\x88\x01\x01\x12\x1a\n\x12heading_from_track\x18\x04 \x01(\x08\x12\x18\n\x10rest_heading_deg\x18\x05 \x01(\x01\x12\x33\n\x0f\x63onstraint_sets\x18\x06 \x03(\x0b\x32\x1a.graphsvc.v1.ConstraintSet\x12 \n\x13speed_threshold_m_s\x18\x07 \x01(\x01H\x02\x88\x01\x01\x12\x11\n\x04\x62\x65\x61m\x18\x08 \x01(\x01H\x03\x88\x01\x01\x12.\n\x07viterbi\x18\t \x01(\x0b\x32\x1b.graphsvc.v1.ViterbiOptionsH\x00\x42\x12\n\x10strategy_optionsB\x0c\n\n_latency_sB\x16\n\x14_speed_threshold_m_sB\x07\n\x05_beam\"\x9c\x01\n\x0eViterbiOptions\x12\x11\n\x04\x62\x65\x61m\x18\x01 \x01(\x01H\x00\x88\x01\x01\x12\x1a\n\x12heading_from_track\x18\x02 \x01(\x08\x12\x18\n\x10rest_heading_deg\x18\x03 \x01(\x01\x12 \n\x13speed_threshold_m_s\x18\x04 \x01(\x01H\x01\x88\x01\x01\x42\x07\n\x05_beamB\x16\n\x14_speed_threshold_m_s\":\n\x0b\x46rameSource\x12\x0c\n\x04\x63lip\x18\x01 \x01(\x05\x12\r\n\x05\x66rame\x18\x02 \x01(\x01\x12\x0e\n\x06weight\x18\x03 \x01(\x01\"g\n\nProvenance\x12\x19\n\x11sources_per_frame\x18\x01 \x01(\x05\x12\r\n\x05\x63lips\x18\x02 \x03(\x05\x12\x0e\n\x06\x66rames\x18\x03 \x03(\x01\x12\x0f\n\x07weights\x18\x04 \x03(\x01\x12\x0e\n\x06labels\x18\x05 \x03(\t\"F\n\x0b\x43ostWeights\x12\x14\n\x0c\x61\x63\x63\x65leration\x18\x01 \x01(\x01\x12\x10\n\x08position\x18\x02 \x01(\x01\x12\x0f\n\x07heading\x18\x03 \x01(\x01\"=\n\rConstraintSet\x12,\n\x0b\x63onstraints\x18\x01 \x03(\x0b\x32\x17.graphsvc.v1.Constraint\"z\n\nConstraint\x12\x0f\n\x07start_s\x18\x01 \x01(\x01\x12\r\n\x05\x65nd_s\x18\x02 \x01(\x01\x12,\n\x07\x63ontact\x18\x03 \x01(\x0e\x32\x19.graphsvc.v1.ContactStateH\x00\x12\x0f\n\x05label\x18\x04 \x01(\tH\x00\x42\r\n\x0brequirement\"\xe3\x01\n\tRecording\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x14\n\x0csensor_names\x18\x02 \x03(\t\x12\x14\n\x0ctimestamps_s\x18\x03 \x03(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x04 \x03(\x02\x12\x1a\n\x12ground_positions_m\x18\x05 \x03(\x01\x12\x14\n\x0cheadings_rad\x18\x06 \x03(\x01\x12\x19\n\x11orientations_wxyz\x18\x07 \x03(\x02\x12\x14\n\x0cmarker_names\x18\x08 \x03(\t\x12\x1a\n\x12marker_positions_m\x18\t \x03(\x01\"}\n\x11SynthesizeRequest\x12\r\n\x05graph\x18\x01 \x01(\t\x12)\n\trecording\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.Recording\x12.\n\x07options\x18\x03 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\"\xaf\x01\n\x12SynthesizeResponse\x12#\n\x06motion\x18\x01 \x01(\x0b\x32\x13.graphsvc.v1.Motion\x12\x11\n\tnode_path\x18\x02 \x03(\x03\x12\x0b\n\x03\x62vh\x18\x03 \x01(\x0c\x12\'\n\x06report\x18\x04 \x01(\x0b\x32\x17.google.protobuf.Struct\x12+\n\nprovenance\x18\x05 \x01(\x0b\x32\x17.graphsvc.v1.Provenance\"s\n\x06Motion\x12\x0f\n\x07rate_hz\x18\x01 \x01(\x01\x12\x13\n\x0b\x66rame_count\x18\x02 \x01(\x05\x12\x13\n\x0bjoint_count\x18\x03 \x01(\x05\x12\x16\n\x0erotations_wxyz\x18\x04 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x05 \x03(\x02\"~\n\x17StreamSynthesizeRequest\x12+\n\x06\x63onfig\x18\x01 \x01(\x0b\x32\x19.graphsvc.v1.StreamConfigH\x00\x12+\n\x06sample\x18\x02 \x01(\x0b\x32\x19.graphsvc.v1.SensorSampleH\x00\x42\t\n\x07message\"c\n\x0cStreamConfig\x12\r\n\x05graph\x18\x01 \x01(\t\x12.\n\x07options\x18\x02 \x01(\x0b\x32\x1d.graphsvc.v1.SynthesisOptions\x12\x14\n\x0csensor_names\x18\x03 \x03(\t\"\x9a\x01\n\x0cSensorSample\x12\x0e\n\x06time_s\x18\x01 \x01(\x01\x12\x1a\n\x12\x61\x63\x63\x65lerations_m_s2\x18\x02 \x03(\x02\x12\x34\n\x0fground_position\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.GroundPosition\x12\x18\n\x0bheading_rad\x18\x04 \x01(\x01H\x00\x88\x01\x01\x42\x0e\n\x0c_heading_rad\"*\n\x0eGroundPosition\x12\x0b\n\x03x_m\x18\x01 \x01(\x01\x12\x0b\n\x03z_m\x18\x02 \x01(\x01\"\xae\x01\n\x18StreamSynthesizeResponse\x12-\n\x07started\x18\x01 \x01(\x0b\x32\x1a.graphsvc.v1.StreamStartedH\x00\x12\'\n\x05\x66rame\x18\x02 \x01(\x0b\x32\x16.graphsvc.v1.PoseFrameH\x00\x12/\n\x08\x66inished\x18\x03 \x01(\x0b\x32\x1b.graphsvc.v1.StreamFinishedH\x00\x42\t\n\x07message\"\x82\x01\n\rStreamStarted\x12\r\n\x05graph\x18\x01 \x01(\t\x12\x0f\n\x07rate_hz\x18\x02 \x01(\x01\x12\x12\n\nlag_frames\x18\x03 \x01(\x05\x12\x14\n\x0csensor_names\x18\x04 \x03(\t\x12\'\n\x08skeleton\x18\x05 \x01(\x0b\x32\x15.graphsvc.v1.Skeleton\"\xbe\x01\n\tPoseFrame\x12\r\n\x05index\x18\x01 \x01(\x03\x12\x0e\n\x06time_s\x18\x02 \x01(\x01\x12\x0c\n\x04node\x18\x03 \x01(\x03\x12\r\n\x05label\x18\x04 \x01(\t\x12\x16\n\x0erotations_wxyz\x18\x05 \x03(\x02\x12\x16\n\x0etranslations_m\x18\x06 \x03(\x02\x12\x1a\n\x12input_sample_index\x18\x07 \x01(\x03\x12)\n\x07sources\x18\x08 \x03(\x0b\x32\x18.graphsvc.v1.FrameSource\"B\n\x0eStreamFinished\x12\x18\n\x10samples_received\x18\x01 \x01(\x03\x12\x16\n\x0e\x66rames_emitted\x18\x02 \x01(\x03*u\n\x08Strategy\x12\x18\n\x14STRATEGY_UNSPECIFIED\x10\x00\x12\x14\n\x10STRATEGY_VITERBI\x10\x01\x12\x11\n\rSTRATEGY_OLNG\x10\x02\x12\x10\n\x0cSTRATEGY_SSG\x10\x03\x12\x14\n\x10STRATEGY_NEAREST\x10\x04*\x8e\x01\n\x0c\x43ontactState\x12\x1d\n\x19\x43ONTACT_STATE_UNSPECIFIED\x10\x00\x12\x16\n\x12\x43ONTACT_STATE_LEFT\x10\x01\x12\x17\n\x13\x43ONTACT_STATE_RIGHT\x10\x02\x12\x16\n\x12\x43ONTACT_STATE_BOTH\x10\x03\x12\x16\n\x12\x43ONTACT_STATE_NONE\x10\x04\x32\xe0\x02\n\x12MotionGraphService\x12M\n\nListGraphs\x12\x1e.graphsvc.v1.ListGraphsRequest\x1a\x1f.graphsvc.v1.ListGraphsResponse\x12G\n\x08GetGraph\x12\x1c.graphsvc.v1.GetGraphRequest\x1a\x1d.graphsvc.v1.GetGraphResponse\x12M\n\nSynthesize\x12\x1e.graphsvc.v1.SynthesizeRequest\x1a\x1f.graphsvc.v1.SynthesizeResponse\x12\x63\n\x10StreamSynthesize\x12$.graphsvc.v1.StreamSynthesizeRequest\x1a%.graphsvc.v1.StreamSynthesizeResponse(\x01\x30\x01\x62\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -36,10 +36,10 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_GRAPHINFO_NODECOUNTSBYKINDENTRY']._serialized_options = b'8\001'
   _globals['_GRAPHINFO_EDGECOUNTSBYKINDENTRY']._loaded_options = None
   _globals['_GRAPHINFO_EDGECOUNTSBYKINDENTRY']._serialized_options = b'8\001'
-  _globals['_STRATEGY']._serialized_start=3215
-  _globals['_STRATEGY']._serialized_end=3310
-  _globals['_CONTACTSTATE']._serialized_start=3313
-  _globals['_CONTACTSTATE']._serialized_end=3455
+  _globals['_STRATEGY']._serialized_start=3772
+  _globals['_STRATEGY']._serialized_end=3889
+  _globals['_CONTACTSTATE']._serialized_start=3892
+  _globals['_CONTACTSTATE']._serialized_end=4034
   _globals['_LISTGRAPHSREQUEST']._serialized_start=73
   _globals['_LISTGRAPHSREQUEST']._serialized_end=92
   _globals['_LISTGRAPHSRESPONSE']._serialized_start=94
@@ -59,37 +59,43 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_JOINTCHANNELS']._serialized_start=1100
   _globals['_JOINTCHANNELS']._serialized_end=1130
   _globals['_SYNTHESISOPTIONS']._serialized_start=1133
-  _globals['_SYNTHESISOPTIONS']._serialized_end=1466
-  _globals['_COSTWEIGHTS']._serialized_start=1468
-  _globals['_COSTWEIGHTS']._serialized_end=1538
-  _globals['_CONSTRAINTSET']._serialized_start=1540
-  _globals['_CONSTRAINTSET']._serialized_end=1601
-  _globals['_CONSTRAINT']._serialized_start=1603
-  _globals['_CONSTRAINT']._serialized_end=1725
-  _globals['_RECORDING']._serialized_start=1728
-  _globals['_RECORDING']._serialized_end=1878
-  _globals['_SYNTHESIZEREQUEST']._serialized_start=1880
-  _globals['_SYNTHESIZEREQUEST']._serialized_end=2005
-  _globals['_SYNTHESIZERESPONSE']._serialized_start=2008
-  _globals['_SYNTHESIZERESPONSE']._serialized_end=2138
-  _globals['_MOTION']._serialized_start=2140
-  _globals['_MOTION']._serialized_end=2255
-  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_start=2257
-  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_end=2383
-  _globals['_STREAMCONFIG']._serialized_start=2385
-  _globals['_STREAMCONFIG']._serialized_end=2484
-  _globals['_SENSORSAMPLE']._serialized_start=2487
-  _globals['_SENSORSAMPLE']._serialized_end=2641
-  _globals['_GROUNDPOSITION']._serialized_start=2643
-  _globals['_GROUNDPOSITION']._serialized_end=2685
-  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_start=2688
-  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_end=2862
-  _globals['_STREAMSTARTED']._serialized_start=2865
-  _globals['_STREAMSTARTED']._serialized_end=2995
-  _globals['_POSEFRAME']._serialized_start=2998
-  _globals['_POSEFRAME']._serialized_end=3145
-  _globals['_STREAMFINISHED']._serialized_start=3147
-  _globals['_STREAMFINISHED']._serialized_end=3213
-  _globals['_MOTIONGRAPHSERVICE']._serialized_start=3458
-  _globals['_MOTIONGRAPHSERVICE']._serialized_end=3810
+  _globals['_SYNTHESISOPTIONS']._serialized_end=1534
+  _globals['_VITERBIOPTIONS']._serialized_start=1537
+  _globals['_VITERBIOPTIONS']._serialized_end=1693
+  _globals['_FRAMESOURCE']._serialized_start=1695
+  _globals['_FRAMESOURCE']._serialized_end=1753
+  _globals['_PROVENANCE']._serialized_start=1755
+  _globals['_PROVENANCE']._serialized_end=1858
+  _globals['_COSTWEIGHTS']._serialized_start=1860
+  _globals['_COSTWEIGHTS']._serialized_end=1930
+  _globals['_CONSTRAINTSET']._serialized_start=1932
+  _globals['_CONSTRAINTSET']._serialized_end=1993
+  _globals['_CONSTRAINT']._serialized_start=1995
+  _globals['_CONSTRAINT']._serialized_end=2117
+  _globals['_RECORDING']._serialized_start=2120
+  _globals['_RECORDING']._serialized_end=2347
+  _globals['_SYNTHESIZEREQUEST']._serialized_start=2349
+  _globals['_SYNTHESIZEREQUEST']._serialized_end=2474
+  _globals['_SYNTHESIZERESPONSE']._serialized_start=2477
+  _globals['_SYNTHESIZERESPONSE']._serialized_end=2652
+  _globals['_MOTION']._serialized_start=2654
+  _globals['_MOTION']._serialized_end=2769
+  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_start=2771
+  _globals['_STREAMSYNTHESIZEREQUEST']._serialized_end=2897
+  _globals['_STREAMCONFIG']._serialized_start=2899
+  _globals['_STREAMCONFIG']._serialized_end=2998
+  _globals['_SENSORSAMPLE']._serialized_start=3001
+  _globals['_SENSORSAMPLE']._serialized_end=3155
+  _globals['_GROUNDPOSITION']._serialized_start=3157
+  _globals['_GROUNDPOSITION']._serialized_end=3199
+  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_start=3202
+  _globals['_STREAMSYNTHESIZERESPONSE']._serialized_end=3376
+  _globals['_STREAMSTARTED']._serialized_start=3379
+  _globals['_STREAMSTARTED']._serialized_end=3509
+  _globals['_POSEFRAME']._serialized_start=3512
+  _globals['_POSEFRAME']._serialized_end=3702
+  _globals['_STREAMFINISHED']._serialized_start=3704
+  _globals['_STREAMFINISHED']._serialized_end=3770
+  _globals['_MOTIONGRAPHSERVICE']._serialized_start=4037
+  _globals['_MOTIONGRAPHSERVICE']._serialized_end=4389
 # @@protoc_insertion_point(module_scope)

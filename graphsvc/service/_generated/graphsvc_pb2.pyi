@@ -14,6 +14,7 @@ class Strategy(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     STRATEGY_VITERBI: _ClassVar[Strategy]
     STRATEGY_OLNG: _ClassVar[Strategy]
     STRATEGY_SSG: _ClassVar[Strategy]
+    STRATEGY_NEAREST: _ClassVar[Strategy]
 
 class ContactState(int, metaclass=_enum_type_wrapper.EnumTypeWrapper):
     __slots__ = ()
@@ -26,6 +27,7 @@ STRATEGY_UNSPECIFIED: Strategy
 STRATEGY_VITERBI: Strategy
 STRATEGY_OLNG: Strategy
 STRATEGY_SSG: Strategy
+STRATEGY_NEAREST: Strategy
 CONTACT_STATE_UNSPECIFIED: ContactState
 CONTACT_STATE_LEFT: ContactState
 CONTACT_STATE_RIGHT: ContactState
@@ -133,7 +135,7 @@ class JointChannels(_message.Message):
     def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SynthesisOptions(_message.Message):
-    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam")
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi")
     STRATEGY_FIELD_NUMBER: _ClassVar[int]
     WEIGHTS_FIELD_NUMBER: _ClassVar[int]
     LATENCY_S_FIELD_NUMBER: _ClassVar[int]
@@ -142,6 +144,7 @@ class SynthesisOptions(_message.Message):
     CONSTRAINT_SETS_FIELD_NUMBER: _ClassVar[int]
     SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
     BEAM_FIELD_NUMBER: _ClassVar[int]
+    VITERBI_FIELD_NUMBER: _ClassVar[int]
     strategy: Strategy
     weights: CostWeights
     latency_s: float
@@ -150,7 +153,44 @@ class SynthesisOptions(_message.Message):
     constraint_sets: _containers.RepeatedCompositeFieldContainer[ConstraintSet]
     speed_threshold_m_s: float
     beam: float
-    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ...) -> None: ...
+    viterbi: ViterbiOptions
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ...) -> None: ...
+
+class ViterbiOptions(_message.Message):
+    __slots__ = ("beam", "heading_from_track", "rest_heading_deg", "speed_threshold_m_s")
+    BEAM_FIELD_NUMBER: _ClassVar[int]
+    HEADING_FROM_TRACK_FIELD_NUMBER: _ClassVar[int]
+    REST_HEADING_DEG_FIELD_NUMBER: _ClassVar[int]
+    SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
+    beam: float
+    heading_from_track: bool
+    rest_heading_deg: float
+    speed_threshold_m_s: float
+    def __init__(self, beam: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., speed_threshold_m_s: _Optional[float] = ...) -> None: ...
+
+class FrameSource(_message.Message):
+    __slots__ = ("clip", "frame", "weight")
+    CLIP_FIELD_NUMBER: _ClassVar[int]
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    WEIGHT_FIELD_NUMBER: _ClassVar[int]
+    clip: int
+    frame: float
+    weight: float
+    def __init__(self, clip: _Optional[int] = ..., frame: _Optional[float] = ..., weight: _Optional[float] = ...) -> None: ...
+
+class Provenance(_message.Message):
+    __slots__ = ("sources_per_frame", "clips", "frames", "weights", "labels")
+    SOURCES_PER_FRAME_FIELD_NUMBER: _ClassVar[int]
+    CLIPS_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_FIELD_NUMBER: _ClassVar[int]
+    WEIGHTS_FIELD_NUMBER: _ClassVar[int]
+    LABELS_FIELD_NUMBER: _ClassVar[int]
+    sources_per_frame: int
+    clips: _containers.RepeatedScalarFieldContainer[int]
+    frames: _containers.RepeatedScalarFieldContainer[float]
+    weights: _containers.RepeatedScalarFieldContainer[float]
+    labels: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, sources_per_frame: _Optional[int] = ..., clips: _Optional[_Iterable[int]] = ..., frames: _Optional[_Iterable[float]] = ..., weights: _Optional[_Iterable[float]] = ..., labels: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class CostWeights(_message.Message):
     __slots__ = ("acceleration", "position", "heading")
@@ -181,20 +221,26 @@ class Constraint(_message.Message):
     def __init__(self, start_s: _Optional[float] = ..., end_s: _Optional[float] = ..., contact: _Optional[_Union[ContactState, str]] = ..., label: _Optional[str] = ...) -> None: ...
 
 class Recording(_message.Message):
-    __slots__ = ("rate_hz", "sensor_names", "timestamps_s", "accelerations_m_s2", "ground_positions_m", "headings_rad")
+    __slots__ = ("rate_hz", "sensor_names", "timestamps_s", "accelerations_m_s2", "ground_positions_m", "headings_rad", "orientations_wxyz", "marker_names", "marker_positions_m")
     RATE_HZ_FIELD_NUMBER: _ClassVar[int]
     SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
     TIMESTAMPS_S_FIELD_NUMBER: _ClassVar[int]
     ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     GROUND_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
     HEADINGS_RAD_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
+    MARKER_NAMES_FIELD_NUMBER: _ClassVar[int]
+    MARKER_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
     rate_hz: float
     sensor_names: _containers.RepeatedScalarFieldContainer[str]
     timestamps_s: _containers.RepeatedScalarFieldContainer[float]
     accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     ground_positions_m: _containers.RepeatedScalarFieldContainer[float]
     headings_rad: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, rate_hz: _Optional[float] = ..., sensor_names: _Optional[_Iterable[str]] = ..., timestamps_s: _Optional[_Iterable[float]] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_positions_m: _Optional[_Iterable[float]] = ..., headings_rad: _Optional[_Iterable[float]] = ...) -> None: ...
+    orientations_wxyz: _containers.RepeatedScalarFieldContainer[float]
+    marker_names: _containers.RepeatedScalarFieldContainer[str]
+    marker_positions_m: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, rate_hz: _Optional[float] = ..., sensor_names: _Optional[_Iterable[str]] = ..., timestamps_s: _Optional[_Iterable[float]] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_positions_m: _Optional[_Iterable[float]] = ..., headings_rad: _Optional[_Iterable[float]] = ..., orientations_wxyz: _Optional[_Iterable[float]] = ..., marker_names: _Optional[_Iterable[str]] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class SynthesizeRequest(_message.Message):
     __slots__ = ("graph", "recording", "options")
@@ -207,16 +253,18 @@ class SynthesizeRequest(_message.Message):
     def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ...) -> None: ...
 
 class SynthesizeResponse(_message.Message):
-    __slots__ = ("motion", "node_path", "bvh", "report")
+    __slots__ = ("motion", "node_path", "bvh", "report", "provenance")
     MOTION_FIELD_NUMBER: _ClassVar[int]
     NODE_PATH_FIELD_NUMBER: _ClassVar[int]
     BVH_FIELD_NUMBER: _ClassVar[int]
     REPORT_FIELD_NUMBER: _ClassVar[int]
+    PROVENANCE_FIELD_NUMBER: _ClassVar[int]
     motion: Motion
     node_path: _containers.RepeatedScalarFieldContainer[int]
     bvh: bytes
     report: _struct_pb2.Struct
-    def __init__(self, motion: _Optional[_Union[Motion, _Mapping]] = ..., node_path: _Optional[_Iterable[int]] = ..., bvh: _Optional[bytes] = ..., report: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ...) -> None: ...
+    provenance: Provenance
+    def __init__(self, motion: _Optional[_Union[Motion, _Mapping]] = ..., node_path: _Optional[_Iterable[int]] = ..., bvh: _Optional[bytes] = ..., report: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., provenance: _Optional[_Union[Provenance, _Mapping]] = ...) -> None: ...
 
 class Motion(_message.Message):
     __slots__ = ("rate_hz", "frame_count", "joint_count", "rotations_wxyz", "translations_m")
@@ -295,7 +343,7 @@ class StreamStarted(_message.Message):
     def __init__(self, graph: _Optional[str] = ..., rate_hz: _Optional[float] = ..., lag_frames: _Optional[int] = ..., sensor_names: _Optional[_Iterable[str]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ...) -> None: ...
 
 class PoseFrame(_message.Message):
-    __slots__ = ("index", "time_s", "node", "label", "rotations_wxyz", "translations_m", "input_sample_index")
+    __slots__ = ("index", "time_s", "node", "label", "rotations_wxyz", "translations_m", "input_sample_index", "sources")
     INDEX_FIELD_NUMBER: _ClassVar[int]
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     NODE_FIELD_NUMBER: _ClassVar[int]
@@ -303,6 +351,7 @@ class PoseFrame(_message.Message):
     ROTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
     TRANSLATIONS_M_FIELD_NUMBER: _ClassVar[int]
     INPUT_SAMPLE_INDEX_FIELD_NUMBER: _ClassVar[int]
+    SOURCES_FIELD_NUMBER: _ClassVar[int]
     index: int
     time_s: float
     node: int
@@ -310,7 +359,8 @@ class PoseFrame(_message.Message):
     rotations_wxyz: _containers.RepeatedScalarFieldContainer[float]
     translations_m: _containers.RepeatedScalarFieldContainer[float]
     input_sample_index: int
-    def __init__(self, index: _Optional[int] = ..., time_s: _Optional[float] = ..., node: _Optional[int] = ..., label: _Optional[str] = ..., rotations_wxyz: _Optional[_Iterable[float]] = ..., translations_m: _Optional[_Iterable[float]] = ..., input_sample_index: _Optional[int] = ...) -> None: ...
+    sources: _containers.RepeatedCompositeFieldContainer[FrameSource]
+    def __init__(self, index: _Optional[int] = ..., time_s: _Optional[float] = ..., node: _Optional[int] = ..., label: _Optional[str] = ..., rotations_wxyz: _Optional[_Iterable[float]] = ..., translations_m: _Optional[_Iterable[float]] = ..., input_sample_index: _Optional[int] = ..., sources: _Optional[_Iterable[_Union[FrameSource, _Mapping]]] = ...) -> None: ...
 
 class StreamFinished(_message.Message):
     __slots__ = ("samples_received", "frames_emitted")

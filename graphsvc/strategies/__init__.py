@@ -1,0 +1,61 @@
+"""Reconstruction strategies behind one interface (`base.Strategy`), looked up by name.
+
+The pipeline, the evaluation, the CLI and the server find a strategy here and nothing
+else; each strategy owns its index, its batch reconstruction and its live session.
+
+| name | needs | also uses | good at |
+| --- | --- | --- | --- |
+| `viterbi` | accelerations | ground position, heading, constraints | whole actions from the graph: the path that best explains every stream over time |
+| `nearest` | accelerations | (the track only to place the start) | nothing: per sample the nearest knowledge-base frame, the floor a search must beat |
+| `olng`, `ssg` | (SPEC §6, §7) | | specified, not built yet: asking for one answers StrategyNotImplementedError |
+
+`register` adds one (a `Strategy` instance); the built-in ones load on first lookup, so
+importing this package compiles and loads nothing.
+"""
+
+from __future__ import annotations
+
+from graphsvc.errors import InputError, StrategyNotImplementedError
+from graphsvc.strategies.base import Strategy
+
+PLANNED = ("olng", "ssg")
+_REGISTRY: dict[str, Strategy] = {}
+_loaded = False
+
+
+def register(strategy: Strategy) -> None:
+    _REGISTRY[strategy.name] = strategy
+
+
+def _builtins() -> None:
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    from graphsvc.strategies.nearest import NearestStrategy
+    from graphsvc.strategies.viterbi import ViterbiStrategy
+
+    for s in (ViterbiStrategy(), NearestStrategy()):
+        _REGISTRY.setdefault(s.name, s)
+
+
+def get(name: str) -> Strategy:
+    """The strategy called `name`: InputError if there is none, StrategyNotImplementedError
+    for one that is specified but not built."""
+    _builtins()
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    if name in PLANNED:
+        raise StrategyNotImplementedError(f"strategy {name!r} is not implemented yet (use {', '.join(available())})")
+    raise InputError(f"unknown strategy {name!r} (choose from {', '.join(names())})")
+
+
+def available() -> tuple[str, ...]:
+    """The strategies that are built, in registration order."""
+    _builtins()
+    return tuple(_REGISTRY)
+
+
+def names() -> tuple[str, ...]:
+    """Every strategy name a request may give: the built ones, then the planned ones."""
+    return available() + tuple(n for n in PLANNED if n not in _REGISTRY)

@@ -1,0 +1,475 @@
+"""The interface every reconstruction strategy implements, and what they share.
+
+A strategy (`Strategy`) turns a recording into motion on a graph's skeleton. It:
+
+- declares the inputs it needs (`needs`: a recording without one is refused, naming
+  it) and those it can use (`uses`: the others are ignored and the report lists them
+  under `ignored_inputs`), from INPUTS;
+- prepares an index from a graph (`prepare`: built on first use, held for the graph
+  object; a strategy whose index is costly caches it beside the graph file, keyed by
+  the file's checksum — `strategies.index`);
+- reconstructs a whole recording (`reconstruct`), given the recording already
+  checked and put on the graph's sample grid (`prepare_input`);
+- opens a live session (`session_class`, a `LiveSession`: `push(sample) -> frames`,
+  `flush()`);
+- hides clips for leave-one-out evaluation (`allowed_mask`: for the graph strategies a
+  node mask, `graph.holdout.held_out_mask`).
+
+What they share lives here: the checks and resampling of a recording
+(`prepare_input`), the result type (`Reconstruction`, with per-frame provenance that
+also fits blended frames), the live frame (`Frame`) and the live session's sample
+handling (resampling raw samples onto the graph's grid), so a strategy writes only
+its own decoding.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph
+from graphsvc.motion import quat
+from graphsvc.motion.skeleton import Motion
+from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
+from graphsvc.sensors.recording import Recording
+from graphsvc.strategies.options import Options, check_constraints
+
+INPUTS = ("accelerations", "orientations", "markers", "ground_position", "heading", "constraints")
+
+
+class Strategy:
+    """One way to reconstruct motion (module docstring). Subclasses set `name`, `needs`,
+    `uses` and `summary`, and implement `prepare`, `reconstruct` and `session_class`."""
+
+    name: str = ""
+    needs: frozenset = frozenset()
+    uses: frozenset = frozenset()
+    summary: str = ""
+    session_class: type = None  # a LiveSession subclass
+
+    def prepare(self, graph: MotionGraph):
+        """The strategy's index for `graph`, made once per graph object."""
+        raise NotImplementedError
+
+    def reconstruct(self, index, graph: MotionGraph, inp: "PreparedInput", options: Options,
+                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> "Reconstruction":  # fmt: skip
+        raise NotImplementedError
+
+    def warm_up(self, index, graph: MotionGraph, threads: bool = False) -> None:
+        """Load compiled code and make tables now, not on a client's first sample."""
+
+    def allowed_mask(self, graph: MotionGraph, clips) -> np.ndarray:
+        """(N,) bool: the nodes a search may use when graph clips `clips` (their
+        performances) are held out."""
+        from graphsvc.graph.holdout import held_out_mask
+
+        return held_out_mask(graph, clips)
+
+    def ignored_options(self, options: Options) -> list[str]:
+        """Options set to something this strategy does not use (for the report)."""
+        return []
+
+
+def prepared_index(strategy: Strategy, graph: MotionGraph):
+    """`strategy.prepare(graph)`, once per graph object and strategy."""
+    held = graph.__dict__.setdefault("_strategy_indexes", {})
+    if strategy.name not in held:
+        held[strategy.name] = strategy.prepare(graph)
+    return held[strategy.name]
+
+
+# ---------------------------------------------------------------- input checks
+
+
+def recording_inputs(rec: Recording) -> set[str]:
+    """Which of INPUTS a recording carries."""
+    have = set()
+    if rec.accelerations is not None and rec.accelerations.size:
+        have.add("accelerations")
+    if getattr(rec, "orientations", None) is not None:
+        have.add("orientations")
+    if getattr(rec, "marker_positions", None) is not None:
+        have.add("markers")
+    if rec.ground_position is not None:
+        have.add("ground_position")
+    if rec.heading is not None:
+        have.add("heading")
+    if rec.constraints:
+        have.add("constraints")
+    return have
+
+
+def check_inputs(strategy: Strategy, have: set[str]) -> list[str]:
+    """InputError naming the first input `strategy` needs that `have` lacks; else the
+    inputs present that it cannot use (sorted)."""
+    for name in INPUTS:
+        if name in strategy.needs and name not in have:
+            raise InputError(f"strategy {strategy.name!r} needs {name.replace('_', ' ')}, and the recording has none")
+    return sorted(have - set(strategy.uses))
+
+
+def check_layout(graph: MotionGraph, sensor_names) -> None:
+    """InputError unless the stream's sensors are the graph's, in the same order."""
+    mine, theirs = tuple(graph.sensor_names), tuple(sensor_names)
+    if mine == theirs:
+        return
+    missing = [n for n in mine if n not in theirs]
+    extra = [n for n in theirs if n not in mine]
+    parts = []
+    if missing:
+        parts.append(f"missing {', '.join(missing)}")
+    if extra:
+        parts.append(f"not in the graph: {', '.join(extra)}")
+    if not parts:
+        parts.append(f"order {', '.join(theirs)} instead of {', '.join(mine)}")
+    raise InputError(f"the recording's sensors do not match the graph's layout {graph.layout.get('name', '?')!r}: "
+                     + "; ".join(parts) + " (rebuild the graph or run `graphsvc relayout`)")  # fmt: skip
+
+
+def _interp_linear(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Linear interpolation along axis 0; NaN at either neighbour gives NaN (a gap
+    stays a gap)."""
+    i = np.clip(np.searchsorted(times, at, side="right") - 1, 0, len(times) - 2)
+    w = ((at - times[i]) / (times[i + 1] - times[i])).reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[i] * (1.0 - w) + values[i + 1] * w
+
+
+def _interp_angle(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    i = np.clip(np.searchsorted(times, at, side="right") - 1, 0, len(times) - 2)
+    w = (at - times[i]) / (times[i + 1] - times[i])
+    return quat.wrap_angle(values[i] + w * quat.wrap_angle(values[i + 1] - values[i]))
+
+
+def to_graph_rate(rec: Recording, rate_hz: float) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, bool]:
+    """The recording's accelerations (T', S, 3), positions (T', 2) and headings (T',)
+    on a uniform grid at `rate_hz` from its first timestamp, linearly interpolated
+    (headings the short way round). Untouched when already uniform at that rate.
+    Returns (acc, position, heading, resampled)."""
+    t = np.asarray(rec.timestamps_s, dtype=np.float64)
+    acc = np.asarray(rec.accelerations, dtype=np.float64)
+    period = 1.0 / rate_hz
+    uniform = abs(rec.rate_hz - rate_hz) < 1e-9 * rate_hz and (
+        t.size < 2 or np.max(np.abs(np.diff(t) - period)) < 0.01 * period
+    )
+    if uniform:
+        return acc, rec.ground_position, rec.heading, False
+    if t.size < 2:
+        return acc, rec.ground_position, rec.heading, False
+    n = int(math.floor((t[-1] - t[0]) * rate_hz + 1e-6)) + 1
+    grid = t[0] + np.arange(n) * period
+    position = None if rec.ground_position is None else _interp_linear(t, np.asarray(rec.ground_position, float), grid)
+    heading = None if rec.heading is None else _interp_angle(t, np.asarray(rec.heading, float), grid)
+    return _interp_linear(t, acc, grid), position, heading, True
+
+
+@dataclass
+class PreparedInput:
+    """A recording checked against a graph and put on its sample grid: T samples of
+    accelerations (T, S, 3) m/s², ground positions (T, 2) m and headings (T,) rad (or
+    None), the constraint sets, and what the report says about them."""
+
+    acc: np.ndarray
+    position: np.ndarray | None
+    heading: np.ndarray | None
+    constraints: list
+    resampled: bool
+    heading_source: str
+    input_rate_hz: float
+    ignored_inputs: list = field(default_factory=list)
+
+    @property
+    def num_samples(self) -> int:
+        return int(self.acc.shape[0])
+
+
+def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, options: Options) -> PreparedInput:
+    """Check `rec` for `strategy` on `graph` and resample it to the graph rate (module
+    docstring). Raises InputError naming what does not fit."""
+    rec.validate()
+    constraints = rec.constraints if options.constraints is None else options.constraints
+    have = recording_inputs(rec) | ({"constraints"} if constraints else set())
+    ignored = check_inputs(strategy, have)
+    check_layout(graph, rec.sensor_names)
+    constraints = check_constraints(constraints, graph) if "constraints" in strategy.uses else []
+    acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
+    heading_source = "recording" if heading is not None else "none"
+    if options.heading_from_track:
+        if position is None:
+            raise InputError("--heading-from-track needs ground positions, and the recording has none")
+        rate = float(graph.rate_hz)
+        rest = math.radians(options.rest_heading_deg)
+        if options.latency_s is None:
+            heading = heading_from_track(position, rate, options.speed_threshold, rest)
+        else:
+            track = CausalTrackHeading(rate, options.speed_threshold, rest)
+            heading = np.array([track.push(p) for p in position])
+        heading_source = "track"
+    return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored)
+
+
+def start_state(position, heading) -> tuple[np.ndarray, float]:
+    """Where a reconstruction starts: the first measured ground position (T, 2) m and
+    heading (T,) rad, else the origin facing +Z."""
+    g = np.zeros(2)
+    if position is not None:
+        measured = np.nonzero(np.isfinite(position).all(axis=1))[0]
+        if len(measured):
+            g = np.asarray(position[measured[0]], dtype=np.float64)
+    h = 0.0
+    if heading is not None:
+        measured = np.nonzero(np.isfinite(heading))[0]
+        if len(measured):
+            h = float(heading[measured[0]])
+    return g, h
+
+
+# ---------------------------------------------------------------- results
+
+
+@dataclass
+class Provenance:
+    """Where each of T output frames comes from: up to K knowledge-base sources, as
+    clip (T, K) int (−1: none), frame (T, K) float (fractional for slow-down and blended
+    frames) and weight (T, K) float (summing to 1 over a frame's sources), and the
+    frame's content label (T,). A graph node is one source; a blend is several."""
+
+    clip: np.ndarray
+    frame: np.ndarray
+    weight: np.ndarray
+    label: np.ndarray
+
+    @staticmethod
+    def of_nodes(graph: MotionGraph, nodes: np.ndarray) -> "Provenance":
+        """One source a frame: each node's clip and frame (a blended node's dominant one)."""
+        nodes = np.asarray(nodes, dtype=np.int64)
+        return Provenance(np.asarray(graph.node_clip)[nodes][:, None].astype(np.int64),
+                          np.asarray(graph.node_frame)[nodes][:, None].astype(np.float64),
+                          np.ones((nodes.size, 1)),
+                          np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[nodes]])  # fmt: skip
+
+    def sources(self, t: int) -> list[tuple[int, float, float]]:
+        """Frame t's sources as (clip, frame, weight), heaviest first."""
+        keep = self.clip[t] >= 0
+        order = np.argsort(-self.weight[t][keep], kind="stable")
+        return [(int(c), float(f), float(w)) for c, f, w in
+                zip(self.clip[t][keep][order], self.frame[t][keep][order], self.weight[t][keep][order])]  # fmt: skip
+
+
+@dataclass
+class Reconstruction:
+    """motion: on graph.skeleton at graph.rate_hz; node_path (T,), edge_path (T−1,) (the
+    edges entering node_path[1:]) for strategies that walk graph nodes, else None;
+    provenance: per-frame sources and labels; report: JSON-able summary (see the
+    README's *Report*)."""
+
+    motion: Motion
+    node_path: np.ndarray | None
+    edge_path: np.ndarray | None
+    report: dict = field(default_factory=dict)
+    provenance: Provenance | None = None
+
+
+def label_runs(labels) -> list[dict]:
+    """Per-frame labels as runs: [{label, start_frame, frames}]."""
+    runs = []
+    start = 0
+    for t in range(1, len(labels) + 1):
+        if t == len(labels) or labels[t] != labels[start]:
+            runs.append({"label": str(labels[start]), "start_frame": start, "frames": t - start})
+            start = t
+    return runs
+
+
+def path_labels(graph: MotionGraph, nodes: np.ndarray) -> list[dict]:
+    """The content labels along a path as runs: [{label, start_frame, frames}]."""
+    return label_runs([graph.labels[int(k)] for k in graph.node_label[nodes]])
+
+
+# ---------------------------------------------------------------- live
+
+
+@dataclass
+class Frame:
+    """One output pose. index: frame number at the graph rate; time_s: stream time;
+    node: the graph node it plays (−1 for a strategy whose frames are not nodes);
+    label: its content label; rotations (J, 4) float32 local wxyz; translations (J, 3)
+    float32 local, metres; sources: (clip, frame, weight) of the knowledge-base frames
+    it is made of, heaviest first."""
+
+    index: int
+    time_s: float
+    node: int
+    label: str
+    rotations: np.ndarray
+    translations: np.ndarray
+    sources: list = field(default_factory=list)
+
+
+class LiveSession:
+    """A live stream: `push` sensor samples (any rate, strictly increasing times),
+    receive the pose frames that became final; `flush` at the end.
+
+    `LiveSession(graph, options, ...)` opens the session of `options.strategy` (its
+    `session_class`, a subclass). Samples are checked and linearly resampled to the
+    graph rate on arrival (headings the short way round); each grid sample goes to the
+    strategy's `_decode`. `lag_frames` is the most a frame waits, in graph frames,
+    between its sample arriving and its pose coming out. keep_motion: keep every frame
+    emitted, for `motion()`; that grows by J × 56 bytes a frame (190 MB an hour at 31
+    joints and 30 Hz), so a server streaming whole matches passes False."""
+
+    DEFAULT_LATENCY_S = 1.0
+    SYNTH_BATCH = 3  # 0.1 s at 30 Hz
+
+    def __new__(cls, graph: MotionGraph, options: Options = Options(), *args, **kwargs):
+        if cls is LiveSession:
+            from graphsvc.strategies import get
+
+            cls = get(options.strategy).session_class
+        return super().__new__(cls)
+
+    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
+                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
+        from graphsvc.strategies import get
+        from graphsvc.strategies.options import check_options
+
+        check_options(options)
+        self.strategy = get(options.strategy)
+        check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
+        self.graph = graph
+        self.options = options
+        self.rate = float(graph.rate_hz)
+        self.S = len(graph.sensor_names)
+        self.lag_frames = 0
+        self.t0: float | None = None
+        self.prev: tuple | None = None  # last raw sample (t, acc, position, heading)
+        self.next_tick = 0  # index of the next graph-rate sample to produce
+        self.samples_in = 0
+        self.keep_motion = keep_motion
+        self._rot: list[np.ndarray] = []
+        self._trans: list[np.ndarray] = []
+        self.flushed = False
+
+    @property
+    def threads(self) -> bool:
+        """Whether the strategy's kernels use numba's threads (may change between pushes)."""
+        return False
+
+    @threads.setter
+    def threads(self, on: bool) -> None:
+        pass
+
+    def _check(self, t_s, acc, position, heading):
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
+            raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
+        if self.prev is not None and not t_s > self.prev[0]:
+            raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
+        acc = np.asarray(acc, dtype=np.float64)
+        if acc.shape != (self.S, 3):
+            raise InputError(f"accelerations must be ({self.S}, 3) for the graph's sensors, got {acc.shape}")
+        if np.isinf(acc).any():
+            raise InputError("accelerations contain infinite values (use NaN for missing)")
+        if position is not None:
+            position = np.asarray(position, dtype=np.float64)
+            if position.shape != (2,) or np.isinf(position).any():
+                raise InputError("position must be two finite numbers (x, z) in metres, or NaN for missing")
+        if heading is not None:
+            heading = float(heading)
+            if math.isinf(heading):
+                raise InputError("heading must be finite (NaN for missing)")
+        return float(t_s), acc, position, heading
+
+    def push(self, t_s: float, acc, position=None, heading=None) -> list[Frame]:
+        """One sensor sample at time t_s (s): acc (S, 3) m/s² (NaN = missing), position
+        (2,) m or None, heading rad or None. Returns the frames now final."""
+        if self.flushed:
+            raise InputError("the stream was already flushed")
+        t_s, acc, position, heading = self._check(t_s, acc, position, heading)
+        self.samples_in += 1
+        cur = (t_s, acc, position, heading)
+        frames: list[Frame] = []
+        if self.prev is None:
+            self.t0 = t_s
+            self.next_tick += 1
+            frames += self._decode(acc, position, heading)
+        else:
+            t_prev = self.prev[0]
+            while True:
+                tick = self.t0 + self.next_tick / self.rate
+                if tick > t_s + 1e-9:
+                    break
+                self.next_tick += 1
+                if abs(tick - t_s) < 1e-9:  # on the grid already: exact values, as in batch
+                    frames += self._decode(acc, position, heading)
+                else:
+                    frames += self._decode(*_blend(self.prev, cur, (tick - t_prev) / (t_s - t_prev)))
+        self.prev = cur
+        return frames
+
+    def flush(self) -> list[Frame]:
+        """The frames still held back, at the end of the stream."""
+        if self.flushed or self.next_tick == 0:
+            self.flushed = True
+            return []
+        self.flushed = True
+        return self._finish()
+
+    def _decode(self, acc, position, heading) -> list[Frame]:
+        """One sample on the graph's grid → the frames now final."""
+        raise NotImplementedError
+
+    def _finish(self) -> list[Frame]:
+        """The frames still held back, once, at the end."""
+        raise NotImplementedError
+
+    def _emit_synthesized(self, synth, synthesized):
+        """The frames a StreamingSynthesizer made final, `synth.add`'s or `finish`'s
+        (first, rotations, translations), with the nodes it played."""
+        first, rot, trans = synthesized
+        nodes = synth.nodes[first - synth.base: first - synth.base + len(rot)] if len(rot) else []
+        return self._emit(first, rot, trans, nodes)
+
+    def _emit(self, first: int, rot: np.ndarray, trans: np.ndarray, nodes=None, provenance: Provenance | None = None):
+        """Frames first … first + K − 1 from their poses (K, J, 4/3), and either their
+        graph nodes (K,) or their provenance."""
+        if not len(rot):
+            return []
+        if self.keep_motion:
+            self._rot.append(rot)
+            self._trans.append(trans)
+        if provenance is None:
+            provenance = Provenance.of_nodes(self.graph, nodes)
+        out = []
+        for k in range(rot.shape[0]):
+            f = first + k
+            out.append(Frame(f, self.t0 + f / self.rate, -1 if nodes is None else int(nodes[k]),
+                             str(provenance.label[k]), rot[k].astype(np.float32), trans[k].astype(np.float32),
+                             provenance.sources(k)))  # fmt: skip
+        return out
+
+    def motion(self) -> Motion:
+        """Everything emitted so far as one motion (a session made with keep_motion)."""
+        if not self.keep_motion:
+            raise InputError("this live session was made with keep_motion=False: it keeps no frames for motion()")
+        J = self.graph.skeleton.num_joints
+        rot = np.concatenate(self._rot) if self._rot else np.zeros((0, J, 4))
+        trans = np.concatenate(self._trans) if self._trans else np.zeros((0, J, 3))
+        return Motion(self.graph.skeleton, rot, trans, self.rate, name="synthesized", source="live stream")
+
+
+def _blend(a: tuple, b: tuple, w: float):
+    """Sample between raw samples a and b at fraction w: (acc, position, heading)."""
+    acc = a[1] * (1.0 - w) + b[1] * w
+    pos = None
+    if a[2] is not None and b[2] is not None:
+        pos = a[2] * (1.0 - w) + b[2] * w
+    elif w >= 0.5 and b[2] is not None or w < 0.5 and a[2] is not None:
+        pos = b[2] if w >= 0.5 else a[2]
+    head = None
+    if a[3] is not None and b[3] is not None:
+        head = float(quat.wrap_angle(a[3] + w * quat.wrap_angle(b[3] - a[3])))
+    elif w >= 0.5 and b[3] is not None or w < 0.5 and a[3] is not None:
+        head = b[3] if w >= 0.5 else a[3]
+    return acc, pos, head

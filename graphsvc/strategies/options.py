@@ -1,0 +1,123 @@
+"""What a reconstruction is asked for, as values: the cost weights, the options every
+strategy shares and those only some use, and the annotation constraints.
+
+Plain data and checks, no kernels: the CLI, the service and every strategy import these
+without pulling a search in. A strategy uses the options that mean something to it
+and names the others it ignored in its report (`ignored_options`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from graphsvc.errors import FormatError, InputError
+from graphsvc.sensors.recording import validate_constraints
+
+
+@dataclass(frozen=True)
+class Weights:
+    """K eq. 6: accelerometers (per g²), position (per metre), orientation (per radian).
+    A strategy weighs whichever of these terms it has."""
+
+    acc: float = 1.0
+    position: float = 1.0
+    heading: float = 1.0
+
+
+@dataclass(frozen=True)
+class Options:
+    """How to reconstruct. strategy: a registered name (`graphsvc.strategies`).
+    weights: K eq. 6 (per g², per m, per rad). latency_s: fixed lag (s) of the live
+    decoder; None in batch = the whole input at once. heading_from_track: derive the
+    heading from the ground positions (K §6: direction of travel above
+    `speed_threshold` m/s, else `rest_heading_deg`). constraints: annotation constraint
+    sets in priority order (None: the recording's own). beam (Viterbi): a cost; after
+    each sample only the paths within it of the best one go on (faster on built
+    graphs, no longer always the cheapest path; None: the exact search)."""
+
+    strategy: str = "viterbi"
+    weights: Weights = Weights()
+    latency_s: float | None = None
+    heading_from_track: bool = False
+    rest_heading_deg: float = 0.0
+    speed_threshold: float = 2.0
+    constraints: tuple | None = None
+    beam: float | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["constraints"] = None if self.constraints is None else list(self.constraints)
+        return d
+
+
+def check_options(options: Options) -> None:
+    """InputError for values no strategy accepts; InputError or
+    StrategyNotImplementedError for a strategy name that is unknown or not built."""
+    from graphsvc.strategies import get
+
+    get(options.strategy)
+    w = options.weights
+    for name in ("acc", "position", "heading"):
+        v = getattr(w, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise InputError(f"weight {name} must be a finite number ≥ 0, got {v!r}")
+    if options.latency_s is not None and (not math.isfinite(options.latency_s) or options.latency_s < 0):
+        raise InputError(f"latency must be a finite number of seconds ≥ 0, got {options.latency_s}")
+    if options.beam is not None and (isinstance(options.beam, bool) or not isinstance(options.beam, (int, float))
+                                     or not math.isfinite(options.beam) or options.beam <= 0):
+        raise InputError(f"beam must be a finite cost > 0, got {options.beam!r}")
+    if not math.isfinite(options.rest_heading_deg):
+        raise InputError(f"rest heading must be finite, got {options.rest_heading_deg}")
+    if not (math.isfinite(options.speed_threshold) and options.speed_threshold >= 0):
+        raise InputError(f"speed threshold must be finite and ≥ 0, got {options.speed_threshold}")
+
+
+def parse_weights(text: str) -> Weights:
+    """'A,P,O' (three non-negative numbers) → Weights."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        raise InputError(f"weights must be three numbers A,P,O, got {text!r}") from None
+    if len(values) != 3 or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"weights must be three finite numbers ≥ 0 as A,P,O, got {text!r}")
+    return Weights(*values)
+
+
+def check_constraints(constraints, graph=None) -> list:
+    """Validate constraint sets (see `Recording`): structure, 0 ≤ start < end, no two
+    intervals of one set overlapping (they would ask for two things at once), and —
+    given a graph — labels it has."""
+    constraints = list(constraints)
+    validate_constraints(constraints)
+    for i, cset in enumerate(constraints):
+        spans = sorted((float(c["start_s"]), float(c["end_s"]), j) for j, c in enumerate(cset))
+        for (s0, e0, j0), (s1, e1, j1) in zip(spans, spans[1:]):
+            if s1 <= e0:
+                raise InputError(f"constraint set {i}: constraints {j0} ({s0:g}–{e0:g} s) and {j1} ({s1:g}–{e1:g} s) overlap")
+    if graph is not None:
+        for k, cset in enumerate(constraints):
+            for item in cset:
+                label = item["require"].get("label")
+                if label is not None and label not in graph.labels:
+                    raise InputError(f"constraint set {k}: unknown label {label!r} (graph labels: "
+                                     f"{', '.join(graph.labels)})")  # fmt: skip
+    return constraints
+
+
+def load_constraints(path) -> list:
+    """A constraint file: a JSON list of sets in priority order (see `Recording`)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
+    try:
+        return check_constraints(data)
+    except InputError as exc:
+        raise FormatError(path, str(exc)) from None
