@@ -334,13 +334,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
 
-    p = sub.add_parser("evaluate", help="leave-one-clip-out evaluation on a knowledge base (SPEC §9)")
+    p = sub.add_parser("evaluate", help="leave-one-out evaluation on a knowledge base (metrics: docs/evaluation.md)")
     p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")
     p.add_argument("--test", required=True, metavar="GLOB", help="test the KB files whose name matches, e.g. '*_00[14].bvh'")
     p.add_argument("--layout", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
     p.add_argument("--graph", metavar="FILE", help="a graph built from the same KB, instead of building one")
     p.add_argument("--augment", metavar="KINDS", help="build with copies: mirror, reverse (held out with their clip)")
-    p.add_argument("--noise", default="default", help="PRESET[,key=value...] (default: SPEC §2's evaluation noise)")
+    p.add_argument("--noise", default="default", help="PRESET[,key=value...] (default: the 'default' preset, docs/sensors.md)")
     p.add_argument("--position-noise", type=float, metavar="M",
                    help="keep the overhead tracker's positions with this σ in metres (0: exact)")
     add_search_options(p, constraints=False)

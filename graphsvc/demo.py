@@ -1,9 +1,9 @@
 """`graphsvc demo`: the whole pipeline on the embedded procedural knowledge base.
 
 Generates a knowledge base and a held-out performance (different seed, never in
-the knowledge base), simulates the performance's sensors with SPEC §2's default
+the knowledge base), simulates the performance's sensors with the default
 noise, builds the knowledge base's motion graph, reconstructs the performance from
-its recording and scores it (SPEC §9 metrics). Writes BVH files (knowledge base,
+its recording and scores it (the metrics of docs/evaluation.md). Writes BVH files (knowledge base,
 performance, reconstruction, both side by side), the recording (native and CSV), a
 PNG of the sensor streams and a PNG of the per-frame errors.
 """
@@ -27,7 +27,7 @@ from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.pipeline import Options, reconstruct
-from graphsvc.search.viterbi import Weights
+from graphsvc.strategies.options import Weights
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS
 from graphsvc.sensors.plot import plot_recording
@@ -157,7 +157,7 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
 
 
 def _score(truth: Motion, true_world: np.ndarray, predicted: Motion, pred_labels, true_labels) -> dict:
-    """SPEC §9 metrics of the reconstruction against the performance, per-frame labels."""
+    """The evaluation metrics of the reconstruction against the performance, per-frame labels."""
     true_table, pred_table = joint_map(truth.skeleton), joint_map(predicted.skeleton)
     _, pred_world = motion_fk(predicted)
     return evaluate_frames(

@@ -39,7 +39,7 @@ class LayoutError(GraphsvcError):
 
 
 class StrategyNotImplementedError(GraphsvcError):
-    """A search strategy that is specified (SPEC §6–7) but not built yet."""
+    """A search strategy that is specified (OLNG, SSG) but not built yet."""
 
 
 class SearchCancelled(GraphsvcError):

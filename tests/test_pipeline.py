@@ -14,7 +14,7 @@ from graphsvc.graph.file import save_graph
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.pipeline import LiveSession, Options, parse_weights, reconstruct, to_graph_rate
-from graphsvc.search.viterbi import Weights
+from graphsvc.strategies.options import Weights
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording

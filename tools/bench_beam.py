@@ -77,8 +77,9 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
         gap_all: bool = False) -> tuple[dict, np.ndarray]:
     """One search's row and node path. gap: that many samples from the middle on have no
     accelerometer reading (a sensor dropout; gap_all: no position and heading either)."""
-    from graphsvc.search.stream import FixedLagDecoder
-    from graphsvc.search.viterbi import Weights, viterbi_search
+    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.viterbi.batch import viterbi_search
 
     _, acc, position, heading = graph_walk(graph, samples)
     if mode == "A":
@@ -130,7 +131,7 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
 
 
 def main() -> None:
-    from graphsvc.search.viterbi import warm_up_search
+    from graphsvc.strategies.viterbi.batch import warm_up_search
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--graph", help="a built graph file (default: bench_viterbi.py's generated G_E graph)")

@@ -26,7 +26,7 @@ import json, sys, time
 sys.path.insert(0, {tools!r})
 import bench_viterbi as B  # this checkout's problem set-up; it puts this checkout first on the path,
 sys.path.insert(0, {tree!r})  # so the checkout measured goes before it
-from graphsvc.search.viterbi import viterbi_search, warm_up_search
+from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 g, acc, position, heading, weights, _ = B.problem({mode!r}, 100_686, 317_600, 720, {graph!r})
 viterbi_search(g, acc[:3], None if position is None else position[:3], None if heading is None else heading[:3],
                weights)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark: Viterbi search speed and memory (issue: SPEC §4 targets).
+"""Benchmark: Viterbi search speed and memory .
 
 A generated graph of K's largest size (G_E: 100,686 nodes, 317,600 edges: clips as
 chains of original edges plus random transitions, random 6-sensor metadata), searched
@@ -51,7 +51,7 @@ def inputs(T: int, sensors: int, seed: int = 1):
 def problem(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> tuple:
     """A run's (graph, acc, position, heading, weights, constraint sets): a generated
     graph and random input, or a built graph and a random walk through its readings."""
-    from graphsvc.search.viterbi import Weights
+    from graphsvc.strategies.options import Weights
 
     if graph_path:
         from bench_service import random_walk_readings
@@ -75,7 +75,7 @@ def problem(mode: str, nodes: int, edges: int, samples: int, graph_path: str | N
 
 
 def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None = None) -> dict:
-    from graphsvc.search.viterbi import batch_ring, viterbi_search, warm_up_search
+    from graphsvc.strategies.viterbi.batch import batch_ring, viterbi_search, warm_up_search
 
     g, acc, position, heading, weights, sets = problem(mode, nodes, edges, samples, graph_path)
     # Warm-up: numba compilation, and a search long enough to make the timed one's ring,
@@ -97,8 +97,9 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
 
 
 def run_reference(nodes: int, edges: int, samples: int) -> dict:
-    from graphsvc.search.reference import reference_viterbi
-    from graphsvc.search.viterbi import Weights, viterbi_search
+    from graphsvc.strategies.viterbi.reference import reference_viterbi
+    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.viterbi.batch import viterbi_search
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
@@ -121,8 +122,9 @@ def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> d
     """The fixed-lag decoder (1 s lag, APO) as a live server runs it: serial kernels,
     one push per sample; per-push latency percentiles. threads: numba threads per step
     instead (one stream with the whole machine)."""
-    from graphsvc.search.stream import FixedLagDecoder
-    from graphsvc.search.viterbi import Weights, warm_up_search
+    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.viterbi.batch import warm_up_search
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
@@ -154,7 +156,7 @@ def run_beam(mode: str, beam: float, samples: int) -> dict:
     serial kernels, 1 s lag)."""
     import bench_beam
 
-    from graphsvc.search.viterbi import warm_up_search
+    from graphsvc.strategies.viterbi.batch import warm_up_search
 
     g = generated_graph(100_686, 317_600)
     warm_up_search(g, threads=True)
@@ -171,7 +173,9 @@ def run_beam_hour(beam: float, samples: int) -> dict:
     peak memory (the exact search is not run: it takes minutes)."""
     import bench_beam
 
-    from graphsvc.search.viterbi import Weights, viterbi_search, warm_up_search
+    from graphsvc.strategies.options import Weights
+
+    from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 
     g = generated_graph(100_686, 317_600)
     _, acc, position, heading = bench_beam.graph_walk(g, samples)

@@ -31,7 +31,8 @@ def main() -> None:
     import bench_beam
 
     from graphsvc.graph.metadata import integrate_path
-    from graphsvc.search.viterbi import Weights, viterbi_search
+    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.viterbi.batch import viterbi_search
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--graph", help="a built graph file (default: bench_viterbi.py's generated G_E graph)")

@@ -12,7 +12,7 @@ GRAPH: a graph built without the clips used here (e.g. Bandai dataset-2 with
    walk-turn-left → raise-up-both-hands → walk of the normal/masculine performer,
    takes 004) joined as `tools/join_clips.py` joins them (each clip's ground track
    shifted to start where the previous one ended, pose and heading as recorded),
-   simulated with the default noise, reconstructed and scored (SPEC §9 metrics, labels
+   simulated with the default noise, reconstructed and scored (the evaluation metrics, labels
    per frame), once with positions (σ 10 cm) and heading (σ 10°) at weights 0.5,1,1
    and once from the accelerometers alone (start placed on the truth's, as
    `graphsvc evaluate` does without positions).
@@ -42,7 +42,7 @@ from graphsvc.graph.file import load_graph  # noqa: E402
 from graphsvc.motion.library import load_motion  # noqa: E402
 from graphsvc.motion.resample import resample  # noqa: E402
 from graphsvc.pipeline import Options, reconstruct  # noqa: E402
-from graphsvc.search.viterbi import Weights  # noqa: E402
+from graphsvc.strategies.options import Weights  # noqa: E402
 from graphsvc.sensors.layout import layout_from_dict  # noqa: E402
 from graphsvc.sensors.noise import PRESETS  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""Leave-one-clip-out evaluation (SPEC §9): what `graphsvc evaluate` runs.
+"""Leave-one-clip-out evaluation: what `graphsvc evaluate` runs.
 
 The graph is built once from the whole knowledge base. For each test clip, every
 node that carries any of its data is hidden by the strategy's mask
@@ -113,7 +113,7 @@ def inputs_description(setup: EvalSetup) -> str:
     if setup.positions:
         parts.append(f"positions (σ {setup.noise.position:g} m)")
     if setup.options.heading_from_track:
-        parts.append("heading (from the track, K §6 rule)")
+        parts.append("heading (from the track, Kelly et al.'s rule)")
     elif setup.noise.heading != "none":
         parts.append(f"heading ({setup.noise.heading})")
     return " + ".join(parts)

@@ -1,6 +1,6 @@
-"""Evaluation metrics (SPEC §9): pure functions over flat per-frame arrays.
+"""Evaluation metrics: pure functions over flat per-frame arrays.
 
-Conventions (SPEC §1): positions in metres, Y up, ground plane XZ; ground positions
+Conventions: positions in metres, Y up, ground plane XZ; ground positions
 are (x, z) pairs in metres; headings are radians about +Y, 0 facing +Z, positive
 turning toward +X, so that R_y(θ) maps (x, z) to (cos θ·x + sin θ·z, −sin θ·x + cos θ·z).
 Reported metrics are in centimetres and degrees.

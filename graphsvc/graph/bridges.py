@@ -1,4 +1,4 @@
-"""Bridges: blended transitions that connect actions (SPEC §3, "connectivity comes first").
+"""Bridges: blended transitions that connect actions: a search can only follow what the graph connects.
 
 Plain transitions (`transitions.py`) join frames whose windowed poses nearly coincide
 (5 cm) at a foot-contact change. On a knowledge base of single-action clips they never

@@ -1,4 +1,4 @@
-"""Offline motion-graph builder (SPEC §3, K §4).
+"""Offline motion-graph builder (Kelly et al. 2013, §4).
 
 Stages, each over flat arrays: prepare clips (resample to the graph rate, FK,
 contacts, pose features, sensor readings at three speeds) → transitions (kd-tree
@@ -154,7 +154,7 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
 
 
 def standard_skeleton(motions: list[Motion]) -> Skeleton:
-    """The KB topology with bone offsets averaged over clips (SPEC §1, T §3)."""
+    """The KB topology with bone offsets averaged over clips (Tautges et al. 2011, §3)."""
     sk = motions[0].skeleton
     offsets = np.mean([m.skeleton.offsets for m in motions], axis=0)
     return Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
@@ -343,7 +343,7 @@ def _params(options: BuildOptions, layout: Layout, window: int) -> dict:
 
 
 def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_node: int, edges: _Edges, parts) -> int:
-    """Slow-down nodes between frames f and f+1 and speed-up edges f → f+2 (K §4.1),
+    """Slow-down nodes between frames f and f+1 and speed-up edges f → f+2 (Kelly et al. 2013, §4.1),
     never where a frame involved has both feet off the ground (gravity would play
     at half or double strength). Returns the next free node index."""
     F = clip.motion.num_frames
@@ -374,7 +374,7 @@ def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_
 
 
 def _add_interpolations(clips, start, options, layout, next_node, edges, parts, bar) -> list[dict]:
-    """Interpolation nodes (K §4.2). For every pair of clips with the same content
+    """Interpolation nodes (Kelly et al. 2013, §4.2). For every pair of clips with the same content
     label — K blends only similar actions, and restricting the pairs keeps the
     similarity matrices few — find regions of similar frames with equal contact
     state, align each with slope-bounded DTW, and blend segments longer than

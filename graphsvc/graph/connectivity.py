@@ -1,4 +1,4 @@
-"""How well a motion graph connects its actions (SPEC §3, "connectivity comes first").
+"""How well a motion graph connects its actions: a search can only follow what the graph connects.
 
 A search can only follow a performance from one action to another if the graph has a
 path there, and a live one only if that path is short. Three measures:

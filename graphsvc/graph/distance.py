@@ -1,4 +1,4 @@
-"""Frame distance of Kovar et al. (SPEC §3): windowed point clouds compared after the
+"""Frame distance of Kovar et al. (2002): windowed point clouds compared after the
 best rotation about +Y and ground-plane translation, in closed form.
 
 For frame i the cloud is the canonical joints over a window of frames centred on i,
@@ -23,7 +23,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 
-DEFAULT_WINDOW_S = 0.25  # TH §4.3.3: 15 frames at 60 Hz
+DEFAULT_WINDOW_S = 0.25  # Tautges 2012, §4.3.3: 15 frames at 60 Hz
 
 
 @dataclass(frozen=True)

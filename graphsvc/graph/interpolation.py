@@ -1,4 +1,4 @@
-"""Interpolation segments between two knowledge-base clips (SPEC §3, K §4.2).
+"""Interpolation segments between two knowledge-base clips (Kelly et al. 2013, §4.2).
 
 Pipeline, all on flat arrays of one pair of clips (a: Fa frames, b: Fb frames):
 
@@ -13,7 +13,7 @@ Pipeline, all on flat arrays of one pair of clips (a: Fa frames, b: Fb frames):
    arrays and the ground trajectory of both clips sampled along the warped timeline
    and blended with even weights into uniformly timed new frames.
 
-DTW objective (K §4.2 leaves begin/end open). A path visits cells c_0 … c_{K−1};
+DTW objective (Kelly et al. 2013, §4.2, leave begin and end open). A path visits cells c_0 … c_{K−1};
 the first cell has weight 1 and a step (di, dj) into a cell has weight (di + dj)/2,
 the time it advances on the mean timeline, so the weights sum to the path's mean
 duration in frames. The path minimises

@@ -1,4 +1,4 @@
-"""Edge metadata (K §4.3): sensor readings and root offsets of playing an edge.
+"""Edge metadata (Kelly et al. 2013, §4.3): sensor readings and root offsets of playing an edge.
 
 A node can be reached at three playback speeds: normal (an original edge or a
 transition), half (through a slow-down node) and double (a speed-up edge). For each

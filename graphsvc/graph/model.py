@@ -1,4 +1,4 @@
-"""The motion graph as flat arrays (SPEC §3).
+"""The motion graph as flat arrays.
 
 Nodes are poses: every knowledge-base frame (original), half-way frames for playing
 slower (slow-down), blends of similar segments (interpolated), and the blended frames
@@ -7,7 +7,7 @@ Each node keeps its full local pose, so sensor metadata for any layout can be
 recomputed from the graph alone (`graph.metadata.recompute_accelerations`).
 
 An edge m → n says "after pose m, pose n may follow, one sample later". Its metadata
-(K §4.3): the accelerations the layout's sensors read on arriving at n that way
+(Kelly et al. 2013, §4.3): the accelerations the layout's sensors read on arriving at n that way
 (S × 3, m/s², sensor frames), the root's ground displacement expressed in m's local
 frame (metres; local frame: facing +Z, left +X), and the heading change (radians).
 Edges are sorted by destination then source, so a node's incoming edges are one

@@ -1,4 +1,4 @@
-"""Transition candidates of a motion graph (SPEC §3; Kelly §4 after Safonova & Hodgins).
+"""Transition candidates of a motion graph (Kelly et al. 2013, §4, after Safonova and Hodgins).
 
 The knowledge base is C clips concatenated on one frame axis of N frames. A
 transition (i, j) means "after frame i, continue with the frame that follows j":

@@ -1,4 +1,4 @@
-"""Canonical joints (SPEC §1) and their mapping onto concrete skeletons.
+"""Canonical joints  and their mapping onto concrete skeletons.
 
 Sensors and metrics address joints by canonical name; each skeleton family maps
 those names onto its own joints. Built-in maps cover the CMU ASF skeleton (a joint

@@ -1,6 +1,6 @@
 """A pose relative to its own root placement, and placed again on another root path.
 
-Synthesis (SPEC §5) and the graph's bridges both take a pose out of its source clip and
+Synthesis and the graph's bridges both take a pose out of its source clip and
 set it down somewhere else: the pelvis rotation is described relative to the frame's
 heading and the pelvis by its height (`relative_pose`), the rest of the body by its
 local rotations; `place_poses` realises a new ground position and heading at the

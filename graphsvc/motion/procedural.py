@@ -19,7 +19,7 @@ running a flight phase); swings and punches are authored key poses with footwork
 and weight shifts. Everything is deterministic given a seed
 (`np.random.default_rng(seed)` is the only source of randomness).
 
-Conventions (SPEC): metres, seconds, radians; Y up, ground y = 0; heading is the
+Conventions: metres, seconds, radians; Y up, ground y = 0; heading is the
 rotation about +Y, 0 facing +Z, the character's left is +X; the rest pose is a
 T-pose. Per-frame content labels of a performance are returned alongside it.
 """

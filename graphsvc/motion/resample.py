@@ -1,5 +1,5 @@
 """Resampling motions to a target frame rate: rotations by slerp, translations
-linearly (SPEC §1)."""
+linearly ."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Per-frame global signals of a motion: ground-plane root position, heading and
-foot-contact state (SPEC §2). All functions take world joint positions (F, J, 3)
+foot-contact state . All functions take world joint positions (F, J, 3)
 from forward kinematics and canonical joint indices from `joints.joint_map`."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Virtual accelerometers (SPEC §2, TH §3.3).
+"""Virtual accelerometers (Tautges 2012, §3.3).
 
 reading = R_sensorᵀ · (p̈_world + g_up), g_up = (0, +9.81, 0): a sensor at rest reads
 +1 g upward in its own frame. p̈ comes from the 5-point stencil (TH eq. 3.1–3.2),
@@ -15,7 +15,7 @@ import numpy as np
 from graphsvc.motion.kinematics import qmul, qrot
 from graphsvc.sensors.layout import Placement
 
-GRAVITY = 9.81  # m/s², the unit "g" of all costs (SPEC §1)
+GRAVITY = 9.81  # m/s², the unit "g" of all costs 
 G_UP = np.array([0.0, GRAVITY, 0.0])
 
 _CENTRAL = np.array([-1.0, 16.0, -30.0, 16.0, -1.0]) / 12.0

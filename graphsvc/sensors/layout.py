@@ -2,7 +2,7 @@
 
 A sensor is attached to a segment named by a canonical joint (the segment runs from
 that joint to `toward`, the next canonical joint down the bone), at fraction `along`
-of the way, plus an optional offset in the segment's frame. Its frame (SPEC §2):
+of the way, plus an optional offset in the segment's frame. Its frame :
 X along the bone, away from the body centre; Z "up" for arm segments and "forward"
 for leg and trunk segments, taken in the skeleton's rest pose (T-pose for the CMU
 and procedural skeletons) and orthogonalised against X; Y = Z × X. A layout file

@@ -1,10 +1,10 @@
-"""Sensor noise model of SPEC §2 and its presets.
+"""The sensor noise model and its presets.
 
 Applied in the order a real device produces it: the sensor is mounted slightly
 rotated about its X axis (misalignment), each axis has a constant bias, white noise
 is added, the ADC clips at ±range g, and some samples are lost (NaN). The overhead
 tracker adds white noise to ground positions; heading comes from the exact pose, a
-noisy copy of it, K §6's rule from the (noisy) track, or is absent.
+noisy copy of it, the rule of Kelly et al. 2013, §6, from the (noisy) track, or is absent.
 
 Spec strings: a preset name, optionally followed by overrides, or overrides alone
 (starting from `none`): "default", "default,drop=0.02", "sigma=0.3,bias=0.1".
@@ -45,7 +45,7 @@ class NoiseModel:
 
 PRESETS: dict[str, NoiseModel] = {
     "none": NoiseModel(),
-    # SPEC §2 evaluation defaults (Kelly et al.'s ±12 g sensors, tracker σ = 10 cm).
+    # The evaluation defaults (Kelly et al.'s ±12 g sensors, tracker σ = 10 cm).
     "default": NoiseModel(
         sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0
     ),
@@ -126,7 +126,7 @@ def heading_from_track(
     rest_heading: float = 0.0,
     window_s: float = 0.5,
 ) -> np.ndarray:
-    """K §6: face the direction of travel while moving faster than `speed_threshold`
+    """Kelly et al. 2013, §6: face the direction of travel while moving faster than `speed_threshold`
     (m/s), else `rest_heading` (radians; e.g. facing the net). position: (T, 2) (x, z)
     metres, NaN allowed. Velocity from a Savitzky–Golay fit over `window_s`, which
     tames the tracker's noise (σ = 10 cm at 30 Hz would make raw differences useless)."""

@@ -1,5 +1,5 @@
 """Clip → input stream: what the body-worn sensors and the overhead tracker would
-have reported while the clip was performed (SPEC §2)."""
+have reported while the clip was performed ."""
 
 from __future__ import annotations
 

@@ -30,7 +30,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
-from graphsvc.search.threads import ThreadShare
+from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc

@@ -7,7 +7,7 @@ else; each strategy owns its index, its batch reconstruction and its live sessio
 | --- | --- | --- | --- |
 | `viterbi` | accelerations | ground position, heading, constraints | whole actions from the graph: the path that best explains every stream over time |
 | `nearest` | accelerations | (the track only to place the start) | nothing: per sample the nearest knowledge-base frame, the floor a search must beat |
-| `olng`, `ssg` | (SPEC §6, §7) | | specified, not built yet: asking for one answers StrategyNotImplementedError |
+| `olng`, `ssg` | (OLNG: Tautges et al. 2011; SSG: Tautges 2012) | | specified, not built yet: asking for one answers StrategyNotImplementedError |
 
 `register` adds one (a `Strategy` instance); the built-in ones load on first lookup, so
 importing this package compiles and loads nothing.

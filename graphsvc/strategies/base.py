@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graphsvc.errors import InputError
+from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
@@ -74,11 +75,9 @@ class Strategy:
 
 
 def prepared_index(strategy: Strategy, graph: MotionGraph):
-    """`strategy.prepare(graph)`, once per graph object and strategy."""
-    held = graph.__dict__.setdefault("_strategy_indexes", {})
-    if strategy.name not in held:
-        held[strategy.name] = strategy.prepare(graph)
-    return held[strategy.name]
+    """`strategy.prepare(graph)`, once per graph object and strategy (`graph.derived`:
+    an index must not refer to its graph but weakly)."""
+    return derived(graph, ("strategy index", strategy.name), lambda: strategy.prepare(graph))
 
 
 # ---------------------------------------------------------------- input checks

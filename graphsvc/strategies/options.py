@@ -19,7 +19,7 @@ from graphsvc.sensors.recording import validate_constraints
 
 @dataclass(frozen=True)
 class Weights:
-    """K eq. 6: accelerometers (per g²), position (per metre), orientation (per radian).
+    """Kelly et al. 2013, eq. 6: accelerometers (per g²), position (per metre), orientation (per radian).
     A strategy weighs whichever of these terms it has."""
 
     acc: float = 1.0
@@ -30,9 +30,9 @@ class Weights:
 @dataclass(frozen=True)
 class Options:
     """How to reconstruct. strategy: a registered name (`graphsvc.strategies`).
-    weights: K eq. 6 (per g², per m, per rad). latency_s: fixed lag (s) of the live
+    weights: Kelly et al. 2013, eq. 6 (per g², per m, per rad). latency_s: fixed lag (s) of the live
     decoder; None in batch = the whole input at once. heading_from_track: derive the
-    heading from the ground positions (K §6: direction of travel above
+    heading from the ground positions (Kelly et al. 2013, §6: direction of travel above
     `speed_threshold` m/s, else `rest_heading_deg`). constraints: annotation constraint
     sets in priority order (None: the recording's own). beam (Viterbi): a cost; after
     each sample only the paths within it of the best one go on (faster on built

@@ -1,4 +1,4 @@
-"""Full-body motion from a node path through the motion graph (SPEC §5, K §5).
+"""Full-body motion from a node path through the motion graph (Kelly et al. 2013, §5).
 
 Pipeline, all on flat (T, ...) arrays:
 
@@ -39,6 +39,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph import metadata as meta
+from graphsvc.graph.derived import derived
 from graphsvc.graph.model import (
     EDGE_BRIDGE,
     EDGE_INTERP,
@@ -182,10 +183,11 @@ def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
 
 
 def path_tables(graph: MotionGraph) -> PathTables:
-    """The graph's synthesis lookups, made once and cached on it."""
-    cached = getattr(graph, "_path_tables", None)
-    if cached is not None:
-        return cached
+    """The graph's synthesis lookups, made once per graph object (`graph.derived`)."""
+    return derived(graph, "synthesis.path_tables", lambda: _make_path_tables(graph))
+
+
+def _make_path_tables(graph: MotionGraph) -> PathTables:
     joints = joint_map(graph.skeleton, graph.params.get("mapping"))
     below, carrier = _joint_tables(graph.skeleton, joints)
     tables = PathTables(
@@ -193,7 +195,6 @@ def path_tables(graph: MotionGraph) -> PathTables:
         continuous=_continuous_edges(graph, np.arange(graph.num_edges, dtype=np.int64)),
         joints=joints, below=below, carrier=carrier,
     )  # fmt: skip
-    graph._path_tables = tables
     return tables
 
 
@@ -531,9 +532,10 @@ def warm_up_synthesis(graph: MotionGraph) -> None:
     """Synthesize a two-frame path with a cut into a node in contact, so numba
     compiles (or loads from its cache) every synthesis kernel and the graph's path
     tables are made now, not on a client's first frames. Once per graph."""
-    if getattr(graph, "_synthesis_warmed", False):
+    warmed = derived(graph, "synthesis.warmed", lambda: [False])
+    if warmed[0]:
         return
-    graph._synthesis_warmed = True  # (as the table caches)
+    warmed[0] = True
     path_tables(graph)
     in_contact = np.flatnonzero(graph.node_contacts.any(axis=1))
     node = int(in_contact[0]) if in_contact.size else 0

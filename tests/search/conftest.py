@@ -2,7 +2,7 @@
 
 import pytest
 
-from graphsvc.search.viterbi import ViterbiSearch
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 
 
 @pytest.fixture(params=[None, (8, 5), (3, 0), (4, 9)], ids=["ring-default", "ring-8+5", "ring-3+0", "ring-4+9"])

@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from graphsvc.errors import InputError
-from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import COST, ViterbiSearch, Weights, _immortal, viterbi_search
+from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import viterbi_search
+from graphsvc.strategies.viterbi.beam import _immortal
+from graphsvc.strategies.viterbi.costs import COST
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 from graphsvc.sensors.accelerometer import GRAVITY
 from tests.search.test_viterbi import random_graph, tiny_graph
 

@@ -5,8 +5,10 @@ import numpy as np
 import pytest
 
 from graphsvc.errors import InputError
-from graphsvc.search.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
-from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
+from graphsvc.strategies.viterbi.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import viterbi_search
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 from tests.search.test_viterbi import random_walk_problem
 
 

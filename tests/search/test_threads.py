@@ -3,8 +3,9 @@ import threading
 import numpy as np
 import pytest
 
-from graphsvc.search.threads import ThreadShare
-from graphsvc.search.viterbi import ViterbiSearch, Weights
+from graphsvc.strategies.threads import ThreadShare
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 from tests.search.test_viterbi import random_walk_problem
 
 

@@ -10,8 +10,10 @@ from hypothesis import strategies as st
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import graph_from_edges
-from graphsvc.search.reference import reference_viterbi
-from graphsvc.search.viterbi import ViterbiSearch, Weights, viterbi_search
+from graphsvc.strategies.viterbi.reference import reference_viterbi
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import viterbi_search
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 
 
 def tiny_graph(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None):
@@ -229,7 +231,7 @@ def test_search_without_placement_ignores_position_like_zero_weights():
 
 
 def test_distinct_rows_groups_bit_identical_rows_in_order_of_first_use():
-    from graphsvc.search.viterbi import distinct_rows
+    from graphsvc.strategies.viterbi.tables import distinct_rows
 
     rng = np.random.default_rng(3)
     pool = rng.normal(0, 1, (7, 4)).astype(np.float32)
@@ -283,7 +285,7 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
     # walk through every row, for rings whose blocks are longer, equal to or shorter
     # than the rows kept beyond them, placed or not, in the float32 pass and in the
     # float64 passes.
-    from graphsvc.search import viterbi as V
+    from graphsvc.strategies.viterbi import store as V
 
     monkeypatch.setattr(ViterbiSearch, "ANCESTOR_SHARE", share)
     flushes = []  # whether each walked from the ancestors
@@ -336,7 +338,7 @@ def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
     # The walks back scan byte maps while rows hold many nodes and switch to lists once
     # they hold few (≤ 16 here): every row's nodes, the converged row (both walks), and a
     # level list too short (in either phase) reported without leaving a mark behind.
-    from graphsvc.search import viterbi as V
+    from graphsvc.strategies.viterbi import store as V
 
     counts = []  # every row's
 
@@ -397,7 +399,7 @@ def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
 
     code = (
         "import numpy as np\n"
-        "from graphsvc.search import viterbi as V\n"
+        "from graphsvc.strategies.viterbi import costs as V\n"
         "k = V.{name}\n"
         "k(np.zeros((4, 8)), np.zeros(2), 0.0, 0.0, np.zeros((4, 4), np.float32))\n"
         "print(sum(k.stats.cache_hits.values()))\n"
@@ -419,16 +421,17 @@ def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
 def test_every_kernel_is_compiled_once_per_cache_entry():
     # The same check for every kernel: no two dispatchers with different compile flags
     # share a function name and line (which is what numba files cache entries under).
-    from graphsvc.search import viterbi as V
+    from graphsvc.strategies.viterbi import batch, beam, costs, dense, search, store, tables
 
-    dispatchers = [d for d in vars(V).values() if isinstance(d, numba.core.registry.CPUDispatcher)]
-    dispatchers += [d for k in (V._finish, V._finish_serial) for d in k.values()]
+    modules = (batch, beam, costs, dense, search, store, tables)
+    dispatchers = [d for m in modules for d in vars(m).values() if isinstance(d, numba.core.registry.CPUDispatcher)]
+    dispatchers += [d for k in (dense._finish, dense._finish_serial) for d in k.values()]
     seen = {}
     for d in dispatchers:
         key = (d.py_func.__qualname__, d.py_func.__code__.co_firstlineno)
         flags = tuple(sorted((k, str(v)) for k, v in d.targetoptions.items()))
         assert seen.setdefault(key, flags) == flags, key
-    assert ("_relative_py_serial", V._relative_py.__code__.co_firstlineno) in seen
+    assert ("_relative_py_serial", costs._relative_py.__code__.co_firstlineno) in seen
 
 
 def test_warm_up_search_runs_the_walk_back_kernels():
@@ -442,13 +445,13 @@ def test_warm_up_search_runs_the_walk_back_kernels():
 
     code = (
         "import numpy as np\n"
-        "from graphsvc.search import viterbi as V\n"
+        "from graphsvc.strategies.viterbi import batch, beam, dense, store\n"
         "from tests.search.test_viterbi import random_graph\n"
-        "kernels = (V._block_levels, V._append_block, V._converged_row, V._trace, V._approx_select,\n"
-        "           *V._finish.values(), V._edge_totals, V._select, V._advance, V._beam_step, V._immortal,\n"
-        "           V._best_in_list, V._reset_costs, V._beam_prune)\n"
+        "kernels = (store._block_levels, store._append_block, store._converged_row, store._trace, dense._approx_select,\n"
+        "           *dense._finish.values(), dense._edge_totals, dense._select, dense._advance, beam._beam_step,\n"
+        "           beam._immortal, beam._best_in_list, beam._reset_costs, beam._beam_prune)\n"
         "assert not any(k.signatures for k in kernels)\n"
-        "V.warm_up_search(random_graph(np.random.default_rng(0)))\n"
+        "batch.warm_up_search(random_graph(np.random.default_rng(0)))\n"
         "assert all(k.signatures for k in kernels), [k.__name__ for k in kernels if not k.signatures]\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
@@ -456,8 +459,8 @@ def test_warm_up_search_runs_the_walk_back_kernels():
 
 
 def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id():
-    from graphsvc.search.viterbi import TIE
-    from graphsvc.search.viterbi import _best_node as best_of_state
+    from graphsvc.strategies.viterbi.costs import TIE
+    from graphsvc.strategies.viterbi.dense import _best_node as best_of_state
 
     def _best_node(cost, rank, det):  # the kernel reads the costs from state rows
         return best_of_state(cost[:, None].copy(), rank, det)
@@ -494,7 +497,8 @@ def test_best_node_ranks_constraints_then_cost_within_tie_then_detours_then_id()
 def test_best_node_from_the_chunks_lowest_and_highest_costs_equals_reading_every_node():
     # Costs on a grid finer and coarser than TIE, ties across chunk boundaries, chunks
     # with no live node, a cost ≥ 1e6 now and then (no rounding then), detours.
-    from graphsvc.search.viterbi import COST, TIE, _best_in_chunks, _best_node
+    from graphsvc.strategies.viterbi.costs import COST, TIE
+    from graphsvc.strategies.viterbi.dense import _best_in_chunks, _best_node
 
     rng = np.random.default_rng(11)
     for trial in range(300):
@@ -527,7 +531,7 @@ def _lockstep(g, meas, position, heading, weights, allowed=None):
     constraint set that requires nothing, so ranks never differ) side by side; every
     sample's costs, detours, placements and lattice rows must be identical, bit for bit.
     Returns the float32-pass search."""
-    from graphsvc.search.viterbi import _best_node as every_node
+    from graphsvc.strategies.viterbi.dense import _best_node as every_node
 
     fast = ViterbiSearch(g, weights, 0, allowed)
     exact = ViterbiSearch(g, weights, 1, allowed)
@@ -630,7 +634,7 @@ def test_near_ties_are_marked_only_where_float32_cannot_decide():
 def test_tagged_minimum_keeps_the_lowest_value_and_its_label():
     import numba
 
-    from graphsvc.search._llvm import fmin, tag
+    from graphsvc.strategies.viterbi.intrinsics import fmin, tag
 
     @numba.njit
     def tagged_min(values, keep):
@@ -674,7 +678,8 @@ def shared_reading_graph(rng, N=1200, out=3, S=2):
 
 
 def test_search_tables_give_every_edge_its_own_reading_and_pass_1_every_edge_once():
-    from graphsvc.search.viterbi import GRAVITY, float32_tables, search_tables
+    from graphsvc.sensors.accelerometer import GRAVITY
+    from graphsvc.strategies.viterbi.tables import float32_tables, search_tables
 
     g = shared_reading_graph(np.random.default_rng(3))
     tables, pass1 = search_tables(g), float32_tables(g)
@@ -720,8 +725,10 @@ def test_float32_pass_eight_wide_equals_float64_search_on_a_built_like_graph(see
 def _keep_two_scalar_and_eight_wide(placed):
     """Two kernels over one run of slot entries: `_keep_two` one entry at a time with
     pass 1's float32 arithmetic, and the eight-wide intrinsic."""
-    from graphsvc.search._llvm import keep_two_gathered8, keep_two_placed8
-    from graphsvc.search.viterbi import RC32, _keep_two, _place_terms, _tag
+    from graphsvc.strategies.viterbi.intrinsics import keep_two_gathered8, keep_two_placed8
+    from graphsvc.strategies.viterbi.costs import RC32, _place_terms
+    from graphsvc.strategies.viterbi.dense import _keep_two
+    from graphsvc.strategies.viterbi.intrinsics import tag as _tag
 
     @numba.njit
     def scalar(best, second, rel, c32, src, labels, offset, turn, extra, w, keep):
@@ -813,7 +820,7 @@ def test_eight_wide_candidates_without_avx2_load_one_by_one_and_agree(tmp_path):
 def test_a_short_batch_search_makes_only_the_rows_it_fills_and_finds_the_same_path(monkeypatch):
     # An input too short to fill a block of the batch ring never flushes it: one row a
     # sample is enough, and the search must be the one the full ring gives.
-    from graphsvc.search import viterbi as V
+    from graphsvc.strategies.viterbi import batch as V
 
     rng = np.random.default_rng(7)
     g = random_graph(rng, N=60, out=4)

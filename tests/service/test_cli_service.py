@@ -33,7 +33,7 @@ def served(graph_file, tmp_path):
 def test_client_commands(served, rec_file, graph, recording, tmp_path, capsys):
     from graphsvc.motion.bvh import bvh_text
     from graphsvc.pipeline import Options, reconstruct
-    from graphsvc.search.viterbi import Weights
+    from graphsvc.strategies.options import Weights
 
     _, address, token = served
     common = ["--server", address, "--token-file", str(token)]

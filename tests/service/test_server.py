@@ -57,7 +57,7 @@ def test_list_and_get_graph(conn, graph, graph_file):
 def test_synthesize_matches_library(conn, graph, recording, latency_s, beam):
     from graphsvc.motion.bvh import bvh_text
     from graphsvc.pipeline import Options, reconstruct
-    from graphsvc.search.viterbi import Weights
+    from graphsvc.strategies.options import Weights
 
     options = Options(weights=Weights(0.5, 1.0, 1.0), latency_s=latency_s, beam=beam)
     expected = reconstruct(graph, recording, options)

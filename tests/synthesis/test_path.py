@@ -1,4 +1,4 @@
-"""Synthesis from a node path (SPEC §5) on a small procedural graph."""
+"""Synthesis from a node path on a small procedural graph."""
 
 import numpy as np
 import pytest

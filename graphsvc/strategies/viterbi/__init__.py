@@ -1,204 +1,23 @@
-"""The Viterbi graph search as a strategy (SPEC §4–5, Kelly et al.): the path through
-the motion graph that best explains the accelerometers, the overhead tracker's ground
-position and heading and the animator's constraints, synthesized on the knowledge-base
-skeleton.
+"""The Viterbi graph search as a strategy (Kelly et al. 2013): the path through the
+motion graph that best explains the accelerometers, the overhead tracker's ground
+position and heading and the animator's constraints, synthesized on the
+knowledge-base skeleton.
 
-Batch (`reconstruct`): the whole recording in one search (`search.viterbi`), or with
-a latency the fixed-lag decoder a live stream runs (`search.stream`), then synthesis
-(`synthesis.path`, `synthesis.stream`). Live (`ViterbiSession`): the fixed-lag decoder
-and the streaming synthesizer, one sample at a time. Its index is the graph's search
-and synthesis tables, made once per graph by the warm-up.
+- `strategy`: the strategy (batch reconstruction) and its live session.
+- `costs`: the cost terms L(e, t) = W_A·C_A + W_P·C_P + W_O·C_O and the path state
+  they read, with the list of every place each term is computed.
+- `tables`: the graph's arrays in the search's layouts (`SearchIndex`).
+- `dense`: the exact step's passes over every node and edge, float32 and float64.
+- `beam`: the beam search's sparse step and cut.
+- `store`: the survivor store and the walks back through the dense rows.
+- `search`: `ViterbiSearch`, the incremental search a batch or live caller steps.
+- `batch`: the batch search, constraint sets, per-term path costs, the warm-up.
+- `stream`: the fixed-lag and sliding-window decoders of live streams.
+- `reference`: a plain numpy search over the full lattice, which the others are
+  checked against.
+- `intrinsics`: LLVM instructions for the hot loops; the threaded and serial compile.
 """
 
-from __future__ import annotations
+from graphsvc.strategies.viterbi.strategy import ViterbiSession, ViterbiStrategy, warm_up
 
-import math
-import time
-
-import numpy as np
-
-from graphsvc.errors import SearchCancelled
-from graphsvc.graph.model import MotionGraph
-from graphsvc.motion.skeleton import Motion
-from graphsvc.search.stream import FixedLagDecoder
-from graphsvc.search.viterbi import needs_placement, viterbi_search, warm_up_search, warm_up_search_once
-from graphsvc.sensors.noise import CausalTrackHeading
-from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels,
-                                      start_state)  # fmt: skip
-from graphsvc.strategies.options import Options, check_constraints
-from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
-from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
-
-
-class ViterbiStrategy(Strategy):
-    name = "viterbi"
-    needs = frozenset({"accelerations"})
-    uses = frozenset({"accelerations", "ground_position", "heading", "constraints"})
-    summary = "the motion-graph path that best explains the readings, the track and the constraints"
-
-    def prepare(self, graph: MotionGraph):
-        return graph  # its tables are made on the graph by the warm-up
-
-    def warm_up(self, index, graph: MotionGraph, threads: bool = False) -> None:
-        warm_up(graph, threads)
-
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
-        acc, position, heading, constraints = inp.acc, inp.position, inp.heading, inp.constraints
-        rate = float(graph.rate_hz)
-        T = acc.shape[0]
-        w = options.weights
-        use_pos = position if w.position else None
-        use_head = heading if w.heading else None
-        # numba compiles (or loads) the search and synthesis kernels and the graph's tables
-        # are made once per process, timed apart: the search time is the search's own.
-        t0 = time.perf_counter()
-        warm_up_search_once(graph, threads)
-        warm_up_synthesis(graph)
-        warm_up_s = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        start_ground, start_heading = start_state(position, heading)
-        if options.latency_s is None:
-            result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                    should_stop=should_stop, beam=options.beam)  # fmt: skip
-            nodes, edges = result.node_path, result.edge_path
-            search_s = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading)
-            synth_s = time.perf_counter() - t0
-            extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
-                     "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
-        else:
-            lag = int(round(options.latency_s * rate))
-            decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
-                                      needs_placement(w, use_pos, use_head), beam=options.beam)  # fmt: skip
-            synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
-            node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
-            synth_s = 0.0
-            for t in range(T + 1):
-                if should_stop is not None and t % 32 == 31 and should_stop():
-                    raise SearchCancelled(f"search stopped at sample {t} of {T}")
-                if t < T:
-                    n, e = decoder.push(acc[t], None if use_pos is None else use_pos[t],
-                                        None if use_head is None else use_head[t])  # fmt: skip
-                else:
-                    n, e = decoder.flush()
-                node_parts.append(n)
-                edge_parts.append(e)
-                ts = time.perf_counter()
-                _, rot, trans = synth.add(n, e) if t < T else _join(synth.add(n, e), synth.finish())
-                synth_s += time.perf_counter() - ts
-                rot_parts.append(rot)
-                trans_parts.append(trans)
-            nodes = np.concatenate(node_parts)
-            edges = np.concatenate(edge_parts)[1:]
-            motion = Motion(graph.skeleton, np.concatenate(rot_parts), np.concatenate(trans_parts), rate,
-                            name="synthesized", source="graph path")  # fmt: skip
-            search_s = time.perf_counter() - t0 - synth_s
-            s = decoder.search
-            extra = {"lag_samples": lag, "revisions": decoder.revisions,
-                     "converged_early_frames": decoder.converged_frames, "compression": round(s.compression, 2),
-                     "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
-        report = {
-            **extra,
-            "labels": path_labels(graph, nodes),
-            "node_path": nodes.tolist(),
-            "timings_s": {"warm_up": round(warm_up_s, 4), "search": round(search_s, 4),
-                          "synthesis": round(synth_s, 4)},  # fmt: skip
-            "samples_per_s": round(T / max(search_s, 1e-9), 1),
-        }
-        return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
-
-
-def _join(a, b):
-    return a[0], np.concatenate([a[1], b[1]]), np.concatenate([a[2], b[2]])
-
-
-class ViterbiSession(LiveSession):
-    """A live stream through the Viterbi search: samples decoded by the fixed-lag
-    decoder (lag = options.latency_s, default 1 s) and synthesized a few frames behind
-    it, SYNTH_BATCH frames at a time. threads: numba threads per step — off by
-    default, since a live server runs many sessions side by side (it turns them on
-    while a session runs alone: `threads`)."""
-
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion)
-        latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
-        constraints = check_constraints(options.constraints or [], graph)
-        self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
-                                       self.rate, threads, beam=options.beam)  # fmt: skip
-        self.synth: StreamingSynthesizer | None = None
-        self.start_position: np.ndarray | None = None  # first measured, (2,) m
-        self.start_heading: float | None = None  # first measured (or from the track), rad
-        self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
-                      if options.heading_from_track else None)  # fmt: skip
-        self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
-
-    @property
-    def threads(self) -> bool:
-        """Whether the search steps use numba's threads; may change between pushes
-        (same frames either way — see `graphsvc.search.threads`)."""
-        return self.decoder.search.threads
-
-    @threads.setter
-    def threads(self, on: bool) -> None:
-        self.decoder.search.threads = on
-
-    def _decode(self, acc, position, heading):
-        if self.track is not None:
-            heading = self.track.push(position)
-        if self.start_position is None and position is not None and np.all(np.isfinite(position)):
-            self.start_position = np.asarray(position, dtype=np.float64)
-        if self.start_heading is None and heading is not None and np.isfinite(heading):
-            self.start_heading = float(heading)
-        w = self.options.weights
-        nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
-        if self.synth is None and not len(nodes):
-            return []
-        return self._frames(self._synthesizer().add(nodes, edges))
-
-    def _synthesizer(self) -> StreamingSynthesizer:
-        """Made when the first frames are final, starting where the search starts its
-        paths (`start_state`): the first position and heading measured so far (one
-        measured only later moves the search's paths, not frames already out)."""
-        if self.synth is None:
-            g = np.zeros(2) if self.start_position is None else self.start_position
-            h = 0.0 if self.start_heading is None else self.start_heading
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
-        return self.synth
-
-    def _frames(self, synthesized):
-        return self._emit_synthesized(self.synth, synthesized)
-
-    def _finish(self):
-        nodes, edges = self.decoder.flush()
-        synth = self._synthesizer()
-        return self._frames(_join(synth.add(nodes, edges), synth.finish()))
-
-
-ViterbiStrategy.session_class = ViterbiSession
-
-
-def warm_up(graph: MotionGraph, threads: bool = False) -> float:
-    """Run a few samples through a live session and a batch search, so numba's
-    compilation (or loading from its cache) and the graph's search tables are paid at
-    load, not by the first client. Returns the seconds it took."""
-    from graphsvc.strategies.options import Weights
-
-    t0 = time.perf_counter()
-    S = len(graph.sensor_names)
-    rng = np.random.default_rng(0)
-    T = 48
-    acc = rng.normal(0.0, 1.0, (T, S, 3))
-    acc[:, :, 1] += 9.81
-    position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
-    heading = np.zeros(T)
-    session = ViterbiSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2), threads=threads)
-    for t in range(T):
-        session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
-    session.flush()
-    warm_up_search(graph, threads)  # (batch searches too)
-    warm_up_synthesis(graph)
-    return time.perf_counter() - t0
+__all__ = ["ViterbiSession", "ViterbiStrategy", "warm_up"]

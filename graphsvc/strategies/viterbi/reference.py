@@ -10,13 +10,14 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.graph.model import MotionGraph
-from graphsvc.search.viterbi import Weights, compile_constraints
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import compile_constraints
 from graphsvc.sensors.accelerometer import GRAVITY
 
 
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
                       constraint_sets=None) -> tuple[np.ndarray, float]:  # fmt: skip
-    """(node path (T,), cost) — same inputs and meaning as `viterbi_search`."""
+    """(node path (T,), cost) — same inputs and meaning as `batch.viterbi_search`."""
     # Readings and measurements rounded to float32 in g as the search stores them; the
     # arithmetic after that is float64 over the full N × T lattice.
     acc = (np.asarray(acc, dtype=np.float32).astype(np.float64) / GRAVITY).astype(np.float32).astype(np.float64)

@@ -1,10 +1,18 @@
-"""LLVM instructions numba does not expose, for the search's hot loops.
+"""What the Viterbi kernels are built with: LLVM instructions numba does not expose
+(a branch-free select, min / max, fused multiply-add, prefetch, float32 tagging and
+eight-wide candidate keeping for the float32 pass), and `compile_kernel`, which
+compiles each kernel threaded and serial.
 
-(numba's disk cache checks the source file of a kernel, not of the intrinsics it
-inlines: after editing this file, empty the caches — `__pycache__/*.nbi, *.nbc`.)"""
+`keep_two_placed8` computes the float32 pass's placed total (W_A·C_A + W_P·C_P +
+W_O·C_O from a source's relative row) eight edges at a time in LLVM IR: it must agree
+bit for bit with `costs._placed_total32` (see `costs` for every place a term is
+computed)."""
 
 from __future__ import annotations
 
+from types import FunctionType
+
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
@@ -140,7 +148,7 @@ class _Lanes:
 
     def keep_two(self, t, keep, labels, i, best, second, p):
         """Tag the totals t with the labels at i (argument numbers keep, labels), then
-        `_keep_two` them into the best and second arrays (argument numbers) at p."""
+        `dense._keep_two` them into the best and second arrays (argument numbers) at p."""
         b = self.builder
         keep_ = self.context.cast(b, self.args[keep], self.types[keep], types.uint32)
         bits = ir.IntType(self.types[labels].dtype.bitwidth)
@@ -163,7 +171,7 @@ def _labels(labels) -> bool:
 
 @intrinsic
 def keep_two_gathered8(typingctx, best, second, p, costs, src, i, extra, weight, keep, labels):
-    """Eight candidates at once for `_keep_two` (viterbi.py) at positions p … p+7:
+    """Eight candidates at once for `dense._keep_two` (viterbi.py) at positions p … p+7:
     t = tag(costs[src[i + k]] + weight · extra[p + k], keep, labels[i + k]) for k < 8 (a
     multiply, then an add: no fused multiply-add), then
     second = fmin(second, fmax(t, best)) and best = fmin(t, best) lane by lane — the
@@ -207,7 +215,7 @@ def keep_two_placed8(typingctx, best, second, p, rel, src, i, offset, turn, extr
     """`keep_two_gathered8` for placed searches: eight candidates at positions p … p+7
     from relative rows rel (R, 4) float32 [qx, qz, rh, cost] of the sources src[i + k]
     (uint32): t = cost + w_acc · extra[p + k] + w_pos · |q + offset[i + k]|
-    + w_head · |wrap(rh + turn[i + k])|, tagged with labels[i + k] — `_place_terms`'
+    + w_head · |wrap(rh + turn[i + k])|, tagged with labels[i + k] — `costs._place_terms`'
     float32 operations in the same order, so the scalar loop's values bit for bit.
     The eight rows come in eight 16-byte loads, transposed into four vectors.
     offset (…, 2) and turn, extra (…,) float32; C-contiguous arrays."""
@@ -266,3 +274,18 @@ def fma(typingctx, a, b, c):
 
     return a(a, b, c), codegen
 
+
+def compile_kernel(fn, parallel: bool):
+    """fn compiled threaded (its prange loops spread over numba's threads) or serial.
+    Each kernel is compiled both ways: threaded for one search using the whole machine
+    (batch), serial for many searches side by side (a server's streams), where threads
+    would only fight. The serial one is compiled from a copy of fn named …_serial:
+    numba's disk cache files a function under its name and line and tells entries
+    apart by signature, bytecode and closure, not by compile flags, so the two would
+    load each other's machine code — whichever was cached first served both (seen:
+    "serial" streams running threaded kernels)."""
+    if not parallel:
+        qualname = fn.__qualname__ + "_serial"
+        fn = FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__, fn.__closure__)
+        fn.__qualname__ = qualname
+    return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)

@@ -1,4 +1,4 @@
-"""Streaming Viterbi decoders (SPEC §4 "Streaming"): samples in one at a time, final
+"""Streaming Viterbi decoders : samples in one at a time, final
 frames out as soon as they are decided.
 
 - `FixedLagDecoder`: one incremental search over the whole stream. After sample t,
@@ -6,7 +6,7 @@ frames out as soon as they are decided.
   surviving path already agrees on it (the converged-prefix commit). An emitted frame
   is never changed; when a later best path disagrees with what was emitted, the
   output jumps there (counted in `revisions`), and synthesis blends it like a cut.
-- `SlidingWindowDecoder`: K §6.4 / fig. 10 for comparison: each sample, a fresh search
+- `SlidingWindowDecoder`: Kelly et al. 2013, §6.4 / fig. 10 for comparison: each sample, a fresh search
   over the last W samples; frame t − L of that window's best path is emitted.
 
 Both emit (nodes, arrival_edges): arrival_edges[k] is the edge by which the deciding
@@ -22,7 +22,9 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
-from graphsvc.search.viterbi import ViterbiSearch, Weights, compile_constraints
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import compile_constraints
+from graphsvc.strategies.viterbi.search import ViterbiSearch
 
 
 def _check_lag(lag: int) -> int:
@@ -117,7 +119,7 @@ class FixedLagDecoder:
 
 
 class SlidingWindowDecoder:
-    """K §6.4: at each sample, search the last `window` samples afresh (every node a
+    """Kelly et al. 2013, §6.4: at each sample, search the last `window` samples afresh (every node a
     possible start, at the window's first measured position and heading) and emit
     frame t − lag of the best path. Costs `window` times the fixed-lag decoder."""
 

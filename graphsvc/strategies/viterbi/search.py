@@ -1,0 +1,661 @@
+"""The incremental Viterbi search over a motion graph (Kelly et al. 2013, §4–5):
+`ViterbiSearch`, used alike by the batch search (`batch`) and the streaming decoders
+(`stream`).
+
+State = graph node. At each input sample every path advances along one edge, and each
+node keeps the best path arriving there (the cost terms: `costs`; the step's passes:
+`dense`, or `beam` for a beam search).
+
+Memory (§5.1, after Abbasfar and Yao): instead of the N × T back-pointer lattice the
+search keeps the newest samples' lattice rows dense, one byte a node, in a ring of
+BLOCK + STORE_WINDOW rows (a batch search: twice both). When the ring is full it walks
+back from all live nodes and appends only the oldest BLOCK rows' points that some live
+path passes through to a survivor store (`store`); by then most paths have merged.
+When the store has doubled, one backward sweep keeps what the live paths still reach.
+The compression ratio reported is the full lattice's memory (N·T points of 4 bytes)
+over the peak memory held for it. Once every survivor passes through one point, the
+prefix up to it is final (the converged-prefix commit of streaming decoders).
+
+Speed: a step is bound by scattered reads of the source nodes' state, so each node's
+best edge is chosen in float32 and the chosen path's cost recomputed in float64
+(near-ties decided again in float64), C_A is computed once per distinct reading per
+sample, the placement is carried only when position or heading counts, and edges are
+visited in slot-major order. The search's memory layout and what each choice measured
+are in docs/search.md.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
+                                              _immortal, _reset_costs)  # fmt: skip
+from graphsvc.strategies.viterbi.costs import COS, COST, DEAD32, HEADING, PLACED_WIDTH, SIN, UNPLACED_WIDTH, X, Z
+from graphsvc.strategies.viterbi.costs import _reading_costs_batch, _reading_costs_batch_serial
+from graphsvc.strategies.viterbi.dense import _SERIAL, _THREADED, _best_in_chunks, _best_node, _satisfied
+from graphsvc.strategies.viterbi.store import (EDGE, NODE, PARENT, TIME, _append_block, _block_levels, _collect,
+                                               _converged_row, _converged_until, _trace)  # fmt: skip
+from graphsvc.strategies.viterbi.tables import search_index
+
+
+class ViterbiSearch:
+    """Incremental search: `start(first sample)`, `step(sample)` per sample, then
+    `trace(best_node())`. Used by the batch search and by streaming decoders alike.
+
+    Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
+
+    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
+                 threads: bool = True, placed: bool | None = None, window: int | None = None,
+                 ring: tuple[int, int] | None = None, beam: float | None = None):  # fmt: skip
+        """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
+        never entered, which is how leave-one-out evaluation hides a clip. threads:
+        spread each step over numba's threads (one search at a time) or not (many
+        searches in parallel, e.g. a server's streams). placed: carry each path's
+        ground placement (needed for position and heading costs); default: when the
+        position or heading weight is non-zero. Without it, position and heading
+        measurements are ignored and a step skips the placement passes. window: keep
+        only the back-pointers of the last `window` samples or more, dense, and no
+        survivor store — for a fixed-lag decoder, which never traces back further
+        (traces must start inside the window). It saves the store's appends and sweeps
+        for (window + BLOCK) × N bytes. None: the survivor store, any trace. ring:
+        (BLOCK, STORE_WINDOW) instead of the class's (a warm-up makes the rarely run
+        walk-back kernels run within a few samples). beam: keep only the paths whose
+        cost is within this much of the best one's after each sample (see
+        `beam._beam_step_py`), and visit only the nodes they reach — faster, but the path is
+        no longer always the cheapest (None: the exact search; no constraint sets; inf:
+        the exact search's results by the beam's step). Weights must be finite and ≥ 0
+        (InputError); the float32 pass serves searches without constraint sets whose
+        weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
+        the float64 passes the rest, with the same results."""
+        self.graph = graph
+        self.threads = threads
+        if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
+            raise InputError(f"weights must be finite and ≥ 0, got {weights}")
+        self.weights = weights
+        self.placed = bool(weights.position != 0 or weights.heading != 0) if placed is None else bool(placed)
+        N = graph.num_nodes
+        self.N = N
+        self.gamma = gamma
+        self.index = search_index(graph)  # (the graph's tables, made once and shared)
+        tables = self.index.tables
+        self.edge_src = tables["edge_src"]
+        self.edge_kind = tables["edge_kind"]
+        self.edge_offset = tables["edge_offset"]
+        self.edge_heading = tables["edge_heading"]
+        self.edge_turn = tables["edge_turn"]
+        self.readings_t = tables["readings_t"]
+        self.edge_reading = tables["edge_reading"]
+        c = graph.node_contacts
+        self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
+        self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
+        P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
+        width = PLACED_WIDTH if self.placed else UNPLACED_WIDTH
+        self.state, self._state_new = np.zeros((N, width)), np.zeros((N, width))  # (see COST…SIN)
+        self.det, self._det_new = np.zeros(N, dtype=np.int32), np.zeros(N, dtype=np.int32)  # detour counts
+        self.rank, self._rank_new = np.zeros((N, gamma), dtype=np.int32), np.zeros((N, gamma), dtype=np.int32)
+        self.rel = np.zeros((P, 4), dtype=np.float32)
+        # The float32 pass and float64 fix-ups (see `dense._approx_select_py`) for searches
+        # without constraint sets; constrained ones keep the float64 passes (rank first).
+        # bits for an arrival index < max in-degree, and all ones (which none is) marking a near-tie
+        label_bits = max(int(np.diff(tables["incoming"]).max(initial=0)), 1).bit_length()
+        # (weights ≤ 1e6 keep every live float32 total far from overflow)
+        heaviest = max(weights.acc, weights.position, weights.heading)
+        self.float32_pass = gamma == 0 and label_bits <= 12 and heaviest <= 1e6
+        self.near_ties = 0  # nodes whose choice the float64 rule settled (a check on the bound's width)
+        if self.float32_pass:
+            self._keep = np.uint32(0xFFFFFFFF ^ ((1 << label_bits) - 1))
+            self._label_mask = np.uint32((1 << label_bits) - 1)
+            self._alpha = 2.0**-20 + 2.0 ** (label_bits - 22)
+            self._best32, self._second32 = np.empty(N, np.float32), np.empty(N, np.float32)
+            self._best_bits = self._best32.view(np.uint32)  # pass 2 reads the labels through it
+            pass1 = self.index.float32
+            self.node_pos = tables["node_pos"]
+            self._pass1 = tuple(pass1[k] for k in (
+                "chunk_nodes", "shared_slots", "shared_src", "shared_arrival", "shared_offset", "shared_heading",
+                "own_bounds", "own_src", "own_reading", "own_pos", "own_arrival", "own_offset", "own_heading"))
+            # unsigned views of the index tables pass 2 reads (see `dense._approx_select_py`)
+            self._unsigned = {
+                "incoming": tables["incoming"].view(np.uint32), "edge_src": tables["edge_src"].view(np.uint32),
+                "edge_reading": tables["edge_reading"].view(np.uint32),
+            }  # fmt: skip
+            self._chunk_nodes = pass1["chunk_nodes"]
+            self._chunk_low = np.empty(len(self._chunk_nodes) - 1)
+            self._chunk_high = np.empty_like(self._chunk_low)
+            self.c32 = np.zeros(N if not self.placed else 1, dtype=np.float32)
+            self._c32_new = np.zeros_like(self.c32)
+        else:
+            self.slots = tuple(self.index.slots[k] for k in (
+                "chunk_nodes", "chunk_slots", "slot_dst", "slot_src", "slot_kind", "slot_edge", "slot_reading",
+                "slot_offset", "slot_heading"))
+            self.total = np.full(graph.num_edges + 1, np.inf)  # slot order; total[E] = inf (no candidate)
+            self.best_slot = np.full(N, graph.num_edges, dtype=np.int64)
+        self.low = 0.0  # lowest live cost (the float32 costs' base)
+        self._chunks_t = -1  # the sample the chunks' lowest and highest costs describe (−1: none)
+        self.c32_base = 0.0  # what c32 is relative to
+        self.reading_cost = np.zeros(self.readings_t.shape[1], dtype=np.float32)
+        self._meas = np.zeros(self.readings_t.shape[0], dtype=np.float32)
+        self._mask = np.ones(self.readings_t.shape[0], dtype=np.float32)
+        self._scale = np.float32(1.0)  # (see `_set_measurement`)
+        self.ok = np.ones((gamma, N), dtype=bool)
+        if allowed is None:
+            self.allowed = np.ones(N, dtype=bool)
+        else:
+            self.allowed = np.ascontiguousarray(allowed, dtype=bool)
+            if self.allowed.shape != (N,):
+                raise InputError(f"node mask must have {N} entries, got {self.allowed.shape}")
+            if not self.allowed.any():
+                raise InputError("the node mask leaves no node to search")
+        if self.float32_pass:
+            self._allowed_pos = np.empty(N, dtype=bool)  # in the float32 pass's layout order
+            self._allowed_pos[self.node_pos] = self.allowed
+        self.beam = None if beam is None else float(beam)
+        if self.beam is not None:
+            if not self.beam > 0:
+                raise InputError(f"the beam must be a cost > 0 (or inf), got {beam}")
+            if gamma:
+                raise InputError("a beam search takes no constraint sets (their counts rank before the cost)")
+            self._out_start, self._out_dst, self._readings = self.index.beam
+            self._immortal = _immortal(tables["incoming"], self.edge_src, self.allowed)
+            self._marks = np.zeros(8 * ((N + 7) // 8), dtype=np.uint8)
+            self._marks_words = self._marks.view(np.uint64)
+            # live nodes ascending: at the newest sample (state's), at the one before
+            # (_state_new's, whose costs a step resets to inf before writing)
+            self._live, self._live_before = np.empty(N, dtype=np.int32), np.empty(N, dtype=np.int32)
+            self._n_live = self._n_live_before = 0
+            self._touched, self._total = np.empty(N, dtype=np.int32), np.empty(N)
+            self._survives = np.empty(N, dtype=np.uint8)
+            self._beam_low = np.empty((BEAM_CHUNKS, 2))
+            self._no_c32 = np.zeros(0, dtype=np.float32)
+            self._step_seconds = (None, None)  # sparse steps' seconds a live node, dense steps' (see `narrow`)
+        self._c32_stale = False  # (see `_rebase_c32`)
+        self.converged_t = -1  # every sample ≤ this one has a single surviving entry (or was forgotten)
+        self.keep_from = 0  # samples before this one are forgotten (see forget_before)
+        # The lattice of the newest samples, dense: one row per sample, each node's
+        # arrival (which of its incoming edges its best path came by; 1 byte a node
+        # while no node has 255 incoming edges), written sequentially each step, in a
+        # ring of rows. In store mode (Kelly et al. 2013, §5.1: the periodic trace-back from all live
+        # nodes), when the ring is full the walk back from the live nodes moves the
+        # surviving points of its oldest BLOCK rows into the survivor store; they are
+        # then STORE_WINDOW samples old, by when most paths have merged (on built
+        # graphs, whose clips run as long single-predecessor chains, a third of the
+        # nodes still had distinct paths 32 samples back, 8 % at 128). In window mode
+        # the oldest rows are dropped instead.
+        self.incoming = tables["incoming"]
+        most = int(np.diff(self.incoming).max(initial=0))
+        dtype = next(d for d in (np.uint8, np.uint16, np.uint32) if most < np.iinfo(d).max)
+        self.none = int(np.iinfo(dtype).max)  # arrival of a dead node
+        if ring is not None:
+            self.BLOCK, self.STORE_WINDOW = max(int(ring[0]), 1), max(int(ring[1]), 0)
+        self.window = None if window is None else max(int(window), 1)
+        rows = self.BLOCK + (self.STORE_WINDOW if window is None else self.window)
+        self.arrivals = np.full((rows, N), self.none, dtype=dtype)
+        self._best_edge = np.full(N, -1, dtype=np.int32)
+        self.first = 0  # physical row of the oldest filled row
+        self.used = 0  # rows filled
+        self.alive_map = np.zeros(8 * ((N + 7) // 8), dtype=np.uint8)
+        small = window is not None  # window mode never appends to the store
+        self.row_of = np.zeros(1 if small else N, dtype=np.int64)
+        self.level_nodes = np.zeros(16 if small else N + 16, dtype=np.int32)
+        self.level_start = np.zeros(self.BLOCK + 1, dtype=np.int64)
+        self.store = np.zeros((N + 16 if small else 2 * N + 16, 4), dtype=np.int32)  # 16 bytes a row; doubles when full
+        self.size = 0  # rows of the store in use (live or garbage)
+        self.live_rows = 0  # rows alive after the last collection
+        self.heads = np.full(N, -1, dtype=np.int64)
+        # Store mode, while paths stay apart (see ANCESTOR_SHARE): each live path's node
+        # at sample ancestor_t (one gather a node a step), so a flush walks back from
+        # there instead of through the newest rows (on the built kelly6 graph that walk
+        # was a quarter of a step's time: 80k of 268k nodes on distinct paths 32
+        # samples back).
+        self._identity = np.arange(0 if small else N, dtype=np.int32)
+        self.ancestor, self._ancestor_new = self._identity.copy(), self._identity.copy()
+        self._no_ancestors = np.zeros(0, dtype=np.int32)  # the kernels' "not carried"
+        self.carry_ancestors = False  # decided at each flush
+        self.ancestor_t = -1  # −1: not carried since the last flush
+        self.t = -1
+        self.peak_entries = 0
+        self.peak_bytes = 0
+
+    # Rows moved into the store (or dropped) at a time, and rows kept dense beyond them:
+    # each walk back through the ring is shared by BLOCK samples. On the built Bandai
+    # dataset-2 graph (268k nodes) 128 + 128 took 4.6 ms a sample in steady state,
+    # 64 + 128 5.2 ms, and 32 + 0 (the store taking every row at once) 8.3 ms. A batch
+    # search, which has no latency to keep low, takes BATCH_RING_SCALE times both: fewer,
+    # longer walks, over paths that have merged more (built kelly6 graph, 2,880 samples:
+    # mode A 2.28 against 2.47–2.54 ms a sample, APO 5.80 against 6.01; 512 + 256 rows
+    # 2.21 and 5.62, for 1.5 times the memory; G_E unchanged), unless its input is too
+    # short to fill a block (`batch.batch_ring`).
+    BLOCK = 128
+    STORE_WINDOW = 128
+    BATCH_RING_SCALE = 2
+    # Carry ancestors (see __init__) while more than this share of the nodes are distinct
+    # paths' nodes at the newest row a flush lists: then the walk through the newer rows
+    # costs more than a gather a node a step (built kelly6 graph: 7.5 %, where carrying
+    # took a flush from 0.83 to 0.28 ms a sample; generated G_E: under 0.05 %, where
+    # carrying cost 4 % of a step and saved nothing).
+    ANCESTOR_SHARE = 0.01
+    # A beam search steps sparsely (`beam._beam_step_py`: only the nodes its live paths reach,
+    # C_A only for the edges read) while at most BEAM_DENSE_SHARE of the nodes are live,
+    # by the exact search's passes and then a cut (`beam._beam_prune`) while more than
+    # BEAM_SPARSE_SHARE are, and in between by whichever its past steps predict to be
+    # faster (`narrow`). The same survivors and states either way, but which is faster
+    # depends on the graph: with a fifth of the nodes live, sparse steps took 4 times an
+    # exact step on the generated G_E (random transitions, three incoming edges a node)
+    # and were the faster on the built kelly6 graph (evaluation with beam 10: 418–449
+    # samples/s switching at a quarter, 288–307 at 5 %, 291–330 always sparse); with
+    # every node live they took 3 times an exact step on G_E.
+    BEAM_DENSE_SHARE = 0.05
+    BEAM_SPARSE_SHARE = 0.5
+
+    @property
+    def threads(self) -> bool:
+        """Whether steps spread over numba's threads (see __init__). May change between
+        steps — a server gives them to a stream while it is the only one running —
+        without changing any result: both kinds of kernel compute the same values."""
+        return self._kernels is _THREADED
+
+    @threads.setter
+    def threads(self, on: bool) -> None:
+        self._kernels = _THREADED if on else _SERIAL
+
+    @property
+    def cost(self) -> np.ndarray:
+        """(N,) float64 each node's best path's cost (inf: none alive), a view."""
+        return self.state[:, COST]
+
+    @property
+    def place(self) -> np.ndarray | None:
+        """(N, 5) float64 each node's best path's placement (x, z m, heading rad, its
+        cos, sin), a view; None when the search is not placed."""
+        return self.state[:, X:SIN + 1] if self.placed else None
+
+    @property
+    def live_entries(self) -> int:
+        """Store rows in use (survivors plus garbage not yet collected)."""
+        return self.size
+
+    def start(self, position=None, heading=None, kinds_t=None, values_t=None):
+        """Sample 0: every node starts a path at the measured position / heading; one
+        not measured yet is taken from the first sample that has it (see `_anchor`)."""
+        self.t = 0
+        self.anchor_position = None  # every path's start, once measured: (2,) m
+        self.anchor_heading = None  # rad
+        if self.placed:
+            self.state[:, X] = self.state[:, Z] = self.state[:, HEADING] = self.state[:, SIN] = 0.0
+            self.state[:, COS] = 1.0
+        self._anchor(position, heading)
+        self.state[:, COST] = np.where(self.allowed, 0.0, np.inf)
+        self.det[:] = 0
+        if self.beam is not None:
+            live = np.flatnonzero(self.allowed)
+            self._live[: len(live)], self._n_live, self._n_live_before = live, len(live), 0
+            self._state_new[:, COST] = np.inf
+        self._c32_stale = False
+        self.low = self.c32_base = 0.0
+        self._chunks_t = -1
+        if self.float32_pass and not self.placed:
+            self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
+        if self.gamma:
+            _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
+            self.rank[:] = (~self.ok).T
+        live = np.nonzero(self.allowed)[0]
+        self.size = len(live)
+        self.store[: self.size, NODE] = live
+        self.store[: self.size, EDGE] = -1
+        self.store[: self.size, PARENT] = -1
+        self.store[: self.size, TIME] = 0
+        self.heads[:] = -1
+        self.heads[live] = np.arange(self.size)
+        self.live_rows = self.size
+        self.first = self.used = 0
+        self.carry_ancestors, self.ancestor_t = False, -1
+        self.converged_t = 0 if len(live) == 1 else -1
+        self.peak_entries = self.size
+        self.peak_bytes = self.lattice_bytes
+
+    def _anchor(self, position, heading) -> None:
+        """Until a position (a heading) has been measured, paths run from the origin
+        (facing +Z) and no position (heading) term has counted, so the first one
+        measured can become every path's start: all placements are turned about the
+        start by the heading and moved onto the position, rigidly — the same as if the
+        search had started there (as a batch search given them at sample 0 does)."""
+        place = self.state if self.placed else np.zeros((1, PLACED_WIDTH))  # (unplaced: only noted)
+        if self.anchor_heading is None and heading is not None and np.isfinite(heading):
+            self.anchor_heading = h = float(heading)
+            ax, az = (0.0, 0.0) if self.anchor_position is None else self.anchor_position
+            c, s = np.cos(h), np.sin(h)
+            dx, dz = place[:, X] - ax, place[:, Z] - az
+            place[:, X], place[:, Z] = ax + c * dx + s * dz, az - s * dx + c * dz
+            cos, sin = place[:, COS].copy(), place[:, SIN].copy()
+            place[:, HEADING] += h
+            place[:, COS], place[:, SIN] = cos * c - sin * s, sin * c + cos * s
+        if self.anchor_position is None and position is not None and np.all(np.isfinite(position)):
+            self.anchor_position = p = (float(position[0]), float(position[1]))
+            place[:, X] += p[0]
+            place[:, Z] += p[1]
+
+    @property
+    def start_placement(self) -> tuple[np.ndarray, float]:
+        """Where every path starts: ground position (2,) m and heading rad (the origin and
+        +Z for what has not been measured yet)."""
+        p = np.zeros(2) if self.anchor_position is None else np.asarray(self.anchor_position, dtype=np.float64)
+        return p, 0.0 if self.anchor_heading is None else self.anchor_heading
+
+    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
+        """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
+        when a batch caller computed it ahead (else it is computed here)."""
+        if (self.anchor_position is None and position is not None) or (self.anchor_heading is None and
+                                                                           heading is not None):
+            self._anchor(position, heading)
+        if self.used == self.arrivals.shape[0]:
+            self._flush() if self.window is None else self._slide()
+        self.t += 1
+        arrivals = self.arrivals[(self.first + self.used) % self.arrivals.shape[0]]
+        if self.gamma:
+            _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
+        w = self.weights
+        wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
+        use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
+        use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
+        reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
+        narrow = self.narrow
+        if self.beam is not None:
+            started, live_before = time.perf_counter(), self._n_live
+        if narrow:
+            self._set_measurement(acc)  # (a narrow beam step computes the C_A it reads from it)
+        elif reading_cost is None:
+            # Computed even at W_A = 0: the report carries each path's accelerometer cost.
+            self._set_measurement(acc)
+            if self._scale:
+                reading_costs(self.readings_t, self._meas, self._mask, self._scale, self.reading_cost)
+            else:
+                self.reading_cost[:] = 0.0
+            reading_cost = self.reading_cost
+        # Placed searches read their sources' relative rows (which hold the float32 cost)
+        # every sample, whether or not this sample's position or heading counts.
+        rows = self.placed and (self.float32_pass or use_pos or use_head)
+        meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
+        meas_heading = float(heading) if use_head else 0.0
+        ancestors = ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
+                     (self._no_ancestors, self._no_ancestors))  # fmt: skip
+        if rows and not narrow:
+            relative(self.state, meas_pos, meas_heading, self.low, self.rel)
+        if narrow:
+            live = self._beam_step(wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors)
+        elif self.float32_pass:
+            if self._c32_stale and not self.placed:  # (narrow beam steps leave the unplaced float32 costs behind)
+                self._rebase_c32()
+            u = self._unsigned
+            base = self.low if rows else self.c32_base  # what the float32 costs read are relative to
+            approx_select(*self._pass1, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
+                          np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._allowed_pos,
+                          self._alpha, 2.0**-48 * base + 1e-30, self._best32, self._second32)  # fmt: skip
+            # (unplaced: the cost column alone, 1-D — see `costs._cost_at`)
+            state, state_new = (self.state, self._state_new) if self.placed else (self.cost, self._state_new[:, COST])
+            live, near_ties = finish[self.placed](
+                self._chunk_nodes, self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
+                u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
+                self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
+                state, self.det, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
+                self._chunk_low, self._chunk_high, *ancestors)  # fmt: skip
+            self.near_ties += near_ties
+            if live:
+                self.c32_base, self.low = self.low, float(self._chunk_low.min())
+                self._chunks_t = self.t
+                self.c32, self._c32_new = self._c32_new, self.c32
+        else:
+            chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, \
+                slot_heading = self.slots
+            edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
+                        self.state, self.rel, self.total)  # fmt: skip
+            select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed,
+                   self.det, self.rank, self.best_slot, self._state_new, self._best_edge)  # fmt: skip
+            live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
+                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.det, self.rank,
+                           self._state_new, self._det_new, self._rank_new, arrivals, self.none,
+                           *ancestors)  # fmt: skip
+        if self.beam is not None:
+            if not narrow and live:
+                live = self._cut(arrivals)
+            self._time_beam_step(narrow, time.perf_counter() - started, live_before)
+        if live == 0:
+            raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
+        self.used += 1
+        if self.carry_ancestors:
+            self.ancestor, self._ancestor_new = self._ancestor_new, self.ancestor
+        if self.used == self.BLOCK:  # the newest row is the next flush's newest listed one
+            self._restart_ancestors()
+        self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
+        # Swap buffers: the new state becomes the previous one.
+        self.state, self._state_new = self._state_new, self.state
+        self.det, self._det_new = self._det_new, self.det
+        self.rank, self._rank_new = self._rank_new, self.rank
+
+    @property
+    def narrow(self) -> bool:
+        """Whether the next step is a beam search's sparse one: always while few nodes are
+        live, never while most are, else whichever this search's steps so far predict to
+        be faster (sparse steps cost about the same per live node; the results are the
+        same either way, so timing only chooses the work)."""
+        if self.beam is None:
+            return False
+        if self._n_live <= self.BEAM_DENSE_SHARE * self.N:
+            return True
+        if self._n_live > self.BEAM_SPARSE_SHARE * self.N:
+            return False
+        per_node, dense = self._step_seconds
+        if per_node is None or dense is None:
+            return dense is not None  # (each kind tried once before comparing)
+        return per_node * self._n_live < dense
+
+    def _time_beam_step(self, narrow: bool, seconds: float, live_before: int) -> None:
+        """Fold a beam step's time into `narrow`'s estimates (running means, recent steps
+        weighted most): seconds a live node for sparse steps, a step for dense ones."""
+        per_node, dense = self._step_seconds
+        if narrow:
+            x = seconds / max(live_before, 1)
+            per_node = x if per_node is None else 0.75 * per_node + 0.25 * x
+        else:
+            dense = seconds if dense is None else 0.75 * dense + 0.25 * seconds
+        self._step_seconds = (per_node, dense)
+
+    def _beam_step(self, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors) -> int:
+        """`step`'s passes for a beam search while few nodes are live (`beam._beam_step_py`);
+        returns the survivors."""
+        _reset_costs(self._state_new, self._live_before, self._n_live_before)
+        kernel = _beam_step if self.threads else _beam_step_serial
+        live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
+                           self._marks, self._marks_words, self._touched, self._total, self._survives,
+                           self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
+                           self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
+                           self._scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
+                           meas_heading, self.placed, self.beam, self.state, self.det, self._state_new,
+                           self._det_new, arrivals, self.none, *ancestors, self._beam_low)  # fmt: skip
+        self._live, self._live_before = self._live_before, self._live
+        self._n_live, self._n_live_before = live, self._n_live
+        if live:
+            self.low = low
+        self._c32_stale = True
+        return live
+
+    def _cut(self, arrivals) -> int:
+        """A beam search's cut after an exact step (`beam._beam_prune`); returns the survivors."""
+        c32 = self.c32 if self.float32_pass else self._no_c32  # (swapped in by the step already)
+        none = arrivals.dtype.type(self.none)  # (the arrivals' own type, for a select)
+        live, low = _beam_prune(self._state_new, self._immortal, self.beam, arrivals, none, c32, self._live_before)
+        self._live, self._live_before = self._live_before, self._live
+        self._n_live, self._n_live_before = live, self._n_live
+        self.low = low
+        return live
+
+    def _rebase_c32(self) -> None:
+        """The unplaced float32 pass's costs from the cost column, relative to the
+        lowest live cost (any base at most every live cost keeps the pass's bound)."""
+        cost = self.cost
+        live = np.isfinite(cost)
+        self.c32[:] = DEAD32
+        self.c32[live] = (cost[live] - self.low).astype(np.float32)
+        self.c32_base = self.low
+        self._c32_stale = False
+
+    @staticmethod
+    def measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accelerations (B, S, 3) m/s² → the kernels' measurement vectors (B, 3S)
+        float32 in g, masks (B, 3S) float32 and the sensors present (B,): a sensor with
+        any NaN axis is left out (Kelly et al. 2013, eq. 4 averages over sensors present)."""
+        a = np.asarray(acc, dtype=np.float32)
+        a = a.reshape(len(a), -1, 3)
+        valid = np.isfinite(a).all(axis=-1)
+        # float32(m/s²) / g in float64, rounded once — exactly as the readings table.
+        g = (a.astype(np.float64) / GRAVITY).astype(np.float32)
+        meas = np.where(valid[..., None], g, np.float32(0.0)).reshape(len(a), -1)
+        mask = np.repeat(valid, 3, axis=1).astype(np.float32)
+        return meas, mask, mask.sum(axis=1) / 3.0
+
+    def reading_costs(self, acc, measured=None) -> np.ndarray:
+        """C_A (B, R) float32 in g² of every distinct edge reading for B samples of
+        accelerations (B, S, 3) m/s² at once (see `costs._reading_costs_batch_py`);
+        measured: their `measurements`, when the caller has them already."""
+        meas, mask, present = self.measurements(acc) if measured is None else measured
+        B = len(meas)
+        scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
+        out = np.empty((B, self.readings_t.shape[1]), np.float32)
+        kernel = _reading_costs_batch if self.threads else _reading_costs_batch_serial
+        kernel(self.readings_t, meas, mask, scale, out)
+        return out
+
+    def _set_measurement(self, acc) -> None:
+        """One sample's accelerations (S, 3) m/s² → self._meas, self._mask (see
+        `measurements`) and self._scale, float32 1 / sensors present (0: none)."""
+        meas, mask, present = self.measurements(np.asarray(acc)[None])
+        self._meas[:], self._mask[:] = meas[0], mask[0]
+        self._scale = np.float32(1.0 / float(present[0])) if present[0] else np.float32(0.0)
+
+    @property
+    def lattice_bytes(self) -> int:
+        """Memory held for the trace-back now: the dense rows filled and the store's rows
+        in use (survivors and garbage not yet collected)."""
+        return self.used * self.arrivals.shape[1] * self.arrivals.itemsize + self.size * self.store.itemsize * 4
+
+    @property
+    def compression(self) -> float:
+        """The memory reduction of Kelly et al. 2013, §5.1: the full back-pointer lattice (N·T points of 4
+        bytes) over the peak memory the search held for it (`lattice_bytes`)."""
+        return self.N * (self.t + 1) * 4 / max(self.peak_bytes, 1)
+
+    def _flush(self) -> None:
+        """Store mode, ring full: walk back from the live nodes through every dense row
+        and move the surviving points of the oldest BLOCK rows into the store (collect
+        the store's garbage first when it has doubled); those rows are then free. With
+        ancestors carried, the walk starts at the row of ancestor_t, from the live
+        paths' nodes there; else at the newest row."""
+        t_first = self.t - self.used + 1  # the sample of the oldest row
+        if self.ancestor_t >= 0:
+            walk, ancestor = self.ancestor_t - t_first + 1, self.ancestor  # rows walked through: to ancestor_t's
+            assert self.BLOCK <= walk <= self.used, (walk, self.BLOCK, self.used)
+        else:
+            walk, ancestor = self.used, self._identity
+        while True:  # grown on demand: the worst case (nothing merges) is used × N
+            total, converged_row = _block_levels(self.arrivals, self.first, walk, self.BLOCK, self.incoming,
+                                                 self.edge_src, self.alive_map, self.level_nodes, self.level_start,
+                                                 ancestor, self.state)  # fmt: skip
+            if total >= 0:
+                break
+            self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
+        flush = self.BLOCK
+        appended = int(self.level_start[flush])
+        if self.size + appended > self.store.shape[0]:
+            self._collect()
+            if self.size + appended > self.store.shape[0] // 2:
+                # np.empty: rows past `size` are always written before they are read
+                bigger = np.empty((2 * (self.size + appended), 4), dtype=np.int32)
+                bigger[: self.size] = self.store[: self.size]
+                self.store = bigger
+        self.size = _append_block(self.arrivals, self.first, flush, t_first, self.incoming, self.edge_src, self.heads,
+                                  self.store, self.size, self.level_nodes, self.level_start, self.row_of)  # fmt: skip
+        self.peak_entries = max(self.peak_entries, self.live_rows + appended)
+        self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
+        self.first = (self.first + flush) % self.arrivals.shape[0]
+        self.used -= flush
+        apart = self.level_start[flush] - self.level_start[flush - 1]  # distinct nodes at the newest listed row
+        self.carry_ancestors = bool(apart > self.ANCESTOR_SHARE * self.N)
+        self.ancestor_t = -1
+        if self.used >= self.BLOCK:  # (else when the row BLOCK − 1 is written)
+            self._restart_ancestors()
+        if converged_row >= 0:  # one node left at that row: everything up to it is agreed
+            self.converged_t = max(self.converged_t, t_first + converged_row)
+
+    def _restart_ancestors(self) -> None:
+        """When carrying them: from now on, ancestor[n] is node n's path's node at this
+        sample."""
+        if self.carry_ancestors:
+            self.ancestor[:] = self._identity
+            self.ancestor_t = self.t
+
+    def _slide(self) -> None:
+        """Dense-window mode, ring full: note whether the live paths have come to agree
+        on a sample not yet forgotten (the converged-prefix commit), then drop the
+        oldest BLOCK rows."""
+        t_first = self.t - self.used + 1  # the sample of the oldest row
+        lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
+        if lowest < self.used:
+            row = _converged_row(self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none,
+                                 self.alive_map)  # fmt: skip
+            if row >= 0:
+                self.converged_t = max(self.converged_t, t_first + row)
+        self.first = (self.first + self.BLOCK) % self.arrivals.shape[0]
+        self.used -= self.BLOCK
+
+    def forget_before(self, t: int) -> None:
+        """Let the next garbage collection drop survivors of samples before t: a
+        streaming decoder that has emitted them never traces back past them, and on
+        graphs whose paths rarely merge they are over a third of the store. Traces must
+        then start at t or later; such samples count as agreed (converged_t)."""
+        self.keep_from = max(self.keep_from, min(int(t), self.t))
+
+    def _collect(self) -> None:
+        self.size = _collect(self.store, self.size, self.heads, self.keep_from)
+        self.live_rows = self.size
+        self.peak_entries = max(self.peak_entries, self.size)
+        if self.converged_t < self.t:
+            t_from = max(self.converged_t + 1, self.keep_from)
+            self.converged_t = max(self.converged_t, _converged_until(self.store, self.size, t_from, self.t))
+
+    @property
+    def alive(self) -> np.ndarray:
+        return np.isfinite(self.cost)
+
+    def best_node(self) -> int:
+        """The live node whose path ranks first: fewest broken constraints, then cost
+        (within TIE counts as equal), then fewer non-original edges, then lower node id."""
+        if self.beam is not None:
+            return int(_best_in_list(self.state, self.det, self._live, self._n_live))
+        if self._chunks_t == self.t:  # (the float32 pass's steps: γ = 0)
+            return int(_best_in_chunks(self.state, self.det, self._chunk_nodes, self._chunk_low, self._chunk_high))
+        return int(_best_node(self.state, self.rank, self.det))
+
+    def trace_arrivals(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes (t+1−since,) at samples since..t of the path ending at `node` now and
+        the edge each was entered by (−1 at sample 0). Walks back only to `since`, so
+        a fixed-lag trace costs the lag, not the input length."""
+        earliest = self.keep_from
+        if self.window is not None and self.used < self.t:  # the window has slid past sample 0
+            earliest = max(earliest, self.t - self.used + 1)
+        if not earliest <= since <= self.t:
+            raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}"
+                             f" and has forgotten samples before {earliest}")  # fmt: skip
+        return _trace(self.arrivals, self.first, self.used, self.t, self.heads, self.incoming, self.edge_src, self.store,
+                      int(node), int(since))  # fmt: skip
+
+    def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Nodes (t+1−since,) at samples since..t of the path ending at `node` now,
+        and the edges (t−since,) between them."""
+        nodes, edges = self.trace_arrivals(node, since)
+        return nodes, edges[1:]
+
+
