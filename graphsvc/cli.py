@@ -174,7 +174,7 @@ def _cmd_evaluate(args) -> int:
     from dataclasses import replace
 
     from graphsvc.errors import InputError
-    from graphsvc.evaluate import loo
+    from graphsvc.evaluate import loo, protocols
     from graphsvc.evaluate.report import format_table
     from graphsvc.fileio import write_text_atomic
     from graphsvc.motion.library import find_motion_files, load_motion
@@ -202,6 +202,8 @@ def _cmd_evaluate(args) -> int:
         raise InputError(f"--mixed needs at least 2 clips a performance, got {args.mixed}")
     if args.graph and args.augment:
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
+    actor_map = protocols.load_actor_map(args.actors) if args.actors else None
+    setup = replace(setup, protocol=args.hold_out)
     layout = load_layout(args.layout) if args.layout else None
     if args.json:
         _check_output(Path(args.json))
@@ -223,6 +225,7 @@ def _cmd_evaluate(args) -> int:
                              "(rebuild it or run `graphsvc relayout`)")  # fmt: skip
         tests = [load_motion(files[k]) for k in picked]
         indices = loo.match_graph_clips(graph, tests)
+        offsets = {k: m.skeleton.offsets for m, k in zip(tests, indices) if k is not None}
         missing = [m.name for m, k in zip(tests, indices) if k is None]
         if missing:
             print(f"note: {len(missing)} test clips are not in {args.graph} and are evaluated with nothing hidden: "
@@ -239,12 +242,17 @@ def _cmd_evaluate(args) -> int:
         # so file k is graph clip k.
         tests = [motions[k] for k in picked]
         indices = list(picked)
+        offsets = {k: m.skeleton.offsets for k, m in enumerate(motions)}
         build_s = time.perf_counter() - t0
-    items = list(zip(tests, indices))
+    hides = protocols.hide_lists(graph, tests, args.hold_out, offsets, actor_map)
+    if args.hold_out == "actor":
+        for problem in protocols.check_actor_map(protocols.graph_clips(graph, offsets), actor_map):
+            print(f"note: {problem}", file=sys.stderr)
+    items = list(zip(tests, hides))
     if args.mixed is not None:
         from graphsvc.evaluate.mixed import mixed_items
 
-        items = mixed_items(tests, indices, args.mixed, float(graph.rate_hz), graph.params.get("mapping"), args.seed)
+        items = mixed_items(tests, hides, args.mixed, float(graph.rate_hz), graph.params.get("mapping"), args.seed)
         if not items:
             raise InputError(f"--mixed {args.mixed}: the test clips of no one performer cover {args.mixed} different "
                              "labels")  # fmt: skip
@@ -259,12 +267,14 @@ def _cmd_evaluate(args) -> int:
         "graph_nodes": graph.num_nodes, "graph_edges": graph.num_edges, "inputs": loo.inputs_description(setup),
         "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": args.seed,
         "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": args.mixed,
+        "hold_out": args.hold_out, "actors": args.actors,
     }  # fmt: skip
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
     print(format_table(out))
     w = options.weights
-    what = f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out"
+    what = (f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out") + \
+        f" (hold-out {args.hold_out})"
     print(f"{what} on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
           f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else "") +
           f"; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
@@ -291,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate sensor readings of a clip into a recording")
     p.add_argument("clip", metavar="CLIP")
     p.add_argument("--layout", required=True, help="preset (wrists-ankles, kelly6, right-wrist) or layout file")
-    p.add_argument("--noise", default="none", help="PRESET[,key=value...] (presets: none, default, harsh)")
+    p.add_argument("--noise", default="none", help="PRESET[,key=value...] (presets: none, default, tracker, harsh)")
     p.add_argument("--position-noise", type=float, metavar="M", help="overhead-tracker noise σ in metres")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, metavar="HZ", help="resample to this rate first")
@@ -336,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("evaluate", help="leave-one-out evaluation on a knowledge base (metrics: docs/evaluation.md)")
     p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")
-    p.add_argument("--test", required=True, metavar="GLOB", help="test the KB files whose name matches, e.g. '*_00[14].bvh'")
+    p.add_argument("--test", required=True, metavar="GLOB", help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
     p.add_argument("--layout", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
     p.add_argument("--graph", metavar="FILE", help="a graph built from the same KB, instead of building one")
     p.add_argument("--augment", metavar="KINDS", help="build with copies: mirror, reverse (held out with their clip)")
@@ -350,6 +360,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mixed", type=int, metavar="N",
                    help="score performances of N test clips with N different labels joined end to end (one performer "
                         "each; their clips hidden together) instead of each clip alone")
+    p.add_argument("--hold-out", default="takes", choices=("clip", "takes", "actor", "content"),
+                   help="what a test clip hides from the graph: its performance (clip), every take of its content × "
+                        "style (takes, the default), every clip of its performer (actor) or of its content label "
+                        "(content); docs/evaluation.md")
+    p.add_argument("--actors", metavar="FILE", help="actor map for --hold-out actor: JSON {clip name or glob: actor}")
     p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)

@@ -140,6 +140,25 @@ def test_evaluate_with_a_prebuilt_graph_matches_the_clips(tmp_path, procedural_k
     assert code == 2 and "kelly6" in err
 
 
+def test_evaluate_hold_out_protocols(tmp_path, procedural_kb, capsys):
+    out_json = tmp_path / "eval.json"
+    rows = {}
+    for protocol in ("clip", "content"):
+        code, out, err = run(["evaluate", str(procedural_kb), "--test", "*_01.bvh", "--noise", "none", "--hold-out",
+                              protocol, "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+        assert code == 0, err
+        result = json.loads(out_json.read_text())
+        assert result["config"]["hold_out"] == protocol and f"(hold-out {protocol})" in out.splitlines()[-1]
+        rows[protocol] = {r["file"]: r for r in result["clips"]}
+    # Each procedural clip is the only one of its label: content hides the same clip, and
+    # scores no label (none can be right); the groups are reported apart.
+    for name, r in rows["content"].items():
+        assert r["label_acc"] is None and rows["clip"][name]["label_acc"] is not None
+        assert r["hidden_nodes"] == rows["clip"][name]["hidden_nodes"]
+    assert set(result["groups"]) == {"locomotion", "gestures"}
+    assert "locomotion (1 clips)" in out
+
+
 def test_evaluate_mixed_joins_the_test_clips(tmp_path, procedural_kb, capsys):
     out_json = tmp_path / "mixed.json"
     code, out, err = run(["evaluate", str(procedural_kb), "--test", "*.bvh", "--mixed", "2", "--noise", "none",
@@ -168,6 +187,8 @@ def test_evaluate_mixed_joins_the_test_clips(tmp_path, procedural_kb, capsys):
     (["--test", "*.bvh", "--beam", "0"], "beam"),
     (["--test", "*.bvh", "--beam", "nan"], "beam"),
     (["--test", "*.bvh", "--json", "{tmp}/no/such/dir/x.json"], "does not exist"),
+    (["--test", "idle_*.bvh", "--hold-out", "actor"], "hides every clip"),  # (one procedural performer)
+    (["--test", "idle_*.bvh", "--hold-out", "actor", "--actors", "{tmp}/none.json"], "cannot read actor map"),
 ])
 def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, extra, needle):
     before = sorted(p.name for p in tmp_path.iterdir())

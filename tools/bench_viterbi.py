@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Benchmark: Viterbi search speed and memory .
+"""Benchmark: Viterbi search speed and memory.
 
-A generated graph of K's largest size (G_E: 100,686 nodes, 317,600 edges: clips as
+A generated graph of the largest size of Kelly et al. 2013 (G_E: 100,686 nodes, 317,600 edges: clips as
 chains of original edges plus random transitions, random 6-sensor metadata), searched
 with 720 samples (24 s at 30 Hz) in modes A (accelerometers), APO (+ position and
 heading) and APO+2constraints; a one-hour input (108,000 samples, mode APO); and the

@@ -1,5 +1,5 @@
 """The benchmarks' generated graph: clips as chains of original edges plus random
-transitions, at any size (K's largest, G_E, is 100,686 nodes and 317,600 edges)."""
+transitions, at any size (the largest of Kelly et al. 2013, G_E, is 100,686 nodes and 317,600 edges)."""
 
 from __future__ import annotations
 

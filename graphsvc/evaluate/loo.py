@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.evaluate.metrics import evaluate_frames, summarize
+from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import signals
@@ -52,9 +53,11 @@ def clip_file_name(source: str, name: str) -> str:
 
 
 def select_clips(names: list[str], pattern: str) -> list[int]:
-    """Indices of `names` (file names) matching the fnmatch `pattern`, in order.
-    Case-sensitive, so the selection does not depend on the platform."""
-    return [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+    """Indices of `names` (file names) matching the fnmatch `pattern` — or any of
+    several, comma-separated — in order. Case-sensitive, so the selection does not
+    depend on the platform."""
+    patterns = [p for p in pattern.split(",") if p]
+    return [k for k, n in enumerate(names) if any(fnmatch.fnmatchcase(n, p) for p in patterns)]
 
 
 def match_graph_clips(graph: MotionGraph, motions: list[Motion]) -> list[int | None]:
@@ -99,12 +102,14 @@ class EvalSetup:
     noise: the sensor/tracker noise model. positions: whether the simulated
     recording keeps the overhead tracker's ground positions (else they are dropped;
     heading follows `noise.heading`, where "none" drops it). options: decoding
-    options of `pipeline.reconstruct`. seed: the run's seed (`clip_seed`)."""
+    options of `pipeline.reconstruct`. seed: the run's seed (`clip_seed`). protocol:
+    the hold-out protocol the hidden clips were chosen by (`evaluate.protocols`)."""
 
     noise: NoiseModel
     positions: bool
     options: Options
     seed: int = 0
+    protocol: str = "clip"  # (`protocols`: what hides the clip list given; "content": label accuracy not applicable)
 
 
 def inputs_description(setup: EvalSetup) -> str:
@@ -137,9 +142,11 @@ def _global_signals(world_pos: np.ndarray, table: dict) -> tuple[np.ndarray, np.
 
 def place_start(pos, ground, heading, true_ground0, true_heading0, fix_position: bool, fix_heading: bool):
     """Move a whole predicted motion rigidly so its first frame starts where the truth
-    does, for the streams the recording lacked: without positions the search starts
-    at the origin and without heading facing +Z (`strategies.base.start_state`), and the
-    metrics should measure drift, not where the world origin happens to be.
+    does, for what the recording could not tell: without positions a reconstruction
+    starts at the origin, and without positions and heading facing +Z
+    (`strategies.base.start_placement`); the metrics should measure drift, not where
+    the world origin happens to be. A reconstruction whose track was searched against
+    measured positions is never moved: its start heading came from the track.
 
     pos (T, P, 3), ground (T, 2) m, heading (T,) rad → moved copies. Turns about the
     first frame's ground position by the heading difference (fix_heading), then
@@ -184,7 +191,7 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1],
                                                             joint_map(graph.skeleton, mapping))  # fmt: skip
     fix_position = rec.ground_position is None
-    fix_heading = rec.heading is None and not setup.options.heading_from_track
+    fix_heading = rec.heading is None and rec.ground_position is None  # (positions: the track placed it)
     if fix_position or fix_heading:
         pred_canon, pred_ground, pred_heading = place_start(pred_canon, pred_ground, pred_heading, true_ground[0],
                                                             true_heading[0], fix_position, fix_heading)  # fmt: skip
@@ -193,6 +200,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
                           pred_labels=pred_labels, true_label=true_label if true_labels is None else true_labels,
                           name=motion.name)  # fmt: skip
+    if setup.protocol == "content":
+        row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     report = result.report
     row.update({
         "file": clip_file_name(motion.source, motion.name),
@@ -201,6 +210,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
         "samples_per_s": float(report["samples_per_s"]),
         "search_s": float(report["timings_s"]["search"]),
         "hidden_nodes": int(np.count_nonzero(~allowed)),
+        "hidden_clips": int(np.size(clip_index)) if in_graph else 0,
+        "activity": activity(true_label) if true_labels is None else "mixed",
         "in_graph": in_graph,
         **({"joined": motion.source} if true_labels is not None else {}),
         "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
@@ -280,5 +291,10 @@ def summarize_run(rows: list[dict]) -> dict:
     search_s = sum(r["search_s"] for r in rows)
     samples = sum(r["samples"] for r in rows)
     out["mean"]["samples_per_s"] = round(samples / search_s, 1) if search_s > 0 else None
+    out["groups"] = {}
+    for group in ("locomotion", "gestures"):
+        members = [r for r in out["clips"] if r.get("activity") == group]
+        if members:
+            out["groups"][group] = summarize(members)["mean"]
     return out
 

@@ -107,10 +107,13 @@ def mixed_groups(motions: list[Motion], n: int, seed: int = 0) -> list[list[int]
 def mixed_items(tests: list[Motion], indices: list, n: int, rate_hz: float, mapping=None, seed: int = 0,
                 turn: bool = False) -> list[tuple]:  # fmt: skip
     """`loo.run_leave_one_out` items of the joined performances of `tests` (`mixed_groups`):
-    (joined motion named mixed_NN, the graph clip indices to hide, per-frame labels)."""
+    (joined motion named mixed_NN, the graph clip indices to hide, per-frame labels).
+    indices: per test clip its graph clip index, a list of graph clips it hides
+    (`protocols.hide_lists`), or None."""
     items = []
     for g, group in enumerate(mixed_groups(tests, n, seed)):
         motion, labels = join_clips([tests[k] for k in group], rate_hz, mapping, name=f"mixed_{g + 1:02d}", turn=turn)
         motion.source = " + ".join(tests[k].name for k in group)
-        items.append((motion, [indices[k] for k in group if indices[k] is not None], labels))
+        hide = sorted({int(i) for k in group if indices[k] is not None for i in np.atleast_1d(indices[k])})
+        items.append((motion, hide, labels))
     return items

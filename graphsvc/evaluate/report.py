@@ -15,23 +15,31 @@ def _fmt(value, spec: str, scale: float = 1.0) -> str:
 def format_table(summary: dict) -> str:
     """One row per clip and a mean row from `loo.summarize_run`'s dict: frames,
     joint error (cm), root error (cm), heading error (°), label accuracy (%),
-    search speed (samples/s)."""
+    search speed (samples/s); then, when both occur, the means of the locomotion and
+    the gesture clips (`protocols.activity`)."""
     head = ("clip", "frames", "joint cm", "root cm", "heading °", "label %", "samples/s")
     rows = []
     for r in summary["clips"]:
         rows.append((str(r.get("file") or r["name"]), f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"),
                      _fmt(r["root_err_cm"], ".1f"), _fmt(r["heading_err_deg"], ".1f"),
                      _fmt(r["label_acc"], ".0f", 100.0), _fmt(r.get("samples_per_s"), ",.0f")))  # fmt: skip
+    def summary_row(title, m):
+        return (title, f"{m['frames']:,}", _fmt(m["joint_err_cm"], ".2f"), _fmt(m["root_err_cm"], ".1f"),
+                _fmt(m["heading_err_deg"], ".1f"), _fmt(m["label_acc"], ".0f", 100.0),
+                _fmt(m.get("samples_per_s"), ",.0f"))  # fmt: skip
+
     m = summary["mean"]
-    mean = (f"mean of {m['clips']} clips", f"{m['frames']:,}", _fmt(m["joint_err_cm"], ".2f"), _fmt(m["root_err_cm"], ".1f"),
-            _fmt(m["heading_err_deg"], ".1f"), _fmt(m["label_acc"], ".0f", 100.0), _fmt(m.get("samples_per_s"), ",.0f"))  # fmt: skip
-    widths = [max(len(row[i]) for row in [head, *rows, mean]) for i in range(len(head))]
+    means = [summary_row(f"mean of {m['clips']} clips", m)]
+    groups = summary.get("groups") or {}
+    if len(groups) > 1:  # (one group alone is the mean)
+        means += [summary_row(f"  {name} ({g['clips']} clips)", g) for name, g in groups.items()]
+    widths = [max(len(row[i]) for row in [head, *rows, *means]) for i in range(len(head))]
 
     def line(cells):
         return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
 
     rule = "  ".join("-" * w for w in widths)
-    return "\n".join([line(head), rule, *(line(r) for r in rows), rule, line(mean)])
+    return "\n".join([line(head), rule, *(line(r) for r in rows), rule, *(line(r) for r in means)])
 
 
 def plot_errors(path, rate_hz: float, per_frame: dict, pred_labels, true_labels, title: str = "") -> None:

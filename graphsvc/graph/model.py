@@ -103,7 +103,7 @@ def incoming_offsets(edge_dst: np.ndarray, num_nodes: int) -> np.ndarray:
 
 
 def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
-    """What `graphsvc info` reports (the columns of K's Table 2 and more)."""
+    """What `graphsvc info` reports (the columns of Table 2 of Kelly et al. 2013, and more)."""
     nodes = {k: int(np.sum(graph.node_kind == i)) for i, k in enumerate(NODE_KINDS)}
     edges = {k: int(np.sum(graph.edge_kind == i)) for i, k in enumerate(EDGE_KINDS)}
     original_frames = nodes["original"]

@@ -3,8 +3,11 @@
 Applied in the order a real device produces it: the sensor is mounted slightly
 rotated about its X axis (misalignment), each axis has a constant bias, white noise
 is added, the ADC clips at ±range g, and some samples are lost (NaN). The overhead
-tracker adds white noise to ground positions; heading comes from the exact pose, a
-noisy copy of it, the rule of Kelly et al. 2013, §6, from the (noisy) track, or is absent.
+tracker errs as trackers do: white noise per sample, a systematic offset (a fixed
+distance in a direction drawn per recording: Kelly et al. measured 13.7 cm between
+their overhead camera and Vicon) and a slowly wandering error (a random walk, σ per
+√s), and loses samples; heading comes from the exact pose, a noisy copy of it, the rule
+of Kelly et al. 2013, §6, from the (noisy) track, or is absent.
 
 Spec strings: a preset name, optionally followed by overrides, or overrides alone
 (starting from `none`): "default", "default,drop=0.02", "sigma=0.3,bias=0.1".
@@ -32,6 +35,8 @@ class NoiseModel:
     drop: float = 0.0  # probability that a sensor's sample is lost (NaN)
     position: float = 0.0  # overhead-tracker ground-position noise σ, metres
     position_drop: float = 0.0  # probability that a tracker sample is lost
+    position_offset: float = 0.0  # systematic tracker offset, metres, in a direction drawn per recording
+    position_walk: float = 0.0  # wandering tracker error: a random walk, metres per √s on each axis
     heading: str = "exact"  # exact | noisy | rule | none
     heading_sigma: float = 0.0  # degrees, for heading=noisy
     rest_heading: float = 0.0  # degrees, for heading=rule: facing when slower than speed_threshold
@@ -48,6 +53,12 @@ PRESETS: dict[str, NoiseModel] = {
     # The evaluation defaults (Kelly et al.'s ±12 g sensors, tracker σ = 10 cm).
     "default": NoiseModel(
         sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0
+    ),
+    # The default sensors with a tracker that errs as real ones do: offset by Kelly et
+    # al.'s 13.7 cm and wandering 3 cm per √s (10 cm after 10 s, 23 cm after a minute).
+    "tracker": NoiseModel(
+        sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0,
+        position_offset=0.137, position_walk=0.03,
     ),
     # A poorly mounted, lossy setup for robustness checks.
     "harsh": NoiseModel(
@@ -110,11 +121,21 @@ def corrupt_accelerations(acc: np.ndarray, model: NoiseModel, rng: np.random.Gen
     return out.astype(np.float32)
 
 
-def corrupt_positions(position: np.ndarray, model: NoiseModel, rng: np.random.Generator) -> np.ndarray:
-    """(T, 2) ground positions in metres → noisy copy, NaN where the tracker lost the player."""
+def corrupt_positions(position: np.ndarray, model: NoiseModel, rng: np.random.Generator,
+                      rate_hz: float = 30.0) -> np.ndarray:  # fmt: skip
+    """(T, 2) ground positions in metres at `rate_hz` → noisy copy, NaN where the tracker
+    lost the player. The offset and the random walk are drawn from a generator spawned
+    from rng, which leaves rng's own draws (white noise, losses, and what is drawn
+    after) as they were without them."""
     white = rng.standard_normal(position.shape) * model.position
     lost = rng.random(position.shape[0]) < model.position_drop
     out = position + white
+    if model.position_offset or model.position_walk:
+        (drift_rng,) = rng.spawn(1)
+        angle = drift_rng.uniform(0.0, 2.0 * np.pi)
+        offset = model.position_offset * np.array([np.cos(angle), np.sin(angle)])
+        steps = drift_rng.standard_normal(position.shape) * (model.position_walk / np.sqrt(float(rate_hz)))
+        out = out + offset + np.cumsum(steps, axis=0)
     out[lost] = np.nan
     return out
 

@@ -40,7 +40,7 @@ def simulate_recording(
 
     rng = np.random.default_rng(seed)
     acc = corrupt_accelerations(exact, noise, rng)
-    noisy_position = corrupt_positions(position, noise, rng)
+    noisy_position = corrupt_positions(position, noise, rng, rate)
     noisy_heading = corrupt_heading(heading, noisy_position, rate, noise, rng)
     rec = Recording(
         rate_hz=float(rate),

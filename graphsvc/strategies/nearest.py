@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, NODE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels, start_state
+from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels, first_measured
 from graphsvc.strategies.index import cached_arrays
 from graphsvc.strategies.options import Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
@@ -104,7 +104,7 @@ class NearestStrategy(Strategy):
         edges = idx.edges[picks[1:]]
         search_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        motion = synthesize_motion(graph, nodes, edges, *start_state(inp.position, inp.heading), allow_jumps=True)
+        motion = synthesize_motion(graph, nodes, edges, *first_measured(inp.position, inp.heading), allow_jumps=True)
         synth_s = time.perf_counter() - t0
         T = nodes.size
         report = {

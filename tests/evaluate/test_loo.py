@@ -140,6 +140,7 @@ def test_clip_seed_is_stable_and_selection_matches_file_names():
     assert loo.clip_seed(0, "walk_001") != loo.clip_seed(0, "walk_004")
     files = ["a_walk_001.bvh", "a_walk_002.bvh", "a_run_004.bvh", "A_RUN_001.BVH"]
     assert loo.select_clips(files, "*_00[14].bvh") == [0, 2]
+    assert loo.select_clips(files, "*_run_*,*walk_002*") == [1, 2]  # (several patterns)
     assert loo.clip_file_name("/data/x/a_walk_001.bvh", "a_walk_001") == "a_walk_001.bvh"
     assert loo.clip_file_name("procedural:seed=0", "walk_01") == "walk_01"
 
@@ -156,7 +157,7 @@ def test_parallel_run_gives_the_same_rows_in_the_same_order(kb_graph):
         for key in ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc", "hidden_nodes", "frames"):
             assert a[key] == b[key], key
     out = loo.summarize_run(parallel)
-    assert set(out) == {"clips", "mean"}
+    assert set(out) == {"clips", "mean", "groups"}  # (groups: locomotion and gestures apart)
     assert {"joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc", "samples_per_s"} <= set(out["mean"])
     assert "per_frame" not in out["clips"][0] and "node_path" not in out["clips"][0]
 

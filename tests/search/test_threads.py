@@ -52,3 +52,30 @@ def test_switching_threads_between_steps_changes_nothing(weights):
         runs.append((np.array(rows), np.array(costs), s.trace(s.best_node())[0]))
     for serial, switched in zip(*runs):
         np.testing.assert_array_equal(serial, switched)
+
+
+def test_step_timer_runs_the_faster_kind_and_notices_a_change_of_load():
+    from graphsvc.strategies.threads import StepTimer
+
+    timer = StepTimer()
+    cost = {True: 1.0, False: 2.0}  # an idle machine: threaded steps twice as fast
+    chosen = []
+    for _ in range(2000):
+        kind = timer.choose()
+        chosen.append(kind)
+        timer.record(kind, cost[kind])
+    assert timer.current is True
+    probes = chosen.count(False)
+    assert 0 < probes < 0.02 * len(chosen)  # the interval grew: few serial probes
+    cost = {True: 6.0, False: 3.0}  # another process on every core
+    for k in range(2 * StepTimer.MAX_INTERVAL + 8):
+        kind = timer.choose()
+        timer.record(kind, cost[kind])
+        if timer.current is False:
+            break
+    assert timer.current is False and k <= StepTimer.MAX_INTERVAL + 2 * StepTimer.PROBE_STEPS
+    cost = {True: 1.0, False: 2.0}  # idle again: back to the threads within a few probes
+    for _ in range(8 * StepTimer.FIRST_INTERVAL):
+        kind = timer.choose()
+        timer.record(kind, cost[kind])
+    assert timer.current is True

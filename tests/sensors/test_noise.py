@@ -70,3 +70,24 @@ def test_heading_rule_faces_travel_when_fast_else_rest():
     np.testing.assert_allclose(h[60:], 0.25)
     pos[10:20] = np.nan  # tracker dropouts are bridged
     assert np.isfinite(heading_from_track(pos, rate)).all()
+
+
+def test_tracker_offset_and_wander_leave_the_other_draws_alone():
+    from dataclasses import replace
+
+    from graphsvc.sensors.noise import NoiseModel
+
+    T = 600  # 20 s at 30 Hz
+    pos = np.zeros((T, 2))
+    base = PRESETS["default"]
+    plain = corrupt_positions(pos, base, np.random.default_rng(4), 30.0)
+    offset = corrupt_positions(pos, replace(base, position_offset=0.137), np.random.default_rng(4), 30.0)
+    shift = offset - plain  # the white noise is the same draw: what differs is the offset alone
+    np.testing.assert_allclose(shift, np.broadcast_to(shift[0], shift.shape), atol=1e-12)
+    assert np.hypot(*shift[0]) == pytest.approx(0.137)
+    # The wander: a random walk of 0.03 m/√s, so after t seconds σ = 0.03·√t per axis.
+    walk = np.stack([corrupt_positions(pos, NoiseModel(position_walk=0.03), np.random.default_rng(s), 30.0)
+                     for s in range(400)])  # fmt: skip
+    assert walk[:, -1].std() == pytest.approx(0.03 * np.sqrt(T / 30.0), rel=0.1)
+    assert walk[:, 29].std() == pytest.approx(0.03 * np.sqrt(1.0), rel=0.1)
+    assert PRESETS["tracker"].position_offset == 0.137 and parse_noise("tracker,position_walk=0").position_walk == 0

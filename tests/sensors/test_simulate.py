@@ -47,6 +47,6 @@ def test_resampling_and_heading_rule():
     m = walking_still_pose(frames=121, rate=120.0)
     rec = simulate_recording(m, PRESETS["right-wrist"], parse_noise("heading=rule,rest_heading=30"), rate_hz=30.0)
     assert rec.num_samples == 31 and rec.rate_hz == 30.0
-    # 1.2 m/s is below K's 2 m/s threshold: the rule reports the rest heading.
+    # 1.2 m/s is below Kelly et al.'s 2 m/s threshold: the rule reports the rest heading.
     np.testing.assert_allclose(rec.heading, np.deg2rad(30.0))
     assert simulate_recording(m, PRESETS["right-wrist"], parse_noise("heading=none")).heading is None

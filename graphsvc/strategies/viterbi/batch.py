@@ -148,13 +148,16 @@ def batch_ring(samples: int) -> tuple[int, int]:
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
                    constraint_sets: list | None = None, rate_hz: float | None = None,
                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None,
-                   beam: float | None = None) -> SearchResult:  # fmt: skip
+                   beam: float | None = None, start: tuple | None = None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
     node mask or None; threads: see ViterbiSearch; should_stop: a callable polled
     every READING_BATCH (16) samples — when it returns true the search raises SearchCancelled (a
-    server stops work for a client that went away); beam: see ViterbiSearch."""
+    server stops work for a client that went away); beam: see ViterbiSearch. start:
+    (ground position (2,) m or None, heading rad or None), where every path starts
+    (`strategies.base.start_placement`); None: at the first measured position and
+    heading (see `ViterbiSearch.start`)."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -169,7 +172,10 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
                            ring=batch_ring(T), beam=beam)  # fmt: skip
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
-    search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
+    if start is None:
+        search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
+    else:
+        search.start(start[0], start[1], kinds[:, 0], values[:, 0])
     measured = search.measurements(acc)  # once: the C_A batches and the path's terms share it
     for t0 in range(1, T, READING_BATCH):
         if should_stop is not None and should_stop():

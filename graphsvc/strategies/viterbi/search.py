@@ -34,6 +34,7 @@ from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.options import Weights
+from graphsvc.strategies.threads import StepTimer
 from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
                                               _immortal, _reset_costs)  # fmt: skip
 from graphsvc.strategies.viterbi.costs import COS, COST, DEAD32, HEADING, PLACED_WIDTH, SIN, UNPLACED_WIDTH, X, Z
@@ -74,6 +75,7 @@ class ViterbiSearch:
         weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
         the float64 passes the rest, with the same results."""
         self.graph = graph
+        self._timer = StepTimer()  # (whether a step that may use the threads does)
         self.threads = threads
         if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
             raise InputError(f"weights must be finite and ≥ 0, got {weights}")
@@ -254,14 +256,17 @@ class ViterbiSearch:
 
     @property
     def threads(self) -> bool:
-        """Whether steps spread over numba's threads (see __init__). May change between
-        steps — a server gives them to a stream while it is the only one running —
-        without changing any result: both kinds of kernel compute the same values."""
-        return self._kernels is _THREADED
+        """Whether steps may spread over numba's threads (see __init__); those that may
+        use them where they are faster (`strategies.threads.StepTimer`: not on a busy
+        machine). May change between steps — a server gives them to a stream while it
+        is the only one running — without changing any result: both kinds of kernel
+        compute the same values."""
+        return self._may_thread
 
     @threads.setter
     def threads(self, on: bool) -> None:
-        self._kernels = _THREADED if on else _SERIAL
+        self._may_thread = bool(on)
+        self._kernels = _THREADED if on and self._timer.current else _SERIAL
 
     @property
     def cost(self) -> np.ndarray:
@@ -362,8 +367,13 @@ class ViterbiSearch:
         wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
         use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
-        reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
         narrow = self.narrow
+        timed = self._may_thread and not narrow  # (narrow beam steps: too short to time)
+        if timed:
+            threaded = self._timer.choose()
+            self._kernels = _THREADED if threaded else _SERIAL
+            step_started = time.perf_counter()
+        reading_costs, relative, edge_totals, select, advance, approx_select, finish = self._kernels
         if self.beam is not None:
             started, live_before = time.perf_counter(), self._n_live
         if narrow:
@@ -423,6 +433,8 @@ class ViterbiSearch:
             if not narrow and live:
                 live = self._cut(arrivals)
             self._time_beam_step(narrow, time.perf_counter() - started, live_before)
+        if timed:
+            self._timer.record(threaded, time.perf_counter() - step_started)
         if live == 0:
             raise InputError(f"no graph path reaches sample {self.t}: every path ran into a dead end")
         self.used += 1
@@ -468,7 +480,7 @@ class ViterbiSearch:
         """`step`'s passes for a beam search while few nodes are live (`beam._beam_step_py`);
         returns the survivors."""
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
-        kernel = _beam_step if self.threads else _beam_step_serial
+        kernel = _beam_step if self._kernels is _THREADED else _beam_step_serial
         live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
                            self._marks, self._marks_words, self._touched, self._total, self._survives,
                            self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
@@ -525,7 +537,7 @@ class ViterbiSearch:
         B = len(meas)
         scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
         out = np.empty((B, self.readings_t.shape[1]), np.float32)
-        kernel = _reading_costs_batch if self.threads else _reading_costs_batch_serial
+        kernel = _reading_costs_batch if self._kernels is _THREADED else _reading_costs_batch_serial
         kernel(self.readings_t, meas, mask, scale, out)
         return out
 

@@ -22,7 +22,7 @@ from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
 from graphsvc.strategies.viterbi.batch import needs_placement, viterbi_search, warm_up_search, warm_up_search_once
 from graphsvc.sensors.noise import CausalTrackHeading
 from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels,
-                                      start_state)  # fmt: skip
+                                      start_placement, start_samples, start_state)  # fmt: skip
 from graphsvc.strategies.options import Options, check_constraints
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
@@ -56,10 +56,13 @@ class ViterbiStrategy(Strategy):
         warm_up_s = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        start_ground, start_heading = start_state(position, heading)
+        # Every path starts where the first second's measurements put it (start_placement),
+        # and the motion is synthesized from there.
+        start = start_placement(position, heading, rate)
+        start_ground, start_heading = start_state(position, heading, rate)
         if options.latency_s is None:
             result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                    should_stop=should_stop, beam=options.beam)  # fmt: skip
+                                    should_stop=should_stop, beam=options.beam, start=start)  # fmt: skip
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -70,16 +73,17 @@ class ViterbiStrategy(Strategy):
         else:
             lag = int(round(options.latency_s * rate))
             decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
-                                      needs_placement(w, use_pos, use_head), beam=options.beam)  # fmt: skip
+                                      needs_placement(w, use_pos, use_head), beam=options.beam,
+                                      start_samples=start_samples(rate))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
             for t in range(T + 1):
                 if should_stop is not None and t % 32 == 31 and should_stop():
                     raise SearchCancelled(f"search stopped at sample {t} of {T}")
-                if t < T:
-                    n, e = decoder.push(acc[t], None if use_pos is None else use_pos[t],
-                                        None if use_head is None else use_head[t])  # fmt: skip
+                if t < T:  # (the raw streams: the search scores only what its weights count)
+                    n, e = decoder.push(acc[t], None if position is None else position[t],
+                                        None if heading is None else heading[t])  # fmt: skip
                 else:
                     n, e = decoder.flush()
                 node_parts.append(n)
@@ -126,10 +130,9 @@ class ViterbiSession(LiveSession):
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
-                                       self.rate, threads, beam=options.beam)  # fmt: skip
+                                       self.rate, threads, beam=options.beam,
+                                       start_samples=start_samples(self.rate))  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
-        self.start_position: np.ndarray | None = None  # first measured, (2,) m
-        self.start_heading: float | None = None  # first measured (or from the track), rad
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
         self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
@@ -147,23 +150,17 @@ class ViterbiSession(LiveSession):
     def _decode(self, acc, position, heading):
         if self.track is not None:
             heading = self.track.push(position)
-        if self.start_position is None and position is not None and np.all(np.isfinite(position)):
-            self.start_position = np.asarray(position, dtype=np.float64)
-        if self.start_heading is None and heading is not None and np.isfinite(heading):
-            self.start_heading = float(heading)
-        w = self.options.weights
-        nodes, edges = self.decoder.push(acc, position if w.position else None, heading if w.heading else None)
+        nodes, edges = self.decoder.push(acc, position, heading)  # (the search scores what its weights count)
         if self.synth is None and not len(nodes):
             return []
         return self._frames(self._synthesizer().add(nodes, edges))
 
     def _synthesizer(self) -> StreamingSynthesizer:
         """Made when the first frames are final, starting where the search starts its
-        paths (`start_state`): the first position and heading measured so far (one
-        measured only later moves the search's paths, not frames already out)."""
+        paths (`strategies.base.start_placement` over the first second; a position or
+        heading measured only later moves the search's paths, not frames already out)."""
         if self.synth is None:
-            g = np.zeros(2) if self.start_position is None else self.start_position
-            h = 0.0 if self.start_heading is None else self.start_heading
+            g, h = self.decoder.search.start_placement
             self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
         return self.synth
 

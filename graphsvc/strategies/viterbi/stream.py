@@ -65,13 +65,18 @@ class FixedLagDecoder:
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
-                 placed: bool | None = None, store: bool | None = None, beam: float | None = None):  # fmt: skip
+                 placed: bool | None = None, store: bool | None = None, beam: float | None = None,
+                 start_samples: int = 1):  # fmt: skip
         """placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
         lag + 1 samples' back-pointers, dense (False: its `window` mode); None: the
         window for lags up to DENSE_MAX_LAG samples, the store beyond. beam: see
-        ViterbiSearch (None: the exact search)."""
+        ViterbiSearch (None: the exact search). start_samples: the search starts once
+        this many samples have arrived (or at flush), its paths placed where
+        `strategies.base.start_placement` puts them from those samples' positions and
+        headings, as a batch search given the same `start` does; 1: at the first
+        sample's measurements. No frame is emitted before."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
@@ -79,6 +84,8 @@ class FixedLagDecoder:
             store = self.lag > self.DENSE_MAX_LAG
         self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
                                     window=None if store else self.lag + 1, beam=beam)  # fmt: skip
+        self.start_samples = max(1, int(start_samples))
+        self._pending: list = []  # samples (acc, position, heading) that arrived before the search started
         self.emitted = 0  # frames emitted so far
         self.last_node = -1
         self.revisions = 0  # emitted frames not reached from the previous emitted frame
@@ -86,9 +93,21 @@ class FixedLagDecoder:
 
     @property
     def samples(self) -> int:
-        return self.search.t + 1
+        return self.search.t + 1 + len(self._pending)
+
+    @property
+    def started(self) -> bool:
+        return self.search.t >= 0
 
     def push(self, acc, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+        if not self.started and self.start_samples > 1:
+            self._pending.append((acc, position, heading))
+            if len(self._pending) < self.start_samples:
+                return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return self._start_pending()
+        return self._advance(acc, position, heading)
+
+    def _advance(self, acc, position, heading) -> tuple[np.ndarray, np.ndarray]:
         t = self.search.t + 1
         kinds, values = self.requirements.at(t)
         if t == 0:
@@ -99,8 +118,25 @@ class FixedLagDecoder:
         self.converged_frames += max(0, final - max(self.emitted - 1, t - self.lag))
         return self._emit(final)
 
+    def _start_pending(self) -> tuple[np.ndarray, np.ndarray]:
+        """Start the search placed from the samples waiting, then run them through it."""
+        from graphsvc.strategies.base import start_placement
+
+        pending, self._pending = self._pending, []
+        position = np.array([np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64)
+                             for _, p, _ in pending])  # fmt: skip
+        heading = np.array([np.nan if h is None else float(h) for _, _, h in pending])
+        p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
+        out = [self._advance(pending[0][0], p0, h0)]  # (sample 0 places the paths; its readings are not scored)
+        out += [self._advance(acc, p, h) for acc, p, h in pending[1:]]
+        return np.concatenate([n for n, _ in out]), np.concatenate([e for _, e in out])
+
     def flush(self) -> tuple[np.ndarray, np.ndarray]:
         """Everything not yet emitted, from the best path now."""
+        if not self.started:
+            if not self._pending:
+                return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            self._start_pending()
         return self._emit(self.search.t)
 
     def _emit(self, until: int) -> tuple[np.ndarray, np.ndarray]:
