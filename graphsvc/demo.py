@@ -105,7 +105,7 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     graph, _ = build_graph(kb, BuildOptions(rate_hz=kb[0].rate_hz, layout=layout, progress=False))
     timings["build_graph_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    # K Table 3's weights with global data; a stream the recording lacks gets none.
+    # Kelly et al.'s weights with global data (their Table 3); a stream the recording lacks gets none.
     weights = Weights(0.5, 1.0 if rec.ground_position is not None else 0.0, 1.0 if rec.heading is not None else 0.0)
     result = reconstruct(graph, rec, Options(weights=weights))
     # numba's first compilation (a fresh install) is listed apart from the reconstruction

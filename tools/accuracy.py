@@ -16,7 +16,9 @@ tuned here); every registered strategy on the same clips. Prints one JSON object
 run (its row, the command and the figures, the locomotion and gesture means), then
 the table in Markdown.
 
-Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor] [--layouts L,...]
+`--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
+
+Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor|clip] [--layouts L,...]
                          [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest]
 DATA: the Bandai-Namco folder (../shared/data/bandai).
 """
@@ -38,7 +40,9 @@ sys.path.insert(0, str(ROOT))
 PROTOCOLS = {
     "takes": "*_00[14].bvh",
     "actor": "*_normal_00[14].bvh,*_masculine_00[14].bvh",
+    "clip": "*_00[14].bvh",  # (only with --only clip: the least a test can hide)
 }
+DEFAULT_PROTOCOLS = ("takes", "actor")
 INPUTS = {
     "acc": ("accelerometers", ["--noise", "default,position=0,heading=none"]),
     "pos": ("+ overhead positions", ["--noise", "default,heading=none", "--weights", "0.5,1,1"]),
@@ -79,7 +83,7 @@ def main() -> None:
         graph = work / f"dataset-2.{layout}.graph"
         if not graph.exists():
             run(graphsvc() + ["build", str(kb), "--layout", layout, "--jobs", str(args.jobs), "--quiet", "-o", str(graph)])
-        for protocol in [args.only] if args.only else list(PROTOCOLS):
+        for protocol in [args.only] if args.only else DEFAULT_PROTOCOLS:
             for key in args.inputs.split(","):
                 what, flags = INPUTS[key]
                 for strategy in args.strategies.split(","):

@@ -16,9 +16,12 @@ graph can explain: a noisy walk through G_E itself, readings and ground track
 "beam APO" also run the exact search and the exact stream on the same input in the
 same process and report whether the beam found the exact search's path
 (`same_nodes_as_exact`: the share of samples on it); "beam hour" is a one-hour walk,
-beam only. One JSON object per run. Each run is its own process, so peak RSS is its own.
+beam only. With --data (the Bandai-Namco folder), "beam held-out A" and "beam held-out
+APO" run both searches where users run them: a graph of G_E's size built from three
+styles of dataset 2 without their takes 004, searched with those takes joined end to
+end and simulated with the default noise (`input: held-out`). One JSON object per run. Each run is its own process, so peak RSS is its own.
 
-Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE] [--beam 10]
+Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE] [--data DIR] [--beam 10]
 """
 
 from __future__ import annotations
@@ -192,6 +195,70 @@ def run_beam_hour(beam: float, samples: int) -> dict:
             "compression": round(r.compression, 1), "peak_entries": r.peak_entries}  # fmt: skip
 
 
+HELD_OUT_STYLES = ("active", "feminine", "normal")
+HELD_OUT_CONTENTS = ("walk", "run", "wave-left-hand", "walk-turn-left", "raise-up-both-hands", "walk-turn-right",
+                     "raise-up-left-hand", "wave-both-hands", "raise-up-right-hand", "wave-right-hand")
+
+
+def held_out_problem(data: str, samples: int):
+    """A graph of G_E's size built from Bandai-Namco dataset 2 (the styles
+    HELD_OUT_STYLES without their takes 004: about 110k nodes, wrists-ankles), and an
+    input no path of it reproduces: those styles' takes 004 joined end to end up to
+    `samples` samples (one action after another: walk, run, wave-left-hand, …, the
+    styles in turn), simulated with the default noise (positions and heading)."""
+    from graphsvc.evaluate.mixed import join_clips
+    from graphsvc.graph.build import BuildOptions, build_graph
+    from graphsvc.motion.library import find_motion_files, load_motion
+    from graphsvc.sensors.layout import load_layout
+    from graphsvc.sensors.noise import PRESETS
+    from graphsvc.sensors.simulate import simulate_recording
+
+    files = find_motion_files([str(Path(data) / "dataset-2" / "data")])
+    styled = [f for f in files if f.stem.split("_")[2] in HELD_OUT_STYLES]
+    kb = [load_motion(f) for f in styled if not f.stem.endswith("_004")]
+    tests = [load_motion(f) for f in styled if f.stem.endswith("_004")]
+    g, _ = build_graph(kb, BuildOptions(layout=load_layout("wrists-ankles"), progress=False))
+    by_name = {m.name: m for m in tests}
+    picked, frames = [], 0
+    for i in range(3 * len(HELD_OUT_CONTENTS)):  # one action after another, the styles in turn
+        m = by_name.get(f"dataset-2_{HELD_OUT_CONTENTS[i % len(HELD_OUT_CONTENTS)]}_{HELD_OUT_STYLES[i % 3]}_004")
+        if m is None:
+            continue
+        picked.append(m)
+        frames += m.num_frames
+        if frames >= samples + 30:
+            break
+    motion, _ = join_clips(picked, g.rate_hz)
+    rec = simulate_recording(motion, load_layout("wrists-ankles"), PRESETS["default"], seed=0, rate_hz=g.rate_hz)
+    return g, rec.accelerations[:samples], rec.ground_position[:samples], rec.heading[:samples], len(picked)
+
+
+def run_beam_held_out(mode: str, beam: float, samples: int, data: str) -> dict:
+    """The beam against the exact search (batch, numba threads) on `held_out_problem`."""
+    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
+
+    g, acc, position, heading, clips = held_out_problem(data, samples)
+    weights = Weights(1, 0, 0) if mode == "A" else Weights(0.5, 1, 1)
+    pos, head = (None, None) if mode == "A" else (position, heading)
+    warm_up_search(g, threads=True)
+    viterbi_search(g, acc, pos, head, weights)  # (the ring's memory, touched once)
+    viterbi_search(g, acc[:600], pos if pos is None else pos[:600], head if head is None else head[:600], weights,
+                   beam=beam)  # the beam's tables  # fmt: skip
+    t0 = time.perf_counter()
+    exact = viterbi_search(g, acc, pos, head, weights)
+    exact_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    r = viterbi_search(g, acc, pos, head, weights, beam=beam)
+    seconds = time.perf_counter() - t0
+    return {"mode": f"{mode}, beam {beam:g}", "beam": beam, "input": "held-out", "held_out_clips": clips,
+            "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),
+            "exact_seconds": round(exact_s, 3), "speed_up": round(exact_s / seconds, 2),
+            "same_nodes_as_exact": round(float(np.mean(r.node_path == exact.node_path)), 4),
+            "cost": r.cost, "exact_cost": exact.cost,
+            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}"}  # fmt: skip
+
+
 RUNS = {
     "A": lambda a: run("A", 100_686, 317_600, 720),
     "APO": lambda a: run("APO", 100_686, 317_600, 720),
@@ -203,6 +270,8 @@ RUNS = {
     "beam A": lambda a: run_beam("A", a.beam, 720),
     "beam APO": lambda a: run_beam("APO", a.beam, 720),
     "beam hour": lambda a: run_beam_hour(a.beam, a.hour_samples),
+    "beam held-out A": lambda a: run_beam_held_out("A", a.beam, 720, a.data),
+    "beam held-out APO": lambda a: run_beam_held_out("APO", a.beam, 720, a.data),
     "built A": lambda a: {**run("A", 0, 0, 720, a.graph), "mode": "built A", "graph": a.graph},
     "built APO": lambda a: {**run("APO", 0, 0, 720, a.graph), "mode": "built APO", "graph": a.graph},
 }
@@ -213,20 +282,26 @@ def main() -> None:
     parser.add_argument("--only", choices=sorted(RUNS))
     parser.add_argument("--hour-samples", type=int, default=108_000)
     parser.add_argument("--graph", help="a built graph file for the 'built A' and 'built APO' runs")
+    parser.add_argument("--data", help="the Bandai-Namco folder, for the 'beam held-out' runs")
     parser.add_argument("--beam", type=float, default=10.0, help="the beam runs' width (default 10)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(RUNS[args.child](args)), flush=True)
         return
-    names = [args.only] if args.only else [n for n in RUNS if args.graph or not n.startswith("built")]
+    names = [args.only] if args.only else [n for n in RUNS if (args.graph or not n.startswith("built")) and
+                                           (args.data or "held-out" not in n)]  # fmt: skip
     if any(n.startswith("built") for n in names) and not args.graph:
         parser.error("the 'built' runs need --graph FILE")
+    if any("held-out" in n for n in names) and not args.data:
+        parser.error("the 'beam held-out' runs need --data DIR (the Bandai-Namco folder)")
     for name in names:
         cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples),
                "--beam", str(args.beam)]
         if args.graph:
             cmd += ["--graph", args.graph]
+        if args.data:
+            cmd += ["--data", args.data]
         out = subprocess.run(cmd, capture_output=True, text=True)
         print(out.stdout.strip() if out.returncode == 0 else json.dumps({"run": name, "error": out.stderr[-400:]}), flush=True)
 
