@@ -76,7 +76,8 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     (out_dir / "kb").mkdir(parents=True, exist_ok=True)
     timings = {}
     t0 = time.perf_counter()
-    kb = generate_knowledge_base(seed=seed, minutes=minutes)
+    frame_labels: dict = {}  # (each clip's phases: a stop clip walks first, a stroke clip stands between strokes)
+    kb = generate_knowledge_base(seed=seed, minutes=minutes, frame_labels=frame_labels)
     performance, performance_labels = generate_performance(seed=seed + 1)
     timings["generate_s"] = time.perf_counter() - t0
 
@@ -102,7 +103,7 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     timings["plot_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    graph, _ = build_graph(kb, BuildOptions(rate_hz=kb[0].rate_hz, layout=layout, progress=False))
+    graph, _ = build_graph(kb, BuildOptions(rate_hz=kb[0].rate_hz, layout=layout, progress=False), frame_labels)
     timings["build_graph_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     # Kelly et al.'s weights with global data (their Table 3); a stream the recording lacks gets none.

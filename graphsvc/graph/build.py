@@ -32,6 +32,7 @@ from graphsvc.graph.model import (
 from graphsvc.graph.connectivity import label_hops, typical_times
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
 from graphsvc.motion import quat, signals
+from graphsvc.motion.augment import mirror_label
 from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.resample import resample
@@ -179,8 +180,13 @@ class _Edges:
         return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
 
 
-def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGraph, BuildReport]:
-    """Build the motion graph of a knowledge base (already loaded and augmented)."""
+def build_graph(motions: list[Motion], options: BuildOptions,
+                frame_labels: dict | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
+    """Build the motion graph of a knowledge base (already loaded and augmented).
+    frame_labels: clip name → (F,) per-frame content labels, for knowledge bases
+    whose clips hold more than one action (the procedural one's stop clips walk first);
+    a node then carries the label of the frame it comes from (`_node_labels`), else its
+    clip's. Mirrored and reversed copies take their original's, mirrored or reversed."""
     from graphsvc.sensors.layout import PRESETS
 
     layout = options.layout or PRESETS["wrists-ankles"]
@@ -269,7 +275,8 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
         segments = _add_interpolations(clips, start, options, layout, next_node, edges, node_parts, bar)
         next_node = sum(len(k) for k in node_parts["kind"])
         report.timings["interpolation_s"] = time.perf_counter() - t0
-    labels = sorted({_content(m.motion) for m in clips})
+    per_frame = [_clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
+    labels = sorted({_content(m.motion) for m in clips} | {x for f in per_frame if f is not None for x in f})
     label_of_clip = np.array([labels.index(_content(c.motion)) for c in clips], dtype=np.int32)
     bridges = []
     if options.bridges:
@@ -304,7 +311,8 @@ def build_graph(motions: list[Motion], options: BuildOptions) -> tuple[MotionGra
         node_clip=node_clip,
         node_frame=np.concatenate(node_parts["frame"]),
         node_contacts=np.concatenate(node_parts["contacts"]),
-        node_label=label_of_clip[node_clip],
+        node_label=_node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip,
+                                np.concatenate(node_parts["frame"])),
         node_rotations=np.concatenate(node_parts["rot"]),
         node_translations=np.concatenate(node_parts["trans"]),
         node_ground=np.concatenate(node_parts["ground"]),
@@ -330,6 +338,41 @@ def _performance(motion: Motion) -> tuple[str, str]:
 
 def _content(motion: Motion) -> str:
     return motion.labels[0] if motion.labels else motion.name
+
+
+def _clip_frame_labels(motion: Motion, frame_labels: dict | None, frames: int) -> np.ndarray | None:
+    """The clip's per-frame labels from `build_graph`'s frame_labels (by its name, or its
+    original's for a mirrored or reversed copy), at `frames` frames (nearest), or None."""
+    if not frame_labels:
+        return None
+    if motion.name in frame_labels:
+        out = np.asarray(frame_labels[motion.name], dtype=str)
+    else:
+        base = re.sub(r"(_mirror|_reverse)+$", "", motion.name)
+        if base not in frame_labels:
+            return None
+        out = np.asarray(frame_labels[base], dtype=str)
+        suffixes = motion.name[len(base):]  # (mirroring and reversing commute on labels)
+        if "_reverse" in suffixes:
+            out = out[::-1]
+        if "_mirror" in suffixes:
+            out = np.array([mirror_label(x) for x in out], dtype=str)
+    if len(out) != frames:  # (resampled to the graph rate)
+        out = out[np.minimum(np.round(np.arange(frames) * len(out) / max(frames, 1)).astype(np.int64), len(out) - 1)]
+    return out
+
+
+def _node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, node_frame) -> np.ndarray:
+    """(N,) int32 each node's label: its clip's, or, where the clip has per-frame
+    labels, that of the frame it comes from (`node_frame`, the first clip's frame for
+    interpolated nodes, the source frame for bridges)."""
+    if all(f is None for f in per_frame):
+        return label_of_clip[node_clip]
+    flat = np.concatenate([np.full(int(lengths[k]), label_of_clip[k], dtype=np.int32) if f is None else
+                           np.array([labels.index(x) for x in f], dtype=np.int32)
+                           for k, f in enumerate(per_frame)])  # fmt: skip
+    frame = np.clip(np.floor(node_frame).astype(np.int64), 0, np.asarray(lengths)[node_clip] - 1)
+    return flat[np.asarray(start)[node_clip] + frame]
 
 
 def _params(options: BuildOptions, layout: Layout, window: int) -> dict:

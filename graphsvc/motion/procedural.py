@@ -1073,12 +1073,24 @@ def _motion(
     name: str,
     label: str,
     seed: int,
+    frame_labels: dict | None = None,
 ):
     t = t0 + np.arange(round((t1 - t0) * rate_hz)) / rate_hz
     R, T = _render(plan, sk, t)
+    if frame_labels is not None:
+        frame_labels[name] = _segment_labels(plan, t, label)
     return Motion(
         sk, R, T, rate_hz, name=name, source=f"procedural:seed={seed}", labels=(label,)
     )
+
+
+def _segment_labels(plan: _Plan, t: np.ndarray, default: str) -> np.ndarray:
+    """(F,) the content label of each frame time from the plan's phases (walking,
+    stopping, standing, a stroke, …); `default` where no phase is recorded."""
+    out = np.full(t.shape[0], default, dtype=object)
+    for a, b, lab in plan.segments:
+        out[(t >= a) & (t < b)] = lab
+    return out.astype(str)
 
 
 # --------------------------------------------------------------------------- public generators
@@ -1096,8 +1108,11 @@ def make_clip(
     duration: float,
     name: str,
     seed: int = 0,
+    frame_labels: dict | None = None,
 ) -> Motion:
     """One clip of content `kind` (one of CONTENT_LABELS), about `duration` seconds.
+    frame_labels: a dict that receives the clip's per-frame content labels under its
+    name (a stop clip walks before it stops, a stroke clip stands between strokes).
 
     walk/run: cruising at a random speed (walk 0.8–1.8 m/s, run 2.5–4.5 m/s) along a
     curved path, cropped after the start-up. stop: walking or running with one or two
@@ -1117,7 +1132,7 @@ def make_clip(
             _turns(rng, 0.0, pre + duration + 3.0, 0.6),
             stop=False,
         )
-        return _motion(plan, sk, rate_hz, pre, pre + duration, name, kind, seed)
+        return _motion(plan, sk, rate_hz, pre, pre + duration, name, kind, seed, frame_labels)
     if kind == "stop":
         run = rng.random() < 0.4
         _idle(plan, rng, 0.6)
@@ -1137,33 +1152,35 @@ def make_clip(
                 stop=True,
             )
             _idle(plan, rng, rng.uniform(1.0, 1.8), label="stop")
-        return _motion(plan, sk, rate_hz, t_clip0, plan.t, name, kind, seed)
+        return _motion(plan, sk, rate_hz, t_clip0, plan.t, name, kind, seed, frame_labels)
     if kind == "idle":
         _idle(plan, rng, duration)
-        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed)
+        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed, frame_labels)
     if kind in ("forehand", "backhand", "overhead"):
         _idle(plan, rng, 0.4)
         while plan.t < duration - 1.5:
             _swing(plan, rng, kind)
             _idle(plan, rng, rng.uniform(0.3, 0.9), label="idle")
-        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed)
+        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed, frame_labels)
     if kind == "punch":
         _idle(plan, rng, 0.3)
         while plan.t < duration - 2.0:
             _punches(plan, rng, int(rng.integers(3, 8)))
             _idle(plan, rng, rng.uniform(0.4, 1.0), label="idle")
-        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed)
+        return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed, frame_labels)
     raise ValueError(
         f"unknown procedural content {kind!r}; expected one of {', '.join(CONTENT_LABELS)}"
     )
 
 
 def generate_knowledge_base(
-    seed: int = 0, rate_hz: float = 30.0, minutes: float = 3.0
+    seed: int = 0, rate_hz: float = 30.0, minutes: float = 3.0, frame_labels: dict | None = None
 ) -> list[Motion]:
     """About `minutes` of labelled clips (5–15 s each) cycling through every content
     label in a seed-shuffled order, so even a short knowledge base has all of them.
-    Names are "<label>_<nn>"; labels=(content,). Deterministic by seed."""
+    Names are "<label>_<nn>"; labels=(content,). Deterministic by seed. frame_labels:
+    a dict that receives each clip's per-frame labels (`make_clip`), for
+    `build_graph(..., frame_labels=)`."""
     rng = np.random.default_rng(seed)
     sk = standard_skeleton()
     clips: list[Motion] = []
@@ -1183,6 +1200,7 @@ def generate_knowledge_base(
             float(rng.uniform(5.0, 12.0)),
             f"{kind}_{counts[kind]:02d}",
             seed,
+            frame_labels,
         )
         clips.append(clip)
         total += clip.duration_s

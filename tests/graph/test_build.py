@@ -210,3 +210,38 @@ def test_augmented_copies_are_never_blended_with_their_original(kb):
     for seg in g.segments:
         assert g.clips[seg["clip_a"]]["source"] != g.clips[seg["clip_b"]]["source"]
     assert any(c["name"].endswith("_mirror") for c in g.clips)
+
+
+def test_per_frame_labels_label_each_node_by_its_frame():
+    # A procedural stop clip walks, then stops and stands: its nodes carry those phases'
+    # labels, its copies the mirrored and reversed ones, other clips their own label.
+    from graphsvc.graph.model import NODE_ORIGINAL
+    from graphsvc.motion.augment import mirror_motion, reverse_motion
+
+    phases: dict = {}
+    kb = generate_knowledge_base(seed=3, minutes=0.8, frame_labels=phases)
+    stop = next(m for m in kb if m.labels[0] == "stop")
+    assert {"walk", "stop"} <= set(phases[stop.name]) or {"run", "stop"} <= set(phases[stop.name])
+    del phases[kb[0].name]  # (a clip without per-frame labels keeps its clip's)
+    motions = kb + [mirror_motion(stop), reverse_motion(stop)]
+    g, _ = build_graph(motions, BuildOptions(layout=PRESETS["wrists-ankles"], progress=False), phases)
+    names = [c["name"] for c in g.clips]
+    labels = np.asarray(g.labels)
+
+    def original(name):
+        k = names.index(name)
+        return labels[g.node_label[g.clips[k]["first_node"] + np.arange(g.clips[k]["frames"])]]
+
+    np.testing.assert_array_equal(original(stop.name), phases[stop.name])
+    np.testing.assert_array_equal(original(stop.name + "_reverse"), phases[stop.name][::-1])
+    assert set(original(stop.name + "_mirror")) == set(phases[stop.name])  # (no left/right in these labels)
+    assert set(original(kb[0].name)) == {kb[0].labels[0]}
+    # Every other node (slow-downs, interpolations, bridges) takes its source frame's.
+    slow = (g.node_kind != NODE_ORIGINAL) & (np.asarray(g.node_clip) == names.index(stop.name))
+    frames = np.floor(g.node_frame[slow]).astype(int)
+    np.testing.assert_array_equal(labels[g.node_label[slow]], phases[stop.name][frames])
+    # Without per-frame labels the graph is the one the clip labels give, byte for byte.
+    plain, _ = build_graph(kb, BuildOptions(layout=PRESETS["wrists-ankles"], progress=False))
+    again, _ = build_graph(kb, BuildOptions(layout=PRESETS["wrists-ankles"], progress=False), {})
+    np.testing.assert_array_equal(plain.node_label, again.node_label)
+    assert plain.labels == again.labels
