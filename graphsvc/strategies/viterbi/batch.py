@@ -99,7 +99,15 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     searches: numba compiles (or loads from its cache) the step kernels,
     the walk back through the dense rows, the batch C_A and the path's terms for this
     graph's array types now, not when a search first fills its ring (every BLOCK
-    samples) or first meets constraints."""
+    samples) or first meets constraints. threads=True warms the serial kernels too: a
+    search that may use the threads runs serial steps where they are faster
+    (`strategies.threads.StepTimer`)."""
+    for mode in (True, False) if threads else (False,):
+        _warm_up(graph, mode)
+        search_index(graph).warmed.add(mode)
+
+
+def _warm_up(graph: MotionGraph, threads: bool) -> None:
     rng = np.random.default_rng(0)
     T = 16
     acc = rng.normal(0.0, 9.81, (T, len(graph.sensor_names), 3))
@@ -115,7 +123,6 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
         search.trace(search.best_node(), since=search.t - 1)
     for weights, pos, head in ((placed, position, np.zeros(T)), (unplaced, None, None)):  # batch C_A, path terms
         viterbi_search(graph, acc, pos, head, weights, threads=threads)
-    search_index(graph).warmed.add(bool(threads))
 
 
 def warm_up_search_once(graph: MotionGraph, threads: bool = True) -> float:
