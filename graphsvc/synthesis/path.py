@@ -537,10 +537,24 @@ def warm_up_synthesis(graph: MotionGraph) -> None:
         return
     warmed[0] = True
     path_tables(graph)
-    in_contact = np.flatnonzero(graph.node_contacts.any(axis=1))
-    node = int(in_contact[0]) if in_contact.size else 0
-    edge = int(np.flatnonzero(graph.edge_dst == node)[0]) if np.any(graph.edge_dst == node) else -1
-    if edge < 0:
+    entered = np.zeros(graph.num_nodes, dtype=bool)
+    entered[graph.edge_dst] = True
+    in_contact = np.flatnonzero(graph.node_contacts.any(axis=1) & entered)  # (a clip's first frame has no way in)
+    if not in_contact.size:
         return
+    node = int(in_contact[0])
+    edge = int(np.flatnonzero(graph.edge_dst == node)[0])
     before = (int(graph.edge_src[edge]) + 1) % graph.num_nodes  # not the edge's source: a cut
     synthesize_motion(graph, np.array([before, node]), np.array([edge]), np.zeros(2), 0.0, allow_jumps=True)
+    # A second of each of two clips joined by a cut: the blends and the foot clean-up,
+    # which run only where a path has contact spans and a cut with frames around it.
+    runs = [c["first_node"] + 1 + np.arange(min(30, c["frames"] - 1)) for c in (graph.clips[0], graph.clips[-1])]
+    nodes = np.concatenate(runs).astype(np.int64)
+    edges = np.empty(len(nodes) - 1, dtype=np.int64)
+    for k in range(1, len(nodes)):
+        into = np.flatnonzero(graph.edge_dst == nodes[k])
+        if not into.size:
+            return
+        same = into[graph.edge_src[into] == nodes[k - 1]]
+        edges[k - 1] = same[0] if same.size else into[0]  # (at the cut: any edge into the node)
+    synthesize_motion(graph, nodes, edges, np.zeros(2), 0.0, allow_jumps=True)
