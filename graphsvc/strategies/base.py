@@ -306,13 +306,8 @@ def start_state(position, heading, rate_hz: float) -> tuple[np.ndarray, float]:
     """`start_placement` with what it cannot tell filled in: the first measured position
     and heading, else the origin, facing +Z (where the search's paths start)."""
     p0, h0 = start_placement(position, heading, rate_hz)
-    if p0 is None and position is not None:
-        measured = np.flatnonzero(np.isfinite(position).all(axis=1))
-        p0 = np.asarray(position[measured[0]], dtype=np.float64) if len(measured) else None
-    if h0 is None and heading is not None:
-        measured = np.flatnonzero(np.isfinite(heading))
-        h0 = float(heading[measured[0]]) if len(measured) else None
-    return (np.zeros(2) if p0 is None else np.asarray(p0, dtype=np.float64)), (0.0 if h0 is None else h0)
+    g, h = first_measured(position, heading)
+    return (g if p0 is None else np.asarray(p0, dtype=np.float64)), (h if h0 is None else h0)
 
 
 # ---------------------------------------------------------------- results
