@@ -348,7 +348,7 @@ def _clip_frame_labels(motion: Motion, frame_labels: dict | None, frames: int) -
     if motion.name in frame_labels:
         out = np.asarray(frame_labels[motion.name], dtype=str)
     else:
-        base = re.sub(r"(_mirror|_reverse)+$", "", motion.name)
+        base = _performance(motion)[1]
         if base not in frame_labels:
             return None
         out = np.asarray(frame_labels[base], dtype=str)

@@ -219,8 +219,5 @@ def generate_performance(
         plan, sk, rate_hz, 0.0, t1, f"performance_s{seed}", "performance", seed
     )
     t = np.arange(motion.num_frames) / rate_hz
-    labels = np.full(motion.num_frames, "idle", dtype="<U8")
-    for a, b, lab in plan.segments:
-        labels[(t >= a) & (t < b)] = lab
-    return motion, labels
+    return motion, _segment_labels(plan, t, "idle")
 
