@@ -18,11 +18,13 @@ def search_options(args):
     constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
     return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
                    heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
-                   speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam)  # fmt: skip
+                   speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam,
+                   **({} if args.track_pull is None else {"track_pull_s": args.track_pull}))  # fmt: skip
 
 
 def add_search_options(p, constraints: bool = True) -> None:
     from graphsvc.strategies import names
+    from graphsvc.strategies.options import TRACK_PULL_S
 
     p.add_argument("--strategy", default="viterbi", choices=names(),
                    help="reconstruction strategy (default viterbi; nearest: the per-sample baseline)")
@@ -40,6 +42,9 @@ def add_search_options(p, constraints: bool = True) -> None:
     p.add_argument("--beam", type=float, metavar="COST",
                    help="beam search: after each sample keep only the paths within COST of the best (faster; default:"
                         " the exact search)")
+    p.add_argument("--track-pull", type=float, metavar="S",
+                   help="time constant (s) with which each path's placement follows the measured positions (0: placed"
+                        f" once, at the start; default {TRACK_PULL_S:g})")
 
 
 def os_message(exc: OSError) -> str:

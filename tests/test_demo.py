@@ -57,3 +57,14 @@ def test_side_by_side_holds_both_figures_apart():
     _, wb = motion_fk(b)
     np.testing.assert_allclose(world[:, 1: J + 1], wa, atol=1e-9)
     np.testing.assert_allclose(world[:, J + 1:], wb + [1.5, 0.0, 0.0], atol=1e-9)
+
+
+def test_the_threaded_kernels_compile_ahead_in_a_process_that_exits_cleanly():
+    # (With the suite's kernels already in numba's cache the process only loads them.)
+    from graphsvc import precompile
+
+    process = precompile.start()
+    assert process is not None
+    precompile.wait(process, timeout_s=300)
+    assert process.returncode == 0
+    precompile.wait(None)  # (nothing started: nothing to wait for)

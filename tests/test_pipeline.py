@@ -101,8 +101,11 @@ def test_heading_from_track_replaces_the_heading(graph, rec):
     assert r.report["heading_source"] == "track"
 
 
-def test_live_session_equals_batch_with_the_same_lag(graph, rec):
-    opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5)
+@pytest.mark.parametrize("pull", [0.0, 0.3], ids=["placed-once", "pulled"])
+def test_live_session_equals_batch_with_the_same_lag(graph, rec, pull):
+    opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5, track_pull_s=pull)
+    # A tracker offset the path cannot follow by itself: pulled, the root follows it.
+    rec = replace(rec, ground_position=rec.ground_position + np.linspace(0, 1, rec.num_samples)[:, None] * [0.6, 0])
     batch = reconstruct(graph, rec, opts)
     live = LiveSession(graph, opts, rec.sensor_names)
     frames = []
@@ -115,6 +118,11 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec):
     assert [f.node for f in frames] == batch.node_path.tolist()
     np.testing.assert_array_equal(live.motion().rotations, batch.motion.rotations)
     np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
+    if pull:
+        placed_once = reconstruct(graph, rec, replace(opts, track_pull_s=0.0))
+        gap = [np.hypot(*(m.translations[-1, 0, [0, 2]] - rec.ground_position[-1])) for m in (batch.motion,
+                                                                                         placed_once.motion)]
+        assert gap[0] < 0.5 * gap[1]
 
 
 def test_a_live_session_keeping_no_motion_emits_the_same_frames(graph, rec):

@@ -19,7 +19,7 @@ the table in Markdown.
 `--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
 
 Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor|clip] [--layouts L,...]
-                         [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest]
+                         [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest] [--reuse]
 DATA: the Bandai-Namco folder (../shared/data/bandai).
 """
 
@@ -72,6 +72,9 @@ def main() -> None:
     parser.add_argument("--layouts", default="wrists-ankles,kelly6")
     parser.add_argument("--inputs", default=",".join(INPUTS))
     parser.add_argument("--strategies", default=",".join(available()))
+    parser.add_argument("--reuse", action="store_true",
+                        help="keep a run already in --work that the same command wrote (after a change that cannot"
+                             " move it, e.g. one to how positions are used, for the accelerometer-only rows)")
     args = parser.parse_args()
     kb = Path(args.data) / "dataset-2" / "data"
     if not kb.is_dir():
@@ -92,7 +95,10 @@ def main() -> None:
                                         "--hold-out", protocol, *flags, "--strategy", strategy, "--jobs",
                                         str(args.jobs), "--json", str(out), "--quiet"]  # fmt: skip
                     t0 = time.perf_counter()
-                    run(cmd)
+                    stamp = out.with_suffix(".cmd")  # the command that wrote `out`
+                    if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == shlex.join(cmd)):
+                        run(cmd)
+                        stamp.write_text(shlex.join(cmd))
                     result = json.loads(out.read_text())
                     m, groups = result["mean"], result.get("groups", {})
                     row = {"hold_out": protocol, "layout": layout, "inputs": what, "strategy": strategy,

@@ -19,7 +19,8 @@ same process and report whether the beam found the exact search's path
 beam only. With --data (the Bandai-Namco folder), "beam held-out A" and "beam held-out
 APO" run both searches where users run them: a graph of G_E's size built from three
 styles of dataset 2 without their takes 004, searched with those takes joined end to
-end and simulated with the default noise (`input: held-out`). One JSON object per run. Each run is its own process, so peak RSS is its own.
+end and simulated with the default noise (`input: held-out`). Searches with positions
+pull each path toward them with the default time constant (`--track-pull`). One JSON object per run. Each run is its own process, so peak RSS is its own.
 
 Usage: tools/bench_viterbi.py [--only MODE] [--hour-samples 108000] [--graph FILE] [--data DIR] [--beam 10]
 """
@@ -41,6 +42,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from synthetic_graph import generated_graph  # noqa: E402
+
+from graphsvc.strategies.options import TRACK_PULL_S  # noqa: E402
+
+PULL = TRACK_PULL_S  # searches with positions pull their paths toward them, as users' do by default
 
 
 def inputs(T: int, sensors: int, seed: int = 1):
@@ -86,10 +91,10 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
     # or `evaluate` does with its first long search.
     k = min(samples, batch_ring(samples)[0] + 1)
     viterbi_search(g, acc[:k], None if position is None else position[:k], None if heading is None else heading[:k],
-                   weights, sets)  # fmt: skip
+                   weights, sets, pull_s=PULL)  # fmt: skip
     warm_up_search(g, threads=True)  # (and the walk-back kernels, which a 3-sample search never reaches)
     t0 = time.perf_counter()
-    r = viterbi_search(g, acc, position, heading, weights, sets)
+    r = viterbi_search(g, acc, position, heading, weights, sets, pull_s=PULL)
     seconds = time.perf_counter() - t0
     return {"mode": mode, "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
             "seconds": round(seconds, 3), "ms_per_sample": round(1000 * seconds / samples, 3),
@@ -107,12 +112,12 @@ def run_reference(nodes: int, edges: int, samples: int) -> dict:
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
     w = Weights(0.5, 1, 1)
-    viterbi_search(g, acc[:3], position[:3], heading[:3], w)
+    viterbi_search(g, acc[:3], position[:3], heading[:3], w, pull_s=PULL)
     t0 = time.perf_counter()
-    fast = viterbi_search(g, acc, position, heading, w)
+    fast = viterbi_search(g, acc, position, heading, w, pull_s=PULL)
     t_fast = time.perf_counter() - t0
     t0 = time.perf_counter()
-    ref_path, _ = reference_viterbi(g, acc, position, heading, w)
+    ref_path, _ = reference_viterbi(g, acc, position, heading, w, pull_s=PULL)
     t_ref = time.perf_counter() - t0
     return {"mode": "APO numba vs numpy reference", "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
             "seconds": round(t_fast, 3), "reference_seconds": round(t_ref, 3), "speed_ratio": round(t_ref / t_fast, 1),
@@ -184,9 +189,9 @@ def run_beam_hour(beam: float, samples: int) -> dict:
     _, acc, position, heading = bench_beam.graph_walk(g, samples)
     weights = Weights(0.5, 1, 1)
     warm_up_search(g, threads=True)
-    viterbi_search(g, acc[:600], position[:600], heading[:600], weights, beam=beam)  # the beam's tables, the ring
+    viterbi_search(g, acc[:600], position[:600], heading[:600], weights, beam=beam, pull_s=PULL)  # the beam's tables
     t0 = time.perf_counter()
-    r = viterbi_search(g, acc, position, heading, weights, beam=beam)
+    r = viterbi_search(g, acc, position, heading, weights, beam=beam, pull_s=PULL)
     seconds = time.perf_counter() - t0
     return {"mode": f"APO, long input, beam {beam:g}", "beam": beam, "input": "graph walk", "nodes": g.num_nodes,
             "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),
@@ -242,14 +247,14 @@ def run_beam_held_out(mode: str, beam: float, samples: int, data: str) -> dict:
     weights = Weights(1, 0, 0) if mode == "A" else Weights(0.5, 1, 1)
     pos, head = (None, None) if mode == "A" else (position, heading)
     warm_up_search(g, threads=True)
-    viterbi_search(g, acc, pos, head, weights)  # (the ring's memory, touched once)
+    viterbi_search(g, acc, pos, head, weights, pull_s=PULL)  # (the ring's memory, touched once)
     viterbi_search(g, acc[:600], pos if pos is None else pos[:600], head if head is None else head[:600], weights,
-                   beam=beam)  # the beam's tables  # fmt: skip
+                   beam=beam, pull_s=PULL)  # the beam's tables  # fmt: skip
     t0 = time.perf_counter()
-    exact = viterbi_search(g, acc, pos, head, weights)
+    exact = viterbi_search(g, acc, pos, head, weights, pull_s=PULL)
     exact_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    r = viterbi_search(g, acc, pos, head, weights, beam=beam)
+    r = viterbi_search(g, acc, pos, head, weights, beam=beam, pull_s=PULL)
     seconds = time.perf_counter() - t0
     return {"mode": f"{mode}, beam {beam:g}", "beam": beam, "input": "held-out", "held_out_clips": clips,
             "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),

@@ -31,8 +31,10 @@ def main() -> None:
     import bench_beam
 
     from graphsvc.graph.metadata import integrate_path
-    from graphsvc.strategies.options import Weights
+    from graphsvc.strategies.options import TRACK_PULL_S, Weights
     from graphsvc.strategies.viterbi.batch import viterbi_search
+    from graphsvc.strategies.viterbi.costs import track_pull
+    from graphsvc.synthesis.path import pulled_track
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--graph", help="a built graph file (default: bench_viterbi.py's generated G_E graph)")
@@ -40,6 +42,8 @@ def main() -> None:
     parser.add_argument("--beams", default="10", help="beam widths, comma-separated")
     parser.add_argument("--mode", choices=("A", "APO"), default="APO")
     parser.add_argument("--no-exact", action="store_true", help="skip the exact search")
+    parser.add_argument("--track-pull", type=float, default=TRACK_PULL_S,
+                        help=f"the search's pull toward the tracker, s (APO; default {TRACK_PULL_S:g}, 0: placed once)")
     args = parser.parse_args()
     graph = bench_beam.benchmark_graph(args.graph)
     walk_nodes, acc, position, heading = bench_beam.graph_walk(graph, args.samples)
@@ -53,13 +57,18 @@ def main() -> None:
     quarters = np.linspace(0, args.samples, 5).astype(int)
     for beam in searches:
         t0 = time.perf_counter()
-        r = viterbi_search(graph, acc, *measured, weights, beam=beam)
+        pull = args.track_pull if args.mode == "APO" else 0.0
+        r = viterbi_search(graph, acc, *measured, weights, beam=beam, pull_s=pull)
         seconds = time.perf_counter() - t0
         track, turn = integrate_path(position[0], heading[0], graph.edge_offset[r.edge_path],
                                      graph.edge_heading[r.edge_path])  # fmt: skip
+        if pull:  # (the root a synthesis of this path places: on the pulled track)
+            track = pulled_track(graph, r.edge_path, position[0], heading[0], position,
+                                 track_pull(pull, graph.rate_hz))  # fmt: skip
         root_err = np.linalg.norm(track - true_position, axis=1)
         heading_err = np.abs((turn - true_heading + np.pi) % (2 * np.pi) - np.pi)
-        row = {"search": "exact" if beam is None else f"beam {beam:g}", "mode": args.mode, "nodes": graph.num_nodes,
+        row = {"search": "exact" if beam is None else f"beam {beam:g}", "mode": args.mode, "track_pull_s": pull,
+               "nodes": graph.num_nodes,
                "samples": args.samples, "seconds": round(seconds, 1), "cost": round(r.cost, 1),
                "root_err_m": round(float(root_err.mean()), 3),
                "root_err_m_by_quarter": [round(float(root_err[a:b].mean()), 3) for a, b in zip(quarters, quarters[1:])],

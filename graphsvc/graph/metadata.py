@@ -94,27 +94,35 @@ def apply_offsets(ground: np.ndarray, heading: float, offset: np.ndarray, dheadi
 
 
 def integrate_path(
-    ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray
+    ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray,
+    targets: np.ndarray | None = None, alpha: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets,
     `apply_offsets` step by step (compiled: a live stream integrates a few edges many
-    times a second)."""
+    times a second). targets (K, 2) m, NaN where none: after step k the position is
+    pulled toward targets[k] by the share alpha, as the Viterbi search pulls each
+    path's placement toward the tracker (`strategies.viterbi.costs.track_pull`)."""
     K = offsets.shape[0]
     ground = np.empty((K + 1, 2))
     heading = np.empty(K + 1)
     ground[0], heading[0] = ground0, heading0
+    if targets is None or alpha == 0.0:
+        targets, alpha = np.full((0, 2), np.nan), 0.0
     _integrate(np.ascontiguousarray(offsets, dtype=np.float64), np.ascontiguousarray(dheadings, dtype=np.float64),
-               ground, heading)  # fmt: skip
+               np.ascontiguousarray(targets, dtype=np.float64), float(alpha), ground, heading)  # fmt: skip
     return ground, heading
 
 
 @numba.njit(cache=True, nogil=True)
-def _integrate(offsets, dheadings, ground, heading):
+def _integrate(offsets, dheadings, targets, alpha, ground, heading):
     for k in range(offsets.shape[0]):
         c, s = np.cos(heading[k]), np.sin(heading[k])
         ground[k + 1, 0] = ground[k, 0] + (c * offsets[k, 0] + s * offsets[k, 1])
         ground[k + 1, 1] = ground[k, 1] + (-s * offsets[k, 0] + c * offsets[k, 1])
         heading[k + 1] = (heading[k] + dheadings[k] + np.pi) % (2.0 * np.pi) - np.pi
+        if alpha != 0.0 and np.isfinite(targets[k, 0]) and np.isfinite(targets[k, 1]):
+            ground[k + 1, 0] = (1.0 - alpha) * ground[k + 1, 0] + alpha * targets[k, 0]
+            ground[k + 1, 1] = (1.0 - alpha) * ground[k + 1, 1] + alpha * targets[k, 1]
 
 
 def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray) -> np.ndarray:

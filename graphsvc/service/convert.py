@@ -388,6 +388,7 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
     msg.viterbi.speed_threshold_m_s = msg.speed_threshold_m_s = float(options.speed_threshold)
     if options.beam is not None:
         msg.viterbi.beam = msg.beam = float(options.beam)
+    msg.viterbi.track_pull_s = float(options.track_pull_s)
     sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
     msg.constraint_sets.extend(constraints_to_proto(sets))
     return msg
@@ -432,6 +433,11 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
         if not (math.isfinite(own.beam) and own.beam > 0):
             raise FieldError(f"{where}.beam", f"must be a finite cost > 0, got {own.beam}")
         extra["beam"] = own.beam
+    if msg.HasField("viterbi") and msg.viterbi.HasField("track_pull_s"):
+        v = msg.viterbi.track_pull_s
+        if not (math.isfinite(v) and v >= 0):
+            raise FieldError(f"{field}.viterbi.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
+        extra["track_pull_s"] = v
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
     return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=own.heading_from_track,
                    rest_heading_deg=own.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError
+from graphsvc.graph.model import EDGE_ORIGINAL, NODE_ORIGINAL
+from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.store import read_container, write_container
 
 KIND = "index"
@@ -48,3 +50,17 @@ def cached_arrays(graph, strategy: str, version: int, build) -> dict[str, np.nda
     except OSError:
         return arrays
     return dict(read_container(path, kind=KIND, mmap=True, verify=False).arrays)
+
+
+def frame_readings(graph) -> dict[str, np.ndarray]:
+    """The knowledge-base frames a per-frame index holds: the original nodes with an
+    original edge into them (the readings on arriving at a frame are that edge's), in
+    node order — nodes (F,) int64, edges (F,) int64, readings (F, 3S) float32 in g."""
+    e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
+    dst = np.asarray(graph.edge_dst)[e].astype(np.int64)
+    keep = np.asarray(graph.node_kind)[dst] == NODE_ORIGINAL
+    e, dst = e[keep], dst[keep]
+    order = np.argsort(dst, kind="stable")
+    e, dst = e[order], dst[order]
+    readings = (np.asarray(graph.edge_acc)[e].reshape(e.size, -1) / GRAVITY).astype(np.float32)
+    return {"nodes": dst, "edges": e.astype(np.int64), "readings": readings}

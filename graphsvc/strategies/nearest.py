@@ -23,11 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from graphsvc.graph.model import EDGE_ORIGINAL, NODE_ORIGINAL, MotionGraph
+from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels, first_measured
-from graphsvc.strategies.index import cached_arrays
-from graphsvc.strategies.options import Options
+from graphsvc.strategies.index import cached_arrays, frame_readings
+from graphsvc.strategies.options import TRACK_PULL_S, Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
 
@@ -48,14 +48,7 @@ class NearestIndex:
 
 
 def _build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
-    e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
-    dst = np.asarray(graph.edge_dst)[e].astype(np.int64)
-    keep = np.asarray(graph.node_kind)[dst] == NODE_ORIGINAL
-    e, dst = e[keep], dst[keep]
-    order = np.argsort(dst, kind="stable")
-    e, dst = e[order], dst[order]
-    readings = (np.asarray(graph.edge_acc)[e].reshape(e.size, -1) / GRAVITY).astype(np.float32)
-    return {"nodes": dst, "edges": e.astype(np.int64), "readings": readings}
+    return frame_readings(graph)
 
 
 def _index(graph: MotionGraph, arrays: dict, allowed: np.ndarray | None = None) -> NearestIndex:
@@ -90,6 +83,8 @@ class NearestStrategy(Strategy):
             out.append("beam")
         if options.latency_s is not None:
             out.append("latency_s")  # each frame is decided from its own sample
+        if options.track_pull_s != TRACK_PULL_S:
+            out.append("track_pull_s")  # (its start is placed from the track, no path follows it)
         return out
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,

@@ -27,6 +27,12 @@ class Weights:
     heading: float = 1.0
 
 
+# The default time constant of the pull toward the tracker (s); chosen on Bandai
+# dataset-2's takes 002 with the takes held out (docs/reconstruction.md), not on the clips
+# the accuracy table reports.
+TRACK_PULL_S = 0.5
+
+
 @dataclass(frozen=True)
 class Options:
     """How to reconstruct. strategy: a registered name (`graphsvc.strategies`).
@@ -36,7 +42,11 @@ class Options:
     `speed_threshold` m/s, else `rest_heading_deg`). constraints: annotation constraint
     sets in priority order (None: the recording's own). beam (Viterbi): a cost; after
     each sample only the paths within it of the best one go on (faster on built
-    graphs, no longer always the cheapest path; None: the exact search)."""
+    graphs, no longer always the cheapest path; None: the exact search). track_pull_s
+    (Viterbi): the time constant (s) with which each path's ground placement is pulled
+    toward the measured positions, so the path and the synthesized root follow the
+    tracker instead of drifting from where they started (0: placed once, at the
+    start)."""
 
     strategy: str = "viterbi"
     weights: Weights = Weights()
@@ -46,6 +56,7 @@ class Options:
     speed_threshold: float = 2.0
     constraints: tuple | None = None
     beam: float | None = None
+    track_pull_s: float = TRACK_PULL_S
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -69,6 +80,9 @@ def check_options(options: Options) -> None:
     if options.beam is not None and (isinstance(options.beam, bool) or not isinstance(options.beam, (int, float))
                                      or not math.isfinite(options.beam) or options.beam <= 0):
         raise InputError(f"beam must be a finite cost > 0, got {options.beam!r}")
+    p = options.track_pull_s
+    if isinstance(p, bool) or not isinstance(p, (int, float)) or not math.isfinite(p) or p < 0:
+        raise InputError(f"track pull must be a finite number of seconds ≥ 0, got {p!r}")
     if not math.isfinite(options.rest_heading_deg):
         raise InputError(f"rest heading must be finite, got {options.rest_heading_deg}")
     if not (math.isfinite(options.speed_threshold) and options.speed_threshold >= 0):

@@ -27,13 +27,16 @@ def lookahead_frames(rate_hz: float, blend_s: float = 0.7) -> int:
 
 
 class StreamingSynthesizer:
-    """add(nodes, arrival_edges) → (first frame index, rotations (K, J, 4), translations
-    (K, J, 3)) of the frames that became final; finish() → the rest."""
+    """add(nodes, arrival_edges[, positions]) → (first frame index, rotations (K, J, 4),
+    translations (K, J, 3)) of the frames that became final; finish() → the rest.
+    pull_alpha, with each frame's measured position (K, 2) m given to add (NaN: none):
+    the root's track is pulled toward them as a batch synthesis pulls it."""
 
     def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
                  flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
-                 batch: int = 1):  # fmt: skip
+                 batch: int = 1, pull_alpha: float = 0.0):  # fmt: skip
         self.graph = graph
+        self.pull_alpha = float(pull_alpha)
         self.blend_s = blend_s
         self.flight_root_blend_s = flight_root_blend_s
         self.fix_feet = fix_feet
@@ -51,17 +54,27 @@ class StreamingSynthesizer:
         self.edges = np.zeros(0, np.int64)  # arrival edge of each node (−1 for frame 0)
         self.ground = [np.asarray(start_ground, dtype=np.float64).reshape(2)]
         self.heading = [float(start_heading)]
+        self.plain = [self.ground[0]]  # the path's own track, which synthesis places the poses on
         self.done = 0  # frames emitted
 
-    def add(self, nodes: np.ndarray, arrival_edges: np.ndarray):
-        """Append decided frames; return the frames now final."""
+    def add(self, nodes: np.ndarray, arrival_edges: np.ndarray, positions: np.ndarray | None = None):
+        """Append decided frames (and their measured positions (K, 2), NaN where none);
+        return the frames now final."""
         nodes = np.asarray(nodes, dtype=np.int64)
         edges = np.asarray(arrival_edges, dtype=np.int64)
-        new = edges[(1 if self.base + self.nodes.size == 0 else 0):]
+        positions = (np.full((nodes.size, 2), np.nan) if positions is None else
+                     np.asarray(positions, dtype=np.float64).reshape(nodes.size, 2))  # fmt: skip
+        first = self.base + self.nodes.size == 0
+        new = edges[(1 if first else 0):]
         if new.size:
-            # integrate_path, as a batch synthesis does: the same float64 steps, so the same root.
-            g, h = meta.integrate_path(self.ground[-1], self.heading[-1], self.graph.edge_offset[new],
-                                       self.graph.edge_heading[new])  # fmt: skip
+            # integrate_path, as a batch synthesis does (`pulled_track` and the path's own
+            # track): the same float64 steps, so the same root.
+            offsets, turns = self.graph.edge_offset[new], self.graph.edge_heading[new]
+            g, h = meta.integrate_path(self.plain[-1], self.heading[-1], offsets, turns)
+            self.plain.extend(g[1:])
+            if self.pull_alpha:
+                g, _ = meta.integrate_path(self.ground[-1], self.heading[-1], offsets, turns,
+                                           positions[(1 if first else 0):], self.pull_alpha)  # fmt: skip
             self.ground.extend(g[1:])
             self.heading.extend(h[1:].tolist())
         self.nodes = np.concatenate([self.nodes, nodes])
@@ -116,9 +129,9 @@ class StreamingSynthesizer:
             start = max(lo, self._before_cuts(start, lo))
         k = start - b
         motion = synthesize_motion(
-            self.graph, self.nodes[k:], self.edges[k + 1 :], self.ground[k], self.heading[k],
+            self.graph, self.nodes[k:], self.edges[k + 1 :], self.plain[k], self.heading[k],
             blend_s=self.blend_s, flight_root_blend_s=self.flight_root_blend_s, fix_feet=self.fix_feet,
-            allow_jumps=True,
+            allow_jumps=True, track=np.array(self.ground[k:]) if self.pull_alpha else None,
         )  # fmt: skip
         lo, hi = self.done - start, until - start
         first = self.done
@@ -127,7 +140,7 @@ class StreamingSynthesizer:
         drop = max(0, self.done - self.max_back - self.lookahead - 2 - self.base)
         if drop > 256:
             self.nodes, self.edges = self.nodes[drop:], self.edges[drop:]
-            del self.ground[:drop], self.heading[:drop]
+            del self.ground[:drop], self.plain[:drop], self.heading[:drop]
             self.base += drop
         # Copies: a view would keep the whole window's arrays alive with the frames
         # (135 kB a frame held by a session that keeps its motion, instead of 1.7).

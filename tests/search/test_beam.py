@@ -56,8 +56,9 @@ def test_an_infinite_beam_is_the_exact_search_bit_for_bit(seed, threads, steps, 
     g = random_graph(rng, N=60, out=4)
     meas, position, heading = _inputs(rng, g, 90)
     allowed = rng.random(g.num_nodes) < 0.85
-    for weights in (UNPLACED, PLACED):
-        searches = [ViterbiSearch(g, weights, 0, allowed, threads, ring=(16, 8), beam=beam) for beam in (None, np.inf)]
+    for weights, pull_s in ((UNPLACED, None), (PLACED, None), (PLACED, 0.2)):
+        searches = [ViterbiSearch(g, weights, 0, allowed, threads, ring=(16, 8), beam=beam, pull_s=pull_s)
+                    for beam in (None, np.inf)]  # fmt: skip
         (exact_nodes, exact_edges, exact_cost), (nodes, edges, cost) = (_run(s, meas, position, heading)
                                                                         for s in searches)  # fmt: skip
         np.testing.assert_array_equal(nodes, exact_nodes)

@@ -526,15 +526,15 @@ def test_best_node_from_the_chunks_lowest_and_highest_costs_equals_reading_every
     assert _best_in_chunks(state, det, chunks, np.array([2.0, 2.0 + 0.4 * TIE]), np.array([5.0, 2e6])) == 1
 
 
-def _lockstep(g, meas, position, heading, weights, allowed=None):
+def _lockstep(g, meas, position, heading, weights, allowed=None, pull_s=None):
     """Run the float32-pass search (no constraint sets) and the float64 one (one
     constraint set that requires nothing, so ranks never differ) side by side; every
     sample's costs, detours, placements and lattice rows must be identical, bit for bit.
     Returns the float32-pass search."""
     from graphsvc.strategies.viterbi.dense import _best_node as every_node
 
-    fast = ViterbiSearch(g, weights, 0, allowed)
-    exact = ViterbiSearch(g, weights, 1, allowed)
+    fast = ViterbiSearch(g, weights, 0, allowed, pull_s=pull_s)
+    exact = ViterbiSearch(g, weights, 1, allowed, pull_s=pull_s)
     assert fast.float32_pass and not exact.float32_pass
     free = np.zeros(1, np.int64)
     fast.start(position[0], heading[0])
@@ -586,6 +586,7 @@ def test_float32_pass_equals_float64_search_placed_with_masks_and_gaps(seed):
     allowed = rng.random(g.num_nodes) < 0.8
     for weights in (Weights(0.5, 1, 1), Weights(1, 2, 0), Weights(0, 0, 1)):
         _lockstep(g, meas, position, heading, weights, allowed)
+        _lockstep(g, meas, position, heading, weights, allowed, pull_s=0.2)
 
 
 def test_float32_pass_resolves_differences_below_float32_resolution_in_float64():
@@ -888,3 +889,58 @@ def test_paths_start_at_the_first_measured_position_and_heading():
     assert h0 == heading[2]
     assert fast.terms["position_m"] * w.position + fast.terms["heading_rad"] * w.heading + \
         fast.terms["acc_g2"] * w.acc == pytest.approx(fast.cost, rel=1e-6)
+
+
+def test_track_pull_is_a_first_order_filter_with_its_time_constant():
+    from graphsvc.strategies.viterbi.costs import track_pull
+
+    assert track_pull(None, 30.0) == track_pull(0.0, 30.0) == 0.0
+    # After τ·rate samples the gap left is e⁻¹ of what it was.
+    alpha = track_pull(0.5, 30.0)
+    assert (1.0 - alpha) ** 15 == pytest.approx(np.exp(-1.0), rel=1e-12)
+    with pytest.raises(InputError):
+        ViterbiSearch(random_graph(np.random.default_rng(0), N=20, out=2), Weights(0.5, 1, 1), pull_s=-1.0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_pulled_placements_equal_the_reference_and_the_reported_terms(seed):
+    # The pull moves each path's placement toward the tracker after its position term
+    # is scored: the numpy reference, which pulls its per-node positions the same way,
+    # finds the same path, and the terms summed along it (with the same pull) add up to
+    # the search's cost. Positions missing at some samples are not pulled toward.
+    g, meas, position, heading = random_walk_problem(seed, T=80)
+    position += np.array([3.0, -2.0]) * np.linspace(0, 1, len(position))[:, None]  # a track the edges do not follow
+    position[::9] = np.nan
+    changed = False
+    for w in (Weights(0.5, 1, 1), Weights(0.5, 2, 0)):
+        plain = viterbi_search(g, meas, position, heading, w)
+        fast = viterbi_search(g, meas, position, heading, w, pull_s=0.1)
+        ref_path, ref_cost = reference_viterbi(g, meas, position, heading, w, pull_s=0.1)
+        np.testing.assert_array_equal(fast.node_path, ref_path)
+        assert fast.cost == pytest.approx(ref_cost, rel=1e-6)
+        t = fast.terms
+        assert t["acc_g2"] * w.acc + t["position_m"] * w.position + t["heading_rad"] * w.heading == \
+            pytest.approx(fast.cost, rel=1e-6)
+        # Following the tracker, the paths score far less position cost than placed once.
+        assert t["position_m"] < 0.5 * plain.terms["position_m"]
+        changed |= not np.array_equal(plain.node_path, fast.node_path)
+    assert changed
+
+
+def test_a_pulled_track_closes_the_gap_to_the_tracker_geometrically():
+    # Standing still (zero offsets) with the tracker one metre off from sample 1 on:
+    # the pulled position after k samples is 1 − (1 − α)^k, and a missing measurement
+    # leaves the position where it was.
+    from graphsvc.graph.metadata import integrate_path
+
+    alpha = 0.2
+    K = 12
+    targets = np.tile([1.0, -2.0], (K, 1))
+    targets[5] = np.nan
+    ground, heading = integrate_path(np.zeros(2), 0.4, np.zeros((K, 2)), np.zeros(K), targets, alpha)
+    pulls = np.cumsum(np.isfinite(targets[:, 0]))
+    np.testing.assert_allclose(ground[1:, 0], 1.0 - (1.0 - alpha) ** pulls, rtol=1e-12)
+    np.testing.assert_allclose(ground[1:, 1], -2.0 * (1.0 - (1.0 - alpha) ** pulls), rtol=1e-12)
+    np.testing.assert_allclose(heading, 0.4)
+    unpulled, _ = integrate_path(np.zeros(2), 0.4, np.zeros((K, 2)), np.zeros(K), targets, 0.0)
+    np.testing.assert_array_equal(unpulled, 0.0)

@@ -463,6 +463,11 @@ def test_viterbi_options_supersede_the_flat_fields():
     assert convert.options_from_proto(new).beam == 7.0 and not convert.options_from_proto(new).heading_from_track
     with pytest.raises(Exception, match="options.viterbi.beam"):
         convert.options_from_proto(pb.SynthesisOptions(viterbi=pb.ViterbiOptions(beam=0.0)))
+    # The pull toward the tracker: sent, read back; absent, the default; negative, refused.
+    assert convert.options_from_proto(convert.options_to_proto(Options(track_pull_s=2.5))).track_pull_s == 2.5
+    assert convert.options_from_proto(old).track_pull_s == Options().track_pull_s
+    with pytest.raises(Exception, match="options.viterbi.track_pull_s"):
+        convert.options_from_proto(pb.SynthesisOptions(viterbi=pb.ViterbiOptions(track_pull_s=-1.0)))
 
 
 def test_recordings_with_orientations_and_markers_cross_the_wire(graph, recording):

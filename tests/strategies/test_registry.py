@@ -65,6 +65,8 @@ def test_inputs_and_options_a_strategy_cannot_use_are_reported(graph, rec):
     assert r.report["ignored_inputs"] == ["constraints"]
     assert r.report["ignored_options"] == ["beam"]
     assert r.report["constraint_sets"] == 0
+    pulled = reconstruct(graph, rec, Options(strategy="nearest", track_pull_s=0.0))  # (no path to pull)
+    assert pulled.report["ignored_options"] == ["track_pull_s"]
     v = reconstruct(graph, rec, Options(constraints=constraints))
     assert "ignored_inputs" not in v.report and v.report["constraint_sets"] == 1
 

@@ -207,3 +207,33 @@ def test_two_bone_ik_puts_the_ankle_and_toe_on_reachable_targets(graph):
     # The knee bends the way it bent (a mirrored knee reaches the same ankle position).
     before_plane, after_plane = (np.cross(p[knee] - p[hip], p[ankle] - p[knee]) for p in (world_pos[0], after[0]))
     assert before_plane @ after_plane / np.linalg.norm(before_plane) / np.linalg.norm(after_plane) > 0.9
+
+
+def test_a_track_moves_the_whole_body_onto_it_and_keeps_every_pose(graph, transition_path):
+    # synthesize_motion(track=...) places the path's motion (clean-up included) on its
+    # own integrated track, then shifts each frame's whole body onto the given track:
+    # every joint moves by the same ground-plane offset, so every rotation and every
+    # joint's position relative to the root are the own-track synthesis', and the root
+    # stands on the track wherever the own-track synthesis stood on its own.
+    from graphsvc.motion.kinematics import motion_fk
+    from graphsvc.synthesis.path import pulled_track
+
+    g = graph
+    nodes, edges, _ = transition_path
+    start = np.array([0.2, 0.1]), 0.5
+    own = synthesize_motion(g, nodes, edges, *start)
+    rng = np.random.default_rng(0)
+    positions = np.cumsum(rng.normal(0.0, 0.05, (nodes.size, 2)), axis=0) + 1.0
+    track = pulled_track(g, edges, *start, positions, 0.1)
+    ground, _ = meta.integrate_path(start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float))
+    moved = synthesize_motion(g, nodes, edges, *start, track=track)
+    np.testing.assert_array_equal(moved.rotations, own.rotations)
+    _, own_world = motion_fk(own)
+    _, moved_world = motion_fk(moved)
+    shift = moved_world - own_world
+    np.testing.assert_allclose(shift[..., 0], (track[:, 0] - ground[:, 0])[:, None] + 0 * shift[..., 0], atol=1e-9)
+    np.testing.assert_allclose(shift[..., 2], (track[:, 1] - ground[:, 1])[:, None] + 0 * shift[..., 2], atol=1e-9)
+    np.testing.assert_allclose(shift[..., 1], 0.0, atol=1e-9)
+    assert np.abs(track - ground).max() > 0.5  # (the track is far from the path's own)
+    with pytest.raises(InputError, match="track"):
+        synthesize_motion(g, nodes, edges, *start, track=track[:-1])

@@ -6,7 +6,7 @@ import pytest
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.model import EDGE_TRANSITION
 from graphsvc.motion.procedural import generate_knowledge_base
-from graphsvc.synthesis.path import synthesize_motion
+from graphsvc.synthesis.path import pulled_track, synthesize_motion
 from graphsvc.synthesis.stream import StreamingSynthesizer
 
 
@@ -28,16 +28,25 @@ def _walk(g, steps, rng):
     return np.array(nodes), np.array(edges)
 
 
-def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph):
+@pytest.mark.parametrize("pull", [0.0, 0.1], ids=["placed-once", "pulled"])
+def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, pull):
     g = graph
-    nodes, edges = _walk(g, 150, np.random.default_rng(2))
+    rng = np.random.default_rng(2)
+    nodes, edges = _walk(g, 150, rng)
     start = np.array([0.5, -1.0]), 0.3
-    whole = synthesize_motion(g, nodes, edges, *start)
-    synth = StreamingSynthesizer(g, *start, batch=3)
+    # A tracker's positions (some missing) the root is pulled toward, when it is.
+    positions = np.cumsum(rng.normal(0, 0.05, (nodes.size, 2)), axis=0)
+    positions[rng.random(nodes.size) < 0.2] = np.nan
+    track = pulled_track(g, edges, *start, positions, pull) if pull else None
+    whole = synthesize_motion(g, nodes, edges, *start, track=track)
+    if pull:
+        placed_once = synthesize_motion(g, nodes, edges, *start)
+        assert np.abs(whole.translations[:, 0] - placed_once.translations[:, 0]).max() > 0.05
+    synth = StreamingSynthesizer(g, *start, batch=3, pull_alpha=pull)
     arrival = np.concatenate([[-1], edges])
     rot, trans = [], []
     for a in range(0, nodes.size, 7):
-        first, r, t = synth.add(nodes[a:a + 7], arrival[a:a + 7])
+        first, r, t = synth.add(nodes[a:a + 7], arrival[a:a + 7], positions[a:a + 7])
         assert first == sum(len(x) for x in rot)  # in order, each frame once
         rot.append(r)
         trans.append(t)

@@ -157,16 +157,18 @@ class SynthesisOptions(_message.Message):
     def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ...) -> None: ...
 
 class ViterbiOptions(_message.Message):
-    __slots__ = ("beam", "heading_from_track", "rest_heading_deg", "speed_threshold_m_s")
+    __slots__ = ("beam", "heading_from_track", "rest_heading_deg", "speed_threshold_m_s", "track_pull_s")
     BEAM_FIELD_NUMBER: _ClassVar[int]
     HEADING_FROM_TRACK_FIELD_NUMBER: _ClassVar[int]
     REST_HEADING_DEG_FIELD_NUMBER: _ClassVar[int]
     SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
+    TRACK_PULL_S_FIELD_NUMBER: _ClassVar[int]
     beam: float
     heading_from_track: bool
     rest_heading_deg: float
     speed_threshold_m_s: float
-    def __init__(self, beam: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., speed_threshold_m_s: _Optional[float] = ...) -> None: ...
+    track_pull_s: float
+    def __init__(self, beam: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., speed_threshold_m_s: _Optional[float] = ..., track_pull_s: _Optional[float] = ...) -> None: ...
 
 class FrameSource(_message.Message):
     __slots__ = ("clip", "frame", "weight")

@@ -80,7 +80,8 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
     w = search.weights
     out = _path_terms(edges.astype(np.int64), search.readings_t, search.edge_reading, search.edge_offset,
                       search.edge_heading, search.edge_turn, meas, mask, present, pos, head, w.position != 0,
-                      w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0))  # fmt: skip
+                      w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0),
+                      search.pull_alpha)  # fmt: skip
     return {"acc_g2": float(out[0]), "position_m": float(out[1]), "heading_rad": float(out[2])}
 
 
@@ -155,7 +156,8 @@ def batch_ring(samples: int) -> tuple[int, int]:
 def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
                    constraint_sets: list | None = None, rate_hz: float | None = None,
                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None,
-                   beam: float | None = None, start: tuple | None = None) -> SearchResult:  # fmt: skip
+                   beam: float | None = None, start: tuple | None = None,
+                   pull_s: float | None = None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
@@ -164,7 +166,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     server stops work for a client that went away); beam: see ViterbiSearch. start:
     (ground position (2,) m or None, heading rad or None), where every path starts
     (`strategies.base.start_placement`); None: at the first measured position and
-    heading (see `ViterbiSearch.start`)."""
+    heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -176,7 +178,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
     search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading),
-                           ring=batch_ring(T), beam=beam)  # fmt: skip
+                           ring=batch_ring(T), beam=beam, pull_s=pull_s)  # fmt: skip
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     if start is None:

@@ -71,7 +71,7 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
                   survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
                   readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, beam,
                   state_prev, det_prev, state_new, det_new, arrivals, none, ancestor_prev, ancestor_new,
-                  chunk_low):  # fmt: skip
+                  chunk_low, pull):  # fmt: skip
     """One step of a beam search (γ = 0) while few nodes are live (see
     `ViterbiSearch.BEAM_DENSE_SHARE`; else the exact step and `_beam_prune`).
 
@@ -146,7 +146,7 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
                 ancestor_new[n] = ancestor_prev[m]
             if placed:
                 _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                                 edge_turn[e, 0], edge_turn[e, 1])  # fmt: skip
+                                 edge_turn[e, 0], edge_turn[e, 1], pull)  # fmt: skip
     survivors = 0
     for i in range(count):
         if keep[i]:

@@ -7,7 +7,12 @@
   between the edge's simulated reading and the measured one, in g² (eq. 4). A sensor
   with a NaN axis is left out; with none present C_A is 0.
 - C_P, ground position: the distance in metres between the path's placement advanced
-  by the edge (its offset, in the source's frame) and the tracker's position.
+  by the edge (its offset, in the source's frame) and the tracker's position. Where it
+  counts, the placement is then pulled toward the measured position by a share α
+  (`track_pull`: a first-order filter with a time constant in seconds), so a path's
+  ground track follows the tracker instead of drifting from where it started: C_P
+  scores how far each step's edge carried the path from the measurement, and the
+  synthesized root follows the same pulled track (`graph.metadata.integrate_path`).
 - C_O, heading: |wrap(h + Δh − measured)| in radians, the path's heading advanced by
   the edge's turn against the measured heading.
 A term counts at a sample where its weight is non-zero and it is measured (finite);
@@ -30,8 +35,9 @@ brute force over all paths, and `reference.reference_viterbi`, a plain numpy sea
   (`_relative_row`, `_relative_py`), `_place_terms`, and eight edges at a time
   `intrinsics.keep_two_placed8` (LLVM IR); along the final path `_path_terms`;
   `reference.reference_viterbi`.
-- The placement carried along an edge: `_carry_placement`; `_path_terms`;
-  `reference.reference_viterbi`.
+- The placement carried along an edge, and its pull: `_carry_placement`;
+  `_path_terms`; `reference.reference_viterbi`; for synthesis
+  `graph.metadata.integrate_path`.
 - L(e, t) + G(m, t−1) in float64: `_exact_total` (through `_row_total`,
   `_state_total`, `_source_total`); unplaced, G + W_A·C_A: `dense._edge_totals_py`,
   `dense._finish_kernel`.
@@ -52,6 +58,23 @@ import numpy as np
 
 from graphsvc.strategies.viterbi.intrinsics import compile_kernel as _compile
 from graphsvc.strategies.viterbi.intrinsics import fma as _fma
+
+
+def track_pull(pull_s: float | None, rate_hz: float) -> float:
+    """The share α of the gap to the measured position a path's placement closes each
+    sample, for a time constant of pull_s seconds at rate_hz: 1 − exp(−1 / (pull_s ·
+    rate)); 0 (never pulled: placed once, at the start) for None or 0."""
+    if not pull_s:
+        return 0.0
+    return float(-np.expm1(-1.0 / (float(pull_s) * float(rate_hz))))
+
+
+def pull_row(alpha: float, position, counts: bool) -> np.ndarray:
+    """The pull `_carry_placement` applies this sample: (1 − α, α·mx, α·mz) where the
+    position term counts, else (1, 0, 0)."""
+    if not counts or alpha == 0.0:
+        return np.array([1.0, 0.0, 0.0])
+    return np.array([1.0 - alpha, alpha * float(position[0]), alpha * float(position[1])])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -268,13 +291,14 @@ def _relative_py(state, meas_pos, meas_heading, base, rel):
 # decrement around every node's call, which numba's reference-count pruning did not
 # remove (serial placed pass 2 on G_E: 2.5–3.0 against 3.2–4.1 ms a sample).
 @numba.njit(cache=True, nogil=True)
-def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts):
+def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts, pull):
     """Node n's placement (state columns X…SIN): m's advanced by an edge (offset ox,
     oz in m's frame, turn dh with cos tc, sin ts), cos/sin carried by rotation — no
-    trigonometry."""
+    trigonometry — then pulled toward the measured position: pull = (1 − α, α·mx,
+    α·mz) (`track_pull`; (1, 0, 0) leaves it where the edge put it, bit for bit)."""
     c, s = place_prev[m, COS], place_prev[m, SIN]
-    place_new[n, X] = place_prev[m, X] + c * ox + s * oz
-    place_new[n, Z] = place_prev[m, Z] - s * ox + c * oz
+    place_new[n, X] = pull[0] * (place_prev[m, X] + c * ox + s * oz) + pull[1]
+    place_new[n, Z] = pull[0] * (place_prev[m, Z] - s * ox + c * oz) + pull[2]
     place_new[n, HEADING] = place_prev[m, HEADING] + dh
     place_new[n, COS] = c * tc - s * ts
     place_new[n, SIN] = s * tc + c * ts
@@ -367,11 +391,12 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
 
 @numba.njit(cache=True, nogil=True)
 def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
-                meas_heading, use_pos, use_head, x, z, h, c, s):  # fmt: skip
+                meas_heading, use_pos, use_head, x, z, h, c, s, alpha):  # fmt: skip
     """Accumulated acc (g²), position (m) and heading (rad) costs along one path, with
     the search's arithmetic. edges (T−1,); meas/mask (T, 3S) float32 as the search's
     measurement vectors; present (T,) sensors present; meas_pos (T, 2), meas_heading
-    (T,); use_* whether each term counted; x, z, h, c, s the start placement."""
+    (T,); use_* whether each term counted; x, z, h, c, s the start placement; alpha
+    the search's pull toward each measured position (`track_pull`)."""
     out = np.zeros(3)
     D = readings_t.shape[0]
     for k in range(edges.shape[0]):
@@ -392,6 +417,9 @@ def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge
         c, s = c * tc - s * ts, s * tc + c * ts
         if use_pos and np.isfinite(meas_pos[t, 0]) and np.isfinite(meas_pos[t, 1]):
             out[1] += np.sqrt((x - meas_pos[t, 0]) ** 2 + (z - meas_pos[t, 1]) ** 2)
+            if alpha != 0.0:  # (after the term: C_P scores where the edge put the path)
+                x = (1.0 - alpha) * x + alpha * meas_pos[t, 0]
+                z = (1.0 - alpha) * z + alpha * meas_pos[t, 1]
         if use_head and np.isfinite(meas_heading[t]):
             out[2] += abs(_wrap(h - meas_heading[t]))
     return out

@@ -139,7 +139,7 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
 
 def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, state_prev,
                 det_prev, rank_prev, state_new, det_new, rank_new, arrivals, none, ancestor_prev,
-                ancestor_new):  # fmt: skip
+                ancestor_new, pull):  # fmt: skip
     """The new state of every live path from its predecessor's along its best edge:
     the arrival (which of the node's incoming edges, `none`: dead) into this sample's
     lattice row, detour count, broken constraints, its node at an earlier sample
@@ -164,7 +164,7 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
         if placed:
             _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                             edge_turn[e, 0], edge_turn[e, 1])  # fmt: skip
+                             edge_turn[e, 0], edge_turn[e, 1], pull)  # fmt: skip
     return live
 
 
@@ -274,7 +274,7 @@ def _finish_kernel(placed: bool, parallel: bool):
     def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
                edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
                state_prev, det_prev, c32_base, state_new, det_new, c32_new, arrivals, none, lowest, highest,
-               ancestor_prev, ancestor_new):  # fmt: skip
+               ancestor_prev, ancestor_new, pull):  # fmt: skip
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
         the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
         this sample's lattice row (`none`: dead or masked), the chosen path's new state
@@ -341,7 +341,7 @@ def _finish_kernel(placed: bool, parallel: bool):
                 if ancestor_prev.shape[0]:
                     ancestor_new[n] = ancestor_prev[m]
                 if placed:
-                    _carry_placement(state_prev, m, state_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1])
+                    _carry_placement(state_prev, m, state_new, n, ox, oz, dh, edge_turn[e, 0], edge_turn[e, 1], pull)
             lowest[c], highest[c] = chunk_low, chunk_high
         return live, near_ties
 

@@ -12,12 +12,14 @@ import numpy as np
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import compile_constraints
+from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.sensors.accelerometer import GRAVITY
 
 
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
-                      constraint_sets=None) -> tuple[np.ndarray, float]:  # fmt: skip
+                      constraint_sets=None, pull_s=None) -> tuple[np.ndarray, float]:  # fmt: skip
     """(node path (T,), cost) — same inputs and meaning as `batch.viterbi_search`."""
+    alpha = track_pull(pull_s, graph.rate_hz)
     # Readings and measurements rounded to float32 in g as the search stores them; the
     # arithmetic after that is float64 over the full N × T lattice.
     acc = (np.asarray(acc, dtype=np.float32).astype(np.float64) / GRAVITY).astype(np.float32).astype(np.float64)
@@ -61,7 +63,8 @@ def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weig
         pz = pos[src, 1] - s * off[:, 0] + c * off[:, 1]
         nh = h + dhead
         cp = np.zeros(len(src))
-        if position is not None and np.all(np.isfinite(position[t])) and weights.position:
+        pulled = position is not None and np.all(np.isfinite(position[t])) and weights.position
+        if pulled:
             cp = np.hypot(px - position[t, 0], pz - position[t, 1])
         co = np.zeros(len(src))
         if heading is not None and np.isfinite(heading[t]) and weights.heading:
@@ -84,6 +87,8 @@ def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weig
             new_rank[n] = rank[src[best]] + (~ok(t)).T[n]
         new_pos = np.zeros_like(pos)
         new_pos[n, 0], new_pos[n, 1] = px[best], pz[best]
+        if pulled and alpha:  # (after C_P: the placement follows the tracker, `costs.track_pull`)
+            new_pos[n] = (1.0 - alpha) * new_pos[n] + alpha * position[t]
         new_head = np.zeros(N)
         new_head[n] = nh[best]
         lattice[t, n] = src[best]

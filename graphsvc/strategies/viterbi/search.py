@@ -38,6 +38,7 @@ from graphsvc.strategies.threads import StepTimer
 from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
                                               _immortal, _reset_costs)  # fmt: skip
 from graphsvc.strategies.viterbi.costs import COS, COST, DEAD32, HEADING, PLACED_WIDTH, SIN, UNPLACED_WIDTH, X, Z
+from graphsvc.strategies.viterbi.costs import pull_row, track_pull
 from graphsvc.strategies.viterbi.costs import _reading_costs_batch, _reading_costs_batch_serial
 from graphsvc.strategies.viterbi.dense import _SERIAL, _THREADED, _best_in_chunks, _best_node, _satisfied
 from graphsvc.strategies.viterbi.store import (EDGE, NODE, PARENT, TIME, _append_block, _block_levels, _collect,
@@ -53,7 +54,8 @@ class ViterbiSearch:
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
                  threads: bool = True, placed: bool | None = None, window: int | None = None,
-                 ring: tuple[int, int] | None = None, beam: float | None = None):  # fmt: skip
+                 ring: tuple[int, int] | None = None, beam: float | None = None,
+                 pull_s: float | None = None):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
@@ -73,13 +75,19 @@ class ViterbiSearch:
         the exact search's results by the beam's step). Weights must be finite and ≥ 0
         (InputError); the float32 pass serves searches without constraint sets whose
         weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
-        the float64 passes the rest, with the same results."""
+        the float64 passes the rest, with the same results. pull_s: the time constant
+        (s) with which each path's placement is pulled toward the measured positions
+        (`costs.track_pull`; None or 0: placed once, at the start)."""
         self.graph = graph
         self._timer = StepTimer()  # (whether a step that may use the threads does)
         self.threads = threads
         if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
             raise InputError(f"weights must be finite and ≥ 0, got {weights}")
         self.weights = weights
+        if pull_s is not None and not (np.isfinite(pull_s) and pull_s >= 0):
+            raise InputError(f"track pull must be a finite number of seconds ≥ 0, got {pull_s!r}")
+        self.pull_s = pull_s
+        self.pull_alpha = track_pull(pull_s, graph.rate_hz)
         self.placed = bool(weights.position != 0 or weights.heading != 0) if placed is None else bool(placed)
         N = graph.num_nodes
         self.N = N
@@ -391,12 +399,13 @@ class ViterbiSearch:
         rows = self.placed and (self.float32_pass or use_pos or use_head)
         meas_pos = np.asarray(position, dtype=np.float64) if use_pos else np.zeros(2)
         meas_heading = float(heading) if use_head else 0.0
+        pull = pull_row(self.pull_alpha, meas_pos, use_pos)
         ancestors = ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
                      (self._no_ancestors, self._no_ancestors))  # fmt: skip
         if rows and not narrow:
             relative(self.state, meas_pos, meas_heading, self.low, self.rel)
         if narrow:
-            live = self._beam_step(wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors)
+            live = self._beam_step(wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors, pull)
         elif self.float32_pass:
             if self._c32_stale and not self.placed:  # (narrow beam steps leave the unplaced float32 costs behind)
                 self._rebase_c32()
@@ -412,7 +421,7 @@ class ViterbiSearch:
                 u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
                 self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
                 state, self.det, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
-                self._chunk_low, self._chunk_high, *ancestors)  # fmt: skip
+                self._chunk_low, self._chunk_high, *ancestors, pull)  # fmt: skip
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
@@ -428,7 +437,7 @@ class ViterbiSearch:
             live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
                            self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.det, self.rank,
                            self._state_new, self._det_new, self._rank_new, arrivals, self.none,
-                           *ancestors)  # fmt: skip
+                           *ancestors, pull)  # fmt: skip
         if self.beam is not None:
             if not narrow and live:
                 live = self._cut(arrivals)
@@ -476,7 +485,7 @@ class ViterbiSearch:
             dense = seconds if dense is None else 0.75 * dense + 0.25 * seconds
         self._step_seconds = (per_node, dense)
 
-    def _beam_step(self, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors) -> int:
+    def _beam_step(self, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors, pull) -> int:
         """`step`'s passes for a beam search while few nodes are live (`beam._beam_step_py`);
         returns the survivors."""
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
@@ -487,7 +496,7 @@ class ViterbiSearch:
                            self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
                            self._scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
                            meas_heading, self.placed, self.beam, self.state, self.det, self._state_new,
-                           self._det_new, arrivals, self.none, *ancestors, self._beam_low)  # fmt: skip
+                           self._det_new, arrivals, self.none, *ancestors, self._beam_low, pull)  # fmt: skip
         self._live, self._live_before = self._live_before, self._live
         self._n_live, self._n_live_before = live, self._n_live
         if live:

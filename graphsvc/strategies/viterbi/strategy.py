@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 
 import numpy as np
 
 from graphsvc.errors import SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
+from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
 from graphsvc.strategies.viterbi.batch import needs_placement, viterbi_search, warm_up_search, warm_up_search_once
@@ -24,7 +26,7 @@ from graphsvc.sensors.noise import CausalTrackHeading
 from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels,
                                       start_placement, start_samples, start_state)  # fmt: skip
 from graphsvc.strategies.options import Options, check_constraints
-from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
+from graphsvc.synthesis.path import pulled_track, synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
 
 
@@ -60,13 +62,18 @@ class ViterbiStrategy(Strategy):
         # and the motion is synthesized from there.
         start = start_placement(position, heading, rate)
         start_ground, start_heading = start_state(position, heading, rate)
+        # The positions the search pulls its paths toward, which synthesis follows too.
+        alpha = track_pull(options.track_pull_s, rate)
+        targets = pull_targets(use_pos, T)
         if options.latency_s is None:
             result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                    should_stop=should_stop, beam=options.beam, start=start)  # fmt: skip
+                                    should_stop=should_stop, beam=options.beam, start=start,
+                                    pull_s=options.track_pull_s)  # fmt: skip
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
-            motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading)
+            track = pulled_track(graph, edges, start_ground, start_heading, targets, alpha) if alpha else None
+            motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
             synth_s = time.perf_counter() - t0
             extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
                      "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
@@ -74,8 +81,10 @@ class ViterbiStrategy(Strategy):
             lag = int(round(options.latency_s * rate))
             decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
                                       needs_placement(w, use_pos, use_head), beam=options.beam,
-                                      start_samples=start_samples(rate))  # fmt: skip
-            synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH)
+                                      start_samples=start_samples(rate), pull_s=options.track_pull_s)  # fmt: skip
+            synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
+                                         pull_alpha=alpha)  # fmt: skip
+            emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
             for t in range(T + 1):
@@ -89,7 +98,9 @@ class ViterbiStrategy(Strategy):
                 node_parts.append(n)
                 edge_parts.append(e)
                 ts = time.perf_counter()
-                _, rot, trans = synth.add(n, e) if t < T else _join(synth.add(n, e), synth.finish())
+                part = synth.add(n, e, targets[emitted:emitted + len(n)])
+                emitted += len(n)
+                _, rot, trans = part if t < T else _join(part, synth.finish())
                 synth_s += time.perf_counter() - ts
                 rot_parts.append(rot)
                 trans_parts.append(trans)
@@ -102,6 +113,8 @@ class ViterbiStrategy(Strategy):
             extra = {"lag_samples": lag, "revisions": decoder.revisions,
                      "converged_early_frames": decoder.converged_frames, "compression": round(s.compression, 2),
                      "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
+        if alpha and np.isfinite(targets).all(axis=1).any():
+            extra["track_pull_s"] = float(options.track_pull_s)  # (the paths and the root followed the tracker)
         report = {
             **extra,
             "labels": path_labels(graph, nodes),
@@ -111,6 +124,15 @@ class ViterbiStrategy(Strategy):
             "samples_per_s": round(T / max(search_s, 1e-9), 1),
         }
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
+
+
+def pull_targets(position, T: int) -> np.ndarray:
+    """(T, 2) the positions the search's pull counts (NaN where none)."""
+    if position is None:
+        return np.full((T, 2), np.nan)
+    out = np.asarray(position, dtype=np.float64).reshape(T, 2).copy()
+    out[~np.isfinite(out).all(axis=1)] = np.nan
+    return out
 
 
 def _join(a, b):
@@ -131,8 +153,12 @@ class ViterbiSession(LiveSession):
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
                                        self.rate, threads, beam=options.beam,
-                                       start_samples=start_samples(self.rate))  # fmt: skip
+                                       start_samples=start_samples(self.rate),
+                                       pull_s=options.track_pull_s)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
+        self.pull_alpha = track_pull(options.track_pull_s, self.rate)
+        self.counts_position = options.weights.position != 0
+        self._targets: deque = deque()  # measured positions of the samples not yet synthesized
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
         self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
@@ -151,9 +177,20 @@ class ViterbiSession(LiveSession):
         if self.track is not None:
             heading = self.track.push(position)
         nodes, edges = self.decoder.push(acc, position, heading)  # (the search scores what its weights count)
+        self._targets.append(position if self.counts_position and position is not None else None)
         if self.synth is None and not len(nodes):
             return []
-        return self._frames(self._synthesizer().add(nodes, edges))
+        return self._frames(self._synthesizer().add(nodes, edges, self._take_targets(len(nodes))))
+
+    def _take_targets(self, count: int) -> np.ndarray:
+        """The measured positions of the next `count` frames (NaN where none), as the
+        search pulled its paths toward them."""
+        out = np.full((count, 2), np.nan)
+        for k in range(count):
+            p = self._targets.popleft()
+            if p is not None:
+                out[k] = p
+        return out
 
     def _synthesizer(self) -> StreamingSynthesizer:
         """Made when the first frames are final, starting where the search starts its
@@ -161,7 +198,7 @@ class ViterbiSession(LiveSession):
         heading measured only later moves the search's paths, not frames already out)."""
         if self.synth is None:
             g, h = self.decoder.search.start_placement
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH)
+            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, pull_alpha=self.pull_alpha)
         return self.synth
 
     def _frames(self, synthesized):
@@ -170,7 +207,7 @@ class ViterbiSession(LiveSession):
     def _finish(self):
         nodes, edges = self.decoder.flush()
         synth = self._synthesizer()
-        return self._frames(_join(synth.add(nodes, edges), synth.finish()))
+        return self._frames(_join(synth.add(nodes, edges, self._take_targets(len(nodes))), synth.finish()))
 
 
 ViterbiStrategy.session_class = ViterbiSession

@@ -66,7 +66,7 @@ class FixedLagDecoder:
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
                  placed: bool | None = None, store: bool | None = None, beam: float | None = None,
-                 start_samples: int = 1):  # fmt: skip
+                 start_samples: int = 1, pull_s: float | None = None):  # fmt: skip
         """placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
@@ -76,14 +76,14 @@ class FixedLagDecoder:
         this many samples have arrived (or at flush), its paths placed where
         `strategies.base.start_placement` puts them from those samples' positions and
         headings, as a batch search given the same `start` does; 1: at the first
-        sample's measurements. No frame is emitted before."""
+        sample's measurements. No frame is emitted before. pull_s: see ViterbiSearch."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
         if store is None:
             store = self.lag > self.DENSE_MAX_LAG
         self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
-                                    window=None if store else self.lag + 1, beam=beam)  # fmt: skip
+                                    window=None if store else self.lag + 1, beam=beam, pull_s=pull_s)  # fmt: skip
         self.start_samples = max(1, int(start_samples))
         self._pending: list = []  # samples (acc, position, heading) that arrived before the search started
         self.emitted = 0  # frames emitted so far
