@@ -70,6 +70,15 @@ def _segment_labels(plan: _Plan, t: np.ndarray, default: str) -> np.ndarray:
 # --------------------------------------------------------------------------- public generators
 
 
+def _cruise_and_stop(plan, rng, run: bool, speed: float, cruise_s: float, max_turn_rate: float,
+                     stand_s: tuple[float, float]) -> None:  # fmt: skip
+    """Walk or run at `speed` for cruise_s seconds (turning at up to max_turn_rate),
+    stop, and stand for a time drawn from stand_s, labelled "stop"."""
+    _locomote(plan, rng, run, speed, plan.t + cruise_s, _turns(rng, plan.t, plan.t + cruise_s + 4.0, max_turn_rate),
+              stop=True)  # fmt: skip
+    _idle(plan, rng, rng.uniform(*stand_s), label="stop")
+
+
 def _turns(rng, t0: float, t1: float, max_rate: float):
     return _smooth_curve(rng, t0, t1, rng.uniform(1.5, 3.0), -max_rate, max_rate)
 
@@ -115,17 +124,7 @@ def make_clip(
         span = (duration - 0.6) / stops
         for _ in range(stops):
             v = rng.uniform(2.5, 4.0) if run else rng.uniform(0.9, 1.7)
-            cruise = max(1.5, span - 3.5)
-            _locomote(
-                plan,
-                rng,
-                run,
-                v,
-                plan.t + cruise,
-                _turns(rng, plan.t, plan.t + cruise + 4.0, 0.4),
-                stop=True,
-            )
-            _idle(plan, rng, rng.uniform(1.0, 1.8), label="stop")
+            _cruise_and_stop(plan, rng, run, v, max(1.5, span - 3.5), 0.4, (1.0, 1.8))
         return _motion(plan, sk, rate_hz, t_clip0, plan.t, name, kind, seed, frame_labels)
     if kind == "idle":
         _idle(plan, rng, duration)
@@ -197,17 +196,7 @@ def generate_performance(
     while plan.t < seconds:
         run = i % 2 == 1
         v = rng.uniform(2.6, 4.0) if run else rng.uniform(1.0, 1.6)
-        cruise = rng.uniform(2.0, 3.5)
-        _locomote(
-            plan,
-            rng,
-            run,
-            v,
-            plan.t + cruise,
-            _turns(rng, plan.t, plan.t + cruise + 4.0, 0.5),
-            stop=True,
-        )
-        _idle(plan, rng, rng.uniform(0.5, 1.0), label="stop")
+        _cruise_and_stop(plan, rng, run, v, rng.uniform(2.0, 3.5), 0.5, (0.5, 1.0))
         if i % 2 == 0:
             _swing(plan, rng, strokes[(i // 2) % 3])
         else:

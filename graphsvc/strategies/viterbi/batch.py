@@ -103,9 +103,11 @@ def warm_up_search(graph: MotionGraph, threads: bool = True) -> None:
     samples) or first meets constraints. threads=True warms the serial kernels too: a
     search that may use the threads runs serial steps where they are faster
     (`strategies.threads.StepTimer`)."""
+    warmed = search_index(graph).warmed
     for mode in (True, False) if threads else (False,):
-        _warm_up(graph, mode)
-        search_index(graph).warmed.add(mode)
+        if mode not in warmed:  # (a mode warmed already, e.g. the serial one by a caller, is not run again)
+            _warm_up(graph, mode)
+            warmed.add(mode)
 
 
 def _warm_up(graph: MotionGraph, threads: bool) -> None:
