@@ -19,7 +19,33 @@ def search_options(args):
     return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
                    heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
                    speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam,
+                   olng=olng_options(args),
                    **({} if args.track_pull is None else {"track_pull_s": args.track_pull}))  # fmt: skip
+
+
+OLNG_WEIGHTS = ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth")
+
+
+def parse_olng_weights(text: str) -> dict:
+    """'PRIOR,CONTR,POSE,MOTION,SMOOTH' → OlngOptions keyword arguments."""
+    from graphsvc.errors import InputError
+
+    try:
+        values = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise InputError(f"OLNG weights must be five numbers PRIOR,CONTR,POSE,MOTION,SMOOTH, got {text!r}") from None
+    if len(values) != 5:
+        raise InputError(f"OLNG weights must be five numbers PRIOR,CONTR,POSE,MOTION,SMOOTH, got {text!r}")
+    return dict(zip(OLNG_WEIGHTS, values))
+
+
+def olng_options(args):
+    from graphsvc.strategies.options import OlngOptions
+
+    weights = parse_olng_weights(args.olng_weights) if getattr(args, "olng_weights", None) else {}
+    return OlngOptions(k=getattr(args, "olng_k", None), m=32 if getattr(args, "olng_m", None) is None else args.olng_m,
+                       i=getattr(args, "olng_i", None), extended=not getattr(args, "olng_basic_steps", False),
+                       fix_feet=getattr(args, "olng_fix_feet", False), **weights)  # fmt: skip
 
 
 def add_search_options(p, constraints: bool = True) -> None:
@@ -27,7 +53,8 @@ def add_search_options(p, constraints: bool = True) -> None:
     from graphsvc.strategies.options import TRACK_PULL_S
 
     p.add_argument("--strategy", default="viterbi", choices=names(),
-                   help="reconstruction strategy (default viterbi; nearest: the per-sample baseline)")
+                   help="reconstruction strategy (default viterbi; olng: frame by frame, optimised poses; nearest: the"
+                        " per-sample baseline)")
     p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
                    help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
     if constraints:
@@ -44,7 +71,17 @@ def add_search_options(p, constraints: bool = True) -> None:
                         " the exact search)")
     p.add_argument("--track-pull", type=float, metavar="S",
                    help="time constant (s) with which each path's placement follows the measured positions (0: placed"
-                        f" once, at the start; default {TRACK_PULL_S:g})")
+                        f" once, at the start; default {TRACK_PULL_S:g}); olng follows the tracker the same way")
+    g = p.add_argument_group("olng (Tautges et al. 2011)")
+    g.add_argument("--olng-k", type=int, metavar="K",
+                   help="neighbours a sample (default: frames / 150, 16 to 4096, the paper's 4096 of ~600,000)")
+    g.add_argument("--olng-i", type=int, metavar="I", help="paths the pose is made from (default K / 16, 4 to 256)")
+    g.add_argument("--olng-m", type=int, metavar="M", help="window columns (default 32)")
+    g.add_argument("--olng-basic-steps", action="store_true", help="leave out the extended steps (a column skipped)")
+    g.add_argument("--olng-weights", metavar="PRIOR,CONTR,POSE,MOTION,SMOOTH",
+                   help="energy weights (default the paper's 5,1,0.6,0.2,0.2)")
+    g.add_argument("--olng-fix-feet", action="store_true",
+                   help="foot clean-up: a foot in contact moves only as the neighbours' feet moved (costs accuracy)")
 
 
 def os_message(exc: OSError) -> str:

@@ -73,8 +73,8 @@ def test_other_rates_are_resampled_to_the_graph_rate(graph, kb, rec):
 
 
 def test_bad_options_and_constraints(graph, rec):
-    with pytest.raises(StrategyNotImplementedError, match="olng"):
-        reconstruct(graph, rec, Options(strategy="olng"))
+    with pytest.raises(StrategyNotImplementedError, match="ssg"):
+        reconstruct(graph, rec, Options(strategy="ssg"))
     with pytest.raises(InputError, match="unknown strategy"):
         reconstruct(graph, rec, Options(strategy="magic"))
     with pytest.raises(InputError, match="weights"):

@@ -195,7 +195,10 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     if fix_position or fix_heading:
         pred_canon, pred_ground, pred_heading = place_start(pred_canon, pred_ground, pred_heading, true_ground[0],
                                                             true_heading[0], fix_position, fix_heading)  # fmt: skip
-    pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
+    if result.provenance is not None:
+        pred_labels = np.asarray(result.provenance.label, dtype=object)
+    else:
+        pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
     true_label = motion.labels[0] if motion.labels else motion.name
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
                           pred_labels=pred_labels, true_label=true_label if true_labels is None else true_labels,
@@ -215,7 +218,7 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
         "in_graph": in_graph,
         **({"joined": motion.source} if true_labels is not None else {}),
         "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
-        "node_path": np.asarray(result.node_path),
+        "node_path": np.asarray(result.node_path if result.node_path is not None else [], dtype=np.int64),
         "pred_labels": pred_labels,
     })  # fmt: skip
     return row

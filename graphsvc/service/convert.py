@@ -388,7 +388,20 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
     msg.viterbi.speed_threshold_m_s = msg.speed_threshold_m_s = float(options.speed_threshold)
     if options.beam is not None:
         msg.viterbi.beam = msg.beam = float(options.beam)
-    msg.viterbi.track_pull_s = float(options.track_pull_s)
+    if options.strategy == "olng":
+        o = options.olng
+        msg.olng.SetInParent()  # (the oneof: Viterbi's own fields go as the flat ones above)
+        for key in ("k", "i"):
+            if getattr(o, key) is not None:
+                setattr(msg.olng, key, int(getattr(o, key)))
+        msg.olng.m = int(o.m)
+        msg.olng.basic_steps = not o.extended
+        for key in ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth"):
+            setattr(msg.olng, key, float(getattr(o, key)))
+        msg.olng.fix_feet = bool(o.fix_feet)
+        msg.olng.track_pull_s = float(options.track_pull_s)
+    else:
+        msg.viterbi.track_pull_s = float(options.track_pull_s)
     sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
     msg.constraint_sets.extend(constraints_to_proto(sets))
     return msg
@@ -438,9 +451,39 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
         if not (math.isfinite(v) and v >= 0):
             raise FieldError(f"{field}.viterbi.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
         extra["track_pull_s"] = v
+    if msg.HasField("olng"):
+        extra.update(olng_from_proto(msg.olng, f"{field}.olng"))
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
     return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=own.heading_from_track,
                    rest_heading_deg=own.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
+
+
+def olng_from_proto(msg, field: str) -> dict:
+    """Options keyword arguments (olng, track_pull_s) from an OlngOptions, checked."""
+    from graphsvc.strategies.options import OlngOptions, check_olng
+
+    kw = {}
+    for key in ("k", "i", "m"):
+        if msg.HasField(key):
+            kw[key] = int(getattr(msg, key))
+    for key in ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth"):
+        if msg.HasField(key):
+            v = getattr(msg, key)
+            if not (math.isfinite(v) and v >= 0):
+                raise FieldError(f"{field}.{key}", f"must be a finite number ≥ 0, got {v}")
+            kw[key] = v
+    o = OlngOptions(extended=not msg.basic_steps, fix_feet=msg.fix_feet, **kw)
+    try:
+        check_olng(o)
+    except InputError as exc:
+        raise FieldError(field, str(exc)) from None
+    out = {"olng": o}
+    if msg.HasField("track_pull_s"):
+        v = msg.track_pull_s
+        if not (math.isfinite(v) and v >= 0):
+            raise FieldError(f"{field}.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
+        out["track_pull_s"] = v
+    return out
 
 
 # ---------------------------------------------------------------- motion and frames

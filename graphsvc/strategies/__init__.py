@@ -7,7 +7,8 @@ else; each strategy owns its index, its batch reconstruction and its live sessio
 | --- | --- | --- | --- |
 | `viterbi` | accelerations | ground position, heading, constraints | whole actions from the graph: the path that best explains every stream over time |
 | `nearest` | accelerations | (the track only to place the start) | nothing: per sample the nearest knowledge-base frame, the floor a search must beat |
-| `olng`, `ssg` | (OLNG: Tautges et al. 2011; SSG: Tautges 2012) | | specified, not built yet: asking for one answers StrategyNotImplementedError |
+| `olng` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample the neighbourhood of frames moving as the readings do (Tautges et al. 2011) and a pose optimised from it |
+| `ssg` | (Tautges 2012) | | specified, not built yet: asking for it answers StrategyNotImplementedError |
 
 `register` adds one (a `Strategy` instance); the built-in ones load on first lookup, so
 importing this package compiles and loads nothing.
@@ -18,7 +19,7 @@ from __future__ import annotations
 from graphsvc.errors import InputError, StrategyNotImplementedError
 from graphsvc.strategies.base import Strategy
 
-PLANNED = ("olng", "ssg")
+PLANNED = ("ssg",)
 _REGISTRY: dict[str, Strategy] = {}
 _loaded = False
 
@@ -33,9 +34,10 @@ def _builtins() -> None:
         return
     _loaded = True
     from graphsvc.strategies.nearest import NearestStrategy
+    from graphsvc.strategies.olng.strategy import OlngStrategy
     from graphsvc.strategies.viterbi import ViterbiStrategy
 
-    for s in (ViterbiStrategy(), NearestStrategy()):
+    for s in (ViterbiStrategy(), NearestStrategy(), OlngStrategy()):
         _REGISTRY.setdefault(s.name, s)
 
 

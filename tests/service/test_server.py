@@ -232,7 +232,6 @@ def _bad_cases(recording):
         "nan latency": ({"options.latency_s": float("nan")}, INVALID, "options.latency_s"),
         "zero beam": ({"options.beam": 0.0}, INVALID, "options.beam"),
         "unknown strategy": ({"options.strategy": 7}, INVALID, "options.strategy"),
-        "olng": ({"options.strategy": pb.STRATEGY_OLNG}, grpc.StatusCode.UNIMPLEMENTED, "olng"),
         "ssg": ({"options.strategy": pb.STRATEGY_SSG}, grpc.StatusCode.UNIMPLEMENTED, "ssg"),
         "constraint order": ({"options": bad_constraint}, INVALID, "options.constraint_sets[0].constraints[0]"),
         "unknown label": ({"options": unknown_label}, INVALID, "no-such-label"),
@@ -263,8 +262,8 @@ def _stream_cases(recording):
         "sample first": ([pb.StreamSynthesizeRequest(sample=samples[0])], INVALID, "config"),
         "config twice": ([pb.StreamSynthesizeRequest(config=config)] * 2, INVALID, "sample[0]"),
         "unknown graph": (list(_requests(C.stream_config("nope"), samples)), grpc.StatusCode.NOT_FOUND, "nope"),
-        "olng": (list(_requests(C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG)), samples)),
-                 grpc.StatusCode.UNIMPLEMENTED, "olng"),
+        "ssg": (list(_requests(C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG)), samples)),
+                grpc.StatusCode.UNIMPLEMENTED, "ssg"),
         "time backwards": (list(_requests(config, back)), INVALID, "sample[2].time_s"),
         "sensor count": (list(_requests(config, short)), INVALID, "sample[0].accelerations_m_s2"),
         "inf reading": (list(_requests(config, inf)), INVALID, "sample[0].accelerations_m_s2[17]"),
@@ -440,10 +439,39 @@ def test_nearest_through_synthesize_and_stream(conn, graph, recording):
         (live[0].sources[0][0], pytest.approx(live[0].sources[0][1]), 1.0)]
 
 
+def test_olng_through_synthesize_and_stream(conn, graph, recording):
+    from graphsvc.pipeline import Options, reconstruct
+    from graphsvc.strategies.options import OlngOptions
+
+    options = Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False, w_contr=0.5))
+    msg = convert.options_to_proto(options)
+    assert convert.options_from_proto(msg).olng == options.olng  # every OLNG option crosses the wire
+    expected = reconstruct(graph, recording, options)
+    got = C.synthesize(conn, "small", recording, msg)
+    np.testing.assert_array_equal(got.motion.rotations, expected.motion.rotations.astype(np.float32))
+    assert got.report["strategy"] == "olng" and got.report["olng"]["k"] == 24
+    live, _ = live_frames(graph, recording, options)
+    feed = C.SampleFeed(C.stream_config("small", msg))
+    for sample in C.recording_samples(recording):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert_frames_equal(live, result.frames)
+    assert len(result.frames[0].sources) > 1  # (a neighbourhood: several frames, weighted)
+    bad = pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG, olng=pb.OlngOptions(k=8, i=9))
+    request = _recording_request(recording)
+    request.options.CopyFrom(bad)
+    code, details = _code(conn.stub.Synthesize, request, timeout=10)
+    assert code == grpc.StatusCode.INVALID_ARGUMENT and "options.olng" in details, details
+    request.options.CopyFrom(pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG, olng=pb.OlngOptions(k=10**6)))
+    code, details = _code(conn.stub.Synthesize, request, timeout=10)
+    assert code == grpc.StatusCode.INVALID_ARGUMENT and "exceeds" in details, details
+
+
 def test_a_strategy_asked_for_an_input_it_lacks_answers_invalid_argument(conn, recording):
     request = _recording_request(recording)
     del request.recording.accelerations_m_s2[:]  # no accelerations at all: only the track
-    for strategy in (pb.STRATEGY_VITERBI, pb.STRATEGY_NEAREST):
+    for strategy in (pb.STRATEGY_VITERBI, pb.STRATEGY_NEAREST, pb.STRATEGY_OLNG):
         request.options.strategy = strategy
         got, details = _code(conn.stub.Synthesize, request, timeout=10)
         assert got == grpc.StatusCode.INVALID_ARGUMENT and "needs accelerations" in details, details

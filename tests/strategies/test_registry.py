@@ -30,7 +30,7 @@ def rec():
 
 
 def test_names_and_lookup():
-    assert available()[:2] == ("viterbi", "nearest")
+    assert available()[:3] == ("viterbi", "nearest", "olng")
     assert set(names()) >= {"viterbi", "nearest", "olng", "ssg"}
     for name in available():
         s = get(name)
@@ -38,7 +38,7 @@ def test_names_and_lookup():
         assert s.needs <= s.uses <= set(INPUTS)
         assert issubclass(s.session_class, LiveSession)
     with pytest.raises(StrategyNotImplementedError, match="not implemented"):
-        get("olng")
+        get("ssg")
     with pytest.raises(InputError, match="unknown strategy 'elbow'"):
         get("elbow")
 
@@ -50,7 +50,7 @@ def test_live_session_opens_the_strategys_session(graph, rec):
         LiveSession(graph, Options(strategy="ssg"), rec.sensor_names)
 
 
-@pytest.mark.parametrize("strategy", ["viterbi", "nearest"])
+@pytest.mark.parametrize("strategy", ["viterbi", "nearest", "olng"])
 def test_a_missing_input_is_named(graph, rec, strategy):
     from dataclasses import replace
 

@@ -135,7 +135,7 @@ class JointChannels(_message.Message):
     def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SynthesisOptions(_message.Message):
-    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi")
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi", "olng")
     STRATEGY_FIELD_NUMBER: _ClassVar[int]
     WEIGHTS_FIELD_NUMBER: _ClassVar[int]
     LATENCY_S_FIELD_NUMBER: _ClassVar[int]
@@ -145,6 +145,7 @@ class SynthesisOptions(_message.Message):
     SPEED_THRESHOLD_M_S_FIELD_NUMBER: _ClassVar[int]
     BEAM_FIELD_NUMBER: _ClassVar[int]
     VITERBI_FIELD_NUMBER: _ClassVar[int]
+    OLNG_FIELD_NUMBER: _ClassVar[int]
     strategy: Strategy
     weights: CostWeights
     latency_s: float
@@ -154,7 +155,34 @@ class SynthesisOptions(_message.Message):
     speed_threshold_m_s: float
     beam: float
     viterbi: ViterbiOptions
-    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ...) -> None: ...
+    olng: OlngOptions
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ..., olng: _Optional[_Union[OlngOptions, _Mapping]] = ...) -> None: ...
+
+class OlngOptions(_message.Message):
+    __slots__ = ("k", "i", "m", "basic_steps", "w_prior", "w_contr", "w_pose", "w_motion", "w_smooth", "fix_feet", "track_pull_s")
+    K_FIELD_NUMBER: _ClassVar[int]
+    I_FIELD_NUMBER: _ClassVar[int]
+    M_FIELD_NUMBER: _ClassVar[int]
+    BASIC_STEPS_FIELD_NUMBER: _ClassVar[int]
+    W_PRIOR_FIELD_NUMBER: _ClassVar[int]
+    W_CONTR_FIELD_NUMBER: _ClassVar[int]
+    W_POSE_FIELD_NUMBER: _ClassVar[int]
+    W_MOTION_FIELD_NUMBER: _ClassVar[int]
+    W_SMOOTH_FIELD_NUMBER: _ClassVar[int]
+    FIX_FEET_FIELD_NUMBER: _ClassVar[int]
+    TRACK_PULL_S_FIELD_NUMBER: _ClassVar[int]
+    k: int
+    i: int
+    m: int
+    basic_steps: bool
+    w_prior: float
+    w_contr: float
+    w_pose: float
+    w_motion: float
+    w_smooth: float
+    fix_feet: bool
+    track_pull_s: float
+    def __init__(self, k: _Optional[int] = ..., i: _Optional[int] = ..., m: _Optional[int] = ..., basic_steps: _Optional[bool] = ..., w_prior: _Optional[float] = ..., w_contr: _Optional[float] = ..., w_pose: _Optional[float] = ..., w_motion: _Optional[float] = ..., w_smooth: _Optional[float] = ..., fix_feet: _Optional[bool] = ..., track_pull_s: _Optional[float] = ...) -> None: ...
 
 class ViterbiOptions(_message.Message):
     __slots__ = ("beam", "heading_from_track", "rest_heading_deg", "speed_threshold_m_s", "track_pull_s")

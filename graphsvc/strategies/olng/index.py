@@ -7,9 +7,10 @@ are consecutive; `run_of` numbers the runs of consecutive frames (a clip, or the
 of one between frames the graph left out), so frame p − k is k frames before p exactly
 when `run_of` agrees — the rule `lattice.Lattice` steps by. Readings are in g, S × 3
 values a frame, at the graph rate and in its layout, so `graphsvc relayout` serves OLNG
-as it serves the search. The arrays are cached beside the graph file
-(`strategies.index`, memory-mapped on later loads); the tree is built on load (scipy's
-cKDTree).
+as it serves the search; and each frame's pose vector and heading-frame joint
+positions (`pose.frame_poses`), which the pose energy reads for the neighbours. The
+arrays are cached beside the graph file (`strategies.index`, memory-mapped on later
+loads); the tree is built on load (scipy's cKDTree).
 
 Hiding clips (leave-out evaluation) never rebuilds the tree: the query asks for more
 neighbours and drops the hidden ones (`Neighbours.dropped` says how many).
@@ -26,20 +27,24 @@ from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.index import cached_arrays, frame_readings
 
-INDEX_VERSION = 1
+INDEX_VERSION = 2
 
 
 def build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
     """The index's arrays: nodes (F,) int64, edges (F,) int64 (the original edge into
-    each), readings (F, 3S) float32 g, run_of (F,) int64."""
+    each), readings (F, 3S) float32 g, run_of (F,) int64, and what the pose energy reads
+    of each frame (`pose`): poses (F, D) and positions (F, Ja, 3) float32."""
+    from graphsvc.strategies.olng.pose import frame_poses, pose_model
+
     arrays = frame_readings(graph)
     dst = arrays["nodes"]
+    poses, positions = frame_poses(graph, pose_model(graph), dst)
     clip = np.asarray(graph.node_clip)[dst].astype(np.int64)
     frame = np.asarray(graph.node_frame)[dst].astype(np.float64)
     # A new run where the clip changes or a frame is not the one after the previous.
     new_run = np.ones(dst.size, dtype=bool)
     new_run[1:] = (clip[1:] != clip[:-1]) | (frame[1:] - frame[:-1] != 1.0)
-    return {**arrays, "run_of": np.cumsum(new_run) - 1}
+    return {**arrays, "run_of": np.cumsum(new_run) - 1, "poses": poses, "positions": positions}
 
 
 def load_index(graph: MotionGraph, allowed: np.ndarray | None = None) -> "OlngIndex":
@@ -68,6 +73,8 @@ class OlngIndex:
         self.edges = np.asarray(arrays["edges"])
         self.readings = np.asarray(arrays["readings"])
         self.run_of = np.ascontiguousarray(arrays["run_of"], dtype=np.int64)
+        self.poses = arrays.get("poses")
+        self.positions = arrays.get("positions")
         if self.nodes.size == 0:
             raise InputError("the graph has no original frames with readings for OLNG")
         self.tree = cKDTree(self.readings)

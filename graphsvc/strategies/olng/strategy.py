@@ -1,0 +1,176 @@
+"""The OLNG strategy behind the common interface: batch and live run one decoder
+(`decoder.OlngDecoder`) sample by sample, so a live session's frames are the batch's,
+each emitted as its sample arrives (the steps look back only: no look-ahead).
+
+Index: `index.load_index` (cached beside the graph file); hidden clips are dropped at
+query time. Options: `Options.olng` (K, M, I, the step set, the energy weights, foot
+clean-up); the tracker is followed with `track_pull_s` as the Viterbi search follows
+it; a weight of 0 for position or heading leaves that stream out.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from graphsvc.errors import InputError
+from graphsvc.graph.model import MotionGraph
+from graphsvc.motion.skeleton import Motion
+from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, label_runs
+from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
+from graphsvc.strategies.olng.index import OlngIndex, load_index
+from graphsvc.strategies.olng.pose import pose_model
+from graphsvc.strategies.options import Options, OlngOptions
+from graphsvc.strategies.viterbi.costs import track_pull
+
+
+def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
+    """K and I filled in for the index, and checked against what it can return."""
+    o = options.resolved(index.searchable)
+    if o.k > index.searchable:
+        raise InputError(f"OLNG K ({o.k}) exceeds the knowledge base's {index.searchable} searchable frames")
+    if o.i > o.k:
+        raise InputError(f"OLNG I ({o.i}) must not exceed K ({o.k})")
+    return o
+
+
+def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options) -> OlngDecoder:
+    return OlngDecoder(graph, index, pose_model(graph), resolved_options(index, options.olng),
+                       track_pull(options.track_pull_s, float(graph.rate_hz)))  # fmt: skip
+
+
+def _streams(options: Options, position, heading):
+    """The tracker streams the weights keep."""
+    return (position if options.weights.position else None), (heading if options.weights.heading else None)
+
+
+class OlngStrategy(Strategy):
+    name = "olng"
+    needs = frozenset({"accelerations"})
+    uses = frozenset({"accelerations", "ground_position", "heading"})
+    summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
+
+    def prepare(self, graph: MotionGraph) -> OlngIndex:
+        return load_index(graph)
+
+    def warm_up(self, index, graph: MotionGraph, threads: bool = False) -> None:
+        warm_up(graph, index)
+
+    def ignored_options(self, options: Options) -> list[str]:
+        out = []
+        if options.beam is not None:
+            out.append("beam")
+        if options.latency_s is not None:
+            out.append("latency_s")  # every frame is final as its sample arrives
+        if options.weights.acc != 1.0:
+            out.append("weights.acc")  # (its own energy weights: olng)
+        return out
+
+    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
+                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+        t0 = time.perf_counter()
+        idx = index.with_allowed(allowed)
+        decoder = make_decoder(graph, idx, options)
+        warm_up(graph, index)
+        warm_up_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        position, heading = _streams(options, inp.position, inp.heading)
+        T = inp.num_samples
+        J = graph.skeleton.num_joints
+        rot, trans = np.empty((T, J, 4)), np.empty((T, J, 3))
+        clip, frame, weight = np.full((T, SOURCES), -1, np.int64), np.zeros((T, SOURCES)), np.zeros((T, SOURCES))
+        labels, rows = [], []
+        for t in range(T):
+            if should_stop is not None and t % 64 == 0 and should_stop():
+                from graphsvc.errors import SearchCancelled
+
+                raise SearchCancelled("reconstruction cancelled")
+            r, tr, sources, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
+                                                      None if heading is None else heading[t])  # fmt: skip
+            rot[t], trans[t] = r[0], tr[0]
+            for k, (c, f, w) in enumerate(sources):
+                clip[t, k], frame[t, k], weight[t, k] = c, f, w
+            labels.append(label)
+            rows.append(row)
+        total_s = time.perf_counter() - t0
+        motion = Motion(graph.skeleton, rot, trans, float(graph.rate_hz), name="synthesized", source="olng")
+        provenance = Provenance(clip, frame, weight, np.asarray(labels, dtype=object))
+        return Reconstruction(motion, None, None, report(decoder, rows, labels, warm_up_s, total_s), provenance)
+
+
+def report(decoder: OlngDecoder, rows: list[dict], labels: list, warm_up_s: float, total_s: float) -> dict:
+    """The report of an OLNG run (README, *Report*)."""
+    o = decoder.options
+    T = len(rows)
+
+    def col(name):
+        return np.array([r[name] for r in rows], dtype=np.float64)
+
+    # search: the neighbours and the lattice; synthesis: the pose, root and feet.
+    search_s = float(np.sum(col("nn_ms")) + np.sum(col("olng_ms"))) / 1e3 if T else 0.0
+    timings = {"warm_up": round(warm_up_s, 4), "search": round(search_s, 4),
+               "synthesis": round(max(total_s - search_s, 0.0), 4)}  # fmt: skip
+    for name in ("nn_ms", "olng_ms", "optimise_ms"):
+        timings[f"median_{name}"] = round(float(np.median(col(name))), 3) if T else 0.0
+    return {
+        "cost": float(col("cost").sum()) if T else 0.0,
+        "terms": {"path_cost": float(col("cost").sum()) if T else 0.0, "energy": float(col("energy").sum()) if T else 0.0},
+        "olng": {"k": o.k, "i": o.i, "m": o.m, "extended": o.extended, "w_prior": o.w_prior, "w_contr": o.w_contr,
+                 "w_pose": o.w_pose, "w_motion": o.w_motion, "w_smooth": o.w_smooth, "fix_feet": o.fix_feet,
+                 "track_pull_alpha": round(decoder.alpha, 6)},  # fmt: skip
+        "candidate_frames": int(decoder.index.searchable),
+        "per_frame": {"path_cost": [round(v, 5) for v in col("cost")], "energy": [round(v, 5) for v in col("energy")],
+                      "path_length": [round(v, 3) for v in col("path_length")],
+                      "subspace_dims": [int(v) for v in col("subspace")], "iterations": [int(v) for v in col("iterations")],
+                      "dropped": [int(v) for v in col("dropped")]},  # fmt: skip
+        "mean_path_length": round(float(col("path_length").mean()), 3) if T else 0.0,
+        "incomplete_samples": int(sum(not r["complete"] for r in rows)),
+        "labels": label_runs(labels),
+        "timings_s": timings,
+        "samples_per_s": round(T / max(total_s, 1e-9), 1),
+    }
+
+
+def warm_up(graph: MotionGraph, index: OlngIndex) -> None:
+    """Run a few samples through a decoder, so numba loads every kernel now."""
+    if getattr(index, "_warmed", False):
+        return
+    o = OlngOptions(k=min(8, index.frames), i=min(4, index.frames), m=4)
+    decoder = OlngDecoder(graph, index, pose_model(graph), o, 0.1)
+    reading = np.asarray(index.readings[min(2, index.frames - 1)], dtype=np.float64).reshape(-1, 3) * 9.81
+    for t in range(3):
+        decoder.step(reading, np.zeros(2), 0.0)
+    index._warmed = True
+
+
+class OlngSession(LiveSession):
+    """OLNG live: each grid sample's frame as it arrives (lag 0)."""
+
+    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
+                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
+        from graphsvc.strategies.base import prepared_index
+
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion)
+        index = prepared_index(self.strategy, graph)
+        self.decoder = make_decoder(graph, index.with_allowed(allowed), options)
+        warm_up(graph, index)
+        self.lag_frames = 0
+        self.frame_index = 0
+
+    def _decode(self, acc, position, heading):
+        position, heading = _streams(self.options, position, heading)
+        rot, trans, sources, label, _ = self.decoder.step(acc, position, heading)
+        clip = np.full((1, SOURCES), -1, np.int64)
+        frame, weight = np.zeros((1, SOURCES)), np.zeros((1, SOURCES))
+        for k, (c, f, w) in enumerate(sources):
+            clip[0, k], frame[0, k], weight[0, k] = c, f, w
+        out = self._emit(self.frame_index, rot, trans, provenance=Provenance(clip, frame, weight, np.array([label], object)))
+        self.frame_index += 1
+        return out
+
+    def _finish(self):
+        return []
+
+
+OlngStrategy.session_class = OlngSession
