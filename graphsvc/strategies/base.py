@@ -74,6 +74,12 @@ class Strategy:
         return []
 
 
+def frame_by_frame_ignored(options: Options) -> list[str]:
+    """The options a strategy that decides each frame from its own sample ignores:
+    the beam and the latency (no search over time to prune or to delay)."""
+    return [name for name, v in (("beam", options.beam), ("latency_s", options.latency_s)) if v is not None]
+
+
 def prepared_index(strategy: Strategy, graph: MotionGraph):
     """`strategy.prepare(graph)`, once per graph object and strategy (`graph.derived`:
     an index must not refer to its graph but weakly)."""

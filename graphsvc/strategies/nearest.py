@@ -25,7 +25,8 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels, first_measured
+from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy,
+                                      first_measured, frame_by_frame_ignored, path_labels)  # fmt: skip
 from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.strategies.options import TRACK_PULL_S, Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
@@ -78,11 +79,7 @@ class NearestStrategy(Strategy):
         warm_up_synthesis(graph)
 
     def ignored_options(self, options: Options) -> list[str]:
-        out = []
-        if options.beam is not None:
-            out.append("beam")
-        if options.latency_s is not None:
-            out.append("latency_s")  # each frame is decided from its own sample
+        out = frame_by_frame_ignored(options)  # each frame is decided from its own sample
         if options.track_pull_s != TRACK_PULL_S:
             out.append("track_pull_s")  # (its start is placed from the track, no path follows it)
         return out

@@ -34,9 +34,11 @@ import time
 import numpy as np
 
 from graphsvc.errors import InputError
+from graphsvc.graph.metadata import rotate_ground
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
+from graphsvc.motion import quat
 from graphsvc.motion.quat import wrap_angle
 from graphsvc.sensors.accelerometer import G_UP, GRAVITY
 from graphsvc.strategies.olng.index import OlngIndex
@@ -111,8 +113,9 @@ class OlngDecoder:
         t1 = time.perf_counter()
         self.lattice.push(frames, distances)
         self.last_frames, self.last_distances = frames, distances
-        order, best, cost, w = self.lattice.best(self.options.i)
-        lengths = self.lattice.column()["length"][order]
+        col = self.lattice.column()
+        order, best, cost, w = self.lattice.best(self.options.i, col)
+        lengths = col["length"][order]
         t2 = time.perf_counter()
         p, energy, iterations, dims = self._pose(best, w, np.asarray(acc, dtype=np.float64) if complete else None)
         x = pose_positions(p, self.offsets, self.model)
@@ -120,9 +123,8 @@ class OlngDecoder:
         heading_before = self.heading
         self._root(best, w, position, heading)
         rot, trans = self._place(best[0], p)
-        contacts = self._contacts(best, w)
         if self.options.fix_feet:
-            self._fix_feet(rot, trans, contacts, self._foot_steps(best, w, heading_before))
+            self._fix_feet(rot, trans, self._contacts(best, w), self._foot_steps(best, w, heading_before))
         for root in np.flatnonzero(self.parents < 0):  # onto the pulled track, the whole body at once
             trans[0, root, 0] += self.ground[0] - self.own[0]
             trans[0, root, 2] += self.ground[1] - self.own[1]
@@ -183,12 +185,7 @@ class OlngDecoder:
     def _control(self, X, X2, f1, best, w, acc):
         """x̃ᵢ = s_t + vᵢΔt + ½α̂Δt² (`pose` module docstring)."""
         dt = 1.0 / self.rate
-        orient = sensor_orientations(self.p_prev, self.model)
-        S = orient.shape[0]
-        a_hat = np.empty((S, 3))
-        for m in range(S):
-            q = orient[m]
-            a_hat[m] = _qrot_np(q, acc[m]) - G_UP
+        a_hat = quat.rotate(sensor_orientations(self.p_prev, self.model), acc) - G_UP
         step = self.edge_offset[self.index.edges[best]]
         step1 = self.edge_offset[self.index.edges[f1]]
         ground_acc = w @ (step - step1) * (self.rate * self.rate)
@@ -203,8 +200,7 @@ class OlngDecoder:
         if self.t > 0:
             step = w @ self.edge_offset[e]
             turn = float(w @ self.edge_heading[e])
-            c, s = math.cos(self.heading), math.sin(self.heading)
-            move = np.array([c * step[0] + s * step[1], -s * step[0] + c * step[1]])
+            move = rotate_ground(step[None], np.array([self.heading]), np.zeros((1, 2)))[0]
             self.ground = self.ground + move
             self.own = self.own + move
             self.heading = float(wrap_angle(self.heading + turn))
@@ -310,8 +306,3 @@ class OlngDecoder:
         votes = np.bincount(np.asarray(g.node_label)[nodes], weights=w, minlength=len(g.labels))
         return sources, g.labels[int(np.argmax(votes))]
 
-
-def _qrot_np(q, v):
-    w, x, y, z = q
-    tx, ty, tz = 2.0 * (y * v[2] - z * v[1]), 2.0 * (z * v[0] - x * v[2]), 2.0 * (x * v[1] - y * v[0])
-    return np.array([v[0] + w * tx + (y * tz - z * ty), v[1] + w * ty + (z * tx - x * tz), v[2] + w * tz + (x * ty - y * tx)])

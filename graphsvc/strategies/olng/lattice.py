@@ -133,10 +133,12 @@ class Lattice:
         return {"frames": self.frames[c, :n].copy(), "node_cost": self.node_cost[c, :n].copy(),
                 "cost": self.cost[c, :n].copy(), "length": length, "step": self.step_of[c, :n].copy()}  # fmt: skip
 
-    def best(self, count: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def best(self, count: int | None = None,
+             col: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
         """The I (count) cheapest paths into the newest column: (positions in the
-        column, frames, costs, weights), cheapest first (ties: the column's order)."""
-        col = self.column()
+        column, frames, costs, weights), cheapest first (ties: the column's order).
+        col: `column()` when the caller has it already."""
+        col = self.column() if col is None else col
         I = min(self.options.i if count is None else int(count), col["cost"].size)
         order = np.argsort(col["cost"], kind="stable")[:I]
         cost = col["cost"][order]

@@ -17,7 +17,8 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, label_runs
+from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy,
+                                      frame_by_frame_ignored, label_runs)  # fmt: skip
 from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
 from graphsvc.strategies.olng.index import OlngIndex, load_index
 from graphsvc.strategies.olng.pose import pose_model
@@ -58,11 +59,7 @@ class OlngStrategy(Strategy):
         warm_up(graph, index)
 
     def ignored_options(self, options: Options) -> list[str]:
-        out = []
-        if options.beam is not None:
-            out.append("beam")
-        if options.latency_s is not None:
-            out.append("latency_s")  # every frame is final as its sample arrives
+        out = frame_by_frame_ignored(options)  # every frame is final as its sample arrives
         if options.weights.acc != 1.0:
             out.append("weights.acc")  # (its own energy weights: olng)
         return out
