@@ -72,6 +72,24 @@ class AsfSkeleton:
 # ---------------------------------------------------------------------------
 
 
+def _check_utf8_outside_comments(path, data: bytes) -> None:
+    """FormatError unless every line but `#` comments is UTF-8: Vicon's exporters write
+    the source file's path into an AMC's first comment in the local code page (HDM05's
+    takes: `f\xfcr Bonn` in Latin-1), and comments are never read."""
+    try:
+        data.decode("utf-8")
+        return
+    except UnicodeDecodeError:
+        pass
+    for number, line in enumerate(data.split(b"\n"), start=1):
+        if line.lstrip().startswith(b"#"):
+            continue
+        try:
+            line.decode("utf-8")
+        except UnicodeDecodeError:
+            raise FormatError(path, "not UTF-8 text", line=number) from None
+
+
 def _text_lines(path, data: bytes) -> list[str]:
     """File lines with CRLF handled and comments stripped (line i is file line i+1)."""
     try:
@@ -457,10 +475,7 @@ def read_amc(path, asf: AsfSkeleton, rate_hz: float = CMU_RATE_HZ) -> Motion:
     data = read_file_bytes(path)
     if b"\x00" in data:
         raise FormatError(path, "binary data (NUL byte) in a text file", line=data[: data.index(b"\x00")].count(b"\n") + 1)
-    try:
-        data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise FormatError(path, "not UTF-8 text", line=data[: exc.start].count(b"\n") + 1) from None
+    _check_utf8_outside_comments(path, data)
     start, first_line, degrees = _amc_header(path, data)
     counts = _amc_layout(asf)
     parsed = _parse_amc_fast(path, data, start, first_line, counts)
