@@ -13,7 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import Parser, add_search_options, os_message, search_options
+from graphsvc.cli_args import (Parser, add_marker_file_options, add_marker_options, add_search_options, os_message,
+                               search_options)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 
 
@@ -29,20 +30,42 @@ def _cmd_inspect(args) -> int:
 
 
 def _cmd_simulate(args) -> int:
+    from graphsvc.errors import InputError
     from graphsvc.motion.library import load_motion
-    from graphsvc.sensors.layout import load_layout
     from graphsvc.sensors.noise import parse_noise
     from graphsvc.sensors.recording import export_csv, save_recording
-    from graphsvc.sensors.simulate import simulate_recording
 
     noise = parse_noise(args.noise)
     if args.position_noise is not None:
         from dataclasses import replace
 
         noise = replace(noise, position=args.position_noise)
-    layout = load_layout(args.layout)
+    if (args.layout is None) == (args.markers is None):
+        raise InputError("give --layout (accelerometers) or --markers (optical markers), one of them")
+    if args.markers is None and (args.keep or args.gaps or args.flicker or args.gap_fraction):
+        raise InputError("--keep, --gaps, --flicker and --gap-fraction apply to --markers")
     out = Path(args.output)
     _check_output(out)
+    if args.markers is not None:
+        from graphsvc.sensors.markers import keep_markers, load_marker_set, parse_names
+        from graphsvc.sensors.optical import export_marker_csv
+        from graphsvc.sensors.simulate import MarkerPattern, check_pattern, parse_gaps, simulate_marker_recording
+
+        pattern = MarkerPattern(parse_gaps(args.gaps), args.flicker or 0.0, args.gap_fraction or 0.0)
+        check_pattern(pattern)
+        marker_set = keep_markers(load_marker_set(args.markers), parse_names(args.keep))
+        motion = load_motion(args.clip)
+        rec = simulate_marker_recording(motion, marker_set, noise, seed=args.seed, rate_hz=args.rate,
+                                        mapping=args.mapping, pattern=pattern)  # fmt: skip
+        (export_marker_csv if out.suffix.lower() == ".csv" else save_recording)(rec, out)
+        print(f"wrote {out}: {rec.num_samples} samples of {len(rec.marker_names)} markers "
+              f"({', '.join(rec.marker_names)}) at {rec.rate_hz:g} Hz, seen {100 * rec.meta['seen']:.0f} %, "
+              f"marker noise {noise.marker:g} mm")  # fmt: skip
+        return 0
+    from graphsvc.sensors.layout import load_layout
+    from graphsvc.sensors.simulate import simulate_recording
+
+    layout = load_layout(args.layout)
     motion = load_motion(args.clip)
     rec = simulate_recording(motion, layout, noise, seed=args.seed, rate_hz=args.rate, mapping=args.mapping)
     if out.suffix.lower() == ".csv":
@@ -147,7 +170,7 @@ def _cmd_synthesize(args) -> int:
         _check_output(Path(args.report))
     options = search_options(args)
     graph = load_graph(args.graph)
-    rec = read_recording(args.recording)
+    rec = read_recording(args.recording, up=args.up, units=args.units)
     result = reconstruct(graph, rec, options)
     write_bvh(out, result.motion, scale=args.scale)
     result.report["files"] = {"output": str(out.resolve()), "graph": str(Path(args.graph).resolve()),
@@ -192,8 +215,21 @@ def _cmd_evaluate(args) -> int:
         noise = replace(noise, position=args.position_noise)
     # The tracker stream is there when asked for: --position-noise, or a noise spec
     # with a tracker σ (the default and harsh presets, position=M).
+    from graphsvc.sensors.simulate import MarkerPattern, check_pattern
+
+    pattern = MarkerPattern((), args.flicker or 0.0, args.gap_fraction or 0.0)
+    check_pattern(pattern)
     setup = loo.EvalSetup(noise=noise, positions=args.position_noise is not None or noise.position > 0,
-                          options=options, seed=args.seed)  # fmt: skip
+                          options=options, seed=args.seed, pattern=pattern)  # fmt: skip
+    if loo.reads_markers(setup) and not options.ssg.markers:
+        raise InputError(f"--strategy {options.strategy} reads optical markers: give the set to simulate, --markers")
+    if loo.reads_markers(setup):
+        from graphsvc.sensors.markers import keep_markers
+        from graphsvc.strategies.ssg.strategy import parse_marker_set
+
+        keep_markers(parse_marker_set(options.ssg.markers), options.ssg.keep)  # (a bad set: before the build)
+    if not loo.reads_markers(setup) and (args.flicker or args.gap_fraction):
+        raise InputError("--flicker and --gap-fraction apply to a strategy that reads optical markers (ssg)")
     if options.heading_from_track and not setup.positions:
         raise InputError("--heading-from-track needs the tracker's positions: give --position-noise M")
     if args.jobs < 1:
@@ -275,9 +311,11 @@ def _cmd_evaluate(args) -> int:
     w = options.weights
     what = (f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out") + \
         f" (hold-out {args.hold_out})"
-    print(f"{what} on {graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
-          f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else "") +
-          f"; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
+    searched = (f"{graph.num_nodes:,} nodes, {loo.inputs_description(setup)}, strategy {options.strategy}"
+                if loo.reads_markers(setup) else
+                f"{graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
+                f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else ""))  # fmt: skip
+    print(f"{what} on {searched}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
     return 0
 
@@ -298,15 +336,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(run=_cmd_inspect)
 
-    p = sub.add_parser("simulate", help="simulate sensor readings of a clip into a recording")
+    p = sub.add_parser("simulate", help="simulate sensor readings or optical markers of a clip into a recording")
     p.add_argument("clip", metavar="CLIP")
-    p.add_argument("--layout", required=True, help="preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    p.add_argument("--layout", help="accelerometers: preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    add_marker_options(p)
+    p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
+    p.add_argument("--flicker", type=float, metavar="P",
+                   help="markers: each marker unseen this share of samples, in short dropouts (3 samples on average)")
+    p.add_argument("--gap-fraction", type=float, metavar="F",
+                   help="markers: random gaps of 5–80 samples until this share of samples is in one")
     p.add_argument("--noise", default="none", help="PRESET[,key=value...] (presets: none, default, tracker, harsh)")
     p.add_argument("--position-noise", type=float, metavar="M", help="overhead-tracker noise σ in metres")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, metavar="HZ", help="resample to this rate first")
     p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons")
-    p.add_argument("-o", "--output", required=True, metavar="REC", help="output .rec (or .csv)")
+    p.add_argument("-o", "--output", required=True, metavar="REC",
+                   help="output .rec (or .csv: a device CSV, or a marker CSV with --markers)")
     p.set_defaults(run=_cmd_simulate)
 
     p = sub.add_parser("build", help="build a motion graph from a knowledge base")
@@ -337,9 +382,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("synthesize", help="reconstruct motion from a recording by searching a graph")
     p.add_argument("graph", metavar="GRAPH")
-    p.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
+    p.add_argument("recording", metavar="REC", help="recording: .rec, device CSV, C3D or marker CSV")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
     add_search_options(p)
+    add_marker_file_options(p)
     p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
@@ -354,6 +400,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--position-noise", type=float, metavar="M",
                    help="keep the overhead tracker's positions with this σ in metres (0: exact)")
     add_search_options(p, constraints=False)
+    p.add_argument("--flicker", type=float, metavar="P",
+                   help="ssg: each simulated marker unseen this share of samples, in short dropouts")
+    p.add_argument("--gap-fraction", type=float, metavar="F",
+                   help="ssg: random gaps of 5–80 samples (every marker unseen) until this share of samples")
     p.add_argument("--seed", type=int, default=0, help="noise seed (each clip's is derived from it and its name)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="evaluate N clips at once in worker processes (and build with N threads)")

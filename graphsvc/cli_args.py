@@ -19,7 +19,7 @@ def search_options(args):
     return Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
                    heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
                    speed_threshold=args.speed_threshold, constraints=constraints, beam=args.beam,
-                   olng=olng_options(args),
+                   olng=olng_options(args), ssg=ssg_options(args),
                    **({} if args.track_pull is None else {"track_pull_s": args.track_pull}))  # fmt: skip
 
 
@@ -48,13 +48,37 @@ def olng_options(args):
                        fix_feet=getattr(args, "olng_fix_feet", False), **weights)  # fmt: skip
 
 
+def ssg_options(args):
+    from graphsvc.sensors.markers import parse_names
+    from graphsvc.strategies.options import SsgOptions
+
+    return SsgOptions(markers=getattr(args, "markers", None), keep=parse_names(getattr(args, "keep", None)),
+                      window_s=getattr(args, "ssg_window", None), overlap_s=getattr(args, "ssg_overlap", None),
+                      k=getattr(args, "ssg_k", None), weight=getattr(args, "ssg_weight", None),
+                      offsets=getattr(args, "ssg_offsets", None) or "auto")  # fmt: skip
+
+
+def add_marker_options(p) -> None:
+    """--markers and --keep: the marker set of an optical input and the markers used."""
+    p.add_argument("--markers", metavar="SET",
+                   help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file (JSON/TOML)")
+    p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated)")
+
+
+def add_marker_file_options(p) -> None:
+    """--up and --units: how to read a C3D or marker CSV that does not say."""
+    p.add_argument("--up", choices=("y", "z"),
+                   help="marker files: the vertical axis (default: the file's; C3D: from the markers' spread, else Z)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), help="marker files: length unit, overriding the file's")
+
+
 def add_search_options(p, constraints: bool = True) -> None:
     from graphsvc.strategies import names
     from graphsvc.strategies.options import TRACK_PULL_S
 
     p.add_argument("--strategy", default="viterbi", choices=names(),
                    help="reconstruction strategy (default viterbi; olng: frame by frame, optimised poses; nearest: the"
-                        " per-sample baseline)")
+                        " per-sample baseline; ssg: optical markers)")
     p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
                    help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
     if constraints:
@@ -82,6 +106,18 @@ def add_search_options(p, constraints: bool = True) -> None:
                    help="energy weights (default the paper's 5,1,0.6,0.2,0.2)")
     g.add_argument("--olng-fix-feet", action="store_true",
                    help="foot clean-up: a foot in contact moves only as the neighbours' feet moved (costs accuracy)")
+    g = p.add_argument_group("ssg (Tautges 2012): optical markers")
+    add_marker_options(g)
+    g.add_argument("--ssg-window", type=float, metavar="S",
+                   help="window length, seconds (default 1/3; 0.25 when every marker is on the head or trunk)")
+    g.add_argument("--ssg-overlap", type=float, metavar="S",
+                   help="overlap of consecutive windows, seconds, at most half a window (default 1/6; 0.1)")
+    g.add_argument("--ssg-k", type=int, metavar="K", help="subsequences kept a window (default 8; 16)")
+    g.add_argument("--ssg-weight", type=float, metavar="W",
+                   help="weight of the transition costs against the node costs (default 1; 4)")
+    g.add_argument("--ssg-offsets", choices=("auto", "fit", "nominal"),
+                   help="marker offsets on their segments: the set's (nominal), fitted to the input (fit), or fit "
+                        "unless the recording was simulated (auto, the default)")
 
 
 def os_message(exc: OSError) -> str:

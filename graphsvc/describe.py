@@ -12,7 +12,7 @@ from graphsvc.errors import UnknownFormatError
 from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
 from graphsvc.sensors.recording import describe_recording, read_recording
 
-RECORDING_SUFFIXES = (".rec", ".csv")
+RECORDING_SUFFIXES = (".rec", ".csv", ".c3d")
 
 
 def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
@@ -29,7 +29,7 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
             recordings.append({"path": str(path), **info})
         elif path.is_file() and path.suffix.lower() not in MOTION_SUFFIXES:
             raise UnknownFormatError(
-                f"{path}: unknown format (motion: {', '.join(MOTION_SUFFIXES)}; recordings: .rec, .csv)"
+                f"{path}: unknown format (motion: {', '.join(MOTION_SUFFIXES)}; recordings: {', '.join(RECORDING_SUFFIXES)})"
             )
         else:
             motion_inputs.append(p)
@@ -85,11 +85,13 @@ def format_description(info: dict) -> str:
             lines.append(_total_line(f["path"], f))
         lines.append(_total_line("total", info["totals"]))
     for r in info["recordings"]:
-        lines.append(
-            f"{r['path']}: recording, {r['samples']} samples of {len(r['sensors'])} sensors "
-            f"({', '.join(r['sensors'])}) at {r['rate_hz']:g} Hz, {r['duration_s']:.2f} s"
-        )
-        lines.append(f"  channels: {', '.join(r['channels'])}")
+        what = [f"{len(r['sensors'])} sensors ({', '.join(r['sensors'])})"] if r["sensors"] else []
+        if r.get("markers"):
+            what.append(f"{len(r['markers'])} markers ({', '.join(r['markers'][:12])}"
+                        f"{' …' if len(r['markers']) > 12 else ''}), seen {100 * r['markers_seen']:.0f} %")  # fmt: skip
+        lines.append(f"{r['path']}: recording, {r['samples']} samples of {' and '.join(what) or 'nothing'} at "
+                     f"{r['rate_hz']:g} Hz, {r['duration_s']:.2f} s")  # fmt: skip
+        lines.append(f"  channels: {', '.join(r['channels'][:36])}{' …' if len(r['channels']) > 36 else ''}")
     return "\n".join(lines)
 
 

@@ -19,8 +19,17 @@ from __future__ import annotations
 import os
 
 SPIN_COUNT = "100000"
+# OpenBLAS's threads busy-wait after a product the same way (2^28 cycles by default),
+# taking the cores from numba's threads in the kernel that follows: the SSG, which
+# alternates a matrix product and a threaded kernel every window, ran 15.6 s of input a
+# second with the default and 28.6 with 2^4 cycles (OPENBLAS_THREAD_TIMEOUT=4, the
+# least OpenBLAS takes; the products themselves stay threaded; dataset 2 of Bandai,
+# hands-feet markers). OpenBLAS reads it when numpy first loads it, so this module runs
+# before anything imports numpy (graphsvc's `__init__`).
+BLAS_TIMEOUT = "4"
 
 
 def configure() -> None:
     if "OMP_WAIT_POLICY" not in os.environ and "GOMP_SPINCOUNT" not in os.environ:
         os.environ["GOMP_SPINCOUNT"] = SPIN_COUNT
+    os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", BLAS_TIMEOUT)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from graphsvc.cli import main
-from graphsvc.errors import InputError, StrategyNotImplementedError
+from graphsvc.errors import InputError
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.motion.bvh import read_bvh
@@ -73,7 +73,7 @@ def test_other_rates_are_resampled_to_the_graph_rate(graph, kb, rec):
 
 
 def test_bad_options_and_constraints(graph, rec):
-    with pytest.raises(StrategyNotImplementedError, match="ssg"):
+    with pytest.raises(InputError, match="strategy 'ssg' needs markers, and the recording has none"):
         reconstruct(graph, rec, Options(strategy="ssg"))
     with pytest.raises(InputError, match="unknown strategy"):
         reconstruct(graph, rec, Options(strategy="magic"))

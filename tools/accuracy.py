@@ -12,7 +12,8 @@ is an `evaluate --graph` run whose hold-out protocol hides the test clips' sets:
 For each: layouts wrists-ankles and kelly6; inputs accelerometers alone (`--noise
 default,position=0,heading=none`), + overhead positions (`default,heading=none`, weights
 0.5,1,1), + positions and heading (`default`, weights 0.5,1,1: Kelly et al.'s, not
-tuned here); every registered strategy on the same clips. Prints one JSON object a
+tuned here); every registered strategy that reads accelerometers on the same clips
+(the optical-marker strategy has its own figures: tools/bench_ssg.py). Prints one JSON object a
 run (its row, the command and the figures, the locomotion and gesture means), then
 the table in Markdown.
 
@@ -62,7 +63,7 @@ def run(cmd: list[str]) -> None:
 
 
 def main() -> None:
-    from graphsvc.strategies import available
+    from graphsvc.strategies import available, get
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("data", help="the Bandai-Namco folder (with dataset-2/data)")
@@ -71,7 +72,8 @@ def main() -> None:
     parser.add_argument("--only", choices=sorted(PROTOCOLS))
     parser.add_argument("--layouts", default="wrists-ankles,kelly6")
     parser.add_argument("--inputs", default=",".join(INPUTS))
-    parser.add_argument("--strategies", default=",".join(available()))
+    accelerometer_strategies = [n for n in available() if "accelerations" in get(n).needs]  # (ssg: tools/bench_ssg.py)
+    parser.add_argument("--strategies", default=",".join(accelerometer_strategies))
     parser.add_argument("--reuse", action="store_true",
                         help="keep a run already in --work that the same command wrote (after a change that cannot"
                              " move it, e.g. one to how positions are used, for the accelerometer-only rows)")

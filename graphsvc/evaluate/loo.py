@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.evaluate.metrics import evaluate_frames, summarize
 from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
@@ -43,7 +44,7 @@ from graphsvc.strategies import get as get_strategy
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
-from graphsvc.sensors.simulate import simulate_recording
+from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording, simulate_recording
 
 def clip_file_name(source: str, name: str) -> str:
     """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
@@ -110,10 +111,26 @@ class EvalSetup:
     options: Options
     seed: int = 0
     protocol: str = "clip"  # (`protocols`: what hides the clip list given; "content": label accuracy not applicable)
+    # Optical markers instead of accelerometers, for a strategy that reads markers: how
+    # they are lost (`sensors.simulate.MarkerPattern`); the set and the kept markers
+    # are the strategy's (`options.ssg.markers`, `options.ssg.keep`).
+    pattern: MarkerPattern = MarkerPattern()
+
+
+def reads_markers(setup: EvalSetup) -> bool:
+    """Whether the test inputs are optical markers (the strategy needs them)."""
+    return "markers" in get_strategy(setup.options.strategy).needs
 
 
 def inputs_description(setup: EvalSetup) -> str:
     """Which streams the recordings carry, e.g. "accelerometers + positions (σ 0.1 m) + heading (noisy)"."""
+    if reads_markers(setup):
+        ssg, pat = setup.options.ssg, setup.pattern
+        kept = f" ({','.join(ssg.keep)})" if ssg.keep else ""
+        return (f"markers {ssg.markers}{kept}, σ {setup.noise.marker:g} mm"
+                + (f", {100 * pat.gap_fraction:g} % in gaps" if pat.gap_fraction else "")
+                + (f", gaps {pat.gaps}" if pat.gaps else "")
+                + (f", flicker {100 * pat.flicker:g} %" if pat.flicker else ""))  # fmt: skip
     parts = ["accelerometers"]
     if setup.positions:
         parts.append(f"positions (σ {setup.noise.position:g} m)")
@@ -126,7 +143,17 @@ def inputs_description(setup: EvalSetup) -> str:
 
 def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_hz: float, mapping=None) -> Recording:
     """The simulated input of a test clip (already at `rate_hz`), noise seeded by
-    `clip_seed`; positions dropped unless `setup.positions`."""
+    `clip_seed`; positions dropped unless `setup.positions`. For a strategy that reads
+    markers, the markers of `setup.options.ssg.markers` lost to `setup.pattern`."""
+    if reads_markers(setup):
+        if not setup.options.ssg.markers:
+            raise InputError(f"strategy {setup.options.strategy!r} reads optical markers: give the marker set to "
+                             "simulate (--markers)")  # fmt: skip
+        from graphsvc.sensors.markers import load_marker_set
+
+        return simulate_marker_recording(motion, load_marker_set(setup.options.ssg.markers), setup.noise,
+                                         seed=clip_seed(setup.seed, motion.name), rate_hz=rate_hz, mapping=mapping,
+                                         keep=setup.options.ssg.keep, pattern=setup.pattern)  # fmt: skip
     rec = simulate_recording(motion, layout, setup.noise, seed=clip_seed(setup.seed, motion.name), rate_hz=rate_hz,
                              mapping=mapping)  # fmt: skip
     if not setup.positions:
@@ -190,8 +217,9 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], joint_map(truth.skeleton, mapping))
     pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1],
                                                             joint_map(graph.skeleton, mapping))  # fmt: skip
-    fix_position = rec.ground_position is None
-    fix_heading = rec.heading is None and rec.ground_position is None  # (positions: the track placed it)
+    markers = rec.marker_positions is not None  # (markers place a reconstruction in the world themselves)
+    fix_position = rec.ground_position is None and not markers
+    fix_heading = rec.heading is None and rec.ground_position is None and not markers  # (positions: the track placed it)
     if fix_position or fix_heading:
         pred_canon, pred_ground, pred_heading = place_start(pred_canon, pred_ground, pred_heading, true_ground[0],
                                                             true_heading[0], fix_position, fix_heading)  # fmt: skip

@@ -9,6 +9,9 @@ their overhead camera and Vicon) and a slowly wandering error (a random walk, σ
 √s), and loses samples; heading comes from the exact pose, a noisy copy of it, the rule
 of Kelly et al. 2013, §6, from the (noisy) track, or is absent.
 
+Optical markers err by white noise of σ `marker` millimetres per axis (their
+dropouts and gaps are a pattern of their own: `sensors.simulate.marker_visibility`).
+
 Spec strings: a preset name, optionally followed by overrides, or overrides alone
 (starting from `none`): "default", "default,drop=0.02", "sigma=0.3,bias=0.1".
 """
@@ -41,6 +44,7 @@ class NoiseModel:
     heading_sigma: float = 0.0  # degrees, for heading=noisy
     rest_heading: float = 0.0  # degrees, for heading=rule: facing when slower than speed_threshold
     speed_threshold: float = 2.0  # m/s, for heading=rule
+    marker: float = 0.0  # optical marker position noise σ, millimetres (per axis, per sample)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -51,19 +55,20 @@ class NoiseModel:
 PRESETS: dict[str, NoiseModel] = {
     "none": NoiseModel(),
     # The evaluation defaults (Kelly et al.'s ±12 g sensors, tracker σ = 10 cm).
+    # Markers: an optical system's typical 1 mm.
     "default": NoiseModel(
-        sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0
+        sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0, marker=1.0
     ),
     # The default sensors with a tracker that errs as real ones do: offset by Kelly et
     # al.'s 13.7 cm and wandering 3 cm per √s (10 cm after 10 s, 23 cm after a minute).
     "tracker": NoiseModel(
         sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0,
-        position_offset=0.137, position_walk=0.03,
+        position_offset=0.137, position_walk=0.03, marker=1.0,
     ),
     # A poorly mounted, lossy setup for robustness checks.
     "harsh": NoiseModel(
         sigma=1.0, bias=0.5, misalign=10.0, range=8.0, drop=0.05, position=0.30,
-        position_drop=0.05, heading="rule", heading_sigma=20.0,
+        position_drop=0.05, heading="rule", heading_sigma=20.0, marker=5.0,
     ),
 }  # fmt: skip
 

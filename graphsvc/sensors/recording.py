@@ -391,15 +391,7 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
         raise FormatError(path, f"timestamps must be strictly increasing ({t[i]:g} after {t[i - 1]:g})",
                           line=row_lines[i])  # fmt: skip
 
-    if rate_hz is None and "rate_hz" in comments:
-        try:
-            rate_hz = float(comments["rate_hz"])
-        except ValueError:
-            raise FormatError(path, f"bad rate_hz comment {comments['rate_hz']!r}") from None
-    if rate_hz is None:
-        if len(t) < 2:
-            raise InputError(f"{path}: cannot infer the sample rate from one sample; pass rate_hz")
-        rate_hz = 1.0 / float(np.median(np.diff(t)))
+    rate_hz = sample_rate(path, rate_hz, comments, t)
 
     def gather(cols, width):  # per sensor, its columns or NaN where it has none
         if all(c is None for c in cols):
@@ -429,6 +421,21 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
     )
     rec.validate()
     return rec
+
+
+def sample_rate(path, rate_hz: float | None, comments: dict, t: np.ndarray) -> float:
+    """A CSV's sample rate: `rate_hz` when given, else its `# rate_hz=` comment, else the
+    median step of its timestamps t (s)."""
+    if rate_hz is None and "rate_hz" in comments:
+        try:
+            rate_hz = float(comments["rate_hz"])
+        except ValueError:
+            raise FormatError(path, f"bad rate_hz comment {comments['rate_hz']!r}") from None
+    if rate_hz is None:
+        if len(t) < 2:
+            raise InputError(f"{path}: cannot infer the sample rate from one sample; pass rate_hz")
+        rate_hz = 1.0 / float(np.median(np.diff(t)))
+    return float(rate_hz)
 
 
 def _parse_header(path: Path, cols: list[str], lineno: int):
@@ -508,7 +515,8 @@ def describe_recording(rec: Recording) -> dict:
     """What `graphsvc inspect` shows of a recording: {"samples", "sensors" (names),
     "channels" (e.g. "l_wrist.ax", ..., "ground_position.x", "ground_position.z",
     "heading"), "rate_hz", "duration_s", "has_ground_position", "has_heading",
-    "constraint_sets"}."""
+    "constraint_sets"} and, with markers, "markers" (names) and "markers_seen" (the
+    share of marker samples seen)."""
     channels = [f"{n}.a{k}" for n in rec.sensor_names for k in _AXES] if rec.accelerations is not None else []
     if rec.orientations is not None:
         channels += [f"{n}.q{k}" for n in rec.sensor_names for k in _QUAT]
@@ -518,7 +526,7 @@ def describe_recording(rec: Recording) -> dict:
         channels += ["ground_position.x", "ground_position.z"]
     if rec.heading is not None:
         channels.append("heading")
-    return {
+    out = {
         "samples": rec.num_samples,
         "sensors": list(rec.sensor_names),
         "channels": channels,
@@ -528,8 +536,26 @@ def describe_recording(rec: Recording) -> dict:
         "has_heading": rec.heading is not None,
         "constraint_sets": len(rec.constraints),
     }
+    if rec.marker_positions is not None:
+        out["markers"] = list(rec.marker_names)
+        out["markers_seen"] = round(float(np.isfinite(rec.marker_positions).all(axis=-1).mean()), 4)
+    return out
 
 
-def read_recording(path, rate_hz: float | None = None) -> Recording:
-    """A recording from a `.rec` file or a device CSV (by suffix)."""
-    return import_csv(path, rate_hz=rate_hz) if Path(path).suffix.lower() == ".csv" else load_recording(path)
+def read_recording(path, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
+    """A recording from a `.rec` file, a device CSV, a C3D file or a marker CSV (by
+    suffix, and a CSV by its first column: `time` for markers, `t_s` for devices). up,
+    units: for marker files, the vertical axis and length unit where the file does not
+    say (`sensors.optical`)."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".c3d":
+        from graphsvc.sensors.optical import read_c3d
+
+        return read_c3d(path, up=up, units=units)
+    if suffix == ".csv":
+        from graphsvc.sensors.optical import is_marker_csv, read_marker_csv
+
+        if is_marker_csv(path):
+            return read_marker_csv(path, up=up, units=units, rate_hz=rate_hz)
+        return import_csv(path, rate_hz=rate_hz)
+    return load_recording(path)

@@ -55,11 +55,13 @@ def _connect(args):
     return connect(args.server, token=token, tls_ca=args.tls_ca, tls_server_name=args.tls_server_name)
 
 
-def _options(args, constraints=None):
-    """SynthesisOptions from the strategy flags (graphsvc.cli_args.search_options)."""
+def _options(args, constraints=None, recording=None):
+    """SynthesisOptions from the strategy flags (graphsvc.cli_args.search_options), for
+    `recording` when given (convert.for_recording: SSG's marker set and offsets as the
+    recording decides them locally; a --markers file is sent as its content)."""
     from graphsvc.service.convert import options_to_proto
 
-    return options_to_proto(search_options(args), constraints)
+    return options_to_proto(search_options(args), constraints, recording)
 
 
 def _cmd_client_graphs(args) -> int:
@@ -93,7 +95,7 @@ def _cmd_client_synthesize(args) -> int:
     if args.report:
         _check_output(Path(args.report))
     rec = read_recording(args.recording)
-    options = _options(args, rec.constraints)
+    options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
@@ -119,7 +121,7 @@ def _cmd_client_stream(args) -> int:
     if out is not None:
         _check_output(out)
     rec = read_recording(args.recording)
-    options = _options(args)
+    options = _options(args, recording=rec)
 
     def on_frame(frame, latency_ms):
         if not args.quiet:

@@ -8,6 +8,7 @@ their shapes are in the proto's comments.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -200,9 +201,12 @@ def recording_to_proto(rec: Recording) -> pb.Recording:
     return msg
 
 
-def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording") -> Recording:
+def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording",
+                         match_layout: bool = True) -> Recording:  # fmt: skip
     """A validated Recording with the sensors in the graph's order. Checks shapes,
-    finiteness (NaN = missing is allowed in readings, never in times) and order."""
+    finiteness (NaN = missing is allowed in readings, never in times) and order.
+    match_layout False (a strategy that reads no accelerations): the sensors are
+    whatever the recording names (the graph's when it names none), in its order."""
     rate = msg.rate_hz
     if not (math.isfinite(rate) and rate > 0):
         raise FieldError(f"{field}.rate_hz", f"must be a positive number of Hz, got {rate}")
@@ -211,7 +215,10 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
     if T == 0:
         raise FieldError(f"{field}.timestamps_s", "no samples")
     _check_times(t, f"{field}.timestamps_s")
-    order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
+    if match_layout:
+        order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
+    else:
+        order, graph_names = None, tuple(msg.sensor_names) or tuple(graph_names)
     S = len(graph_names)
     acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order)
     orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order)
@@ -272,22 +279,30 @@ def _check_times(t: np.ndarray, field: str) -> None:
                          "(timestamps must strictly increase)")  # fmt: skip
 
 
-def sample_to_proto(time_s: float, acc: np.ndarray, position=None, heading=None) -> pb.SensorSample:
-    """acc (S, 3) m/s² NaN = missing; position (2,) m or None; heading rad or None."""
+def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, heading=None,
+                    markers=None) -> pb.SensorSample:  # fmt: skip
+    """acc (S, 3) m/s² NaN = missing, or None (a marker-only sample); position (2,) m
+    or None; heading rad or None; markers (M, 3) m for the stream's marker names, NaN =
+    not seen, or None."""
     msg = pb.SensorSample(time_s=float(time_s))
-    msg.accelerations_m_s2.extend(np.asarray(acc, np.float32).ravel().tolist())
+    if acc is not None:
+        msg.accelerations_m_s2.extend(np.asarray(acc, np.float32).ravel().tolist())
     if position is not None:
         msg.ground_position.x_m, msg.ground_position.z_m = (float(position[0]), float(position[1]))
     if heading is not None:
         msg.heading_rad = float(heading)
+    if markers is not None:
+        msg.marker_positions_m.extend(np.asarray(markers, np.float64).ravel().tolist())
     return msg
 
 
 def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, previous_time_s: float | None,
-                      field: str) -> tuple[float, np.ndarray, np.ndarray | None, float | None]:  # fmt: skip
+                      field: str, reads_acc: bool = True,
+                      ) -> tuple[float, np.ndarray | None, np.ndarray | None, float | None]:  # fmt: skip
     """(time_s, acc (S, 3) float64 m/s², position (2,) m or None, heading rad or
     None) in the graph's sensor order, checked: finite time after the previous one,
-    S×3 readings with no ±inf, finite-or-NaN position and heading."""
+    S×3 readings with no ±inf, finite-or-NaN position and heading. reads_acc False (a
+    strategy that reads no accelerations): the readings may be absent (acc None)."""
     t = msg.time_s
     if not math.isfinite(t):
         raise FieldError(f"{field}.time_s", f"not a finite number of seconds ({t})")
@@ -295,15 +310,18 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
         raise FieldError(f"{field}.time_s", f"{t!r} s is not after the previous sample's {previous_time_s!r} s "
                          "(times must strictly increase)")  # fmt: skip
     acc = np.array(msg.accelerations_m_s2, np.float64)
-    if acc.shape[0] != 3 * num_sensors:
-        raise FieldError(f"{field}.accelerations_m_s2", f"expected S×3 = {3 * num_sensors} values for the graph's "
-                         f"{num_sensors} sensors, got {acc.shape[0]}")  # fmt: skip
-    if np.isinf(acc).any():
-        k = int(np.argmax(np.isinf(acc)))
-        raise FieldError(f"{field}.accelerations_m_s2[{k}]", "infinite value (use NaN for missing)")
-    acc = acc.reshape(num_sensors, 3)
-    if order is not None:
-        acc = acc[order]
+    if acc.shape[0] == 0 and not reads_acc:
+        acc = None
+    else:
+        if acc.shape[0] != 3 * num_sensors:
+            raise FieldError(f"{field}.accelerations_m_s2", f"expected S×3 = {3 * num_sensors} values for the graph's "
+                             f"{num_sensors} sensors{'' if reads_acc else ' (or none)'}, got {acc.shape[0]}")  # fmt: skip
+        if np.isinf(acc).any():
+            k = int(np.argmax(np.isinf(acc)))
+            raise FieldError(f"{field}.accelerations_m_s2[{k}]", "infinite value (use NaN for missing)")
+        acc = acc.reshape(num_sensors, 3)
+        if order is not None:
+            acc = acc[order]
     position = None
     if msg.HasField("ground_position"):
         position = np.array([msg.ground_position.x_m, msg.ground_position.z_m], np.float64)
@@ -315,6 +333,33 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
         if math.isinf(heading):
             raise FieldError(f"{field}.heading_rad", "infinite value (use NaN for missing)")
     return float(t), acc, position, heading
+
+
+def sample_markers_from_proto(msg: pb.SensorSample, num_markers: int, field: str) -> np.ndarray | None:
+    """The sample's marker positions (M, 3) float64 m (NaN = not seen) for the stream's
+    M marker names, None when it names none; checked: M×3 values, no ±inf."""
+    markers = np.array(msg.marker_positions_m, np.float64)
+    if markers.shape[0] != 3 * num_markers:
+        raise FieldError(f"{field}.marker_positions_m", f"expected M×3 = {3 * num_markers} values for the "
+                         f"{num_markers} markers of config.marker_names, got {markers.shape[0]}")  # fmt: skip
+    if np.isinf(markers).any():
+        k = int(np.argmax(np.isinf(markers)))
+        raise FieldError(f"{field}.marker_positions_m[{k}]", "infinite value (use NaN for not seen)")
+    return markers.reshape(num_markers, 3) if num_markers else None
+
+
+def marker_names_from_proto(names, field: str) -> tuple[str, ...]:
+    """A stream's marker names, checked as a Recording's: non-empty, no commas, quotes,
+    newlines or edge spaces, distinct."""
+    names = tuple(names)
+    for i, n in enumerate(names):
+        if not n or n != n.strip() or set(n) & set(',"\r\n'):
+            raise FieldError(f"{field}[{i}]", f"bad marker name {n!r} (non-empty, no commas, quotes, newlines or "
+                             "edge spaces)")  # fmt: skip
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise FieldError(field, f"duplicate marker names: {', '.join(dup)}")
+    return names
 
 
 # ---------------------------------------------------------------- options
@@ -368,12 +413,16 @@ def constraints_from_proto(sets, field: str) -> list:
     return out
 
 
-def options_to_proto(options=None, constraints: list | None = None) -> pb.SynthesisOptions:
+def options_to_proto(options=None, constraints: list | None = None,
+                     recording: Recording | None = None) -> pb.SynthesisOptions:  # fmt: skip
     """pipeline.Options (None: the defaults) → SynthesisOptions. constraints: sets to
-    send when options.constraints is None (a recording's own), else ignored."""
+    send when options.constraints is None (a recording's own), else ignored.
+    recording: the recording the options go with (`for_recording`)."""
     from graphsvc.pipeline import Options
 
     options = Options() if options is None else options
+    if recording is not None:
+        options = for_recording(options, recording)
     if options.strategy not in STRATEGY_VALUES:
         raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
     w = options.weights
@@ -400,10 +449,51 @@ def options_to_proto(options=None, constraints: list | None = None) -> pb.Synthe
             setattr(msg.olng, key, float(getattr(o, key)))
         msg.olng.fix_feet = bool(o.fix_feet)
         msg.olng.track_pull_s = float(options.track_pull_s)
+    elif options.strategy == "ssg":
+        msg.ssg.SetInParent()  # (the oneof, as for OLNG)
+        msg.ssg.CopyFrom(ssg_to_proto(options.ssg))
     else:
         msg.viterbi.track_pull_s = float(options.track_pull_s)
     sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
     msg.constraint_sets.extend(constraints_to_proto(sets))
+    return msg
+
+
+def for_recording(options, rec: Recording):
+    """The options as the library would read them with `rec` (client side): what the
+    recording's meta decides does not cross the wire. For SSG: the marker set the
+    recording names when the options name none, and "auto" offsets as "nominal" for a
+    recording graphsvc simulated (`strategies.ssg`: auto fits the offsets unless it was)."""
+    from dataclasses import replace
+
+    if options.strategy != "ssg":
+        return options
+    o = options.ssg
+    meta = rec.meta or {}
+    if o.markers is None and isinstance(meta.get("marker_set"), dict):
+        o = replace(o, markers=json.dumps(meta["marker_set"], sort_keys=True))
+    if o.offsets == "auto" and meta.get("simulated"):
+        o = replace(o, offsets="nominal")
+    return replace(options, ssg=o)
+
+
+def ssg_to_proto(o) -> pb.SsgOptions:
+    """SsgOptions → proto. A marker set that is neither a built-in name nor JSON text
+    is a file on this side: it is read here and sent as JSON (the server reads no files)."""
+    from graphsvc.sensors.markers import PRESETS, load_marker_set
+
+    msg = pb.SsgOptions(offsets=o.offsets, keep=list(o.keep or ()))
+    if o.markers is not None:
+        text = o.markers.strip()
+        if text.startswith("{") or text in PRESETS:
+            msg.markers = text
+        else:
+            msg.markers = json.dumps(load_marker_set(text).to_dict(), sort_keys=True)
+    for key in ("window_s", "overlap_s", "weight"):
+        if getattr(o, key) is not None:
+            setattr(msg, key, float(getattr(o, key)))
+    if o.k is not None:
+        msg.k = int(o.k)
     return msg
 
 
@@ -453,6 +543,12 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
         extra["track_pull_s"] = v
     if msg.HasField("olng"):
         extra.update(olng_from_proto(msg.olng, f"{field}.olng"))
+    if msg.HasField("ssg"):
+        extra["ssg"] = ssg_from_proto(msg.ssg, f"{field}.ssg")
+    if strategy == "ssg" and ("ssg" not in extra or extra["ssg"].markers is None):
+        # (the library would take the recording's own set, which does not cross the wire)
+        raise FieldError(f"{field}.ssg.markers", "strategy SSG needs a marker set: a built-in name "
+                         f"({', '.join(_marker_presets())}) or a marker set as JSON")  # fmt: skip
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
     return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=own.heading_from_track,
                    rest_heading_deg=own.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
@@ -484,6 +580,72 @@ def olng_from_proto(msg, field: str) -> dict:
             raise FieldError(f"{field}.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
         out["track_pull_s"] = v
     return out
+
+
+def _marker_presets() -> tuple[str, ...]:
+    from graphsvc.sensors.markers import PRESETS
+
+    return tuple(PRESETS)
+
+
+def ssg_from_proto(msg: pb.SsgOptions, field: str):
+    """strategies.options.SsgOptions from its proto, checked (FieldError naming the
+    field). The marker set is a built-in name or JSON text, never a path: the server
+    reads no files for a client."""
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.sensors.markers import PRESETS, keep_markers, marker_set_from_dict
+    from graphsvc.strategies.options import SSG_OFFSETS, SsgOptions, check_ssg
+
+    text = msg.markers.strip()
+    marker_set = None
+    if text.startswith("{"):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise FieldError(f"{field}.markers", f"marker set JSON does not parse: {exc.msg} (at character "
+                             f"{exc.pos})") from None  # fmt: skip
+        try:
+            marker_set = marker_set_from_dict(data, "marker set")
+        except GraphsvcError as exc:
+            raise FieldError(f"{field}.markers", str(exc)) from None
+    elif text in PRESETS:
+        marker_set = PRESETS[text]
+    elif text:
+        raise FieldError(f"{field}.markers", f"unknown marker set {text!r}: not a built-in set "
+                         f"({', '.join(PRESETS)}) nor a marker set as JSON (the server reads no files)")  # fmt: skip
+    keep = tuple(msg.keep) or None
+    if keep is not None:
+        for i, name in enumerate(keep):
+            if not name:
+                raise FieldError(f"{field}.keep[{i}]", "empty marker name")
+    if keep is not None and marker_set is not None:
+        try:
+            keep_markers(marker_set, keep)
+        except InputError as exc:
+            raise FieldError(f"{field}.keep", str(exc)) from None
+    kw = {}
+    for key, low in (("window_s", "> 0"), ("overlap_s", "≥ 0"), ("weight", "≥ 0")):
+        if msg.HasField(key):
+            v = getattr(msg, key)
+            if not (math.isfinite(v) and (v > 0 if low == "> 0" else v >= 0)):
+                raise FieldError(f"{field}.{key}", f"must be a finite number {low}, got {v}")
+            kw[key] = v
+    if "window_s" in kw and "overlap_s" in kw and kw["overlap_s"] > 0.5 * kw["window_s"]:
+        raise FieldError(f"{field}.overlap_s", f"{kw['overlap_s']:g} s is more than half of window_s "
+                         f"({kw['window_s']:g} s)")  # fmt: skip
+    if msg.HasField("k"):
+        if not 1 <= msg.k <= 256:
+            raise FieldError(f"{field}.k", f"must be from 1 to 256, got {msg.k}")
+        kw["k"] = int(msg.k)
+    offsets = msg.offsets or "auto"
+    if offsets not in SSG_OFFSETS:
+        raise FieldError(f"{field}.offsets", f"must be one of {', '.join(SSG_OFFSETS)} (empty: auto), got {offsets!r}")
+    o = SsgOptions(markers=text or None, keep=keep, offsets=offsets, **kw)
+    try:
+        check_ssg(o)
+    except InputError as exc:  # anything the checks above missed still names the message
+        raise FieldError(field, str(exc)) from None
+    return o
 
 
 # ---------------------------------------------------------------- motion and frames

@@ -7,7 +7,7 @@ a thread pool sized for `max_streams` live streams plus a few unary calls; the
 search kernels release the GIL, so streams decode in parallel.
 
 Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unknown
-graph; UNIMPLEMENTED for strategies not built (OLNG, SSG); RESOURCE_EXHAUSTED beyond
+graph; UNIMPLEMENTED for a strategy not built (none at present); RESOURCE_EXHAUSTED beyond
 `max_streams` concurrent streams; UNAUTHENTICATED without a valid token; INTERNAL
 (with the traceback on the server's stderr) for bugs — bad input never takes the
 server down.
@@ -26,10 +26,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import grpc
+import numpy as np
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
+from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
@@ -246,8 +248,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
 
         try:
             graph = self._graph(request.graph).graph
-            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording")
             options = convert.options_from_proto(request.options, "options")
+            reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
+            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc)
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
             # Serial kernels: many calls share the machine (and while this one runs, a
@@ -296,10 +299,24 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         loaded = self._graph(config.graph, "config.graph")
         graph = loaded.graph
         names = graph.sensor_names
-        order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
         options = convert.options_from_proto(config.options, "config.options")
+        reads_acc = "accelerations" in get_strategy(options.strategy).uses
+        if reads_acc:
+            order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
+        else:  # whatever sensors the samples carry (the strategy reads none): the lengths still checked
+            order, names = None, tuple(config.sensor_names) or names
+        marker_names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")
+        kept = None  # SSG: the columns of the markers it matches, to tell a stream that never saw one
+        if options.strategy == "ssg":
+            from graphsvc.strategies.ssg.strategy import used_markers
+
+            try:
+                used, kept, _, _ = used_markers(options.ssg, marker_names, None)
+            except InputError as exc:  # none of the set's (kept) markers among the stream's
+                raise convert.FieldError("config.marker_names", str(exc)) from None
         try:
-            session = LiveSession(graph, options, names, keep_motion=False)  # the client keeps the frames
+            session = LiveSession(graph, options, names, keep_motion=False,  # the client keeps the frames
+                                  marker_names=marker_names)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise convert.FieldError("config.options", str(exc)) from None
         yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
@@ -309,6 +326,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         sample_index = -1
         previous_t = None
         frames_out = 0
+        seen_a_marker = False
         for request in request_iterator:
             if not context.is_active():
                 return  # cancelled or past the deadline: stop searching now
@@ -319,13 +337,17 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             if kind is None:
                 raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
             sample_index += 1
-            t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t,
-                                                                  f"sample[{sample_index}]")  # fmt: skip
+            where = f"sample[{sample_index}]"
+            t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t, where,
+                                                                  reads_acc)  # fmt: skip
+            markers = convert.sample_markers_from_proto(request.sample, len(marker_names), where)
+            if kept is not None and not seen_a_marker:
+                seen_a_marker = bool(np.isfinite(markers[kept]).all(axis=-1).any())
             previous_t = t
             try:
                 with self.threads.step() as threaded:  # the threads while this stream runs alone
                     session.threads = threaded
-                    frames = session.push(t, acc, position, heading)
+                    frames = session.push(t, acc, position, heading, markers=markers)
             except InputError as exc:
                 raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
             for frame in frames:
@@ -333,6 +355,11 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             frames_out += len(frames)
         if not context.is_active():
             return
+        if kept is not None and sample_index >= 0 and not seen_a_marker:
+            # (as Synthesize refuses such a recording; a stream can only tell at its end)
+            raise convert.FieldError("sample[*].marker_positions_m", f"every kept marker "
+                                     f"({', '.join(used.marker_names)}) is NaN in all {sample_index + 1} samples: "
+                                     "nothing to match")  # fmt: skip
         with self.threads.step() as threaded:
             session.threads = threaded
             frames = session.flush()

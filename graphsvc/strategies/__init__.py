@@ -8,7 +8,7 @@ else; each strategy owns its index, its batch reconstruction and its live sessio
 | `viterbi` | accelerations | ground position, heading, constraints | whole actions from the graph: the path that best explains every stream over time |
 | `nearest` | accelerations | (the track only to place the start) | nothing: per sample the nearest knowledge-base frame, the floor a search must beat |
 | `olng` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample the neighbourhood of frames moving as the readings do (Tautges et al. 2011) and a pose optimised from it |
-| `ssg` | (Tautges 2012) | | specified, not built yet: asking for it answers StrategyNotImplementedError |
+| `ssg` | labelled optical markers | | sparse, gappy markers: the knowledge base's subsequences that fit each window of the input, joined by a subsequence graph (Tautges 2012) |
 
 `register` adds one (a `Strategy` instance); the built-in ones load on first lookup, so
 importing this package compiles and loads nothing.
@@ -19,7 +19,7 @@ from __future__ import annotations
 from graphsvc.errors import InputError, StrategyNotImplementedError
 from graphsvc.strategies.base import Strategy
 
-PLANNED = ("ssg",)
+PLANNED: tuple[str, ...] = ()
 _REGISTRY: dict[str, Strategy] = {}
 _loaded = False
 
@@ -35,9 +35,10 @@ def _builtins() -> None:
     _loaded = True
     from graphsvc.strategies.nearest import NearestStrategy
     from graphsvc.strategies.olng.strategy import OlngStrategy
+    from graphsvc.strategies.ssg import SsgStrategy
     from graphsvc.strategies.viterbi import ViterbiStrategy
 
-    for s in (ViterbiStrategy(), NearestStrategy(), OlngStrategy()):
+    for s in (ViterbiStrategy(), NearestStrategy(), OlngStrategy(), SsgStrategy()):
         _REGISTRY.setdefault(s.name, s)
 
 

@@ -152,29 +152,47 @@ def to_graph_rate(rec: Recording, rate_hz: float) -> tuple[np.ndarray, np.ndarra
     """The recording's accelerations (T', S, 3), positions (T', 2) and headings (T',)
     on a uniform grid at `rate_hz` from its first timestamp, linearly interpolated
     (headings the short way round). Untouched when already uniform at that rate.
-    Returns (acc, position, heading, resampled)."""
-    t = np.asarray(rec.timestamps_s, dtype=np.float64)
-    acc = np.asarray(rec.accelerations, dtype=np.float64)
-    period = 1.0 / rate_hz
-    uniform = abs(rec.rate_hz - rate_hz) < 1e-9 * rate_hz and (
-        t.size < 2 or np.max(np.abs(np.diff(t) - period)) < 0.01 * period
-    )
-    if uniform:
+    Returns (acc, position, heading, resampled); a recording without accelerations
+    gives (T', 0, 3) (`markers_to_graph_rate` puts its markers on the same grid)."""
+    t, grid = _grid(rec, rate_hz)
+    acc = np.asarray(rec.accelerations, dtype=np.float64) if rec.accelerations is not None else np.zeros((t.size, 0, 3))
+    if grid is None:
         return acc, rec.ground_position, rec.heading, False
-    if t.size < 2:
-        return acc, rec.ground_position, rec.heading, False
-    n = int(math.floor((t[-1] - t[0]) * rate_hz + 1e-6)) + 1
-    grid = t[0] + np.arange(n) * period
     position = None if rec.ground_position is None else _interp_linear(t, np.asarray(rec.ground_position, float), grid)
     heading = None if rec.heading is None else _interp_angle(t, np.asarray(rec.heading, float), grid)
     return _interp_linear(t, acc, grid), position, heading, True
 
 
+def _grid(rec: Recording, rate_hz: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """The recording's timestamps and the uniform grid at `rate_hz` from its first
+    (None: already uniform at that rate, or a single sample)."""
+    t = np.asarray(rec.timestamps_s, dtype=np.float64)
+    period = 1.0 / rate_hz
+    uniform = abs(rec.rate_hz - rate_hz) < 1e-9 * rate_hz and (
+        t.size < 2 or np.max(np.abs(np.diff(t) - period)) < 0.01 * period
+    )
+    if uniform or t.size < 2:
+        return t, None
+    n = int(math.floor((t[-1] - t[0]) * rate_hz + 1e-6)) + 1
+    return t, t[0] + np.arange(n) * period
+
+
+def markers_to_graph_rate(rec: Recording, rate_hz: float) -> np.ndarray | None:
+    """The recording's marker positions (T', M, 3) on `to_graph_rate`'s grid (a marker
+    unseen at either neighbouring sample is unseen between them), or None."""
+    if rec.marker_positions is None:
+        return None
+    t, grid = _grid(rec, rate_hz)
+    points = np.asarray(rec.marker_positions, dtype=np.float64)
+    return points if grid is None else _interp_linear(t, points, grid)
+
+
 @dataclass
 class PreparedInput:
     """A recording checked against a graph and put on its sample grid: T samples of
-    accelerations (T, S, 3) m/s², ground positions (T, 2) m and headings (T,) rad (or
-    None), the constraint sets, and what the report says about them."""
+    accelerations (T, S, 3) m/s² (S = 0 for a strategy that reads none), ground
+    positions (T, 2) m and headings (T,) rad (or None), labelled marker positions (T, M,
+    3) m (or None), the constraint sets, and what the report says about them."""
 
     acc: np.ndarray
     position: np.ndarray | None
@@ -184,6 +202,9 @@ class PreparedInput:
     heading_source: str
     input_rate_hz: float
     ignored_inputs: list = field(default_factory=list)
+    markers: np.ndarray | None = None  # (T, M, 3) m, NaN = not seen
+    marker_names: tuple = ()
+    meta: dict = field(default_factory=dict)  # the recording's provenance
 
     @property
     def num_samples(self) -> int:
@@ -197,9 +218,13 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
     constraints = rec.constraints if options.constraints is None else options.constraints
     have = recording_inputs(rec) | ({"constraints"} if constraints else set())
     ignored = check_inputs(strategy, have)
-    check_layout(graph, rec.sensor_names)
+    if "accelerations" in strategy.uses:
+        check_layout(graph, rec.sensor_names)
     constraints = check_constraints(constraints, graph) if "constraints" in strategy.uses else []
     acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
+    if "accelerations" not in strategy.uses:
+        acc = np.zeros((acc.shape[0], 0, 3))
+    markers = markers_to_graph_rate(rec, graph.rate_hz) if "markers" in strategy.uses else None
     heading_source = "recording" if heading is not None else "none"
     if options.heading_from_track:
         if position is None:
@@ -212,7 +237,8 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
             track = CausalTrackHeading(rate, options.speed_threshold, rest)
             heading = np.array([track.push(p) for p in position])
         heading_source = "track"
-    return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored)
+    return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored,
+                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta))  # fmt: skip
 
 
 # Where a reconstruction starts is estimated from the measurements of its first second:
@@ -421,17 +447,23 @@ class LiveSession:
         return super().__new__(cls)
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
         from graphsvc.strategies import get
         from graphsvc.strategies.options import check_options
 
         check_options(options)
         self.strategy = get(options.strategy)
-        check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
+        self.reads_acc = "accelerations" in self.strategy.uses
+        if self.reads_acc:
+            check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
+        self.marker_names = tuple(marker_names or ()) if "markers" in self.strategy.uses else ()
+        if "markers" in self.strategy.needs and not self.marker_names:
+            raise InputError(f"strategy {self.strategy.name!r} needs the names of the markers the stream carries")
         self.graph = graph
         self.options = options
         self.rate = float(graph.rate_hz)
-        self.S = len(graph.sensor_names)
+        self.S = len(graph.sensor_names) if self.reads_acc else 0
+        self.M = len(self.marker_names)
         self.lag_frames = 0
         self.t0: float | None = None
         self.prev: tuple | None = None  # last raw sample (t, acc, position, heading)
@@ -451,16 +483,26 @@ class LiveSession:
     def threads(self, on: bool) -> None:
         pass
 
-    def _check(self, t_s, acc, position, heading):
+    def _check(self, t_s, acc, position, heading, markers=None):
         if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
             raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
-        acc = np.asarray(acc, dtype=np.float64)
+        acc = np.zeros((0, 3)) if acc is None and not self.reads_acc else np.asarray(acc, dtype=np.float64)
+        if not self.reads_acc and acc.size:
+            acc = np.zeros((0, 3))  # (a strategy that reads none: ignored)
         if acc.shape != (self.S, 3):
             raise InputError(f"accelerations must be ({self.S}, 3) for the graph's sensors, got {acc.shape}")
         if np.isinf(acc).any():
             raise InputError("accelerations contain infinite values (use NaN for missing)")
+        if self.M:
+            markers = np.full((self.M, 3), np.nan) if markers is None else np.asarray(markers, dtype=np.float64)
+            if markers.shape != (self.M, 3):
+                raise InputError(f"marker positions must be ({self.M}, 3) for the stream's markers, got {markers.shape}")
+            if np.isinf(markers).any():
+                raise InputError("marker positions contain infinite values (use NaN for not seen)")
+        else:
+            markers = None
         if position is not None:
             position = np.asarray(position, dtype=np.float64)
             if position.shape != (2,) or np.isinf(position).any():
@@ -469,21 +511,23 @@ class LiveSession:
             heading = float(heading)
             if math.isinf(heading):
                 raise InputError("heading must be finite (NaN for missing)")
-        return float(t_s), acc, position, heading
+        return float(t_s), acc, position, heading, markers
 
-    def push(self, t_s: float, acc, position=None, heading=None) -> list[Frame]:
-        """One sensor sample at time t_s (s): acc (S, 3) m/s² (NaN = missing), position
-        (2,) m or None, heading rad or None. Returns the frames now final."""
+    def push(self, t_s: float, acc=None, position=None, heading=None, markers=None) -> list[Frame]:
+        """One sample at time t_s (s): acc (S, 3) m/s² (NaN = missing; None for a
+        strategy that reads no accelerations), position (2,) m or None, heading rad or
+        None, markers (M, 3) m for the session's marker names (NaN = not seen) or None.
+        Returns the frames now final."""
         if self.flushed:
             raise InputError("the stream was already flushed")
-        t_s, acc, position, heading = self._check(t_s, acc, position, heading)
+        t_s, acc, position, heading, markers = self._check(t_s, acc, position, heading, markers)
         self.samples_in += 1
-        cur = (t_s, acc, position, heading)
+        cur = (t_s, acc, position, heading, markers)
         frames: list[Frame] = []
         if self.prev is None:
             self.t0 = t_s
             self.next_tick += 1
-            frames += self._decode(acc, position, heading)
+            frames += self._decode(acc, position, heading, markers)
         else:
             t_prev = self.prev[0]
             while True:
@@ -492,7 +536,7 @@ class LiveSession:
                     break
                 self.next_tick += 1
                 if abs(tick - t_s) < 1e-9:  # on the grid already: exact values, as in batch
-                    frames += self._decode(acc, position, heading)
+                    frames += self._decode(acc, position, heading, markers)
                 else:
                     frames += self._decode(*_blend(self.prev, cur, (tick - t_prev) / (t_s - t_prev)))
         self.prev = cur
@@ -506,7 +550,7 @@ class LiveSession:
         self.flushed = True
         return self._finish()
 
-    def _decode(self, acc, position, heading) -> list[Frame]:
+    def _decode(self, acc, position, heading, markers=None) -> list[Frame]:
         """One sample on the graph's grid → the frames now final."""
         raise NotImplementedError
 
@@ -550,8 +594,10 @@ class LiveSession:
 
 
 def _blend(a: tuple, b: tuple, w: float):
-    """Sample between raw samples a and b at fraction w: (acc, position, heading)."""
+    """Sample between raw samples a and b at fraction w: (acc, position, heading,
+    markers); a marker unseen at either is unseen between them."""
     acc = a[1] * (1.0 - w) + b[1] * w
+    markers = None if a[4] is None else a[4] * (1.0 - w) + b[4] * w
     pos = None
     if a[2] is not None and b[2] is not None:
         pos = a[2] * (1.0 - w) + b[2] * w
@@ -562,4 +608,4 @@ def _blend(a: tuple, b: tuple, w: float):
         head = float(quat.wrap_angle(a[3] + w * quat.wrap_angle(b[3] - a[3])))
     elif w >= 0.5 and b[3] is not None or w < 0.5 and a[3] is not None:
         head = b[3] if w >= 0.5 else a[3]
-    return acc, pos, head
+    return acc, pos, head, markers

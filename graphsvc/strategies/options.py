@@ -87,6 +87,64 @@ def check_olng(o: "OlngOptions") -> None:
         raise InputError("OLNG weights are all zero: the pose would be undetermined")
 
 
+SSG_OFFSETS = ("auto", "fit", "nominal")
+
+
+@dataclass(frozen=True)
+class SsgOptions:
+    """The SSG strategy's settings (Tautges 2012, ch. 4). markers: the marker set — a
+    built-in name (hands-feet, left-foot, head-back, vicon), a JSON/TOML file, or a set
+    as JSON text (None: the one the recording names, as `simulate --markers` writes);
+    keep: the markers to use (None: every marker of the set the recording has);
+    window_s, overlap_s: a window's length and consecutive windows' overlap (thesis: N =
+    20 and o = 10 frames at 60 Hz, 0.33 s and 0.17 s; 15 and 6, 0.25 s and 0.1 s, for
+    markers on the head and trunk only — None picks by the kept markers); k:
+    subsequences a window (8; 16 for head and trunk); weight: the transition costs'
+    weight against the node costs (1; 4 for head and trunk, whose windows say less of
+    the limbs: the thesis raises it there); offsets: the markers' offsets on their
+    segments — "nominal" (the set's), "fit" (estimated from the input against the
+    knowledge-base poses it is matched to, `strategies.ssg.offsets`), "auto" (fit
+    unless the recording was simulated by graphsvc with this set)."""
+
+    markers: str | None = None
+    keep: tuple[str, ...] | None = None
+    window_s: float | None = None
+    overlap_s: float | None = None
+    k: int | None = None
+    weight: float | None = None
+    offsets: str = "auto"
+
+    def resolved(self, trunk_only: bool) -> "SsgOptions":
+        """The defaults filled in for a set whose kept markers are (not) all on the head
+        and trunk."""
+        d = (0.25, 0.1, 16, 4.0) if trunk_only else (1.0 / 3.0, 1.0 / 6.0, 8, 1.0)
+        pick = lambda v, default: default if v is None else v  # noqa: E731
+        return SsgOptions(self.markers, self.keep, pick(self.window_s, d[0]), pick(self.overlap_s, d[1]),
+                          pick(self.k, d[2]), pick(self.weight, d[3]), self.offsets)  # fmt: skip
+
+
+def check_ssg(o: "SsgOptions") -> None:
+    """InputError for SSG settings no input accepts."""
+    for name in ("window_s", "overlap_s", "weight"):
+        v = getattr(o, name)
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise InputError(f"SSG {name.replace('_s', '').replace('_', ' ')} must be a finite number ≥ 0, got {v!r}")
+    if o.window_s is not None and o.window_s <= 0:
+        raise InputError(f"SSG window must be > 0 seconds, got {o.window_s}")
+    if o.window_s is not None and o.overlap_s is not None and o.overlap_s > 0.5 * o.window_s:
+        raise InputError(f"SSG overlap ({o.overlap_s:g} s) must be at most half the window ({o.window_s:g} s)")
+    if o.k is not None and (isinstance(o.k, bool) or not isinstance(o.k, int) or not 1 <= o.k <= 256):
+        raise InputError(f"SSG k must be a whole number from 1 to 256, got {o.k!r}")
+    if o.offsets not in SSG_OFFSETS:
+        raise InputError(f"SSG offsets must be one of {', '.join(SSG_OFFSETS)}, got {o.offsets!r}")
+    if o.keep is not None and (not isinstance(o.keep, tuple) or not all(isinstance(n, str) and n for n in o.keep)):
+        raise InputError("SSG keep must be marker names")
+    if o.markers is not None and (not isinstance(o.markers, str) or not o.markers):
+        raise InputError("SSG markers must name a marker set")
+
+
 @dataclass(frozen=True)
 class Options:
     """How to reconstruct. strategy: a registered name (`graphsvc.strategies`).
@@ -101,7 +159,7 @@ class Options:
     toward the measured positions, so the path and the synthesized root follow the
     tracker instead of drifting from where they started (0: placed once, at the
     start); OLNG pulls its root (and heading) the same way. olng: the OLNG strategy's
-    settings (`OlngOptions`)."""
+    settings (`OlngOptions`); ssg: the SSG strategy's (`SsgOptions`)."""
 
     strategy: str = "viterbi"
     weights: Weights = Weights()
@@ -113,6 +171,7 @@ class Options:
     beam: float | None = None
     track_pull_s: float = TRACK_PULL_S
     olng: OlngOptions = OlngOptions()
+    ssg: SsgOptions = SsgOptions()
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -142,6 +201,9 @@ def check_options(options: Options) -> None:
     if not isinstance(options.olng, OlngOptions):
         raise InputError(f"olng options must be OlngOptions, got {type(options.olng).__name__}")
     check_olng(options.olng)
+    if not isinstance(options.ssg, SsgOptions):
+        raise InputError(f"ssg options must be SsgOptions, got {type(options.ssg).__name__}")
+    check_ssg(options.ssg)
     if not math.isfinite(options.rest_heading_deg):
         raise InputError(f"rest heading must be finite, got {options.rest_heading_deg}")
     if not (math.isfinite(options.speed_threshold) and options.speed_threshold >= 0):

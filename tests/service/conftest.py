@@ -63,6 +63,29 @@ def rec_file(recording, tmp_path_factory) -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def marker_recording():
+    """The same 3 s of the held-out performance (not in the graph) as the hands-feet
+    markers would have been tracked: no accelerations, a 20-frame gap of every marker
+    and 10 % flicker."""
+    from graphsvc.motion.procedural import generate_performance
+    from graphsvc.sensors.noise import parse_noise
+    from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording
+
+    motion = generate_performance(seed=1)[0].slice(30, 120)
+    pattern = MarkerPattern(gaps=((10, 20),), flicker=0.1)
+    return simulate_marker_recording(motion, "hands-feet", parse_noise("none"), seed=0, pattern=pattern)
+
+
+@pytest.fixture(scope="session")
+def marker_rec_file(marker_recording, tmp_path_factory) -> Path:
+    from graphsvc.sensors.recording import save_recording
+
+    path = tmp_path_factory.mktemp("rec") / "markers.rec"
+    save_recording(marker_recording, path)
+    return path
+
+
 def start(loaded_graphs, **config):
     from graphsvc.service.server import ServerConfig, start_server
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import signal
 import time
@@ -30,7 +31,7 @@ def served(graph_file, tmp_path):
         proc.wait()
 
 
-def test_client_commands(served, rec_file, graph, recording, tmp_path, capsys):
+def test_client_commands(served, rec_file, graph, recording, marker_rec_file, marker_recording, tmp_path, capsys):
     from graphsvc.motion.bvh import bvh_text
     from graphsvc.pipeline import Options, reconstruct
     from graphsvc.strategies.options import Weights
@@ -59,8 +60,28 @@ def test_client_commands(served, rec_file, graph, recording, tmp_path, capsys):
     # Errors: one line, exit 2.
     assert main(["client", "graphs", "--server", address]) == 2
     assert "UNAUTHENTICATED" in capsys.readouterr().err
-    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--strategy", "ssg"]) == 2
-    assert "UNIMPLEMENTED" in capsys.readouterr().err
+    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--strategy", "ssg",
+                 "--markers", "hands-feet"]) == 2  # (an accelerometer recording: no markers)
+    assert "INVALID_ARGUMENT" in (err := capsys.readouterr().err) and "needs markers" in err, err
+
+    # SSG: a marker-only recording, the set by name or from a file (sent as its content).
+    from graphsvc.sensors.markers import PRESETS
+    from graphsvc.strategies.options import SsgOptions
+
+    set_file = tmp_path / "feet.json"
+    set_file.write_text(json.dumps({**PRESETS["hands-feet"].to_dict(), "name": "feet"}))
+    for flags, ssg in ((["--markers", "hands-feet"], SsgOptions(markers="hands-feet")),
+                       (["--markers", str(set_file), "--keep", "l_foot,r_foot", "--ssg-k", "4"],
+                        SsgOptions(markers=str(set_file), keep=("l_foot", "r_foot"), k=4))):  # fmt: skip
+        assert main(["client", "synthesize", str(marker_rec_file), "-o", str(out), *common, "--strategy", "ssg",
+                     *flags]) == 0  # fmt: skip
+        assert f"{marker_recording.num_samples} frames" in capsys.readouterr().out
+        expected = reconstruct(graph, marker_recording, Options(strategy="ssg", ssg=ssg))
+        assert out.read_text() == bvh_text(expected.motion, scale=100.0)
+    # Live, with the marker set the recording names.
+    assert main(["client", "stream", str(marker_rec_file), "-o", str(live), *common, "--speed", "30", "--strategy",
+                 "ssg", "--latency", "0.5", "--quiet"]) == 0  # fmt: skip
+    assert f"{marker_recording.num_samples} frames from {marker_recording.num_samples} samples" in capsys.readouterr().out
 
 
 def test_sigterm_drains_in_flight_streams_then_exits_0(served, recording):

@@ -113,7 +113,7 @@ def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(con
     expected, _ = live_frames(graph, recording, Options())
     used = []  # whether each push and the flush ran with the threads
     push, flush = LiveSession.push, LiveSession.flush
-    monkeypatch.setattr(LiveSession, "push", lambda self, *a: used.append(self.threads) or push(self, *a))
+    monkeypatch.setattr(LiveSession, "push", lambda self, *a, **kw: used.append(self.threads) or push(self, *a, **kw))
     monkeypatch.setattr(LiveSession, "flush", lambda self: used.append(self.threads) or flush(self))
     assert server.servicer.threads.running_searches == 0
     feed = C.SampleFeed(C.stream_config("small"))
@@ -232,7 +232,7 @@ def _bad_cases(recording):
         "nan latency": ({"options.latency_s": float("nan")}, INVALID, "options.latency_s"),
         "zero beam": ({"options.beam": 0.0}, INVALID, "options.beam"),
         "unknown strategy": ({"options.strategy": 7}, INVALID, "options.strategy"),
-        "ssg": ({"options.strategy": pb.STRATEGY_SSG}, grpc.StatusCode.UNIMPLEMENTED, "ssg"),
+        "ssg without a marker set": ({"options.strategy": pb.STRATEGY_SSG}, INVALID, "options.ssg.markers"),
         "constraint order": ({"options": bad_constraint}, INVALID, "options.constraint_sets[0].constraints[0]"),
         "unknown label": ({"options": unknown_label}, INVALID, "no-such-label"),
     }
@@ -262,8 +262,8 @@ def _stream_cases(recording):
         "sample first": ([pb.StreamSynthesizeRequest(sample=samples[0])], INVALID, "config"),
         "config twice": ([pb.StreamSynthesizeRequest(config=config)] * 2, INVALID, "sample[0]"),
         "unknown graph": (list(_requests(C.stream_config("nope"), samples)), grpc.StatusCode.NOT_FOUND, "nope"),
-        "ssg": (list(_requests(C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG)), samples)),
-                grpc.StatusCode.UNIMPLEMENTED, "ssg"),
+        "ssg without a marker set": (list(_requests(C.stream_config("small", pb.SynthesisOptions(
+            strategy=pb.STRATEGY_SSG)), samples)), INVALID, "config.options.ssg.markers"),
         "time backwards": (list(_requests(config, back)), INVALID, "sample[2].time_s"),
         "sensor count": (list(_requests(config, short)), INVALID, "sample[0].accelerations_m_s2"),
         "inf reading": (list(_requests(config, inf)), INVALID, "sample[0].accelerations_m_s2[17]"),

@@ -29,25 +29,42 @@ def rec():
     return simulate_recording(motion, PRESETS["kelly6"], NOISE["none"], seed=0)
 
 
-def test_names_and_lookup():
-    assert available()[:3] == ("viterbi", "nearest", "olng")
+def test_names_and_lookup(monkeypatch):
+    assert available()[:4] == ("viterbi", "nearest", "olng", "ssg")
     assert set(names()) >= {"viterbi", "nearest", "olng", "ssg"}
     for name in available():
         s = get(name)
         assert isinstance(s, Strategy) and s.name == name and s.summary
         assert s.needs <= s.uses <= set(INPUTS)
         assert issubclass(s.session_class, LiveSession)
+    import graphsvc.strategies as registry
+
+    monkeypatch.setattr(registry, "PLANNED", ("hosvd",))  # a strategy specified but not built
+    assert names()[-1] == "hosvd"
     with pytest.raises(StrategyNotImplementedError, match="not implemented"):
-        get("ssg")
+        get("hosvd")
     with pytest.raises(InputError, match="unknown strategy 'elbow'"):
         get("elbow")
 
 
-def test_live_session_opens_the_strategys_session(graph, rec):
+def test_live_session_opens_the_strategys_session(graph, rec, monkeypatch):
+    from graphsvc.strategies.ssg import SsgSession
+
     assert type(LiveSession(graph, Options(), rec.sensor_names)) is ViterbiSession
     assert type(LiveSession(graph, Options(strategy="nearest"), rec.sensor_names)) is NearestSession
-    with pytest.raises(StrategyNotImplementedError):
+    with pytest.raises(InputError, match="needs the names of the markers"):
         LiveSession(graph, Options(strategy="ssg"), rec.sensor_names)
+    with pytest.raises(InputError, match="needs a marker set"):
+        LiveSession(graph, Options(strategy="ssg"), marker_names=("l_hand",))
+    from graphsvc.strategies.options import SsgOptions
+
+    ssg = LiveSession(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet")), marker_names=("l_hand",))
+    assert type(ssg) is SsgSession
+    import graphsvc.strategies as registry
+
+    monkeypatch.setattr(registry, "PLANNED", ("hosvd",))
+    with pytest.raises(StrategyNotImplementedError):
+        LiveSession(graph, Options(strategy="hosvd"), rec.sensor_names)
 
 
 @pytest.mark.parametrize("strategy", ["viterbi", "nearest", "olng"])

@@ -135,7 +135,7 @@ class JointChannels(_message.Message):
     def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SynthesisOptions(_message.Message):
-    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi", "olng")
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi", "olng", "ssg")
     STRATEGY_FIELD_NUMBER: _ClassVar[int]
     WEIGHTS_FIELD_NUMBER: _ClassVar[int]
     LATENCY_S_FIELD_NUMBER: _ClassVar[int]
@@ -146,6 +146,7 @@ class SynthesisOptions(_message.Message):
     BEAM_FIELD_NUMBER: _ClassVar[int]
     VITERBI_FIELD_NUMBER: _ClassVar[int]
     OLNG_FIELD_NUMBER: _ClassVar[int]
+    SSG_FIELD_NUMBER: _ClassVar[int]
     strategy: Strategy
     weights: CostWeights
     latency_s: float
@@ -156,7 +157,8 @@ class SynthesisOptions(_message.Message):
     beam: float
     viterbi: ViterbiOptions
     olng: OlngOptions
-    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ..., olng: _Optional[_Union[OlngOptions, _Mapping]] = ...) -> None: ...
+    ssg: SsgOptions
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ..., olng: _Optional[_Union[OlngOptions, _Mapping]] = ..., ssg: _Optional[_Union[SsgOptions, _Mapping]] = ...) -> None: ...
 
 class OlngOptions(_message.Message):
     __slots__ = ("k", "i", "m", "basic_steps", "w_prior", "w_contr", "w_pose", "w_motion", "w_smooth", "fix_feet", "track_pull_s")
@@ -183,6 +185,24 @@ class OlngOptions(_message.Message):
     fix_feet: bool
     track_pull_s: float
     def __init__(self, k: _Optional[int] = ..., i: _Optional[int] = ..., m: _Optional[int] = ..., basic_steps: _Optional[bool] = ..., w_prior: _Optional[float] = ..., w_contr: _Optional[float] = ..., w_pose: _Optional[float] = ..., w_motion: _Optional[float] = ..., w_smooth: _Optional[float] = ..., fix_feet: _Optional[bool] = ..., track_pull_s: _Optional[float] = ...) -> None: ...
+
+class SsgOptions(_message.Message):
+    __slots__ = ("markers", "keep", "window_s", "overlap_s", "k", "weight", "offsets")
+    MARKERS_FIELD_NUMBER: _ClassVar[int]
+    KEEP_FIELD_NUMBER: _ClassVar[int]
+    WINDOW_S_FIELD_NUMBER: _ClassVar[int]
+    OVERLAP_S_FIELD_NUMBER: _ClassVar[int]
+    K_FIELD_NUMBER: _ClassVar[int]
+    WEIGHT_FIELD_NUMBER: _ClassVar[int]
+    OFFSETS_FIELD_NUMBER: _ClassVar[int]
+    markers: str
+    keep: _containers.RepeatedScalarFieldContainer[str]
+    window_s: float
+    overlap_s: float
+    k: int
+    weight: float
+    offsets: str
+    def __init__(self, markers: _Optional[str] = ..., keep: _Optional[_Iterable[str]] = ..., window_s: _Optional[float] = ..., overlap_s: _Optional[float] = ..., k: _Optional[int] = ..., weight: _Optional[float] = ..., offsets: _Optional[str] = ...) -> None: ...
 
 class ViterbiOptions(_message.Message):
     __slots__ = ("beam", "heading_from_track", "rest_heading_deg", "speed_threshold_m_s", "track_pull_s")
@@ -319,26 +339,30 @@ class StreamSynthesizeRequest(_message.Message):
     def __init__(self, config: _Optional[_Union[StreamConfig, _Mapping]] = ..., sample: _Optional[_Union[SensorSample, _Mapping]] = ...) -> None: ...
 
 class StreamConfig(_message.Message):
-    __slots__ = ("graph", "options", "sensor_names")
+    __slots__ = ("graph", "options", "sensor_names", "marker_names")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
+    MARKER_NAMES_FIELD_NUMBER: _ClassVar[int]
     graph: str
     options: SynthesisOptions
     sensor_names: _containers.RepeatedScalarFieldContainer[str]
-    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ...) -> None: ...
+    marker_names: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SensorSample(_message.Message):
-    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad")
+    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m")
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     GROUND_POSITION_FIELD_NUMBER: _ClassVar[int]
     HEADING_RAD_FIELD_NUMBER: _ClassVar[int]
+    MARKER_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
     time_s: float
     accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     ground_position: GroundPosition
     heading_rad: float
-    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ...) -> None: ...
+    marker_positions_m: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class GroundPosition(_message.Message):
     __slots__ = ("x_m", "z_m")

@@ -145,17 +145,17 @@ class OlngSession(LiveSession):
     """OLNG live: each grid sample's frame as it arrives (lag 0)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
         from graphsvc.strategies.base import prepared_index
 
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion)
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
         index = prepared_index(self.strategy, graph)
         self.decoder = make_decoder(graph, index.with_allowed(allowed), options)
         warm_up(graph, index)
         self.lag_frames = 0
         self.frame_index = 0
 
-    def _decode(self, acc, position, heading):
+    def _decode(self, acc, position, heading, markers=None):
         position, heading = _streams(self.options, position, heading)
         rot, trans, sources, label, _ = self.decoder.step(acc, position, heading)
         clip = np.full((1, SOURCES), -1, np.int64)

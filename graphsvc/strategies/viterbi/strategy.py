@@ -147,8 +147,8 @@ class ViterbiSession(LiveSession):
     while a session runs alone: `threads`)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True):  # fmt: skip
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion)
+                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
@@ -173,7 +173,7 @@ class ViterbiSession(LiveSession):
     def threads(self, on: bool) -> None:
         self.decoder.search.threads = on
 
-    def _decode(self, acc, position, heading):
+    def _decode(self, acc, position, heading, markers=None):
         if self.track is not None:
             heading = self.track.push(position)
         nodes, edges = self.decoder.push(acc, position, heading)  # (the search scores what its weights count)
