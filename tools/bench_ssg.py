@@ -48,8 +48,9 @@ markers (default noise, seed 0, 30 Hz). One-time costs (graph load, index build 
 parent / load from its cache in the child, the knowledge base's marker clouds for the
 set, numba's kernels) are timed apart from the per-input search and synthesis (best of
 --recon-repeats runs after a warm-up run on another clip). Target: ≥ 1 s of input per
-second on 2 cores. A diagnostic reruns hands-feet with OPENBLAS_NUM_THREADS=1
-(--skip-blas-variant leaves it out).
+second on 2 cores. A diagnostic reruns hands-feet with OPENBLAS_NUM_THREADS=1 (graphsvc
+instead stops OpenBLAS's threads spinning after a product, OPENBLAS_THREAD_TIMEOUT=4:
+`numba_env`; --skip-blas-variant leaves it out).
 
 "accuracy" (--evaluate): `graphsvc evaluate --strategy ssg` on Bandai-Namco dataset 2
 (a light graph of all of it; the takes 001 and 004 of every content × style as tests,
@@ -57,8 +58,9 @@ each hiding every take of its content × style, and the normal and masculine sty
 takes 001 and 004, each hiding every clip of its actor — tools/accuracy.py's clips),
 for the marker sets hands-feet, left-foot and head-back, each without gaps and with 30 %
 of the samples in random gaps of 5–80 frames (`--gap-fraction 0.3`), default noise
-(markers σ 1 mm): the mean joint, root and heading errors and labels, and the
-locomotion and gesture means.
+(markers σ 1 mm), and hands-feet on performances of six held-out clips of six actions
+joined (`--mixed 6`, takes hidden): the mean joint, root and heading errors and
+labels, and the locomotion and gesture means.
 
 Each section records "contention": the share of the machine's CPU other processes took
 meanwhile (/proc/stat less this process and its children); the threaded kernels lose
@@ -80,10 +82,11 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+import graphsvc  # noqa: E402,F401  (first: it sets OpenBLAS's and OpenMP's waits before numpy loads)
+import numpy as np  # noqa: E402
 
 RATE_HZ = 30.0
 KERNEL_SET = "hands-feet"
@@ -624,7 +627,8 @@ EVAL_GAPS = (0.0, 0.3)
 def evaluate_section(bandai: Path, work: Path, jobs: int) -> dict:
     """`graphsvc evaluate --strategy ssg` on dataset 2 (a light graph of all of it, each
     test hiding its takes or its actor): every marker set without gaps and with 30 % of
-    the samples in random gaps, default noise (markers σ 1 mm)."""
+    the samples in random gaps, default noise (markers σ 1 mm); and hands-feet on
+    performances of six held-out clips of six actions joined (--mixed 6)."""
     kb = bandai / "dataset-2" / "data"
     graph = work / "dataset2.graph"
     exe = Path(sys.executable).with_name("graphsvc")
@@ -632,31 +636,34 @@ def evaluate_section(bandai: Path, work: Path, jobs: int) -> dict:
     subprocess.run(cli + ["build", str(kb), "--no-msv", "--no-interp", "--no-bridges", "--jobs", str(jobs), "--quiet",
                           "-o", str(graph)], check=True, capture_output=True)  # fmt: skip
     rows = []
-    for protocol, tests in EVAL_PROTOCOLS.items():
-        for marker_set in EVAL_SETS:
-            for gaps in EVAL_GAPS:
-                out = work / f"{protocol}-{marker_set}-{gaps:g}.json"
-                cmd = cli + ["evaluate", str(kb), "--graph", str(graph), "--test", tests, "--hold-out", protocol,
-                             "--strategy", "ssg", "--markers", marker_set, "--jobs", str(jobs), "--quiet",
-                             "--json", str(out)] + (["--gap-fraction", f"{gaps:g}"] if gaps else [])  # fmt: skip
-                t0 = time.perf_counter()
-                done = subprocess.run(cmd, capture_output=True, text=True)
-                if done.returncode != 0:
-                    rows.append({"protocol": protocol, "markers": marker_set, "gap_fraction": gaps,
-                                 "error": done.stderr[-600:]})  # fmt: skip
-                    continue
-                run = json.loads(out.read_text())
-                mean, groups = run["mean"], run.get("groups", {})
-                rows.append({
-                    "protocol": protocol, "markers": marker_set, "gap_fraction": gaps, "clips": len(run["clips"]),
-                    "joint_err_cm": round(mean["joint_err_cm"], 2), "root_err_cm": round(mean["root_err_cm"], 2),
-                    "heading_err_deg": round(mean["heading_err_deg"], 2),
-                    "label_acc": None if mean.get("label_acc") is None else round(mean["label_acc"], 3),
-                    "locomotion_joint_err_cm": round(groups["locomotion"]["joint_err_cm"], 2) if "locomotion" in groups else None,
-                    "gestures_joint_err_cm": round(groups["gestures"]["joint_err_cm"], 2) if "gestures" in groups else None,
-                    "samples_per_s": mean.get("samples_per_s"), "wall_s": round(time.perf_counter() - t0, 1),
-                    "command": shlex.join(["graphsvc"] + cmd[len(cli):]),
-                })  # fmt: skip
+    runs = [(p, m, g, None) for p in EVAL_PROTOCOLS for m in EVAL_SETS for g in EVAL_GAPS]
+    runs += [("takes", "hands-feet", g, 6) for g in EVAL_GAPS]  # (mixed: six held-out clips of six actions joined)
+    for protocol, marker_set, gaps, mixed in runs:
+        tests = EVAL_PROTOCOLS[protocol]
+        out = work / f"{protocol}-{marker_set}-{gaps:g}-{mixed}.json"
+        cmd = cli + ["evaluate", str(kb), "--graph", str(graph), "--test", tests, "--hold-out", protocol,
+                     "--strategy", "ssg", "--markers", marker_set, "--jobs", str(jobs), "--quiet",
+                     "--json", str(out)] + (["--gap-fraction", f"{gaps:g}"] if gaps else []) + \
+            (["--mixed", str(mixed)] if mixed else [])  # fmt: skip
+        t0 = time.perf_counter()
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode != 0:
+            rows.append({"protocol": protocol, "markers": marker_set, "gap_fraction": gaps, "mixed": mixed,
+                         "error": done.stderr[-600:]})  # fmt: skip
+            continue
+        run = json.loads(out.read_text())
+        mean, groups = run["mean"], run.get("groups", {})
+        rows.append({
+            "protocol": protocol, "markers": marker_set, "gap_fraction": gaps, "mixed": mixed,
+            "clips": len(run["clips"]),
+            "joint_err_cm": round(mean["joint_err_cm"], 2), "root_err_cm": round(mean["root_err_cm"], 2),
+            "heading_err_deg": round(mean["heading_err_deg"], 2),
+            "label_acc": None if mean.get("label_acc") is None else round(mean["label_acc"], 3),
+            "locomotion_joint_err_cm": round(groups["locomotion"]["joint_err_cm"], 2) if "locomotion" in groups else None,
+            "gestures_joint_err_cm": round(groups["gestures"]["joint_err_cm"], 2) if "gestures" in groups else None,
+            "samples_per_s": mean.get("samples_per_s"), "wall_s": round(time.perf_counter() - t0, 1),
+            "command": shlex.join(["graphsvc"] + cmd[len(cli):]),
+        })  # fmt: skip
     return {"what": evaluate_section.__doc__.replace("\n    ", " ").strip(), "runs": rows}
 
 
@@ -752,7 +759,9 @@ def main() -> None:
         if not args.skip_blas_variant and "OPENBLAS_NUM_THREADS" not in os.environ:
             result["reconstruction"]["diagnostic_openblas_1_thread"] = {
                 "why": "OpenBLAS's worker threads busy-wait after each product and take the cores from numba's "
-                       "OpenMP workers in the threaded kernels that follow (subsequence_dtw's median vs best above)",
+                       "OpenMP workers in the threaded kernels that follow; graphsvc shortens their wait "
+                       f"(OPENBLAS_THREAD_TIMEOUT={os.environ.get('OPENBLAS_THREAD_TIMEOUT')}): this run keeps BLAS "
+                       "on one thread instead, for comparison",
                 **child(RECON_SETS[0], {"OPENBLAS_NUM_THREADS": "1"}),
             }  # fmt: skip
         if args.evaluate:

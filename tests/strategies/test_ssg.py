@@ -20,7 +20,7 @@ from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
 from graphsvc.pipeline import LiveSession, Options, reconstruct
 from graphsvc.sensors.markers import PRESETS as MARKERS
-from graphsvc.sensors.markers import MarkerSet, MarkerSpec
+from graphsvc.sensors.markers import MarkerSet
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
 from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording

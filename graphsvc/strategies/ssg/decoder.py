@@ -150,7 +150,7 @@ class SsgDecoder:
         if self.T == 0:
             return []
         out = []
-        while (len(self.layers) + 1) * self.w.step - self.w.step + self.w.n <= self.T:
+        while len(self.layers) * self.w.step + self.w.n <= self.T:
             start = len(self.layers) * self.w.step
             self._add_layer(start, start + self.w.n)
             out += self._commit()
@@ -165,7 +165,7 @@ class SsgDecoder:
         entry = self._entry(first)
         nodes, _ = cheapest_path(self.layers, self.edges, self.w.weight, first, entry)
         self.path.extend(int(v) for v in nodes)
-        return out + self._emit(len(self.layers) - 1, self.T)
+        return out + self._emit(self.T)
 
     # ---------------------------------------------------------------- layers
 
@@ -212,9 +212,9 @@ class SsgDecoder:
         layer.add(RETRIEVED, anchors, costs)
 
     def _continuations(self, z: int, D: np.ndarray, step: np.ndarray, ends: set) -> list:
-        """The best subsequence ending where each retrieved subsequence of the window
-        before, played on at its warping factor, ends in this one — when the k best
-        missed it. With markers that cannot tell poses apart (a single marker standing
+        """The best subsequence ending where each of the k nodes of the window before with
+        the cheapest paths to them, played on at its warping factor, ends in this one —
+        when the k best missed it. With markers that cannot tell poses apart (a single marker standing
         still matches every stance of every clip) the k best are an arbitrary few of
         many equal ones; the subsequence that simply goes on is always among the
         candidates, so the graph can keep a motion coherent."""
@@ -353,10 +353,10 @@ class SsgDecoder:
                 break  # (no searchable window yet: it waits)
             nodes, _ = cheapest_path(self.layers, self.edges, self.w.weight, c, self._entry(c))
             self.path.append(int(nodes[0]))
-            out += self._emit(c, self.layers[c + 1].start)
+            out += self._emit(self.layers[c + 1].start)
         return out
 
-    def _emit(self, upto_layer: int, upto_frame: int) -> list[tuple[int, int]]:
+    def _emit(self, upto_frame: int) -> list[tuple[int, int]]:
         if upto_frame <= self.emitted:
             return []
         a, self.emitted = self.emitted, upto_frame

@@ -192,7 +192,6 @@ def k_best(D: np.ndarray, step: np.ndarray, k: int, batch: int = 256) -> list[tu
     first: [(cost, frames (N,) float64)]."""
     last = D[-1]
     N = D.shape[0]
-    F = last.size
     taken: list[tuple[float, float]] = []
     out: list[tuple[float, np.ndarray]] = []
     finite = np.isfinite(last)

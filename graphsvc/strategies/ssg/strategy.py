@@ -27,6 +27,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
+from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.markers import TRUNK_SEGMENTS, MarkerSet, keep_markers, load_marker_set, marker_set_from_dict
 from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, label_runs
 from graphsvc.strategies.options import Options, SsgOptions
@@ -189,8 +190,6 @@ class SsgStrategy(Strategy):
         a, f, wt = decoder.sources(0, T)
         rot, trans = poses(graph, idx, decoder.anchors, a, f, wt)
         clip, frame, weight, labels = provenance(graph, idx, a, f, wt)
-        from graphsvc.motion.skeleton import Motion
-
         motion = Motion(graph.skeleton, rot, trans, rate, name="synthesized", source="ssg")
         synth_s = time.perf_counter() - t0
         report = _report(decoder, used, resolved, w, lag, ignored, missing, offsets_report, seen, labels, idx,
