@@ -160,6 +160,11 @@ def test_windows_options_and_the_report(graph, kb):
     assert r.report["labels"] and r.report["path"][0]["start_frame"] == 0
     assert sum(p["frames"] for p in r.report["path"]) >= clip.num_frames
     assert r.node_path is None and r.provenance.clip.shape == (clip.num_frames, 2)
+    # Weight 0: node costs alone (the structural non-edges stay non-edges).
+    gappy = simulate_marker_recording(clip, "hands-feet", NOISE["none"], pattern=MarkerPattern(gaps=((10, 40),)))
+    r = reconstruct(graph, gappy, Options(strategy="ssg", ssg=SsgOptions(weight=0.0)))
+    assert np.isfinite(r.report["cost"]) and np.isfinite(r.motion.rotations).all()
+    assert r.report["terms"]["transition_m2"] >= 0 and r.report["blind_windows"] > 0
 
 
 def test_markers_the_set_does_not_define_are_ignored_and_kept_ones_chosen(graph, kb):

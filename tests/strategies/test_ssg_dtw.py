@@ -1,4 +1,5 @@
-"""The SSG's subsequence DTW and local cost against brute force on small inputs."""
+"""The SSG's subsequence DTW, local cost and cheapest path against brute force and
+networkx on small inputs."""
 
 import itertools
 
@@ -165,3 +166,36 @@ def test_local_cost_is_the_aligned_point_cloud_distance():
     assert np.isinf(dtw.local_costs(kb, points, seen, frames, hidden)[:, 2]).all()
     none_seen = np.zeros_like(seen)
     assert (dtw.local_costs(kb, points, none_seen, frames, np.ones(F, dtype=bool)) == 0).all()  # (says nothing)
+
+
+def test_cheapest_path_equals_networkx():
+    """The forward pass over the subsequence graph's layers against networkx's shortest
+    path on the same graph (edges that do not exist: inf; a node weight added to the
+    edges into it)."""
+    import networkx as nx
+
+    from graphsvc.strategies.ssg.graph import Layer, cheapest_path
+
+    rng = np.random.default_rng(5)
+    sizes = [3, 5, 2, 6, 4, 4]
+    layers = []
+    for K in sizes:
+        layer = Layer(0, 1, False)
+        layer.add(0, np.arange(K), rng.random(K))
+        layers.append(layer)
+    edges = [np.where(rng.random((a, b)) < 0.3, np.inf, rng.random((a, b))) for a, b in zip(sizes, sizes[1:])]
+    for weight in (0.0, 1.0, 4.0):
+        G = nx.DiGraph()
+        for k in range(sizes[0]):
+            G.add_edge("s", (0, k), weight=layers[0].cost[k])
+        for z, e in enumerate(edges):
+            for a, b in zip(*np.nonzero(np.isfinite(e))):
+                G.add_edge((z, a), (z + 1, b), weight=weight * e[a, b] + layers[z + 1].cost[b])
+        for k in range(sizes[-1]):
+            G.add_edge((len(sizes) - 1, k), "t", weight=0.0)
+        want = nx.shortest_path_length(G, "s", "t", weight="weight")
+        path, cost = cheapest_path(layers, edges, weight)
+        assert cost == pytest.approx(want, rel=1e-12)
+        total = layers[0].cost[path[0]] + sum(layers[z + 1].cost[path[z + 1]] + weight * edges[z][path[z], path[z + 1]]
+                                               for z in range(len(edges)))  # fmt: skip
+        assert total == pytest.approx(cost, rel=1e-12)

@@ -25,7 +25,7 @@ import numpy as np
 
 from graphsvc.strategies.ssg import dtw
 from graphsvc.strategies.ssg.graph import (BACKWARD, FORWARD, RETRIEVED, Anchor, Layer, cheapest_path, edge_costs,
-                                           placed)  # fmt: skip
+                                           placed, weighted)  # fmt: skip
 from graphsvc.strategies.ssg.index import SsgIndex, WindowPoints
 
 COST_BLOCK = 64  # input frames whose local costs one matrix product computes (when they are in)
@@ -244,8 +244,8 @@ class SsgDecoder:
             if a == 0:
                 self.dp.append(cost)
             else:
-                self.dp.append(cost + np.min(self.dp[a - 1][:, None] + self.w.weight * self.edges[a - 1], axis=0,
-                                             initial=np.inf))  # fmt: skip
+                self.dp.append(cost + np.min(self.dp[a - 1][:, None] + weighted(self.edges[a - 1], self.w.weight),
+                                             axis=0, initial=np.inf))  # fmt: skip
         self.dp_valid = len(self.dp)
         return self.dp[z]
 
