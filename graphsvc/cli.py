@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (Parser, add_marker_file_options, add_marker_options, add_search_options, os_message,
+from graphsvc.cli_args import (Parser, add_input_file_options, add_marker_options, add_search_options, os_message,
                                search_options)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 
@@ -79,6 +79,28 @@ def _cmd_simulate(args) -> int:
     return 0
 
 
+def _cmd_mapping(args) -> int:
+    from graphsvc.fileio import write_text_atomic
+    from graphsvc.motion.joints import OPTIONAL, guess_mapping
+    from graphsvc.motion.library import load_motion
+
+    if args.output:
+        _check_output(Path(args.output))
+    motion = load_motion(args.clip)
+    mapping, missing = guess_mapping(motion.skeleton)
+    text = json.dumps(mapping, indent=1) + "\n"
+    if args.output:
+        write_text_atomic(args.output, text)
+    else:
+        print(text, end="")
+    required = [c for c in missing if c not in OPTIONAL]
+    note = (f"not found: {', '.join(missing)}" + (" — required: map them by hand" if required else
+                                                  " (a skeleton may lack these)")) if missing else "every canonical joint found"  # fmt: skip
+    print(f"{motion.skeleton.num_joints} joints; {note}" + (f"; wrote {args.output}" if args.output else ""),
+          file=sys.stderr)
+    return 0 if not required else 2
+
+
 def _cmd_demo(args) -> int:
     from graphsvc.demo import format_demo_summary, run_demo
 
@@ -99,13 +121,21 @@ def _cmd_build(args) -> int:
     _check_output(out)
     progress = False if args.quiet else None
     augment = tuple(a for a in (args.augment or "").split(",") if a)
-    mapping = load_mapping_file(args.mapping) if args.mapping else None
+    mapping = load_mapping_file(args.mapping) if args.mapping and args.mapping != "guess" else None
     options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
                            interp=not args.no_interp, bridges=not args.no_bridges, augment=augment, mapping=mapping,
                            jobs=args.jobs, progress=progress)  # fmt: skip
     t0 = time.perf_counter()
     motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
     load_s = time.perf_counter() - t0
+    if args.mapping == "guess" and motions:  # (one topology a knowledge base: its first clip's names)
+        from dataclasses import replace
+
+        from graphsvc.motion.joints import guess_mapping
+
+        mapping, missing = guess_mapping(motions[0].skeleton)
+        options = replace(options, mapping=mapping)
+        print(f"guessed joint map: {json.dumps(mapping)}" + (f" (missing: {', '.join(missing)})" if missing else ""))
     graph, report = build_graph(motions, options)
     t0 = time.perf_counter()
     save_graph(graph, out)
@@ -158,6 +188,7 @@ def _cmd_relayout(args) -> int:
 
 
 def _cmd_synthesize(args) -> int:
+    from graphsvc.errors import InputError
     from graphsvc.fileio import write_text_atomic
     from graphsvc.graph.file import load_graph
     from graphsvc.motion.bvh import write_bvh
@@ -171,6 +202,19 @@ def _cmd_synthesize(args) -> int:
     options = search_options(args)
     graph = load_graph(args.graph)
     rec = read_recording(args.recording, up=args.up, units=args.units)
+    if args.device_map:
+        from graphsvc.sensors.devices import apply_device_map, device_map
+
+        mapping = device_map(args.device_map, graph.layout.get("name"))
+        rec = apply_device_map(rec, mapping, order=graph.sensor_names)
+    elif rec.meta.get("imported_from") == "mvnx" and tuple(rec.sensor_names) != tuple(graph.sensor_names):
+        raise InputError(f"{args.recording} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
+                         f"{' …' if rec.num_sensors > 4 else ''}): "
+                         f"give --device-map xsens (or a map file) to name them as layout "
+                         f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
+    if rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None:
+        print(f"note: {args.recording}'s readings are in each device's own frame; they are used as if in the "
+              "layout's sensor frames (no calibration yet)", file=sys.stderr)  # fmt: skip
     result = reconstruct(graph, rec, options)
     write_bvh(out, result.motion, scale=args.scale)
     result.report["files"] = {"output": str(out.resolve()), "graph": str(Path(args.graph).resolve()),
@@ -219,8 +263,13 @@ def _cmd_evaluate(args) -> int:
 
     pattern = MarkerPattern((), args.flicker or 0.0, args.gap_fraction or 0.0)
     check_pattern(pattern)
+    test_mapping = args.mapping
+    if test_mapping and test_mapping != "guess":
+        from graphsvc.motion.joints import load_mapping_file
+
+        test_mapping = load_mapping_file(test_mapping)
     setup = loo.EvalSetup(noise=noise, positions=args.position_noise is not None or noise.position > 0,
-                          options=options, seed=args.seed, pattern=pattern)  # fmt: skip
+                          options=options, seed=args.seed, pattern=pattern, mapping=test_mapping)  # fmt: skip
     if loo.reads_markers(setup) and not options.ssg.markers:
         raise InputError(f"--strategy {options.strategy} reads optical markers: give the set to simulate, --markers")
     if loo.reads_markers(setup):
@@ -349,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--position-noise", type=float, metavar="M", help="overhead-tracker noise σ in metres")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, metavar="HZ", help="resample to this rate first")
-    p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons")
+    p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons, or 'guess'")
     p.add_argument("-o", "--output", required=True, metavar="REC",
                    help="output .rec (or .csv: a device CSV, or a marker CSV with --markers)")
     p.set_defaults(run=_cmd_simulate)
@@ -364,7 +413,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-bridges", action="store_true", help="no bridges between actions (blended transitions)")
     p.add_argument("--exclude", action="append", metavar="GLOB", help="leave out matching files (repeatable)")
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
-    p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for skeletons graphsvc does not know")
+    p.add_argument("--mapping", metavar="FILE",
+                   help="joint mapping JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
     p.add_argument("--jobs", type=int, default=1, metavar="N", help="threads for loading and preparing clips")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)
@@ -382,10 +432,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("synthesize", help="reconstruct motion from a recording by searching a graph")
     p.add_argument("graph", metavar="GRAPH")
-    p.add_argument("recording", metavar="REC", help="recording: .rec, device CSV, C3D or marker CSV")
+    p.add_argument("recording", metavar="REC", help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
     add_search_options(p)
-    add_marker_file_options(p)
+    add_input_file_options(p)
     p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
@@ -415,9 +465,16 @@ def build_parser() -> argparse.ArgumentParser:
                         "style (takes, the default), every clip of its performer (actor) or of its content label "
                         "(content); docs/evaluation.md")
     p.add_argument("--actors", metavar="FILE", help="actor map for --hold-out actor: JSON {clip name or glob: actor}")
+    p.add_argument("--mapping", metavar="FILE",
+                   help="the test clips' joint map when their skeleton is not the graph's (JSON, or 'guess')")
     p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
+
+    p = sub.add_parser("mapping", help="propose a joint map for a skeleton graphsvc does not know")
+    p.add_argument("clip", metavar="CLIP", help="a motion file (.bvh, .amc) with that skeleton")
+    p.add_argument("-o", "--output", metavar="MAP.json", help="write the map here (default: print it)")
+    p.set_defaults(run=_cmd_mapping)
 
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")

@@ -65,11 +65,18 @@ def add_marker_options(p) -> None:
     p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated)")
 
 
-def add_marker_file_options(p) -> None:
-    """--up and --units: how to read a C3D or marker CSV that does not say."""
+def add_input_file_options(p) -> None:
+    """--up, --units and --device-map: how to read a recording file where it does not say,
+    and how to name a device's sensors as the graph's layout does."""
     p.add_argument("--up", choices=("y", "z"),
-                   help="marker files: the vertical axis (default: the file's; C3D: from the markers' spread, else Z)")
-    p.add_argument("--units", choices=("m", "cm", "mm"), help="marker files: length unit, overriding the file's")
+                   help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
+                        "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
+    p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
+                   help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
+                        "unit (g, m/s2)")
+    p.add_argument("--device-map", metavar="xsens|FILE",
+                   help="rename a device's sensors to the graph layout's: xsens (Xsens segment names, the built-in map "
+                        "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
 
 
 def add_search_options(p, constraints: bool = True) -> None:

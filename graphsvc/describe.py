@@ -12,7 +12,7 @@ from graphsvc.errors import UnknownFormatError
 from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
 from graphsvc.sensors.recording import describe_recording, read_recording
 
-RECORDING_SUFFIXES = (".rec", ".csv", ".c3d")
+RECORDING_SUFFIXES = (".rec", ".csv", ".c3d", ".mvnx")
 
 
 def describe_paths(paths: list[str], progress: bool | None = None) -> dict:

@@ -35,7 +35,7 @@ from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import signals
-from graphsvc.motion.joints import CANONICAL, joint_map
+from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
@@ -115,6 +115,9 @@ class EvalSetup:
     # they are lost (`sensors.simulate.MarkerPattern`); the set and the kept markers
     # are the strategy's (`options.ssg.markers`, `options.ssg.keep`).
     pattern: MarkerPattern = MarkerPattern()
+    # The test clips' joint map when their skeleton is not the graph's family (a file, a
+    # dict or "guess"; None: the graph's).
+    mapping: object = None
 
 
 def reads_markers(setup: EvalSetup) -> bool:
@@ -161,9 +164,10 @@ def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_h
     return rec
 
 
-def _global_signals(world_pos: np.ndarray, table: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(T, 19, 3) canonical joints, (T, 2) ground position, (T,) heading."""
-    canon = world_pos[:, [table[c] for c in CANONICAL]]
+def _global_signals(world_pos: np.ndarray, table: dict, names=CANONICAL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(T, P, 3) the canonical joints `names` (default all 19), (T, 2) ground position,
+    (T,) heading."""
+    canon = world_pos[:, [table[c] for c in names]]
     return canon, signals.ground_position(world_pos, table["pelvis"]), signals.heading(world_pos, table)
 
 
@@ -205,18 +209,20 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     from graphsvc.pipeline import reconstruct
 
     mapping = graph.params.get("mapping")
+    test_mapping = setup.mapping if setup.mapping is not None else mapping  # (the test clip's skeleton)
     rate = float(graph.rate_hz)
     truth = resample(motion, rate)
     layout = layout_from_dict(graph.layout)
-    rec = simulate_test_input(truth, layout, setup, rate, mapping)
+    rec = simulate_test_input(truth, layout, setup, rate, test_mapping)
     in_graph = clip_index is not None and np.size(clip_index) > 0
     strategy = get_strategy(setup.options.strategy)
     allowed = strategy.allowed_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
     result = reconstruct(graph, rec, setup.options, allowed=allowed)
 
-    true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], joint_map(truth.skeleton, mapping))
-    pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1],
-                                                            joint_map(graph.skeleton, mapping))  # fmt: skip
+    true_table, pred_table = joint_map(truth.skeleton, test_mapping), joint_map(graph.skeleton, mapping)
+    compared = common_joints(true_table, pred_table)  # (what both skeletons have)
+    true_canon, true_ground, true_heading = _global_signals(motion_fk(truth)[1], true_table, compared)
+    pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1], pred_table, compared)
     markers = rec.marker_positions is not None  # (markers place a reconstruction in the world themselves)
     fix_position = rec.ground_position is None and not markers
     fix_heading = rec.heading is None and rec.ground_position is None and not markers  # (positions: the track placed it)
@@ -246,6 +252,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
         "in_graph": in_graph,
         **({"joined": motion.source} if true_labels is not None else {}),
         "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
+        **({"missing_joints": sorted(true_table.missing | pred_table.missing)}
+           if true_table.missing or pred_table.missing else {}),
         "node_path": np.asarray(result.node_path if result.node_path is not None else [], dtype=np.int64),
         "pred_labels": pred_labels,
     })  # fmt: skip

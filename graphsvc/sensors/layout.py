@@ -226,7 +226,9 @@ def _place(layout: Layout, skeleton: Skeleton, mapping) -> Placement:
         seg, tow = table[s.segment], table[s.toward]
         bone = rest[tow] - rest[seg]
         if np.linalg.norm(bone) < 1e-6:
-            raise SkeletonError(f"sensor {s.name!r}: joints {s.segment} and {s.toward} coincide in this skeleton")
+            lacks = [j for j in (s.segment, s.toward) if j in getattr(table, "missing", ())]
+            raise SkeletonError(f"sensor {s.name!r}: joints {s.segment} and {s.toward} coincide in this skeleton"
+                                + (f" (it has no {' or '.join(lacks)})" if lacks else ""))  # fmt: skip
         segment.append(seg)
         toward.append(tow)
         if s.rotation_wxyz is not None:

@@ -254,6 +254,9 @@ def place_markers(marker_set: MarkerSet, skeleton: Skeleton, mapping=None) -> Ma
     rest = _rest_positions(skeleton)
     carrier, local = [], []
     for m in marker_set.markers:
+        lacks = [j for j in (m.segment, m.at, m.toward) if j is not None and j in table.missing]
+        if lacks:
+            raise SkeletonError(f"marker {m.name!r} sits on {', '.join(lacks)}, which this skeleton lacks")
         c = table[m.segment]
         at = rest[table[m.at or m.segment]]
         point = at + np.asarray(m.offset_m, dtype=np.float64)

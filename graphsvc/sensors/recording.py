@@ -23,15 +23,35 @@ CSV format
         0,0.12,9.79,-0.3,...
 
     - Lines starting with ``#`` are comments; ``# key=value`` comments before the
-      header set ``rate_hz``. export_csv writes the two lines shown; files from
-      devices may have none.
+      header (keys and values in any case) say how to read the file. export_csv
+      writes the two lines shown; files from devices may have none:
+
+      ``rate_hz=HZ``
+          the sample rate (else the median timestamp step).
+      ``units=m/s2|g``
+          the acceleration columns' unit (default m/s²; g is converted with 9.81
+          m/s²). ``import_csv(..., units=)`` overrides it.
+      ``up=y|z``
+          the vertical axis of the world the orientations are given in (default y,
+          graphsvc's). A Z-up world (X forward, Y left, as Xsens's) is turned onto
+          graphsvc's Y-up world by (x, y, z) → (y, z, x), as for MVNX and C3D:
+          q_world = Q_Z_UP_TO_Y_UP ⊗ q (`sensors.devices`). It concerns the
+          orientations only; markers, ground position and heading are always in
+          graphsvc's world. ``import_csv(..., up=)`` overrides it.
+      ``sensor_frame=device|layout``
+          whose frames the readings are in, kept in meta["sensor_frame"]: ``layout``,
+          each sensor's frame as the graph layout defines it (what graphsvc
+          simulates), or ``device``, each device's own frame, to be calibrated onto
+          the layout's. Without it: ``layout`` when the file starts with the
+          ``# graphsvc recording v1`` line (written by graphsvc), else ``device``.
     - ``t_s``: seconds, required, finite, strictly increasing.
-    - ``<sensor>_ax, <sensor>_ay, <sensor>_az``: acceleration in the sensor's frame,
-      m/s² (or g with ``import_csv(..., units="g")``, converted with 9.81 m/s²).
-      ``<sensor>_qw … _qz``: the sensor's orientation, a unit quaternion. A sensor has
-      all three (all four) columns or none, in any column order; sensors are numbered
-      in the order their first column appears; a sensor without acceleration columns,
-      in a file where others have them, reads NaN (missing).
+    - ``<sensor>_ax, <sensor>_ay, <sensor>_az``: acceleration in the sensor's frame
+      (gravity included: +9.81 "up" at rest), m/s² or g (``units``).
+      ``<sensor>_qw … _qz``: the sensor's orientation, a unit quaternion (w, x, y, z):
+      the sensor frame's rotation into the world (``up``). A sensor has all three (all
+      four) columns or none, in any column order; sensors are numbered in the order
+      their first column appears; a sensor without acceleration columns, in a file
+      where others have them, reads NaN (missing).
     - ``<marker>_px, <marker>_py, <marker>_pz``: a labelled optical marker's position,
       m, Y up; empty = not seen. Markers are numbered in the order their first column
       appears.
@@ -45,7 +65,7 @@ CSV format
       ``# rate_hz=`` comment, else the median timestamp step.
     Errors name the file and line: wrong column counts, non-numeric cells, a
     missing ``t_s`` column, incomplete sensor triplets, unknown columns,
-    non-increasing timestamps.
+    non-increasing timestamps, bad ``units``, ``up`` or ``sensor_frame`` values.
 """
 
 from __future__ import annotations
@@ -67,6 +87,9 @@ FORMAT_VERSION = 1
 CSV_MAGIC = "# graphsvc recording v1"
 CONTACTS = ("left", "right", "both", "none")
 UNITS = ("m/s2", "g")
+_UNIT_NAMES = {"m/s2": "m/s2", "m/s^2": "m/s2", "m/s²": "m/s2", "g": "g"}
+UPS = ("y", "z")
+SENSOR_FRAMES = ("device", "layout")
 _AXES = ("x", "y", "z")
 _QUAT = ("w", "x", "y", "z")
 _SENSOR_COLUMN = re.compile(r"^(.+)_a([xyz])$")
@@ -321,7 +344,10 @@ def export_csv(rec: Recording, path) -> None:
     if rec.heading is not None:
         parts.append(rec.heading.astype(np.float64)[:, None])
     table = np.concatenate(parts, axis=1)
-    lines = [CSV_MAGIC, f"# rate_hz={_shortest(rec.rate_hz)}", ",".join(csv_columns(rec))]
+    lines = [CSV_MAGIC, f"# rate_hz={_shortest(rec.rate_hz)}"]
+    if rec.meta.get("sensor_frame") == "device":  # (readings not yet calibrated: said, not assumed)
+        lines.append("# sensor_frame=device")
+    lines.append(",".join(csv_columns(rec)))
     for row in table.tolist():
         lines.append(",".join("" if v != v else "%.9g" % v for v in row))  # v != v ⇔ NaN
     with atomic_writer(path) as f:
@@ -334,15 +360,20 @@ def _shortest(x: float) -> str:
     return s[:-2] if s.endswith(".0") else s
 
 
-def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: dict | None = None) -> Recording:
+def import_csv(path, rate_hz: float | None = None, units: str | None = None, layout: dict | None = None,
+               up: str | None = None) -> Recording:
     """Read a CSV recording (ours or a device's; format in the module docstring).
 
     rate_hz: overrides the file's; else `# rate_hz=` or the median timestamp step.
-    units: "m/s2" or "g" for the acceleration columns (g × 9.81 → m/s²).
+    units: "m/s2" or "g" for the acceleration columns (g × 9.81 → m/s²); overrides the
+    file's `# units=` (default m/s²).
     layout: the sensor layout description to attach.
+    up: "y" or "z", the orientations' world up axis; overrides the file's `# up=`.
     FormatError (with the line number) for malformed files."""
-    if units not in UNITS:
+    if units is not None and units not in UNITS:
         raise InputError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    if up is not None and up not in UPS:
+        raise InputError(f"up must be one of {', '.join(UPS)}, got {up!r}")
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
@@ -352,6 +383,8 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
         raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
 
     comments: dict[str, str] = {}
+    comment_lines: dict[str, int] = {}
+    ours = re.match(r"\s*" + re.escape(CSV_MAGIC) + r"[ \t]*(\r?\n|$)", text) is not None  # written by graphsvc
     header: list[str] | None = None
     header_line = 0
     rows: list[list[float]] = []
@@ -363,7 +396,8 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
         if stripped.startswith("#"):
             if header is None and "=" in stripped:
                 key, _, value = stripped[1:].partition("=")
-                comments[key.strip()] = value.strip()
+                comments[key.strip().lower()] = value.strip()
+                comment_lines[key.strip().lower()] = lineno
             continue
         cells = [c.strip() for c in line.split(",")]
         if header is None:
@@ -402,10 +436,15 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
                 out[:, k] = table[:, c]
         return out.reshape(len(t), -1, width)
 
+    units, up, sensor_frame = _device_comments(path, comments, comment_lines, units, up, ours)
     acc = gather(acc_cols, 3)
     if acc is not None and units == "g":
         acc = acc * GRAVITY
     orientations = gather(quat_cols, 4)
+    if orientations is not None and up == "z":
+        from graphsvc.sensors.devices import z_up_to_y_up
+
+        orientations = z_up_to_y_up(orientations)
     rec = Recording(
         rate_hz=float(rate_hz),
         timestamps_s=np.ascontiguousarray(t),
@@ -414,13 +453,34 @@ def import_csv(path, rate_hz: float | None = None, units: str = "m/s2", layout: 
         ground_position=np.ascontiguousarray(table[:, pos_cols]) if pos_cols else None,
         heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
         layout=layout,
-        meta={"source": str(path), "imported_from": "csv", "units": units},
+        meta={"source": str(path), "imported_from": "csv", "units": units, "up": up, "sensor_frame": sensor_frame},
         orientations=None if orientations is None else orientations.astype(np.float32),
         marker_names=marker_names,
         marker_positions=np.ascontiguousarray(table[:, marker_cols].reshape(len(t), -1, 3)) if marker_cols else None,
     )
     rec.validate()
     return rec
+
+
+def _device_comments(path, comments: dict, lines: dict, units: str | None, up: str | None,
+                     ours: bool) -> tuple[str, str, str]:
+    """(units, up, sensor_frame) of a device CSV: the arguments where given, else its
+    `# units=`, `# up=`, `# sensor_frame=` comments, else the defaults (module
+    docstring). FormatError with the comment's line for a bad value."""
+
+    def comment(key: str, allowed: dict, default: str) -> str:
+        if key not in comments:
+            return default
+        value = comments[key].lower()
+        if value not in allowed:
+            expected = " or ".join(dict.fromkeys(allowed.values()))
+            raise FormatError(path, f"bad {key} comment {comments[key]!r} (expected {expected})", line=lines[key])
+        return allowed[value]
+
+    units = units if units is not None else comment("units", _UNIT_NAMES, "m/s2")
+    up = up if up is not None else comment("up", {u: u for u in UPS}, "y")
+    sensor_frame = comment("sensor_frame", {f: f for f in SENSOR_FRAMES}, "layout" if ours else "device")
+    return units, up, sensor_frame
 
 
 def sample_rate(path, rate_hz: float | None, comments: dict, t: np.ndarray) -> float:
@@ -543,19 +603,29 @@ def describe_recording(rec: Recording) -> dict:
 
 
 def read_recording(path, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
-    """A recording from a `.rec` file, a device CSV, a C3D file or a marker CSV (by
-    suffix, and a CSV by its first column: `time` for markers, `t_s` for devices). up,
-    units: for marker files, the vertical axis and length unit where the file does not
-    say (`sensors.optical`)."""
+    """A recording from a `.rec` file, a device CSV, an Xsens MVNX file, a C3D file or a
+    marker CSV (by suffix, and a CSV by its first column: `time` for markers, `t_s` for
+    devices). up, units: where the file does not say, for marker files the vertical axis
+    and length unit (m, cm, mm; `sensors.optical`), for a device CSV its orientations'
+    up axis and acceleration unit (m/s2, g); an MVNX file takes neither (Xsens's axes
+    and units)."""
     suffix = Path(path).suffix.lower()
+    if suffix == ".mvnx":
+        from graphsvc.sensors.devices import read_mvnx
+
+        if up is not None or units is not None:
+            raise InputError(f"{path}: up and units do not apply to an MVNX file (Xsens's axes, m/s²)")
+        return read_mvnx(path)
+    if suffix not in (".c3d", ".csv"):
+        return load_recording(path)
+    from graphsvc.sensors.optical import is_marker_csv, read_c3d, read_marker_csv
+
+    if suffix == ".csv" and not is_marker_csv(path):
+        if units is not None and units not in UNITS:
+            raise InputError(f"{path}: a device CSV's acceleration unit is {' or '.join(UNITS)}, not {units!r}")
+        return import_csv(path, rate_hz=rate_hz, units=units, up=up)
+    if units in UNITS:
+        raise InputError(f"{path}: {units} is an acceleration unit; a marker file's unit is a length (m, cm, mm)")
     if suffix == ".c3d":
-        from graphsvc.sensors.optical import read_c3d
-
         return read_c3d(path, up=up, units=units)
-    if suffix == ".csv":
-        from graphsvc.sensors.optical import is_marker_csv, read_marker_csv
-
-        if is_marker_csv(path):
-            return read_marker_csv(path, up=up, units=units, rate_hz=rate_hz)
-        return import_csv(path, rate_hz=rate_hz)
-    return load_recording(path)
+    return read_marker_csv(path, up=up, units=units, rate_hz=rate_hz)

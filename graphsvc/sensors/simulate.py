@@ -63,6 +63,7 @@ def simulate_recording(
             "noise": noise.to_dict(),
             "seed": int(seed),
             "simulated": True,
+            **({"missing_joints": sorted(table.missing)} if getattr(table, "missing", None) else {}),
         },
     )
     rec.validate()

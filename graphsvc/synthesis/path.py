@@ -512,8 +512,8 @@ def synthesize_motion(
     # Re-place at the integrated root path.
     _place(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier)
 
-    # d. Footskate clean-up.
-    if fix_feet:
+    # d. Footskate clean-up (it places the toes: not on a skeleton without them).
+    if fix_feet and not {"l_toe", "r_toe"} & getattr(joints, "missing", frozenset()):
         contacts = np.ascontiguousarray(graph.node_contacts[node_path], dtype=np.bool_)
         if contacts.any():
             world_rot, world_pos = forward_kinematics(rot, trans, parents)
