@@ -19,8 +19,12 @@ the table in Markdown.
 
 `--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
 
+`--preset real` runs the same rows with the `real` sensor noise (real IMUs: more white
+noise, the legs' soft tissue, foot-strike jolts; docs/sensors.md) in place of `default`.
+
 Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor|clip] [--layouts L,...]
-                         [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest] [--reuse]
+                         [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest] [--preset real]
+                         [--reuse]
 DATA: the Bandai-Namco folder (../shared/data/bandai).
 """
 
@@ -74,6 +78,8 @@ def main() -> None:
     parser.add_argument("--inputs", default=",".join(INPUTS))
     accelerometer_strategies = [n for n in available() if "accelerations" in get(n).needs]  # (ssg: tools/bench_ssg.py)
     parser.add_argument("--strategies", default=",".join(accelerometer_strategies))
+    parser.add_argument("--preset", default="default",
+                        help="the sensors' noise preset (default; real: tools/fit_real_noise.py's devices)")
     parser.add_argument("--reuse", action="store_true",
                         help="keep a run already in --work that the same command wrote (after a change that cannot"
                              " move it, e.g. one to how positions are used, for the accelerometer-only rows)")
@@ -91,8 +97,10 @@ def main() -> None:
         for protocol in [args.only] if args.only else DEFAULT_PROTOCOLS:
             for key in args.inputs.split(","):
                 what, flags = INPUTS[key]
+                flags = [f.replace("default", args.preset, 1) if f.startswith("default") else f for f in flags]
                 for strategy in args.strategies.split(","):
-                    out = work / f"{protocol}.{layout}.{key}.{strategy}.json"
+                    tag = "" if args.preset == "default" else f".{args.preset}"
+                    out = work / f"{protocol}.{layout}.{key}.{strategy}{tag}.json"
                     cmd = graphsvc() + ["evaluate", str(kb), "--graph", str(graph), "--test", PROTOCOLS[protocol],
                                         "--hold-out", protocol, *flags, "--strategy", strategy, "--jobs",
                                         str(args.jobs), "--json", str(out), "--quiet"]  # fmt: skip
@@ -104,6 +112,7 @@ def main() -> None:
                     result = json.loads(out.read_text())
                     m, groups = result["mean"], result.get("groups", {})
                     row = {"hold_out": protocol, "layout": layout, "inputs": what, "strategy": strategy,
+                           "noise": args.preset,
                            "clips": m["clips"], "frames": m["frames"], "joint_err_cm": m["joint_err_cm"],
                            "root_err_cm": m["root_err_cm"], "heading_err_deg": m["heading_err_deg"],
                            "label_acc": m["label_acc"], "samples_per_s": m.get("samples_per_s"),

@@ -114,6 +114,15 @@ def sensor_poses(world_rot: np.ndarray, world_pos: np.ndarray, placement: Placem
     return position, orientation
 
 
+def to_sensor_frames(orientation: np.ndarray, world_acc: np.ndarray) -> np.ndarray:
+    """(F, S, 3) float32 readings: world accelerations (F, S, 3) m/s² plus gravity's
+    reaction, in the sensor frames of orientations (F, S, 4)."""
+    out = np.empty(world_acc.shape, dtype=np.float32)
+    _to_sensor_frames(np.ascontiguousarray(orientation, dtype=np.float64),
+                      np.ascontiguousarray(world_acc, dtype=np.float64), GRAVITY, out)  # fmt: skip
+    return out
+
+
 def simulate_accelerations(
     world_rot: np.ndarray, world_pos: np.ndarray, placement: Placement, rate_hz: float
 ) -> np.ndarray:

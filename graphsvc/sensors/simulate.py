@@ -11,15 +11,37 @@ import numpy as np
 
 from graphsvc.errors import InputError
 
-from graphsvc.motion import signals
+from graphsvc.motion import quat, signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, check_finite
-from graphsvc.sensors.accelerometer import simulate_accelerations
+from graphsvc.sensors.accelerometer import second_derivative, sensor_poses, to_sensor_frames
+from graphsvc.sensors.device_model import TISSUE_SEGMENTS, impacts, mounting, orientation_output, soft_tissue
 from graphsvc.sensors.layout import Layout, place
 from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_heading, corrupt_positions
 from graphsvc.sensors.recording import Recording
+
+
+def device_readings(world_rot: np.ndarray, world_pos: np.ndarray, placement, table, rate_hz: float,
+                    noise: NoiseModel, seed: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The readings (F, S, 3) m/s² of the layout's sensors as mounted devices, before
+    the per-sample noise (`corrupt_accelerations`), and their frames' world orientations
+    (F, S, 4): the ideal accelerometer of `sensors.accelerometer`, on soft tissue, with
+    foot-strike jolts, each sensor turned by its mounting (`sensors.device_model`; none
+    of it unless the noise model asks)."""
+    position, orientation = sensor_poses(world_rot, world_pos, placement)
+    world_acc = second_derivative(position, rate_hz)
+    legs = [k for k, spec in enumerate(placement.layout.sensors) if spec.segment in TISSUE_SEGMENTS]
+    if noise.tissue and legs:
+        world_acc = world_acc.copy()
+        world_acc[:, legs] = soft_tissue(world_acc[:, legs], rate_hz, noise.tissue, noise.tissue_damping)
+    if noise.impact:
+        contacts = signals.foot_contacts(world_pos, table, rate_hz)
+        segments = [s.segment for s in placement.layout.sensors]
+        world_acc = world_acc + impacts(contacts, segments, rate_hz, noise.impact)
+    device = quat.mul(orientation, mounting(seed, placement.layout.sensor_names, noise.mount)[None])
+    return to_sensor_frames(device, world_acc), device
 
 
 def simulate_recording(
@@ -40,14 +62,19 @@ def simulate_recording(
     world_rot, world_pos = motion_fk(motion)
     table = joint_map(motion.skeleton, mapping)
     placement = place(layout, motion.skeleton, mapping)
-    exact = simulate_accelerations(world_rot, world_pos, placement, rate)
+    exact, device = device_readings(world_rot, world_pos, placement, table, rate, noise, seed)
     position = signals.ground_position(world_pos, table["pelvis"])
     heading = signals.heading(world_pos, table)
 
     rng = np.random.default_rng(seed)
-    acc = corrupt_accelerations(exact, noise, rng)
+    acc, misalign = corrupt_accelerations(exact, noise, rng, misalignment=True)
     noisy_position = corrupt_positions(position, noise, rng, rate)
     noisy_heading = corrupt_heading(heading, noisy_position, rate, noise, rng)
+    orientations = None
+    if noise.orientations:
+        (orient_rng,) = rng.spawn(1)  # (its own stream: the other draws stay as they were)
+        orientations = orientation_output(quat.mul(device, misalign[None]), rate, noise.orient_sigma, noise.yaw_drift,
+                                          orient_rng).astype(np.float32)  # fmt: skip
     rec = Recording(
         rate_hz=float(rate),
         timestamps_s=np.arange(motion.num_frames, dtype=np.float64) / rate,
@@ -55,6 +82,7 @@ def simulate_recording(
         accelerations=acc,
         ground_position=noisy_position,
         heading=noisy_heading,
+        orientations=orientations,
         layout=layout.to_dict(),
         meta={
             "source": motion.source or motion.name,
