@@ -177,7 +177,6 @@ def common_joints(*tables: JointTable) -> list[str]:
 
 # ---------------------------------------------------------------- guessing a map
 
-_SIDE = re.compile(r"^(left|right|l|r)(?=[^a-z]|[A-Z])|(?<=[^a-zA-Z])(left|right|l|r)$|^(left|right)", re.I)
 
 # Per canonical joint (side stripped), name words that name it, most telling first.
 _WORDS = {
@@ -266,6 +265,6 @@ def guess_mapping(skeleton: Skeleton) -> tuple[dict[str, str], list[str]]:
         while parents[j] >= 0 and skeleton.names[int(parents[j])] != out["pelvis"]:
             j = int(parents[j])
             between.append(skeleton.names[j])
-        if len(between) >= 2 and out["pelvis"] in (skeleton.names[int(parents[index[between[-1]]])],):
+        if len(between) >= 2 and skeleton.names[int(parents[index[between[-1]]])] == out["pelvis"]:
             out["spine"], out["chest"] = between[-1], between[0]
     return out, [c for c in CANONICAL if c not in out]

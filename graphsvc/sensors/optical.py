@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.sensors.recording import Recording, sample_rate
+from graphsvc.sensors.recording import Recording, csv_rows, read_csv_table, sample_rate
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 UPS = ("y", "z")
@@ -191,71 +191,35 @@ def is_marker_csv(path) -> bool:
     return False
 
 
+def _marker_columns(path: Path, header: list, line: int) -> dict[str, dict[str, int]]:
+    """A marker CSV's header → {marker: {axis: column}}; FormatError for anything but
+    `time` then whole NAME_x, NAME_y, NAME_z triplets."""
+    if header[0].lower() not in ("time", "time_s"):
+        raise FormatError(path, f"the first column must be time (seconds), got {header[0]!r}", line=line)
+    markers: dict[str, dict[str, int]] = {}
+    for k, c in enumerate(header[1:], start=1):
+        name, _, axis = c.rpartition("_")
+        if not name or axis.lower() not in ("x", "y", "z"):
+            raise FormatError(path, f"column {c!r} is not NAME_x, NAME_y or NAME_z", line=line)
+        if axis.lower() in markers.setdefault(name, {}):
+            raise FormatError(path, f"duplicate column {c!r}", line=line)
+        markers[name][axis.lower()] = k
+    for name, axes in markers.items():
+        if len(axes) != 3:
+            raise FormatError(path, f"marker {name!r} lacks column(s) "
+                              f"{', '.join(f'{name}_{a}' for a in 'xyz' if a not in axes)}", line=line)  # fmt: skip
+    if not markers:
+        raise FormatError(path, "no marker columns", line=line)
+    return markers
+
+
 def read_marker_csv(path, up: str | None = None, units: str | None = None, rate_hz: float | None = None) -> Recording:
     """A marker CSV (module docstring) as a recording; up, units, rate_hz override the
     file's comments. FormatError with the line for malformed files."""
     _check_up(up)
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except UnicodeDecodeError as e:
-        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
-    comments: dict[str, str] = {}
-    header = None
-    header_line = 0
-    rows, lines = [], []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        s = line.strip()
-        if not s:
-            continue
-        if s.startswith("#"):
-            if header is None and "=" in s:
-                k, _, v = s[1:].partition("=")
-                comments[k.strip().lower()] = v.strip()
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if header is None:
-            header, header_line = cells, lineno
-            continue
-        if len(cells) != len(header):
-            raise FormatError(path, f"expected {len(header)} columns, got {len(cells)}", line=lineno)
-        row = []
-        for k, c in enumerate(cells):
-            if not c or c.lower() == "nan":
-                row.append(math.nan)
-                continue
-            try:
-                v = float(c)
-            except ValueError:
-                raise FormatError(path, f"non-numeric value {c!r} in column {header[k]}", line=lineno) from None
-            if math.isinf(v):
-                raise FormatError(path, f"infinite value in column {header[k]}", line=lineno)
-            row.append(v)
-        rows.append(row)
-        lines.append(lineno)
-    if header is None:
-        raise FormatError(path, "no header row (expected time,NAME_x,NAME_y,NAME_z,...)")
-    if header[0].lower() not in ("time", "time_s"):
-        raise FormatError(path, f"the first column must be time (seconds), got {header[0]!r}", line=header_line)
-    markers: dict[str, dict[str, int]] = {}
-    for k, c in enumerate(header[1:], start=1):
-        name, _, axis = c.rpartition("_")
-        if not name or axis.lower() not in ("x", "y", "z"):
-            raise FormatError(path, f"column {c!r} is not NAME_x, NAME_y or NAME_z", line=header_line)
-        if axis.lower() in markers.setdefault(name, {}):
-            raise FormatError(path, f"duplicate column {c!r}", line=header_line)
-        markers[name][axis.lower()] = k
-    for name, axes in markers.items():
-        if len(axes) != 3:
-            raise FormatError(path, f"marker {name!r} lacks column(s) "
-                              f"{', '.join(f'{name}_{a}' for a in 'xyz' if a not in axes)}", line=header_line)  # fmt: skip
-    if not markers:
-        raise FormatError(path, "no marker columns", line=header_line)
-    if not rows:
-        raise FormatError(path, "no samples after the header", line=header_line)
-    table = np.array(rows, dtype=np.float64)
+    csv = read_csv_table(path, "time,NAME_x,NAME_y,NAME_z,...", lambda cells, line: _marker_columns(path, cells, line))
+    comments, lines, markers, table = csv.comments, csv.row_lines, csv.parsed_header, csv.table
     t = table[:, 0]
     if np.isnan(t).any():
         raise FormatError(path, "time is empty or nan", line=lines[int(np.argmax(np.isnan(t)))])
@@ -288,8 +252,6 @@ def export_marker_csv(rec: Recording, path) -> None:
     lines = [CSV_MAGIC, f"# rate_hz={rec.rate_hz:.12g}", "# units=m", "# up=y",
              ",".join(["time"] + [f"{n}_{a}" for n in rec.marker_names for a in "xyz"])]  # fmt: skip
     T = rec.num_samples
-    table = np.concatenate([rec.timestamps_s[:, None], rec.marker_positions.reshape(T, -1)], axis=1)
-    for row in table.tolist():
-        lines.append(",".join("" if v != v else "%.9g" % v for v in row))
+    lines += csv_rows(np.concatenate([rec.timestamps_s[:, None], rec.marker_positions.reshape(T, -1)], axis=1))
     with atomic_writer(path) as f:
         f.write(("\n".join(lines) + "\n").encode("utf-8"))

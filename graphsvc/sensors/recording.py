@@ -348,16 +348,85 @@ def export_csv(rec: Recording, path) -> None:
     if rec.meta.get("sensor_frame") == "device":  # (readings not yet calibrated: said, not assumed)
         lines.append("# sensor_frame=device")
     lines.append(",".join(csv_columns(rec)))
-    for row in table.tolist():
-        lines.append(",".join("" if v != v else "%.9g" % v for v in row))  # v != v ⇔ NaN
+    lines += csv_rows(table)
     with atomic_writer(path) as f:
         f.write(("\n".join(lines) + "\n").encode("utf-8"))
+
+
+def csv_rows(table: np.ndarray) -> list[str]:
+    """A CSV's rows of numbers: '%.9g', NaN as an empty cell."""
+    return [",".join("" if v != v else "%.9g" % v for v in row) for row in table.tolist()]  # (v != v ⇔ NaN)
 
 
 def _shortest(x: float) -> str:
     """The shortest text that reads back as exactly `x` (30.0 → "30")."""
     s = repr(float(x))
     return s[:-2] if s.endswith(".0") else s
+
+
+@dataclass
+class CsvTable:
+    """A CSV file as read by `read_csv_table`: its text, the `# key=value` comments
+    before the header (keys lower-cased) and their lines, the header's cells and line,
+    what `on_header` made of it, the rows (n, columns) float64 (NaN: empty or nan) and
+    their lines."""
+
+    text: str
+    comments: dict
+    comment_lines: dict
+    header: list
+    header_line: int
+    parsed_header: object
+    table: np.ndarray
+    row_lines: list
+
+
+def read_csv_table(path, expect: str, on_header=None) -> CsvTable:
+    """The comma-separated, UTF-8 (a BOM tolerated) file every graphsvc CSV is: blank
+    lines skipped, `#` lines comments (`# key=value` before the header kept), then a
+    header row and rows of numbers with as many cells (empty or `nan`: NaN; ±inf
+    refused). on_header(cells, line) checks the header where it stands; expect: the
+    header the "no header row" error suggests. FormatError with the line for anything
+    else, and for a file with no row after its header."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
+    except FileNotFoundError:
+        raise FormatError(path, "no such file") from None
+    except UnicodeDecodeError as e:
+        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    comments: dict[str, str] = {}
+    comment_lines: dict[str, int] = {}
+    header: list[str] | None = None
+    header_line = 0
+    parsed = None
+    rows: list[list[float]] = []
+    row_lines: list[int] = []
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            if header is None and "=" in stripped:
+                key, _, value = stripped[1:].partition("=")
+                comments[key.strip().lower()] = value.strip()
+                comment_lines[key.strip().lower()] = lineno
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if header is None:
+            header, header_line = cells, lineno
+            parsed = None if on_header is None else on_header(cells, lineno)
+            continue
+        if len(cells) != len(header):
+            raise FormatError(path, f"expected {len(header)} columns, got {len(cells)}", line=lineno)
+        rows.append([_parse_cell(path, c, header[k], lineno) for k, c in enumerate(cells)])
+        row_lines.append(lineno)
+    if header is None:
+        raise FormatError(path, f"no header row (expected {expect})")
+    if not rows:
+        raise FormatError(path, "no samples after the header", line=header_line)
+    return CsvTable(text, comments, comment_lines, header, header_line, parsed, np.array(rows, dtype=np.float64),
+                    row_lines)  # fmt: skip
 
 
 def import_csv(path, rate_hz: float | None = None, units: str | None = None, layout: dict | None = None,
@@ -375,45 +444,11 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
     if up is not None and up not in UPS:
         raise InputError(f"up must be one of {', '.join(UPS)}, got {up!r}")
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except UnicodeDecodeError as e:
-        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    csv = read_csv_table(path, "t_s,<sensor>_ax,...", lambda cells, lineno: _parse_header(path, cells, lineno))
+    comments, comment_lines, row_lines, layout_cols = csv.comments, csv.comment_lines, csv.row_lines, csv.parsed_header
+    ours = re.match(r"\s*" + re.escape(CSV_MAGIC) + r"[ \t]*(\r?\n|$)", csv.text) is not None  # written by graphsvc
 
-    comments: dict[str, str] = {}
-    comment_lines: dict[str, int] = {}
-    ours = re.match(r"\s*" + re.escape(CSV_MAGIC) + r"[ \t]*(\r?\n|$)", text) is not None  # written by graphsvc
-    header: list[str] | None = None
-    header_line = 0
-    rows: list[list[float]] = []
-    row_lines: list[int] = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped.startswith("#"):
-            if header is None and "=" in stripped:
-                key, _, value = stripped[1:].partition("=")
-                comments[key.strip().lower()] = value.strip()
-                comment_lines[key.strip().lower()] = lineno
-            continue
-        cells = [c.strip() for c in line.split(",")]
-        if header is None:
-            header, header_line = cells, lineno
-            layout_cols = _parse_header(path, header, lineno)
-            continue
-        if len(cells) != len(header):
-            raise FormatError(path, f"expected {len(header)} columns, got {len(cells)}", line=lineno)
-        rows.append([_parse_cell(path, c, header[k], lineno) for k, c in enumerate(cells)])
-        row_lines.append(lineno)
-    if header is None:
-        raise FormatError(path, "no header row (expected t_s,<sensor>_ax,...)")
-    if not rows:
-        raise FormatError(path, "no samples after the header", line=header_line)
-
-    table = np.array(rows, dtype=np.float64)
+    table = csv.table
     t_col, sensor_names, acc_cols, pos_cols, heading_col, quat_cols, marker_names, marker_cols = layout_cols
     t = table[:, t_col]
     missing = np.isnan(t)

@@ -313,13 +313,8 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
     if acc.shape[0] == 0 and not reads_acc:
         acc = None
     else:
-        if acc.shape[0] != 3 * num_sensors:
-            raise FieldError(f"{field}.accelerations_m_s2", f"expected S×3 = {3 * num_sensors} values for the graph's "
-                             f"{num_sensors} sensors{'' if reads_acc else ' (or none)'}, got {acc.shape[0]}")  # fmt: skip
-        if np.isinf(acc).any():
-            k = int(np.argmax(np.isinf(acc)))
-            raise FieldError(f"{field}.accelerations_m_s2[{k}]", "infinite value (use NaN for missing)")
-        acc = acc.reshape(num_sensors, 3)
+        acc = _triplets(acc, num_sensors, f"{field}.accelerations_m_s2", f"S×3 = {3 * num_sensors} values for the "
+                        f"graph's {num_sensors} sensors{'' if reads_acc else ' (or none)'}", "missing")  # fmt: skip
         if order is not None:
             acc = acc[order]
     position = None
@@ -338,14 +333,21 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
 def sample_markers_from_proto(msg: pb.SensorSample, num_markers: int, field: str) -> np.ndarray | None:
     """The sample's marker positions (M, 3) float64 m (NaN = not seen) for the stream's
     M marker names, None when it names none; checked: M×3 values, no ±inf."""
-    markers = np.array(msg.marker_positions_m, np.float64)
-    if markers.shape[0] != 3 * num_markers:
-        raise FieldError(f"{field}.marker_positions_m", f"expected M×3 = {3 * num_markers} values for the "
-                         f"{num_markers} markers of config.marker_names, got {markers.shape[0]}")  # fmt: skip
-    if np.isinf(markers).any():
-        k = int(np.argmax(np.isinf(markers)))
-        raise FieldError(f"{field}.marker_positions_m[{k}]", "infinite value (use NaN for not seen)")
-    return markers.reshape(num_markers, 3) if num_markers else None
+    markers = _triplets(np.array(msg.marker_positions_m, np.float64), num_markers, f"{field}.marker_positions_m",
+                        f"M×3 = {3 * num_markers} values for the {num_markers} markers of config.marker_names",
+                        "not seen")  # fmt: skip
+    return markers if num_markers else None
+
+
+def _triplets(values: np.ndarray, count: int, field: str, expected: str, unseen: str) -> np.ndarray:
+    """(count, 3) from a sample's flat values, checked: `count` triplets (else the error
+    says `expected`), no ±inf (NaN is `unseen`)."""
+    if values.shape[0] != 3 * count:
+        raise FieldError(field, f"expected {expected}, got {values.shape[0]}")
+    if np.isinf(values).any():
+        k = int(np.argmax(np.isinf(values)))
+        raise FieldError(f"{field}[{k}]", f"infinite value (use NaN for {unseen})")
+    return values.reshape(count, 3)
 
 
 def marker_names_from_proto(names, field: str) -> tuple[str, ...]:

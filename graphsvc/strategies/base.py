@@ -488,9 +488,7 @@ class LiveSession:
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
             raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
-        acc = np.zeros((0, 3)) if acc is None and not self.reads_acc else np.asarray(acc, dtype=np.float64)
-        if not self.reads_acc and acc.size:
-            acc = np.zeros((0, 3))  # (a strategy that reads none: ignored)
+        acc = np.asarray(acc, dtype=np.float64) if self.reads_acc else np.zeros((0, 3))  # (else ignored)
         if acc.shape != (self.S, 3):
             raise InputError(f"accelerations must be ({self.S}, 3) for the graph's sensors, got {acc.shape}")
         if np.isinf(acc).any():

@@ -146,3 +146,26 @@ def assert_frames_equal(expected, received) -> None:
         assert b.time_s == pytest.approx(a.time_s, abs=1e-9)
         np.testing.assert_array_equal(np.array(b.rotations_wxyz, np.float32), a.rotations.ravel())
         np.testing.assert_array_equal(np.array(b.translations_m, np.float32), a.translations.ravel())
+
+
+def rpc_error(call, *args, **kwargs):
+    """(status code, details) of the RpcError a call (unary, or a stream read to its end)
+    raises."""
+    import grpc
+
+    from graphsvc.service._generated import graphsvc_pb2 as pb
+
+    with pytest.raises(grpc.RpcError) as info:
+        result = call(*args, **kwargs)
+        if hasattr(result, "__iter__") and not isinstance(result, pb.SynthesizeResponse):
+            list(result)
+    return info.value.code(), info.value.details()
+
+
+def stream_requests(config, samples):
+    """A StreamSynthesize request iterator: the config, then each sample."""
+    from graphsvc.service._generated import graphsvc_pb2 as pb
+
+    yield pb.StreamSynthesizeRequest(config=config)
+    for s in samples:
+        yield pb.StreamSynthesizeRequest(sample=s)

@@ -15,6 +15,8 @@ from graphsvc.service import client as C
 from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from tests.service.conftest import assert_frames_equal
+from tests.service.conftest import rpc_error as _code
+from tests.service.conftest import stream_requests as _stream_requests
 
 INVALID = grpc.StatusCode.INVALID_ARGUMENT
 
@@ -25,20 +27,6 @@ def _ssg(**kw):
 
     latency = kw.pop("latency_s", None)
     return Options(strategy="ssg", latency_s=latency, ssg=SsgOptions(**kw))
-
-
-def _code(call, *args, **kwargs):
-    with pytest.raises(grpc.RpcError) as info:
-        result = call(*args, **kwargs)
-        if hasattr(result, "__iter__") and not isinstance(result, pb.SynthesizeResponse):
-            list(result)
-    return info.value.code(), info.value.details()
-
-
-def _stream_requests(config: pb.StreamConfig, samples):
-    yield pb.StreamSynthesizeRequest(config=config)
-    for s in samples:
-        yield pb.StreamSynthesizeRequest(sample=s)
 
 
 # ---------------------------------------------------------------- batch

@@ -19,6 +19,7 @@ searchable one wait for it.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,6 +105,7 @@ class SsgDecoder:
         self.seen = np.zeros((cap, M), dtype=bool)
         self.T = 0
         self.layers: list[Layer] = []
+        self.stops: list[int] = []  # each layer's stop, increasing (`sources` finds a frame's windows)
         self.edges: list[np.ndarray] = []  # edges[a]: layer a → a + 1
         self.anchors: list[Anchor] = []
         self.path: list[int] = []  # committed node of each committed layer
@@ -176,6 +178,7 @@ class SsgDecoder:
         blind = not force and 2 * self._data_rows(start, stop) <= stop - start
         layer = Layer(start, stop, blind)
         self.layers.append(layer)
+        self.stops.append(stop)
         z = len(self.layers) - 1
         if z:
             self.edges.append(np.zeros((0, 0)))
@@ -270,11 +273,9 @@ class SsgDecoder:
             layer = self.layers[a]
             layer.add(BACKWARD, mine, self._extension_costs(layer, mine))
             self.dp_valid = min(self.dp_valid, a)
-            if a + 1 < z:
-                self._refresh_edges(a)
-            if a >= 1:
-                self._refresh_edges(a - 1)
             a -= 1
+        for p in range(max(a, 0), z - 1):  # (the edges into and out of each extended layer, once; z − 1 → z: the caller)
+            self._refresh_edges(p)
 
     def _search_anyway(self) -> None:
         """No window had markers seen in more than half its frames: search the one with
@@ -282,7 +283,7 @@ class SsgDecoder:
         rows = [self._data_rows(layer.start, layer.stop) for layer in self.layers]
         best = int(np.argmax(rows))
         spans = [(layer.start, layer.stop) for layer in self.layers]
-        self.layers, self.edges, self.anchors, self.dp, self.dp_valid = [], [], [], [], 0
+        self.layers, self.edges, self.anchors, self.dp, self.dp_valid, self.stops = [], [], [], [], 0, []
         for z, (s, e) in enumerate(spans):
             self._add_layer(s, e, force=z == best)
 
@@ -372,11 +373,13 @@ class SsgDecoder:
         anchor = np.full((L, 2), -1, dtype=np.int64)
         frame = np.zeros((L, 2))
         weight = np.zeros((L, 2))
-        for z, node in enumerate(self.path):
-            layer = self.layers[z]
+        # The committed windows reaching [a, b): their stops increase, so they start at the
+        # first window ending after a (a live stream's frames cost the same an hour in).
+        for z in range(bisect.bisect_right(self.stops, a, 0, len(self.path)), len(self.path)):
+            layer, node = self.layers[z], self.path[z]
+            if layer.start >= b:
+                break
             lo, hi = max(a, layer.start), min(b, layer.stop)
-            if lo >= hi:
-                continue
             an = int(layer.anchor[node])
             n = np.arange(lo, hi)
             f = self.anchors[an].frames_at(n)
