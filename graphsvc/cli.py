@@ -174,6 +174,7 @@ def _cmd_relayout(args) -> int:
 
     from graphsvc.graph.file import load_graph, save_graph
     from graphsvc.graph.metadata import recompute_accelerations
+    from graphsvc.sensors.anatomy import ANATOMICAL
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
@@ -181,7 +182,7 @@ def _cmd_relayout(args) -> int:
     layout = load_layout(args.layout)
     graph = load_graph(args.graph)
     acc = recompute_accelerations(graph, layout)
-    params = {**graph.params, "layout": layout.name}
+    params = {**graph.params, "layout": layout.name, "sensor_frames": ANATOMICAL}  # (an older graph's converted)
     save_graph(replace(graph, edge_acc=acc, layout=layout.to_dict(), params=params), out)
     print(f"wrote {out}: edge metadata for layout {layout.name} ({', '.join(layout.sensor_names)})")
     return 0

@@ -38,7 +38,8 @@ from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
 from graphsvc.sensors.accelerometer import simulate_accelerations
-from graphsvc.sensors.layout import Layout, place
+from graphsvc.sensors.anatomy import ANATOMICAL
+from graphsvc.sensors.layout import Layout, Placement, anatomical_placement, place
 
 
 
@@ -91,6 +92,7 @@ class PreparedClip:
     half_heading: np.ndarray  # (2F−1,)
     half_rotations: np.ndarray  # (2F−1, J, 4)
     half_translations: np.ndarray  # (2F−1, J, 3)
+    placement: Placement  # the layout on this clip, its sensor frames estimated from the clip's motion
     digest: str = ""
 
 
@@ -145,12 +147,13 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
     half_rot, half_trans = meta.half_speed_poses(motion.rotations, motion.translations)
     half_world_rot, half_pos = forward_kinematics(half_rot, half_trans, sk.parents)
     half_ground, half_heading = meta.ground_and_heading(half_pos, table)
-    readings = meta.speed_readings(world_rot, world_pos, half_world_rot, half_pos, place(layout, sk, mapping), rate_hz)
+    placement = anatomical_placement(layout, sk, mapping, world_rot, world_pos)
+    readings = meta.speed_readings(world_rot, world_pos, half_world_rot, half_pos, placement, rate_hz)
     return PreparedClip(
         motion=motion, world_pos=world_pos, contacts=contacts, changes=signals.contact_changes(contacts),
         ground=ground, heading=heading, features=pose_features(canon, window), readings=readings,
         half_ground=half_ground, half_heading=half_heading, half_rotations=half_rot,
-        half_translations=half_trans, digest=content_digest(motion),
+        half_translations=half_trans, placement=placement, digest=content_digest(motion),
     )  # fmt: skip
 
 
@@ -379,6 +382,7 @@ def _params(options: BuildOptions, layout: Layout, window: int) -> dict:
     d = asdict(options)
     d["layout"] = layout.name
     d["window_frames"] = window
+    d["sensor_frames"] = ANATOMICAL
     d["augment"] = list(options.augment)
     for k in ("jobs", "progress"):  # do not change the graph: keep them out of the file
         d.pop(k)
@@ -541,7 +545,7 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
                                 options.bridge_spacing_s, needed)  # fmt: skip
     if not len(matches):
         return []
-    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: place(layout, clips[c].motion.skeleton, options.mapping),
+    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement,
                              rate)  # fmt: skip
     B, M = len(matches), nodes.rotations.shape[0]
     parts["kind"].append(np.full(M, NODE_BRIDGE, np.uint8))
@@ -591,7 +595,7 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
     sk = A.motion.skeleton
     world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
     ground, heading = meta.ground_and_heading(world_pos, joint_map(sk, mapping))
-    readings = simulate_accelerations(world_rot, world_pos, place(layout, sk, mapping), rate)
+    readings = simulate_accelerations(world_rot, world_pos, A.placement, rate)
     contacts = A.contacts[np.clip(np.rint(coords_a).astype(np.int64), 0, A.motion.num_frames - 1)]
     return rot, trans, ground, heading, contacts, coords_a, readings, theta, np.asarray(shift, dtype=np.float64)
 

@@ -198,7 +198,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     the float32 rounding of the stored poses (≈ 1e-3 m/s²)."""
     from graphsvc.graph.model import EDGE_SLOW, EDGE_SPEEDUP, NODE_SLOW
     from graphsvc.motion.skeleton import Skeleton
-    from graphsvc.sensors.layout import place
+    from graphsvc.sensors.layout import anatomical_placement
 
     sk = graph.skeleton
     mapping = graph.params.get("mapping")  # the joint mapping the graph was built with
@@ -214,14 +214,17 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
         return Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
 
     slow_nodes = np.nonzero(kind == NODE_SLOW)[0]
+    placements = []
     for c, info in enumerate(graph.clips):
         nodes = info["first_node"] + np.arange(info["frames"])
-        placement = place(layout, clip_skeleton(c), mapping)
         rot = graph.node_rotations[nodes].astype(np.float64)
         trans = graph.node_translations[nodes].astype(np.float64)
         half_rot, half_trans = half_speed_poses(rot, trans)
-        r = speed_readings(*forward_kinematics(rot, trans, sk.parents),
-                           *forward_kinematics(half_rot, half_trans, sk.parents), placement, graph.rate_hz)  # fmt: skip
+        world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
+        placement = anatomical_placement(layout, clip_skeleton(c), mapping, world_rot, world_pos)
+        placements.append(placement)
+        r = speed_readings(world_rot, world_pos, *forward_kinematics(half_rot, half_trans, sk.parents), placement,
+                           graph.rate_hz)  # fmt: skip
         normal[nodes], double[nodes], half[nodes] = r.normal, r.double, r.half[0::2]
         slow = slow_nodes[clip_of[slow_nodes] == c]
         half[slow] = r.half[(2 * frame_of[slow]).astype(np.int64)]
@@ -229,7 +232,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
         nodes = seg["first_node"] + np.arange(seg["count"])
         world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
                                                   graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
-        normal[nodes] = simulate_accelerations(world_rot, world_pos, place(layout, clip_skeleton(seg["clip_a"]), mapping), graph.rate_hz)
+        normal[nodes] = simulate_accelerations(world_rot, world_pos, placements[seg["clip_a"]], graph.rate_hz)
     dst, ekind = graph.edge_dst, graph.edge_kind
     out = normal[dst]
     slow_edges = ekind == EDGE_SLOW
@@ -237,15 +240,15 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     fast = ekind == EDGE_SPEEDUP
     out[fast] = double[dst[fast]]
     if graph.bridges:
-        _bridge_accelerations(graph, layout, mapping, clip_skeleton, out)
+        _bridge_accelerations(graph, placements, out)
     return out
 
 
-def _bridge_accelerations(graph, layout, mapping, clip_skeleton, out) -> None:
-    """Bridge edges' readings for `layout`, in place on out (E, S, 3), from the stored
-    poses of the bridges and of the clip frames around them (`bridge_readings`)."""
+def _bridge_accelerations(graph, placements, out) -> None:
+    """Bridge edges' readings, in place on out (E, S, 3), from the stored poses of the
+    bridges and of the clip frames around them (`bridge_readings`); placements: the
+    layout on each clip."""
     from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE
-    from graphsvc.sensors.layout import place
 
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
@@ -267,7 +270,7 @@ def _bridge_accelerations(graph, layout, mapping, clip_skeleton, out) -> None:
         node_rot, node_pos, graph.node_ground[nodes].astype(np.float64), graph.node_heading[nodes].astype(np.float64),
         first, count, clip_start[ca] + np.array([b["a_entry"] for b in recs]),
         clip_start[cb] + np.array([b["b_exit"] for b in recs]), clip_start[ca], clip_start[ca + 1], clip_start[cb],
-        clip_start[cb + 1], [place(layout, clip_skeleton(int(c)), mapping) for c in ca], graph.rate_hz,
+        clip_start[cb + 1], [placements[int(c)] for c in ca], graph.rate_hz,
     )  # fmt: skip
     # Row of each bridge node's entering edge, and of each bridge's exit edge.
     row_of_node = np.full(graph.num_nodes, -1, dtype=np.int64)
@@ -279,3 +282,29 @@ def _bridge_accelerations(graph, layout, mapping, clip_skeleton, out) -> None:
     into = graph.node_kind[graph.edge_dst[edges]] == NODE_BRIDGE
     out[edges[into]] = readings[row_of_node[graph.edge_dst[edges[into]]]]
     out[edges[~into]] = readings[exit_row[bridge_of_last[graph.edge_src[edges[~into]]]]]
+
+
+# Frames of a graph's clips sampled for its graph-wide sensor frames (`graph_placement`).
+PLACEMENT_SAMPLE = 20000
+
+
+def graph_placement(graph, layout=None):
+    """The graph's layout (or `layout`) placed on its skeleton, in the sensor-frame
+    convention of the graph's readings (params["sensor_frames"]; graphs without it are
+    `rest-pose`): for anatomical frames, estimated from up to PLACEMENT_SAMPLE frames of
+    its clips, evenly spread. What the searches use to turn a measured reading into the
+    world (OLNG's pose model, the rest-pose readings a live bridge calibrates against);
+    each clip's own readings were simulated with its own estimate."""
+    from graphsvc.sensors.anatomy import ANATOMICAL
+    from graphsvc.sensors.layout import anatomical_placement, layout_from_dict, place
+
+    layout = layout or layout_from_dict(graph.layout)
+    sk = graph.skeleton
+    mapping = graph.params.get("mapping")
+    if graph.params.get("sensor_frames") != ANATOMICAL:
+        return place(layout, sk, mapping)
+    n0 = sum(int(c["frames"]) for c in graph.clips) or graph.num_nodes
+    nodes = np.unique(np.linspace(0, n0 - 1, min(n0, PLACEMENT_SAMPLE)).round().astype(np.int64))
+    world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                              graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    return anatomical_placement(layout, sk, mapping, world_rot, world_pos)

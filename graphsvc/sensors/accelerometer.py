@@ -70,7 +70,61 @@ def second_derivative(x: np.ndarray, rate_hz: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _sensor_poses(world_rot, world_pos, segment, toward, along, offset, rotation, position, orientation):
+def _frame_quat(x, y, out):
+    """The rotation (w, x, y, z) whose matrix has columns x, y ⊥ x (unit) and x × y."""
+    z0 = x[1] * y[2] - x[2] * y[1]
+    z1 = x[2] * y[0] - x[0] * y[2]
+    z2 = x[0] * y[1] - x[1] * y[0]
+    m00, m01, m02 = x[0], y[0], z0
+    m10, m11, m12 = x[1], y[1], z1
+    m20, m21, m22 = x[2], y[2], z2
+    tr = m00 + m11 + m22
+    if tr > 0.0:
+        s = np.sqrt(tr + 1.0) * 2.0
+        out[0], out[1], out[2], out[3] = 0.25 * s, (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s
+    elif m00 > m11 and m00 > m22:
+        s = np.sqrt(1.0 + m00 - m11 - m22) * 2.0
+        out[0], out[1], out[2], out[3] = (m21 - m12) / s, 0.25 * s, (m01 + m10) / s, (m02 + m20) / s
+    elif m11 > m22:
+        s = np.sqrt(1.0 + m11 - m00 - m22) * 2.0
+        out[0], out[1], out[2], out[3] = (m02 - m20) / s, (m01 + m10) / s, 0.25 * s, (m12 + m21) / s
+    else:
+        s = np.sqrt(1.0 + m22 - m00 - m11) * 2.0
+        out[0], out[1], out[2], out[3] = (m10 - m01) / s, (m02 + m20) / s, (m12 + m21) / s, 0.25 * s
+    if out[0] < 0.0:
+        for k in range(4):
+            out[k] = -out[k]
+
+
+@numba.njit(cache=True, nogil=True)
+def carried_frame(seg_rot, rotation, carrier_rot, axis, out):
+    """A carried sensor's orientation (`layout.Placement`): X = seg_rot ⊗ rotation's X,
+    Y = carrier_rot's view of `axis` made orthogonal to X, Z = X × Y."""
+    ex = np.empty(3)
+    ex[0] = 1.0 - 2.0 * (rotation[2] * rotation[2] + rotation[3] * rotation[3])
+    ex[1] = 2.0 * (rotation[1] * rotation[2] + rotation[0] * rotation[3])
+    ex[2] = 2.0 * (rotation[1] * rotation[3] - rotation[0] * rotation[2])
+    x = np.empty(3)
+    y = np.empty(3)
+    qrot(seg_rot, ex, x)
+    qrot(carrier_rot, axis, y)
+    d = x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+    n = 0.0
+    for k in range(3):
+        y[k] -= d * x[k]
+        n += y[k] * y[k]
+    if n < 1e-18:  # (the carried axis along the bone: never for a hinge; keep the rigid frame)
+        qmul(seg_rot, rotation, out)
+        return
+    n = np.sqrt(n)
+    for k in range(3):
+        y[k] /= n
+    _frame_quat(x, y, out)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sensor_poses(world_rot, world_pos, segment, toward, along, offset, rotation, carrier, axis, position,
+                  orientation):  # fmt: skip
     F, S = position.shape[0], position.shape[1]
     tmp = np.empty(3)
     for f in range(F):
@@ -80,7 +134,10 @@ def _sensor_poses(world_rot, world_pos, segment, toward, along, offset, rotation
             for k in range(3):
                 base = world_pos[f, seg, k]
                 position[f, s, k] = base + along[s] * (world_pos[f, tow, k] - base) + tmp[k]
-            qmul(world_rot[f, seg], rotation[s], orientation[f, s])
+            if carrier[s] < 0:
+                qmul(world_rot[f, seg], rotation[s], orientation[f, s])
+            else:
+                carried_frame(world_rot[f, seg], rotation[s], world_rot[f, carrier[s]], axis[s], orientation[f, s])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -109,6 +166,7 @@ def sensor_poses(world_rot: np.ndarray, world_pos: np.ndarray, placement: Placem
         np.ascontiguousarray(world_rot), np.ascontiguousarray(world_pos),
         placement.segment, placement.toward, placement.along,
         np.ascontiguousarray(placement.offset), np.ascontiguousarray(placement.rotation),
+        np.ascontiguousarray(placement.carrier), np.ascontiguousarray(placement.axis, dtype=np.float64),
         position, orientation,
     )  # fmt: skip
     return position, orientation

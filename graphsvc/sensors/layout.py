@@ -2,11 +2,15 @@
 
 A sensor is attached to a segment named by a canonical joint (the segment runs from
 that joint to `toward`, the next canonical joint down the bone), at fraction `along`
-of the way, plus an optional offset in the segment's frame. Its frame :
-X along the bone, away from the body centre; Z "up" for arm segments and "forward"
-for leg and trunk segments, taken in the skeleton's rest pose (T-pose for the CMU
-and procedural skeletons) and orthogonalised against X; Y = Z × X. A layout file
-may instead give the sensor's rotation relative to the segment explicitly.
+of the way, plus an optional offset in the segment's frame. Its frame is anatomical
+(`sensors.anatomy`: X along the bone, Y from the joint's flexion axis or the hip or
+shoulder line, the same on every skeleton), estimated from the motion it rides on
+(`anatomical_placement`). Graphs and recordings made before anatomical frames used
+the rest-pose convention (`place` without motion, `rest_rotation`): X along the bone,
+Z "up" for arm segments and "forward" for leg and trunk segments in the skeleton's rest
+pose, orthogonalised against X; Y = Z × X. A layout file may instead give the sensor's
+rotation relative to the segment explicitly (then it is used as given, in either
+convention).
 
 Layout files are JSON or TOML:
 
@@ -22,7 +26,7 @@ from __future__ import annotations
 
 import json
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +165,11 @@ def load_layout(name_or_path: str) -> Layout:
 class Placement:
     """A layout resolved against one skeleton. Arrays have one row per sensor (S):
     segment (S,) joint index, toward (S,) joint index, along (S,), offset (S, 3) metres
-    in the segment frame, rotation (S, 4) sensor frame relative to the segment."""
+    in the segment frame, rotation (S, 4) sensor frame relative to the segment.
+    carrier (S,): −1 for a sensor rigid on its segment; else the joint whose frame
+    carries the sensor's Y axis, `axis` (S, 3) in that joint's frame, while X follows
+    the segment (rotation's X): the forearm's frame, which then does not turn with the
+    forearm's twist (`sensors.anatomy`). convention: ANATOMICAL or REST_POSE."""
 
     layout: Layout
     segment: np.ndarray
@@ -169,6 +177,9 @@ class Placement:
     along: np.ndarray
     offset: np.ndarray
     rotation: np.ndarray
+    carrier: np.ndarray
+    axis: np.ndarray
+    convention: str = "rest-pose"
 
 
 def _rest_world_positions(skeleton: Skeleton) -> np.ndarray:
@@ -178,7 +189,7 @@ def _rest_world_positions(skeleton: Skeleton) -> np.ndarray:
     return pos
 
 
-def default_rotation(bone_dir: np.ndarray, segment: str) -> np.ndarray:
+def rest_rotation(bone_dir: np.ndarray, segment: str) -> np.ndarray:
     """Sensor frame relative to a segment whose rest-pose world rotation is the
     identity: X along the bone, Z toward +Y (arms) or +Z (legs, trunk), orthogonalised."""
     x = bone_dir / np.linalg.norm(bone_dir)
@@ -210,7 +221,8 @@ def place(layout: Layout, skeleton: Skeleton, mapping=None) -> Placement:
         if len(_PLACEMENTS) > 256:
             _PLACEMENTS.clear()
         cached = _PLACEMENTS[key] = _place(layout, skeleton, mapping)
-        for arr in (cached.segment, cached.toward, cached.along, cached.offset, cached.rotation):
+        for arr in (cached.segment, cached.toward, cached.along, cached.offset, cached.rotation, cached.carrier,
+                    cached.axis):
             arr.flags.writeable = False  # shared between callers
     return cached
 
@@ -234,7 +246,8 @@ def _place(layout: Layout, skeleton: Skeleton, mapping) -> Placement:
         if s.rotation_wxyz is not None:
             rotation.append(quat.normalize(np.array(s.rotation_wxyz)))
         else:
-            rotation.append(default_rotation(bone, s.segment))
+            rotation.append(rest_rotation(bone, s.segment))
+    S = len(layout.sensors)
     return Placement(
         layout=layout,
         segment=np.array(segment, dtype=np.int64),
@@ -242,4 +255,38 @@ def _place(layout: Layout, skeleton: Skeleton, mapping) -> Placement:
         along=np.array([s.along for s in layout.sensors]),
         offset=np.array([s.offset_m for s in layout.sensors], dtype=float).reshape(-1, 3),
         rotation=np.array(rotation).reshape(-1, 4),
+        carrier=np.full(S, -1, dtype=np.int64),
+        axis=np.zeros((S, 3)),
     )
+
+
+def anatomical_placement(layout: Layout, skeleton: Skeleton, mapping, world_rot: np.ndarray,
+                         world_pos: np.ndarray) -> Placement:  # fmt: skip
+    """The layout on a skeleton with anatomical sensor frames (`sensors.anatomy`),
+    estimated from the motion world_rot (F, J, 4), world_pos (F, J, 3) that the sensors
+    ride on (a clip, or a sample of a graph's nodes). Sensors whose layout gives
+    rotation_wxyz keep it."""
+    from graphsvc.sensors import anatomy
+
+    base = place(layout, skeleton, mapping)
+    table = joint_map(skeleton, mapping)
+    rest_rot, rest_pos = anatomy.rest_pose(skeleton)
+    segments = [s.segment for s in layout.sensors]
+    towards = [s.toward for s in layout.sensors]
+    rotation = anatomy.estimate_rotations(world_rot, world_pos, rest_rot, rest_pos, table, segments, towards)
+    carrier = np.full(len(segments), -1, dtype=np.int64)
+    axis = np.zeros((len(segments), 3))
+    for k, (seg, spec) in enumerate(zip(segments, layout.sensors)):
+        if spec.rotation_wxyz is not None:
+            rotation[k] = base.rotation[k]
+            continue
+        upper = anatomy.CARRIED_BY.get(seg)
+        if upper is not None:  # Y: the elbow's axis as the upper arm carries it
+            carrier[k] = table[upper]
+            up_rot = anatomy.estimate_rotations(world_rot, world_pos, rest_rot, rest_pos, table, [upper],
+                                                [anatomy.CARRIED_TOWARD[upper]])[0]  # fmt: skip
+            axis[k] = quat.rotate(up_rot, np.array([0.0, 1.0, 0.0]))
+    out = replace(base, rotation=rotation, carrier=carrier, axis=axis, convention=anatomy.ANATOMICAL)
+    for arr in (out.rotation, out.carrier, out.axis):
+        arr.flags.writeable = False
+    return out

@@ -347,6 +347,8 @@ def export_csv(rec: Recording, path) -> None:
     lines = [CSV_MAGIC, f"# rate_hz={_shortest(rec.rate_hz)}"]
     if rec.meta.get("sensor_frame") == "device":  # (readings not yet calibrated: said, not assumed)
         lines.append("# sensor_frame=device")
+    if rec.meta.get("sensor_frames"):
+        lines.append(f"# sensor_frames={rec.meta['sensor_frames']}")
     lines.append(",".join(csv_columns(rec)))
     lines += csv_rows(table)
     with atomic_writer(path) as f:
@@ -488,13 +490,28 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
         ground_position=np.ascontiguousarray(table[:, pos_cols]) if pos_cols else None,
         heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
         layout=layout,
-        meta={"source": str(path), "imported_from": "csv", "units": units, "up": up, "sensor_frame": sensor_frame},
+        meta={"source": str(path), "imported_from": "csv", "units": units, "up": up, "sensor_frame": sensor_frame,
+              **_frames_comment(path, comments, comment_lines, ours and sensor_frame == "layout")},
         orientations=None if orientations is None else orientations.astype(np.float32),
         marker_names=marker_names,
         marker_positions=np.ascontiguousarray(table[:, marker_cols].reshape(len(t), -1, 3)) if marker_cols else None,
     )
     rec.validate()
     return rec
+
+
+def _frames_comment(path, comments: dict, lines: dict, ours_in_layout: bool) -> dict:
+    """{"sensor_frames": convention} from a `# sensor_frames=` comment (`sensors.anatomy`);
+    a layout-frame file graphsvc wrote without one predates anatomical frames."""
+    from graphsvc.sensors.anatomy import CONVENTIONS, REST_POSE
+
+    if "sensor_frames" not in comments:
+        return {"sensor_frames": REST_POSE} if ours_in_layout else {}
+    value = comments["sensor_frames"].lower()
+    if value not in CONVENTIONS:
+        raise FormatError(path, f"bad sensor_frames comment {comments['sensor_frames']!r} (expected "
+                                f"{' or '.join(CONVENTIONS)})", line=lines["sensor_frames"])  # fmt: skip
+    return {"sensor_frames": value}
 
 
 def _device_comments(path, comments: dict, lines: dict, units: str | None, up: str | None,

@@ -18,7 +18,8 @@ from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, check_finite
 from graphsvc.sensors.accelerometer import second_derivative, sensor_poses, to_sensor_frames
 from graphsvc.sensors.device_model import TISSUE_SEGMENTS, impacts, mounting, orientation_output, soft_tissue
-from graphsvc.sensors.layout import Layout, place
+from graphsvc.sensors.anatomy import ANATOMICAL
+from graphsvc.sensors.layout import Layout, anatomical_placement
 from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_heading, corrupt_positions
 from graphsvc.sensors.recording import Recording
 
@@ -61,7 +62,7 @@ def simulate_recording(
     rate = motion.rate_hz
     world_rot, world_pos = motion_fk(motion)
     table = joint_map(motion.skeleton, mapping)
-    placement = place(layout, motion.skeleton, mapping)
+    placement = anatomical_placement(layout, motion.skeleton, mapping, world_rot, world_pos)
     exact, device = device_readings(world_rot, world_pos, placement, table, rate, noise, seed)
     position = signals.ground_position(world_pos, table["pelvis"])
     heading = signals.heading(world_pos, table)
@@ -91,6 +92,7 @@ def simulate_recording(
             "noise": noise.to_dict(),
             "seed": int(seed),
             "simulated": True,
+            "sensor_frames": ANATOMICAL,
             **({"missing_joints": sorted(table.missing)} if getattr(table, "missing", None) else {}),
         },
     )

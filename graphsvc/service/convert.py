@@ -67,12 +67,12 @@ def rest_pose_readings(graph: MotionGraph) -> np.ndarray:
     from graphsvc.errors import GraphsvcError
     from graphsvc.motion.kinematics import forward_kinematics
     from graphsvc.sensors.accelerometer import simulate_accelerations
-    from graphsvc.sensors.layout import layout_from_dict, place
+    from graphsvc.graph.metadata import graph_placement
 
     sk = graph.skeleton
     S = len(graph.sensor_names)
     try:
-        placement = place(layout_from_dict(graph.layout), sk, graph.params.get("mapping"))
+        placement = graph_placement(graph)
     except GraphsvcError:
         return np.full((S, 3), np.nan, np.float32)
     frames = 5  # the derivative stencil needs a few frames; a held pose has p̈ = 0

@@ -32,6 +32,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.anatomy import check_frames
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
@@ -220,6 +221,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
     ignored = check_inputs(strategy, have)
     if "accelerations" in strategy.uses:
         check_layout(graph, rec.sensor_names)
+        check_frames(graph.params, rec.meta)
     constraints = check_constraints(constraints, graph) if "constraints" in strategy.uses else []
     acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
     if "accelerations" not in strategy.uses:

@@ -12,7 +12,7 @@ from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.signals import foot_contacts
 from graphsvc.sensors.accelerometer import G_UP, second_derivative, sensor_poses
 from graphsvc.sensors.device_model import impacts, mounting, orientation_output, soft_tissue
-from graphsvc.sensors.layout import PRESETS, place
+from graphsvc.sensors.layout import PRESETS, anatomical_placement
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.simulate import simulate_recording
 
@@ -42,7 +42,8 @@ def test_a_mounted_device_reads_in_its_rotated_frame_and_reports_it(walk):
                                atol=2e-4)  # fmt: skip
     # The orientation output is the mounted frame's: with it, reading − gravity is the sensor point's p̈.
     world_rot, world_pos = motion_fk(walk)
-    position, orientation = sensor_poses(world_rot, world_pos, place(layout, walk.skeleton))
+    position, orientation = sensor_poses(world_rot, world_pos,
+                                         anatomical_placement(layout, walk.skeleton, None, world_rot, world_pos))
     np.testing.assert_allclose(mounted.orientations, quat.mul(orientation, M[None]), atol=1e-6)
     free = quat.rotate(mounted.orientations.astype(float), mounted.accelerations.astype(float)) - G_UP
     np.testing.assert_allclose(free, second_derivative(position, walk.rate_hz), atol=2e-3)

@@ -55,7 +55,8 @@ from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.kinematics import qmul4 as _qmul
 from graphsvc.motion.kinematics import qrot3 as _qrot
 from graphsvc.motion.placement import joint_tables, relative_pose
-from graphsvc.sensors.layout import layout_from_dict, place
+from graphsvc.graph.metadata import graph_placement
+from graphsvc.sensors.accelerometer import carried_frame
 
 EPS = 1e-4  # ρ's smoothing (units of each term)
 VARIANCE_KEPT = 0.99
@@ -82,6 +83,8 @@ class PoseModel:
     sensor_rotation: np.ndarray
     pelvis: int
     carrier: int
+    sensor_carrier: np.ndarray  # (S,) slot of the joint carrying a sensor's Y, −1: rigid (`layout.Placement`)
+    sensor_axis: np.ndarray  # (S, 3) that axis in the carrier's frame
 
     @property
     def dims(self) -> int:
@@ -104,8 +107,9 @@ def pose_model(graph: MotionGraph) -> PoseModel:
         while a >= 0:
             descendant[a, b] = True
             a = parent_slot[a]
-    placement = place(layout_from_dict(graph.layout), sk, graph.params.get("mapping"))
-    missing = [int(j) for j in np.concatenate([placement.segment, placement.toward]) if int(j) not in where]
+    placement = graph_placement(graph)
+    carried = placement.carrier[placement.carrier >= 0]
+    missing = [int(j) for j in np.concatenate([placement.segment, placement.toward, carried]) if int(j) not in where]
     if missing:
         from graphsvc.errors import InputError
 
@@ -114,7 +118,9 @@ def pose_model(graph: MotionGraph) -> PoseModel:
                      np.array([where[int(j)] for j in placement.segment], dtype=np.int64),
                      np.array([where[int(j)] for j in placement.toward], dtype=np.int64),
                      np.asarray(placement.along, dtype=np.float64), np.asarray(placement.rotation, dtype=np.float64),
-                     int(pelvis), int(carrier))  # fmt: skip
+                     int(pelvis), int(carrier),
+                     np.array([where[int(j)] if j >= 0 else -1 for j in placement.carrier], dtype=np.int64),
+                     np.asarray(placement.axis, dtype=np.float64))  # fmt: skip
 
 
 def frame_poses(graph: MotionGraph, model: PoseModel, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -388,7 +394,8 @@ def pose_positions(p: np.ndarray, offsets: np.ndarray, model: PoseModel) -> np.n
 
 def sensor_orientations(p: np.ndarray, model: PoseModel) -> np.ndarray:
     """Heading-frame orientations (S, 4) of the sensors in pose p: each segment's
-    global rotation times the sensor's rotation on it."""
+    global rotation times the sensor's rotation on it (a carried sensor's:
+    `accelerometer.carried_frame`)."""
     Ja = model.active.size
     g = np.empty((Ja, 4))
     for k in range(Ja):
@@ -398,5 +405,9 @@ def sensor_orientations(p: np.ndarray, model: PoseModel) -> np.ndarray:
         g[k] = q if k == 0 else _qmul(*g[model.parent_slot[k]], *q)
     out = np.empty((model.sensor_a.size, 4))
     for m in range(model.sensor_a.size):
-        out[m] = _qmul(*g[model.sensor_a[m]], *model.sensor_rotation[m])
+        c = model.sensor_carrier[m]
+        if c < 0:
+            out[m] = _qmul(*g[model.sensor_a[m]], *model.sensor_rotation[m])
+        else:
+            carried_frame(g[model.sensor_a[m]], model.sensor_rotation[m], g[c], model.sensor_axis[m], out[m])
     return out
