@@ -91,6 +91,8 @@ def simulate_recording(
             "noise": noise.to_dict(),
             "seed": int(seed),
             "simulated": True,
+            # (a mounting turns each reading into its device's frame: calibration's input)
+            "sensor_frame": "device" if noise.mount else "layout",
             **({"missing_joints": sorted(table.missing)} if getattr(table, "missing", None) else {}),
         },
     )
