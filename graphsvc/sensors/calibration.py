@@ -27,8 +27,12 @@ estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device �
    of freedom fitted (SVD) over the matched sample pairs and the rest's gravity pair
    (weighted `REST_WEIGHT`); for `npose`/`tpose` only the rotation about gravity, in
    closed form over every pair (the pose fixes the tilt). Steps 2–3 run `ITERATIONS`
-   times, each from the last estimate. A sensor the motion hardly turns off its rest
-   axis (`SEEN_RATIO`) cannot show its rotation about gravity and keeps none.
+   times, each from the last estimate. With orientation output the fits also pair the
+   vertical each device frame saw, D(t)⁻¹·ŷ (free of the yaw drift and of linear
+   acceleration), with the matched graph frames' (`graph_verticals`, FK of the poses
+   the graph stores): the relative rotations D(t0)⁻¹D(t) = M⁻¹·S(t0)⁻¹S(t)·M tie M to
+   the segment's motion, seen through gravity. A sensor the motion hardly turns off its
+   rest axis (`SEEN_RATIO`) cannot show its rotation about gravity and keeps none.
 
 Without a graph the rotation about gravity cannot be determined (a single direction
 fixes two of three degrees of freedom): `calibrate` refuses.
@@ -174,10 +178,10 @@ def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> tup
 # ------------------------------------------------------------------ graph readings in clip order
 
 
-def graph_stream(graph) -> tuple[np.ndarray, np.ndarray]:
+def graph_stream(graph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The graph's readings at normal speed in clip order: (N, S, 3) float64 (the
-    original edges, by clip then frame) and (N,) int64 run ids (a new id wherever
-    the clip changes or a frame is skipped)."""
+    original edges, by clip then frame), (N,) int64 run ids (a new id wherever the
+    clip changes or a frame is skipped) and (N,) the edges' destination nodes."""
     from graphsvc.graph.model import EDGE_ORIGINAL
 
     edges = np.flatnonzero(graph.edge_kind == EDGE_ORIGINAL)
@@ -188,7 +192,36 @@ def graph_stream(graph) -> tuple[np.ndarray, np.ndarray]:
     edges, clip, frame = edges[order], clip[order], frame[order]
     brk = np.ones(edges.size, dtype=bool)
     brk[1:] = (clip[1:] != clip[:-1]) | (np.abs(frame[1:] - frame[:-1] - 1.0) > 1e-3)
-    return np.asarray(graph.edge_acc[edges], dtype=np.float64), np.cumsum(brk) - 1
+    return np.asarray(graph.edge_acc[edges], dtype=np.float64), np.cumsum(brk) - 1, graph.edge_dst[edges]
+
+
+def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
+    """(len(nodes), S, 3) the world's vertical (a unit vector) in the layout's frame of
+    sensors `names` at original nodes `nodes`, from the poses the graph stores (each
+    clip's skeleton placing the sensors, as `graph.metadata.recompute_accelerations`)."""
+    from graphsvc.motion.kinematics import forward_kinematics
+    from graphsvc.motion.skeleton import Skeleton
+    from graphsvc.sensors.accelerometer import sensor_poses
+    from graphsvc.sensors.layout import layout_from_dict, place
+
+    layout = layout_from_dict(graph.layout)
+    sk, mapping = graph.skeleton, graph.params.get("mapping")
+    cols = [layout.sensor_names.index(n) for n in names]
+    out = np.zeros((nodes.size, len(names), 3))
+    clips = graph.node_clip[nodes]
+    for c in np.unique(clips):
+        pick = np.flatnonzero(clips == c)
+        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes[pick]].astype(np.float64),
+                                                  graph.node_translations[nodes[pick]].astype(np.float64), sk.parents)  # fmt: skip
+        placement = place(layout, Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site), mapping)
+        _, orientation = sensor_poses(world_rot, world_pos, placement)
+        out[pick] = _vertical(orientation)[:, cols]
+    return out
+
+
+def _vertical(q: np.ndarray) -> np.ndarray:
+    """(..., 3) the world's +Y seen in frames q (..., 4)."""
+    return quat.inv_rotate(q, np.broadcast_to([0.0, 1.0, 0.0], q.shape[:-1] + (3,)))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -278,9 +311,7 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
 def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rest: tuple[int, int]) -> tuple[np.ndarray, str]:
     a, b = rest
     if orient is not None and np.isfinite(orient[a:b]).all():
-        q = quat.normalize(np.asarray(orient[a:b], dtype=np.float64))
-        up = quat.inv_rotate(q, np.broadcast_to([0.0, 1.0, 0.0], q.shape[:-1] + (3,)))
-        return _unit(up.mean(axis=0)), "orientation"
+        return _unit(_vertical(quat.normalize(np.asarray(orient[a:b], dtype=np.float64))).mean(axis=0)), "orientation"
     return _unit(np.nanmean(np.asarray(acc[a:b], dtype=np.float64), axis=0)), "acceleration"
 
 
@@ -329,10 +360,13 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     R = R0.copy()
     still = np.asarray(acc[r0:r1], dtype=np.float64)
     noise_var = np.mean(np.sum((still - still.mean(axis=0)) ** 2, axis=-1), axis=0) / 3.0  # (S,) per axis
-    stream, runs = graph_stream(graph)
+    stream, runs, stream_nodes = graph_stream(graph)
     cols = [list(graph.sensor_names).index(n) for n in names]
     stream = np.ascontiguousarray(stream[:, cols])
     moving = acc[r0:r0 + int(MAX_MOTION_S * rate)]  # (the rest and the motion after it)
+    # With orientation output: the vertical each device frame saw (free of the yaw drift
+    # and of linear acceleration), paired with the matched graph frames' (FK of its poses).
+    dev_up = None if orient is None else _vertical(quat.normalize(orient[r0:r0 + moving.shape[0]]))
     window, stride = max(4, int(round(WINDOW_S * rate))), max(1, int(round(STRIDE_S * rate)))
     if moving.shape[0] < 2 * window:
         raise InputError(f"the recording has {moving.shape[0] / rate:.2f} s from its rest on; calibration needs "
@@ -357,20 +391,29 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
         idx_q = np.concatenate([np.arange(m[0], m[0] + window) for m in matches])
         idx_g = np.concatenate([np.arange(m[1], m[1] + window) for m in matches])
         w_pair = np.repeat(weight, window)
+        lay_up = None
+        if dev_up is not None:
+            used, back = np.unique(idx_g, return_inverse=True)
+            lay_up = graph_verticals(graph, stream_nodes[used], names)[back]
         for s in range(S):
-            dev, lay = moving[idx_q, s], stream[idx_g, s]
+            dev, lay, w_s = moving[idx_q, s], stream[idx_g, s], w_pair
+            if lay_up is not None:  # (gravity's pairs beside the readings', NaN orientations left out)
+                ok = np.isfinite(dev_up[idx_q, s]).all(axis=-1)
+                dev = np.vstack([dev, GRAVITY * dev_up[idx_q[ok], s]])
+                lay = np.vstack([lay, GRAVITY * lay_up[ok, s]])
+                w_s = np.concatenate([w_pair, w_pair[ok]])
             if not seen[s]:  # the motion barely turns it off gravity's axis: its twist is unseen,
                 # its tilt the pose's, or for a natural stance the matched graph poses' (shortest arcs)
-                R[s] = R0[s] if pose != "stand" else _between(w_pair @ dev, w_pair @ lay)
+                R[s] = R0[s] if pose != "stand" else _between(w_s @ dev, w_s @ lay)
             elif pose == "stand" or not has_rest[s]:
-                rest_w = REST_WEIGHT[pose] * w_pair.sum() * has_rest[s]
+                rest_w = REST_WEIGHT[pose] * w_s.sum() * has_rest[s]
                 R[s] = wahba(np.vstack([dev, up_dev[s] * GRAVITY]), np.vstack([lay, up_lay[s] * GRAVITY]),
-                             np.append(w_pair, rest_w))  # fmt: skip
+                             np.append(w_s, rest_w))  # fmt: skip
             else:  # the tilt is the pose's: only the angle about gravity, over every pair
-                R[s] = _about_only(R0[s], dev, lay, w_pair, up_lay[s])
+                R[s] = _about_only(R0[s], dev, lay, w_s, up_lay[s])
             got = np.einsum("ij,kj->ki", R[s], dev)
             cosang = np.sum(_unit(got) * _unit(lay), axis=-1)
-            residual[s] = math.degrees(math.sqrt(np.average(np.arccos(np.clip(cosang, -1, 1)) ** 2, weights=w_pair)))
+            residual[s] = math.degrees(math.sqrt(np.average(np.arccos(np.clip(cosang, -1, 1)) ** 2, weights=w_s)))
         pairs = idx_q.size
     rest = (r0, r1)
     method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source}) + graph") if seen[s]
