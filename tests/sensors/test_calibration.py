@@ -26,16 +26,12 @@ from graphsvc.sensors.simulate import simulate_recording
 LAYOUT = load_layout("wrists-ankles")
 
 
-def npose_take(clip: Motion, hold_s: float = 1.5, blend_s: float = 0.6) -> Motion:
-    """A calibration take: the procedural skeleton's N-pose (its T-pose rest with the
-    arms turned down, legs straight) held, blended into `clip`'s first frame, then the clip."""
+def pose_take(clip: Motion, pose: np.ndarray, hold_s: float = 1.5, blend_s: float = 0.6) -> Motion:
+    """A calibration take: local rotations `pose` (J, 4) held (the root where `clip`
+    starts), eased into `clip`'s first frame, then the clip."""
     sk, rate = clip.skeleton, clip.rate_hz
-    pose = quat.identity((sk.num_joints,))
-    for name, sign in (("l_shoulder", -1.0), ("r_shoulder", 1.0)):
-        pose[sk.names.index(name)] = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.float64(sign * np.pi / 2))
     trans = sk.offsets.copy()
     trans[0] = clip.translations[0, 0]
-    trans[0, 1] = sk.offsets[0, 1] if sk.offsets[0, 1] > 0.5 else 0.99
     hold, blend = int(hold_s * rate), int(blend_s * rate)
     t = (1.0 - np.cos(np.pi * (np.arange(1, blend + 1) / (blend + 1)))) / 2.0  # (eased: still at both ends)
     rot_b = quat.slerp(np.broadcast_to(pose, (blend, *pose.shape)), np.broadcast_to(clip.rotations[0], (blend, *pose.shape)),
@@ -44,6 +40,16 @@ def npose_take(clip: Motion, hold_s: float = 1.5, blend_s: float = 0.6) -> Motio
     rot = np.concatenate([np.broadcast_to(pose, (hold, *pose.shape)), rot_b, clip.rotations])
     tr = np.concatenate([np.broadcast_to(trans, (hold, *trans.shape)), trans_b, clip.translations])
     return Motion(sk, np.ascontiguousarray(rot), np.ascontiguousarray(tr), rate, name="calibration-take")
+
+
+def npose_take(clip: Motion) -> Motion:
+    """`pose_take` of the procedural skeleton's N-pose: its T-pose rest (identity
+    rotations) with the arms turned down, legs straight."""
+    sk = clip.skeleton
+    pose = quat.identity((sk.num_joints,))
+    for name, sign in (("l_shoulder", -1.0), ("r_shoulder", 1.0)):
+        pose[sk.names.index(name)] = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.float64(sign * np.pi / 2))
+    return pose_take(clip, pose)
 
 
 @pytest.fixture(scope="module")
@@ -156,6 +162,30 @@ def test_calibration_recovers_a_mounting_at_the_default_noise(kb, graph, orienta
     err = _errors(cal, seed, LAYOUT.sensor_names, 90.0)
     assert err.max() < 5.0, err
     assert all(("orientation" in s["method"]) == orientations for s in cal["sensors"].values())
+
+
+def test_a_t_pose_take_calibrates_sensors_in_anatomical_frames(kb):
+    """Sensor frames given explicitly (the procedural skeleton's rest is the T-pose with
+    identity rotations, so a frame's rotation is its world axes there): the left arm X
+    to the body's left (+X), Y up; the right arm X to its right, Y down; the shins X
+    down, Z forward — the frames `POSE_READINGS` is written for."""
+    from graphsvc.sensors.layout import layout_from_dict
+
+    c = float(np.sqrt(0.5))
+    layout = layout_from_dict({"name": "anatomical", "sensors": [
+        {"name": "l_wrist", "segment": "l_elbow", "along": 0.9, "rotation_wxyz": [1, 0, 0, 0]},
+        {"name": "r_wrist", "segment": "r_elbow", "along": 0.9, "rotation_wxyz": [0, 0, 0, 1]},
+        {"name": "l_ankle", "segment": "l_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]},
+        {"name": "r_ankle", "segment": "r_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]}]})  # fmt: skip
+    g, _ = build_graph(kb, BuildOptions(layout=layout, progress=False))
+    seed = 8
+    take = pose_take(_clip(kb, "stop"), quat.identity((kb[0].skeleton.num_joints,)))
+    rec = simulate_recording(take, layout, parse_noise("none,mount=90"), seed=seed)
+    rest = rec.accelerations[5].astype(float)  # (the T-pose's readings without the mounting:)
+    np.testing.assert_allclose(quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
+                               [POSE_READINGS["tpose"][s.segment] for s in layout.sensors], atol=1e-3)  # fmt: skip
+    err = _errors(calibrate(rec, "tpose", g), seed, layout.sensor_names, 90.0)
+    assert err.max() < 2.0, err
 
 
 def test_orientation_output_pairs_gravity_free_of_linear_acceleration(kb, graph):
