@@ -332,8 +332,10 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     if graph is not None:
         gnames = graph.sensor_names
         if sorted(gnames) != sorted(names):
+            hint = ("" if rec.meta.get("device_sensors") is not None
+                    else ": give --device-map to name them as the layout does")  # (mapped already: some are missing)
             raise InputError(f"the recording's sensors ({', '.join(names)}) are not the graph's "
-                             f"({', '.join(gnames)}): give --device-map to name them as the layout does")  # fmt: skip
+                             f"({', '.join(gnames)}){hint}")  # fmt: skip
     segments = sensor_segments(layout, names)
     table = POSE_READINGS[pose]
     unknown = [f"{n} ({s})" for n, s in zip(names, segments) if s not in table]
