@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (Parser, add_input_file_options, add_marker_options, add_search_options, os_message,
+from graphsvc.cli_args import (Parser, add_calibration_option, add_input_file_options, add_marker_options, add_search_options, os_message,
                                search_options)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 
@@ -213,9 +214,13 @@ def _cmd_synthesize(args) -> int:
                          f"{' …' if rec.num_sensors > 4 else ''}): "
                          f"give --device-map xsens (or a map file) to name them as layout "
                          f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
-    if rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None:
+    if args.calibration:
+        from graphsvc.sensors.calibration import apply_calibration, load_calibration
+
+        rec = apply_calibration(rec, load_calibration(args.calibration))
+    elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None:
         print(f"note: {args.recording}'s readings are in each device's own frame; they are used as if in the "
-              "layout's sensor frames (no calibration yet)", file=sys.stderr)  # fmt: skip
+              "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)", file=sys.stderr)  # fmt: skip
     result = reconstruct(graph, rec, options)
     write_bvh(out, result.motion, scale=args.scale)
     result.report["files"] = {"output": str(out.resolve()), "graph": str(Path(args.graph).resolve()),
@@ -235,6 +240,36 @@ def _cmd_synthesize(args) -> int:
           + (f", {r['revisions']} revisions at lag {r['lag_samples']} samples" if "revisions" in r else "")
           + (f"; ignored: {', '.join(r.get('ignored_inputs', []) + r.get('ignored_options', []))}"
              if r.get("ignored_inputs") or r.get("ignored_options") else ""))  # fmt: skip
+    return 0
+
+
+def _cmd_calibrate(args) -> int:
+    from graphsvc.sensors.calibration import calibrate, save_calibration
+    from graphsvc.sensors.recording import read_recording
+
+    out = Path(args.output)
+    _check_output(out)
+    graph = None
+    if args.graph:
+        from graphsvc.graph.file import load_graph
+
+        graph = load_graph(args.graph)
+    rec = read_recording(args.recording, up=args.up, units=args.units)
+    if args.device_map:
+        from graphsvc.sensors.devices import apply_device_map, device_map
+
+        layout_name = (graph.layout if graph is not None else rec.layout or {}).get("name")
+        rec = apply_device_map(rec, device_map(args.device_map, layout_name),
+                               order=graph.sensor_names if graph is not None else None)  # fmt: skip
+    cal = calibrate(rec, args.pose, graph, args.start, args.end)
+    cal["source"] = str(Path(args.recording))
+    save_calibration(cal, out)
+    a, b = cal["rest_s"]
+    print(f"wrote {out}: {len(cal['sensors'])} sensors, pose {args.pose}, rest {a:.2f}–{b:.2f} s, "
+          f"{cal['matched_samples']} matched samples")  # fmt: skip
+    for name, item in cal["sensors"].items():
+        angle = 2.0 * math.degrees(math.acos(min(1.0, abs(item["rotation_wxyz"][0]))))
+        print(f"  {name}: mounting {angle:.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
     return 0
 
 
@@ -437,9 +472,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
     add_search_options(p)
     add_input_file_options(p)
+    add_calibration_option(p)
     p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
+
+    p = sub.add_parser("calibrate", help="estimate each sensor's mounting rotation from a calibration take")
+    p.add_argument("recording", metavar="REC", help="device recording: stands still in the pose, then moves")
+    p.add_argument("--graph", metavar="G", help="a graph whose readings of similar motion fix the rotation about gravity")
+    p.add_argument("--pose", required=True, choices=("npose", "tpose", "stand"),
+                   help="the pose held at the start (stand: a natural stance, only approximately an N-pose)")
+    p.add_argument("--from", dest="start", type=float, metavar="S", help="use the recording from S seconds")
+    p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds")
+    add_input_file_options(p)
+    p.add_argument("-o", "--output", required=True, metavar="CAL.json")
+    p.set_defaults(run=_cmd_calibrate)
 
     p = sub.add_parser("evaluate", help="leave-one-out evaluation on a knowledge base (metrics: docs/evaluation.md)")
     p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")

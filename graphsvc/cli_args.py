@@ -79,6 +79,13 @@ def add_input_file_options(p) -> None:
                         "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
 
 
+def add_calibration_option(p) -> None:
+    """--calibration: a device-frame recording's mounting calibration (`graphsvc calibrate`)."""
+    p.add_argument("--calibration", metavar="CAL.json",
+                   help="turn a device-frame recording into the layout's sensor frames with this calibration "
+                        "(`graphsvc calibrate`)")
+
+
 def add_search_options(p, constraints: bool = True) -> None:
     from graphsvc.strategies import names
     from graphsvc.strategies.options import TRACK_PULL_S

@@ -1,5 +1,6 @@
 """Atomic file output: write to a temporary file beside the target, fsync, rename.
-A reader never sees a half-written file and a failed write leaves the old one intact."""
+A reader never sees a half-written file and a failed write leaves the old one intact.
+And `read_json_file`: a small JSON input file, its faults as FormatError."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-from graphsvc.errors import InputError
+from graphsvc.errors import FormatError, InputError
 
 
 @contextlib.contextmanager
@@ -72,3 +73,16 @@ def _fsync_dir(folder: Path) -> None:
 def write_text_atomic(path, text: str) -> None:
     with atomic_writer(path) as f:
         f.write(text.encode("utf-8"))
+
+
+def read_json_file(path):
+    """The parsed content of a UTF-8 JSON file; FormatError naming the file (and the
+    line) when it is not UTF-8 or not valid JSON."""
+    import json
+
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None

@@ -92,7 +92,9 @@ def simulate_recording(
             "noise": noise.to_dict(),
             "seed": int(seed),
             "simulated": True,
-            "sensor_frames": ANATOMICAL,
+            "sensor_frames": ANATOMICAL,  # (the layout's frames' convention, `sensors.anatomy`)
+            # (a mounting turns each reading into its device's frame: calibration's input)
+            "sensor_frame": "device" if noise.mount else "layout",
             **({"missing_joints": sorted(table.missing)} if getattr(table, "missing", None) else {}),
         },
     )

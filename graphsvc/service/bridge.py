@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.calibration import calibrate_sample
 
 LINE_MAX_BYTES = 256  # longer without a newline: noise or a wrong baud rate
 MAX_GAP_S = 0.5  # resampling does not interpolate across a longer silence
@@ -241,7 +242,7 @@ class LineProtocol:
     stream: line splitting, parsing, grouping, calibration, resampling."""
 
     def __init__(self, sensor_names: tuple[str, ...], rate_hz: float, units: str = "m/s2",
-                 calibration: StaticCalibration | None = None):  # fmt: skip
+                 calibration: StaticCalibration | None = None, mounting: np.ndarray | None = None):  # fmt: skip
         if units not in UNITS:
             raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
         self.names = tuple(sensor_names)
@@ -250,6 +251,7 @@ class LineProtocol:
         self.assembler = SampleAssembler(len(self.names))
         self.resampler = Resampler(rate_hz)
         self.calibration = calibration
+        self.mounting = mounting  # (S, 4): device frame → the layout's (`sensors.calibration`), or None
         self.stats = BridgeStats()
         self._buffer = bytearray()
         self._skipping = False  # inside an over-long line: drop bytes up to its newline
@@ -319,6 +321,8 @@ class LineProtocol:
             st.incomplete_samples = self.assembler.incomplete
             st.first_device_t_s = t if st.first_device_t_s is None else st.first_device_t_s
             st.last_device_t_s = t
+            if self.mounting is not None:
+                acc = calibrate_sample(self.mounting, acc)
             if self.calibration is not None:
                 if self.calibration.add(t, acc):
                     st.calibration_samples += 1
@@ -373,17 +377,19 @@ def read_device(port, protocol: LineProtocol, feed, stop: threading.Event, durat
 
 def run_bridge(port, conn, graph_info, options, units: str = "m/s2", calibrate_s: float = 0.0,
                stop: threading.Event | None = None, duration_s: float | None = None,
-               on_frame=None) -> BridgeResult:  # fmt: skip
+               on_frame=None, mounting: np.ndarray | None = None) -> BridgeResult:  # fmt: skip
     """Stream what `port` reports to graph `graph_info` (a GraphInfo) on `conn`
     with SynthesisOptions `options`; returns when the device closes, `stop` is set,
-    or `duration_s` passes, after the server has sent the last frames."""
+    or `duration_s` passes, after the server has sent the last frames. `mounting` (S,
+    4): each sensor's rotation from its device frame into the layout's
+    (`sensors.calibration`), applied to every reading first."""
     from graphsvc.service import client
 
     names = tuple(graph_info.sensor_names)
     calibration = None
     if calibrate_s > 0:
         calibration = StaticCalibration(calibrate_s, np.array(graph_info.rest_pose_accelerations_m_s2), names)
-    protocol = LineProtocol(names, graph_info.rate_hz, units, calibration)
+    protocol = LineProtocol(names, graph_info.rate_hz, units, calibration, mounting)
     feed = client.SampleFeed(client.stream_config(graph_info.name, options, names))
     stop = stop or threading.Event()
     ended = {"reason": "stream ended"}

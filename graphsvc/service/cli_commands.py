@@ -16,7 +16,7 @@ import sys
 import threading
 from pathlib import Path
 
-from graphsvc.cli_args import Parser, add_search_options, os_message, search_options
+from graphsvc.cli_args import Parser, add_calibration_option, add_search_options, os_message, search_options
 from graphsvc.errors import GraphsvcError
 
 
@@ -64,6 +64,15 @@ def _options(args, constraints=None, recording=None):
     return options_to_proto(search_options(args), constraints, recording)
 
 
+def _calibrated(rec, path):
+    """The recording in the layout's sensor frames with calibration file `path` (client-side), or as it is."""
+    if not path:
+        return rec
+    from graphsvc.sensors.calibration import apply_calibration, load_calibration
+
+    return apply_calibration(rec, load_calibration(path))
+
+
 def _cmd_client_graphs(args) -> int:
     from graphsvc.graph.model import format_summary
     from graphsvc.service.client import get_graph, list_graphs
@@ -94,7 +103,7 @@ def _cmd_client_synthesize(args) -> int:
     _check_output(out)
     if args.report:
         _check_output(Path(args.report))
-    rec = read_recording(args.recording)
+    rec = _calibrated(read_recording(args.recording), args.calibration)
     options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
@@ -120,7 +129,7 @@ def _cmd_client_stream(args) -> int:
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out)
-    rec = read_recording(args.recording)
+    rec = _calibrated(read_recording(args.recording), args.calibration)
     options = _options(args, recording=rec)
 
     def on_frame(frame, latency_ms):
@@ -157,9 +166,15 @@ def _cmd_sensor_bridge(args) -> int:
     if args.calibrate_seconds < 0:
         raise GraphsvcError(f"--calibrate-seconds must be ≥ 0, got {args.calibrate_seconds}")
     options = _options(args)
+    cal = None
+    if args.calibration:
+        from graphsvc.sensors.calibration import calibration_rotations, load_calibration
+
+        cal = load_calibration(args.calibration)
     stop = threading.Event()
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
+        mounting = None if cal is None else calibration_rotations(cal, tuple(info.sensor_names))
         try:
             port = serial.Serial(args.device, args.baud, timeout=0.1)
         except (serial.SerialException, ValueError) as exc:
@@ -173,7 +188,8 @@ def _cmd_sensor_bridge(args) -> int:
                    f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
                    + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
                       if args.calibrate_seconds else ""))  # fmt: skip
-            result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration)
+            result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration,
+                                mounting=mounting)  # fmt: skip
         finally:
             port.close()
             for s, handler in previous.items():
@@ -242,6 +258,7 @@ def add_service_parsers(sub) -> None:
     c.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
     c.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
     c.add_argument("--report", metavar="OUT.json", help="write the search report")
+    add_calibration_option(c)
     add_search_options(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
@@ -250,6 +267,7 @@ def add_service_parsers(sub) -> None:
     c.add_argument("--speed", type=float, default=1.0, metavar="X", help="replay X times faster than real time")
     c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
+    add_calibration_option(c)
     add_search_options(c)
     c.set_defaults(run=_cmd_client_stream)
 
@@ -261,6 +279,7 @@ def add_service_parsers(sub) -> None:
                    help="stand still in the rest pose for the first S seconds to estimate sensor biases")  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
     p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion")
+    add_calibration_option(p)
     add_search_options(p)
     p.set_defaults(run=_cmd_sensor_bridge)
 

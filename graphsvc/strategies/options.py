@@ -8,7 +8,6 @@ and names the others it ignored in its report (`ignored_options`).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -245,13 +244,10 @@ def check_constraints(constraints, graph=None) -> list:
 
 def load_constraints(path) -> list:
     """A constraint file: a JSON list of sets in priority order (see `Recording`)."""
+    from graphsvc.fileio import read_json_file
+
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
-    except json.JSONDecodeError as exc:
-        raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
+    data = read_json_file(path)
     try:
         return check_constraints(data)
     except InputError as exc:

@@ -13,6 +13,7 @@ import time
 import tty
 
 import numpy as np
+import pytest
 
 from graphsvc.service.bridge import LineProtocol, Resampler, StaticCalibration
 
@@ -182,3 +183,14 @@ def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path):
     # Same poses, up to the BVH's 9-digit Euler angles (q and −q are one rotation).
     dots = np.abs(np.sum(motion.rotations * exp_rot, axis=-1))
     np.testing.assert_allclose(dots, 1.0, atol=1e-6)
+
+
+def test_a_mounting_calibration_turns_every_sample_into_the_layout_frames():
+    from graphsvc.motion import quat
+
+    mounting = quat.from_axis_angle(np.array([[1.0, 0, 0], [0, 1.0, 0], [0.6, 0, 0.8]]), np.array([0.3, -1.2, 2.0]))
+    p = LineProtocol(NAMES, rate_hz=10.0, mounting=mounting)
+    device = np.array([[0.0, 9.81, 0.0], [1.0, 2.0, 3.0], [-4.0, 0.5, 9.0]])
+    ((_, acc),) = p.push_bytes(_lines(0, device))
+    np.testing.assert_allclose(acc, quat.rotate(mounting, device), atol=1e-5)
+    assert np.linalg.norm(acc, axis=-1) == pytest.approx(np.linalg.norm(device, axis=-1), abs=1e-5)

@@ -84,6 +84,41 @@ def test_client_commands(served, rec_file, graph, recording, marker_rec_file, ma
     assert f"{marker_recording.num_samples} frames from {marker_recording.num_samples} samples" in capsys.readouterr().out
 
 
+def test_client_commands_apply_a_calibration_before_sending(served, graph, recording, tmp_path, capsys):
+    from dataclasses import replace
+
+    import numpy as np
+
+    from graphsvc.motion import quat
+    from graphsvc.motion.bvh import bvh_text
+    from graphsvc.pipeline import reconstruct
+    from graphsvc.sensors.calibration import apply_calibration, load_calibration
+    from graphsvc.sensors.device_model import mounting
+    from graphsvc.sensors.recording import save_recording
+
+    _, address, token = served
+    common = ["--server", address, "--token-file", str(token)]
+    M = mounting(4, recording.sensor_names, 60.0)
+    mounted = replace(recording, accelerations=quat.inv_rotate(M[None], recording.accelerations.astype(float)).astype(np.float32),
+                      meta={**recording.meta, "sensor_frame": "device"})  # fmt: skip
+    rec_file = tmp_path / "mounted.rec"
+    save_recording(mounted, rec_file)
+    cal_file = tmp_path / "cal.json"
+    cal_file.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
+        n: {"rotation_wxyz": M[k].tolist()} for k, n in enumerate(recording.sensor_names)}}))  # fmt: skip
+    out = tmp_path / "cal.bvh"
+    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--calibration", str(cal_file)]) == 0
+    capsys.readouterr()
+    expected = reconstruct(graph, apply_calibration(mounted, load_calibration(cal_file)))
+    assert out.read_text() == bvh_text(expected.motion, scale=100.0)
+    assert main(["client", "stream", str(rec_file), *common, "--speed", "30", "--quiet",
+                 "--calibration", str(cal_file)]) == 0  # fmt: skip
+    assert f"{recording.num_samples} frames" in capsys.readouterr().out
+    cal_file.write_text("[]")
+    assert main(["client", "stream", str(rec_file), *common, "--calibration", str(cal_file)]) == 2
+    assert "not a graphsvc calibration" in capsys.readouterr().err
+
+
 def test_sigterm_drains_in_flight_streams_then_exits_0(served, recording):
     proc, address, token = served
     with C.connect(address, token=C.read_token_file(token)) as conn:

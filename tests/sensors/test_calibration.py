@@ -1,0 +1,285 @@
+"""Mounting calibration: rest detection, the closed forms, recovering simulated
+mountings against a small procedural graph, applying a calibration, CAL.json checks."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from graphsvc.errors import FormatError, InputError
+from graphsvc.graph.build import BuildOptions, build_graph
+from graphsvc.motion import quat
+from graphsvc.motion.procedural import generate_knowledge_base
+from graphsvc.motion.skeleton import Motion
+from graphsvc.sensors import calibration as cal_mod
+from graphsvc.sensors.calibration import (POSE_READINGS, angle_deg, apply_calibration, calibrate, calibrate_sample,
+                                          check_calibration, find_rest, load_calibration, match_windows, wahba)  # fmt: skip
+from graphsvc.sensors.device_model import mounting
+from graphsvc.sensors.layout import load_layout
+from graphsvc.sensors.noise import corrupt_accelerations, parse_noise
+from graphsvc.sensors.simulate import simulate_recording
+
+LAYOUT = load_layout("wrists-ankles")
+
+
+def pose_take(clip: Motion, pose: np.ndarray, hold_s: float = 1.5, blend_s: float = 0.6) -> Motion:
+    """A calibration take: local rotations `pose` (J, 4) held (the root where `clip`
+    starts), eased into `clip`'s first frame, then the clip."""
+    sk, rate = clip.skeleton, clip.rate_hz
+    trans = sk.offsets.copy()
+    trans[0] = clip.translations[0, 0]
+    hold, blend = int(hold_s * rate), int(blend_s * rate)
+    t = (1.0 - np.cos(np.pi * (np.arange(1, blend + 1) / (blend + 1)))) / 2.0  # (eased: still at both ends)
+    rot_b = quat.slerp(np.broadcast_to(pose, (blend, *pose.shape)), np.broadcast_to(clip.rotations[0], (blend, *pose.shape)),
+                       t[:, None])  # fmt: skip
+    trans_b = trans[None] + t[:, None, None] * (clip.translations[0][None] - trans[None])
+    rot = np.concatenate([np.broadcast_to(pose, (hold, *pose.shape)), rot_b, clip.rotations])
+    tr = np.concatenate([np.broadcast_to(trans, (hold, *trans.shape)), trans_b, clip.translations])
+    return Motion(sk, np.ascontiguousarray(rot), np.ascontiguousarray(tr), rate, name="calibration-take")
+
+
+def npose_take(clip: Motion) -> Motion:
+    """`pose_take` of the procedural skeleton's N-pose: its T-pose rest (identity
+    rotations) with the arms turned down, legs straight."""
+    sk = clip.skeleton
+    pose = quat.identity((sk.num_joints,))
+    for name, sign in (("l_shoulder", -1.0), ("r_shoulder", 1.0)):
+        pose[sk.names.index(name)] = quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.float64(sign * np.pi / 2))
+    return pose_take(clip, pose)
+
+
+@pytest.fixture(scope="module")
+def kb():
+    return generate_knowledge_base(seed=3, minutes=1.0)
+
+
+@pytest.fixture(scope="module")
+def graph(kb):
+    g, _ = build_graph(kb, BuildOptions(layout=LAYOUT, progress=False))
+    return g
+
+
+def _clip(kb, name):
+    return next(m for m in kb if m.name.startswith(name))
+
+
+def _errors(cal: dict, seed: int, names, degrees: float, misalign=None) -> np.ndarray:
+    true = mounting(seed, names, degrees)
+    if misalign is not None:
+        true = quat.mul(true, misalign)
+    doc = check_calibration(cal)
+    return np.array([angle_deg(quat.to_matrix(doc["rotations"][n]), quat.to_matrix(true[k])) for k, n in enumerate(names)])
+
+
+# ---------------------------------------------------------------- pieces
+
+
+def test_the_pose_table_reads_plus_one_g_and_holds_every_canonical_segment():
+    for pose, table in POSE_READINGS.items():
+        for seg, v in table.items():
+            assert np.linalg.norm(v) == pytest.approx(9.81), (pose, seg)
+    assert POSE_READINGS["npose"]["l_elbow"] == (-9.81, 0.0, 0.0)
+    assert POSE_READINGS["npose"]["chest"] == (9.81, 0.0, 0.0)
+    assert POSE_READINGS["npose"]["r_ankle"] == (0.0, 0.0, 9.81)
+    assert POSE_READINGS["tpose"]["l_wrist"] == (0.0, 9.81, 0.0)
+    assert POSE_READINGS["tpose"]["r_shoulder"] == (0.0, -9.81, 0.0)
+    assert POSE_READINGS["tpose"]["l_knee"] == POSE_READINGS["npose"]["l_knee"]
+
+
+def test_find_rest_finds_the_first_still_stretch_and_the_sensors_never_still():
+    rng = np.random.default_rng(0)
+    rate, T = 30.0, 150
+    acc = np.zeros((T, 2, 3))
+    acc[:] = (0.0, 9.81, 0.0)
+    acc += rng.normal(0.0, 0.05, acc.shape)
+    t = np.arange(T) / rate
+    acc[:12, 0, 0] += 3.0  # moved off for 0.4 s
+    acc[60:, 0, 0] += 4.0 * np.sin(7 * t[60:])  # still 0.4–2.0 s, then moving
+    acc[:, 1, 2] += 5.0 * np.sin(12 * t)  # never still
+    start, stop, still = find_rest(acc, rate)
+    assert still.tolist() == [True, False]
+    assert 12 <= start <= 14 and 58 <= stop <= 61
+    assert find_rest(acc[:, 1:], rate) is None
+    acc[:, 0] *= 1.5  # not 1 g: not at rest
+    assert find_rest(acc[:, :1], rate) is None
+
+
+def test_wahba_matches_scipy_align_vectors():
+    rng = np.random.default_rng(1)
+    R = Rotation.random(random_state=2).as_matrix()
+    dev = rng.normal(size=(40, 3))
+    lay = dev @ R.T + rng.normal(0, 0.05, (40, 3))
+    w = rng.uniform(0.5, 2.0, 40)
+    ref, _ = Rotation.align_vectors(lay, dev, weights=w)
+    assert angle_deg(wahba(dev, lay, w), ref.as_matrix()) < 1e-4
+    assert angle_deg(wahba(dev, dev @ R.T, np.ones(40)), R) < 1e-4
+
+
+def test_the_complex_sum_gives_the_rotation_about_gravity_and_the_best_window():
+    rng = np.random.default_rng(3)
+    N, S, W = 200, 2, 20
+    stream = rng.normal(0.0, 3.0, (N, S, 3)) + np.array([0.0, 9.81, 0.0])
+    runs = np.zeros(N, dtype=np.int64)
+    runs[100:] = 1
+    up = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    theta = np.array([0.4, -1.1])
+    # The device window is graph window 130 turned by −θ about gravity: the graph = R(θ)·device.
+    device = np.stack([Rotation.from_rotvec(-theta[s] * up[s]).apply(stream[130:130 + W, s]) for s in range(S)], axis=1)
+    matches = match_windows(device, stream, runs, up, W, W)
+    q, j, cost, sums = matches[0]
+    assert (q, j) == (0, 130) and cost == pytest.approx(0.0, abs=1e-6)
+    e1, e2 = cal_mod._plane_basis(up[0])
+    assert np.cross(e1, e2) == pytest.approx(up[0])
+    np.testing.assert_allclose(np.angle(sums), theta, atol=1e-9)
+    assert all(runs[m[1]] == runs[m[1] + W - 1] for m in matches)  # (no window across two clips)
+
+
+# ---------------------------------------------------------------- recovering a mounting
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_calibration_recovers_a_mounting_from_exact_readings(kb, graph, seed):
+    take = npose_take(_clip(kb, "stop"))
+    rec = simulate_recording(take, LAYOUT, parse_noise("none,mount=90"), seed=seed)
+    assert rec.meta["sensor_frame"] == "device"
+    cal = calibrate(rec, "npose", graph)
+    assert cal["rest_s"][0] < 0.1 and cal["rest_s"][1] >= 1.0
+    err = _errors(cal, seed, LAYOUT.sensor_names, 90.0)
+    assert err.max() < 2.0, err
+
+
+@pytest.mark.parametrize("orientations", [False, True])
+def test_calibration_recovers_a_mounting_at_the_default_noise(kb, graph, orientations):
+    seed = 21
+    spec = "default,misalign=0,mount=90" + (",orientations=1,orient_sigma=2,yaw_drift=0.5" if orientations else "")
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise(spec), seed=seed)
+    assert (rec.orientations is not None) == orientations
+    cal = calibrate(rec, "npose", graph)
+    err = _errors(cal, seed, LAYOUT.sensor_names, 90.0)
+    assert err.max() < 5.0, err
+    assert all(("orientation" in s["method"]) == orientations for s in cal["sensors"].values())
+
+
+def test_a_t_pose_take_calibrates_sensors_in_anatomical_frames(kb):
+    """Sensor frames given explicitly (the procedural skeleton's rest is the T-pose with
+    identity rotations, so a frame's rotation is its world axes there): the left arm X
+    to the body's left (+X), Y up; the right arm X to its right, Y down; the shins X
+    down, Z forward — the frames `POSE_READINGS` is written for."""
+    from graphsvc.sensors.layout import layout_from_dict
+
+    c = float(np.sqrt(0.5))
+    layout = layout_from_dict({"name": "anatomical", "sensors": [
+        {"name": "l_wrist", "segment": "l_elbow", "along": 0.9, "rotation_wxyz": [1, 0, 0, 0]},
+        {"name": "r_wrist", "segment": "r_elbow", "along": 0.9, "rotation_wxyz": [0, 0, 0, 1]},
+        {"name": "l_ankle", "segment": "l_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]},
+        {"name": "r_ankle", "segment": "r_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]}]})  # fmt: skip
+    g, _ = build_graph(kb, BuildOptions(layout=layout, progress=False))
+    seed = 8
+    take = pose_take(_clip(kb, "stop"), quat.identity((kb[0].skeleton.num_joints,)))
+    rec = simulate_recording(take, layout, parse_noise("none,mount=90"), seed=seed)
+    rest = rec.accelerations[5].astype(float)  # (the T-pose's readings without the mounting:)
+    np.testing.assert_allclose(quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
+                               [POSE_READINGS["tpose"][s.segment] for s in layout.sensors], atol=1e-3)  # fmt: skip
+    err = _errors(calibrate(rec, "tpose", g), seed, layout.sensor_names, 90.0)
+    assert err.max() < 2.0, err
+
+
+def test_orientation_output_pairs_gravity_free_of_linear_acceleration(kb, graph):
+    """The `real` preset (soft tissue on the legs, foot-strike jolts, orientation output
+    with noise and yaw drift): the verticals the orientation output gives, paired with
+    the graph frames', make the fit better than the readings alone (over seeds 30–35 the
+    largest error 5.8° with them, 8.4° without)."""
+    seed = 33
+    take = npose_take(_clip(kb, "stop"))
+    err = {}
+    for spec in ("real,mount=60", "real,mount=60,orientations=0"):
+        noise = parse_noise(spec)
+        rec = simulate_recording(take, LAYOUT, noise, seed=seed)
+        _, misalign = corrupt_accelerations(np.zeros((1, 4, 3)), noise, np.random.default_rng(seed), True)
+        err[spec] = _errors(calibrate(rec, "npose", graph), seed, LAYOUT.sensor_names, 60.0, misalign)
+    with_o, without = err.values()
+    assert with_o.max() < 4.0 and with_o.mean() < without.mean(), (with_o, without)
+
+
+def test_a_natural_stance_is_calibrated_from_the_motion(kb, graph):
+    """`stand`: the procedural clips' own standing start (arms hanging bent, not an
+    N-pose), the default noise; the misalignment drawn for this take is part of what
+    its devices' frames are turned by."""
+    seed = 5
+    noise = parse_noise("default,mount=60")
+    clip = _clip(kb, "punch")
+    rec = simulate_recording(clip, LAYOUT, noise, seed=seed)
+    _, misalign = corrupt_accelerations(np.zeros((1, 4, 3)), noise, np.random.default_rng(seed), True)
+    err = _errors(calibrate(rec, "stand", graph), seed, LAYOUT.sensor_names, 60.0, misalign)
+    assert err.max() < 6.0, err  # (over seeds 30–37: 0.5–5.1°, the shins' the largest)
+
+
+def test_calibration_refuses_what_it_cannot_do(kb, graph):
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=1)
+    with pytest.raises(InputError, match="rotation about gravity"):
+        calibrate(rec, "npose", None)
+    with pytest.raises(InputError, match="unknown pose"):
+        calibrate(rec, "sitting", graph)
+    plain = simulate_recording(_clip(kb, "stop"), LAYOUT, parse_noise("none"), seed=1)
+    with pytest.raises(InputError, match="already in the layout"):
+        calibrate(plain, "npose", graph)
+    moving = replace(rec, accelerations=rec.accelerations * 1.6)  # nowhere near 1 g
+    with pytest.raises(InputError, match="no still stretch"):
+        calibrate(moving, "npose", graph)
+    with pytest.raises(InputError, match="not the graph's"):
+        calibrate(replace(rec, sensor_names=("a", "b", "c", "d")), "npose", graph)
+
+
+# ---------------------------------------------------------------- applying it
+
+
+def test_apply_calibration_with_the_true_mounting_gives_the_mount_free_recording(kb):
+    clip = _clip(kb, "stop")
+    spec = "none,orientations=1"
+    mounted = simulate_recording(clip, LAYOUT, parse_noise(spec + ",mount=70"), seed=4)
+    free = simulate_recording(clip, LAYOUT, parse_noise(spec), seed=4)
+    true = mounting(4, LAYOUT.sensor_names, 70.0)
+    doc = check_calibration({"format": "graphsvc-calibration", "version": 1, "sensors": {
+        n: {"rotation_wxyz": true[k].tolist()} for k, n in enumerate(LAYOUT.sensor_names)}}, "cal.json")  # fmt: skip
+    out = apply_calibration(mounted, doc)
+    np.testing.assert_allclose(out.accelerations, free.accelerations, atol=2e-4)
+    dots = np.abs(np.sum(out.orientations.astype(float) * free.orientations.astype(float), axis=-1))
+    assert dots.min() > 1 - 1e-6
+    assert out.meta["sensor_frame"] == "layout" and out.meta["calibration"] == "cal.json"
+    # The live form turns one sample the same way.
+    np.testing.assert_allclose(calibrate_sample(doc["rotations"] and np.stack([doc["rotations"][n] for n in LAYOUT.sensor_names]),
+                                                mounted.accelerations[7]), free.accelerations[7], atol=2e-4)  # fmt: skip
+    with pytest.raises(InputError, match="already in the layout"):
+        apply_calibration(out, doc)
+    wrong = {**doc, "rotations": {**doc["rotations"], "extra": np.array([1.0, 0, 0, 0])}}
+    with pytest.raises(InputError, match="not the recording's"):
+        apply_calibration(mounted, wrong)
+
+
+def test_cal_json_round_trips_and_malformed_files_are_refused(tmp_path, kb, graph):
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=2)
+    cal = calibrate(rec, "npose", graph)
+    path = tmp_path / "cal.json"
+    cal_mod.save_calibration(cal, path)
+    doc = load_calibration(path)
+    assert doc["format"] == "graphsvc-calibration" and doc["version"] == 1 and doc["layout"] == "wrists-ankles"
+    assert set(doc["rotations"]) == set(LAYOUT.sensor_names)
+    for n, item in doc["sensors"].items():
+        assert set(item) == {"rotation_wxyz", "method", "residual_deg"}
+    bad = {
+        "not json": "{",
+        "another format": json.dumps({"format": "x", "version": 1, "sensors": {}}),
+        "a newer version": json.dumps({**cal, "version": 2}),
+        "no sensors": json.dumps({**cal, "sensors": {}}),
+        "not a rotation": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": [1, 2, 3, 4]}}}),
+        "three numbers": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": [1, 0, 0]}}}),
+        "words": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": "identity"}}}),
+    }
+    for what, text in bad.items():
+        path.write_text(text)
+        with pytest.raises(FormatError):
+            load_calibration(path)

@@ -1,0 +1,109 @@
+"""`graphsvc calibrate` and `--calibration` end to end: a calibration take → CAL.json →
+a match take synthesized as if its sensors had no mounting; bad files refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from graphsvc.cli import main
+from graphsvc.graph.build import BuildOptions, build_graph
+from graphsvc.graph.file import save_graph
+from graphsvc.motion.bvh import read_bvh
+from graphsvc.motion.kinematics import motion_fk
+from graphsvc.motion.procedural import generate_knowledge_base
+from graphsvc.sensors.layout import load_layout
+from graphsvc.sensors.noise import parse_noise
+from graphsvc.sensors.recording import save_recording
+from graphsvc.sensors.simulate import simulate_recording
+from tests.sensors.test_calibration import npose_take
+
+LAYOUT = load_layout("wrists-ankles")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A graph of a procedural knowledge base; a calibration take and a match take
+    simulated with one seed (one mounting), and the match take without a mounting."""
+    d = tmp_path_factory.mktemp("calibrate")
+    kb = generate_knowledge_base(seed=3, minutes=1.0)
+    graph, _ = build_graph(kb, BuildOptions(layout=LAYOUT, progress=False))
+    save_graph(graph, d / "g.graph")
+    stop = next(m for m in kb if m.name.startswith("stop"))
+    run = next(m for m in kb if m.name.startswith("run"))
+    mounted = parse_noise("none,mount=60")
+    save_recording(simulate_recording(npose_take(stop), LAYOUT, mounted, seed=9), d / "take.rec")
+    save_recording(simulate_recording(run, LAYOUT, mounted, seed=9), d / "match.rec")
+    save_recording(simulate_recording(run, LAYOUT, parse_noise("none"), seed=9), d / "free.rec")
+    return d
+
+
+def run(argv, capsys):
+    code = main(argv)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_calibrate_then_synthesize_matches_the_mount_free_recording(files, capsys):
+    d = files
+    cal = d / "cal.json"
+    code, out, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
+                          "-o", str(cal)], capsys)  # fmt: skip
+    assert code == 0, err
+    assert out.startswith(f"wrote {cal}: 4 sensors, pose npose") and "l_wrist: mounting" in out
+    doc = json.loads(cal.read_text())
+    assert doc["format"] == "graphsvc-calibration" and doc["source"] == str(d / "take.rec")
+    for name, path in (("calibrated", d / "match.rec"), ("free", d / "free.rec")):
+        extra = ["--calibration", str(cal)] if name == "calibrated" else []
+        code, _, err = run(["synthesize", str(d / "g.graph"), str(path), "-o", str(d / f"{name}.bvh"), *extra], capsys)
+        assert code == 0, err
+        assert "note:" not in err
+    a, b = (motion_fk(read_bvh(d / f"{n}.bvh"))[1] for n in ("calibrated", "free"))
+    assert np.mean(np.linalg.norm(a - b, axis=-1)) < 0.01  # m: the same motion within 1 cm on average
+    # Uncalibrated, a device-frame recording is used with a note saying so.
+    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "match.rec"), "-o", str(d / "raw.bvh")], capsys)
+    assert code == 0 and "--calibration" in err
+
+
+def test_calibrate_with_a_span_and_without_a_graph(files, capsys):
+    d = files
+    code, _, err = run(["calibrate", str(d / "take.rec"), "--pose", "npose", "-o", str(d / "x.json")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "rotation about gravity" in err
+    assert not (d / "x.json").exists()
+    code, _, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
+                        "--from", "1.7", "--to", "2.2", "-o", str(d / "x.json")], capsys)  # fmt: skip
+    assert code == 2 and ("no still stretch" in err or "needs at least" in err), err
+    code, _, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
+                        "--from", "3", "--to", "1", "-o", str(d / "x.json")], capsys)  # fmt: skip
+    assert code == 2 and "--from" in err
+
+
+@pytest.mark.parametrize("content, needle", [
+    ("{", "not valid JSON"),
+    (json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {"l_wrist": {"rotation_wxyz": [2, 0, 0, 0]}}}),
+     "unit quaternion"),
+    (json.dumps({"format": "graphsvc-calibration", "version": 1,
+                 "sensors": {"l_wrist": {"rotation_wxyz": [1, 0, 0, 0]}}}), "not the recording's"),
+    (json.dumps({"version": 1}), "not a graphsvc calibration"),
+])  # fmt: skip
+def test_bad_calibration_files_one_line_exit_2(files, capsys, content, needle):
+    d = files
+    bad = d / "bad.json"
+    bad.write_text(content)
+    out = d / "never.bvh"
+    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "match.rec"), "-o", str(out),
+                        "--calibration", str(bad)], capsys)  # fmt: skip
+    assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err, err
+    assert not out.exists()
+
+
+def test_a_layout_frame_recording_is_not_calibrated(files, capsys):
+    d = files
+    cal = d / "ident.json"
+    cal.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
+        n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names}}))  # fmt: skip
+    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "free.rec"), "-o", str(d / "n.bvh"),
+                        "--calibration", str(cal)], capsys)  # fmt: skip
+    assert code == 2 and "already in the layout" in err
