@@ -103,6 +103,7 @@ def graph_info(name: str, graph: MotionGraph, file_bytes: int | None) -> pb.Grap
         joint_count=s["joints"],
         interpolated_segment_count=s["interpolated_segments"],
         bridge_count=s["bridges"],
+        sensor_orientations=s["sensor_orientations"],
         file_bytes=s.get("file_bytes", 0),
         skeleton=skeleton_to_proto(graph.skeleton),
         rest_pose_accelerations_m_s2=rest_pose_readings(graph).ravel().tolist(),
@@ -132,6 +133,7 @@ def graph_info_dict(info: pb.GraphInfo) -> dict:
         "joints": info.joint_count,
         "interpolated_segments": info.interpolated_segment_count,
         "bridges": info.bridge_count,
+        "sensor_orientations": info.sensor_orientations,
         "file_bytes": info.file_bytes,
         "params": MessageToDict(info.params),
     }
@@ -429,7 +431,8 @@ def options_to_proto(options=None, constraints: list | None = None,
         raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
     w = options.weights
     msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[options.strategy],
-                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading))
+                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading,
+                                                     orientation=w.orientation))  # fmt: skip
     if options.latency_s is not None:
         msg.latency_s = float(options.latency_s)
     # The heading rule and the beam in ViterbiOptions; the old flat fields too, which
@@ -514,11 +517,12 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
     weights = Weights()
     if msg.HasField("weights"):
         w = msg.weights
-        for key in ("acceleration", "position", "heading"):
+        for key in ("acceleration", "position", "heading", "orientation"):
             v = getattr(w, key)
             if not (math.isfinite(v) and v >= 0):
                 raise FieldError(f"{field}.weights.{key}", f"must be a finite number ≥ 0, got {v}")
-        weights = Weights(w.acceleration, w.position, w.heading)
+        weights = Weights(w.acceleration, w.position, w.heading,
+                          w.orientation if w.HasField("orientation") else None)  # fmt: skip
     latency = None
     if msg.HasField("latency_s"):
         latency = msg.latency_s

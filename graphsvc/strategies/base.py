@@ -177,6 +177,17 @@ def _grid(rec: Recording, rate_hz: float) -> tuple[np.ndarray, np.ndarray | None
     return t, t[0] + np.arange(n) * period
 
 
+def orientations_to_graph_rate(rec: Recording, rate_hz: float) -> np.ndarray:
+    """The sensors' measured "up" vectors (T', S, 3) (`graph.metadata.sensor_up` of the
+    recording's orientations) on `to_graph_rate`'s grid, interpolated linearly (the
+    search normalises them; NaN stays a gap)."""
+    from graphsvc.graph.metadata import sensor_up
+
+    t, grid = _grid(rec, rate_hz)
+    up = sensor_up(np.asarray(rec.orientations, dtype=np.float64))
+    return up if grid is None else _interp_linear(t, up, grid)
+
+
 def markers_to_graph_rate(rec: Recording, rate_hz: float) -> np.ndarray | None:
     """The recording's marker positions (T', M, 3) on `to_graph_rate`'s grid (a marker
     unseen at either neighbouring sample is unseen between them), or None."""
@@ -205,6 +216,10 @@ class PreparedInput:
     markers: np.ndarray | None = None  # (T, M, 3) m, NaN = not seen
     marker_names: tuple = ()
     meta: dict = field(default_factory=dict)  # the recording's provenance
+    # (T, S, 3) the sensors' measured "up" vectors (world +Y in each sensor's frame,
+    # `graph.metadata.sensor_up`; NaN = missing), where the strategy uses orientations
+    # and the graph has their metadata; else None
+    up: np.ndarray | None = None
 
     @property
     def num_samples(self) -> int:
@@ -225,6 +240,12 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
     if "accelerations" not in strategy.uses:
         acc = np.zeros((acc.shape[0], 0, 3))
     markers = markers_to_graph_rate(rec, graph.rate_hz) if "markers" in strategy.uses else None
+    up = None
+    if getattr(rec, "orientations", None) is not None and "orientations" in strategy.uses:
+        if graph.edge_up is None:  # (a graph file written before orientation metadata)
+            ignored = sorted(set(ignored) | {"orientations"})
+        else:
+            up = orientations_to_graph_rate(rec, graph.rate_hz)
     heading_source = "recording" if heading is not None else "none"
     if options.heading_from_track:
         if position is None:
@@ -238,7 +259,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
             heading = np.array([track.push(p) for p in position])
         heading_source = "track"
     return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored,
-                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta))  # fmt: skip
+                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta), up)  # fmt: skip
 
 
 # Where a reconstruction starts is estimated from the measurements of its first second:

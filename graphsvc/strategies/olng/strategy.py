@@ -49,7 +49,7 @@ def _streams(options: Options, position, heading):
 class OlngStrategy(Strategy):
     name = "olng"
     needs = frozenset({"accelerations"})
-    uses = frozenset({"accelerations", "ground_position", "heading"})
+    uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})
     summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
 
     def prepare(self, graph: MotionGraph) -> OlngIndex:
@@ -69,6 +69,10 @@ class OlngStrategy(Strategy):
         t0 = time.perf_counter()
         idx = index.with_allowed(allowed)
         decoder = make_decoder(graph, idx, options)
+        up = inp.up if options.weights.orientation > 0 else None
+        decoder.up_weight = float(options.weights.orientation)
+        if up is not None:
+            idx.oriented_tree(decoder.up_weight)  # (made once per weight, with the warm-up's time)
         warm_up(graph, index)
         warm_up_s = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -84,7 +88,8 @@ class OlngStrategy(Strategy):
 
                 raise SearchCancelled("reconstruction cancelled")
             r, tr, sources, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
-                                                      None if heading is None else heading[t])  # fmt: skip
+                                                      None if heading is None else heading[t],
+                                                      None if up is None else up[t])  # fmt: skip
             rot[t], trans[t] = r[0], tr[0]
             for k, (c, f, w) in enumerate(sources):
                 clip[t, k], frame[t, k], weight[t, k] = c, f, w
