@@ -170,3 +170,26 @@ def test_old_graph_files_search_as_before_and_list_orientations_ignored(built, t
     zero = reconstruct(g, rec, Options(weights=Weights(0.5, 1, 1, 0.0)))
     np.testing.assert_array_equal(zero.node_path, plain.node_path)
     assert zero.report["cost"] == plain.report["cost"]
+
+
+def test_a_beam_of_inf_and_a_fixed_lag_decoder_weigh_orientations_as_the_exact_search():
+    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+    from tests.search.test_viterbi import random_up, random_walk_problem
+
+    g, meas, position, heading = random_walk_problem(4, T=60)
+    rng = np.random.default_rng(9)
+    g.edge_up = random_up(rng, g.edge_acc.shape)
+    up = random_up(rng, meas.shape)
+    up[rng.random(up.shape[:2]) < 0.1] = np.nan
+    w = Weights(0.5, 1, 1, 2.0)
+    exact = viterbi_search(g, meas, position, heading, w, up=up)
+    beam = viterbi_search(g, meas, position, heading, w, up=up, beam=np.inf)
+    np.testing.assert_array_equal(beam.node_path, exact.node_path)
+    assert beam.cost == exact.cost
+    plain = viterbi_search(g, meas, position, heading, Weights(0.5, 1, 1, 0.0), up=up)
+    assert not np.array_equal(plain.node_path, exact.node_path)  # (the term changed the path)
+    # a fixed-lag decoder whose lag spans the input emits the batch search's path
+    decoder = FixedLagDecoder(g, w, lag=len(meas), oriented=True)
+    nodes = [decoder.push(meas[t], position[t], heading[t], up[t])[0] for t in range(len(meas))]
+    nodes.append(decoder.flush()[0])
+    np.testing.assert_array_equal(np.concatenate(nodes), exact.node_path)
