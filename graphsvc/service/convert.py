@@ -282,10 +282,10 @@ def _check_times(t: np.ndarray, field: str) -> None:
 
 
 def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, heading=None,
-                    markers=None) -> pb.SensorSample:  # fmt: skip
+                    markers=None, orientations=None) -> pb.SensorSample:  # fmt: skip
     """acc (S, 3) m/s² NaN = missing, or None (a marker-only sample); position (2,) m
     or None; heading rad or None; markers (M, 3) m for the stream's marker names, NaN =
-    not seen, or None."""
+    not seen, or None; orientations (S, 4) w, x, y, z, NaN = missing, or None."""
     msg = pb.SensorSample(time_s=float(time_s))
     if acc is not None:
         msg.accelerations_m_s2.extend(np.asarray(acc, np.float32).ravel().tolist())
@@ -295,7 +295,29 @@ def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, headin
         msg.heading_rad = float(heading)
     if markers is not None:
         msg.marker_positions_m.extend(np.asarray(markers, np.float64).ravel().tolist())
+    if orientations is not None:
+        msg.orientations_wxyz.extend(np.asarray(orientations, np.float32).ravel().tolist())
     return msg
+
+
+def sample_orientations_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, expected: bool,
+                                   field: str) -> np.ndarray | None:  # fmt: skip
+    """The sample's orientations (S, 4) float64 (w, x, y, z; NaN = missing) in the
+    graph's sensor order when the stream's config says samples carry them, else None;
+    checked: S×4 values, no ±inf, none where the config announced none."""
+    values = np.array(msg.orientations_wxyz, np.float64)
+    name = f"{field}.orientations_wxyz"
+    if not expected:
+        if values.size:
+            raise FieldError(name, "the stream's config.orientations is not set: samples carry no orientations")
+        return None
+    if values.shape[0] != 4 * num_sensors:
+        raise FieldError(name, f"expected S×4 = {4 * num_sensors} values for the graph's {num_sensors} sensors, "
+                               f"got {values.shape[0]}")  # fmt: skip
+    if np.isinf(values).any():
+        raise FieldError(f"{name}[{int(np.argmax(np.isinf(values)))}]", "infinite value (use NaN for missing)")
+    q = values.reshape(num_sensors, 4)
+    return q if order is None else q[order]
 
 
 def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, previous_time_s: float | None,

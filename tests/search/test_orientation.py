@@ -193,3 +193,32 @@ def test_a_beam_of_inf_and_a_fixed_lag_decoder_weigh_orientations_as_the_exact_s
     nodes = [decoder.push(meas[t], position[t], heading[t], up[t])[0] for t in range(len(meas))]
     nodes.append(decoder.flush()[0])
     np.testing.assert_array_equal(np.concatenate(nodes), exact.node_path)
+
+
+@pytest.mark.parametrize("strategy", ["viterbi", "olng"])
+def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, strategy):
+    from dataclasses import replace
+
+    from graphsvc.pipeline import LiveSession, Options, reconstruct
+    from graphsvc.sensors.layout import layout_from_dict
+    from graphsvc.sensors.noise import PRESETS as NOISE
+    from graphsvc.sensors.simulate import simulate_recording
+
+    kb, g = built
+    rec = simulate_recording(kb[2], layout_from_dict(g.layout), NOISE["real"], seed=6, rate_hz=g.rate_hz)
+    opts = Options(strategy=strategy, weights=Weights(0.5, 1, 1, 1.0), latency_s=0.5 if strategy == "viterbi" else None)
+    batch = reconstruct(g, rec, opts)
+    plain = reconstruct(g, replace(rec, orientations=None), opts)
+    assert not np.array_equal(batch.motion.rotations, plain.motion.rotations)  # (they changed the result)
+    for orientations, want in ((True, batch), (False, plain)):  # a session not told of them ignores them
+        live = LiveSession(g, opts, rec.sensor_names, orientations=orientations)
+        frames = []
+        for k in range(rec.num_samples):
+            frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k],
+                                rec.heading[k], orientations=rec.orientations[k])  # fmt: skip
+        frames += live.flush()
+        assert [f.index for f in frames] == list(range(rec.num_samples))
+        np.testing.assert_allclose(live.motion().rotations, want.motion.rotations, atol=1e-6)
+    with pytest.raises(InputError, match="orientations must be"):
+        LiveSession(g, opts, rec.sensor_names, orientations=True).push(0.0, rec.accelerations[0],
+                                                                         orientations=np.ones((2, 4)))  # fmt: skip

@@ -343,30 +343,34 @@ class StreamSynthesizeRequest(_message.Message):
     def __init__(self, config: _Optional[_Union[StreamConfig, _Mapping]] = ..., sample: _Optional[_Union[SensorSample, _Mapping]] = ...) -> None: ...
 
 class StreamConfig(_message.Message):
-    __slots__ = ("graph", "options", "sensor_names", "marker_names")
+    __slots__ = ("graph", "options", "sensor_names", "marker_names", "orientations")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
     MARKER_NAMES_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATIONS_FIELD_NUMBER: _ClassVar[int]
     graph: str
     options: SynthesisOptions
     sensor_names: _containers.RepeatedScalarFieldContainer[str]
     marker_names: _containers.RepeatedScalarFieldContainer[str]
-    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ...) -> None: ...
+    orientations: bool
+    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ..., orientations: _Optional[bool] = ...) -> None: ...
 
 class SensorSample(_message.Message):
-    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m")
+    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m", "orientations_wxyz")
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     GROUND_POSITION_FIELD_NUMBER: _ClassVar[int]
     HEADING_RAD_FIELD_NUMBER: _ClassVar[int]
     MARKER_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
     time_s: float
     accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     ground_position: GroundPosition
     heading_rad: float
     marker_positions_m: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
+    orientations_wxyz: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ..., marker_positions_m: _Optional[_Iterable[float]] = ..., orientations_wxyz: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class GroundPosition(_message.Message):
     __slots__ = ("x_m", "z_m")

@@ -153,14 +153,15 @@ class ViterbiSession(LiveSession):
     while a session runs alone: `threads`)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
                                        self.rate, threads, beam=options.beam,
                                        start_samples=start_samples(self.rate),
-                                       pull_s=options.track_pull_s)  # fmt: skip
+                                       pull_s=options.track_pull_s, oriented=self.reads_up)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
         self.pull_alpha = track_pull(options.track_pull_s, self.rate)
         self.counts_position = options.weights.position != 0
@@ -179,10 +180,10 @@ class ViterbiSession(LiveSession):
     def threads(self, on: bool) -> None:
         self.decoder.search.threads = on
 
-    def _decode(self, acc, position, heading, markers=None):
+    def _decode(self, acc, position, heading, markers=None, up=None):
         if self.track is not None:
             heading = self.track.push(position)
-        nodes, edges = self.decoder.push(acc, position, heading)  # (the search scores what its weights count)
+        nodes, edges = self.decoder.push(acc, position, heading, up)  # (the search scores what its weights count)
         self._targets.append(position if self.counts_position and position is not None else None)
         if self.synth is None and not len(nodes):
             return []
