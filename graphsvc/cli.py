@@ -174,7 +174,7 @@ def _cmd_relayout(args) -> int:
     from dataclasses import replace
 
     from graphsvc.graph.file import load_graph, save_graph
-    from graphsvc.graph.metadata import recompute_accelerations
+    from graphsvc.graph.metadata import edge_up_vectors, recompute_accelerations
     from graphsvc.sensors.anatomy import ANATOMICAL
     from graphsvc.sensors.layout import load_layout
 
@@ -184,7 +184,8 @@ def _cmd_relayout(args) -> int:
     graph = load_graph(args.graph)
     acc = recompute_accelerations(graph, layout)
     params = {**graph.params, "layout": layout.name, "sensor_frames": ANATOMICAL}  # (an older graph's converted)
-    save_graph(replace(graph, edge_acc=acc, layout=layout.to_dict(), params=params), out)
+    save_graph(replace(graph, edge_acc=acc, edge_up=edge_up_vectors(graph, layout), layout=layout.to_dict(),
+                       params=params), out)  # fmt: skip
     print(f"wrote {out}: edge metadata for layout {layout.name} ({', '.join(layout.sensor_names)})")
     return 0
 
@@ -399,7 +400,7 @@ def _cmd_evaluate(args) -> int:
     searched = (f"{graph.num_nodes:,} nodes, {loo.inputs_description(setup)}, strategy {options.strategy}"
                 if loo.reads_markers(setup) else
                 f"{graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
-                f"weights {w.acc:g},{w.position:g},{w.heading:g}" + (f", beam {options.beam:g}" if options.beam else ""))  # fmt: skip
+                f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}" + (f", beam {options.beam:g}" if options.beam else ""))  # fmt: skip
     print(f"{what} on {searched}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
     return 0

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from graphsvc.strategies.options import ORIENTATION_WEIGHT
+
 
 class Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2, like every other user error
@@ -93,8 +95,10 @@ def add_search_options(p, constraints: bool = True) -> None:
     p.add_argument("--strategy", default="viterbi", choices=names(),
                    help="reconstruction strategy (default viterbi; olng: frame by frame, optimised poses; nearest: the"
                         " per-sample baseline; ssg: optical markers)")
-    p.add_argument("--weights", default="1,1,1", metavar="A,P,O",
-                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad); default 1,1,1")
+    p.add_argument("--weights", default="1,1,1", metavar="A,P,O[,R]",
+                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad), sensor"
+                        " orientation (per chord², where the recording has orientations); default 1,1,1,"
+                        f"{ORIENTATION_WEIGHT:g}")
     if constraints:
         p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
     p.add_argument("--latency", type=float, metavar="S",

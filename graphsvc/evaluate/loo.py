@@ -135,6 +135,8 @@ def inputs_description(setup: EvalSetup) -> str:
                 + (f", gaps {pat.gaps}" if pat.gaps else "")
                 + (f", flicker {100 * pat.flicker:g} %" if pat.flicker else ""))  # fmt: skip
     parts = ["accelerometers"]
+    if setup.noise.orientations:
+        parts.append(f"orientations (σ {setup.noise.orient_sigma:g}°, yaw drift {setup.noise.yaw_drift:g}°/√s)")
     if setup.positions:
         parts.append(f"positions (σ {setup.noise.position:g} m)")
     if setup.options.heading_from_track:

@@ -331,6 +331,9 @@ def build_graph(motions: list[Motion], options: BuildOptions,
         bridges=bridges,
     )
     report.timings["assemble_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    graph.edge_up = meta.edge_up_vectors(graph, layout)  # (from the stored poses, as `relayout` computes it)
+    report.timings["orientations_s"] = time.perf_counter() - t0
     return graph, report
 
 

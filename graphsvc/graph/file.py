@@ -20,6 +20,7 @@ READABLE_VERSIONS = (1, 2)
 ARRAYS = ("clip_offsets", "node_kind", "node_clip", "node_frame", "node_contacts", "node_label", "node_rotations",
           "node_translations", "node_ground", "node_heading", "edge_src", "edge_dst", "edge_kind", "edge_acc",
           "edge_offset", "edge_heading", "incoming")  # fmt: skip
+OPTIONAL = ("edge_up",)  # absent from files written before it (loaded as None)
 
 
 def save_graph(graph: MotionGraph, path) -> None:
@@ -37,7 +38,9 @@ def save_graph(graph: MotionGraph, path) -> None:
         "bridges": graph.bridges,
         "counts": {"nodes": graph.num_nodes, "edges": graph.num_edges},
     }
-    write_container(path, KIND, meta, {name: getattr(graph, name) for name in ARRAYS}, FORMAT_VERSION)
+    arrays = {name: getattr(graph, name) for name in ARRAYS}
+    arrays.update({name: getattr(graph, name) for name in OPTIONAL if getattr(graph, name) is not None})
+    write_container(path, KIND, meta, arrays, FORMAT_VERSION)
 
 
 def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
@@ -56,11 +59,14 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
         graph = MotionGraph(rate_hz=float(meta["rate_hz"]), skeleton=skeleton, layout=meta["layout"],
                             clips=meta["clips"], labels=tuple(meta["labels"]), params=meta["params"],
                             segments=meta.get("segments", []), bridges=meta.get("bridges", []),
-                            **{name: arrays[name] for name in ARRAYS})  # fmt: skip
+                            **{name: arrays[name] for name in ARRAYS},
+                            **{name: arrays.get(name) for name in OPTIONAL})  # fmt: skip
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None
     N, E = graph.num_nodes, graph.num_edges
-    if meta.get("counts") != {"nodes": N, "edges": E} or graph.incoming.shape != (N + 1,):
+    up = graph.edge_up
+    if meta.get("counts") != {"nodes": N, "edges": E} or graph.incoming.shape != (N + 1,) or (
+            up is not None and up.shape != graph.edge_acc.shape):
         raise FormatError(path, "graph arrays disagree with its header counts")
     graph.source_path, graph.checksum = str(Path(path).resolve()), file_checksum(path)
     return graph

@@ -308,3 +308,65 @@ def graph_placement(graph, layout=None):
     world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
                                               graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
     return anatomical_placement(layout, sk, mapping, world_rot, world_pos)
+
+
+def sensor_up(orientation: np.ndarray) -> np.ndarray:
+    """(..., 3) world +Y seen in the sensor frames of orientations (..., 4) w, x, y, z
+    (each the sensor frame's rotation into the world): R(q)ᵀ·ŷ, the second row of R(q),
+    a unit vector. NaN orientations give NaN."""
+    q = np.asarray(orientation, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)], axis=-1)
+
+
+# Nodes whose world poses are computed at a time (bounds the FK's memory on large graphs).
+_UP_CHUNK = 8192
+
+
+def edge_up_vectors(graph, layout) -> np.ndarray:
+    """(E, S, 3) float16: each edge's sensor "up" — world +Y in each sensor's frame
+    (`sensor_up`) — for `layout`, from the graph's stored poses. An edge plays its
+    destination node's pose whatever its speed (a slow-down edge the slerped pose its
+    slow-down node stores, a bridge's exit edge clip b's frame turned about the
+    vertical, which leaves "up" alone), so every edge's is its destination's, placed as
+    that node's readings are: on its clip's skeleton, a bridge's or an interpolated
+    segment's on clip a's (`clip_placements`). The orientation cost is yaw-free (a rotation about the
+    vertical leaves it unchanged), so "up" is all it needs of the sensor's rotation;
+    float16 keeps it to 5e-4 (0.03°)."""
+    from graphsvc.sensors.accelerometer import sensor_poses
+
+    sk = graph.skeleton
+    N, S = graph.num_nodes, len(layout.sensors)
+    owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
+    for rec in list(graph.segments) + list(graph.bridges):
+        owner[int(rec["first_node"]):int(rec["first_node"]) + int(rec["count"])] = int(rec["clip_a"])
+    node_up = np.zeros((N, S, 3), np.float16)
+    placements = clip_placements(graph, layout)
+    for c in np.unique(owner):
+        placement = placements[c]
+        nodes = np.flatnonzero(owner == c)
+        for k in range(0, nodes.size, _UP_CHUNK):
+            part = nodes[k:k + _UP_CHUNK]
+            world_rot, world_pos = forward_kinematics(graph.node_rotations[part].astype(np.float64),
+                                                      graph.node_translations[part].astype(np.float64), sk.parents)  # fmt: skip
+            node_up[part] = sensor_up(sensor_poses(world_rot, world_pos, placement)[1])
+    return node_up[np.asarray(graph.edge_dst, dtype=np.int64)]
+
+
+def clip_placements(graph, layout) -> list:
+    """The layout on each of the graph's clips in anatomical frames, each estimated from
+    the clip's stored poses, as `recompute_accelerations` places them."""
+    from graphsvc.motion.skeleton import Skeleton
+    from graphsvc.sensors.layout import anatomical_placement
+
+    sk = graph.skeleton
+    out = []
+    for c, info in enumerate(graph.clips):
+        nodes = info["first_node"] + np.arange(info["frames"])
+        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                                  graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+        out.append(anatomical_placement(layout, Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels,
+                                                         sk.end_site), graph.params.get("mapping"), world_rot,
+                                        world_pos))  # fmt: skip
+    return out

@@ -42,6 +42,9 @@ class MotionGraph:
     (m/s²); edge_offset (E, 2) float32 (m, in the source node's local frame);
     edge_heading (E,) float32 (rad); incoming (N + 1,) int64 CSR offsets by destination.
     clip_offsets (C, J, 3) float64: each clip's skeleton offsets (sensor placement).
+    edge_up (E, S, 3) float16 or None: each edge's sensor "up", world +Y in the sensor
+    frame (`metadata.edge_up_vectors`); None in graph files written before it, which
+    then cannot weigh measured orientations.
     """
 
     rate_hz: float
@@ -78,6 +81,7 @@ class MotionGraph:
     # or None for a graph built in memory: what a strategy's cached index is keyed by.
     source_path: str | None = None
     checksum: str | None = None
+    edge_up: np.ndarray | None = None
 
     @property
     def num_nodes(self) -> int:
@@ -123,6 +127,7 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
         "joints": graph.skeleton.num_joints,
         "interpolated_segments": len(graph.segments),
         "bridges": len(graph.bridges),
+        "sensor_orientations": graph.edge_up is not None,
     }
     if file_size is not None:
         out["file_bytes"] = int(file_size)
@@ -136,7 +141,8 @@ def format_summary(s: dict) -> str:
         f"edges {s['edges']:,} ({kinds(s['edges_by_kind'])})",
         f"dead ends {s['dead_ends']:,}; clips {s['clips']}, {s['kb_frames']:,} frames "
         f"({s['kb_minutes']:.1f} min) at {s['rate_hz']:g} Hz, {s['joints']} joints",
-        f"layout {s['layout']} ({', '.join(s['sensors'])})",
+        f"layout {s['layout']} ({', '.join(s['sensors'])})" + ("; sensor orientations" if s.get("sensor_orientations")
+                                                               else "; no sensor orientations (`graphsvc relayout` adds them)"),
         f"labels: {', '.join(s['labels'])}",
     ]
     if "file_bytes" in s:
@@ -145,10 +151,11 @@ def format_summary(s: dict) -> str:
 
 
 def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None,
-                     rate_hz: float = 30.0) -> MotionGraph:  # fmt: skip
+                     rate_hz: float = 30.0, up=None) -> MotionGraph:  # fmt: skip
     """A MotionGraph of bare edges, for synthetic studies (benchmarks, tests): N nodes
     (the largest index + 1) on a one-joint skeleton, without poses or clips. src, dst
-    (E,) node indices; acc (E, S, 3) readings (m/s²); offsets (E, 2) m, dheading (E,)
+    (E,) node indices; acc (E, S, 3) readings (m/s²); up (E, S, 3) sensor "up" vectors
+    (None: no orientation metadata); offsets (E, 2) m, dheading (E,)
     rad (default 0); contacts (N, 2) bool (default all planted); labels (N,) int into
     ("a", "b") (default 0); kinds (E,) edge kinds (default original). Edges are
     sorted by destination, as a built graph's."""
@@ -173,4 +180,5 @@ def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, 
         edge_kind=kinds[order], edge_acc=np.asarray(acc, np.float32)[order],
         edge_offset=offsets[order].astype(np.float32), edge_heading=dheading[order].astype(np.float32),
         incoming=incoming_offsets(dst[order], N),
+        edge_up=None if up is None else np.asarray(up, np.float16)[order],
     )

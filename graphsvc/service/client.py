@@ -227,22 +227,23 @@ def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = N
 
 
 def stream_config(graph: str, options: pb.SynthesisOptions | None = None, sensor_names=(),
-                  marker_names=()) -> pb.StreamConfig:  # fmt: skip
+                  marker_names=(), orientations: bool = False) -> pb.StreamConfig:  # fmt: skip
     """marker_names: the markers each sample carries (`recording_samples` sends a
-    recording's), in order."""
+    recording's), in order; orientations: whether each carries the sensors' orientations."""
     return pb.StreamConfig(graph=graph, options=options or pb.SynthesisOptions(), sensor_names=list(sensor_names),
-                           marker_names=list(marker_names))  # fmt: skip
+                           marker_names=list(marker_names), orientations=bool(orientations))  # fmt: skip
 
 
 def recording_samples(rec: Recording) -> Iterator[pb.SensorSample]:
     """The recording's samples as SensorSamples, in order: its accelerations (none for a
-    marker-only recording), track, heading and markers (for its marker_names)."""
+    marker-only recording), track, heading, markers (for its marker_names) and orientations."""
     for k in range(rec.num_samples):
         acc = None if rec.accelerations is None else rec.accelerations[k]
         pos = None if rec.ground_position is None else rec.ground_position[k]
         head = None if rec.heading is None else float(rec.heading[k])
         markers = None if rec.marker_positions is None else rec.marker_positions[k]
-        yield convert.sample_to_proto(rec.timestamps_s[k], acc, pos, head, markers)
+        orient = None if rec.orientations is None else rec.orientations[k]
+        yield convert.sample_to_proto(rec.timestamps_s[k], acc, pos, head, markers, orient)
 
 
 def replay(rec: Recording, feed: SampleFeed, speed: float = 1.0, stop: threading.Event | None = None) -> None:
@@ -269,7 +270,7 @@ def stream_recording(conn: Connection, graph: str, rec: Recording, options: pb.S
     """Replay `rec` in real time (÷ speed) through StreamSynthesize (its markers too,
     when it has them)."""
     marker_names = rec.marker_names if rec.marker_positions is not None else ()
-    feed = SampleFeed(stream_config(graph, options, rec.sensor_names, marker_names))
+    feed = SampleFeed(stream_config(graph, options, rec.sensor_names, marker_names, rec.orientations is not None))
     stop = threading.Event()
     sender = threading.Thread(target=replay, args=(rec, feed, speed, stop), name="graphsvc-replay", daemon=True)
     sender.start()

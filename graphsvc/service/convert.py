@@ -103,6 +103,7 @@ def graph_info(name: str, graph: MotionGraph, file_bytes: int | None) -> pb.Grap
         joint_count=s["joints"],
         interpolated_segment_count=s["interpolated_segments"],
         bridge_count=s["bridges"],
+        sensor_orientations=s["sensor_orientations"],
         file_bytes=s.get("file_bytes", 0),
         skeleton=skeleton_to_proto(graph.skeleton),
         rest_pose_accelerations_m_s2=rest_pose_readings(graph).ravel().tolist(),
@@ -132,6 +133,7 @@ def graph_info_dict(info: pb.GraphInfo) -> dict:
         "joints": info.joint_count,
         "interpolated_segments": info.interpolated_segment_count,
         "bridges": info.bridge_count,
+        "sensor_orientations": info.sensor_orientations,
         "file_bytes": info.file_bytes,
         "params": MessageToDict(info.params),
     }
@@ -280,10 +282,10 @@ def _check_times(t: np.ndarray, field: str) -> None:
 
 
 def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, heading=None,
-                    markers=None) -> pb.SensorSample:  # fmt: skip
+                    markers=None, orientations=None) -> pb.SensorSample:  # fmt: skip
     """acc (S, 3) m/s² NaN = missing, or None (a marker-only sample); position (2,) m
     or None; heading rad or None; markers (M, 3) m for the stream's marker names, NaN =
-    not seen, or None."""
+    not seen, or None; orientations (S, 4) w, x, y, z, NaN = missing, or None."""
     msg = pb.SensorSample(time_s=float(time_s))
     if acc is not None:
         msg.accelerations_m_s2.extend(np.asarray(acc, np.float32).ravel().tolist())
@@ -293,7 +295,29 @@ def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, headin
         msg.heading_rad = float(heading)
     if markers is not None:
         msg.marker_positions_m.extend(np.asarray(markers, np.float64).ravel().tolist())
+    if orientations is not None:
+        msg.orientations_wxyz.extend(np.asarray(orientations, np.float32).ravel().tolist())
     return msg
+
+
+def sample_orientations_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, expected: bool,
+                                   field: str) -> np.ndarray | None:  # fmt: skip
+    """The sample's orientations (S, 4) float64 (w, x, y, z; NaN = missing) in the
+    graph's sensor order when the stream's config says samples carry them, else None;
+    checked: S×4 values, no ±inf, none where the config announced none."""
+    values = np.array(msg.orientations_wxyz, np.float64)
+    name = f"{field}.orientations_wxyz"
+    if not expected:
+        if values.size:
+            raise FieldError(name, "the stream's config.orientations is not set: samples carry no orientations")
+        return None
+    if values.shape[0] != 4 * num_sensors:
+        raise FieldError(name, f"expected S×4 = {4 * num_sensors} values for the graph's {num_sensors} sensors, "
+                               f"got {values.shape[0]}")  # fmt: skip
+    if np.isinf(values).any():
+        raise FieldError(f"{name}[{int(np.argmax(np.isinf(values)))}]", "infinite value (use NaN for missing)")
+    q = values.reshape(num_sensors, 4)
+    return q if order is None else q[order]
 
 
 def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, previous_time_s: float | None,
@@ -429,7 +453,8 @@ def options_to_proto(options=None, constraints: list | None = None,
         raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
     w = options.weights
     msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[options.strategy],
-                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading))
+                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading,
+                                                     orientation=w.orientation))  # fmt: skip
     if options.latency_s is not None:
         msg.latency_s = float(options.latency_s)
     # The heading rule and the beam in ViterbiOptions; the old flat fields too, which
@@ -514,11 +539,12 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
     weights = Weights()
     if msg.HasField("weights"):
         w = msg.weights
-        for key in ("acceleration", "position", "heading"):
+        for key in ("acceleration", "position", "heading", "orientation"):
             v = getattr(w, key)
             if not (math.isfinite(v) and v >= 0):
                 raise FieldError(f"{field}.weights.{key}", f"must be a finite number ≥ 0, got {v}")
-        weights = Weights(w.acceleration, w.position, w.heading)
+        weights = Weights(w.acceleration, w.position, w.heading,
+                          w.orientation if w.HasField("orientation") else None)  # fmt: skip
     latency = None
     if msg.HasField("latency_s"):
         latency = msg.latency_s

@@ -316,7 +316,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 raise convert.FieldError("config.marker_names", str(exc)) from None
         try:
             session = LiveSession(graph, options, names, keep_motion=False,  # the client keeps the frames
-                                  marker_names=marker_names)  # fmt: skip
+                                  marker_names=marker_names, orientations=config.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise convert.FieldError("config.options", str(exc)) from None
         yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
@@ -341,13 +341,15 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t, where,
                                                                   reads_acc)  # fmt: skip
             markers = convert.sample_markers_from_proto(request.sample, len(marker_names), where)
+            orientations = convert.sample_orientations_from_proto(request.sample, len(names), order,
+                                                                  config.orientations, where)  # fmt: skip
             if kept is not None and not seen_a_marker:
                 seen_a_marker = bool(np.isfinite(markers[kept]).all(axis=-1).any())
             previous_t = t
             try:
                 with self.threads.step() as threaded:  # the threads while this stream runs alone
                     session.threads = threaded
-                    frames = session.push(t, acc, position, heading, markers=markers)
+                    frames = session.push(t, acc, position, heading, markers=markers, orientations=orientations)
             except InputError as exc:
                 raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
             for frame in frames:

@@ -178,6 +178,17 @@ def _grid(rec: Recording, rate_hz: float) -> tuple[np.ndarray, np.ndarray | None
     return t, t[0] + np.arange(n) * period
 
 
+def orientations_to_graph_rate(rec: Recording, rate_hz: float) -> np.ndarray:
+    """The sensors' measured "up" vectors (T', S, 3) (`graph.metadata.sensor_up` of the
+    recording's orientations) on `to_graph_rate`'s grid, interpolated linearly (the
+    search normalises them; NaN stays a gap)."""
+    from graphsvc.graph.metadata import sensor_up
+
+    t, grid = _grid(rec, rate_hz)
+    up = sensor_up(np.asarray(rec.orientations, dtype=np.float64))
+    return up if grid is None else _interp_linear(t, up, grid)
+
+
 def markers_to_graph_rate(rec: Recording, rate_hz: float) -> np.ndarray | None:
     """The recording's marker positions (T', M, 3) on `to_graph_rate`'s grid (a marker
     unseen at either neighbouring sample is unseen between them), or None."""
@@ -206,6 +217,10 @@ class PreparedInput:
     markers: np.ndarray | None = None  # (T, M, 3) m, NaN = not seen
     marker_names: tuple = ()
     meta: dict = field(default_factory=dict)  # the recording's provenance
+    # (T, S, 3) the sensors' measured "up" vectors (world +Y in each sensor's frame,
+    # `graph.metadata.sensor_up`; NaN = missing), where the strategy uses orientations
+    # and the graph has their metadata; else None
+    up: np.ndarray | None = None
 
     @property
     def num_samples(self) -> int:
@@ -227,6 +242,12 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
     if "accelerations" not in strategy.uses:
         acc = np.zeros((acc.shape[0], 0, 3))
     markers = markers_to_graph_rate(rec, graph.rate_hz) if "markers" in strategy.uses else None
+    up = None
+    if getattr(rec, "orientations", None) is not None and "orientations" in strategy.uses:
+        if graph.edge_up is None:  # (a graph file written before orientation metadata)
+            ignored = sorted(set(ignored) | {"orientations"})
+        else:
+            up = orientations_to_graph_rate(rec, graph.rate_hz)
     heading_source = "recording" if heading is not None else "none"
     if options.heading_from_track:
         if position is None:
@@ -240,7 +261,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
             heading = np.array([track.push(p) for p in position])
         heading_source = "track"
     return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored,
-                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta))  # fmt: skip
+                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta), up)  # fmt: skip
 
 
 # Where a reconstruction starts is estimated from the measurements of its first second:
@@ -449,7 +470,8 @@ class LiveSession:
         return super().__new__(cls)
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
         from graphsvc.strategies import get
         from graphsvc.strategies.options import check_options
 
@@ -465,6 +487,10 @@ class LiveSession:
         self.options = options
         self.rate = float(graph.rate_hz)
         self.S = len(graph.sensor_names) if self.reads_acc else 0
+        # orientations: the stream's samples carry each sensor's orientation; they count
+        # where the strategy uses them, the graph has their metadata and W_R > 0
+        self.reads_up = bool(orientations) and "orientations" in self.strategy.uses and graph.edge_up is not None \
+            and options.weights.orientation > 0
         self.M = len(self.marker_names)
         self.lag_frames = 0
         self.t0: float | None = None
@@ -485,7 +511,7 @@ class LiveSession:
     def threads(self, on: bool) -> None:
         pass
 
-    def _check(self, t_s, acc, position, heading, markers=None):
+    def _check(self, t_s, acc, position, heading, markers=None, orientations=None):
         if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
@@ -511,23 +537,37 @@ class LiveSession:
             heading = float(heading)
             if math.isinf(heading):
                 raise InputError("heading must be finite (NaN for missing)")
-        return float(t_s), acc, position, heading, markers
+        up = None
+        if orientations is not None:
+            q = np.asarray(orientations, dtype=np.float64)
+            S = len(self.graph.sensor_names)
+            if q.shape != (S, 4) or np.isinf(q).any():
+                raise InputError(f"orientations must be ({S}, 4) finite quaternions w, x, y, z (NaN for missing), "
+                                 f"got shape {q.shape}")  # fmt: skip
+            if self.reads_up:
+                from graphsvc.graph.metadata import sensor_up
 
-    def push(self, t_s: float, acc=None, position=None, heading=None, markers=None) -> list[Frame]:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    up = sensor_up(q)  # (a zero or NaN quaternion gives NaN: missing)
+        return float(t_s), acc, position, heading, markers, up
+
+    def push(self, t_s: float, acc=None, position=None, heading=None, markers=None,
+             orientations=None) -> list[Frame]:  # fmt: skip
         """One sample at time t_s (s): acc (S, 3) m/s² (NaN = missing; None for a
         strategy that reads no accelerations), position (2,) m or None, heading rad or
-        None, markers (M, 3) m for the session's marker names (NaN = not seen) or None.
-        Returns the frames now final."""
+        None, markers (M, 3) m for the session's marker names (NaN = not seen) or None,
+        orientations (S, 4) each sensor's (w, x, y, z; NaN = missing) or None — used by
+        a session opened with `orientations` (see __init__). Returns the frames now final."""
         if self.flushed:
             raise InputError("the stream was already flushed")
-        t_s, acc, position, heading, markers = self._check(t_s, acc, position, heading, markers)
+        t_s, acc, position, heading, markers, up = self._check(t_s, acc, position, heading, markers, orientations)
         self.samples_in += 1
-        cur = (t_s, acc, position, heading, markers)
+        cur = (t_s, acc, position, heading, markers, up)
         frames: list[Frame] = []
         if self.prev is None:
             self.t0 = t_s
             self.next_tick += 1
-            frames += self._decode(acc, position, heading, markers)
+            frames += self._decode(acc, position, heading, markers, up)
         else:
             t_prev = self.prev[0]
             while True:
@@ -536,7 +576,7 @@ class LiveSession:
                     break
                 self.next_tick += 1
                 if abs(tick - t_s) < 1e-9:  # on the grid already: exact values, as in batch
-                    frames += self._decode(acc, position, heading, markers)
+                    frames += self._decode(acc, position, heading, markers, up)
                 else:
                     frames += self._decode(*_blend(self.prev, cur, (tick - t_prev) / (t_s - t_prev)))
         self.prev = cur
@@ -550,8 +590,9 @@ class LiveSession:
         self.flushed = True
         return self._finish()
 
-    def _decode(self, acc, position, heading, markers=None) -> list[Frame]:
-        """One sample on the graph's grid → the frames now final."""
+    def _decode(self, acc, position, heading, markers=None, up=None) -> list[Frame]:
+        """One sample on the graph's grid → the frames now final. up: (S, 3) the
+        sensors' "up" vectors (`graph.metadata.sensor_up`), or None."""
         raise NotImplementedError
 
     def _finish(self) -> list[Frame]:
@@ -595,7 +636,8 @@ class LiveSession:
 
 def _blend(a: tuple, b: tuple, w: float):
     """Sample between raw samples a and b at fraction w: (acc, position, heading,
-    markers); a marker unseen at either is unseen between them."""
+    markers, up); a marker unseen at either is unseen between them; the sensors' "up"
+    vectors blend linearly (the search normalises them), or the nearer sample's."""
     acc = a[1] * (1.0 - w) + b[1] * w
     markers = None if a[4] is None else a[4] * (1.0 - w) + b[4] * w
     pos = None
@@ -608,4 +650,9 @@ def _blend(a: tuple, b: tuple, w: float):
         head = float(quat.wrap_angle(a[3] + w * quat.wrap_angle(b[3] - a[3])))
     elif w >= 0.5 and b[3] is not None or w < 0.5 and a[3] is not None:
         head = b[3] if w >= 0.5 else a[3]
-    return acc, pos, head, markers
+    up = None
+    if a[5] is not None and b[5] is not None:
+        up = a[5] * (1.0 - w) + b[5] * w
+    elif w >= 0.5 and b[5] is not None or w < 0.5 and a[5] is not None:
+        up = b[5] if w >= 0.5 else a[5]
+    return acc, pos, head, markers, up

@@ -144,10 +144,11 @@ class NearestSession(LiveSession):
     (the blend at a jump reaches half its window forward)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
         from graphsvc.strategies.base import prepared_index
 
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
         self.index = _index(graph, prepared_index(self.strategy, graph), allowed)
         self.synth: StreamingSynthesizer | None = None
         self.start_position: np.ndarray | None = None
@@ -155,7 +156,7 @@ class NearestSession(LiveSession):
         self.previous = -1
         self.lag_frames = lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
 
-    def _decode(self, acc, position, heading, markers=None):
+    def _decode(self, acc, position, heading, markers=None, up=None):
         if self.start_position is None and position is not None and np.all(np.isfinite(position)):
             self.start_position = np.asarray(position, dtype=np.float64)
         if self.start_heading is None and heading is not None and np.isfinite(heading):

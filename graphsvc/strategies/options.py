@@ -18,12 +18,26 @@ from graphsvc.sensors.recording import validate_constraints
 
 @dataclass(frozen=True)
 class Weights:
-    """Kelly et al. 2013, eq. 6: accelerometers (per g²), position (per metre), orientation (per radian).
-    A strategy weighs whichever of these terms it has."""
+    """Kelly et al. 2013, eq. 6: accelerometers (per g²), position (per metre), heading
+    (per radian); and sensor orientation (per chord², ≈ rad², of each sensor's tilt
+    against the path's: `strategies.viterbi.costs`), which counts only where the
+    recording has orientations and the graph their metadata. A strategy weighs
+    whichever of these terms it has."""
 
     acc: float = 1.0
     position: float = 1.0
     heading: float = 1.0
+    orientation: float = None  # type: ignore[assignment]  (None: ORIENTATION_WEIGHT)
+
+    def __post_init__(self):
+        if self.orientation is None:
+            object.__setattr__(self, "orientation", ORIENTATION_WEIGHT)
+
+
+# The default weight of the sensor-orientation term (per chord², against W_A per g²);
+# chosen on Bandai dataset-2's takes 002 with real-IMU noise (docs/search.md), not on
+# the clips the accuracy table reports.
+ORIENTATION_WEIGHT = 1.0
 
 
 # The default time constant of the pull toward the tracker (s); chosen on Bandai
@@ -185,7 +199,7 @@ def check_options(options: Options) -> None:
 
     get(options.strategy)
     w = options.weights
-    for name in ("acc", "position", "heading"):
+    for name in ("acc", "position", "heading", "orientation"):
         v = getattr(w, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise InputError(f"weight {name} must be a finite number ≥ 0, got {v!r}")
@@ -210,14 +224,15 @@ def check_options(options: Options) -> None:
 
 
 def parse_weights(text: str) -> Weights:
-    """'A,P,O' (three non-negative numbers) → Weights."""
+    """'A,P,O' or 'A,P,O,R' (non-negative numbers) → Weights; without R, the default
+    orientation weight."""
     parts = [p.strip() for p in str(text).split(",")]
     try:
         values = [float(p) for p in parts]
     except ValueError:
-        raise InputError(f"weights must be three numbers A,P,O, got {text!r}") from None
-    if len(values) != 3 or not all(math.isfinite(v) and v >= 0 for v in values):
-        raise InputError(f"weights must be three finite numbers ≥ 0 as A,P,O, got {text!r}")
+        raise InputError(f"weights must be three or four numbers A,P,O[,R], got {text!r}") from None
+    if len(values) not in (3, 4) or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"weights must be three or four finite numbers ≥ 0 as A,P,O[,R], got {text!r}")
     return Weights(*values)
 
 

@@ -82,6 +82,12 @@ def random_graph(rng, N=40, out=3, S=2):
                       labels=rng.integers(0, 2, N))  # fmt: skip
 
 
+def random_up(rng, shape):
+    """Random unit vectors (…, 3)."""
+    u = rng.normal(size=shape)
+    return u / np.linalg.norm(u, axis=-1, keepdims=True)
+
+
 def random_walk_problem(seed, T=70):
     """random_graph and T samples for it: random readings (T, 2, 3) m/s², a random-walk
     ground track (T, 2) m and heading (T,) rad."""
@@ -526,22 +532,24 @@ def test_best_node_from_the_chunks_lowest_and_highest_costs_equals_reading_every
     assert _best_in_chunks(state, det, chunks, np.array([2.0, 2.0 + 0.4 * TIE]), np.array([5.0, 2e6])) == 1
 
 
-def _lockstep(g, meas, position, heading, weights, allowed=None, pull_s=None):
+def _lockstep(g, meas, position, heading, weights, allowed=None, pull_s=None, up=None):
     """Run the float32-pass search (no constraint sets) and the float64 one (one
     constraint set that requires nothing, so ranks never differ) side by side; every
     sample's costs, detours, placements and lattice rows must be identical, bit for bit.
-    Returns the float32-pass search."""
+    up: (T, S, 3) measured sensor "up" vectors (an oriented search). Returns the
+    float32-pass search."""
     from graphsvc.strategies.viterbi.dense import _best_node as every_node
 
-    fast = ViterbiSearch(g, weights, 0, allowed, pull_s=pull_s)
-    exact = ViterbiSearch(g, weights, 1, allowed, pull_s=pull_s)
+    oriented = up is not None
+    fast = ViterbiSearch(g, weights, 0, allowed, pull_s=pull_s, oriented=oriented)
+    exact = ViterbiSearch(g, weights, 1, allowed, pull_s=pull_s, oriented=oriented)
     assert fast.float32_pass and not exact.float32_pass
     free = np.zeros(1, np.int64)
     fast.start(position[0], heading[0])
     exact.start(position[0], heading[0], free, free)
     for t in range(1, len(meas)):
-        fast.step(meas[t], position[t], heading[t])
-        exact.step(meas[t], position[t], heading[t], free, free)
+        fast.step(meas[t], position[t], heading[t], up=None if up is None else up[t])
+        exact.step(meas[t], position[t], heading[t], free, free, up=None if up is None else up[t])
         row = (fast.first + fast.used - 1) % fast.arrivals.shape[0]
         np.testing.assert_array_equal(fast.arrivals[row], exact.arrivals[row], err_msg=f"sample {t}")
         np.testing.assert_array_equal(fast.cost, exact.cost, err_msg=f"sample {t}")
@@ -587,6 +595,13 @@ def test_float32_pass_equals_float64_search_placed_with_masks_and_gaps(seed):
     for weights in (Weights(0.5, 1, 1), Weights(1, 2, 0), Weights(0, 0, 1)):
         _lockstep(g, meas, position, heading, weights, allowed)
         _lockstep(g, meas, position, heading, weights, allowed, pull_s=0.2)
+    # with the orientation term riding in the C_A kernels (some sensors' orientations
+    # missing, and at W_A = 0 the term alone)
+    g.edge_up = random_up(rng, g.edge_acc.shape)
+    up = random_up(rng, meas.shape)
+    up[rng.random((T, 2)) < 0.1] = np.nan
+    for weights in (Weights(0.5, 1, 1, 2.0), Weights(0, 1, 0, 1.5)):
+        _lockstep(g, meas, position, heading, weights, allowed, up=up)
 
 
 def test_float32_pass_resolves_differences_below_float32_resolution_in_float64():
@@ -925,6 +940,20 @@ def test_pulled_placements_equal_the_reference_and_the_reported_terms(seed):
         assert t["position_m"] < 0.5 * plain.terms["position_m"]
         changed |= not np.array_equal(plain.node_path, fast.node_path)
     assert changed
+    # …and with measured sensor orientations (C_R, chord², some missing)
+    rng = np.random.default_rng(100 + seed)
+    g.edge_up = random_up(rng, g.edge_acc.shape)
+    up = random_up(rng, meas.shape)
+    up[rng.random(up.shape[:2]) < 0.1] = np.nan
+    for w in (Weights(0.5, 1, 1, 3.0), Weights(0, 1, 1, 2.0)):
+        fast = viterbi_search(g, meas, position, heading, w, pull_s=0.1, up=up)
+        ref_path, ref_cost = reference_viterbi(g, meas, position, heading, w, pull_s=0.1, up=up)
+        np.testing.assert_array_equal(fast.node_path, ref_path)
+        assert fast.cost == pytest.approx(ref_cost, rel=1e-6)
+        t = fast.terms
+        assert t["orientation_chord2"] > 0
+        assert (t["acc_g2"] * w.acc + t["position_m"] * w.position + t["heading_rad"] * w.heading
+                + t["orientation_chord2"] * w.orientation) == pytest.approx(fast.cost, rel=1e-6)
 
 
 def test_a_pulled_track_closes_the_gap_to_the_tracker_geometrically():

@@ -502,3 +502,42 @@ def test_recordings_with_orientations_and_markers_cross_the_wire(graph, recordin
     np.testing.assert_array_equal(back.orientations, q)
     assert back.marker_names == ("LFHD", "RTOE")
     np.testing.assert_array_equal(back.marker_positions, markers)
+
+
+def test_a_stream_with_orientations_matches_a_live_session_given_them(conn, graph, recording):
+    from dataclasses import replace
+
+    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.strategies.options import Weights
+
+    # random orientations (none matches the path's sensors): the term weighs something
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(recording.num_samples, recording.num_sensors, 4)).astype(np.float32)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q[5, 1] = np.nan  # a missing one
+    rec = replace(recording, orientations=q)
+    options = Options(latency_s=0.4, weights=Weights(1, 1, 1, 3.0))
+    session = LiveSession(graph, options, rec.sensor_names, orientations=True)
+    expected = []
+    for k in range(rec.num_samples):
+        expected += session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k], rec.heading[k],
+                                 orientations=rec.orientations[k])  # fmt: skip
+    expected += session.flush()
+    plain, _ = live_frames(graph, recording, options)
+    assert [f.node for f in expected] != [f.node for f in plain]  # (they count)
+    feed = C.SampleFeed(C.stream_config("small", convert.options_to_proto(options), rec.sensor_names, (), True))
+    for sample in C.recording_samples(rec):
+        feed.put(sample)
+    feed.close()
+    assert_frames_equal(expected, C.run_stream(conn, feed).frames)
+    # samples with orientations the config did not announce, or too few of them, are refused
+    samples = list(C.recording_samples(rec))[:3]
+    for config, mention in ((C.stream_config("small"), "config.orientations is not set"),
+                            (C.stream_config("small", None, (), (), True), None)):
+        if mention is None:
+            samples = [pb.SensorSample(time_s=s.time_s, accelerations_m_s2=s.accelerations_m_s2,
+                                       orientations_wxyz=list(s.orientations_wxyz)[:-1]) for s in samples]
+            mention = "sample[0].orientations_wxyz"
+        got, details = _code(lambda: list(conn.stub.StreamSynthesize(iter(list(_requests(config, samples))),
+                                                                          timeout=10)))  # fmt: skip
+        assert got == grpc.StatusCode.INVALID_ARGUMENT and mention in details, details

@@ -180,3 +180,38 @@ def test_cli_options_and_bad_ones(graph, kb, tmp_path, capsys):
         assert code == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
+
+
+def test_measured_orientations_join_the_neighbour_query(graph, kb):
+    # The oriented tree's features are the readings and √W_R · the sensors' "up": at a
+    # large weight a query whose "up" is frame q's finds a frame whose "up" is q's,
+    # however far its readings are from the query's.
+    index = load_index(graph)
+    assert index.up is not None and index.up.shape == index.readings.shape
+    p = 5
+    far = np.linalg.norm(index.up - index.up[p], axis=1)
+    q = int(np.argmax(far))  # the frame whose sensors are tilted most unlike p's
+    assert far[q] > 0.5
+    plain = index.query(index.readings[p], 4)
+    assert plain.frames[0] == p
+    weight = 1e4
+    nb = index.query(index.readings[p], 4, index.up[q], weight)
+    gap = np.linalg.norm(index.readings[q] - index.readings[p])
+    assert np.linalg.norm(index.up[nb.frames[0]] - index.up[q]) <= gap / np.sqrt(weight) + 1e-6
+    assert nb.frames[0] != p
+
+
+def test_olng_with_orientations_uses_them_and_without_metadata_lists_them_ignored(graph, kb):
+    from graphsvc.strategies.options import Weights
+
+    rec = _rec(graph, kb[1], "real", seed=3)
+    assert rec.orientations is not None
+    off = reconstruct(graph, rec, Options(strategy="olng", weights=Weights(1, 1, 1, 0.0)))
+    on = reconstruct(graph, rec, Options(strategy="olng", weights=Weights(1, 1, 1, 1.0)))
+    assert "orientations" not in on.report.get("ignored_inputs", [])
+    assert not np.array_equal(on.motion.rotations, off.motion.rotations)
+    # a graph file from before orientation metadata: the input is listed ignored, the result is the plain one
+    old = replace(graph, edge_up=None)
+    plain = reconstruct(old, rec, Options(strategy="olng", weights=Weights(1, 1, 1, 1.0)))
+    assert "orientations" in plain.report["ignored_inputs"]
+    np.testing.assert_array_equal(plain.motion.rotations, off.motion.rotations)

@@ -57,7 +57,7 @@ class GetGraphResponse(_message.Message):
     def __init__(self, graph: _Optional[_Union[GraphInfo, _Mapping]] = ...) -> None: ...
 
 class GraphInfo(_message.Message):
-    __slots__ = ("name", "node_count", "edge_count", "node_counts_by_kind", "edge_counts_by_kind", "dead_end_count", "clip_count", "kb_frame_count", "kb_minutes", "labels", "layout", "sensor_names", "rate_hz", "joint_count", "interpolated_segment_count", "file_bytes", "params", "skeleton", "rest_pose_accelerations_m_s2", "bridge_count")
+    __slots__ = ("name", "node_count", "edge_count", "node_counts_by_kind", "edge_counts_by_kind", "dead_end_count", "clip_count", "kb_frame_count", "kb_minutes", "labels", "layout", "sensor_names", "rate_hz", "joint_count", "interpolated_segment_count", "file_bytes", "params", "skeleton", "rest_pose_accelerations_m_s2", "bridge_count", "sensor_orientations")
     class NodeCountsByKindEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -92,6 +92,7 @@ class GraphInfo(_message.Message):
     SKELETON_FIELD_NUMBER: _ClassVar[int]
     REST_POSE_ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     BRIDGE_COUNT_FIELD_NUMBER: _ClassVar[int]
+    SENSOR_ORIENTATIONS_FIELD_NUMBER: _ClassVar[int]
     name: str
     node_count: int
     edge_count: int
@@ -112,7 +113,8 @@ class GraphInfo(_message.Message):
     skeleton: Skeleton
     rest_pose_accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     bridge_count: int
-    def __init__(self, name: _Optional[str] = ..., node_count: _Optional[int] = ..., edge_count: _Optional[int] = ..., node_counts_by_kind: _Optional[_Mapping[str, int]] = ..., edge_counts_by_kind: _Optional[_Mapping[str, int]] = ..., dead_end_count: _Optional[int] = ..., clip_count: _Optional[int] = ..., kb_frame_count: _Optional[int] = ..., kb_minutes: _Optional[float] = ..., labels: _Optional[_Iterable[str]] = ..., layout: _Optional[str] = ..., sensor_names: _Optional[_Iterable[str]] = ..., rate_hz: _Optional[float] = ..., joint_count: _Optional[int] = ..., interpolated_segment_count: _Optional[int] = ..., file_bytes: _Optional[int] = ..., params: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ..., rest_pose_accelerations_m_s2: _Optional[_Iterable[float]] = ..., bridge_count: _Optional[int] = ...) -> None: ...
+    sensor_orientations: bool
+    def __init__(self, name: _Optional[str] = ..., node_count: _Optional[int] = ..., edge_count: _Optional[int] = ..., node_counts_by_kind: _Optional[_Mapping[str, int]] = ..., edge_counts_by_kind: _Optional[_Mapping[str, int]] = ..., dead_end_count: _Optional[int] = ..., clip_count: _Optional[int] = ..., kb_frame_count: _Optional[int] = ..., kb_minutes: _Optional[float] = ..., labels: _Optional[_Iterable[str]] = ..., layout: _Optional[str] = ..., sensor_names: _Optional[_Iterable[str]] = ..., rate_hz: _Optional[float] = ..., joint_count: _Optional[int] = ..., interpolated_segment_count: _Optional[int] = ..., file_bytes: _Optional[int] = ..., params: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ..., rest_pose_accelerations_m_s2: _Optional[_Iterable[float]] = ..., bridge_count: _Optional[int] = ..., sensor_orientations: _Optional[bool] = ...) -> None: ...
 
 class Skeleton(_message.Message):
     __slots__ = ("joint_names", "parent_indices", "offsets_m", "channels", "end_sites")
@@ -243,14 +245,16 @@ class Provenance(_message.Message):
     def __init__(self, sources_per_frame: _Optional[int] = ..., clips: _Optional[_Iterable[int]] = ..., frames: _Optional[_Iterable[float]] = ..., weights: _Optional[_Iterable[float]] = ..., labels: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class CostWeights(_message.Message):
-    __slots__ = ("acceleration", "position", "heading")
+    __slots__ = ("acceleration", "position", "heading", "orientation")
     ACCELERATION_FIELD_NUMBER: _ClassVar[int]
     POSITION_FIELD_NUMBER: _ClassVar[int]
     HEADING_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATION_FIELD_NUMBER: _ClassVar[int]
     acceleration: float
     position: float
     heading: float
-    def __init__(self, acceleration: _Optional[float] = ..., position: _Optional[float] = ..., heading: _Optional[float] = ...) -> None: ...
+    orientation: float
+    def __init__(self, acceleration: _Optional[float] = ..., position: _Optional[float] = ..., heading: _Optional[float] = ..., orientation: _Optional[float] = ...) -> None: ...
 
 class ConstraintSet(_message.Message):
     __slots__ = ("constraints",)
@@ -339,30 +343,34 @@ class StreamSynthesizeRequest(_message.Message):
     def __init__(self, config: _Optional[_Union[StreamConfig, _Mapping]] = ..., sample: _Optional[_Union[SensorSample, _Mapping]] = ...) -> None: ...
 
 class StreamConfig(_message.Message):
-    __slots__ = ("graph", "options", "sensor_names", "marker_names")
+    __slots__ = ("graph", "options", "sensor_names", "marker_names", "orientations")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
     MARKER_NAMES_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATIONS_FIELD_NUMBER: _ClassVar[int]
     graph: str
     options: SynthesisOptions
     sensor_names: _containers.RepeatedScalarFieldContainer[str]
     marker_names: _containers.RepeatedScalarFieldContainer[str]
-    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ...) -> None: ...
+    orientations: bool
+    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ..., orientations: _Optional[bool] = ...) -> None: ...
 
 class SensorSample(_message.Message):
-    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m")
+    __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m", "orientations_wxyz")
     TIME_S_FIELD_NUMBER: _ClassVar[int]
     ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     GROUND_POSITION_FIELD_NUMBER: _ClassVar[int]
     HEADING_RAD_FIELD_NUMBER: _ClassVar[int]
     MARKER_POSITIONS_M_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATIONS_WXYZ_FIELD_NUMBER: _ClassVar[int]
     time_s: float
     accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     ground_position: GroundPosition
     heading_rad: float
     marker_positions_m: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
+    orientations_wxyz: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, time_s: _Optional[float] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_position: _Optional[_Union[GroundPosition, _Mapping]] = ..., heading_rad: _Optional[float] = ..., marker_positions_m: _Optional[_Iterable[float]] = ..., orientations_wxyz: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class GroundPosition(_message.Message):
     __slots__ = ("x_m", "z_m")

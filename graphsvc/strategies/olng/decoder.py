@@ -63,6 +63,7 @@ class OlngDecoder:
         self.options = options
         self.lattice = Lattice(index.run_of, LatticeOptions(options.k, options.m, options.i, options.extended))
         self.alpha = float(pull_alpha)
+        self.up_weight = 0.0  # W_R: the weight of the sensors' "up" vectors in the neighbour query (0: not used)
         self.rate = float(graph.rate_hz)
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
         sk = graph.skeleton
@@ -97,14 +98,20 @@ class OlngDecoder:
 
     # ------------------------------------------------------------ one sample
 
-    def step(self, acc, position=None, heading=None):
+    def step(self, acc, position=None, heading=None, up=None):
+        """up: (S, 3) the sensors' measured "up" vectors, or None; used (weighed by
+        `up_weight`) when every sensor's is finite."""
         t0 = time.perf_counter()
         self.t += 1
         reading = np.asarray(acc, dtype=np.float64).reshape(-1) / GRAVITY
         complete = bool(np.all(np.isfinite(reading)))
         dropped = 0
+        if up is not None:
+            up = np.asarray(up, dtype=np.float64)
+            norm = np.linalg.norm(up, axis=-1, keepdims=True)
+            up = (up / norm).reshape(-1) if np.all(np.isfinite(up)) and np.all(norm > 0) else None
         if complete:
-            nb = self.index.query(reading, self.options.k)
+            nb = self.index.query(reading, self.options.k, up, self.up_weight if up is not None else 0.0)
             frames, distances, dropped = nb.frames, nb.distances, nb.dropped
         elif self.last_frames is not None:
             frames, distances = self.next[self.last_frames], self.last_distances

@@ -12,6 +12,13 @@ positions (`pose.frame_poses`), which the pose energy reads for the neighbours. 
 arrays are cached beside the graph file (`strategies.index`, memory-mapped on later
 loads); the tree is built on load (scipy's cKDTree).
 
+With measured sensor orientations (a recording that has them, a graph with their
+metadata, W_R > 0) the query runs on a second tree whose features are each frame's
+readings and its sensors' "up" vectors times √W_R (`graph.edge_up` of the edge into
+the frame), so a neighbour's squared distance is ‖Δa‖² (g²) + W_R·Σ chord² — the
+Viterbi search's weighing of C_R against C_A, summed over the sensors. It is built
+on first use for each weight.
+
 Hiding clips (leave-out evaluation) never rebuilds the tree: the query asks for more
 neighbours and drops the hidden ones (`Neighbours.dropped` says how many).
 """
@@ -78,6 +85,9 @@ class OlngIndex:
         if self.nodes.size == 0:
             raise InputError("the graph has no original frames with readings for OLNG")
         self.tree = cKDTree(self.readings)
+        self.up = None if graph.edge_up is None else np.asarray(graph.edge_up, np.float32)[self.edges].reshape(
+            self.nodes.size, -1)  # fmt: skip
+        self._oriented: dict = {}  # weight → the tree over readings and √weight · up
         self.hidden = None if allowed is None else ~np.asarray(allowed, dtype=bool)[self.nodes]
         if self.hidden is not None and not self.hidden.any():
             self.hidden = None
@@ -99,23 +109,38 @@ class OlngIndex:
             other.hidden = None
         return other
 
-    def query(self, reading: np.ndarray, k: int) -> Neighbours:
+    def oriented_tree(self, weight: float) -> cKDTree:
+        """The tree over each frame's readings and √weight · its sensors' "up" vectors
+        (made once per weight; shared by `with_allowed` copies)."""
+        if self.up is None:
+            raise InputError("the graph has no sensor orientation metadata (rebuild it or run `graphsvc relayout`)")
+        if weight not in self._oriented:
+            self._oriented[weight] = cKDTree(np.concatenate([self.readings, np.sqrt(weight) * self.up], axis=1))
+        return self._oriented[weight]
+
+    def query(self, reading: np.ndarray, k: int, up: np.ndarray | None = None, weight: float = 0.0) -> Neighbours:
         """The k searchable frames nearest `reading` ((3S,) g, every sensor present: a
-        kd-tree cannot leave a missing axis out of its distance)."""
+        kd-tree cannot leave a missing axis out of its distance); with up ((3S,), the
+        sensors' measured "up" vectors, unit, all finite) and weight > 0, nearest in
+        readings and √weight · up (`oriented_tree`)."""
         reading = np.asarray(reading, dtype=np.float64).reshape(-1)
         if reading.size != self.readings.shape[1]:
             raise InputError(f"a reading of {reading.size} values for an index of {self.readings.shape[1]}")
         if not np.all(np.isfinite(reading)):
             raise InputError("an OLNG query needs every sensor's reading (NaN or inf given)")
+        tree = self.tree
+        if up is not None and weight > 0:
+            tree = self.oriented_tree(float(weight))
+            reading = np.concatenate([reading, np.sqrt(weight) * np.asarray(up, dtype=np.float64).reshape(-1)])
         if not 1 <= k <= self.searchable:
             raise InputError(f"K must be between 1 and the {self.searchable} searchable frames, got {k}")
         if self.hidden is None:
-            d, p = self.tree.query(reading, k=k)
+            d, p = tree.query(reading, k=k)
             return Neighbours(np.atleast_1d(p).astype(np.int64), np.atleast_1d(d).astype(np.float64), 0)
         share = self.searchable / self.frames
         ask = min(self.frames, int(np.ceil(k / share * 1.1)) + 8)
         while True:
-            d, p = self.tree.query(reading, k=ask)
+            d, p = tree.query(reading, k=ask)
             p, d = np.atleast_1d(p).astype(np.int64), np.atleast_1d(d)
             keep = ~self.hidden[p]
             if keep.sum() >= k or ask == self.frames:

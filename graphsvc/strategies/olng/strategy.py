@@ -37,8 +37,10 @@ def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
 
 
 def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options) -> OlngDecoder:
-    return OlngDecoder(graph, index, pose_model(graph), resolved_options(index, options.olng),
-                       track_pull(options.track_pull_s, float(graph.rate_hz)))  # fmt: skip
+    decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, options.olng),
+                          track_pull(options.track_pull_s, float(graph.rate_hz)))  # fmt: skip
+    decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry "up" vectors)
+    return decoder
 
 
 def _streams(options: Options, position, heading):
@@ -49,7 +51,7 @@ def _streams(options: Options, position, heading):
 class OlngStrategy(Strategy):
     name = "olng"
     needs = frozenset({"accelerations"})
-    uses = frozenset({"accelerations", "ground_position", "heading"})
+    uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})
     summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
 
     def prepare(self, graph: MotionGraph) -> OlngIndex:
@@ -69,6 +71,9 @@ class OlngStrategy(Strategy):
         t0 = time.perf_counter()
         idx = index.with_allowed(allowed)
         decoder = make_decoder(graph, idx, options)
+        up = inp.up if options.weights.orientation > 0 else None
+        if up is not None:
+            idx.oriented_tree(decoder.up_weight)  # (made once per weight, with the warm-up's time)
         warm_up(graph, index)
         warm_up_s = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -84,7 +89,8 @@ class OlngStrategy(Strategy):
 
                 raise SearchCancelled("reconstruction cancelled")
             r, tr, sources, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
-                                                      None if heading is None else heading[t])  # fmt: skip
+                                                      None if heading is None else heading[t],
+                                                      None if up is None else up[t])  # fmt: skip
             rot[t], trans[t] = r[0], tr[0]
             for k, (c, f, w) in enumerate(sources):
                 clip[t, k], frame[t, k], weight[t, k] = c, f, w
@@ -145,19 +151,22 @@ class OlngSession(LiveSession):
     """OLNG live: each grid sample's frame as it arrives (lag 0)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
         from graphsvc.strategies.base import prepared_index
 
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
         index = prepared_index(self.strategy, graph)
         self.decoder = make_decoder(graph, index.with_allowed(allowed), options)
+        if self.reads_up:
+            self.decoder.index.oriented_tree(self.decoder.up_weight)  # (made now, not on a client's first sample)
         warm_up(graph, index)
         self.lag_frames = 0
         self.frame_index = 0
 
-    def _decode(self, acc, position, heading, markers=None):
+    def _decode(self, acc, position, heading, markers=None, up=None):
         position, heading = _streams(self.options, position, heading)
-        rot, trans, sources, label, _ = self.decoder.step(acc, position, heading)
+        rot, trans, sources, label, _ = self.decoder.step(acc, position, heading, up)
         clip = np.full((1, SOURCES), -1, np.int64)
         frame, weight = np.zeros((1, SOURCES)), np.zeros((1, SOURCES))
         for k, (c, f, w) in enumerate(sources):

@@ -292,10 +292,11 @@ class SsgSession(LiveSession):
     passed as the marker set)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
         from graphsvc.strategies.base import prepared_index
 
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
         if options.ssg.offsets == "fit":
             raise InputError("SSG offsets 'fit' needs the whole input: fit them in a batch run (its report's "
                              "fitted_marker_set) and stream with that set")  # fmt: skip
@@ -311,7 +312,7 @@ class SsgSession(LiveSession):
         self.lag_frames = lag_frames(lag, self.windows, self.decoder.ahead)
         self.any_seen = False
 
-    def _decode(self, acc, position, heading, markers=None):
+    def _decode(self, acc, position, heading, markers=None, up=None):
         points = np.asarray(markers, dtype=np.float64)[self.columns]
         seen = np.isfinite(points).all(axis=-1)
         self.any_seen |= bool(seen.any())

@@ -68,12 +68,29 @@ def compile_constraints(graph: MotionGraph, constraint_sets: list, times_s: np.n
 
 
 def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc, position=None, heading=None,
-               measured=None) -> dict:  # fmt: skip
+               measured=None, up=None) -> dict:  # fmt: skip
     """The accelerometer (g²), position (m) and heading (rad) costs accumulated along a
-    path found by `search` (unweighted; a term counts where the search used it).
-    measured: `search.measurements(acc)`, when the caller has it already."""
+    path found by `search` (unweighted; a term counts where the search used it), and
+    in an oriented search the orientation cost (chord²), with the search's arithmetic
+    (`costs._path_terms`). measured: `search.measurements(acc, up)`, when the caller
+    has it already."""
     T = nodes.shape[0]
+    if search.oriented:  # (each term alone: C_A by the accelerations' own mask, C_R by unit masks on the up axes)
+        meas, mask, _ = search.measurements(acc[:T], None if up is None else up[:T]) if measured is None else measured
+        D = mask.shape[1] // 2
+        _, a_mask, a_present = search.acc_measurements(acc[:T])
+        r_mask = np.zeros_like(mask)
+        r_mask[:, D:] = mask[:, D:] != 0
+        terms = _terms(search, edges, meas, np.concatenate([a_mask, np.zeros_like(a_mask)], axis=1), a_present,
+                       position, heading, T)  # fmt: skip
+        r_present = r_mask.sum(axis=1) / 3.0
+        terms["orientation_chord2"] = _terms(search, edges, meas, r_mask, r_present, None, None, T)["acc_g2"]
+        return terms
     meas, mask, present = search.measurements(acc[:T]) if measured is None else measured
+    return _terms(search, edges, meas, mask, present, position, heading, T)
+
+
+def _terms(search, edges, meas, mask, present, position, heading, T) -> dict:
     pos = np.full((T, 2), np.nan) if position is None else np.asarray(position, dtype=np.float64)
     head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
     p0, h0 = search.start_placement
@@ -83,6 +100,13 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
                       w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0),
                       search.pull_alpha)  # fmt: skip
     return {"acc_g2": float(out[0]), "position_m": float(out[1]), "heading_rad": float(out[2])}
+
+
+def orientation_counts(graph: MotionGraph, weights: Weights, up=None) -> bool:
+    """Whether the orientation term can count: W_R > 0, some measured "up" vector
+    (T, S, 3) finite, and the graph has orientation metadata (`graph.edge_up`)."""
+    return bool(up is not None and weights.orientation > 0 and graph.edge_up is not None
+                and np.isfinite(np.asarray(up)).all(axis=-1).any())
 
 
 def needs_placement(weights: Weights, position=None, heading=None) -> bool:
@@ -159,7 +183,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
                    constraint_sets: list | None = None, rate_hz: float | None = None,
                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None,
                    beam: float | None = None, start: tuple | None = None,
-                   pull_s: float | None = None) -> SearchResult:  # fmt: skip
+                   pull_s: float | None = None, up: np.ndarray | None = None) -> SearchResult:  # fmt: skip
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
@@ -168,7 +192,10 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     server stops work for a client that went away); beam: see ViterbiSearch. start:
     (ground position (2,) m or None, heading rad or None), where every path starts
     (`strategies.base.start_placement`); None: at the first measured position and
-    heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch."""
+    heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch. up: (T, S, 3)
+    the sensors' measured "up" vectors (`graph.metadata.sensor_up` of the recording's
+    orientations; NaN = missing), weighed by W_R where the graph has orientation
+    metadata (`orientation_counts`); None: no orientation term."""
     acc = np.asarray(acc)
     T = acc.shape[0]
     if T == 0:
@@ -179,15 +206,17 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
+    oriented = orientation_counts(graph, weights, up)
     search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading),
-                           ring=batch_ring(T), beam=beam, pull_s=pull_s)  # fmt: skip
+                           ring=batch_ring(T), beam=beam, pull_s=pull_s, oriented=oriented)  # fmt: skip
+    up = up if oriented else None
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
     if start is None:
         search.start(pos(0), head(0), kinds[:, 0], values[:, 0])
     else:
         search.start(start[0], start[1], kinds[:, 0], values[:, 0])
-    measured = search.measurements(acc)  # once: the C_A batches and the path's terms share it
+    measured = search.measurements(acc, up)  # once: the C_A batches and the path's terms share it
     for t0 in range(1, T, READING_BATCH):
         if should_stop is not None and should_stop():
             raise SearchCancelled(f"search stopped at sample {t0} of {T}")
@@ -195,10 +224,11 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
         # (a beam search's sparse steps compute only the readings they read)
         costs = None if search.narrow else search.reading_costs(acc[block], tuple(m[block] for m in measured))
         for t in range(t0, min(T, t0 + READING_BATCH)):
-            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], None if costs is None else costs[t - t0])
+            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], None if costs is None else costs[t - t0],
+                        None if up is None else up[t])  # fmt: skip
     best = search.best_node()
     nodes, edges = search.trace(best)
-    terms = path_terms(search, nodes, edges, acc, position, heading, measured)
+    terms = path_terms(search, nodes, edges, acc, position, heading, measured, up)
     return SearchResult(
         node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
         broken=[int(v) for v in search.rank[best]],

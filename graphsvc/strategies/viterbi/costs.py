@@ -1,7 +1,7 @@
 """The Viterbi search's cost terms, and the per-node path state they read.
 
     G(n, t) = min over edges e = (m → n) of [L(e, t) + G(m, t−1)],   G(n, 0) = 0,
-    L(e, t) = W_A·C_A + W_P·C_P + W_O·C_O        (Kelly et al. 2013, eq. 3–7)
+    L(e, t) = W_A·C_A + W_P·C_P + W_O·C_O + W_R·C_R   (Kelly et al. 2013, eq. 3–7; C_R ours)
 
 - C_A, accelerometers: the mean over the sensors present of the squared difference
   between the edge's simulated reading and the measured one, in g² (eq. 4). A sensor
@@ -15,6 +15,16 @@
   synthesized root follows the same pulled track (`graph.metadata.integrate_path`).
 - C_O, heading: |wrap(h + Δh − measured)| in radians, the path's heading advanced by
   the edge's turn against the measured heading.
+- C_R, sensor orientation (where the recording has orientations and the graph their
+  metadata, `graph.edge_up`): per sensor, the angle between the measured and the
+  edge's sensor orientation after the best rotation about the vertical — the angle θ
+  between the two sensor-frame "up" vectors — as the chord² |u_meas − u_edge|² =
+  2 − 2·cos θ (≈ θ², at most 4), the mean over the sensors present. Yaw-free: a
+  magnetometer-free IMU's yaw drift costs nothing. It rides in the C_A kernels as 3S
+  more axes of each reading (`tables.search_tables(oriented)`), the mask weighting
+  them by (W_R / W_A)·(n_A / n_R) (`search.ViterbiSearch.measurements`), so W_A·C_A +
+  W_R·C_R is one per-reading value everywhere C_A is (at W_A = 0 the kernels'
+  value is C_R, weighted by W_R).
 A term counts at a sample where its weight is non-zero and it is measured (finite);
 the placement is carried only when C_P or C_O can count. With γ annotation constraint
 sets each path also carries γ counts of broken constraints, compared lexicographically
@@ -28,7 +38,7 @@ brute force over all paths, and `reference.reference_viterbi`, a plain numpy sea
 - Which terms count at a sample: `search.ViterbiSearch.step` (use_pos, use_head).
 - The measurement: `search.ViterbiSearch.measurements` (float32 in g, the sensor
   mask, the sensors present).
-- C_A: of every distinct reading, per sample, `_reading_costs_py` and, 16 samples at a
+- C_A (and C_R with it): of every distinct reading, per sample, `_reading_costs_py` and, 16 samples at a
   time, `_reading_costs_batch_py`; of one reading `_reading_cost` (beam steps); along
   the final path `_path_terms`; `reference.reference_viterbi`.
 - C_P and C_O: of an edge, from its source's row relative to the measurement
@@ -94,7 +104,10 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
     """C_A (Kelly et al. 2013, eq. 4, g²) of every distinct edge reading: readings_t (3S, R) float32 in
     g, transposed so the inner loop runs along readings (SIMD); meas (3S,) float32 in
     g; mask (3S,) 0 on the axes of missing sensors (skipped), 1 elsewhere; scale = 1 /
-    sensors present. Each axis adds d² by one fused multiply-add, as every C_A kernel
+    sensors present. An oriented search's readings and measurement carry 3S more axes,
+    the sensors' "up" vectors, whose mask holds the root of the orientation term's
+    weight relative to C_A's (`search.ViterbiSearch.measurements`): each axis adds
+    ((r − m)·mask)² (×1 exact: C_A's arithmetic is unchanged) by one fused multiply-add, as every C_A kernel
     does (so a live and a batch search get the same values, bit for bit). A chunk of
     running sums stays in L1 across the axes; the pass is bound by reading the table
     (10 MB for 144k readings of 6 sensors)."""
@@ -107,10 +120,10 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
         for j in range(D):
             if mask[j] == 0.0:
                 continue
-            m = meas[j]
+            m, w = meas[j], mask[j]
             row = readings_t[j, r0:r0 + n]
             for i in range(n):
-                d = row[i] - m
+                d = (row[i] - m) * w
                 sums[i] = _fma(d, d, sums[i])
         for i in range(n):
             out[r0 + i] = sums[i] * scale
@@ -135,9 +148,9 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
             for b in range(B):
                 if mask[b, j] == 0.0:
                     continue
-                m = meas[b, j]
+                m, w = meas[b, j], mask[b, j]
                 for i in range(n):
-                    d = row[i] - m
+                    d = (row[i] - m) * w
                     sums[b, i] = _fma(d, d, sums[b, i])
         for b in range(B):
             for i in range(n):
@@ -325,7 +338,7 @@ def _reading_cost(readings, r, meas, mask, scale):
     total = np.float32(0.0)
     for j in range(readings.shape[1]):
         if mask[j] != 0.0:
-            d = readings[r, j] - meas[j]
+            d = (readings[r, j] - meas[j]) * mask[j]
             total = _fma(d, d, total)
     return total * scale
 
@@ -407,7 +420,7 @@ def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge
             acc = np.float32(0.0)
             for j in range(D):
                 if mask[t, j] != 0.0:
-                    d = readings_t[j, r] - meas[t, j]
+                    d = (readings_t[j, r] - meas[t, j]) * mask[t, j]
                     acc = _fma(d, d, acc)  # as the C_A kernels: the search's values, bit for bit
             out[0] += acc * np.float32(1.0 / present[t])
         ox, oz = edge_offset[e, 0], edge_offset[e, 1]

@@ -11,14 +11,19 @@ import numpy as np
 
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.options import Weights
-from graphsvc.strategies.viterbi.batch import compile_constraints
+from graphsvc.strategies.viterbi.batch import compile_constraints, orientation_counts
 from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.sensors.accelerometer import GRAVITY
 
 
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
-                      constraint_sets=None, pull_s=None) -> tuple[np.ndarray, float]:  # fmt: skip
+                      constraint_sets=None, pull_s=None, up=None) -> tuple[np.ndarray, float]:  # fmt: skip
     """(node path (T,), cost) — same inputs and meaning as `batch.viterbi_search`."""
+    oriented = orientation_counts(graph, weights, up)
+    if oriented:  # unit vectors rounded to float32, as the search's tables and measurements
+        u = np.asarray(up, dtype=np.float64)
+        u = (u / np.linalg.norm(u, axis=-1, keepdims=True)).astype(np.float32).astype(np.float64)
+        e_up = graph.edge_up.astype(np.float32).astype(np.float64)
     alpha = track_pull(pull_s, graph.rate_hz)
     # Readings and measurements rounded to float32 in g as the search stores them; the
     # arithmetic after that is float64 over the full N × T lattice.
@@ -69,7 +74,13 @@ def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weig
         co = np.zeros(len(src))
         if heading is not None and np.isfinite(heading[t]) and weights.heading:
             co = np.abs((nh - heading[t] + np.pi) % (2 * np.pi) - np.pi)
-        total = cost[src] + weights.acc * ca + weights.position * cp + weights.heading * co
+        cr = np.zeros(len(src))
+        if oriented:  # C_R: the mean chord² between the sensors' "up" vectors
+            ok_r = np.all(np.isfinite(u[t]), axis=-1)
+            if ok_r.any():
+                cr = np.sum((e_up[:, ok_r] - u[t, ok_r]) ** 2, axis=(1, 2)) / ok_r.sum()
+            cr = weights.orientation * cr
+        total = cost[src] + weights.acc * ca + weights.position * cp + weights.heading * co + cr
         usable = alive[src]
         keys = [np.where(usable, total, np.inf)] + [rank[src, k] for k in range(gamma - 1, -1, -1)] + [dst]
         order = np.lexsort(keys)

@@ -55,7 +55,7 @@ class ViterbiSearch:
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
                  threads: bool = True, placed: bool | None = None, window: int | None = None,
                  ring: tuple[int, int] | None = None, beam: float | None = None,
-                 pull_s: float | None = None):  # fmt: skip
+                 pull_s: float | None = None, oriented: bool = False):  # fmt: skip
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
@@ -77,13 +77,23 @@ class ViterbiSearch:
         weights are at most 1e6 and whose nodes have fewer than 4,096 incoming edges,
         the float64 passes the rest, with the same results. pull_s: the time constant
         (s) with which each path's placement is pulled toward the measured positions
-        (`costs.track_pull`; None or 0: placed once, at the start)."""
+        (`costs.track_pull`; None or 0: placed once, at the start). oriented: weigh
+        measured sensor orientations (the samples' `up`) by W_R, riding in the C_A
+        kernels (`costs`: C_R); needs W_R > 0 and the graph's orientation metadata
+        (`graph.edge_up`), else InputError."""
         self.graph = graph
         self._timer = StepTimer()  # (whether a step that may use the threads does)
         self.threads = threads
-        if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading)):
+        if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading,
+                                                         weights.orientation)):  # fmt: skip
             raise InputError(f"weights must be finite and ≥ 0, got {weights}")
         self.weights = weights
+        self.oriented = bool(oriented)
+        if self.oriented and not weights.orientation > 0:
+            raise InputError("an oriented search needs an orientation weight > 0")
+        # The weight of the per-reading value the C_A kernels compute: W_A·(C_A + (W_R/W_A)·C_R),
+        # or, at W_A = 0 in an oriented search, W_R·C_R (see `measurements`).
+        self.w_reading = float(weights.acc) if not self.oriented or weights.acc > 0 else float(weights.orientation)
         if pull_s is not None and not (np.isfinite(pull_s) and pull_s >= 0):
             raise InputError(f"track pull must be a finite number of seconds ≥ 0, got {pull_s!r}")
         self.pull_s = pull_s
@@ -92,7 +102,7 @@ class ViterbiSearch:
         N = graph.num_nodes
         self.N = N
         self.gamma = gamma
-        self.index = search_index(graph)  # (the graph's tables, made once and shared)
+        self.index = search_index(graph, self.oriented)  # (the graph's tables, made once and shared)
         tables = self.index.tables
         self.edge_src = tables["edge_src"]
         self.edge_kind = tables["edge_kind"]
@@ -115,7 +125,7 @@ class ViterbiSearch:
         # bits for an arrival index < max in-degree, and all ones (which none is) marking a near-tie
         label_bits = max(int(np.diff(tables["incoming"]).max(initial=0)), 1).bit_length()
         # (weights ≤ 1e6 keep every live float32 total far from overflow)
-        heaviest = max(weights.acc, weights.position, weights.heading)
+        heaviest = max(weights.acc, weights.position, weights.heading, weights.orientation if self.oriented else 0.0)
         self.float32_pass = gamma == 0 and label_bits <= 12 and heaviest <= 1e6
         self.near_ties = 0  # nodes whose choice the float64 rule settled (a check on the bound's width)
         if self.float32_pass:
@@ -359,9 +369,10 @@ class ViterbiSearch:
         p = np.zeros(2) if self.anchor_position is None else np.asarray(self.anchor_position, dtype=np.float64)
         return p, 0.0 if self.anchor_heading is None else self.anchor_heading
 
-    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None):
+    def step(self, acc, position=None, heading=None, kinds_t=None, values_t=None, reading_cost=None, up=None):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
-        when a batch caller computed it ahead (else it is computed here)."""
+        when a batch caller computed it ahead (else it is computed here). up: (S, 3)
+        the sensors' measured "up" vectors (an oriented search; None or NaN: missing)."""
         if (self.anchor_position is None and position is not None) or (self.anchor_heading is None and
                                                                            heading is not None):
             self._anchor(position, heading)
@@ -372,7 +383,7 @@ class ViterbiSearch:
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
         w = self.weights
-        wa, wp, wh = float(w.acc), float(w.position), float(w.heading)
+        wa, wp, wh = self.w_reading, float(w.position), float(w.heading)
         use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
         narrow = self.narrow
@@ -385,10 +396,10 @@ class ViterbiSearch:
         if self.beam is not None:
             started, live_before = time.perf_counter(), self._n_live
         if narrow:
-            self._set_measurement(acc)  # (a narrow beam step computes the C_A it reads from it)
+            self._set_measurement(acc, up)  # (a narrow beam step computes the C_A it reads from it)
         elif reading_cost is None:
             # Computed even at W_A = 0: the report carries each path's accelerometer cost.
-            self._set_measurement(acc)
+            self._set_measurement(acc, up)
             if self._scale:
                 reading_costs(self.readings_t, self._meas, self._mask, self._scale, self.reading_cost)
             else:
@@ -524,11 +535,37 @@ class ViterbiSearch:
         self.c32_base = self.low
         self._c32_stale = False
 
-    @staticmethod
-    def measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def measurements(self, acc, up=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Accelerations (B, S, 3) m/s² → the kernels' measurement vectors (B, 3S)
         float32 in g, masks (B, 3S) float32 and the sensors present (B,): a sensor with
-        any NaN axis is left out (Kelly et al. 2013, eq. 4 averages over sensors present)."""
+        any NaN axis is left out (Kelly et al. 2013, eq. 4 averages over sensors present).
+        An oriented search's also carry up (B, S, 3), the sensors' measured "up"
+        vectors (normalised; None or NaN: missing), as 3S more axes (B, 6S) whose mask
+        is ρ = √((W_R / W_A)·(n / n_R)), and "present" is n, the count the kernels'
+        scale 1 / n divides by: n_A, the accelerometers present, or n_R where none is;
+        so scale·Σ((r − m)·mask)² = C_A + (W_R / W_A)·C_R. At W_A = 0 the accelerometer
+        axes are masked off and ρ = 1 (the search weighs the value by W_R: `w_reading`)."""
+        meas, mask, present = self.acc_measurements(acc)
+        if not self.oriented:
+            return meas, mask, present
+        B, S = meas.shape[0], meas.shape[1] // 3
+        u = np.full((B, S, 3), np.nan) if up is None else np.asarray(up, dtype=np.float64).reshape(B, S, 3)
+        norm = np.linalg.norm(u, axis=-1)
+        valid = np.isfinite(norm) & (norm > 0)
+        u = np.where(valid[..., None], u / np.where(valid, norm, 1.0)[..., None], 0.0)
+        n_r = valid.sum(axis=1).astype(np.float64)
+        w = self.weights
+        acc_on = w.acc > 0
+        n = np.where(acc_on & (present > 0), present, n_r)
+        rho = np.sqrt(np.where(n_r > 0, (w.orientation / self.w_reading) * n / np.maximum(n_r, 1.0), 0.0))
+        meas = np.concatenate([meas, u.reshape(B, -1).astype(np.float32)], axis=1)
+        mask = np.concatenate([mask * np.float32(acc_on), np.repeat(valid * rho[:, None], 3, axis=1).astype(np.float32)],
+                              axis=1)  # fmt: skip
+        return meas, mask, n.astype(present.dtype)
+
+    @staticmethod
+    def acc_measurements(acc) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`measurements` of the accelerations alone: (B, 3S) in g, masks, sensors present."""
         a = np.asarray(acc, dtype=np.float32)
         a = a.reshape(len(a), -1, 3)
         valid = np.isfinite(a).all(axis=-1)
@@ -538,11 +575,11 @@ class ViterbiSearch:
         mask = np.repeat(valid, 3, axis=1).astype(np.float32)
         return meas, mask, mask.sum(axis=1) / 3.0
 
-    def reading_costs(self, acc, measured=None) -> np.ndarray:
+    def reading_costs(self, acc, measured=None, up=None) -> np.ndarray:
         """C_A (B, R) float32 in g² of every distinct edge reading for B samples of
         accelerations (B, S, 3) m/s² at once (see `costs._reading_costs_batch_py`);
         measured: their `measurements`, when the caller has them already."""
-        meas, mask, present = self.measurements(acc) if measured is None else measured
+        meas, mask, present = self.measurements(acc, up) if measured is None else measured
         B = len(meas)
         scale = np.where(present > 0, 1.0 / np.maximum(present, 1.0), 0.0).astype(np.float32)
         out = np.empty((B, self.readings_t.shape[1]), np.float32)
@@ -550,10 +587,10 @@ class ViterbiSearch:
         kernel(self.readings_t, meas, mask, scale, out)
         return out
 
-    def _set_measurement(self, acc) -> None:
-        """One sample's accelerations (S, 3) m/s² → self._meas, self._mask (see
-        `measurements`) and self._scale, float32 1 / sensors present (0: none)."""
-        meas, mask, present = self.measurements(np.asarray(acc)[None])
+    def _set_measurement(self, acc, up=None) -> None:
+        """One sample's accelerations (S, 3) m/s² (and up vectors) → self._meas,
+        self._mask (see `measurements`) and self._scale, float32 1 / sensors present (0: none)."""
+        meas, mask, present = self.measurements(np.asarray(acc)[None], None if up is None else np.asarray(up)[None])
         self._meas[:], self._mask[:] = meas[0], mask[0]
         self._scale = np.float32(1.0 / float(present[0])) if present[0] else np.float32(0.0)
 

@@ -21,7 +21,8 @@ from graphsvc.motion.skeleton import Motion
 from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
-from graphsvc.strategies.viterbi.batch import needs_placement, viterbi_search, warm_up_search, warm_up_search_once
+from graphsvc.strategies.viterbi.batch import (needs_placement, orientation_counts, viterbi_search, warm_up_search,
+                                               warm_up_search_once)  # fmt: skip
 from graphsvc.sensors.noise import CausalTrackHeading
 from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels,
                                       start_placement, start_samples, start_state)  # fmt: skip
@@ -33,7 +34,7 @@ from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
 class ViterbiStrategy(Strategy):
     name = "viterbi"
     needs = frozenset({"accelerations"})
-    uses = frozenset({"accelerations", "ground_position", "heading", "constraints"})
+    uses = frozenset({"accelerations", "orientations", "ground_position", "heading", "constraints"})
     summary = "the motion-graph path that best explains the readings, the track and the constraints"
 
     def prepare(self, graph: MotionGraph) -> SearchIndex:
@@ -55,6 +56,9 @@ class ViterbiStrategy(Strategy):
         t0 = time.perf_counter()
         warm_up_search_once(graph, threads)
         warm_up_synthesis(graph)
+        if orientation_counts(graph, w, inp.up):  # (the oriented index's tables, once per graph, not in the search's time)
+            oriented = search_index(graph, True)
+            _ = oriented.slots if constraints else (oriented.tables, oriented.float32)
         warm_up_s = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -68,7 +72,7 @@ class ViterbiStrategy(Strategy):
         if options.latency_s is None:
             result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
                                     should_stop=should_stop, beam=options.beam, start=start,
-                                    pull_s=options.track_pull_s)  # fmt: skip
+                                    pull_s=options.track_pull_s, up=inp.up)  # fmt: skip
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -81,7 +85,8 @@ class ViterbiStrategy(Strategy):
             lag = int(round(options.latency_s * rate))
             decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
                                       needs_placement(w, use_pos, use_head), beam=options.beam,
-                                      start_samples=start_samples(rate), pull_s=options.track_pull_s)  # fmt: skip
+                                      start_samples=start_samples(rate), pull_s=options.track_pull_s,
+                                      oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
                                          pull_alpha=alpha)  # fmt: skip
             emitted = 0
@@ -92,7 +97,8 @@ class ViterbiStrategy(Strategy):
                     raise SearchCancelled(f"search stopped at sample {t} of {T}")
                 if t < T:  # (the raw streams: the search scores only what its weights count)
                     n, e = decoder.push(acc[t], None if position is None else position[t],
-                                        None if heading is None else heading[t])  # fmt: skip
+                                        None if heading is None else heading[t],
+                                        None if inp.up is None else inp.up[t])  # fmt: skip
                 else:
                     n, e = decoder.flush()
                 node_parts.append(n)
@@ -147,14 +153,15 @@ class ViterbiSession(LiveSession):
     while a session runs alone: `threads`)."""
 
     def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None):  # fmt: skip
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names)
+                 threads: bool = False, keep_motion: bool = True, marker_names=None,
+                 orientations: bool = False):  # fmt: skip
+        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
                                        self.rate, threads, beam=options.beam,
                                        start_samples=start_samples(self.rate),
-                                       pull_s=options.track_pull_s)  # fmt: skip
+                                       pull_s=options.track_pull_s, oriented=self.reads_up)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
         self.pull_alpha = track_pull(options.track_pull_s, self.rate)
         self.counts_position = options.weights.position != 0
@@ -173,10 +180,10 @@ class ViterbiSession(LiveSession):
     def threads(self, on: bool) -> None:
         self.decoder.search.threads = on
 
-    def _decode(self, acc, position, heading, markers=None):
+    def _decode(self, acc, position, heading, markers=None, up=None):
         if self.track is not None:
             heading = self.track.push(position)
-        nodes, edges = self.decoder.push(acc, position, heading)  # (the search scores what its weights count)
+        nodes, edges = self.decoder.push(acc, position, heading, up)  # (the search scores what its weights count)
         self._targets.append(position if self.counts_position and position is not None else None)
         if self.synth is None and not len(nodes):
             return []

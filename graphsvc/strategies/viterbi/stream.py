@@ -66,8 +66,8 @@ class FixedLagDecoder:
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
                  placed: bool | None = None, store: bool | None = None, beam: float | None = None,
-                 start_samples: int = 1, pull_s: float | None = None):  # fmt: skip
-        """placed: see ViterbiSearch (None: from the weights; a caller that knows no
+                 start_samples: int = 1, pull_s: float | None = None, oriented: bool = False):  # fmt: skip
+        """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch). placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
         lag + 1 samples' back-pointers, dense (False: its `window` mode); None: the
@@ -83,7 +83,8 @@ class FixedLagDecoder:
         if store is None:
             store = self.lag > self.DENSE_MAX_LAG
         self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
-                                    window=None if store else self.lag + 1, beam=beam, pull_s=pull_s)  # fmt: skip
+                                    window=None if store else self.lag + 1, beam=beam, pull_s=pull_s,
+                                    oriented=oriented)  # fmt: skip
         self.start_samples = max(1, int(start_samples))
         self._pending: list = []  # samples (acc, position, heading) that arrived before the search started
         self.emitted = 0  # frames emitted so far
@@ -99,21 +100,23 @@ class FixedLagDecoder:
     def started(self) -> bool:
         return self.search.t >= 0
 
-    def push(self, acc, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+    def push(self, acc, position=None, heading=None, up=None) -> tuple[np.ndarray, np.ndarray]:
+        """One sample: accelerations (S, 3) m/s², position (2,) m, heading rad, the
+        sensors' "up" vectors (S, 3) (an oriented decoder's; None: missing)."""
         if not self.started and self.start_samples > 1:
-            self._pending.append((acc, position, heading))
+            self._pending.append((acc, position, heading, up))
             if len(self._pending) < self.start_samples:
                 return np.zeros(0, np.int64), np.zeros(0, np.int64)
             return self._start_pending()
-        return self._advance(acc, position, heading)
+        return self._advance(acc, position, heading, up)
 
-    def _advance(self, acc, position, heading) -> tuple[np.ndarray, np.ndarray]:
+    def _advance(self, acc, position, heading, up=None) -> tuple[np.ndarray, np.ndarray]:
         t = self.search.t + 1
         kinds, values = self.requirements.at(t)
         if t == 0:
             self.search.start(position, heading, kinds, values)
         else:
-            self.search.step(acc, position, heading, kinds, values)
+            self.search.step(acc, position, heading, kinds, values, up=up)
         final = max(self.search.converged_t, t - self.lag)
         self.converged_frames += max(0, final - max(self.emitted - 1, t - self.lag))
         return self._emit(final)
@@ -124,11 +127,11 @@ class FixedLagDecoder:
 
         pending, self._pending = self._pending, []
         position = np.array([np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64)
-                             for _, p, _ in pending])  # fmt: skip
-        heading = np.array([np.nan if h is None else float(h) for _, _, h in pending])
+                             for _, p, _, _ in pending])  # fmt: skip
+        heading = np.array([np.nan if h is None else float(h) for _, _, h, _ in pending])
         p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
         out = [self._advance(pending[0][0], p0, h0)]  # (sample 0 places the paths; its readings are not scored)
-        out += [self._advance(acc, p, h) for acc, p, h in pending[1:]]
+        out += [self._advance(acc, p, h, u) for acc, p, h, u in pending[1:]]
         return np.concatenate([n for n, _ in out]), np.concatenate([e for _, e in out])
 
     def flush(self) -> tuple[np.ndarray, np.ndarray]:

@@ -17,12 +17,13 @@ import weakref
 
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph, incoming_offsets
 from graphsvc.sensors.accelerometer import GRAVITY
 
 
-def _make_search_tables(graph: MotionGraph) -> dict:
+def _make_search_tables(graph: MotionGraph, oriented: bool = False) -> dict:
     """The graph's arrays in the search's layout (`SearchIndex.tables`). Each node's shared reading is the distinct reading most of its incoming edges
     read (the first-met among equals; on built graphs the node's own frame: 79–86 % of
     the edges read their destination's), and those edges are its shared ones. Nodes
@@ -33,11 +34,17 @@ def _make_search_tables(graph: MotionGraph) -> dict:
     incoming edges), then the readings only other edges read (distinct, in order of
     first use), so the float32 pass reads its shared edges' C_A in layout order, not
     scattered; edge_reading (E,) int32 each edge's column; edge_shared (E,) bool.
-    Compact edge arrays."""
+    Compact edge arrays. oriented: each reading is followed by the edge's sensor "up"
+    vectors (`graph.edge_up`), a reading (6S,) — the orientation term rides in the C_A
+    kernels as 3S more axes (`costs`)."""
     N, E = graph.num_nodes, graph.num_edges
     flat = np.ascontiguousarray(graph.edge_acc, dtype=np.float32).reshape(E, -1)
+    D = flat.shape[1]
+    if oriented:
+        flat = np.concatenate([flat, np.asarray(graph.edge_up, dtype=np.float32).reshape(E, -1)], axis=1)
     first_edge, distinct = distinct_rows(flat)
-    in_g = (flat[first_edge].astype(np.float64) / GRAVITY).astype(np.float32)
+    in_g = flat[first_edge]
+    in_g[:, :D] = (in_g[:, :D].astype(np.float64) / GRAVITY).astype(np.float32)
     incoming = np.ascontiguousarray(graph.incoming, dtype=np.int32)  # E < 2³¹ (edge ids are int32 here)
     dst = graph.edge_dst.astype(np.int64)  # (edges are numbered by destination)
     # each node's shared reading: its longest run of one reading, sorted by node and reading
@@ -233,8 +240,9 @@ class SearchIndex:
     warmed: the thread modes (True: threaded kernels) `batch.warm_up_search` has run
     for on this graph in this process."""
 
-    def __init__(self, graph: MotionGraph):
+    def __init__(self, graph: MotionGraph, oriented: bool = False):
         self._graph = weakref.ref(graph)
+        self.oriented = bool(oriented)
         self._lock = threading.RLock()
         self._made: dict[str, object] = {}
         self.warmed: set[bool] = set()
@@ -255,7 +263,7 @@ class SearchIndex:
     @property
     def tables(self) -> dict:
         """Compact edge arrays and the distinct readings (`_make_search_tables`)."""
-        return self._table("search", lambda: _make_search_tables(self.graph))
+        return self._table("search", lambda: _make_search_tables(self.graph, self.oriented))
 
     @property
     def slots(self) -> dict:
@@ -273,9 +281,15 @@ class SearchIndex:
         return self._table("beam", lambda: _make_beam_tables(self.graph, self.tables))
 
 
-def search_index(graph: MotionGraph) -> SearchIndex:
+def search_index(graph: MotionGraph, oriented: bool = False) -> SearchIndex:
     """The graph's search index in this process (`graph.derived`: made on first use,
-    dropped with the graph; a copy of the graph gets its own)."""
+    dropped with the graph; a copy of the graph gets its own). oriented: the index
+    whose readings carry the edges' sensor "up" vectors too (searches that weigh
+    measured orientations; the graph must have them, `graph.edge_up`)."""
+    if oriented:
+        if graph.edge_up is None:
+            raise InputError("the graph has no sensor orientation metadata (rebuild it or run `graphsvc relayout`)")
+        return derived(graph, "viterbi.search_index.oriented", lambda: SearchIndex(graph, True))
     return derived(graph, "viterbi.search_index", lambda: SearchIndex(graph))
 
 
