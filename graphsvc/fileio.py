@@ -72,3 +72,14 @@ def _fsync_dir(folder: Path) -> None:
 def write_text_atomic(path, text: str) -> None:
     with atomic_writer(path) as f:
         f.write(text.encode("utf-8"))
+
+
+def file_sha256(path) -> str:
+    """The SHA-256 of a file's bytes (hex), read in blocks."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
