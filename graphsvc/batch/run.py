@@ -95,14 +95,15 @@ def connect(scheduler: str | None, workers: int | None, timeout_s: float = CONNE
 
 def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | None = None, workers: int | None = None,
               retries: int = 2, progress: bool | None = None, should_stop=None, client=None,
-              timeout_s: float = CONNECT_TIMEOUT_S, on_item=None) -> dict:  # fmt: skip
+              timeout_s: float = CONNECT_TIMEOUT_S, on_item=None, base=None) -> dict:  # fmt: skip
     """Run a manifest's items into `out_dir` and return the summary (also written to
     out_dir/summary.json). graphs: {name: path} for the manifest's graph names;
     retries: further attempts an item gets after a failure that is not its input's;
     progress: the bar (None: when stderr is a terminal); should_stop: polled, the
     batch stops (its unfinished items queued) when it returns true; client: a
     distributed Client to use instead of connecting; on_item(output, state): called
-    as items finish."""
+    as items finish; base: the folder relative paths are taken from (default: the
+    manifest's)."""
     if retries < 0:
         raise InputError(f"--retries must be ≥ 0, got {retries}")
     manifest = Path(manifest)
@@ -118,7 +119,8 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
     try:
         out = check_out_dir(out_dir)
         with store.folder_lock(out):
-            return _run(client, manifest, items, out, graphs or {}, retries, progress, should_stop, on_item)
+            return _run(client, manifest, items, out, graphs or {}, retries, progress, should_stop, on_item,
+                        Path(base) if base is not None else manifest.parent)  # fmt: skip
     finally:
         if own is not None:
             with contextlib.suppress(Exception):
@@ -128,12 +130,12 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
                     own[1].close()
 
 
-def _run(client, manifest: Path, items, out: Path, graphs, retries, progress, should_stop, on_item) -> dict:
+def _run(client, manifest: Path, items, out: Path, graphs, retries, progress, should_stop, on_item, base: Path) -> dict:
     from graphsvc.batch.work import run_item
 
     t0 = time.perf_counter()
     ver = version()
-    plans = [plan_item(item, manifest.parent, graphs, out, ver) for item in items]
+    plans = [plan_item(item, base, graphs, out, ver) for item in items]
     _remove_temporaries(out, [p.item.output for p in plans])
     con = store.open_store(out)
     try:
