@@ -67,9 +67,24 @@ def local_cluster(workers: int | None = None):
     n = workers or os.cpu_count() or 1
     if n < 1:
         raise InputError(f"--workers must be ≥ 1, got {n}")
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                        silence_logs=logging.ERROR, scheduler_kwargs={"allowed_failures": 0},
-                        env=WORKER_ENV)  # fmt: skip
+    with kept_environ():
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                            silence_logs=logging.ERROR, scheduler_kwargs={"allowed_failures": 0},
+                            env=WORKER_ENV)  # fmt: skip
+
+
+@contextlib.contextmanager
+def kept_environ():
+    """Undo what a Dask nanny writes into this process's environment to hand to the
+    worker it spawns (thread counts, PYTHONHASHSEED): processes this one starts later
+    must not inherit them."""
+    saved = dict(os.environ)
+    try:
+        yield
+    finally:
+        for key in set(os.environ) - set(saved):
+            del os.environ[key]
+        os.environ.update(saved)
 
 
 def connect(scheduler: str | None, workers: int | None, timeout_s: float = CONNECT_TIMEOUT_S):
@@ -118,7 +133,7 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
         own = (client, cluster)
     try:
         out = check_out_dir(out_dir)
-        with store.folder_lock(out):
+        with store.folder_lock(out), kept_environ():  # (a worker restarted by its nanny)
             return _run(client, manifest, items, out, graphs or {}, retries, progress, should_stop, on_item,
                         Path(base) if base is not None else manifest.parent)  # fmt: skip
     finally:

@@ -135,19 +135,21 @@ class KillOnStart(WorkerPlugin):
 
 
 def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, batch_files, client):
-    from graphsvc.batch.run import run_batch
+    from graphsvc.batch.run import kept_environ, run_batch
 
     link_inputs(tmp_path, batch_files)
     rows = [{"recording": f"perf{k % 4}.rec", "graph": "small", "strategy": ("viterbi", "nearest")[k % 2],
              "output": f"item{k}"} for k in range(6)]  # fmt: skip
     manifest = write_manifest(tmp_path / "m.json", rows)
     plugin = KillOnStart("item3", str(tmp_path / "killed"))
-    client.register_plugin(plugin, name=KillOnStart.name)
-    try:
-        summary = run_batch(manifest, tmp_path / "out", graphs={"small": batch_files / "small.graph"}, client=client,
-                            retries=2, progress=False)  # fmt: skip
-    finally:
-        client.unregister_worker_plugin(KillOnStart.name)
+    with kept_environ():  # (what the nanny writes into ours when it restarts the killed worker)
+        client.register_plugin(plugin, name=KillOnStart.name)
+        try:
+            summary = run_batch(manifest, tmp_path / "out", graphs={"small": batch_files / "small.graph"},
+                                client=client, retries=2, progress=False)  # fmt: skip
+        finally:
+            client.unregister_worker_plugin(KillOnStart.name)
+            client.wait_for_workers(2, timeout=60)
     assert (tmp_path / "killed").exists(), "the plugin never fired"
     out = tmp_path / "out"
     assert summary["totals"]["done"] == 6
