@@ -159,7 +159,6 @@ class Plan:
     item: Item
     task: dict | None
     fingerprint: str
-    input_s: float | None = None
     error: str | None = None
 
 
@@ -191,7 +190,7 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
     task = {"output": item.output, "out_dir": str(out_dir), "graph": str(graph_path), "graph_checksum": checksum,
             "recording": str(recording), "argv": argv}  # fmt: skip
-    return Plan(item, task, _digest(parts), input_s=_duration(recording))
+    return Plan(item, task, _digest(parts))
 
 
 def option_argv(item: Item, folder: Path) -> list[str]:
@@ -278,16 +277,3 @@ def _existing(folder: Path, name: str, what: str) -> Path:
 def _digest(parts: dict) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:32]
 
-
-def _duration(recording: Path) -> float | None:
-    """The recording's length in seconds, from its header where it says (None: read by
-    the worker)."""
-    if recording.suffix.lower() != ".rec":
-        return None
-    try:
-        from graphsvc.sensors.recording import read_recording
-
-        rec = read_recording(recording)
-        return float(rec.duration_s)
-    except (GraphsvcError, OSError):
-        return None

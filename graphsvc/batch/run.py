@@ -161,6 +161,7 @@ def _run(client, manifest: Path, items, out: Path, graphs, retries, progress, sh
         skipped = len(plans) - len(todo)
         bar = _Progress(len(plans), skipped, progress)
         pending = {}  # future → plan
+        failures: dict[str, int] = {}  # this run's failed attempts of an item
         order = {p.item.output: k for k, p in enumerate(plans)}
 
         def submit(plan):
@@ -192,10 +193,10 @@ def _run(client, manifest: Path, items, out: Path, graphs, retries, progress, sh
                 name = plan.item.output
                 try:
                     result = f.result()
-                except Exception as exc:  # a worker died, or a bug: retried while attempts last
-                    attempts = con.execute("SELECT attempts FROM items WHERE output = ?", (name,)).fetchone()[0]
+                except Exception as exc:  # a worker died, or a bug: retried while this run's attempts last
+                    failures[name] = failures.get(name, 0) + 1
                     reason = _reason(exc)
-                    final = attempts > retries
+                    final = failures[name] > retries
                     store.mark_failed(con, name, reason, final=final)
                     if not final:
                         submit(plan)
@@ -307,17 +308,14 @@ class _Progress:
 
         self.t0 = time.perf_counter()
         self.input_s = 0.0
-        self.finished = 0
         self.bar = tqdm(total=total, initial=skipped, unit="item", disable=False if show else (None if show is None else True),
                         desc="batch", dynamic_ncols=True, smoothing=0.1)  # fmt: skip
 
     def update(self, result, failed: bool = False) -> None:
-        self.finished += 1
         if result and not failed:
             self.input_s += result.get("input_s", 0.0)
         dt = max(time.perf_counter() - self.t0, 1e-9)
-        self.bar.set_postfix_str(f"{self.finished / dt:.2f} items/s, {self.input_s / 3600.0 / dt:.4f} input-h/s",
-                                 refresh=False)  # fmt: skip
+        self.bar.set_postfix_str(f"{self.input_s / 3600.0 / dt:.4f} input-h/s", refresh=False)  # (items/s, ETA: tqdm's)
         self.bar.update(1)
 
     def close(self) -> None:

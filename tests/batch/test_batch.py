@@ -134,22 +134,26 @@ class KillOnStart(WorkerPlugin):
             os.kill(os.getpid(), signal.SIGKILL)
 
 
-def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, batch_files, client):
+def run_killing(client, output: str, manifest: Path, tmp_path: Path, batch_files: Path, retries: int) -> dict:
+    """run_batch into tmp_path/out while KillOnStart kills the worker that starts `output`."""
     from graphsvc.batch.run import kept_environ, run_batch
 
+    with kept_environ():  # (what the nanny writes into ours when it restarts the killed worker)
+        client.register_plugin(KillOnStart(output, str(tmp_path / "killed")), name=KillOnStart.name)
+        try:
+            return run_batch(manifest, tmp_path / "out", graphs={"small": batch_files / "small.graph"}, client=client,
+                             retries=retries, progress=False)  # fmt: skip
+        finally:
+            client.unregister_worker_plugin(KillOnStart.name)
+            client.wait_for_workers(2, timeout=60)
+
+
+def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, batch_files, client):
     link_inputs(tmp_path, batch_files)
     rows = [{"recording": f"perf{k % 4}.rec", "graph": "small", "strategy": ("viterbi", "nearest")[k % 2],
              "output": f"item{k}"} for k in range(6)]  # fmt: skip
     manifest = write_manifest(tmp_path / "m.json", rows)
-    plugin = KillOnStart("item3", str(tmp_path / "killed"))
-    with kept_environ():  # (what the nanny writes into ours when it restarts the killed worker)
-        client.register_plugin(plugin, name=KillOnStart.name)
-        try:
-            summary = run_batch(manifest, tmp_path / "out", graphs={"small": batch_files / "small.graph"},
-                                client=client, retries=2, progress=False)  # fmt: skip
-        finally:
-            client.unregister_worker_plugin(KillOnStart.name)
-            client.wait_for_workers(2, timeout=60)
+    summary = run_killing(client, "item3", manifest, tmp_path, batch_files, retries=2)
     assert (tmp_path / "killed").exists(), "the plugin never fired"
     out = tmp_path / "out"
     assert summary["totals"]["done"] == 6
@@ -164,6 +168,18 @@ def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, b
     assert main(["synthesize", str(batch_files / "small.graph"), str(tmp_path / "perf3.rec"), "-o", str(ref),
                  "--strategy", "nearest"]) == 0  # fmt: skip
     assert (out / "item3.bvh").read_bytes() == ref.read_bytes()
+
+
+def test_no_retries_left_the_item_fails_saying_its_worker_died(tmp_path, batch_files, client):
+    link_inputs(tmp_path, batch_files)
+    rows = [{"recording": f"perf{k}.rec", "graph": "small", "strategy": "nearest", "output": f"n{k}"} for k in range(3)]
+    manifest = write_manifest(tmp_path / "m.json", rows)
+    summary = run_killing(client, "n1", manifest, tmp_path, batch_files, retries=0)
+    assert summary["failures"] == [{"output": "n1", "line": 2, "reason": "its worker died during the item"}]
+    assert summary["totals"]["done"] == 2
+    store = store_rows(tmp_path / "out")
+    assert store["n1"]["state"] == "failed" and store["n1"]["attempts"] == 1
+    assert not (tmp_path / "out" / "n1.bvh").exists() and leftovers(tmp_path / "out") == []
 
 
 def test_client_killed_midway_restart_recomputes_nothing_done(tmp_path, batch_files, client):
