@@ -87,6 +87,11 @@ def test_submit_poll_list_one_output_equals_synthesize(conn, batch_files, batch_
     assert f"{status.batch_id}: finished, 3 items: 2 done, 1 failed" in out and "missing (line 4): failed" in out
     assert main(["client", "batch", "list", "--json", "--server", server]) == 0
     assert status.batch_id in [b["batch_id"] for b in json.loads(capsys.readouterr().out)]
+    one = write_manifest(tmp_path / "one.json", rows[1:2])
+    assert main(["client", "batch", "submit", str(one), "--wait", "--poll", "0.1", "--json", "--server", server]) == 0
+    done = json.loads(capsys.readouterr().out)
+    assert (done["state"], done["done"], done["items"]) == ("finished", 1, 1)
+    assert Path(done["folder"], "n.bvh").read_bytes() == Path(by_name["n"].output_path).read_bytes()
 
 
 def test_cancel_queues_the_unfinished_items(conn, tmp_path):
