@@ -14,8 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (Parser, add_calibration_option, add_input_file_options, add_marker_options, add_search_options, os_message,
-                               search_options)  # fmt: skip
+from graphsvc.cli_args import (Parser, add_input_file_options, add_marker_options, add_search_options,
+                               add_synthesize_options, os_message, search_options)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 
 
@@ -191,12 +191,8 @@ def _cmd_relayout(args) -> int:
 
 
 def _cmd_synthesize(args) -> int:
-    from graphsvc.errors import InputError
-    from graphsvc.fileio import write_text_atomic
     from graphsvc.graph.file import load_graph
-    from graphsvc.motion.bvh import write_bvh
-    from graphsvc.pipeline import reconstruct
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.pipeline import synthesize_files
 
     out = Path(args.output)
     _check_output(out)
@@ -204,30 +200,11 @@ def _cmd_synthesize(args) -> int:
         _check_output(Path(args.report))
     options = search_options(args)
     graph = load_graph(args.graph)
-    rec = read_recording(args.recording, up=args.up, units=args.units)
-    if args.device_map:
-        from graphsvc.sensors.devices import apply_device_map, device_map
-
-        mapping = device_map(args.device_map, graph.layout.get("name"))
-        rec = apply_device_map(rec, mapping, order=graph.sensor_names)
-    elif rec.meta.get("imported_from") == "mvnx" and tuple(rec.sensor_names) != tuple(graph.sensor_names):
-        raise InputError(f"{args.recording} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
-                         f"{' …' if rec.num_sensors > 4 else ''}): "
-                         f"give --device-map xsens (or a map file) to name them as layout "
-                         f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
-    if args.calibration:
-        from graphsvc.sensors.calibration import apply_calibration, load_calibration
-
-        rec = apply_calibration(rec, load_calibration(args.calibration))
-    elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None:
-        print(f"note: {args.recording}'s readings are in each device's own frame; they are used as if in the "
-              "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)", file=sys.stderr)  # fmt: skip
-    result = reconstruct(graph, rec, options)
-    write_bvh(out, result.motion, scale=args.scale)
-    result.report["files"] = {"output": str(out.resolve()), "graph": str(Path(args.graph).resolve()),
-                              "recording": str(Path(args.recording).resolve())}  # fmt: skip
-    if args.report:
-        write_text_atomic(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    notes: list[str] = []
+    result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report, scale=args.scale,
+                              up=args.up, units=args.units, device_map=args.device_map, calibration=args.calibration, notes=notes)  # fmt: skip
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     r = result.report
     labels = " → ".join(f"{run['label']} {run['frames'] / graph.rate_hz:.1f} s" for run in r["labels"][:12])
     more = f" … (+{len(r['labels']) - 12})" if len(r["labels"]) > 12 else ""
@@ -271,6 +248,22 @@ def _cmd_calibrate(args) -> int:
     for name, item in cal["sensors"].items():
         angle = 2.0 * math.degrees(math.acos(min(1.0, abs(item["rotation_wxyz"][0]))))
         print(f"  {name}: mounting {angle:.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
+    return 0
+
+
+def _cmd_batch(args) -> int:
+    from graphsvc.batch.run import format_summary, run_batch
+    from graphsvc.service.server import parse_graph_spec
+
+    graphs = dict(parse_graph_spec(spec) for spec in args.graph or [])
+    summary = run_batch(args.manifest, args.out, graphs=graphs, scheduler=args.scheduler, workers=args.workers,
+                        retries=args.retries, progress=False if args.quiet else None, timeout_s=args.timeout)  # fmt: skip
+    print(format_summary(summary))
+    print(f"summary: {Path(args.out) / 'summary.json'}")
+    failed = summary["totals"]["failed"]
+    if failed:
+        print(f"graphsvc: {failed} of {summary['totals']['items']} items failed", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -471,11 +464,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("graph", metavar="GRAPH")
     p.add_argument("recording", metavar="REC", help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
-    add_search_options(p)
-    add_input_file_options(p)
-    add_calibration_option(p)
+    add_synthesize_options(p)
     p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
-    p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
     p.set_defaults(run=_cmd_synthesize)
 
     p = sub.add_parser("calibrate", help="estimate each sensor's mounting rotation from a calibration take")
@@ -488,6 +478,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_input_file_options(p)
     p.add_argument("-o", "--output", required=True, metavar="CAL.json")
     p.set_defaults(run=_cmd_calibrate)
+
+    p = sub.add_parser("batch", help="reconstruct a manifest of recordings on a local or existing Dask cluster")
+    p.add_argument("manifest", metavar="MANIFEST", help="CSV (header row) or JSON: recording, graph, strategy, output, "
+                                                        "[weights, constraints, calibration, options]; docs/batch.md")
+    p.add_argument("--out", required=True, metavar="DIR", help="outputs, the job store and the summary")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="an existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else a"
+                            " local cluster)")
+    where.add_argument("--workers", type=int, metavar="N", help="local cluster workers (default: one a core)")
+    p.add_argument("--retries", type=int, default=2, metavar="R",
+                   help="further attempts after a failure that is not the input's (a worker died; default 2)")
+    p.add_argument("--graph", action="append", metavar="NAME=PATH", help="a graph the manifest names (repeatable)")
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S", help="wait this long for the scheduler (default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=_cmd_batch)
 
     p = sub.add_parser("evaluate", help="leave-one-out evaluation on a knowledge base (metrics: docs/evaluation.md)")
     p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")

@@ -138,6 +138,15 @@ def add_search_options(p, constraints: bool = True) -> None:
                         "unless the recording was simulated (auto, the default)")
 
 
+def add_synthesize_options(p) -> None:
+    """Every flag of `synthesize` but its files: the strategy flags, how to read the
+    recording, the BVH scale (a batch manifest's `options` column takes the same)."""
+    add_search_options(p)
+    add_input_file_options(p)
+    add_calibration_option(p)
+    p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
+
+
 def os_message(exc: OSError) -> str:
     where = f"{exc.filename}: " if exc.filename else ""
     return f"{where}{exc.strerror or exc}"

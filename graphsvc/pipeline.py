@@ -80,3 +80,50 @@ def warm_up(graph: MotionGraph, threads: bool = False, strategies=None) -> float
         s = get_strategy(name)
         s.warm_up(prepared_index(s, graph), graph, threads)
     return time.perf_counter() - t0
+
+
+def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, options: Options = Options(),
+                     report_path=None, scale: float = 100.0, up=None, units=None, device_map=None,
+                     calibration=None, threads: bool = True, notes=None) -> Reconstruction:  # fmt: skip
+    """`graphsvc synthesize` as a function, for the CLI and a batch alike: read the
+    recording (up, units: as the file does not say), name a device's sensors as the
+    graph's layout does (device_map: 'xsens' or a map file), turn a device's readings into
+    the layout's frames (calibration: a `graphsvc calibrate` file), reconstruct, write the BVH
+    (scale: units per metre) and, given report_path, the report JSON — both atomically.
+    The report's 'files' names the output, graph and recording. notes: a list that
+    collects remarks for the user (None: dropped). Same inputs, same output bytes, with
+    or without threads."""
+    import json
+    from pathlib import Path
+
+    from graphsvc.errors import InputError
+    from graphsvc.fileio import write_text_atomic
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.sensors.recording import read_recording
+
+    rec = read_recording(recording_path, up=up, units=units)
+    if device_map:
+        from graphsvc.sensors.devices import apply_device_map
+        from graphsvc.sensors.devices import device_map as load_device_map
+
+        mapping = load_device_map(device_map, graph.layout.get("name"))
+        rec = apply_device_map(rec, mapping, order=graph.sensor_names)
+    elif rec.meta.get("imported_from") == "mvnx" and tuple(rec.sensor_names) != tuple(graph.sensor_names):
+        raise InputError(f"{recording_path} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
+                         f"{' …' if rec.num_sensors > 4 else ''}): "
+                         f"give --device-map xsens (or a map file) to name them as layout "
+                         f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
+    if calibration:
+        from graphsvc.sensors.calibration import apply_calibration, load_calibration
+
+        rec = apply_calibration(rec, load_calibration(calibration))
+    elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None and notes is not None:
+        notes.append(f"{recording_path}'s readings are in each device's own frame; they are used as if in the "
+                     "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)")  # fmt: skip
+    result = reconstruct(graph, rec, options, threads=threads)
+    write_bvh(output, result.motion, scale=scale)
+    result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
+                              "recording": str(Path(recording_path).resolve())}  # fmt: skip
+    if report_path:
+        write_text_atomic(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    return result

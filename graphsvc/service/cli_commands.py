@@ -14,6 +14,7 @@ import json
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 from graphsvc.cli_args import Parser, add_calibration_option, add_search_options, os_message, search_options
@@ -38,7 +39,11 @@ def _cmd_serve(args) -> int:
     tokens = read_tokens(args.token_file) if args.token_file else ()
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
                           tls_key=args.tls_key and Path(args.tls_key), tokens=tokens, max_streams=args.max_streams,
-                          max_message_mb=args.max_message_mb, grace_s=args.grace_s)  # fmt: skip
+                          max_message_mb=args.max_message_mb, grace_s=args.grace_s,
+                          batch_dir=args.batch_dir and Path(args.batch_dir), batch_scheduler=args.batch_scheduler,
+                          batch_workers=args.batch_workers)  # fmt: skip
+    if config.batch_dir is None and (args.batch_scheduler or args.batch_workers):
+        raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
     graphs = load_graphs(args.graph)
@@ -119,6 +124,50 @@ def _cmd_client_synthesize(args) -> int:
           f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
           f"search {timings.get('search', float('nan')):.2f} s)")  # fmt: skip
     return 0
+
+
+def _batch_line(b) -> str:
+    line = (f"{b.batch_id}: {b.state}, {b.items} items: {b.done} done, {b.failed} failed, {b.running} running, "
+            f"{b.queued} queued")  # fmt: skip
+    return line + (f" — {b.error}" if b.error else "")
+
+
+def _cmd_client_batch(args) -> int:
+    from google.protobuf.json_format import MessageToDict
+
+    from graphsvc.service._generated import graphsvc_pb2 as pb
+    from graphsvc.service.client import batch_call, submit_batch
+
+    with _connect(args) as conn:
+        if args.batch_command == "submit":
+            path = Path(args.manifest)
+            fmt = args.format or ("json" if path.suffix.lower() == ".json" else "csv")
+            status = submit_batch(conn, path.read_text(encoding="utf-8"), fmt, args.retries, args.timeout)
+            while args.wait and status.state in ("queued", "running"):
+                time.sleep(args.poll)
+                status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=status.batch_id), args.timeout)
+        elif args.batch_command == "status":
+            status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=args.batch_id, items=args.items),
+                                args.timeout)  # fmt: skip
+        elif args.batch_command == "cancel":
+            status = batch_call(conn, "CancelBatch", pb.CancelBatchRequest(batch_id=args.batch_id), args.timeout)
+        else:
+            batches = batch_call(conn, "ListBatches", pb.ListBatchesRequest(), args.timeout).batches
+            if args.json:
+                print(json.dumps([MessageToDict(b, preserving_proto_field_name=True) for b in batches], indent=1))
+            for b in [] if args.json else batches:
+                print(_batch_line(b))
+            return 0
+    if getattr(args, "json", False):
+        print(json.dumps(MessageToDict(status, preserving_proto_field_name=True, always_print_fields_with_no_presence=True),
+                         indent=1, sort_keys=True))  # fmt: skip
+    else:
+        print(_batch_line(status))
+        for item in status.item_status:
+            print(f"  {item.output} (line {item.line}): {item.state}, {item.attempts} attempt(s)"
+                  + (f", {item.seconds:.2f} s, {item.output_path}" if item.state == "done" else "")
+                  + (f" — {item.reason}" if item.reason else ""))  # fmt: skip
+    return 1 if status.failed or status.state == "error" else 0
 
 
 def _cmd_client_stream(args) -> int:
@@ -244,6 +293,11 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--max-message-mb", type=float, default=64.0, metavar="M", help="largest message, MiB (default 64)")
     p.add_argument("--grace-s", type=float, default=10.0, metavar="S",
                    help="on SIGTERM, time for in-flight calls to finish (default 10)")  # fmt: skip
+    p.add_argument("--batch-dir", metavar="DIR", help="take batches (SubmitBatch …): their folders go here, and a "
+                                                      "manifest's relative paths are taken from here")  # fmt: skip
+    p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "
+                                                                "local cluster, started at the first batch)")  # fmt: skip
+    p.add_argument("--batch-workers", type=int, metavar="N", help="the local cluster's workers (default: one a core)")
     p.set_defaults(run=_cmd_serve)
 
     connection = _connection_parent()
@@ -261,6 +315,26 @@ def add_service_parsers(sub) -> None:
     add_calibration_option(c)
     add_search_options(c)
     c.set_defaults(run=_cmd_client_synthesize)
+
+    c = client.add_parser("batch", help="batches on the server: submit, status, list, cancel")
+    batch = c.add_subparsers(dest="batch_command", required=True, parser_class=type(p))
+    b = batch.add_parser("submit", parents=[connection], help="submit a manifest (its paths: the server's files)")
+    b.add_argument("manifest", metavar="MANIFEST", help="CSV or JSON manifest (docs/batch.md)")
+    b.add_argument("--format", choices=("csv", "json"), help="default: by the file's extension")
+    b.add_argument("--retries", type=int, metavar="R", help="further attempts after a worker's failure (default 2)")
+    b.add_argument("--wait", action="store_true", help="poll until the batch ends")
+    b.add_argument("--poll", type=float, default=2.0, metavar="S", help="with --wait: seconds between polls")
+    b.add_argument("--json", action="store_true")
+    b = batch.add_parser("status", parents=[connection], help="a batch's state and counts")
+    b.add_argument("batch_id", metavar="ID")
+    b.add_argument("--items", action="store_true", help="every item's state, attempts and reason")
+    b.add_argument("--json", action="store_true")
+    b = batch.add_parser("list", parents=[connection], help="the server's batches, newest first")
+    b.add_argument("--json", action="store_true")
+    b = batch.add_parser("cancel", parents=[connection], help="stop a batch (its unfinished items queued)")
+    b.add_argument("batch_id", metavar="ID")
+    b.add_argument("--json", action="store_true")
+    c.set_defaults(run=_cmd_client_batch)
 
     c = client.add_parser("stream", parents=[connection], help="replay a recording live and print per-frame latency")
     c.add_argument("recording", metavar="REC")

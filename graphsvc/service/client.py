@@ -289,3 +289,20 @@ def latency_summary(latencies_ms: Iterable[float]) -> dict:
         return {"frames": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
     return {"frames": int(a.size), "p50_ms": round(float(np.percentile(a, 50)), 3),
             "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}  # fmt: skip
+
+
+def batch_call(conn: Connection, method: str, request, timeout_s: float | None = 30.0):
+    """A batch method (SubmitBatch, GetBatch, ListBatches, CancelBatch) with `request`;
+    ServiceError when it fails."""
+    try:
+        return getattr(conn.stub, method)(request, timeout=timeout_s, metadata=conn.metadata)
+    except grpc.RpcError as exc:
+        raise service_error(exc, method) from None
+
+
+def submit_batch(conn: Connection, manifest_text: str, fmt: str = "", retries: int | None = None,
+                 timeout_s: float | None = 30.0) -> pb.BatchStatus:  # fmt: skip
+    request = pb.SubmitBatchRequest(manifest=manifest_text, format=fmt)
+    if retries is not None:
+        request.retries = retries
+    return batch_call(conn, "SubmitBatch", request, timeout_s)

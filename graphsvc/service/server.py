@@ -67,6 +67,11 @@ class ServerConfig:
     max_streams: int = 16
     max_message_mb: float = 64.0
     grace_s: float = 10.0
+    # Batches (SubmitBatch …): their root folder (None: the server takes none), and
+    # the Dask cluster they run on (a scheduler's address, else a local cluster).
+    batch_dir: Path | None = None
+    batch_scheduler: str | None = None
+    batch_workers: int | None = None
 
 
 def parse_graph_spec(text: str) -> tuple[str, Path]:
@@ -219,8 +224,9 @@ class StreamSlots:
 
 
 class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
-    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int):
+    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None):
         self.graphs = graphs
+        self.batches = batches  # a batch.service.BatchManager, or None
         self.slots = StreamSlots(max_streams)
         self.threads = ThreadShare()  # numba's threads for a live stream's steps while it runs alone
 
@@ -267,6 +273,36 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             return response
         except Exception as exc:  # noqa: BLE001 — every failure becomes a status, never a dead worker
             _abort_for(context, exc)
+
+    def _batch_call(self, context, call):
+        from graphsvc.batch.service import BatchNotFound
+
+        try:
+            if self.batches is None:
+                raise RpcStatus(grpc.StatusCode.FAILED_PRECONDITION,
+                                "this server takes no batches (start it with --batch-dir DIR)")  # fmt: skip
+            try:
+                return call()
+            except BatchNotFound as exc:
+                raise RpcStatus(grpc.StatusCode.NOT_FOUND, str(exc)) from None
+        except Exception as exc:  # noqa: BLE001
+            _abort_for(context, exc)
+
+    def SubmitBatch(self, request, context):
+        retries = request.retries if request.HasField("retries") else None
+        return self._batch_call(context, lambda: convert.batch_status_to_proto(
+            self.batches.status(self.batches.submit(request.manifest, request.format, retries))))  # fmt: skip
+
+    def GetBatch(self, request, context):
+        return self._batch_call(context, lambda: convert.batch_status_to_proto(
+            self.batches.status(request.batch_id, items=request.items)))  # fmt: skip
+
+    def ListBatches(self, request, context):
+        return self._batch_call(context, lambda: pb.ListBatchesResponse(
+            batches=[convert.batch_status_to_proto(b) for b in self.batches.list()]))  # fmt: skip
+
+    def CancelBatch(self, request, context):
+        return self._batch_call(context, lambda: convert.batch_status_to_proto(self.batches.cancel(request.batch_id)))
 
     def StreamSynthesize(self, request_iterator, context):
         release = self.slots.try_acquire()
@@ -387,6 +423,8 @@ class RunningServer:
         """Refuse new calls, let running ones finish within grace_s, then cancel them."""
         self.health.enter_graceful_shutdown()
         self.server.stop(grace_s).wait()
+        if self.servicer.batches is not None:
+            self.servicer.batches.close()
 
 
 def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None:
@@ -422,7 +460,13 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig) -> Runnin
     executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
     server = grpc.server(executor, interceptors=interceptors, options=options)
 
-    servicer = MotionGraphServicer(graphs, config.max_streams)
+    batches = None
+    if config.batch_dir is not None:
+        from graphsvc.batch.service import BatchManager
+
+        batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
+                               config.batch_workers)  # fmt: skip
+    servicer = MotionGraphServicer(graphs, config.max_streams, batches)
     pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
     health_servicer = health.HealthServicer(experimental_non_blocking=True,
                                             experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip

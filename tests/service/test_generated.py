@@ -43,7 +43,8 @@ def test_descriptor_names_the_proto_package():
     assert pb.DESCRIPTOR.name == "graphsvc/v1/graphsvc.proto"
     assert pb.DESCRIPTOR.package == "graphsvc.v1"
     methods = [m.name for m in pb.DESCRIPTOR.services_by_name["MotionGraphService"].methods]
-    assert methods == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize"]
+    assert methods == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize", "SubmitBatch", "GetBatch",
+                       "ListBatches", "CancelBatch"]
     # The values a client already sends keep their numbers; strategies added since follow.
     assert [(v.name, v.number) for v in pb.Strategy.DESCRIPTOR.values][:4] == [
         ("STRATEGY_UNSPECIFIED", 0), ("STRATEGY_VITERBI", 1), ("STRATEGY_OLNG", 2), ("STRATEGY_SSG", 3)]

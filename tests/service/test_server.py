@@ -169,7 +169,8 @@ def test_reflection_lists_and_describes_the_service(server, version):
              for b in described.file_descriptor_response.file_descriptor_proto]  # fmt: skip
     (mine,) = [f for f in files if f.name == "graphsvc/v1/graphsvc.proto"]
     (service,) = mine.service
-    assert [m.name for m in service.method] == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize"]
+    assert [m.name for m in service.method] == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize",
+                                                 "SubmitBatch", "GetBatch", "ListBatches", "CancelBatch"]
     assert service.method[3].client_streaming and service.method[3].server_streaming
 
 

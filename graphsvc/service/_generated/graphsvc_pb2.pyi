@@ -431,3 +431,83 @@ class StreamFinished(_message.Message):
     samples_received: int
     frames_emitted: int
     def __init__(self, samples_received: _Optional[int] = ..., frames_emitted: _Optional[int] = ...) -> None: ...
+
+class SubmitBatchRequest(_message.Message):
+    __slots__ = ("manifest", "format", "retries")
+    MANIFEST_FIELD_NUMBER: _ClassVar[int]
+    FORMAT_FIELD_NUMBER: _ClassVar[int]
+    RETRIES_FIELD_NUMBER: _ClassVar[int]
+    manifest: str
+    format: str
+    retries: int
+    def __init__(self, manifest: _Optional[str] = ..., format: _Optional[str] = ..., retries: _Optional[int] = ...) -> None: ...
+
+class GetBatchRequest(_message.Message):
+    __slots__ = ("batch_id", "items")
+    BATCH_ID_FIELD_NUMBER: _ClassVar[int]
+    ITEMS_FIELD_NUMBER: _ClassVar[int]
+    batch_id: str
+    items: bool
+    def __init__(self, batch_id: _Optional[str] = ..., items: _Optional[bool] = ...) -> None: ...
+
+class ListBatchesRequest(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class ListBatchesResponse(_message.Message):
+    __slots__ = ("batches",)
+    BATCHES_FIELD_NUMBER: _ClassVar[int]
+    batches: _containers.RepeatedCompositeFieldContainer[BatchStatus]
+    def __init__(self, batches: _Optional[_Iterable[_Union[BatchStatus, _Mapping]]] = ...) -> None: ...
+
+class CancelBatchRequest(_message.Message):
+    __slots__ = ("batch_id",)
+    BATCH_ID_FIELD_NUMBER: _ClassVar[int]
+    batch_id: str
+    def __init__(self, batch_id: _Optional[str] = ...) -> None: ...
+
+class BatchStatus(_message.Message):
+    __slots__ = ("batch_id", "state", "items", "queued", "running", "done", "failed", "error", "submitted_unix_s", "folder", "item_status")
+    BATCH_ID_FIELD_NUMBER: _ClassVar[int]
+    STATE_FIELD_NUMBER: _ClassVar[int]
+    ITEMS_FIELD_NUMBER: _ClassVar[int]
+    QUEUED_FIELD_NUMBER: _ClassVar[int]
+    RUNNING_FIELD_NUMBER: _ClassVar[int]
+    DONE_FIELD_NUMBER: _ClassVar[int]
+    FAILED_FIELD_NUMBER: _ClassVar[int]
+    ERROR_FIELD_NUMBER: _ClassVar[int]
+    SUBMITTED_UNIX_S_FIELD_NUMBER: _ClassVar[int]
+    FOLDER_FIELD_NUMBER: _ClassVar[int]
+    ITEM_STATUS_FIELD_NUMBER: _ClassVar[int]
+    batch_id: str
+    state: str
+    items: int
+    queued: int
+    running: int
+    done: int
+    failed: int
+    error: str
+    submitted_unix_s: float
+    folder: str
+    item_status: _containers.RepeatedCompositeFieldContainer[BatchItem]
+    def __init__(self, batch_id: _Optional[str] = ..., state: _Optional[str] = ..., items: _Optional[int] = ..., queued: _Optional[int] = ..., running: _Optional[int] = ..., done: _Optional[int] = ..., failed: _Optional[int] = ..., error: _Optional[str] = ..., submitted_unix_s: _Optional[float] = ..., folder: _Optional[str] = ..., item_status: _Optional[_Iterable[_Union[BatchItem, _Mapping]]] = ...) -> None: ...
+
+class BatchItem(_message.Message):
+    __slots__ = ("output", "line", "state", "attempts", "reason", "seconds", "output_path", "checksum")
+    OUTPUT_FIELD_NUMBER: _ClassVar[int]
+    LINE_FIELD_NUMBER: _ClassVar[int]
+    STATE_FIELD_NUMBER: _ClassVar[int]
+    ATTEMPTS_FIELD_NUMBER: _ClassVar[int]
+    REASON_FIELD_NUMBER: _ClassVar[int]
+    SECONDS_FIELD_NUMBER: _ClassVar[int]
+    OUTPUT_PATH_FIELD_NUMBER: _ClassVar[int]
+    CHECKSUM_FIELD_NUMBER: _ClassVar[int]
+    output: str
+    line: int
+    state: str
+    attempts: int
+    reason: str
+    seconds: float
+    output_path: str
+    checksum: str
+    def __init__(self, output: _Optional[str] = ..., line: _Optional[int] = ..., state: _Optional[str] = ..., attempts: _Optional[int] = ..., reason: _Optional[str] = ..., seconds: _Optional[float] = ..., output_path: _Optional[str] = ..., checksum: _Optional[str] = ...) -> None: ...

@@ -54,6 +54,26 @@ class MotionGraphServiceStub:
                 request_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeRequest.SerializeToString,
                 response_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeResponse.FromString,
                 _registered_method=True)
+        self.SubmitBatch = channel.unary_unary(
+                '/graphsvc.v1.MotionGraphService/SubmitBatch',
+                request_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.SubmitBatchRequest.SerializeToString,
+                response_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
+                _registered_method=True)
+        self.GetBatch = channel.unary_unary(
+                '/graphsvc.v1.MotionGraphService/GetBatch',
+                request_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.GetBatchRequest.SerializeToString,
+                response_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
+                _registered_method=True)
+        self.ListBatches = channel.unary_unary(
+                '/graphsvc.v1.MotionGraphService/ListBatches',
+                request_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesRequest.SerializeToString,
+                response_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesResponse.FromString,
+                _registered_method=True)
+        self.CancelBatch = channel.unary_unary(
+                '/graphsvc.v1.MotionGraphService/CancelBatch',
+                request_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.CancelBatchRequest.SerializeToString,
+                response_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
+                _registered_method=True)
 
 
 class MotionGraphServiceServicer:
@@ -91,6 +111,40 @@ class MotionGraphServiceServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def SubmitBatch(self, request, context):
+        """Batches (what `graphsvc batch` runs; docs/batch.md): a manifest of recordings on
+        the server's files, reconstructed on its Dask cluster into a folder of its batch
+        root (`graphsvc serve --batch-dir DIR`), with the same resumable job store.
+        FAILED_PRECONDITION when the server was started without --batch-dir;
+        INVALID_ARGUMENT for a manifest that does not parse ("line N: ..."); NOT_FOUND
+        for an unknown batch_id. Returns at once: poll GetBatch.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
+    def GetBatch(self, request, context):
+        """One batch's state, counts and (items = true) its items.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
+    def ListBatches(self, request, context):
+        """Every batch in the server's batch root, newest first, without items.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
+    def CancelBatch(self, request, context):
+        """Stop a running batch: items not finished are queued again (a later SubmitBatch of
+        the same manifest, or `graphsvc batch` on its folder, resumes it).
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
 
 def add_MotionGraphServiceServicer_to_server(servicer, server):
     rpc_method_handlers = {
@@ -113,6 +167,26 @@ def add_MotionGraphServiceServicer_to_server(servicer, server):
                     servicer.StreamSynthesize,
                     request_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeRequest.FromString,
                     response_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeResponse.SerializeToString,
+            ),
+            'SubmitBatch': grpc.unary_unary_rpc_method_handler(
+                    servicer.SubmitBatch,
+                    request_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.SubmitBatchRequest.FromString,
+                    response_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.SerializeToString,
+            ),
+            'GetBatch': grpc.unary_unary_rpc_method_handler(
+                    servicer.GetBatch,
+                    request_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.GetBatchRequest.FromString,
+                    response_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.SerializeToString,
+            ),
+            'ListBatches': grpc.unary_unary_rpc_method_handler(
+                    servicer.ListBatches,
+                    request_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesRequest.FromString,
+                    response_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesResponse.SerializeToString,
+            ),
+            'CancelBatch': grpc.unary_unary_rpc_method_handler(
+                    servicer.CancelBatch,
+                    request_deserializer=graphsvc_dot_v1_dot_graphsvc__pb2.CancelBatchRequest.FromString,
+                    response_serializer=graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.SerializeToString,
             ),
     }
     generic_handler = grpc.method_handlers_generic_handler(
@@ -223,6 +297,114 @@ class MotionGraphService:
             '/graphsvc.v1.MotionGraphService/StreamSynthesize',
             graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeRequest.SerializeToString,
             graphsvc_dot_v1_dot_graphsvc__pb2.StreamSynthesizeResponse.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def SubmitBatch(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/graphsvc.v1.MotionGraphService/SubmitBatch',
+            graphsvc_dot_v1_dot_graphsvc__pb2.SubmitBatchRequest.SerializeToString,
+            graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def GetBatch(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/graphsvc.v1.MotionGraphService/GetBatch',
+            graphsvc_dot_v1_dot_graphsvc__pb2.GetBatchRequest.SerializeToString,
+            graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def ListBatches(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/graphsvc.v1.MotionGraphService/ListBatches',
+            graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesRequest.SerializeToString,
+            graphsvc_dot_v1_dot_graphsvc__pb2.ListBatchesResponse.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def CancelBatch(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/graphsvc.v1.MotionGraphService/CancelBatch',
+            graphsvc_dot_v1_dot_graphsvc__pb2.CancelBatchRequest.SerializeToString,
+            graphsvc_dot_v1_dot_graphsvc__pb2.BatchStatus.FromString,
             options,
             channel_credentials,
             insecure,

@@ -1,0 +1,129 @@
+"""The manifest (CSV and JSON forms, paths, options as synthesize flags, fingerprints)
+and the job store's re-run rules, without a cluster."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from graphsvc.batch import store
+from graphsvc.batch.manifest import Plan, option_argv, parse_item_options, plan_item, read_manifest
+from graphsvc.errors import FormatError, InputError
+
+
+def test_csv_and_json_forms_read_the_same_items(tmp_path):
+    csv_text = ("# a match\n\nrecording,graph,strategy,output,weights,options\n"
+                'p1.rec,g,viterbi,p1,"0.5,1,1","{""beam"": 10}"\n'
+                "p2.rec,g,olng,p2,,\n")  # fmt: skip
+    (tmp_path / "m.csv").write_text(csv_text)
+    rows = [{"recording": "p1.rec", "graph": "g", "strategy": "viterbi", "output": "p1", "weights": [0.5, 1, 1],
+             "options": {"beam": 10}},
+            {"recording": "p2.rec", "graph": "g", "strategy": "olng", "output": "p2"}]  # fmt: skip
+    (tmp_path / "m.json").write_text(json.dumps({"items": rows}))
+    a, b = read_manifest(tmp_path / "m.csv"), read_manifest(tmp_path / "m.json")
+    assert [i.line for i in a] == [4, 5] and [i.line for i in b] == [1, 2]
+    strip = lambda items: [(i.output, i.recording, i.strategy, i.weights, i.options) for i in items]  # noqa: E731
+    assert strip(a) == strip(b) == [("p1", "p1.rec", "viterbi", "0.5,1,1", {"beam": 10}), ("p2", "p2.rec", "olng", None, {})]
+
+
+def test_options_become_synthesize_flags(tmp_path):
+    (tmp_path / "map.json").write_text("{}")
+    (tmp_path / "m.json").write_text(json.dumps([{
+        "recording": "r.rec", "graph": "g", "strategy": "viterbi", "output": "o", "weights": "0.5,1,1",
+        "options": {"latency": 0.5, "heading_from_track": True, "olng-basic-steps": False, "keep": ["A", "B"],
+                    "device-map": "map.json"}}]))  # fmt: skip
+    (item,) = read_manifest(tmp_path / "m.json")
+    argv = option_argv(item, tmp_path)
+    assert argv == ["--strategy", "viterbi", "--weights", "0.5,1,1", "--device-map", str((tmp_path / "map.json").resolve()),
+                    "--heading-from-track", "--keep", "A,B", "--latency", "0.5"]  # fmt: skip
+    options, args = parse_item_options(argv)
+    assert options.latency_s == 0.5 and options.heading_from_track and options.weights.acc == 0.5
+    assert options.ssg.keep == ("A", "B") and args.scale == 100.0
+    with pytest.raises(InputError, match="strategy, weights and constraints are columns"):
+        option_argv(read_manifest(_one(tmp_path, {"strategy": "olng"}))[0], tmp_path)
+    with pytest.raises(InputError, match="must be a number, text, a list or true"):
+        option_argv(read_manifest(_one(tmp_path, {"beam": {"x": 1}}))[0], tmp_path)
+
+
+def _one(folder: Path, options: dict) -> Path:
+    path = folder / "one.json"
+    path.write_text(json.dumps([{"recording": "r.rec", "graph": "g", "strategy": "viterbi", "output": "o",
+                                 "options": options}]))  # fmt: skip
+    return path
+
+
+def test_bad_json_manifests_name_the_item(tmp_path):
+    for body, needle in [("{\"a\": 1}", "a JSON manifest is a list"), ("[1]", "item 1 is not an object"),
+                         ('[{"recording": "r", "graph": "g", "strategy": "s"}]', "no output"),
+                         ('[{"recording": "r", "graph": "g", "strategy": "s", "output": "o", "colour": 1}]',
+                          "unknown field 'colour'"), ("[]", "lists no items"), ("[", "not valid JSON")]:  # fmt: skip
+        (tmp_path / "m.json").write_text(body)
+        with pytest.raises(FormatError, match=needle):
+            read_manifest(tmp_path / "m.json")
+
+
+def test_fingerprint_follows_the_recording_and_options(tmp_path):
+    graph = tmp_path / "g.graph"
+    _small_graph(graph)
+    (tmp_path / "r.rec").write_bytes(b"not a recording yet")
+    items = lambda opts: read_manifest(_one(tmp_path, opts))[0]  # noqa: E731
+    p1 = plan_item(items({}), tmp_path, {"g": graph}, tmp_path, "v")
+    assert p1.error is None and p1.task["graph_checksum"] and p1.task["recording"] == str((tmp_path / "r.rec").resolve())
+    assert plan_item(items({}), tmp_path, {"g": graph}, tmp_path, "v").fingerprint == p1.fingerprint
+    assert plan_item(items({"beam": 10}), tmp_path, {"g": graph}, tmp_path, "v").fingerprint != p1.fingerprint
+    assert plan_item(items({}), tmp_path, {"g": graph}, tmp_path, "v2").fingerprint != p1.fingerprint
+    (tmp_path / "r.rec").write_bytes(b"another recording")
+    assert plan_item(items({}), tmp_path, {"g": graph}, tmp_path, "v").fingerprint != p1.fingerprint
+    bad = plan_item(items({"olng-k": 0}), tmp_path, {"g": graph}, tmp_path, "v")
+    assert bad.task is None and "OLNG K must be ≥ 1" in bad.error
+
+
+def _small_graph(path: Path) -> None:
+    import numpy as np
+
+    from graphsvc.graph.file import save_graph
+    from graphsvc.graph.model import graph_from_edges
+
+    rng = np.random.default_rng(0)
+    src = np.repeat(np.arange(20), 2)
+    g = graph_from_edges(src, rng.integers(0, 20, src.size), rng.normal(0, 9.81, (src.size, 2, 3)),
+                         offsets=rng.normal(0, 0.05, (src.size, 2)), dheading=rng.normal(0, 0.05, src.size))  # fmt: skip
+    save_graph(g, path)
+
+
+def test_store_skips_done_items_and_requeues_the_rest(tmp_path):
+    from graphsvc.batch.manifest import Item
+
+    def plan(name, fp):
+        return Plan(Item(line=1, output=name, recording="r", graph="g", strategy="viterbi"), {}, fp)
+
+    out = tmp_path / "a.bvh"
+    out.write_bytes(b"motion")
+    con = store.open_store(tmp_path)
+    plans = [plan("a", "f1"), plan("b", "f1"), plan("c", "f1")]
+    assert [p.item.output for p in store.sync(con, plans, lambda p: "sum")] == ["a", "b", "c"]
+    for name in "abc":
+        assert store.mark_running(con, name) == 1
+    store.mark_done(con, "a", {"output": str(out), "checksum": "sum", "seconds": 1.0})
+    store.mark_failed(con, "b", "worker died\nat line 3", final=True)  # c: left running (its client died)
+    rows = {r["output"]: r for r in store.rows(con)}
+    assert rows["b"]["reason"] == "worker died at line 3" and rows["c"]["state"] == "running"
+    # Same fingerprints: a skipped; b and c queued, their attempts kept.
+    todo = store.sync(con, plans, lambda p: "sum")
+    assert [p.item.output for p in todo] == ["b", "c"]
+    rows = {r["output"]: r for r in store.rows(con)}
+    assert (rows["a"]["state"], rows["b"]["state"], rows["c"]["state"]) == ("done", "queued", "queued")
+    assert rows["b"]["attempts"] == rows["c"]["attempts"] == 1
+    # A changed fingerprint, or an output whose bytes changed: run again, attempts from 0.
+    assert [p.item.output for p in store.sync(con, [plan("a", "f2")], lambda p: "sum")] == ["a"]
+    assert store.rows(con)[0]["attempts"] == 0
+    store.mark_running(con, "a")
+    store.mark_done(con, "a", {"output": str(out), "checksum": "sum", "seconds": 1.0})
+    assert [p.item.output for p in store.sync(con, [plan("a", "f2")], lambda p: "edited")] == ["a"]
+    assert store.counts(con) == {"queued": 3, "running": 0, "done": 0, "failed": 0}
+    con.close()
+    with store.folder_lock(tmp_path), pytest.raises(InputError, match="another batch is running"):
+        with store.folder_lock(tmp_path):
+            pass
