@@ -357,16 +357,25 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
 def clip_placements(graph, layout) -> list:
     """The layout on each of the graph's clips in anatomical frames, each estimated from
     the clip's stored poses, as `recompute_accelerations` places them."""
+    from graphsvc.sensors.anatomy import ANATOMICAL
+
+    return [clip_placement(graph, layout, c, ANATOMICAL) for c in range(len(graph.clips))]
+
+
+def clip_placement(graph, layout, c: int, convention: str | None = None):
+    """The layout on clip c of the graph in a sensor-frame convention (default: that of
+    the graph's readings): anatomical frames estimated from the clip's stored poses
+    (`clip_placements`), or the rest-pose frames of a graph built before them."""
     from graphsvc.motion.skeleton import Skeleton
-    from graphsvc.sensors.layout import anatomical_placement
+    from graphsvc.sensors.anatomy import ANATOMICAL, REST_POSE
+    from graphsvc.sensors.layout import anatomical_placement, place
 
     sk = graph.skeleton
-    out = []
-    for c, info in enumerate(graph.clips):
-        nodes = info["first_node"] + np.arange(info["frames"])
-        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                                  graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
-        out.append(anatomical_placement(layout, Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels,
-                                                         sk.end_site), graph.params.get("mapping"), world_rot,
-                                        world_pos))  # fmt: skip
-    return out
+    skeleton = Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
+    if (convention or graph.params.get("sensor_frames", REST_POSE)) != ANATOMICAL:
+        return place(layout, skeleton, graph.params.get("mapping"))
+    info = graph.clips[c]
+    nodes = info["first_node"] + np.arange(info["frames"])
+    world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                              graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    return anatomical_placement(layout, skeleton, graph.params.get("mapping"), world_rot, world_pos)

@@ -199,13 +199,13 @@ def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
     """(len(nodes), S, 3) the world's vertical (a unit vector) in the layout's frame of
     sensors `names` at original nodes `nodes`, from the poses the graph stores (each
     clip's skeleton placing the sensors, as `graph.metadata.recompute_accelerations`)."""
+    from graphsvc.graph.metadata import clip_placement
     from graphsvc.motion.kinematics import forward_kinematics
-    from graphsvc.motion.skeleton import Skeleton
     from graphsvc.sensors.accelerometer import sensor_poses
-    from graphsvc.sensors.layout import layout_from_dict, place
+    from graphsvc.sensors.layout import layout_from_dict
 
     layout = layout_from_dict(graph.layout)
-    sk, mapping = graph.skeleton, graph.params.get("mapping")
+    sk = graph.skeleton
     cols = [layout.sensor_names.index(n) for n in names]
     out = np.zeros((nodes.size, len(names), 3))
     clips = graph.node_clip[nodes]
@@ -213,7 +213,7 @@ def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
         pick = np.flatnonzero(clips == c)
         world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes[pick]].astype(np.float64),
                                                   graph.node_translations[nodes[pick]].astype(np.float64), sk.parents)  # fmt: skip
-        placement = place(layout, Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site), mapping)
+        placement = clip_placement(graph, layout, int(c))
         _, orientation = sensor_poses(world_rot, world_pos, placement)
         out[pick] = _vertical(orientation)[:, cols]
     return out

@@ -41,7 +41,7 @@ def test_options_become_synthesize_flags(tmp_path):
     options, args = parse_item_options(argv)
     assert options.latency_s == 0.5 and options.heading_from_track and options.weights.acc == 0.5
     assert options.ssg.keep == ("A", "B") and args.scale == 100.0
-    with pytest.raises(InputError, match="strategy, weights and constraints are columns"):
+    with pytest.raises(InputError, match="strategy, weights, constraints and calibration are columns"):
         option_argv(read_manifest(_one(tmp_path, {"strategy": "olng"}))[0], tmp_path)
     with pytest.raises(InputError, match="must be a number, text, a list or true"):
         option_argv(read_manifest(_one(tmp_path, {"beam": {"x": 1}}))[0], tmp_path)
