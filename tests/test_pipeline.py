@@ -258,3 +258,24 @@ def test_reconstruct_warms_up_the_search_once_per_graph_and_thread_mode(graph, r
     assert first["timings_s"]["warm_up"] > 0 and threaded["timings_s"]["warm_up"] > 0
     assert again["timings_s"]["warm_up"] == 0.0
     assert first["node_path"] == again["node_path"] == threaded["node_path"]
+
+
+def test_a_graph_in_other_sensor_frames_is_refused_and_relayout_converts_it(graph, rec, tmp_path, capsys):
+    """A graph built before anatomical sensor frames (no params["sensor_frames"]) and a
+    recording simulated now: refused, never compared axis by axis; `relayout` turns
+    the old graph's readings into anatomical ones, which match the built graph's."""
+    assert graph.params["sensor_frames"] == "anatomical" and rec.meta["sensor_frames"] == "anatomical"
+    old = replace(graph, params={k: v for k, v in graph.params.items() if k != "sensor_frames"})
+    with pytest.raises(InputError, match="anatomical sensor frames, the graph's in rest-pose"):
+        reconstruct(old, rec, Options())
+    save_graph(old, tmp_path / "old.graph")
+    save_recording(rec, tmp_path / "r.rec")
+    assert main(["synthesize", str(tmp_path / "old.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 2
+    assert "relayout" in capsys.readouterr().err
+    assert main(["relayout", str(tmp_path / "old.graph"), "--layout", "kelly6", "-o", str(tmp_path / "new.graph")]) == 0
+    from graphsvc.graph.file import load_graph
+
+    new = load_graph(tmp_path / "new.graph")
+    assert new.params["sensor_frames"] == "anatomical"
+    np.testing.assert_allclose(new.edge_acc, graph.edge_acc, atol=2e-2)  # (float32 poses, as test_build)
+    assert main(["synthesize", str(tmp_path / "new.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 0
