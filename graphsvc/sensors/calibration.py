@@ -51,6 +51,7 @@ from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import read_json_file, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.anatomy import ANATOMICAL, CONVENTIONS, REST_POSE
 
 FORMAT = "graphsvc-calibration"
 VERSION = 1
@@ -426,6 +427,9 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
         "version": VERSION,
         "layout": (layout or {}).get("name"),
         "pose": pose,
+        # The convention of the layout frames it calibrates onto (`sensors.anatomy`): the
+        # graph's, else the pose table's (anatomical).
+        "sensor_frames": graph.params.get("sensor_frames", REST_POSE) if graph is not None else ANATOMICAL,
         "source": str(rec.meta.get("source", "")),
         "rest_s": [round(rest[0] / rate, 4), round(rest[1] / rate, 4)],
         "matched_samples": int(pairs),
@@ -513,6 +517,8 @@ def check_calibration(doc, path="calibration") -> dict:
         raise FormatError(path, f"not a graphsvc calibration (expected \"format\": \"{FORMAT}\")")
     if doc.get("version") != VERSION:
         raise FormatError(path, f"calibration version {doc.get('version')!r} is not supported (this reads {VERSION})")
+    if "sensor_frames" in doc and doc["sensor_frames"] not in CONVENTIONS:
+        raise FormatError(path, f"sensor_frames must be {' or '.join(CONVENTIONS)}, got {doc['sensor_frames']!r}")
     sensors = doc.get("sensors")
     if not isinstance(sensors, dict) or not sensors:
         raise FormatError(path, "\"sensors\" must be an object with at least one sensor")
@@ -549,7 +555,8 @@ def calibrate_sample(rotations: np.ndarray, acc: np.ndarray) -> np.ndarray:
 
 def apply_calibration(rec, cal: dict):
     """A device-frame recording turned into a layout-frame one: a_layout = R·a_device,
-    q_layout = q_device ⊗ R⁻¹; meta sensor_frame becomes "layout" and records the
+    q_layout = q_device ⊗ R⁻¹; meta sensor_frame becomes "layout", sensor_frames the
+    calibration's convention (so a graph in another is refused), and it records the
     calibration file. InputError for a recording already in layout frames or sensors
     that do not match."""
     from dataclasses import replace
@@ -565,6 +572,8 @@ def apply_calibration(rec, cal: dict):
     if orient is not None:
         orient = quat.mul(np.asarray(orient, dtype=np.float64), quat.conjugate(R)[None]).astype(np.float32)
     meta = {**rec.meta, "sensor_frame": "layout", "calibration": cal.get("path", "")}
+    if cal.get("sensor_frames") in CONVENTIONS:  # (files without it: unknown, not checked)
+        meta["sensor_frames"] = cal["sensor_frames"]
     out = replace(rec, accelerations=acc, orientations=orient, meta=meta)
     out.validate()
     return out

@@ -278,8 +278,25 @@ def test_cal_json_round_trips_and_malformed_files_are_refused(tmp_path, kb, grap
         "not a rotation": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": [1, 2, 3, 4]}}}),
         "three numbers": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": [1, 0, 0]}}}),
         "words": json.dumps({**cal, "sensors": {"l_wrist": {"rotation_wxyz": "identity"}}}),
+        "an unknown convention": json.dumps({**cal, "sensor_frames": "sideways"}),
     }
     for what, text in bad.items():
         path.write_text(text)
         with pytest.raises(FormatError):
             load_calibration(path)
+
+
+def test_a_calibration_carries_its_graphs_sensor_frame_convention(kb, graph):
+    """Calibrated against a graph, a recording's readings are in that graph's frames: the
+    calibration says which, and a graph in another convention refuses them."""
+    from graphsvc.sensors.anatomy import check_frames
+
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=2)
+    rec = replace(rec, meta={k: v for k, v in rec.meta.items() if k != "sensor_frames"})  # (as a device's)
+    cal = calibrate(rec, "npose", graph)
+    assert cal["sensor_frames"] == graph.params["sensor_frames"] == "anatomical"
+    out = apply_calibration(rec, check_calibration(json.loads(json.dumps(cal))))
+    assert out.meta["sensor_frames"] == "anatomical"
+    check_frames(graph.params, out.meta)
+    with pytest.raises(InputError, match="rest-pose"):
+        check_frames({}, out.meta)  # a graph built before anatomical frames
