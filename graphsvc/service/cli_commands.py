@@ -34,7 +34,7 @@ def _print(line: str) -> None:
 
 
 def _cmd_serve(args) -> int:
-    from graphsvc.service.server import ServerConfig, load_graphs, read_tokens, serve
+    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, read_tokens, serve
 
     tokens = read_tokens(args.token_file) if args.token_file else ()
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
@@ -46,8 +46,13 @@ def _cmd_serve(args) -> int:
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
-    graphs = load_graphs(args.graph)
-    return serve(graphs, config, announce=_print)
+    bound = bind_server(config)  # a taken port or a bad address fails here, before the graphs load
+    try:
+        graphs = load_graphs(args.graph)
+    except BaseException:
+        bound.server.stop(None)
+        raise
+    return serve(graphs, config, announce=_print, bound=bound)
 
 
 # ---------------------------------------------------------------- client
