@@ -4,11 +4,18 @@ fails in one line, the strategy flags, and how an OSError reads."""
 from __future__ import annotations
 
 import argparse
+import re
 
 from graphsvc.strategies.options import ORIENTATION_WEIGHT
 
 
 class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a value starting with a minus and a digit is a value, not an option: number lists
+        # such as `--weights -1,1,1` reach our own validation (argparse knows only -1, -.5)
+        self._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
+
     def error(self, message):  # one line, exit 2, like every other user error
         self.exit(2, f"graphsvc: error: {message} (see --help)\n")
 

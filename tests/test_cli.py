@@ -65,6 +65,8 @@ def test_simulate_csv_output(tmp_path, clip, capsys):
     (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/no/such/dir/x.rec"], "does not exist"),
     (["simulate", "{bad}", "--layout", "kelly6", "-o", "{tmp}/x.rec"], "{bad}"),
     (["simulate", "{clip}", "--layout", "kelly6"], "required"),
+    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "-1,1,1"], "≥ 0"),
+    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "0,0,0"], "all 0"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, clip, capsys, argv_tail, needle):
     (tmp_path / "notes.txt").write_text("hello")
