@@ -95,7 +95,14 @@ def add_calibration_option(p) -> None:
                         "(`graphsvc calibrate`)")
 
 
-def add_search_options(p, constraints: bool = True) -> None:
+def _live_lag_s() -> float:
+    from graphsvc.strategies.base import LiveSession
+
+    return LiveSession.DEFAULT_LATENCY_S
+
+
+def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
+    """live: the command streams (a LiveSession), so --latency defaults to its lag."""
     from graphsvc.strategies import names
     from graphsvc.strategies.options import TRACK_PULL_S
 
@@ -109,7 +116,9 @@ def add_search_options(p, constraints: bool = True) -> None:
     if constraints:
         p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
     p.add_argument("--latency", type=float, metavar="S",
-                   help="fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")
+                   help=f"fixed-lag decoding: output lags the input by S seconds (default: a {_live_lag_s():g} s lag)"
+                   if live else
+                        "fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")  # fmt: skip
     p.add_argument("--heading-from-track", action="store_true",
                    help="derive heading from the ground positions: direction of travel above --speed-threshold")
     p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",

@@ -347,7 +347,7 @@ def add_service_parsers(sub) -> None:
     c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
     add_calibration_option(c)
-    add_search_options(c)
+    add_search_options(c, live=True)
     c.set_defaults(run=_cmd_client_stream)
 
     p = sub.add_parser("sensor-bridge", parents=[connection], help="stream a serial accelerometer device to a server")
@@ -359,7 +359,7 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
     p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion")
     add_calibration_option(p)
-    add_search_options(p)
+    add_search_options(p, live=True)
     p.set_defaults(run=_cmd_sensor_bridge)
 
 

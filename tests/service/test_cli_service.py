@@ -197,3 +197,13 @@ def test_grpc_port_reuse_is_off(server, monkeypatch):
     monkeypatch.setattr(S, "check_address", lambda host, port: None)
     with pytest.raises(GraphsvcError, match="cannot listen"):
         bind_server(ServerConfig(host="127.0.0.1", port=server.port))
+
+
+def test_stream_help_states_the_live_lag(capsys):
+    from graphsvc.strategies.base import LiveSession
+
+    for command in (["client", "stream"], ["sensor-bridge"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        assert f"default: a {LiveSession.DEFAULT_LATENCY_S:g} s lag" in text and "whole input" not in text, command
