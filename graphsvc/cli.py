@@ -46,6 +46,8 @@ def _cmd_simulate(args) -> int:
     if args.markers is None and (args.keep or args.gaps or args.flicker or args.gap_fraction):
         raise InputError("--keep, --gaps, --flicker and --gap-fraction apply to --markers")
     out = Path(args.output)
+    if out.suffix.lower() not in (".rec", ".csv"):  # what `inspect` and `synthesize` read back by the suffix
+        raise InputError(f"{out}: simulate writes .rec (binary) or .csv, not {out.suffix or 'a file without a suffix'}")
     _check_output(out)
     if args.markers is not None:
         from graphsvc.sensors.markers import keep_markers, load_marker_set, parse_names

@@ -4,11 +4,18 @@ fails in one line, the strategy flags, and how an OSError reads."""
 from __future__ import annotations
 
 import argparse
+import re
 
 from graphsvc.strategies.options import ORIENTATION_WEIGHT
 
 
 class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a value starting with a minus and a digit is a value, not an option: number lists
+        # such as `--weights -1,1,1` reach our own validation (argparse knows only -1, -.5)
+        self._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
+
     def error(self, message):  # one line, exit 2, like every other user error
         self.exit(2, f"graphsvc: error: {message} (see --help)\n")
 
@@ -88,7 +95,14 @@ def add_calibration_option(p) -> None:
                         "(`graphsvc calibrate`)")
 
 
-def add_search_options(p, constraints: bool = True) -> None:
+def _live_lag_s() -> float:
+    from graphsvc.strategies.base import LiveSession
+
+    return LiveSession.DEFAULT_LATENCY_S
+
+
+def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
+    """live: the command streams (a LiveSession), so --latency defaults to its lag."""
     from graphsvc.strategies import names
     from graphsvc.strategies.options import TRACK_PULL_S
 
@@ -102,7 +116,9 @@ def add_search_options(p, constraints: bool = True) -> None:
     if constraints:
         p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
     p.add_argument("--latency", type=float, metavar="S",
-                   help="fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")
+                   help=f"fixed-lag decoding: output lags the input by S seconds (default: a {_live_lag_s():g} s lag)"
+                   if live else
+                        "fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")  # fmt: skip
     p.add_argument("--heading-from-track", action="store_true",
                    help="derive heading from the ground positions: direction of travel above --speed-threshold")
     p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",

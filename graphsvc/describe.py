@@ -6,9 +6,10 @@ from __future__ import annotations
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
-from graphsvc.errors import UnknownFormatError
+from graphsvc.errors import InputError, UnknownFormatError
 from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
 from graphsvc.sensors.recording import describe_recording, read_recording
 
@@ -44,11 +45,14 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
                     "name": m.name,
                     "frames": m.num_frames,
                     "rate_hz": m.rate_hz,
-                    "joints": m.skeleton.num_joints,
+                    "joints": int(m.skeleton.num_joints - np.count_nonzero(m.skeleton.end_site)),  # End Sites are not joints
                     "duration_s": round(m.duration_s, 6),
                     "labels": list(m.labels),
                 }
             )
+    if not clips and not recordings:
+        raise InputError(f"no motion files or recordings found in {', '.join(map(str, paths))} (motion: "
+                         f"{', '.join(MOTION_SUFFIXES)}; recordings: {', '.join(RECORDING_SUFFIXES)})")  # fmt: skip
     folders = defaultdict(list)
     for c in clips:
         folders[str(Path(c["path"]).parent)].append(c)

@@ -47,6 +47,16 @@ def test_inspect_motion_folder_totals(tmp_path, clip, capsys):
     assert "total: 1 clips, 40 frames at 30 Hz" in out
 
 
+def test_inspect_counts_joints_not_end_sites(tmp_path, capsys):
+    (tmp_path / "two.bvh").write_text(  # a root, one joint, two End Sites: 2 joints
+        "HIERARCHY\nROOT hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        " JOINT spine\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
+        "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n End Site\n {\n  OFFSET 0 -10 0\n }\n}\n"
+        "MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 90 0 0 0 0 0 0 0\n0 90 0 0 0 0 0 0 0\n")
+    code, out, _ = run(["inspect", str(tmp_path / "two.bvh"), "--json"], capsys)
+    assert code == 0 and json.loads(out)["clips"][0]["joints"] == 2
+
+
 def test_simulate_csv_output(tmp_path, clip, capsys):
     out_csv = tmp_path / "walk.csv"
     code, _, _ = run(["simulate", str(clip), "--layout", "right-wrist", "-o", str(out_csv)], capsys)
@@ -65,9 +75,14 @@ def test_simulate_csv_output(tmp_path, clip, capsys):
     (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/no/such/dir/x.rec"], "does not exist"),
     (["simulate", "{bad}", "--layout", "kelly6", "-o", "{tmp}/x.rec"], "{bad}"),
     (["simulate", "{clip}", "--layout", "kelly6"], "required"),
+    (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/s.txt"], ".rec (binary) or .csv"),
+    (["inspect", "{tmp}/empty"], "no motion files or recordings found"),
+    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "-1,1,1"], "≥ 0"),
+    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "0,0,0"], "all 0"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, clip, capsys, argv_tail, needle):
     (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "empty").mkdir()
     bad = tmp_path / "broken.bvh"
     bad.write_text(clip.read_text().replace("MOTION", "MOTON"))
     subs = {"{tmp}": str(tmp_path), "{clip}": str(clip), "{bad}": str(bad)}

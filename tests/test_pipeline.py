@@ -88,6 +88,15 @@ def test_bad_options_and_constraints(graph, rec):
         reconstruct(graph, rec, Options(constraints=([{"start_s": -1, "end_s": 2, "require": {"contact": "left"}}],)))
     with pytest.raises(InputError, match="unknown label"):
         reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"label": "swim"}}],)))
+    duration = rec.num_samples / rec.rate_hz
+    with pytest.raises(InputError, match="starts after the recording ends"):
+        reconstruct(graph, rec, Options(constraints=([{"start_s": duration + 50, "end_s": duration + 60,
+                                                       "require": {"contact": "left"}}],)))  # fmt: skip
+    with pytest.raises(InputError, match="all 0"):
+        parse_weights("0,0,0")
+    with pytest.raises(InputError, match="all 0"):
+        reconstruct(graph, rec, Options(weights=Weights(0, 0, 0, 0)))
+    assert parse_weights("0,0,0,1") == Weights(0, 0, 0, 1)
     with pytest.raises(InputError, match="ground positions"):
         reconstruct(graph, replace(rec, ground_position=None), Options(heading_from_track=True))
     empty = replace(rec, timestamps_s=np.zeros(0), accelerations=np.zeros((0, 6, 3), np.float32),

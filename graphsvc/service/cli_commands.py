@@ -34,7 +34,7 @@ def _print(line: str) -> None:
 
 
 def _cmd_serve(args) -> int:
-    from graphsvc.service.server import ServerConfig, load_graphs, read_tokens, serve
+    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, read_tokens, serve
 
     tokens = read_tokens(args.token_file) if args.token_file else ()
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
@@ -46,8 +46,13 @@ def _cmd_serve(args) -> int:
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
-    graphs = load_graphs(args.graph)
-    return serve(graphs, config, announce=_print)
+    bound = bind_server(config)  # a taken port or a bad address fails here, before the graphs load
+    try:
+        graphs = load_graphs(args.graph)
+    except BaseException:
+        bound.server.stop(None)
+        raise
+    return serve(graphs, config, announce=_print, bound=bound)
 
 
 # ---------------------------------------------------------------- client
@@ -342,7 +347,7 @@ def add_service_parsers(sub) -> None:
     c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
     add_calibration_option(c)
-    add_search_options(c)
+    add_search_options(c, live=True)
     c.set_defaults(run=_cmd_client_stream)
 
     p = sub.add_parser("sensor-bridge", parents=[connection], help="stream a serial accelerometer device to a server")
@@ -354,7 +359,7 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
     p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion")
     add_calibration_option(p)
-    add_search_options(p)
+    add_search_options(p, live=True)
     p.set_defaults(run=_cmd_sensor_bridge)
 
 

@@ -445,21 +445,78 @@ def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None
         "grpc.reflection.v1.ServerReflection", {"ServerReflectionInfo": v1}),))  # fmt: skip
 
 
-def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig) -> RunningServer:
-    """Build, bind and start the server; returns at once (port: the bound port)."""
+def check_address(host: str, port: int) -> None:
+    """Refuse, with one line, a port outside 0–65535, a host that does not resolve, or
+    an address another socket already listens on (checked with a plain socket bound
+    like gRPC binds, SO_REUSEADDR on, SO_REUSEPORT off), before gRPC logs its own
+    failure and before any graph is loaded."""
+    import socket
+
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise InputError(f"--port must be 0–65535, got {port}")
+    name = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    try:
+        infos = socket.getaddrinfo(name or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except (socket.gaierror, UnicodeError, OSError) as exc:
+        raise InputError(f"cannot listen on {host}:{port}: not an address of this machine ({exc})") from None
+    if port == 0:
+        return
+    family, kind, proto, _, sockaddr = infos[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(sockaddr)
+        except OSError as exc:
+            raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+
+
+@dataclass
+class BoundServer:
+    """A gRPC server that holds its port but serves nothing yet (bind_server)."""
+
+    server: grpc.Server
+    port: int
+    max_streams: int
+
+
+def bind_server(config: ServerConfig) -> BoundServer:
+    """Validate the config, build the gRPC server and bind its port; nothing served yet.
+    `serve` binds before it loads graphs, so a taken port fails in a moment."""
     if config.max_streams < 1:
         raise InputError(f"--max-streams must be at least 1, got {config.max_streams}")
     if not (math.isfinite(config.max_message_mb) and config.max_message_mb > 0):
         raise InputError(f"--max-message-mb must be positive, got {config.max_message_mb}")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise InputError("TLS needs both --tls-cert and --tls-key")
+    check_address(config.host, config.port)
     max_bytes = int(config.max_message_mb * 2**20)
+    # SO_REUSEPORT off: two servers can never share a port (nor port 0 land on a held one).
     options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
-               ("grpc.so_reuseport", 0)]  # fmt: skip  # port 0 must mean a port nobody else holds
+               ("grpc.so_reuseport", 0)]  # fmt: skip
     interceptors = [BearerTokenInterceptor(config.tokens)] if config.tokens else []
     executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
     server = grpc.server(executor, interceptors=interceptors, options=options)
+    address = f"{config.host}:{config.port}"
+    try:
+        if config.tls_cert is not None:
+            credentials = grpc.ssl_server_credentials([(Path(config.tls_key).read_bytes(),
+                                                        Path(config.tls_cert).read_bytes())])  # fmt: skip
+            port = server.add_secure_port(address, credentials)
+        else:
+            port = server.add_insecure_port(address)
+    except RuntimeError:  # grpcio ≥ 1.60 raises where older versions returned 0
+        port = 0
+    if port == 0:
+        server.stop(None)
+        raise GraphsvcError(f"cannot listen on {address}")
+    return BoundServer(server, port, config.max_streams)
 
+
+def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None) -> RunningServer:
+    """Build (or take the bound server from bind_server), register the services and
+    start; returns at once (port: the bound port)."""
+    bound = bound or bind_server(config)
+    server = bound.server
     batches = None
     if config.batch_dir is not None:
         from graphsvc.batch.service import BatchManager
@@ -474,26 +531,17 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig) -> Runnin
     for name in ("", SERVICE_NAME):
         health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
     _add_reflection(server, (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME))
-
-    address = f"{config.host}:{config.port}"
-    if config.tls_cert is not None:
-        credentials = grpc.ssl_server_credentials([(Path(config.tls_key).read_bytes(), Path(config.tls_cert).read_bytes())])
-        port = server.add_secure_port(address, credentials)
-    else:
-        port = server.add_insecure_port(address)
-    if port == 0:
-        raise GraphsvcError(f"cannot listen on {address}")
     server.start()
-    return RunningServer(server, port, health_servicer, servicer, graphs)
+    return RunningServer(server, bound.port, health_servicer, servicer, graphs)
 
 
-def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print) -> int:
+def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None) -> int:
     """Run until SIGTERM or SIGINT, then drain in-flight calls for config.grace_s and
     return 0. `announce` gets the "listening on" line (port 0 shows the real port)."""
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        running = start_server(graphs, config)
+        running = start_server(graphs, config, bound)
         security = "TLS" if config.tls_cert else "plaintext"
         auth = f"{len(config.tokens)} token(s)" if config.tokens else "no authentication"
         announce(f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "

@@ -227,6 +227,17 @@ class PreparedInput:
         return int(self.acc.shape[0])
 
 
+def check_constraint_times(constraints, duration_s: float) -> None:
+    """InputError for a constraint interval that starts at or after the recording's
+    end (it could never hold); one that only ends past it is kept."""
+    for k, cset in enumerate(constraints):
+        for j, c in enumerate(cset):
+            start, end = float(c["start_s"]), float(c["end_s"])
+            if start >= duration_s:
+                raise InputError(f"constraint set {k}: constraint {j} ({start:g}–{end:g} s) starts after the "
+                                 f"recording ends ({duration_s:g} s)")  # fmt: skip
+
+
 def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, options: Options) -> PreparedInput:
     """Check `rec` for `strategy` on `graph` and resample it to the graph rate (module
     docstring). Raises InputError naming what does not fit."""
@@ -238,6 +249,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
         check_layout(graph, rec.sensor_names)
         check_frames(graph.params, rec.meta)
     constraints = check_constraints(constraints, graph) if "constraints" in strategy.uses else []
+    check_constraint_times(constraints, rec.num_samples / rec.rate_hz)
     acc, position, heading, resampled = to_graph_rate(rec, graph.rate_hz)
     if "accelerations" not in strategy.uses:
         acc = np.zeros((acc.shape[0], 0, 3))

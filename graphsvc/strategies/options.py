@@ -203,6 +203,8 @@ def check_options(options: Options) -> None:
         v = getattr(w, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
             raise InputError(f"weight {name} must be a finite number ≥ 0, got {v!r}")
+    if w.acc == w.position == w.heading == w.orientation == 0:
+        raise InputError("weights are all 0: every path would cost the same; give at least one weight > 0")
     if options.latency_s is not None and (not math.isfinite(options.latency_s) or options.latency_s < 0):
         raise InputError(f"latency must be a finite number of seconds ≥ 0, got {options.latency_s}")
     if options.beam is not None and (isinstance(options.beam, bool) or not isinstance(options.beam, (int, float))
@@ -233,6 +235,8 @@ def parse_weights(text: str) -> Weights:
         raise InputError(f"weights must be three or four numbers A,P,O[,R], got {text!r}") from None
     if len(values) not in (3, 4) or not all(math.isfinite(v) and v >= 0 for v in values):
         raise InputError(f"weights must be three or four finite numbers ≥ 0 as A,P,O[,R], got {text!r}")
+    if len(values) == 3 and not any(values):  # the default R counts only where a recording has orientations
+        raise InputError(f"weights {text!r} are all 0: give at least one of A,P,O > 0 (or R, as A,P,O,R)")
     return Weights(*values)
 
 

@@ -159,3 +159,51 @@ def test_serve_refuses_bad_arguments(graph_file, tmp_path, capsys):
         assert main(["serve", "--port", "0", *args]) == 2, args
         err = capsys.readouterr().err
         assert mention in err and err.count("\n") == 1, (args, err)
+
+
+def test_serve_fails_fast_on_a_taken_port_or_bad_address(server, tmp_path, capsys):
+    """The port is bound before any graph loads: the graph named here does not exist,
+    so an error about the address proves the bind came first."""
+    import socket
+
+    missing = f"a={tmp_path / 'missing.graph'}"
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen(1)
+        plain = held.getsockname()[1]
+        cases = {  # arguments → what the one-line error must mention
+            ("--host", "127.0.0.1", "--port", str(plain)): f"cannot listen on 127.0.0.1:{plain}",
+            ("--host", "127.0.0.1", "--port", str(server.port)): f"cannot listen on 127.0.0.1:{server.port}",
+            ("--host", "256.1.1.1", "--port", "0"): "cannot listen on 256.1.1.1",
+            ("--port", "99999"): "0–65535",
+            ("--port", "-1"): "0–65535",
+        }
+        for args, mention in cases.items():
+            assert main(["serve", "--graph", missing, *args]) == 2, args
+            err = capsys.readouterr().err
+            assert mention in err and "missing.graph" not in err and err.count("\n") == 1, (args, err)
+    # the address is free again once that server is gone: the graph error now shows
+    assert main(["serve", "--graph", missing, "--host", "127.0.0.1", "--port", str(plain)]) == 2
+    assert "missing.graph" in capsys.readouterr().err
+
+
+def test_grpc_port_reuse_is_off(server, monkeypatch):
+    """A second gRPC server on the very port of a running one must fail to bind, even
+    past the plain-socket check (gRPC's own SO_REUSEPORT is off)."""
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.service import server as S
+    from graphsvc.service.server import ServerConfig, bind_server
+
+    monkeypatch.setattr(S, "check_address", lambda host, port: None)
+    with pytest.raises(GraphsvcError, match="cannot listen"):
+        bind_server(ServerConfig(host="127.0.0.1", port=server.port))
+
+
+def test_stream_help_states_the_live_lag(capsys):
+    from graphsvc.strategies.base import LiveSession
+
+    for command in (["client", "stream"], ["sensor-bridge"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        assert f"default: a {LiveSession.DEFAULT_LATENCY_S:g} s lag" in text and "whole input" not in text, command
