@@ -197,11 +197,9 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     poses it stores (no knowledge base needed). Equal to the built metadata up to
     the float32 rounding of the stored poses (≈ 1e-3 m/s²)."""
     from graphsvc.graph.model import EDGE_SLOW, EDGE_SPEEDUP, NODE_SLOW
-    from graphsvc.motion.skeleton import Skeleton
-    from graphsvc.sensors.layout import anatomical_placement
+    from graphsvc.sensors.anatomy import ANATOMICAL
 
     sk = graph.skeleton
-    mapping = graph.params.get("mapping")  # the joint mapping the graph was built with
     N = graph.num_nodes
     S = len(layout.sensors)
     normal = np.zeros((N, S, 3), np.float32)  # reading on arrival at normal speed
@@ -209,10 +207,6 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     double = np.zeros((N, S, 3), np.float32)  # ... through a speed-up edge
     clip_of, frame_of = graph.node_clip, graph.node_frame
     kind = graph.node_kind
-
-    def clip_skeleton(c):
-        return Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
-
     slow_nodes = np.nonzero(kind == NODE_SLOW)[0]
     placements = []
     for c, info in enumerate(graph.clips):
@@ -221,7 +215,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
         trans = graph.node_translations[nodes].astype(np.float64)
         half_rot, half_trans = half_speed_poses(rot, trans)
         world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
-        placement = anatomical_placement(layout, clip_skeleton(c), mapping, world_rot, world_pos)
+        placement = clip_placement(graph, layout, c, ANATOMICAL, (world_rot, world_pos))
         placements.append(placement)
         r = speed_readings(world_rot, world_pos, *forward_kinematics(half_rot, half_trans, sk.parents), placement,
                            graph.rate_hz)  # fmt: skip
@@ -362,10 +356,11 @@ def clip_placements(graph, layout) -> list:
     return [clip_placement(graph, layout, c, ANATOMICAL) for c in range(len(graph.clips))]
 
 
-def clip_placement(graph, layout, c: int, convention: str | None = None):
+def clip_placement(graph, layout, c: int, convention: str | None = None, poses=None):
     """The layout on clip c of the graph in a sensor-frame convention (default: that of
     the graph's readings): anatomical frames estimated from the clip's stored poses
-    (`clip_placements`), or the rest-pose frames of a graph built before them."""
+    (`clip_placements`; poses: their world rotations and positions when the caller has
+    them), or the rest-pose frames of a graph built before them."""
     from graphsvc.motion.skeleton import Skeleton
     from graphsvc.sensors.anatomy import ANATOMICAL, REST_POSE
     from graphsvc.sensors.layout import anatomical_placement, place
@@ -374,8 +369,10 @@ def clip_placement(graph, layout, c: int, convention: str | None = None):
     skeleton = Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
     if (convention or graph.params.get("sensor_frames", REST_POSE)) != ANATOMICAL:
         return place(layout, skeleton, graph.params.get("mapping"))
-    info = graph.clips[c]
-    nodes = info["first_node"] + np.arange(info["frames"])
-    world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                              graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    if poses is None:
+        info = graph.clips[c]
+        nodes = info["first_node"] + np.arange(info["frames"])
+        poses = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
+                                   graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    world_rot, world_pos = poses
     return anatomical_placement(layout, skeleton, graph.params.get("mapping"), world_rot, world_pos)
