@@ -13,7 +13,7 @@ from graphsvc.strategies.viterbi.beam import _immortal
 from graphsvc.strategies.viterbi.costs import COST
 from graphsvc.strategies.viterbi.search import ViterbiSearch
 from graphsvc.sensors.accelerometer import GRAVITY
-from tests.search.test_viterbi import random_graph, tiny_graph
+from tests.search.problems import random_graph, tiny_graph
 
 PLACED, UNPLACED = Weights(0.5, 1, 1), Weights(1, 0, 0)
 # (BEAM_DENSE_SHARE, BEAM_SPARSE_SHARE) making every step sparse, every step the exact

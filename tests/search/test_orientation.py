@@ -88,7 +88,7 @@ def test_search_refuses_an_oriented_search_without_metadata_or_weight():
 
 
 def test_batch_reading_costs_equal_the_per_sample_kernel_with_orientations():
-    from tests.search.test_viterbi import random_graph, random_up
+    from tests.search.problems import random_graph, random_up
 
     rng = np.random.default_rng(8)
     g = random_graph(rng, N=200, out=4, S=3)
@@ -174,7 +174,7 @@ def test_old_graph_files_search_as_before_and_list_orientations_ignored(built, t
 
 def test_a_beam_of_inf_and_a_fixed_lag_decoder_weigh_orientations_as_the_exact_search():
     from graphsvc.strategies.viterbi.stream import FixedLagDecoder
-    from tests.search.test_viterbi import random_up, random_walk_problem
+    from tests.search.problems import random_up, random_walk_problem
 
     g, meas, position, heading = random_walk_problem(4, T=60)
     rng = np.random.default_rng(9)

@@ -9,7 +9,7 @@ from graphsvc.strategies.viterbi.stream import FixedLagDecoder, SlidingWindowDec
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search
 from graphsvc.strategies.viterbi.search import ViterbiSearch
-from tests.search.test_viterbi import random_walk_problem
+from tests.search.problems import random_walk_problem
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -6,7 +6,7 @@ import pytest
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.search import ViterbiSearch
-from tests.search.test_viterbi import random_walk_problem
+from tests.search.problems import random_walk_problem
 
 
 def test_threads_go_to_a_lone_search_one_step_at_a_time():
