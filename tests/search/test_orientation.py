@@ -195,6 +195,34 @@ def test_a_beam_of_inf_and_a_fixed_lag_decoder_weigh_orientations_as_the_exact_s
     np.testing.assert_array_equal(np.concatenate(nodes), exact.node_path)
 
 
+def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_each_window():
+    from graphsvc.strategies.viterbi.stream import SlidingWindowDecoder
+    from tests.search.problems import random_up, random_walk_problem
+
+    g, meas, position, heading = random_walk_problem(5, T=30)
+    rng = np.random.default_rng(3)
+    g.edge_up = random_up(rng, g.edge_acc.shape)
+    up = random_up(rng, meas.shape)
+    w = Weights(0.5, 1, 1, 2.0)
+    window, lag = 8, 2
+    emitted, differs = [], False
+    for oriented in (True, False):
+        decoder = SlidingWindowDecoder(g, w if oriented else Weights(0.5, 1, 1, 0.0), window=window, lag=lag,
+                                       oriented=oriented)  # fmt: skip
+        out = []
+        for t in range(len(meas)):
+            out.extend(decoder.push(meas[t], position[t], heading[t], up[t] if oriented else None)[0].tolist())
+            if oriented and t >= lag:
+                lo = max(0, t - window + 1)
+                fresh = viterbi_search(g, meas[lo : t + 1], position[lo : t + 1], heading[lo : t + 1], w,
+                                       up=up[lo : t + 1]).node_path  # fmt: skip
+                assert out[t - lag] == fresh[t - lag - lo]
+        out.extend(decoder.flush()[0].tolist())
+        differs = differs or (emitted and out != emitted)
+        emitted = out
+    assert differs  # (the orientation term changed what was emitted)
+
+
 @pytest.mark.parametrize("strategy", ["viterbi", "olng"])
 def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, strategy):
     from dataclasses import replace

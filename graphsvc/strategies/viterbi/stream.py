@@ -163,9 +163,12 @@ class SlidingWindowDecoder:
     frame t − lag of the best path. Costs `window` times the fixed-lag decoder."""
 
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), window: int = 30, lag: int = 0,
-                 constraint_sets=None, allowed: np.ndarray | None = None, rate_hz: float | None = None):  # fmt: skip
+                 constraint_sets=None, allowed: np.ndarray | None = None, rate_hz: float | None = None,
+                 oriented: bool = False):  # fmt: skip
+        """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch)."""
         self.graph = graph
         self.weights = weights
+        self.oriented = bool(oriented)
         self.lag = _check_lag(lag)
         window = _check_lag(window)
         if window < self.lag + 2:
@@ -186,21 +189,22 @@ class SlidingWindowDecoder:
     def _search(self) -> tuple[np.ndarray, np.ndarray, int]:
         """Best path over the buffered window: nodes, arrival edges, first sample."""
         first = self.t - len(self.buffer) + 1
-        search = ViterbiSearch(self.graph, self.weights, self.requirements.gamma, self.allowed)
-        for k, (acc, position, heading) in enumerate(self.buffer):
+        search = ViterbiSearch(self.graph, self.weights, self.requirements.gamma, self.allowed, oriented=self.oriented)
+        for k, (acc, position, heading, up) in enumerate(self.buffer):
             kinds, values = self.requirements.at(first + k)
             if k == 0:
                 search.start(position, heading, kinds, values)
             else:
-                search.step(acc, position, heading, kinds, values)
+                search.step(acc, position, heading, kinds, values, up=up)
         nodes, edges = search.trace_arrivals(search.best_node(), 0)
         if first > 0:
             edges[0] = -1  # the window's start was entered from outside it: unknown
         return nodes, edges, first
 
-    def push(self, acc, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+    def push(self, acc, position=None, heading=None, up=None) -> tuple[np.ndarray, np.ndarray]:
+        """One sample, as FixedLagDecoder.push."""
         self.t += 1
-        self.buffer.append((np.asarray(acc, dtype=np.float64), position, heading))
+        self.buffer.append((np.asarray(acc, dtype=np.float64), position, heading, up))
         until = self.t - self.lag
         if until < self.emitted:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -222,12 +226,14 @@ class SlidingWindowDecoder:
         return nodes, edges
 
 
-def decode_stream(decoder, acc: np.ndarray, position=None, heading=None) -> tuple[np.ndarray, np.ndarray]:
+def decode_stream(decoder, acc: np.ndarray, position=None, heading=None, up=None) -> tuple[np.ndarray, np.ndarray]:
     """Push a whole input (T, S, 3) through a streaming decoder and flush: the node
-    path (T,) and arrival edges (T,) it emits."""
+    path (T,) and arrival edges (T,) it emits. up: (T, S, 3) measured "up" vectors for
+    an oriented decoder, or None."""
     out_nodes, out_edges = [], []
     for t in range(acc.shape[0]):
-        n, e = decoder.push(acc[t], None if position is None else position[t], None if heading is None else heading[t])
+        n, e = decoder.push(acc[t], None if position is None else position[t], None if heading is None else heading[t],
+                            None if up is None else up[t])  # fmt: skip
         out_nodes.append(n)
         out_edges.append(e)
     n, e = decoder.flush()
