@@ -61,22 +61,26 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
     loaded, else read from the report's path when it is there (else no sources)."""
     from graphsvc.motion.library import load_motion
     from graphsvc.motion.resample import resample
+    from graphsvc.pipeline import read_searched_recording
     from graphsvc.sensors.recording import read_recording
 
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
         raise InputError("the report names no output file (write it with `graphsvc synthesize --report`)")
     motion = load_motion(_file(files["output"], "output", base))
-    rec = None
-    if files.get("recording"):
-        read = files.get("read", {})
-        rec = read_recording(_file(files["recording"], "recording", base), up=read.get("up"), units=read.get("units"))
-        if read.get("device_map") or read.get("calibration"):
-            rec = _as_searched(rec, read, files.get("graph"), graph)
     if graph is None and files.get("graph") and Path(files["graph"]).is_file():
         from graphsvc.graph.file import load_graph
 
         graph = load_graph(files["graph"], mmap=True, verify=False)
+    rec = None
+    if files.get("recording"):
+        read = files.get("read", {})
+        path = _file(files["recording"], "recording", base)
+        if graph is not None:  # (as the search read it: device names mapped, calibration applied)
+            rec = read_searched_recording(graph, path, read.get("up"), read.get("units"), read.get("device_map"),
+                                          read.get("calibration"))  # fmt: skip
+        else:
+            rec = read_recording(path, up=read.get("up"), units=read.get("units"))
     if truth is not None and not hasattr(truth, "skeleton"):
         truth = load_motion(truth)
     if truth is not None:
@@ -97,20 +101,6 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
         virtual = source_readings(graph, np.array(src["clip"]), np.array(src["frame"]), np.array(src["weight"]))
     return clip_view(Path(files["output"]).stem, motion, report_timeline(report, graph), rec, truth,
                      constraints=constraints, labels=labels, mapping=mapping, info=info, virtual=virtual)  # fmt: skip
-
-
-def _as_searched(rec, read: dict, graph_path, graph):
-    """The recording as the search read it: device names mapped, calibration applied."""
-    if read.get("device_map"):
-        from graphsvc.sensors.devices import apply_device_map, device_map
-
-        layout_name = (graph.layout if graph is not None else rec.layout or {}).get("name")
-        rec = apply_device_map(rec, device_map(read["device_map"], layout_name))
-    if read.get("calibration"):
-        from graphsvc.sensors.calibration import apply_calibration, load_calibration
-
-        rec = apply_calibration(rec, load_calibration(read["calibration"]))
-    return rec
 
 
 # ---------------------------------------------------------------- evaluation

@@ -123,7 +123,7 @@
     if (!markers) return null;
     const g = new THREE.BufferGeometry();
     g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(markers.M * 3), 3));
-    return add(new THREE.Points(g, new THREE.PointsMaterial({ color: 0xff7f0e, size: 0.06 })));
+    return add(new THREE.Points(g, new THREE.PointsMaterial({ color: 0xff7f0e, size: 0.1 })));
   }
 
   // the ground grid under every figure's trail, 1 m squares
