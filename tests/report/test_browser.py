@@ -14,6 +14,7 @@ import pytest
 
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.library import load_motion
+from graphsvc.strategies import available
 from tests.report.browser import console_errors, open_page, start_browser, wait_for
 
 SCREENSHOT = Path(__file__).resolve().parents[2] / "docs" / "report.png"
@@ -119,4 +120,40 @@ def test_evaluation_table_sorts_and_opens_each_clip(driver, tmp_path, capsys):
         assert driver.execute_script("return window.graphsvcViewer.clip()") == k
         assert driver.find_element("id", "clip-name").text == name
         assert driver.execute_script("return window.graphsvcViewer.frames()") == rows[k]["frames"]
+    assert console_errors(driver) == []
+
+
+@pytest.mark.parametrize("strategy", available())
+def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, strategy, tmp_path):
+    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.pipeline import Options, Weights, synthesize_files
+    from graphsvc.report.html import write_html
+    from graphsvc.report.load import load_document
+
+    d, graph, truth = files
+    rec = d / ("markers.rec" if strategy == "ssg" else "take.rec")
+    synthesize_files(graph, d / "kb.graph", rec, tmp_path / "out.bvh", Options(strategy=strategy, weights=Weights(0.5, 1, 1)),
+                     report_path=tmp_path / "out.json")  # fmt: skip
+    write_bvh(tmp_path / "truth.bvh", truth, scale=100.0)
+    write_html(tmp_path / "page.html", load_document(tmp_path / "out.json", truth=tmp_path / "truth.bvh"))
+    open_page(driver, tmp_path / "page.html")
+    assert console_errors(driver) == []
+    hook = "return window.graphsvcViewer."
+    T = driver.execute_script(hook + "frames()")
+    # A click on the timeline seeks to the frame under it.
+    timeline = driver.find_element("id", "timeline")
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    width = timeline.size["width"]
+    ActionChains(driver).move_to_element_with_offset(timeline, int(width * 0.3), 0).click().perform()
+    x = width / 2 + int(width * 0.3)  # (offsets are from the element's centre)
+    expected = round((x - 150) / (width - 160) * (T - 1))
+    assert abs(driver.execute_script(hook + "frame()") - expected) <= 1
+    # Overlaid, the truth is drawn where it is (no side-by-side offset).
+    select = driver.find_element("id", "layout")
+    driver.execute_script("arguments[0].value = 'overlay'; arguments[0].dispatchEvent(new Event('change'));", select)
+    frame = driver.execute_script(hook + "frame()")
+    drawn = np.array(driver.execute_script("return document.getElementById('view') && graphsvcViewer.drawnJointPositions(1)"))
+    _, world = motion_fk(truth)
+    assert np.abs(drawn - world[frame]).max() < 0.001
     assert console_errors(driver) == []
