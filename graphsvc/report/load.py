@@ -155,7 +155,8 @@ def kept_view(folder: Path, files: dict, row: dict) -> dict:
 
         v = doc["virtual"]
         virtual = np.frombuffer(base64.b64decode(v["f32"]), dtype="<f4").astype(np.float64).reshape(v["shape"])
-    info = {k: row[k] for k in ("file", "label", "joint_err_cm", "root_err_cm") if row.get(k) is not None}
+    info = {k: round(row[k], 2) if isinstance(row[k], float) else row[k]
+            for k in ("file", "label", "joint_err_cm", "root_err_cm", "heading_err_deg") if row.get(k) is not None}
     return clip_view(str(row.get("name", motion.name)), motion, doc["timeline"], rec, truth, per_frame,
                      doc.get("constraints"), doc.get("labels"), info=info, virtual=virtual)  # fmt: skip
 
@@ -215,6 +216,8 @@ def load_document(result, truth=None) -> dict:
     """The page's document for RESULT: a synthesize report, an evaluation JSON with
     kept motions, or a batch folder. truth: a motion file (synthesize reports only)."""
     path = Path(result)
+    if truth is not None and (path.is_dir() or path.is_file() and "mean" in (read_json_file(path) or {})):
+        raise InputError("--truth applies to a synthesize report (an evaluation keeps its truths, a batch has none)")
     if path.is_dir():
         return batch_document(path)
     if not path.is_file():

@@ -83,6 +83,9 @@ def test_report_refuses_what_it_cannot_show(files, tmp_path, capsys):
         assert main(["report", *argv, "-o", str(tmp_path / "r.html")]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err, err
+    (tmp_path / "eval.json").write_text('{"clips": [], "mean": {}}')
+    assert main(["report", str(tmp_path / "eval.json"), "-o", str(tmp_path / "r.html"), "--truth", str(tmp_path / "t.bvh")]) == 2
+    assert "--truth applies to a synthesize report" in capsys.readouterr().err
     assert not (tmp_path / "r.html").exists()
     assert main(["report", str(tmp_path / "other.json"), "-o", str(tmp_path / "no" / "r.html")]) == 2
     assert "does not exist" in capsys.readouterr().err
