@@ -321,6 +321,21 @@ def _cmd_evaluate(args) -> int:
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
     actor_map = protocols.load_actor_map(args.actors) if args.actors else None
     setup = replace(setup, protocol=args.hold_out)
+    if args.report_html:
+        _check_output(Path(args.report_html))
+    keep_tmp = None
+    if args.keep_motions:
+        keep = Path(args.keep_motions)
+        _check_output(keep)
+        if keep.exists() and not keep.is_dir():
+            raise InputError(f"--keep-motions {keep}: is a file, not a folder")
+        keep.mkdir(exist_ok=True)
+        setup = replace(setup, keep_dir=str(keep.resolve()))
+    elif args.report_html:  # (the page holds everything: the clips' files live only until it is written)
+        import tempfile
+
+        keep_tmp = tempfile.TemporaryDirectory(prefix="graphsvc-report-")
+        setup = replace(setup, keep_dir=keep_tmp.name)
     layout = load_layout(args.layout) if args.layout else None
     if args.json:
         _check_output(Path(args.json))
@@ -385,9 +400,19 @@ def _cmd_evaluate(args) -> int:
         "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": args.seed,
         "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": args.mixed,
         "hold_out": args.hold_out, "actors": args.actors,
+        **({"keep_motions": setup.keep_dir} if args.keep_motions else {}),
     }  # fmt: skip
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
+    if args.report_html:
+        from graphsvc.report.html import write_html
+        from graphsvc.report.load import evaluation_document
+
+        write_html(args.report_html, evaluation_document({**out, "config": {**out["config"], "keep_motions": setup.keep_dir}},
+                                                         Path(setup.keep_dir)))  # fmt: skip
+        print(f"wrote {args.report_html}")
+    if keep_tmp is not None:
+        keep_tmp.cleanup()
     print(format_table(out))
     w = options.weights
     what = (f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out") + \
@@ -398,6 +423,19 @@ def _cmd_evaluate(args) -> int:
                 f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}" + (f", beam {options.beam:g}" if options.beam else ""))  # fmt: skip
     print(f"{what} on {searched}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from graphsvc.report.html import write_html
+    from graphsvc.report.load import load_document
+
+    out = Path(args.output)
+    _check_output(out)
+    doc = load_document(args.result, truth=args.truth)
+    write_html(out, doc)
+    print(f"wrote {out}: {len(doc['clips'])} clip{'s' if len(doc['clips']) != 1 else ''}, "
+          f"{out.stat().st_size / 1e6:.1f} MB")
     return 0
 
 
@@ -525,8 +563,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mapping", metavar="FILE",
                    help="the test clips' joint map when their skeleton is not the graph's (JSON, or 'guess')")
     p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
+    p.add_argument("--keep-motions", metavar="DIR",
+                   help="keep each clip's reconstruction, truth, input and timeline here (for `graphsvc report`)")
+    p.add_argument("--report-html", metavar="OUT.html", help="write the HTML report: metrics table and 3D viewer")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
+
+    p = sub.add_parser("report", help="a self-contained HTML page: 3D viewer, errors, sensors, sources, constraints")
+    p.add_argument("result", metavar="RESULT",
+                   help="a `synthesize --report` JSON, an `evaluate --json` output with --keep-motions, or a batch folder")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.html")
+    p.add_argument("--truth", metavar="MOTION", help="the true motion (.bvh, .amc) of a synthesize report, shown beside it")
+    p.set_defaults(run=_cmd_report)
 
     p = sub.add_parser("mapping", help="propose a joint map for a skeleton graphsvc does not know")
     p.add_argument("clip", metavar="CLIP", help="a motion file (.bvh, .amc) with that skeleton")

@@ -18,16 +18,17 @@ import numpy as np
 
 from graphsvc import precompile
 from graphsvc.errors import GraphsvcError
-from graphsvc.evaluate.metrics import evaluate_frames
 from graphsvc.evaluate.report import plot_errors
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.motion import signals
 from graphsvc.motion.bvh import write_bvh
-from graphsvc.motion.joints import CANONICAL, joint_map
+from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.pipeline import Options, reconstruct
+from graphsvc.report.gather import clip_view, path_readings, timeline_from_nodes, truth_errors
+from graphsvc.report.html import write_html
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import warm_up_search
 from graphsvc.synthesis.path import warm_up_synthesis
@@ -128,10 +129,13 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     write_bvh(out_dir / "reconstruction.bvh", result.motion, scale=BVH_UNITS_PER_M)
     write_bvh(out_dir / "side_by_side.bvh", side_by_side(performance, result.motion), scale=BVH_UNITS_PER_M)
     pred_labels = np.asarray(graph.labels)[graph.node_label[result.node_path]]
-    scores = _score(performance, world_pos, result.motion, pred_labels, performance_labels)
+    scores = truth_errors(result.motion, performance, pred_labels, performance_labels)
     plot_errors(out_dir / "error.png", graph.rate_hz, scores["per_frame"], pred_labels, performance_labels,
                 title=f"reconstruction of the held-out performance ({layout.name}, default noise)")  # fmt: skip
     timings["write_reconstruction_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    write_html(out_dir / "report.html", demo_document(graph, result, rec, performance, scores, pred_labels, layout.name))
+    timings["write_report_s"] = time.perf_counter() - t0
     report = result.report
 
     kb_frames = sum(c.num_frames for c in kb)
@@ -156,7 +160,7 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
         "sensors": list(rec.sensor_names),
         "samples": rec.num_samples,
         "files": ["kb/*.bvh", "performance.bvh", "performance.rec", "performance.csv", "sensors.png",
-                  "reconstruction.bvh", "side_by_side.bvh", "error.png"],
+                  "reconstruction.bvh", "side_by_side.bvh", "error.png", "report.html"],
         "graph": {"nodes": graph.num_nodes, "edges": graph.num_edges},
         "weights": [weights.acc, weights.position, weights.heading],
         "metrics": {k: scores[k] for k in ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc")},
@@ -169,16 +173,15 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     }
 
 
-def _score(truth: Motion, true_world: np.ndarray, predicted: Motion, pred_labels, true_labels) -> dict:
-    """The evaluation metrics of the reconstruction against the performance, per-frame labels."""
-    true_table, pred_table = joint_map(truth.skeleton), joint_map(predicted.skeleton)
-    _, pred_world = motion_fk(predicted)
-    return evaluate_frames(
-        pred_world[:, [pred_table[c] for c in CANONICAL]], true_world[:, [true_table[c] for c in CANONICAL]],
-        signals.ground_position(pred_world, pred_table["pelvis"]), signals.heading(pred_world, pred_table),
-        signals.ground_position(true_world, true_table["pelvis"]), signals.heading(true_world, true_table),
-        pred_labels=pred_labels, true_label=true_labels, name="performance",
-    )  # fmt: skip
+def demo_document(graph, result, rec, performance: Motion, scores: dict, pred_labels, layout_name: str) -> dict:
+    """The demo's report page: the reconstruction beside the held-out performance."""
+    m = scores
+    info = {"strategy": "viterbi", "layout": layout_name, "joint error": f"{m['joint_err_cm']:.1f} cm",
+            "root error": f"{m['root_err_cm']:.1f} cm", "labels right": f"{100 * m['label_acc']:.0f} %"}  # fmt: skip
+    view = clip_view("held-out performance", result.motion, timeline_from_nodes(graph, result.node_path), rec,
+                     performance, scores["per_frame"], labels=list(pred_labels), info=info,
+                     virtual=path_readings(graph, result.node_path))  # fmt: skip
+    return {"title": "graphsvc demo: reconstruction of a held-out performance", "clips": [view], "table": None}
 
 
 def format_demo_summary(s: dict) -> str:

@@ -90,15 +90,42 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     graph's layout does (device_map: 'xsens' or a map file), turn a device's readings into
     the layout's frames (calibration: a `graphsvc calibrate` file), reconstruct, write the BVH
     (scale: units per metre) and, given report_path, the report JSON — both atomically.
-    The report's 'files' names the output, graph and recording. notes: a list that
+    The report's 'files' names the output, graph and recording (and how the recording
+    was read); a strategy without a node path adds each frame's heaviest `sources`
+    (`report.gather.compact_sources`). notes: a list that
     collects remarks for the user (None: dropped). Same inputs, same output bytes, with
     or without threads."""
     import json
     from pathlib import Path
 
-    from graphsvc.errors import InputError
     from graphsvc.fileio import write_text_atomic
     from graphsvc.motion.bvh import write_bvh
+
+    rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes)
+    result = reconstruct(graph, rec, options, threads=threads)
+    write_bvh(output, result.motion, scale=scale)
+    result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
+                              "recording": str(Path(recording_path).resolve())}  # fmt: skip
+    read = {k: v for k, v in (("up", up), ("units", units), ("device_map", device_map and _resolved_if_file(device_map)),
+                              ("calibration", calibration and _resolved_if_file(calibration))) if v}  # fmt: skip
+    if read:  # (how the recording was read, for `graphsvc report`)
+        result.report["files"]["read"] = read
+    if result.node_path is None and result.provenance is not None:
+        from graphsvc.report.gather import compact_sources
+
+        result.report["sources"] = compact_sources(result.provenance)
+    if report_path:
+        write_text_atomic(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    return result
+
+
+def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,
+                            notes=None) -> Recording:  # fmt: skip
+    """A recording as `synthesize_files` searches it on `graph`: read (up, units: as the
+    file does not say), a device's sensors named as the graph's layout does
+    (device_map), its readings turned into the layout's frames (calibration). notes:
+    a list that collects remarks for the user, or None."""
+    from graphsvc.errors import InputError
     from graphsvc.sensors.recording import read_recording
 
     rec = read_recording(recording_path, up=up, units=units)
@@ -120,10 +147,11 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None and notes is not None:
         notes.append(f"{recording_path}'s readings are in each device's own frame; they are used as if in the "
                      "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)")  # fmt: skip
-    result = reconstruct(graph, rec, options, threads=threads)
-    write_bvh(output, result.motion, scale=scale)
-    result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
-                              "recording": str(Path(recording_path).resolve())}  # fmt: skip
-    if report_path:
-        write_text_atomic(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
-    return result
+    return rec
+
+
+def _resolved_if_file(name) -> str:
+    """An absolute path for a file name, a preset name ('xsens') as it is."""
+    from pathlib import Path
+
+    return str(Path(name).resolve()) if Path(name).is_file() else str(name)

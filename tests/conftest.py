@@ -76,3 +76,13 @@ def write_procedural_kb(folder: Path, seed: int, minutes: float) -> Path:
     for clip in generate_knowledge_base(seed=seed, minutes=minutes):
         write_bvh(folder / f"{clip.name}.bvh", clip, scale=100.0)
     return folder
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory):
+    """`graphsvc demo` run once (seed 0, 0.6 minutes of knowledge base): (its summary,
+    its output folder)."""
+    from graphsvc.demo import run_demo
+
+    out = tmp_path_factory.mktemp("demo") / "a"
+    return run_demo(out, seed=0, minutes=0.6), out

@@ -6,13 +6,13 @@ from graphsvc.motion.procedural import CONTENT_LABELS
 from graphsvc.sensors.recording import import_csv, load_recording
 
 
-def test_demo_writes_readable_outputs_deterministically(tmp_path):
-    first = run_demo(tmp_path / "a", seed=0, minutes=0.6)
+def test_demo_writes_readable_outputs_deterministically(tmp_path, demo_run):
+    first, a = demo_run
     second = run_demo(tmp_path / "b", seed=0, minutes=0.6)
-    a, b = tmp_path / "a", tmp_path / "b"
+    b = tmp_path / "b"
     names = sorted(p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file())
     assert {"performance.bvh", "performance.rec", "performance.csv", "sensors.png", "reconstruction.bvh",
-            "side_by_side.bvh", "error.png"} <= set(names)
+            "side_by_side.bvh", "error.png", "report.html"} <= set(names)
     assert len([n for n in names if n.startswith("kb/")]) == first["kb_clips"]
     for n in names:  # same seed, same bytes, plot included
         assert (a / n).read_bytes() == (b / n).read_bytes(), n

@@ -118,6 +118,9 @@ class EvalSetup:
     # The test clips' joint map when their skeleton is not the graph's family (a file, a
     # dict or "guess"; None: the graph's).
     mapping: object = None
+    # A folder to keep each clip's reconstruction, truth, input and timeline in, for
+    # `graphsvc report` (`report.load.keep_clip`); None: kept nowhere.
+    keep_dir: str | None = None
 
 
 def reads_markers(setup: EvalSetup) -> bool:
@@ -241,6 +244,9 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
                           name=motion.name)  # fmt: skip
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
+    if setup.keep_dir:
+        row["kept"] = _keep(graph, setup, motion, truth, rec, result, pred_labels, row["per_frame"],
+                            (fix_position, fix_heading), (true_ground[0], true_heading[0], pred_ground, pred_heading))  # fmt: skip
     report = result.report
     row.update({
         "file": clip_file_name(motion.source, motion.name),
@@ -260,6 +266,45 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
         "pred_labels": pred_labels,
     })  # fmt: skip
     return row
+
+
+def placed_motion(motion: Motion, d: float, g0, shift) -> Motion:
+    """`place_start`'s rigid move applied to a motion's root: turned by d rad about +Y
+    around ground point g0 (x, z), then shifted by `shift` (x, z)."""
+    from graphsvc.motion import quat
+
+    rot, trans = motion.rotations.copy(), motion.translations.copy()
+    rot[:, 0] = quat.mul(quat.about_y(np.full(motion.num_frames, d)), rot[:, 0])
+    c, s = math.cos(d), math.sin(d)
+    x, z = trans[:, 0, 0] - g0[0], trans[:, 0, 2] - g0[1]
+    trans[:, 0, 0] = c * x + s * z + g0[0] + shift[0]
+    trans[:, 0, 2] = -s * x + c * z + g0[1] + shift[1]
+    return motion.copy(rotations=rot, translations=trans)
+
+
+def _keep(graph, setup: EvalSetup, motion, truth, rec, result, pred_labels, per_frame, fixes, starts) -> dict:
+    """Write the clip's files into setup.keep_dir (`report.load.keep_clip`), the
+    reconstruction placed as the metrics placed it."""
+    from graphsvc.report.gather import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
+    from graphsvc.report.load import keep_clip, kept_name
+
+    out = result.motion
+    (fix_position, fix_heading), (true_g0, true_h0, pred_ground, pred_heading) = fixes, starts
+    if fix_position or fix_heading:  # (the same rigid move as `place_start`)
+        d = float(true_h0 - pred_heading[0]) if fix_heading else 0.0
+        shift = (np.asarray(true_g0, float) - pred_ground[0]) if fix_position else np.zeros(2)
+        out = placed_motion(out, d, pred_ground[0], shift)
+    virtual = None
+    if result.node_path is not None:
+        timeline = timeline_from_nodes(graph, result.node_path)
+        virtual = path_readings(graph, result.node_path)
+    else:
+        p = result.provenance
+        timeline = timeline_from_sources([str(c["name"]) for c in graph.clips], pred_labels, p.clip, p.frame, p.weight)
+        virtual = source_readings(graph, p.clip, p.frame, p.weight)
+    stem = kept_name(motion.name, hashlib.sha256(f"{motion.source}/{motion.name}".encode()).hexdigest()[:8])
+    return keep_clip(Path(setup.keep_dir), stem, out.copy(name=motion.name), truth, rec, timeline, per_frame,
+                     pred_labels, rec.constraints, virtual)  # fmt: skip
 
 
 # ---------------------------------------------------------------- many clips
