@@ -1,8 +1,8 @@
 """The report page in a real browser (headless Chromium, tests/report/browser.py): it
 loads without console errors, plays, scrubs to a frame and draws that frame's pose
 (the BVH's within 1 mm), draws something, and an evaluation's table sorts and opens
-its clips. The README's screenshot (docs/report.png) is made here from the demo's
-procedural data: GRAPHSVC_UPDATE_SCREENSHOT=1 rewrites it."""
+its clips. The README's screenshot (docs/report.png) is made here from the README's
+demo (procedural data): GRAPHSVC_UPDATE_SCREENSHOT=1 rewrites it."""
 
 import io
 import json
@@ -33,7 +33,7 @@ def _png(data: bytes):
     return Image.open(io.BytesIO(data)).convert("RGB")
 
 
-def test_demo_page_plays_scrubs_and_draws_the_bvh_pose(driver, demo_run):
+def test_demo_page_plays_scrubs_and_draws_the_bvh_pose(driver, demo_run, tmp_path):
     _, out = demo_run
     open_page(driver, out / "report.html")
     assert console_errors(driver) == []
@@ -77,7 +77,12 @@ def test_demo_page_plays_scrubs_and_draws_the_bvh_pose(driver, demo_run):
     assert blue.sum() > 50 and green.sum() > 50
     assert console_errors(driver) == []
 
-    if os.environ.get("GRAPHSVC_UPDATE_SCREENSHOT"):
+    if os.environ.get("GRAPHSVC_UPDATE_SCREENSHOT"):  # from the README's demo (its default three minutes)
+        from graphsvc.demo import run_demo
+
+        run_demo(tmp_path / "readme", seed=0)
+        open_page(driver, tmp_path / "readme" / "report.html")
+        driver.execute_script(hook + "setFrame(arguments[0])", int(driver.execute_script(hook + "frames()") * 0.3))
         page = _png(driver.get_screenshot_as_png())
         page = page.crop((0, 0, page.width, min(page.height, 1060)))
         page = page.resize((page.width * 3 // 4, page.height * 3 // 4))
