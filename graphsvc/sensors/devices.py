@@ -174,6 +174,8 @@ def read_mvnx(path) -> Recording:
         if exc.code in _XML_ENDS_EARLY:
             message += " (the file ends early: truncated?)"
         raise FormatError(path, f"not a well-formed MVNX (XML) file: {message}", line=line) from None
+    except LookupError as exc:  # the XML declaration names an encoding Python does not know
+        raise FormatError(path, f"not a readable MVNX (XML) file: {exc}", line=1) from None
     return reader.recording()
 
 
