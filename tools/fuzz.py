@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -112,6 +113,7 @@ def _worker_atheris(args, target, state: Path) -> None:
 
 def worker(args) -> None:
     state = Path(args.worker)
+    tempfile.tempdir = str(state)  # the child's scratch files go where the parent removes them, even after a crash
     if args.engine == "atheris":
         import atheris
 
@@ -206,6 +208,7 @@ def supervise(args) -> dict:
                 path = _save(out, data, kind, stderr[-4000:])
                 total["findings"].append({"kind": kind, "error": stderr.strip().splitlines()[-1:] and
                                           stderr.strip().splitlines()[-1][:300] or "", "file": str(path)})  # fmt: skip
+        shutil.rmtree(state, ignore_errors=True)
         seed += 1
         total["restarts"] += 1
         if time.monotonic() >= deadline:

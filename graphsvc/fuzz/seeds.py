@@ -4,8 +4,10 @@ Deterministic: the same seeds every run. `seed_corpus(name)` → list of bytes."
 
 from __future__ import annotations
 
+import atexit
 import functools
 import json
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -77,7 +79,9 @@ spine 1 2 3
 
 
 def _scratch() -> Path:
-    return Path(tempfile.mkdtemp(prefix="graphsvc-seeds-"))
+    path = Path(tempfile.mkdtemp(prefix="graphsvc-seeds-"))
+    atexit.register(shutil.rmtree, path, True)
+    return path
 
 
 def small_motion(frames: int = 6, end_site: bool = True):

@@ -11,8 +11,10 @@ server does before it runs anything."""
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +48,7 @@ def scratch() -> Path:
     global _SCRATCH
     if _SCRATCH is None or not _SCRATCH.is_dir():
         _SCRATCH = Path(tempfile.mkdtemp(prefix=f"graphsvc-fuzz-{os.getpid()}-"))
+        atexit.register(shutil.rmtree, _SCRATCH, True)
     return _SCRATCH
 
 
