@@ -44,6 +44,7 @@ import json
 import math
 import mmap as _mmap
 import os
+import re
 import struct
 from pathlib import Path
 from typing import NamedTuple
@@ -62,6 +63,7 @@ _TRAILER = struct.Struct("<8sQ32s")  # end magic, total length, sha-256
 # Numeric kinds plus fixed-width bytes (S) and unicode (U). Object, structured (V)
 # and datetime arrays have no portable raw representation.
 _ALLOWED_KINDS = frozenset("biufcSU")
+_DTYPE = re.compile(r"^[<>|=][biufcSU][1-9][0-9]{0,8}$")
 _CHUNK = 64 << 20  # bytes per write call, so huge arrays stream through the hash
 
 
@@ -329,7 +331,10 @@ def _check_header(h) -> None:
         if not isinstance(e, dict) or not isinstance(e.get("name"), str) or e["name"] in names:
             raise ValueError("bad or duplicate array name")
         names.add(e["name"])
-        dt = np.dtype(e.get("dtype")) if isinstance(e.get("dtype"), str) else None
+        # Only what the writer writes (dtype.str of a numeric, bytes or unicode array):
+        # numpy parses other strings as structured dtypes, with errors of every kind.
+        text = e.get("dtype")
+        dt = np.dtype(text) if isinstance(text, str) and _DTYPE.match(text) else None
         if dt is None or dt.kind not in _ALLOWED_KINDS or dt.itemsize == 0 or dt.fields is not None:
             raise ValueError(f"array {e['name']!r}: bad dtype {e.get('dtype')!r}")
         shape, off, nbytes = e.get("shape"), e.get("offset"), e.get("nbytes")

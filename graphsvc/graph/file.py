@@ -64,12 +64,46 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None
     N, E = graph.num_nodes, graph.num_edges
-    up = graph.edge_up
-    if meta.get("counts") != {"nodes": N, "edges": E} or graph.incoming.shape != (N + 1,) or (
-            up is not None and up.shape != graph.edge_acc.shape):
+    if meta.get("counts") != {"nodes": N, "edges": E}:
         raise FormatError(path, "graph arrays disagree with its header counts")
+    check_graph_arrays(graph, path)
     graph.source_path, graph.checksum = str(Path(path).resolve()), file_checksum(path)
     return graph
+
+
+def check_graph_arrays(graph: MotionGraph, path) -> None:
+    """FormatError unless every array has the shape the graph's counts, skeleton,
+    layout and clips give it, and every index (edges' nodes, the CSR offsets, nodes'
+    clips and labels) is in range: the search's compiled loops index without bounds
+    checks, so a file checksummed after it was altered must not reach them."""
+    N, E, J, C = graph.num_nodes, graph.num_edges, graph.skeleton.num_joints, len(graph.clips)
+    layout = graph.layout
+    if not isinstance(layout, dict) or not isinstance(layout.get("sensors"), list) or not all(
+            isinstance(s, dict) and isinstance(s.get("name"), str) for s in layout["sensors"]):
+        raise FormatError(path, "graph metadata: the layout has no list of named sensors")
+    S = len(layout["sensors"])
+    shapes = {"node_kind": (N,), "node_clip": (N,), "node_frame": (N,), "node_contacts": (N, 2), "node_label": (N,),
+              "node_rotations": (N, J, 4), "node_translations": (N, J, 3), "node_ground": (N, 2), "node_heading": (N,),
+              "edge_src": (E,), "edge_dst": (E,), "edge_kind": (E,), "edge_acc": (E, S, 3), "edge_offset": (E, 2),
+              "edge_heading": (E,), "incoming": (N + 1,), "clip_offsets": (C, J, 3), "edge_up": (E, S, 3)}  # fmt: skip
+    for name, shape in shapes.items():
+        a = getattr(graph, name)
+        if a is not None and (a.shape != shape or a.dtype.kind not in "biuf"):
+            raise FormatError(path, f"graph array {name} is {a.dtype}{list(a.shape)}, expected numbers of shape {list(shape)}")
+    for name in ("edge_src", "edge_dst", "node_clip", "node_label", "incoming", "node_kind", "edge_kind"):
+        if getattr(graph, name).dtype.kind not in "iu":
+            raise FormatError(path, f"graph array {name} holds {getattr(graph, name).dtype}, expected integers")
+    inc = graph.incoming
+
+    def outside(a, low, high) -> bool:
+        return a.size > 0 and (int(a.min()) < low or int(a.max()) >= high)
+
+    if outside(graph.edge_src, 0, N) or outside(graph.edge_dst, 0, N):
+        raise FormatError(path, f"graph edges name nodes outside 0..{N - 1}")
+    if int(inc[0]) != 0 or int(inc[-1]) != E or (N > 0 and bool(np.any(np.diff(inc) < 0))):
+        raise FormatError(path, "graph array incoming is not the edges' offsets by destination")
+    if outside(graph.node_clip, 0, C) or outside(graph.node_label, -1, len(graph.labels)):
+        raise FormatError(path, "graph nodes name clips or labels the graph does not have")
 
 
 def graph_file_meta(path) -> dict:

@@ -161,19 +161,25 @@ def read_mvnx(path) -> Recording:
     if not path.is_file():
         raise FormatError(path, "no such file")
     reader = _MvnxReader(path)
-    try:
-        with open(path, "rb") as f:
-            for event, elem in ET.iterparse(f, events=("start", "end")):
-                if event == "start":
-                    reader.start(_local(elem.tag), elem)
-                else:
-                    reader.end(_local(elem.tag), elem)
-    except ET.ParseError as exc:
-        line = exc.position[0] if exc.position else None
-        message = re.sub(r":\s*line \d+, column \d+$", "", str(exc))
-        if exc.code in _XML_ENDS_EARLY:
-            message += " (the file ends early: truncated?)"
-        raise FormatError(path, f"not a well-formed MVNX (XML) file: {message}", line=line) from None
+    with open(path, "rb") as f:
+        events = ET.iterparse(f, events=("start", "end"))
+        while True:
+            try:
+                event, elem = next(events)
+            except StopIteration:
+                break
+            except ET.ParseError as exc:
+                line = exc.position[0] if exc.position else None
+                message = re.sub(r":\s*line \d+, column \d+$", "", str(exc))
+                if exc.code in _XML_ENDS_EARLY:
+                    message += " (the file ends early: truncated?)"
+                raise FormatError(path, f"not a well-formed MVNX (XML) file: {message}", line=line) from None
+            except (LookupError, ValueError) as exc:  # the XML declaration's encoding: unknown, or multi-byte
+                raise FormatError(path, f"not a readable MVNX (XML) file: {exc}", line=1) from None
+            if event == "start":
+                reader.start(_local(elem.tag), elem)
+            else:
+                reader.end(_local(elem.tag), elem)
     return reader.recording()
 
 

@@ -113,19 +113,19 @@ def _declared_frames(path: Path) -> int | None:
 def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording:
     """A C3D file's labelled markers as a recording (module docstring). up: "y" or "z"
     (None: decided as the module docstring says); units: overrides the file's."""
-    import ezc3d
+    from graphsvc.sensors.c3d_guard import check_c3d, read_isolated
 
     _check_up(up)
     path = Path(path)
     if not path.is_file():
         raise FormatError(path, "no such file")
-    try:
-        c3d = ezc3d.c3d(str(path))
-    except (RuntimeError, OSError, ValueError, IndexError) as exc:
-        raise FormatError(path, f"not a readable C3D file: {str(exc).splitlines()[0][:120]}") from None
-    header = c3d["header"]["points"]
-    params = c3d["parameters"].get("POINT", {})
-    points = np.asarray(c3d["data"]["points"], dtype=np.float64)  # (4, M, F)
+    data = path.read_bytes()
+    check_c3d(path, data)  # what ezc3d would follow fits in the file: it does not check
+    c3d = read_isolated(path, len(data))  # and what else it cannot survive ends a child process
+    header, params = c3d["header"], c3d["params"]
+    points = c3d["points"]  # (4, M, F)
+    if points.ndim != 3 or points.shape[0] < 3:
+        raise FormatError(path, f"not a readable C3D file: points of shape {points.shape}")
     M, F = points.shape[1], points.shape[2]
     declared = _declared_frames(path)
     if declared is None:
@@ -140,10 +140,13 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
     labels: list[str] = []
     for key in ["LABELS"] + [f"LABELS{k}" for k in range(2, 10)]:
         if key in params:
-            labels += [str(v) for v in params[key]["value"]]
+            labels += params[key]
     labels = (labels + [f"*{k}" for k in range(len(labels), M)])[:M]
-    scale = _unit_scale(units if units is not None else (params.get("UNITS", {}).get("value") or ["mm"])[0], path)
-    residual = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=np.float64).reshape(M, F)
+    scale = _unit_scale(units if units is not None else (params.get("UNITS") or ["mm"])[0], path)
+    residual = c3d["residuals"]
+    if residual.size != M * F:
+        raise FormatError(path, f"not a readable C3D file: {residual.size} residuals for {M} points × {F} frames")
+    residual = residual.reshape(M, F)
     xyz = np.transpose(points[:3], (2, 1, 0)) * scale  # (F, M, 3)
     xyz[(residual < 0).T] = np.nan
     names, cols = [], []
@@ -161,7 +164,7 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
         up = _spread_axis(xyz)
         how = "the markers' spread"
         if up is None:
-            screen = str((params.get("Y_SCREEN", {}).get("value") or [""])[0]).strip().upper()
+            screen = str((params.get("Y_SCREEN") or [""])[0]).strip().upper()
             up, how = ({"+Y": "y", "+Z": "z"}[screen], "POINT:Y_SCREEN") if screen in ("+Y", "+Z") else ("z", "the "
                                                                                                           "C3D convention")  # fmt: skip
     xyz = np.ascontiguousarray(to_y_up(xyz, up))

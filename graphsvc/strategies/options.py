@@ -244,8 +244,9 @@ def check_constraints(constraints, graph=None) -> list:
     """Validate constraint sets (see `Recording`): structure, 0 ≤ start < end, no two
     intervals of one set overlapping (they would ask for two things at once), and —
     given a graph — labels it has."""
-    constraints = list(constraints)
-    validate_constraints(constraints)
+    if isinstance(constraints, tuple):
+        constraints = list(constraints)
+    validate_constraints(constraints)  # InputError for anything but a list of sets (a JSON number, say)
     for i, cset in enumerate(constraints):
         spans = sorted((float(c["start_s"]), float(c["end_s"]), j) for j, c in enumerate(cset))
         for (s0, e0, j0), (s1, e1, j1) in zip(spans, spans[1:]):
