@@ -24,8 +24,8 @@ Prints one JSON object per level:
                    clients run on the same machine, so when this nears the core count
                    the machine, not the server alone, is the limit
 
-    server_cpu_ms_per_sample  the server's CPU time over the same span divided by the
-                   samples the streams were due to send in it, ms
+    server_cpu_ms_per_sample  the server's CPU time from the start of the sending until
+                   every stream was answered, divided by the samples sent, ms
 
 Input: by default each stream plays a random walk through the graph's own edges (their
 sensor metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without
@@ -232,6 +232,7 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
                 break
     if len(cpu) == 1:  # every stream ended within the last poll
         cpu.append((time.time(), cpu_seconds(server_pid), machine_busy_seconds()))
+    cpu_to_end = cpu_seconds(server_pid) - cpu[0][1] if server_pid and cpu else None  # every stream answered
     for p in procs:
         p.join()
     latencies = np.concatenate([np.asarray(r["latencies_ms"], float) for r in collected]) if collected else np.zeros(0)
@@ -254,8 +255,8 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "server_rss_mb": round(peak, 1) if server_pid else None,
         "server_cores": round((cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "machine_cores": round((cpu[1][2] - cpu[0][2]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
-        "server_cpu_ms_per_sample": round(1e3 * (cpu[1][1] - cpu[0][1]) / (streams * rate_hz * (cpu[1][0] - cpu[0][0])),
-                                          3) if len(cpu) == 2 else None,  # fmt: skip
+        "server_cpu_ms_per_sample": round(1e3 * cpu_to_end / max(1, sum(r["sent"] for r in collected)), 3)
+                                    if cpu_to_end is not None else None,  # fmt: skip
         "seconds": seconds,
         "rate_hz": rate_hz,
     }

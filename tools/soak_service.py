@@ -460,7 +460,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=600.0, help="how long the clients make calls (default 600)")
     parser.add_argument("--streams", type=int, default=64, help="concurrent clients (default 64)")
     parser.add_argument("--processes", type=int, default=4, help="client processes (default 4)")
-    parser.add_argument("--max-streams", type=int, default=32, help="the server's --max-streams (default 32)")
+    parser.add_argument("--max-streams", type=int, default=16, help="the server's --max-streams (default 16, as serve)")
     parser.add_argument("--config-timeout-s", type=float, default=2.0,
                         help="the server's --config-timeout-s (default 2)")  # fmt: skip
     parser.add_argument("--sample-every", type=float, default=5.0, help="RSS and thread samples, s (default 5)")
