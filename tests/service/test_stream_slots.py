@@ -15,14 +15,7 @@ from graphsvc.errors import InputError
 from graphsvc.service import client as C
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from tests.service.conftest import start
-
-
-def _wait_for(condition, timeout_s: float = 5.0) -> None:
-    end = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached in time")
-        time.sleep(0.02)
+from tests.service.conftest import wait_for as _wait_for
 
 
 def _config_reader_threads() -> int:
