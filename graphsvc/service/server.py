@@ -348,8 +348,13 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         try:
             with self.threads.running():
                 yield from self._stream(request_iterator, context)
-        except grpc.RpcError:
-            return  # the client went away while we waited for its next message
+        except grpc.RpcError as exc:  # the client went away while we waited for its next message
+            # gRPC's error sits in a reference cycle with the frame that raised it, and its
+            # traceback holds this call's frames, the live session (~100 MB on a large
+            # graph) among them, until the cyclic GC's next full pass. Drop the traceback
+            # so the session goes now.
+            exc.__traceback__ = None
+            return
         except Exception as exc:  # noqa: BLE001
             _abort_for(context, exc)
         finally:
