@@ -127,3 +127,45 @@ def test_a_configured_stream_that_pauses_keeps_its_slot_and_resumes(tight_server
 def test_the_configuration_timeout_must_be_positive_and_finite(loaded_graphs, timeout_s):
     with pytest.raises(InputError, match="--config-timeout-s"):
         start(loaded_graphs, config_timeout_s=timeout_s)
+
+
+def _live_sessions() -> int:
+    import gc
+
+    from graphsvc.strategies.base import LiveSession
+
+    return sum(1 for o in gc.get_objects() if isinstance(o, LiveSession))
+
+
+@pytest.mark.parametrize("ending", ["cancel", "deadline"])
+def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recording, ending):
+    """Without waiting for the cyclic garbage collector: a session holds the decoder's
+    state (~100 MB on a large graph), and with streams coming and going the server's
+    memory would swing by gigabytes between full collections."""
+    import gc
+
+    samples = list(C.recording_samples(recording))
+
+    def slow():
+        yield pb.StreamSynthesizeRequest(config=C.stream_config("small"))
+        for s in samples:
+            time.sleep(0.02)
+            yield pb.StreamSynthesizeRequest(sample=s)
+
+    gc.collect()
+    before = _live_sessions()
+    gc.disable()
+    try:
+        with C.connect(f"127.0.0.1:{server.port}") as conn:
+            for _ in range(3):
+                call = conn.stub.StreamSynthesize(slow(), timeout=0.6 if ending == "deadline" else 30)
+                if ending == "cancel":
+                    threading.Timer(0.3, call.cancel).start()
+                with pytest.raises(grpc.RpcError) as info:
+                    list(call)
+                assert info.value.code() == (grpc.StatusCode.CANCELLED if ending == "cancel"
+                                             else grpc.StatusCode.DEADLINE_EXCEEDED)  # fmt: skip
+            _wait_for(lambda: server.servicer.slots.active == 0)
+            _wait_for(lambda: _live_sessions() == before)
+    finally:
+        gc.enable()
