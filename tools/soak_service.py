@@ -28,7 +28,8 @@ at once (all must start: no slot leaked), closes them, stops the server with SIG
 (exit 0 expected) and prints one JSON object:
 
     calls           scenario → status → count; unexpected: count and the first few
-    rejected_ms_max slowest RESOURCE_EXHAUSTED answer, ms
+    rejected_ms     RESOURCE_EXHAUSTED answers: p50, p99 and slowest, ms (a wait for a
+                    slot would take a stream's length)
     health          SERVING / other / failed checks, and the slowest check, ms
     rss_mb          samples (s, MiB), and after the warm-up (the first fifth): the
                     medians of its first and last quarter and their ratio − 1 (growth)
@@ -264,14 +265,14 @@ def _client_process(address, graph_path, ids, end_at, config_timeout_s, seed, re
     lock = threading.Lock()
     calls: dict = {}
     unexpected: list = []
-    rejected_ms = [0.0]
+    rejected_ms: list = []
 
     def tally(scenario, status, elapsed_ms, expected, detail):
         with lock:
             calls.setdefault(scenario, {}).setdefault(status, 0)
             calls[scenario][status] += 1
             if status == "RESOURCE_EXHAUSTED" and scenario != "unary":
-                rejected_ms[0] = max(rejected_ms[0], elapsed_ms)
+                rejected_ms.append(round(elapsed_ms, 1))
             elif status not in expected or detail:
                 unexpected.append(f"{scenario}: {status} {detail}".strip())
 
@@ -288,7 +289,7 @@ def _client_process(address, graph_path, ids, end_at, config_timeout_s, seed, re
     for t in threads:
         t.join()
     conn.close()
-    results.put({"calls": calls, "unexpected": unexpected, "rejected_ms_max": rejected_ms[0]})
+    results.put({"calls": calls, "unexpected": unexpected, "rejected_ms": rejected_ms})
 
 
 # ---------------------------------------------------------------- the server's side
@@ -425,7 +426,10 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
                 calls.setdefault(scenario, {}).setdefault(status, 0)
                 calls[scenario][status] += count
         unexpected += s["unexpected"]
-    rejected_ms_max = max((s["rejected_ms_max"] for s in summaries), default=0.0)
+    rejected = np.array([ms for s in summaries for ms in s["rejected_ms"]], float)
+    rejected_ms_max = float(rejected.max()) if rejected.size else 0.0
+    rejected_ms = {q: round(float(np.percentile(rejected, p)), 1) if rejected.size else None
+                   for q, p in (("p50", 50), ("p99", 99))}  # fmt: skip
     threads_bound = (threads_start or 0) + max_streams + UNARY_WORKERS + THREAD_SLACK
     threads_max = max((n for _, n in monitor.threads if n is not None), default=None)
     growth = rss_growth(monitor.rss, warmup_s=seconds / 5)
@@ -443,7 +447,7 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
         "seconds": seconds, "streams": streams, "max_streams": max_streams, "config_timeout_s": config_timeout_s,
         "calls": calls, "calls_total": sum(sum(v.values()) for v in calls.values()),
         "unexpected": {"count": len(unexpected), "first": unexpected[:10]},
-        "rejected_ms_max": round(rejected_ms_max, 1),
+        "rejected_ms": {**rejected_ms, "max": round(rejected_ms_max, 1)},
         "health": monitor.health,
         "rss_mb": {"samples": monitor.rss, **growth, "end": round(rss_end, 1)},
         "threads": {"start": threads_start, "max": threads_max, "end": threads_end, "bound": threads_bound},

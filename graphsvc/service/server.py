@@ -8,18 +8,21 @@ search kernels release the GIL, so streams decode in parallel.
 
 Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unknown
 graph; UNIMPLEMENTED for a strategy not built (none at present); RESOURCE_EXHAUSTED beyond
-`max_streams` concurrent streams; UNAUTHENTICATED without a valid token; INTERNAL
+`max_streams` concurrent streams (at once, from a spare worker); DEADLINE_EXCEEDED for a
+stream that sends no config within `config_timeout_s`; UNAUTHENTICATED without a valid token; INTERNAL
 (with the traceback on the server's stderr) for bugs — bad input never takes the
 server down.
 """
 
 from __future__ import annotations
 
+import gc
 import hmac
 import math
 import signal
 import sys
 import threading
+import time
 import traceback
 from concurrent import futures
 from dataclasses import dataclass, field
@@ -459,7 +462,15 @@ class RunningServer:
     def stop(self, grace_s: float | None = None) -> None:
         """Refuse new calls, let running ones finish within grace_s, then cancel them."""
         self.health.enter_graceful_shutdown()
-        self.server.stop(grace_s).wait()
+        done = self.server.stop(grace_s)
+        # gRPC's shutdown completes once every call's objects are freed, and a finished
+        # call can sit in a reference cycle until the cyclic GC's next pass (gRPC's own
+        # answer to request bytes that do not parse leaves one): with no allocation to
+        # trigger that pass the server would wait forever. Collect while waiting; give
+        # up (the process is ending) 10 s after the grace.
+        give_up = time.monotonic() + (grace_s or 0.0) + 10.0
+        while not done.wait(0.25) and time.monotonic() < give_up:
+            gc.collect()
         if self.servicer.batches is not None:
             self.servicer.batches.close()
 

@@ -169,3 +169,28 @@ def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recor
             _wait_for(lambda: _live_sessions() == before)
     finally:
         gc.enable()
+
+
+def test_the_server_stops_after_a_request_that_does_not_parse(loaded_graphs):
+    """gRPC answers bytes that are no request itself (INTERNAL) and leaves the call in
+    a reference cycle; stopping must not wait for a garbage collection that no
+    allocation triggers."""
+    import gc
+
+    running = start(loaded_graphs, max_streams=2)
+    gc.collect()
+    gc.disable()
+    try:
+        with C.connect(f"127.0.0.1:{running.port}") as conn:
+            raw = conn.channel.stream_stream("/graphsvc.v1.MotionGraphService/StreamSynthesize",
+                                             request_serializer=None, response_deserializer=None)  # fmt: skip
+            with pytest.raises(grpc.RpcError) as info:
+                list(raw(iter([b"\xff\x01 not a request"]), timeout=10))
+            assert info.value.code() == grpc.StatusCode.INTERNAL
+        stopper = threading.Thread(target=running.stop, args=(0,), daemon=True)
+        stopper.start()
+        stopper.join(5.0)
+        assert not stopper.is_alive(), "the server did not stop"
+    finally:
+        gc.enable()
+        gc.collect()
