@@ -129,21 +129,25 @@ def test_the_configuration_timeout_must_be_positive_and_finite(loaded_graphs, ti
         start(loaded_graphs, config_timeout_s=timeout_s)
 
 
-def _live_sessions() -> int:
-    import gc
-
-    from graphsvc.strategies.base import LiveSession
-
-    return sum(1 for o in gc.get_objects() if isinstance(o, LiveSession))
-
-
 @pytest.mark.parametrize("ending", ["cancel", "deadline"])
-def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recording, ending):
+def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recording, ending, monkeypatch):
     """Without waiting for the cyclic garbage collector: a session holds the decoder's
     state (~100 MB on a large graph), and with streams coming and going the server's
     memory would swing by gigabytes between full collections."""
     import gc
+    import weakref
 
+    from graphsvc import pipeline
+
+    opened = []  # weak references to the sessions the server opens
+    real = pipeline.LiveSession
+
+    def tracked(*args, **kwargs):
+        session = real(*args, **kwargs)
+        opened.append(weakref.ref(session))
+        return session
+
+    monkeypatch.setattr(pipeline, "LiveSession", tracked)
     samples = list(C.recording_samples(recording))
 
     def slow():
@@ -153,7 +157,6 @@ def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recor
             yield pb.StreamSynthesizeRequest(sample=s)
 
     gc.collect()
-    before = _live_sessions()
     gc.disable()
     try:
         with C.connect(f"127.0.0.1:{server.port}") as conn:
@@ -166,7 +169,8 @@ def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recor
                 assert info.value.code() == (grpc.StatusCode.CANCELLED if ending == "cancel"
                                              else grpc.StatusCode.DEADLINE_EXCEEDED)  # fmt: skip
             _wait_for(lambda: server.servicer.slots.active == 0)
-            _wait_for(lambda: _live_sessions() == before)
+            assert len(opened) == 3
+            _wait_for(lambda: all(ref() is None for ref in opened))
     finally:
         gc.enable()
 
