@@ -2,7 +2,7 @@
 """Benchmark of live synthesis: N concurrent StreamSynthesize calls at the graph rate
 against a `graphsvc serve` subprocess on loopback.
 
-    .venv/bin/python tools/bench_service.py bandai.graph                 # 1, 8, 32, 64 streams × 20 s
+    .venv/bin/python tools/bench_service.py bandai.graph                 # 8, 16, 32, 64 streams × 20 s
     .venv/bin/python tools/bench_service.py small.graph --levels 1,2 --seconds 2
 
 Prints one JSON object per level:
@@ -24,10 +24,17 @@ Prints one JSON object per level:
                    clients run on the same machine, so when this nears the core count
                    the machine, not the server alone, is the limit
 
-Input: each stream plays a random walk through the graph's own edges (their sensor
-metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without
-recordings. Clients run in several processes (--streams-per-process) so that the
-Python client does not become the bottleneck.
+    server_cpu_ms_per_sample  the server's CPU time from the start of the sending until
+                   every stream was answered, divided by the samples sent, ms
+
+Input: by default each stream plays a random walk through the graph's own edges (their
+sensor metadata plus white noise σ 0.3 m/s²), so any graph can be benchmarked without
+recordings. With --recordings DIR each stream plays the `.rec` recordings in DIR (e.g.
+`graphsvc simulate` of clips the graph was built without) in its own seeded order,
+joined end to end (each clip's track moved to start where the previous one ended),
+with everything they carry: accelerations, ground position and heading. Clients run
+in several processes (--streams-per-process) so that the Python client does not
+become the bottleneck.
 """
 
 from __future__ import annotations
@@ -81,7 +88,43 @@ def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray
     return out + rng.normal(0.0, 0.3, out.shape).astype(np.float32)
 
 
-def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, options_bytes, start_at, results):
+def joined_recordings(paths: list[str], samples: int, seed: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(acc (samples, S, 3) float32, ground position (samples, 2) or None, heading
+    (samples,) or None): the recordings in a seeded random order, repeated as needed,
+    joined end to end; each recording's track is moved to start where the previous
+    one's ended."""
+    from graphsvc.sensors.recording import load_recording
+
+    rng = np.random.default_rng(seed)
+    recs = [load_recording(p) for p in paths]
+    acc, pos, head = [], [], []
+    have, end = 0, np.zeros(2)
+    while have < samples:
+        for k in rng.permutation(len(recs)):
+            rec = recs[k]
+            acc.append(rec.accelerations)
+            if rec.ground_position is not None:
+                track = rec.ground_position - rec.ground_position[0] + end
+                end = track[-1]
+                pos.append(track)
+            if rec.heading is not None:
+                head.append(rec.heading)
+            have += rec.num_samples
+            if have >= samples:
+                break
+    whole = lambda parts: np.concatenate(parts)[:samples] if len(parts) == len(acc) else None  # noqa: E731
+    return np.asarray(whole(acc), np.float32), whole(pos), whole(head)
+
+
+def _stream_inputs(graph_path: str, recordings: list[str] | None, samples: int, seed: int):
+    """What one stream sends: joined_recordings, or a random walk's readings."""
+    if recordings:
+        return joined_recordings(recordings, samples, seed)
+    return random_walk_readings(graph_path, samples, seed=seed), None, None
+
+
+def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, options_bytes, start_at, results,
+                    recordings=None):  # fmt: skip
     """Run len(stream_ids) paced streams in threads; put one result dict per stream.
     options_bytes: the streams' SynthesisOptions, serialized."""
     from graphsvc.service import client as C
@@ -89,11 +132,12 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
     from graphsvc.service._generated import graphsvc_pb2 as pb
 
     samples = round(seconds * rate_hz)
-    inputs = {i: random_walk_readings(graph_path, samples, seed=i) for i in stream_ids}
+    inputs = {i: _stream_inputs(graph_path, recordings, samples, seed=i) for i in stream_ids}
     options = pb.SynthesisOptions.FromString(options_bytes)
     conn = C.connect(address)
 
     def run(i):
+        acc, pos, head = inputs[i]
         feed = C.SampleFeed(C.stream_config(graph_name, options))
         late = 0
         stop = threading.Event()
@@ -109,7 +153,8 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
                             return
                     elif -delay > 1.0 / rate_hz:
                         late += 1
-                    feed.put(convert.sample_to_proto(k / rate_hz, inputs[i][k]))
+                    feed.put(convert.sample_to_proto(k / rate_hz, acc[k], None if pos is None else pos[k],
+                                                     None if head is None else head[k]))  # fmt: skip
             finally:
                 feed.close()
 
@@ -162,13 +207,13 @@ def rss_mb(pid: int) -> float:
 
 
 def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, options_bytes, per_process,
-              server_pid) -> dict:  # fmt: skip
+              server_pid, recordings=None) -> dict:  # fmt: skip
     ctx = mp.get_context("spawn")  # no fork after gRPC is loaded
     results = ctx.Queue()
     start_at = time.time() + 3.0 + 0.05 * streams  # time for the client processes to load inputs
     ids = list(range(streams))
     procs = [ctx.Process(target=_client_process, args=(address, graph_name, graph_path, ids[i:i + per_process], seconds,
-                                                       rate_hz, options_bytes, start_at, results))
+                                                       rate_hz, options_bytes, start_at, results, recordings))
              for i in range(0, streams, per_process)]  # fmt: skip
     for p in procs:
         p.start()
@@ -187,6 +232,7 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
                 break
     if len(cpu) == 1:  # every stream ended within the last poll
         cpu.append((time.time(), cpu_seconds(server_pid), machine_busy_seconds()))
+    cpu_to_end = cpu_seconds(server_pid) - cpu[0][1] if server_pid and cpu else None  # every stream answered
     for p in procs:
         p.join()
     latencies = np.concatenate([np.asarray(r["latencies_ms"], float) for r in collected]) if collected else np.zeros(0)
@@ -209,16 +255,20 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "server_rss_mb": round(peak, 1) if server_pid else None,
         "server_cores": round((cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "machine_cores": round((cpu[1][2] - cpu[0][2]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
+        "server_cpu_ms_per_sample": round(1e3 * cpu_to_end / max(1, sum(r["sent"] for r in collected)), 3)
+                                    if cpu_to_end is not None else None,  # fmt: skip
         "seconds": seconds,
         "rate_hz": rate_hz,
     }
 
 
-def start_server(graph_path: str, max_streams: int) -> tuple[subprocess.Popen, str]:
+def start_server(graph_path: str, max_streams: int, *extra: str) -> tuple[subprocess.Popen, str]:
+    """A `graphsvc serve` subprocess on a free loopback port serving graph_path as
+    "bench" (extra: more serve flags); (process, address)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.Popen([sys.executable, "-m", "graphsvc.service.cli_commands", "serve", "--graph",
                              f"bench={graph_path}", "--host", "127.0.0.1", "--port", "0", "--max-streams",
-                             str(max_streams), "--grace-s", "2"], cwd=ROOT, stdout=subprocess.PIPE, text=True,
+                             str(max_streams), "--grace-s", "2", *extra], cwd=ROOT, stdout=subprocess.PIPE, text=True,
                             env=env)  # fmt: skip
     line = proc.stdout.readline()
     m = re.search(r"listening on (127\.0\.0\.1:\d+)", line)
@@ -231,15 +281,19 @@ def start_server(graph_path: str, max_streams: int) -> tuple[subprocess.Popen, s
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("graph", metavar="GRAPH_FILE")
-    parser.add_argument("--levels", default="1,8,32,64", help="concurrent streams per level (default 1,8,32,64)")
+    parser.add_argument("--levels", default="8,16,32,64", help="concurrent streams per level (default 8,16,32,64)")
     parser.add_argument("--seconds", type=float, default=20.0, help="length of each level (default 20)")
     parser.add_argument("--rate", type=float, help="samples per second per stream (default: the graph rate)")
     parser.add_argument("--latency", type=float, help="decoder lag in seconds (default: the server's, 1 s)")
     parser.add_argument("--beam", type=float, metavar="COST", help="beam search (default: the exact search)")
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
+    parser.add_argument("--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
+    recordings = sorted(str(p) for p in Path(args.recordings).glob("*.rec")) if args.recordings else None
+    if args.recordings and not recordings:
+        raise SystemExit(f"{args.recordings}: no .rec recordings")
 
     from graphsvc.graph.file import load_graph
     from graphsvc.service._generated import graphsvc_pb2 as pb
@@ -260,11 +314,12 @@ def main(argv=None) -> int:
     options_bytes = options.SerializeToString()
     try:
         # Warm-up: the first stream loads the compiled search kernels.
-        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid)
+        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid,
+                  recordings)  # fmt: skip
         for streams in levels:
             print(f"level {streams} streams × {args.seconds:g} s ...", file=sys.stderr, flush=True)
             result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
-                               args.streams_per_process, server_pid)  # fmt: skip
+                               args.streams_per_process, server_pid, recordings)  # fmt: skip
             print(json.dumps(result), flush=True)
     finally:
         if proc is not None:

@@ -40,6 +40,7 @@ def _cmd_serve(args) -> int:
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
                           tls_key=args.tls_key and Path(args.tls_key), tokens=tokens, max_streams=args.max_streams,
                           max_message_mb=args.max_message_mb, grace_s=args.grace_s,
+                          config_timeout_s=args.config_timeout_s,
                           batch_dir=args.batch_dir and Path(args.batch_dir), batch_scheduler=args.batch_scheduler,
                           batch_workers=args.batch_workers)  # fmt: skip
     if config.batch_dir is None and (args.batch_scheduler or args.batch_workers):
@@ -298,6 +299,9 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--max-message-mb", type=float, default=64.0, metavar="M", help="largest message, MiB (default 64)")
     p.add_argument("--grace-s", type=float, default=10.0, metavar="S",
                    help="on SIGTERM, time for in-flight calls to finish (default 10)")  # fmt: skip
+    p.add_argument("--config-timeout-s", type=float, default=10.0, metavar="S",
+                   help="a stream that sends no config within S seconds of connecting ends with "
+                        "DEADLINE_EXCEEDED (default 10)")  # fmt: skip
     p.add_argument("--batch-dir", metavar="DIR", help="take batches (SubmitBatch …): their folders go here, and a "
                                                       "manifest's relative paths are taken from here")  # fmt: skip
     p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "

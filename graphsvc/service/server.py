@@ -8,18 +8,21 @@ search kernels release the GIL, so streams decode in parallel.
 
 Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unknown
 graph; UNIMPLEMENTED for a strategy not built (none at present); RESOURCE_EXHAUSTED beyond
-`max_streams` concurrent streams; UNAUTHENTICATED without a valid token; INTERNAL
+`max_streams` concurrent streams (at once, from a spare worker); DEADLINE_EXCEEDED for a
+stream that sends no config within `config_timeout_s`; UNAUTHENTICATED without a valid token; INTERNAL
 (with the traceback on the server's stderr) for bugs — bad input never takes the
 server down.
 """
 
 from __future__ import annotations
 
+import gc
 import hmac
 import math
 import signal
 import sys
 import threading
+import time
 import traceback
 from concurrent import futures
 from dataclasses import dataclass, field
@@ -57,7 +60,8 @@ class ServerConfig:
     """host/port: where to listen (port 0: any free port). tls_cert/tls_key: PEM
     files (both or neither). tokens: accepted bearer tokens (empty: no
     authentication). max_streams: concurrent StreamSynthesize calls. max_message_mb:
-    largest message either way, MiB. grace_s: how long SIGTERM lets calls finish."""
+    largest message either way, MiB. grace_s: how long SIGTERM lets calls finish.
+    config_timeout_s: how long a new stream may take to send its StreamConfig."""
 
     host: str = "[::]"
     port: int = 50051
@@ -67,6 +71,9 @@ class ServerConfig:
     max_streams: int = 16
     max_message_mb: float = 64.0
     grace_s: float = 10.0
+    # A stream that sends no StreamConfig within this many seconds of connecting is
+    # ended with DEADLINE_EXCEEDED and its slot freed.
+    config_timeout_s: float = 10.0
     # Batches (SubmitBatch …): their root folder (None: the server takes none), and
     # the Dask cluster they run on (a scheduler's address, else a local cluster).
     batch_dir: Path | None = None
@@ -223,9 +230,37 @@ class StreamSlots:
         return release
 
 
+def first_message(request_iterator, timeout_s: float):
+    """The first request of a stream, or None when the client half-closed before
+    sending one; RpcStatus DEADLINE_EXCEEDED when none came within timeout_s.
+
+    gRPC's request iterator has no timed read, so a short-lived thread reads the one
+    message while the handler waits. On a timeout the handler ends the call, which
+    ends the reader's wait too (its read raises, and the thread exits)."""
+    box: list = []
+    done = threading.Event()
+
+    def read():
+        try:
+            box.append(next(request_iterator, None))
+        except BaseException as exc:  # noqa: BLE001 — grpc.RpcError when the call ends first; handed over
+            box.append(exc)
+        done.set()
+
+    threading.Thread(target=read, name="graphsvc-config", daemon=True).start()
+    if not done.wait(timeout_s):
+        raise RpcStatus(grpc.StatusCode.DEADLINE_EXCEEDED, f"config: no StreamConfig within {timeout_s:g} s of "
+                        "connecting (the server's --config-timeout-s); the stream's slot is freed")  # fmt: skip
+    if isinstance(box[0], BaseException):
+        raise box[0]
+    return box[0]
+
+
 class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
-    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None):
+    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None,
+                 config_timeout_s: float = ServerConfig.config_timeout_s):  # fmt: skip
         self.graphs = graphs
+        self.config_timeout_s = config_timeout_s
         self.batches = batches  # a batch.service.BatchManager, or None
         self.slots = StreamSlots(max_streams)
         self.threads = ThreadShare()  # numba's threads for a live stream's steps while it runs alone
@@ -316,8 +351,13 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         try:
             with self.threads.running():
                 yield from self._stream(request_iterator, context)
-        except grpc.RpcError:
-            return  # the client went away while we waited for its next message
+        except grpc.RpcError as exc:  # the client went away while we waited for its next message
+            # gRPC's error sits in a reference cycle with the frame that raised it, and its
+            # traceback holds this call's frames, the live session (~100 MB on a large
+            # graph) among them, until the cyclic GC's next full pass. Drop the traceback
+            # so the session goes now.
+            exc.__traceback__ = None
+            return
         except Exception as exc:  # noqa: BLE001
             _abort_for(context, exc)
         finally:
@@ -326,7 +366,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     def _stream(self, request_iterator, context):
         from graphsvc.pipeline import LiveSession
 
-        first = next(request_iterator, None)
+        first = first_message(request_iterator, self.config_timeout_s)
         if first is None:
             return  # the client half-closed without a config: nothing to do
         if first.WhichOneof("message") != "config":
@@ -422,7 +462,15 @@ class RunningServer:
     def stop(self, grace_s: float | None = None) -> None:
         """Refuse new calls, let running ones finish within grace_s, then cancel them."""
         self.health.enter_graceful_shutdown()
-        self.server.stop(grace_s).wait()
+        done = self.server.stop(grace_s)
+        # gRPC's shutdown completes once every call's objects are freed, and a finished
+        # call can sit in a reference cycle until the cyclic GC's next pass (gRPC's own
+        # answer to request bytes that do not parse leaves one): with no allocation to
+        # trigger that pass the server would wait forever. Collect while waiting; give
+        # up (the process is ending) 10 s after the grace.
+        give_up = time.monotonic() + (grace_s or 0.0) + 10.0
+        while not done.wait(0.25) and time.monotonic() < give_up:
+            gc.collect()
         if self.servicer.batches is not None:
             self.servicer.batches.close()
 
@@ -486,13 +534,18 @@ def bind_server(config: ServerConfig) -> BoundServer:
         raise InputError(f"--max-streams must be at least 1, got {config.max_streams}")
     if not (math.isfinite(config.max_message_mb) and config.max_message_mb > 0):
         raise InputError(f"--max-message-mb must be positive, got {config.max_message_mb}")
+    if not (math.isfinite(config.config_timeout_s) and config.config_timeout_s > 0):
+        raise InputError(f"--config-timeout-s must be positive, got {config.config_timeout_s}")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise InputError("TLS needs both --tls-cert and --tls-key")
     check_address(config.host, config.port)
     max_bytes = int(config.max_message_mb * 2**20)
     # SO_REUSEPORT off: two servers can never share a port (nor port 0 land on a held one).
+    # Keepalive: a client whose machine or network vanished (no FIN) stops answering
+    # pings, and its calls end (their slots freed) within about 40 s, idle or not.
     options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
-               ("grpc.so_reuseport", 0)]  # fmt: skip
+               ("grpc.so_reuseport", 0), ("grpc.keepalive_time_ms", 30_000), ("grpc.keepalive_timeout_ms", 10_000),
+               ("grpc.http2.max_pings_without_data", 0)]  # fmt: skip
     interceptors = [BearerTokenInterceptor(config.tokens)] if config.tokens else []
     executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
     server = grpc.server(executor, interceptors=interceptors, options=options)
@@ -523,7 +576,7 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
 
         batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
                                config.batch_workers)  # fmt: skip
-    servicer = MotionGraphServicer(graphs, config.max_streams, batches)
+    servicer = MotionGraphServicer(graphs, config.max_streams, batches, config.config_timeout_s)
     pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
     health_servicer = health.HealthServicer(experimental_non_blocking=True,
                                             experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip

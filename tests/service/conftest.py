@@ -148,6 +148,17 @@ def assert_frames_equal(expected, received) -> None:
         np.testing.assert_array_equal(np.array(b.translations_m, np.float32), a.translations.ravel())
 
 
+def wait_for(condition, timeout_s: float = 5.0) -> None:
+    """Poll condition() until it holds; AssertionError after timeout_s."""
+    import time
+
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.02)
+
+
 def rpc_error(call, *args, **kwargs):
     """(status code, details) of the RpcError a call (unary, or a stream read to its end)
     raises."""

@@ -17,6 +17,7 @@ from graphsvc.service._generated import graphsvc_pb2 as pb
 from tests.service.conftest import assert_frames_equal, live_frames, start
 from tests.service.conftest import rpc_error as _code
 from tests.service.conftest import stream_requests as _requests
+from tests.service.conftest import wait_for as _wait_for
 
 
 # ---------------------------------------------------------------- graphs
@@ -289,14 +290,6 @@ def test_message_size_limit(loaded_graphs, recording):
 
 
 # ---------------------------------------------------------------- limits, deadlines, cancellation
-
-
-def _wait_for(condition, timeout_s: float = 5.0) -> None:
-    end = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached in time")
-        time.sleep(0.02)
 
 
 def _rpc_threads_busy() -> int:
