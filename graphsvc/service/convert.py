@@ -162,20 +162,18 @@ def json_safe(value):
 # ---------------------------------------------------------------- sensors
 
 
-def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str) -> np.ndarray | None:
+def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str, layout_name: str = "?") -> np.ndarray | None:
     """Indices that put the request's sensor triplets into the graph's order, or None
-    when they already are (or no names were given: the graph's order is implied)."""
+    when they already are (or no names were given: the graph's order is implied).
+    Sensors that are not the layout's are refused with the CLI's line naming them."""
+    from graphsvc.strategies.base import layout_mismatch_message
+
     given = list(given)
     if not given or tuple(given) == tuple(graph_names):
         return None
-    if len(given) != len(graph_names):
-        raise FieldError(field, f"{len(given)} sensors given, the graph's layout has {len(graph_names)} "
-                         f"({', '.join(graph_names)})")  # fmt: skip
-    if len(set(given)) != len(given):
-        raise FieldError(field, "duplicate sensor names")
-    unknown = [n for n in given if n not in graph_names]
-    if unknown:
-        raise FieldError(field, f"not in the graph's layout: {', '.join(unknown)} (the layout has {', '.join(graph_names)})")
+    message = layout_mismatch_message(layout_name, graph_names, given, order_matters=False)
+    if message is not None:
+        raise FieldError(field, message)
     return np.array([given.index(n) for n in graph_names], np.int64)
 
 
@@ -204,7 +202,7 @@ def recording_to_proto(rec: Recording) -> pb.Recording:
 
 
 def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording",
-                         match_layout: bool = True) -> Recording:  # fmt: skip
+                         match_layout: bool = True, layout_name: str = "?") -> Recording:  # fmt: skip
     """A validated Recording with the sensors in the graph's order. Checks shapes,
     finiteness (NaN = missing is allowed in readings, never in times) and order.
     match_layout False (a strategy that reads no accelerations): the sensors are
@@ -218,12 +216,12 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
         raise FieldError(f"{field}.timestamps_s", "no samples")
     _check_times(t, f"{field}.timestamps_s")
     if match_layout:
-        order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
+        order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names", layout_name)
     else:
         order, graph_names = None, tuple(msg.sensor_names) or tuple(graph_names)
     S = len(graph_names)
-    acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order)
-    orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order)
+    acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order, graph_names)
+    orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order, graph_names)
     marker_names, markers = tuple(msg.marker_names), None
     if len(msg.marker_positions_m) or marker_names:
         M = len(marker_names)
@@ -255,7 +253,7 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
     return rec
 
 
-def _per_sensor(values, T: int, S: int, width: int, field: str, order) -> np.ndarray | None:
+def _per_sensor(values, T: int, S: int, width: int, field: str, order, names=()) -> np.ndarray | None:
     """(T, S, width) float32 in the graph's sensor order from a flat proto field, None
     when it is empty."""
     a = np.array(values, np.float32)
@@ -263,7 +261,7 @@ def _per_sensor(values, T: int, S: int, width: int, field: str, order) -> np.nda
         return None
     if a.shape[0] != T * S * width:
         raise FieldError(field, f"expected T×S×{width} = {T}×{S}×{width} = {T * S * width} values "
-                         f"({T} timestamps, {S} sensors), got {a.shape[0]}")  # fmt: skip
+                         f"({T} timestamps, {S} sensors{': ' if names else ''}{', '.join(names)}), got {a.shape[0]}")  # fmt: skip
     _check_no_inf(field, a, S * width)
     a = a.reshape(T, S, width)
     return np.ascontiguousarray(a[:, order]) if order is not None else a

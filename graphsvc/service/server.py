@@ -256,7 +256,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             graph = self._graph(request.graph).graph
             options = convert.options_from_proto(request.options, "options")
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
-            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc)
+            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
+                                                graph.layout.get("name", "?"))
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
             # Serial kernels: many calls share the machine (and while this one runs, a
@@ -338,7 +339,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         options = convert.options_from_proto(config.options, "config.options")
         reads_acc = "accelerations" in get_strategy(options.strategy).uses
         if reads_acc:
-            order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
+            order = convert.sensor_order(config.sensor_names, names, "config.sensor_names", graph.layout.get("name", "?"))
         else:  # whatever sensors the samples carry (the strategy reads none): the lengths still checked
             order, names = None, tuple(config.sensor_names) or names
         marker_names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")

@@ -242,6 +242,29 @@ def test_bad_synthesize_requests_get_the_right_status(conn, recording):
     assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples  # still serving
 
 
+def test_wrong_layout_names_the_sensors_as_the_cli_does(conn, graph, recording):
+    """The service refuses sensors that are not the graph's layout with the CLI's own
+    line: the missing sensors and the strangers by name, not counts."""
+    from graphsvc.errors import InputError
+    from graphsvc.strategies.base import check_layout
+
+    names = list(recording.sensor_names)
+    wrong = ["elbow_x", *names[1:]]
+    with pytest.raises(InputError) as cli:
+        check_layout(graph, wrong)
+    assert f"missing {names[0]}" in str(cli.value) and "not in the graph: elbow_x" in str(cli.value)
+    code, details = _code(conn.stub.Synthesize, _recording_request(recording, **{"recording.sensor_names": wrong}),
+                          timeout=10)
+    assert code == grpc.StatusCode.INVALID_ARGUMENT
+    assert details == f"recording.sensor_names: {cli.value}"
+    samples = list(C.recording_samples(recording))[:3]
+    code, details = _code(lambda: list(conn.stub.StreamSynthesize(
+        _requests(C.stream_config("small", None, names[:-1]), samples), timeout=10)))
+    assert code == grpc.StatusCode.INVALID_ARGUMENT
+    assert f"missing {names[-1]}" in details and details.startswith("config.sensor_names: the recording's sensors")
+    assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples
+
+
 def _stream_cases(recording):
     samples = list(C.recording_samples(recording))[:6]
     config = C.stream_config("small")
