@@ -1,6 +1,8 @@
 """Atomic file output: write to a temporary file beside the target, fsync, rename.
 A reader never sees a half-written file and a failed write leaves the old one intact.
-And `read_json_file`: a small JSON input file, its faults as FormatError."""
+And reading input files: `require_file`, `read_input_bytes`, `read_input_text`,
+`read_json_file`, a missing file, a folder, an unreadable or non-UTF-8 file as the
+project's errors, worded one way."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import FormatError, InputError, MissingFileError
 
 
 @contextlib.contextmanager
@@ -75,15 +77,48 @@ def write_text_atomic(path, text: str) -> None:
         f.write(text.encode("utf-8"))
 
 
-def read_json_file(path):
+def require_file(path, what: str = "") -> Path:
+    """`path` as a Path when it is a file; MissingFileError (or FormatError for a
+    folder) otherwise. what: what the file is for, named in the message."""
+    path = Path(path)
+    if path.is_dir():
+        raise FormatError(path, "is a folder, not a file")
+    if not path.is_file():
+        raise MissingFileError(path, what)
+    return path
+
+
+def read_input_bytes(path, what: str = "") -> bytes:
+    """The file's bytes; a missing file, a folder or a file that cannot be read as the
+    project's errors naming it."""
+    path = Path(path)
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise MissingFileError(path, what) from None
+    except IsADirectoryError:
+        raise FormatError(path, "is a folder, not a file") from None
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror or e}") from None
+
+
+def read_input_text(path, what: str = "", encoding: str = "utf-8") -> str:
+    """The file's text (`read_input_bytes`); FormatError when it is not `encoding`."""
+    data = read_input_bytes(path, what)
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError as e:
+        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+
+
+def read_json_file(path, what: str = ""):
     """The parsed content of a UTF-8 JSON file; FormatError naming the file (and the
-    line) when it is not UTF-8 or not valid JSON."""
+    line) when it is missing, not UTF-8 or not valid JSON."""
     import json
 
+    text = read_input_text(path, what)
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
 

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
+from graphsvc.fileio import require_file
 from graphsvc.sensors.recording import Recording, csv_rows, read_csv_table, sample_rate
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -116,9 +117,7 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
     import ezc3d
 
     _check_up(up)
-    path = Path(path)
-    if not path.is_file():
-        raise FormatError(path, "no such file")
+    path = require_file(path)
     try:
         c3d = ezc3d.c3d(str(path))
     except (RuntimeError, OSError, ValueError, IndexError) as exc:

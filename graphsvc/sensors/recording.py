@@ -79,7 +79,7 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.fileio import atomic_writer
+from graphsvc.fileio import atomic_writer, read_input_text
 from graphsvc.store import read_container, write_container
 
 KIND = "recording"
@@ -391,12 +391,7 @@ def read_csv_table(path, expect: str, on_header=None) -> CsvTable:
     header the "no header row" error suggests. FormatError with the line for anything
     else, and for a file with no row after its header."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except UnicodeDecodeError as e:
-        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    text = read_input_text(path, encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
     comments: dict[str, str] = {}
     comment_lines: dict[str, int] = {}
     header: list[str] | None = None

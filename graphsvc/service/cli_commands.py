@@ -19,6 +19,7 @@ from pathlib import Path
 
 from graphsvc.cli_args import Parser, add_calibration_option, add_search_options, os_message, search_options
 from graphsvc.errors import GraphsvcError
+from graphsvc.fileio import read_input_text
 
 
 def _check_output(path: Path) -> None:
@@ -147,7 +148,7 @@ def _cmd_client_batch(args) -> int:
         if args.batch_command == "submit":
             path = Path(args.manifest)
             fmt = args.format or ("json" if path.suffix.lower() == ".json" else "csv")
-            status = submit_batch(conn, path.read_text(encoding="utf-8"), fmt, args.retries, args.timeout)
+            status = submit_batch(conn, read_input_text(path, "manifest"), fmt, args.retries, args.timeout)
             while args.wait and status.state in ("queued", "running"):
                 time.sleep(args.poll)
                 status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=status.batch_id), args.timeout)

@@ -31,6 +31,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
+from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
@@ -107,7 +108,7 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
 def read_tokens(path) -> tuple[str, ...]:
     """Accepted tokens: one per line; blank lines and lines starting with # are
     skipped. Several lines let a token be rotated without downtime."""
-    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    lines = read_input_text(path, "token file").splitlines()
     tokens = tuple(t.strip() for t in lines if t.strip() and not t.strip().startswith("#"))
     if not tokens:
         raise InputError(f"{path}: no token in the token file")
@@ -500,8 +501,8 @@ def bind_server(config: ServerConfig) -> BoundServer:
     address = f"{config.host}:{config.port}"
     try:
         if config.tls_cert is not None:
-            credentials = grpc.ssl_server_credentials([(Path(config.tls_key).read_bytes(),
-                                                        Path(config.tls_cert).read_bytes())])  # fmt: skip
+            credentials = grpc.ssl_server_credentials([(read_input_bytes(config.tls_key, "TLS key"),
+                                                        read_input_bytes(config.tls_cert, "TLS certificate"))])  # fmt: skip
             port = server.add_secure_port(address, credentials)
         else:
             port = server.add_insecure_port(address)
