@@ -141,7 +141,7 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
     except grpc.RpcError as exc:
         raise service_error(exc, "Synthesize") from None
     motion = convert.motion_from_proto(response.motion, skeleton)
-    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.struct_to_dict(response.report))
+    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.report_from_proto(response))
 
 
 # ---------------------------------------------------------------- live

@@ -724,9 +724,25 @@ def frames_to_motion(frames: list[pb.PoseFrame], skeleton: Skeleton, rate_hz: fl
     return Motion(skeleton, rot, trans, rate_hz, name=name, source="graphsvc live stream")
 
 
-def report_to_struct(report: dict, out) -> None:
-    """Fill a google.protobuf.Struct with a JSON-safe copy of `report`."""
-    out.update(json_safe(report))
+def report_to_proto(report: dict, response: pb.SynthesizeResponse) -> None:
+    """The report into a SynthesizeResponse: JSON text (report_json, types kept) and
+    the Struct (report, every number a double) for clients that read that."""
+    safe = json_safe(report)
+    response.report_json = json.dumps(safe, sort_keys=True, allow_nan=False)
+    response.report.update(safe)
+
+
+def report_from_proto(response: pb.SynthesizeResponse) -> dict:
+    """The report of a SynthesizeResponse with its integers as integers (from
+    report_json; a server that sends only the Struct gives its doubles)."""
+    if response.report_json:
+        try:
+            report = json.loads(response.report_json)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"report_json: not valid JSON ({exc.msg})") from None
+        if isinstance(report, dict):
+            return report
+    return struct_to_dict(response.report)
 
 
 def struct_to_dict(msg) -> dict:

@@ -271,7 +271,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                                               bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
             if result.provenance is not None:
                 response.provenance.CopyFrom(convert.provenance_to_proto(result.provenance))
-            convert.report_to_struct(result.report, response.report)
+            convert.report_to_proto(result.report, response)
             return response
         except Exception as exc:  # noqa: BLE001 — every failure becomes a status, never a dead worker
             _abort_for(context, exc)

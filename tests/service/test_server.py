@@ -177,6 +177,34 @@ def test_reflection_lists_and_describes_the_service(server, version):
 # ---------------------------------------------------------------- bad requests
 
 
+def test_report_arrives_with_its_types(conn, graph, recording):
+    """The client's report is the library's as `synthesize --report` writes it: the
+    node path and every count integers, the same keys, the same values but timings."""
+    import json
+
+    from graphsvc.pipeline import reconstruct
+
+    got = C.synthesize(conn, "small", recording).report
+    options = convert.options_from_proto(pb.SynthesisOptions(), "options")  # what the server makes of none
+    want = json.loads(json.dumps(reconstruct(graph, recording, options, threads=False).report, sort_keys=True))
+    assert got["node_path"] and all(type(n) is int for n in got["node_path"])
+
+    def same(a, b, where):
+        assert type(a) is type(b), f"{where}: {a!r} against {b!r}"
+        if isinstance(a, dict):
+            assert sorted(a) == sorted(b), where
+            for k in a:
+                same(a[k], b[k], f"{where}.{k}")
+        elif isinstance(a, list):
+            assert len(a) == len(b), where
+            for k, (x, y) in enumerate(zip(a, b)):
+                same(x, y, f"{where}[{k}]")
+        elif not where.startswith(("report.timings_s", "report.samples_per_s")):
+            assert a == b, f"{where}: {a!r} against {b!r}"
+
+    same(got, want, "report")
+
+
 def _recording_request(recording, **changes) -> pb.SynthesizeRequest:
     request = pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording))
     for key, value in changes.items():
