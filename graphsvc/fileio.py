@@ -20,28 +20,95 @@ from graphsvc.errors import FormatError, InputError, MissingFileError
 def atomic_writer(path) -> Iterator[IO[bytes]]:
     """Yield a binary file beside `path`; on normal exit it is flushed, fsynced and
     renamed onto `path`. On any error the temporary file is removed and an existing
-    `path` is left untouched. A missing output folder raises InputError naming it."""
+    `path` is left untouched. A missing output folder raises InputError naming it.
+    A process killed while writing leaves `path` as it was and its temporary file
+    (`.NAME.HOST-PID.XXXX.tmp`), which the next write of `path` removes."""
     path = Path(path)
     folder = path.parent
     if not folder.is_dir():
         raise InputError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not a file")
-    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".tmp", delete=False)
+    remove_stale_temporaries(path)
+    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.{owner_tag()}.", suffix=".tmp", delete=False)
     try:
         with tmp as f:
+            _crash_point("open", path)
             yield f
             f.flush()
             os.fsync(f.fileno())
         # NamedTemporaryFile creates 0600; give the result the mode a plain open()
         # would (or keep the mode of the file it replaces).
         os.chmod(tmp.name, _target_mode(path))
+        _crash_point("rename", path)
         os.replace(tmp.name, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp.name)
         raise
     _fsync_dir(folder)
+
+
+def owner_tag() -> str:
+    """HOST-PID of this process, in a temporary file's (or folder's) name."""
+    import socket
+
+    return f"{socket.gethostname()}-{os.getpid()}"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # (EPERM: it exists, another user's)
+        return True
+    return True
+
+
+def stale_temporary(tmp: Path, name: str) -> bool:
+    """Whether `tmp`, a temporary of `name` (`.NAME.HOST-PID.XXXX.tmp`, a file or a
+    folder), was left by a process of this host that no longer runs. Another host's,
+    a live process's and names of another shape are not."""
+    middle = tmp.name[len(name) + 2: -len(".tmp")]
+    owner = middle.rsplit(".", 1)[0]
+    host, _, pid = owner.rpartition("-")
+    if not tmp.name.startswith(f".{name}.") or not pid.isdigit():
+        return False
+    import socket
+
+    return host == socket.gethostname() and int(pid) != os.getpid() and not _pid_alive(int(pid))
+
+
+def remove_stale_temporaries(path) -> int:
+    """Remove the temporary files a killed writer of `path` left beside it
+    (`stale_temporary`); how many."""
+    import glob
+
+    path = Path(path)
+    removed = 0
+    for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        if stale_temporary(tmp, path.name):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+                removed += 1
+    return removed
+
+
+def _crash_point(where: str, path: Path) -> None:
+    """Test hook: GRAPHSVC_CRASH_AT=WHERE[:GLOB] kills this process with SIGKILL at
+    that point of writing a file whose name matches GLOB ("open": the temporary file
+    just made, "rename": written and synced, not yet in place), as a power cut or an
+    OOM kill would. Unset in normal use."""
+    hook = os.environ.get("GRAPHSVC_CRASH_AT")
+    if not hook:
+        return
+    import fnmatch
+    import signal
+
+    point, _, pattern = hook.partition(":")
+    if point == where and fnmatch.fnmatch(path.name, pattern or "*"):
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _target_mode(path: Path) -> int:
