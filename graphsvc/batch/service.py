@@ -112,8 +112,10 @@ class BatchManager:
 
     def _folder(self, batch_id: str) -> Path:
         folder = self.root / batch_id
-        if not batch_id or "/" in batch_id or batch_id.startswith(".") or not (folder / store.DB_NAME).is_file():
-            raise BatchNotFound(f"batch_id: no batch {batch_id!r} in this server's batch folder")
+        plausible = 0 < len(batch_id) <= 128 and "/" not in batch_id and "\0" not in batch_id
+        if not plausible or batch_id.startswith(".") or not (folder / store.DB_NAME).is_file():
+            shown = batch_id if len(batch_id) <= 64 else batch_id[:61] + "..."
+            raise BatchNotFound(f"batch_id: no batch {shown!r} in this server's batch folder")
         return folder
 
     def status(self, batch_id: str, items: bool = False) -> dict:

@@ -16,7 +16,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph, summary
 from graphsvc.motion.skeleton import Motion, Skeleton
-from graphsvc.sensors.recording import Recording, validate_constraints
+from graphsvc.sensors.recording import Recording, check_gap, check_rate, validate_constraints
 from graphsvc.service._generated import graphsvc_pb2 as pb
 
 STRATEGY_NAMES = {pb.STRATEGY_UNSPECIFIED: "viterbi", pb.STRATEGY_VITERBI: "viterbi", pb.STRATEGY_OLNG: "olng",
@@ -208,8 +208,10 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
     match_layout False (a strategy that reads no accelerations): the sensors are
     whatever the recording names (the graph's when it names none), in its order."""
     rate = msg.rate_hz
-    if not (math.isfinite(rate) and rate > 0):
-        raise FieldError(f"{field}.rate_hz", f"must be a positive number of Hz, got {rate}")
+    try:
+        check_rate(rate, "rate")
+    except InputError as exc:
+        raise FieldError(f"{field}.rate_hz", str(exc)) from None
     t = np.array(msg.timestamps_s, np.float64)
     T = t.shape[0]
     if T == 0:
@@ -331,6 +333,11 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
     if previous_time_s is not None and not t > previous_time_s:
         raise FieldError(f"{field}.time_s", f"{t!r} s is not after the previous sample's {previous_time_s!r} s "
                          "(times must strictly increase)")  # fmt: skip
+    if previous_time_s is not None:
+        try:
+            check_gap(previous_time_s, t)
+        except InputError as exc:
+            raise FieldError(f"{field}.time_s", str(exc)) from None
     acc = np.array(msg.accelerations_m_s2, np.float64)
     if acc.shape[0] == 0 and not reads_acc:
         acc = None

@@ -179,16 +179,28 @@ class RpcStatus(Exception):
         self.message = message
 
 
+MAX_DETAILS_BYTES = 2048  # a status message rides in a trailer gRPC caps at 16 KiB, percent-encoded
+
+
+def status_details(text: str) -> str:
+    """`text` cut to MAX_DETAILS_BYTES of UTF-8 (an echoed oversize value must not
+    turn the answer into RESOURCE_EXHAUSTED)."""
+    data = text.encode("utf-8")
+    if len(data) <= MAX_DETAILS_BYTES:
+        return text
+    return data[: MAX_DETAILS_BYTES - 3].decode("utf-8", "ignore") + "…"
+
+
 def _abort_for(context: grpc.ServicerContext, exc: BaseException) -> None:
     """Map an exception to a status and end the call (context.abort raises)."""
     if isinstance(exc, RpcStatus):
-        context.abort(exc.code, exc.message)
+        context.abort(exc.code, status_details(exc.message))
     if isinstance(exc, StrategyNotImplementedError):
-        context.abort(grpc.StatusCode.UNIMPLEMENTED, str(exc))
+        context.abort(grpc.StatusCode.UNIMPLEMENTED, status_details(str(exc)))
     if isinstance(exc, SearchCancelled):  # the client is gone or out of time; nobody reads this
         context.abort(grpc.StatusCode.CANCELLED, str(exc))
     if isinstance(exc, GraphsvcError):
-        context.abort(grpc.StatusCode.INVALID_ARGUMENT, str(exc))
+        context.abort(grpc.StatusCode.INVALID_ARGUMENT, status_details(str(exc)))
     # A bug: keep the traceback for the operator, tell the client only what failed.
     traceback.print_exception(exc, file=sys.stderr)
     context.abort(grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}); see the server log")

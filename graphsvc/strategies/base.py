@@ -36,7 +36,7 @@ from graphsvc.sensors.anatomy import check_frames
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
-from graphsvc.sensors.recording import Recording
+from graphsvc.sensors.recording import Recording, check_gap
 from graphsvc.strategies.options import Options, check_constraints
 
 INPUTS = ("accelerations", "orientations", "markers", "ground_position", "heading", "constraints")
@@ -551,6 +551,8 @@ class LiveSession:
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
             raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
+        if self.prev is not None:
+            check_gap(float(self.prev[0]), float(t_s))
         acc = np.asarray(acc, dtype=np.float64) if self.reads_acc else np.zeros((0, 3))  # (else ignored)
         if acc.shape != (self.S, 3):
             raise InputError(f"accelerations must be ({self.S}, 3) for the graph's sensors, got {acc.shape}")
