@@ -14,8 +14,9 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (Parser, add_input_file_options, add_marker_options, add_search_options,
-                               add_synthesize_options, os_message, search_options)  # fmt: skip
+from graphsvc.cli_args import (COUNT, RATE_HZ, SEED, Parser, add_input_file_options, add_marker_options,
+                               add_search_options, add_synthesize_options, os_message, ranged,
+                               search_options)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 
 
@@ -465,9 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gap-fraction", type=float, metavar="F",
                    help="markers: random gaps of 5–80 samples until this share of samples is in one")
     p.add_argument("--noise", default="none", help="PRESET[,key=value...] (presets: none, default, tracker, harsh)")
-    p.add_argument("--position-noise", type=float, metavar="M", help="overhead-tracker noise σ in metres")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rate", type=float, metavar="HZ", help="resample to this rate first")
+    p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M", help="overhead-tracker noise σ in metres")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--rate", type=RATE_HZ, metavar="HZ", help="resample to this rate first")
     p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons, or 'guess'")
     p.add_argument("-o", "--output", required=True, metavar="REC",
                    help="output .rec (or .csv: a device CSV, or a marker CSV with --markers)")
@@ -476,7 +477,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("build", help="build a motion graph from a knowledge base")
     p.add_argument("kb", nargs="+", metavar="KB", help="motion files, folders or globs (.bvh, .amc)")
     p.add_argument("-o", "--output", required=True, metavar="FILE")
-    p.add_argument("--rate", type=float, default=30.0, metavar="HZ", help="graph rate (default 30)")
+    p.add_argument("--rate", type=RATE_HZ, default=30.0, metavar="HZ", help="graph rate (default 30)")
     p.add_argument("--layout", default="wrists-ankles", help="sensor layout for the edge metadata")
     p.add_argument("--no-msv", action="store_true", help="no slow-down nodes or speed-up edges")
     p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
@@ -485,7 +486,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
     p.add_argument("--mapping", metavar="FILE",
                    help="joint mapping JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
-    p.add_argument("--jobs", type=int, default=1, metavar="N", help="threads for loading and preparing clips")
+    p.add_argument("--jobs", type=COUNT, default=1, metavar="N", help="threads for loading and preparing clips")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)
 
@@ -527,7 +528,7 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="an existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else a"
                             " local cluster)")
-    where.add_argument("--workers", type=int, metavar="N", help="local cluster workers (default: one a core)")
+    where.add_argument("--workers", type=COUNT, metavar="N", help="local cluster workers (default: one a core)")
     p.add_argument("--retries", type=int, default=2, metavar="R",
                    help="further attempts after a failure that is not the input's (a worker died; default 2)")
     p.add_argument("--graph", action="append", metavar="NAME=PATH", help="a graph the manifest names (repeatable)")
@@ -542,15 +543,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--graph", metavar="FILE", help="a graph built from the same KB, instead of building one")
     p.add_argument("--augment", metavar="KINDS", help="build with copies: mirror, reverse (held out with their clip)")
     p.add_argument("--noise", default="default", help="PRESET[,key=value...] (default: the 'default' preset, docs/sensors.md)")
-    p.add_argument("--position-noise", type=float, metavar="M",
+    p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M",
                    help="keep the overhead tracker's positions with this σ in metres (0: exact)")
     add_search_options(p, constraints=False)
     p.add_argument("--flicker", type=float, metavar="P",
                    help="ssg: each simulated marker unseen this share of samples, in short dropouts")
     p.add_argument("--gap-fraction", type=float, metavar="F",
                    help="ssg: random gaps of 5–80 samples (every marker unseen) until this share of samples")
-    p.add_argument("--seed", type=int, default=0, help="noise seed (each clip's is derived from it and its name)")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
+    p.add_argument("--seed", type=SEED, default=0, help="noise seed (each clip's is derived from it and its name)")
+    p.add_argument("--jobs", type=COUNT, default=1, metavar="N",
                    help="evaluate N clips at once in worker processes (and build with N threads)")
     p.add_argument("--mixed", type=int, metavar="N",
                    help="score performances of N test clips with N different labels joined end to end (one performer "
@@ -583,9 +584,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--layout", default="kelly6")
-    p.add_argument("--minutes", type=float, default=3.0, help="knowledge-base length")
+    p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=3.0,
+                   help="knowledge-base length (at most 600)")
     p.set_defaults(run=_cmd_demo)
 
     from graphsvc.service.cli_commands import add_service_parsers

@@ -4,6 +4,8 @@ fails in one line, the strategy flags, and how an OSError reads."""
 from __future__ import annotations
 
 import argparse
+import argparse
+import math
 import re
 
 from graphsvc.strategies.options import ORIENTATION_WEIGHT
@@ -18,6 +20,34 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):  # one line, exit 2, like every other user error
         self.exit(2, f"graphsvc: error: {message} (see --help)\n")
+
+
+def _number(kind, text: str, low: float, high: float, low_open: bool):
+    try:
+        value = kind(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+    if not math.isfinite(value) or value > high or (value <= low if low_open else value < low):
+        bound = f"> {low:g}" if low_open else f"≥ {low:g}"
+        raise argparse.ArgumentTypeError(f"{text!r} must be finite, {bound} and at most {high:g}")
+    return value
+
+
+def ranged(kind, low: float, high: float, low_open: bool = False):
+    """An argparse `type`: a finite int or float in [low, high] ((low, high] when
+    low_open); anything else is refused with one line, exit 2."""
+
+    def convert(text: str):
+        return _number(kind, text, low, high, low_open)
+
+    convert.__name__ = "integer" if kind is int else "number"  # (argparse names the type in its message)
+    return convert
+
+
+SEED = ranged(int, 0, 2**63 - 1)
+RATE_HZ = ranged(float, 0.0, 100_000.0, low_open=True)  # (sensors.recording.MAX_RATE_HZ)
+COUNT = ranged(int, 1, 4096)  # threads, workers, streams
+PROTO_UINT = ranged(int, 0, 2**32 - 1)  # (a uint32 of the service's options; the strategies check their own range)
 
 
 def search_options(args):
@@ -131,10 +161,10 @@ def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
                    help="time constant (s) with which each path's placement follows the measured positions (0: placed"
                         f" once, at the start; default {TRACK_PULL_S:g}); olng follows the tracker the same way")
     g = p.add_argument_group("olng (Tautges et al. 2011)")
-    g.add_argument("--olng-k", type=int, metavar="K",
+    g.add_argument("--olng-k", type=PROTO_UINT, metavar="K",
                    help="neighbours a sample (default: frames / 150, 16 to 4096, the paper's 4096 of ~600,000)")
-    g.add_argument("--olng-i", type=int, metavar="I", help="paths the pose is made from (default K / 16, 4 to 256)")
-    g.add_argument("--olng-m", type=int, metavar="M", help="window columns (default 32)")
+    g.add_argument("--olng-i", type=PROTO_UINT, metavar="I", help="paths the pose is made from (default K / 16, 4 to 256)")
+    g.add_argument("--olng-m", type=PROTO_UINT, metavar="M", help="window columns (default 32)")
     g.add_argument("--olng-basic-steps", action="store_true", help="leave out the extended steps (a column skipped)")
     g.add_argument("--olng-weights", metavar="PRIOR,CONTR,POSE,MOTION,SMOOTH",
                    help="energy weights (default the paper's 5,1,0.6,0.2,0.2)")
@@ -146,7 +176,7 @@ def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
                    help="window length, seconds (default 1/3; 0.25 when every marker is on the head or trunk)")
     g.add_argument("--ssg-overlap", type=float, metavar="S",
                    help="overlap of consecutive windows, seconds, at most half a window (default 1/6; 0.1)")
-    g.add_argument("--ssg-k", type=int, metavar="K", help="subsequences kept a window (default 8; 16)")
+    g.add_argument("--ssg-k", type=PROTO_UINT, metavar="K", help="subsequences kept a window (default 8; 16)")
     g.add_argument("--ssg-weight", type=float, metavar="W",
                    help="weight of the transition costs against the node costs (default 1; 4)")
     g.add_argument("--ssg-offsets", choices=("auto", "fit", "nominal"),

@@ -77,6 +77,7 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     out_dir = Path(out_dir)
     if not out_dir.parent.is_dir():
         raise GraphsvcError(f"output folder {out_dir.parent} does not exist")
+    layout = load_layout(layout_name)  # (an unknown layout refused before anything is written)
     (out_dir / "kb").mkdir(parents=True, exist_ok=True)
     timings = {}
     # numba's threaded search kernels compile in another process meanwhile (`precompile`).
@@ -94,7 +95,6 @@ def run_demo(out_dir: Path, seed: int = 0, layout_name: str = "kelly6", minutes:
     timings["write_bvh_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    layout = load_layout(layout_name)
     rec = simulate_recording(performance, layout, PRESETS["default"], seed=seed)
     save_recording(rec, out_dir / "performance.rec")
     export_csv(rec, out_dir / "performance.csv")

@@ -22,6 +22,16 @@ class FormatError(GraphsvcError):
         super().__init__(f"{where}: {message}")
 
 
+class MissingFileError(FormatError):
+    """An input file that is not there: `<path>: no such file`, after what it was for
+    when given (`actor map: <path>: no such file`). The one wording for every reader."""
+
+    def __init__(self, path, what: str = ""):
+        super().__init__(path, "no such file")
+        if what:
+            self.args = (f"{what}: {self.args[0]}",)
+
+
 class UnknownFormatError(GraphsvcError):
     """A path whose format graphsvc does not read."""
 

@@ -1,6 +1,8 @@
 """Atomic file output: write to a temporary file beside the target, fsync, rename.
 A reader never sees a half-written file and a failed write leaves the old one intact.
-And `read_json_file`: a small JSON input file, its faults as FormatError."""
+And reading input files: `require_file`, `read_input_bytes`, `read_input_text`,
+`read_json_file`, a missing file, a folder, an unreadable or non-UTF-8 file as the
+project's errors, worded one way."""
 
 from __future__ import annotations
 
@@ -11,35 +13,102 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import FormatError, InputError, MissingFileError
 
 
 @contextlib.contextmanager
 def atomic_writer(path) -> Iterator[IO[bytes]]:
     """Yield a binary file beside `path`; on normal exit it is flushed, fsynced and
     renamed onto `path`. On any error the temporary file is removed and an existing
-    `path` is left untouched. A missing output folder raises InputError naming it."""
+    `path` is left untouched. A missing output folder raises InputError naming it.
+    A process killed while writing leaves `path` as it was and its temporary file
+    (`.NAME.HOST-PID.XXXX.tmp`), which the next write of `path` removes."""
     path = Path(path)
     folder = path.parent
     if not folder.is_dir():
         raise InputError(f"{path}: output folder {folder} does not exist")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not a file")
-    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.", suffix=".tmp", delete=False)
+    remove_stale_temporaries(path)
+    tmp = tempfile.NamedTemporaryFile(dir=folder, prefix=f".{path.name}.{owner_tag()}.", suffix=".tmp", delete=False)
     try:
         with tmp as f:
+            _crash_point("open", path)
             yield f
             f.flush()
             os.fsync(f.fileno())
         # NamedTemporaryFile creates 0600; give the result the mode a plain open()
         # would (or keep the mode of the file it replaces).
         os.chmod(tmp.name, _target_mode(path))
+        _crash_point("rename", path)
         os.replace(tmp.name, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp.name)
         raise
     _fsync_dir(folder)
+
+
+def owner_tag() -> str:
+    """HOST-PID of this process, in a temporary file's (or folder's) name."""
+    import socket
+
+    return f"{socket.gethostname()}-{os.getpid()}"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # (EPERM: it exists, another user's)
+        return True
+    return True
+
+
+def stale_temporary(tmp: Path, name: str) -> bool:
+    """Whether `tmp`, a temporary of `name` (`.NAME.HOST-PID.XXXX.tmp`, a file or a
+    folder), was left by a process of this host that no longer runs. Another host's,
+    a live process's and names of another shape are not."""
+    middle = tmp.name[len(name) + 2: -len(".tmp")]
+    owner = middle.rsplit(".", 1)[0]
+    host, _, pid = owner.rpartition("-")
+    if not tmp.name.startswith(f".{name}.") or not pid.isdigit():
+        return False
+    import socket
+
+    return host == socket.gethostname() and int(pid) != os.getpid() and not _pid_alive(int(pid))
+
+
+def remove_stale_temporaries(path) -> int:
+    """Remove the temporary files a killed writer of `path` left beside it
+    (`stale_temporary`); how many."""
+    import glob
+
+    path = Path(path)
+    removed = 0
+    for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        if stale_temporary(tmp, path.name):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+                removed += 1
+    return removed
+
+
+def _crash_point(where: str, path: Path) -> None:
+    """Test hook: GRAPHSVC_CRASH_AT=WHERE[:GLOB] kills this process with SIGKILL at
+    that point of writing a file whose name matches GLOB ("open": the temporary file
+    just made, "rename": written and synced, not yet in place), as a power cut or an
+    OOM kill would. Unset in normal use."""
+    hook = os.environ.get("GRAPHSVC_CRASH_AT")
+    if not hook:
+        return
+    import fnmatch
+    import signal
+
+    point, _, pattern = hook.partition(":")
+    if point == where and fnmatch.fnmatch(path.name, pattern or "*"):
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _target_mode(path: Path) -> int:
@@ -75,15 +144,48 @@ def write_text_atomic(path, text: str) -> None:
         f.write(text.encode("utf-8"))
 
 
-def read_json_file(path):
+def require_file(path, what: str = "") -> Path:
+    """`path` as a Path when it is a file; MissingFileError (or FormatError for a
+    folder) otherwise. what: what the file is for, named in the message."""
+    path = Path(path)
+    if path.is_dir():
+        raise FormatError(path, "is a folder, not a file")
+    if not path.is_file():
+        raise MissingFileError(path, what)
+    return path
+
+
+def read_input_bytes(path, what: str = "") -> bytes:
+    """The file's bytes; a missing file, a folder or a file that cannot be read as the
+    project's errors naming it."""
+    path = Path(path)
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise MissingFileError(path, what) from None
+    except IsADirectoryError:
+        raise FormatError(path, "is a folder, not a file") from None
+    except OSError as e:
+        raise FormatError(path, f"cannot read: {e.strerror or e}") from None
+
+
+def read_input_text(path, what: str = "", encoding: str = "utf-8") -> str:
+    """The file's text (`read_input_bytes`); FormatError when it is not `encoding`."""
+    data = read_input_bytes(path, what)
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError as e:
+        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+
+
+def read_json_file(path, what: str = ""):
     """The parsed content of a UTF-8 JSON file; FormatError naming the file (and the
-    line) when it is not UTF-8 or not valid JSON."""
+    line) when it is missing, not UTF-8 or not valid JSON."""
     import json
 
+    text = read_input_text(path, what)
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise FormatError(path, f"not valid JSON: {exc.msg}", exc.lineno) from None
 

@@ -52,7 +52,7 @@ from typing import NamedTuple
 import numpy as np
 
 from graphsvc.fileio import atomic_writer
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import FormatError, InputError, MissingFileError
 
 MAGIC = b"GRAPHSVC"
 END_MAGIC = b"GSVC-END"
@@ -248,7 +248,7 @@ def _load_bytes(path: Path, use_mmap: bool) -> np.ndarray:
                 raise FormatError(path, "file changed size while being read")
             return buf
     except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
+        raise MissingFileError(path) from None
     except IsADirectoryError:
         raise FormatError(path, "is a folder, not a graphsvc file") from None
     except PermissionError as e:

@@ -138,7 +138,7 @@ def table(rows: list[dict]) -> str:
         g = r["groups"]
         cells = (r["hold_out"], f"`{r['layout']}`", r["inputs"], f"`{r['strategy']}`", str(r["clips"]),
                  _f(r["joint_err_cm"], ".2f"), _f(r["root_err_cm"], ".1f"), _f(r["heading_err_deg"], ".1f"),
-                 _f(r["label_acc"], ".0f", 100.0) + (" %" if r["label_acc"] is not None else ""),
+                 (_f(r["label_acc"], ".0f", 100.0) + " %") if r["label_acc"] is not None else "n/a",
                  _f(g.get("locomotion", {}).get("joint_err_cm"), ".2f"),
                  _f(g.get("gestures", {}).get("joint_err_cm"), ".2f"))  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
-from graphsvc.fileio import file_sha256
+from graphsvc.fileio import file_sha256, read_input_text, require_file
 
 REQUIRED = ("recording", "graph", "strategy", "output")
 OPTIONAL = ("weights", "constraints", "calibration", "options")
@@ -55,10 +55,7 @@ def read_manifest(path) -> list[Item]:
     """Every item of a manifest; FormatError (file and line) for a row that does not
     parse, an unknown column, a missing required value or a duplicate output name."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+    text = read_input_text(path, "manifest")
     rows = _json_rows(path, text) if path.suffix.lower() == ".json" else _csv_rows(path, text)
     items, seen = [], {}
     for line, row in rows:
@@ -270,9 +267,7 @@ def _graph_path(graph: str, folder: Path, graphs: dict) -> Path:
 
 def _existing(folder: Path, name: str, what: str) -> Path:
     path = Path(name) if Path(name).is_absolute() else folder / name
-    if not path.is_file():
-        raise InputError(f"{what} {path} not found")
-    return path.resolve()
+    return require_file(path, what).resolve()
 
 
 def _digest(parts: dict) -> str:

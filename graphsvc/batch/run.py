@@ -23,7 +23,7 @@ from pathlib import Path
 from graphsvc.batch import store
 from graphsvc.batch.manifest import plan_item, read_manifest
 from graphsvc.errors import InputError
-from graphsvc.fileio import file_sha256, write_text_atomic
+from graphsvc.fileio import file_sha256, require_file, write_text_atomic
 
 CONNECT_TIMEOUT_S = 10.0
 # The workers' numeric libraries single-threaded: the workers are the parallelism.
@@ -124,8 +124,7 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
     manifest = Path(manifest)
     items = read_manifest(manifest)
     for name, path in (graphs or {}).items():
-        if not Path(path).is_file():
-            raise InputError(f"graph {name}: {path} not found")
+        require_file(path, f"graph {name}")
     check_out_dir(out_dir, create=False)
     own = None
     if client is None:

@@ -9,6 +9,9 @@ reads as `interrupted`, and submitting its manifest again resumes it.
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
+import tempfile
 import threading
 import time
 import uuid
@@ -16,7 +19,8 @@ from pathlib import Path
 
 from graphsvc.batch import store
 from graphsvc.batch.manifest import read_manifest
-from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.errors import FormatError, GraphsvcError, InputError
+from graphsvc.fileio import owner_tag, stale_temporary, write_text_atomic
 
 
 class BatchNotFound(GraphsvcError):
@@ -34,6 +38,9 @@ class BatchManager:
         from graphsvc.batch.run import check_out_dir
 
         check_out_dir(self.root, create=False)
+        for tmp in self.root.glob(".*.tmp"):  # batches a killed server was making
+            if tmp.is_dir() and stale_temporary(tmp, tmp.name[1:].split(".", 1)[0]):
+                shutil.rmtree(tmp, ignore_errors=True)
         self.graphs = dict(graphs)
         self.scheduler, self.workers = scheduler, workers
         self._lock = threading.Lock()
@@ -59,23 +66,27 @@ class BatchManager:
             raise InputError(f"retries must be ≥ 0, got {retries}")
         batch_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime()) + "-" + uuid.uuid4().hex[:8]
         folder = self.root / batch_id
-        folder.mkdir()
+        # Made whole under a temporary name and renamed into place: a server killed
+        # meanwhile leaves no half batch, only a temporary folder its next start removes.
+        staging = Path(tempfile.mkdtemp(prefix=f".{batch_id}.{owner_tag()}.", suffix=".tmp", dir=self.root))
         manifest = folder / f"manifest.{fmt}"
         try:
-            manifest.write_text(text, encoding="utf-8")
-            items = read_manifest(manifest)
+            write_text_atomic(staging / manifest.name, text)
+            try:
+                items = read_manifest(staging / manifest.name)
+            except FormatError as exc:  # (named where the batch would have been)
+                raise FormatError(manifest, exc.detail, exc.line) from None
+            con = store.open_store(staging)
+            try:
+                store.set_meta(con, "state", "queued")
+                store.set_meta(con, "submitted", time.time())
+                store.set_meta(con, "items", len(items))
+            finally:
+                con.close()
+            os.rename(staging, folder)
         except BaseException:
-            for p in folder.iterdir():
-                p.unlink()
-            folder.rmdir()
+            shutil.rmtree(staging, ignore_errors=True)
             raise
-        con = store.open_store(folder)
-        try:
-            store.set_meta(con, "state", "queued")
-            store.set_meta(con, "submitted", time.time())
-            store.set_meta(con, "items", len(items))
-        finally:
-            con.close()
         stop = threading.Event()
         thread = threading.Thread(target=self._run, args=(folder, manifest, retries, stop), daemon=True,
                                   name=f"graphsvc-batch-{batch_id}")  # fmt: skip
@@ -101,8 +112,10 @@ class BatchManager:
 
     def _folder(self, batch_id: str) -> Path:
         folder = self.root / batch_id
-        if not batch_id or "/" in batch_id or batch_id.startswith(".") or not (folder / store.DB_NAME).is_file():
-            raise BatchNotFound(f"batch_id: no batch {batch_id!r} in this server's batch folder")
+        plausible = 0 < len(batch_id) <= 128 and "/" not in batch_id and "\0" not in batch_id
+        if not plausible or batch_id.startswith(".") or not (folder / store.DB_NAME).is_file():
+            shown = batch_id if len(batch_id) <= 64 else batch_id[:61] + "..."
+            raise BatchNotFound(f"batch_id: no batch {shown!r} in this server's batch folder")
         return folder
 
     def status(self, batch_id: str, items: bool = False) -> dict:

@@ -201,6 +201,22 @@ def place_start(pos, ground, heading, true_ground0, true_heading0, fix_position:
     return pos, ground, heading + d
 
 
+def offered_labels(graph: MotionGraph, allowed: np.ndarray) -> set[str]:
+    """The content labels the nodes a search may use carry (allowed: (N,) bool)."""
+    used = np.unique(np.asarray(graph.node_label)[np.asarray(allowed, dtype=bool)])
+    return {str(graph.labels[k]) for k in used if 0 <= k < len(graph.labels)}
+
+
+def scored_labels(true_label, offered: set[str]):
+    """What label accuracy is scored against: the test clip's label, or its (T,)
+    per-frame labels with None where the graph offers that label nowhere; None (label
+    accuracy not applicable, not 0) when no frame's label is offered."""
+    if isinstance(true_label, (str, bytes, int, np.integer, np.str_)):
+        return true_label if str(true_label) in offered else None
+    kept = [w if w is not None and str(w) in offered else None for w in true_label]
+    return kept if any(w is not None for w in kept) else None
+
+
 def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSetup, true_labels=None) -> dict:
     """Reconstruct one test clip with its performance hidden and score it.
 
@@ -239,9 +255,9 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     else:
         pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
     true_label = motion.labels[0] if motion.labels else motion.name
+    scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
-                          pred_labels=pred_labels, true_label=true_label if true_labels is None else true_labels,
-                          name=motion.name)  # fmt: skip
+                          pred_labels=pred_labels, true_label=scored, name=motion.name)  # fmt: skip
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     if setup.keep_dir:

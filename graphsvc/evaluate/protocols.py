@@ -29,10 +29,8 @@ maps disagree with the offsets.
 from __future__ import annotations
 
 import fnmatch
-import json
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -85,12 +83,9 @@ def builtin_actor(name: str) -> str | None:
 
 def load_actor_map(path) -> dict[str, str]:
     """An actor map file: a JSON object from clip names or globs to actor names."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise InputError(f"cannot read actor map {path}: {e.strerror or e}") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"actor map {path}: not JSON ({e.msg} at line {e.lineno})") from None
+    from graphsvc.fileio import read_json_file
+
+    data = read_json_file(path, "actor map")
     if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
         raise InputError(f"actor map {path}: want an object of clip name or glob → actor name")
     return data

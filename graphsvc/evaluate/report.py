@@ -8,8 +8,8 @@ import numpy as np
 from graphsvc.sensors.plot import save_figure
 
 
-def _fmt(value, spec: str, scale: float = 1.0) -> str:
-    return "—" if value is None else format(value * scale, spec)
+def _fmt(value, spec: str, scale: float = 1.0, none: str = "—") -> str:
+    return none if value is None else format(value * scale, spec)
 
 
 def format_table(summary: dict) -> str:
@@ -22,10 +22,10 @@ def format_table(summary: dict) -> str:
     for r in summary["clips"]:
         rows.append((str(r.get("file") or r["name"]), f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"),
                      _fmt(r["root_err_cm"], ".1f"), _fmt(r["heading_err_deg"], ".1f"),
-                     _fmt(r["label_acc"], ".0f", 100.0), _fmt(r.get("samples_per_s"), ",.0f")))  # fmt: skip
+                     _fmt(r["label_acc"], ".0f", 100.0, "n/a"), _fmt(r.get("samples_per_s"), ",.0f")))  # fmt: skip
     def summary_row(title, m):
         return (title, f"{m['frames']:,}", _fmt(m["joint_err_cm"], ".2f"), _fmt(m["root_err_cm"], ".1f"),
-                _fmt(m["heading_err_deg"], ".1f"), _fmt(m["label_acc"], ".0f", 100.0),
+                _fmt(m["heading_err_deg"], ".1f"), _fmt(m["label_acc"], ".0f", 100.0, "n/a"),
                 _fmt(m.get("samples_per_s"), ",.0f"))  # fmt: skip
 
     m = summary["mean"]

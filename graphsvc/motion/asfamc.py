@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
+from graphsvc.fileio import require_file
 from graphsvc.motion import quat
 from graphsvc.motion.bvh import ERR_COUNT, ERR_NUMBER, OK, _POW10, _channels_to_pose, parse_rows, read_file_bytes
 from graphsvc.motion.skeleton import Motion, Skeleton
@@ -621,8 +622,6 @@ def find_asf(amc_path) -> Path:
 
 def read_asf_amc(amc_path, asf_path=None, rate_hz: float = CMU_RATE_HZ) -> Motion:
     """Read an AMC motion with its ASF skeleton (found beside it when not given)."""
-    amc_path = Path(amc_path)
-    if not amc_path.is_file():
-        raise FormatError(amc_path, "file not found")
+    amc_path = require_file(amc_path)
     asf = read_asf(find_asf(amc_path) if asf_path is None else asf_path)
     return read_amc(amc_path, asf, rate_hz=rate_hz)

@@ -423,14 +423,10 @@ _FRAME_TIME = re.compile(rb"^[ \t]*Frame[ \t]+Time[ \t]*:[ \t]*(\S*)[ \t]*\r?$")
 
 
 def read_file_bytes(path) -> bytes:
-    """Whole file as bytes; FormatError("file not found") when absent."""
-    path = Path(path)
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except IsADirectoryError:
-        raise FormatError(path, "expected a file, found a folder") from None
+    """Whole file as bytes; the project's errors for a missing or unreadable file."""
+    from graphsvc.fileio import read_input_bytes
+
+    return read_input_bytes(path)
 
 
 def _next_line(data: bytes, start: int, lineno: int) -> tuple[bytes, int, int]:

@@ -13,7 +13,6 @@ skeletons have.
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
@@ -60,13 +59,10 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
 
 
 def load_mapping_file(path) -> dict[str, str]:
+    from graphsvc.fileio import read_json_file
+
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise FormatError(path, "mapping file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FormatError(path, f"not valid JSON: {exc}") from None
+    data = read_json_file(path, "joint mapping")
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):
         raise FormatError(path, 'expected a JSON object {"canonical_name": "joint_name", ...}')
     unknown = sorted(set(data) - set(CANONICAL))

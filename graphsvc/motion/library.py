@@ -17,7 +17,8 @@ import json
 import re
 from pathlib import Path
 
-from graphsvc.errors import FormatError, UnknownFormatError
+from graphsvc.errors import FormatError, MissingFileError, UnknownFormatError
+from graphsvc.fileio import read_input_text
 from graphsvc.motion.asfamc import read_asf_amc
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.skeleton import Motion, check_finite
@@ -40,10 +41,7 @@ def _check_suffix(path: Path) -> str:
 
 
 def _read_label_file(path: Path) -> list[str]:
-    try:
-        return path.read_text(encoding="utf-8").splitlines()
-    except UnicodeDecodeError:
-        raise FormatError(path, "not UTF-8 text") from None
+    return read_input_text(path).splitlines()
 
 
 @functools.lru_cache(maxsize=64)
@@ -144,10 +142,10 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
                 elif h.suffix.lower() in MOTION_SUFFIXES and h.is_file():
                     files.add(h)
             if not files:
-                raise FormatError(text, "not found: the pattern matches no .bvh or .amc files")
+                raise FormatError(text, "no such file: the pattern matches no .bvh or .amc files")
             found.update(files)
         else:
-            raise FormatError(text, "not found")
+            raise MissingFileError(text)
     return sorted((f for f in found if not _excluded(f, exclude)), key=lambda f: f.as_posix())
 
 

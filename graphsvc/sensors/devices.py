@@ -66,6 +66,7 @@ from xml.parsers.expat import errors as expat_errors
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
+from graphsvc.fileio import read_input_text, require_file
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.recording import Recording
@@ -157,9 +158,7 @@ def _orientations(path: Path, q: np.ndarray, names: list[str], where: str | None
 def read_mvnx(path) -> Recording:
     """An Xsens MVNX export as a recording (module docstring). FormatError for a file
     that is not a readable MVNX with sensors and normal frames."""
-    path = Path(path)
-    if not path.is_file():
-        raise FormatError(path, "no such file")
+    path = require_file(path)
     reader = _MvnxReader(path)
     with open(path, "rb") as f:
         events = ET.iterparse(f, events=("start", "end"))
@@ -394,10 +393,9 @@ def load_device_map(path) -> dict[str, str]:
             raise FormatError(path, f"names {', '.join(map(repr, dup))} more than once")
         return dict(items)
 
+    text = read_input_text(path, "device map", encoding="utf-8-sig")
     try:
-        data = json.loads(path.read_text(encoding="utf-8-sig"), object_pairs_hook=pairs)
-    except UnicodeDecodeError as exc:
-        raise FormatError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        data = json.loads(text, object_pairs_hook=pairs)
     except json.JSONDecodeError as exc:
         raise FormatError(path, f"not valid JSON: {exc.msg}", line=exc.lineno) from None
     if isinstance(data, dict) and isinstance(data.get("sensors"), dict):

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
+from graphsvc.fileio import require_file
 from graphsvc.sensors.recording import Recording, csv_rows, read_csv_table, sample_rate
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -116,9 +117,7 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
     from graphsvc.sensors.c3d_guard import check_c3d, read_isolated
 
     _check_up(up)
-    path = Path(path)
-    if not path.is_file():
-        raise FormatError(path, "no such file")
+    path = require_file(path)
     data = path.read_bytes()
     check_c3d(path, data)  # what ezc3d would follow fits in the file: it does not check
     c3d = read_isolated(path, len(data))  # and what else it cannot survive ends a child process

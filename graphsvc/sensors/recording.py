@@ -79,7 +79,7 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.fileio import atomic_writer
+from graphsvc.fileio import atomic_writer, read_input_text
 from graphsvc.store import read_container, write_container
 
 KIND = "recording"
@@ -148,13 +148,32 @@ class Recording:
         validate_recording(self)
 
 
+# Bounds on time: a rate no sensor has, and a gap between consecutive samples longer
+# than a stream could mean (the strategies fill gaps on the graph's grid, so a gap of
+# 1e12 s would be 3e13 samples to allocate).
+MAX_RATE_HZ = 100_000.0
+MAX_GAP_S = 3600.0
+
+
+def check_rate(rate, what: str = "rate_hz") -> float:
+    """`rate` as a float in Hz: finite, positive, at most MAX_RATE_HZ; InputError else."""
+    if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)):
+        raise InputError(f"{what} must be a number, got {rate!r}")
+    if not math.isfinite(rate) or rate <= 0 or rate > MAX_RATE_HZ:
+        raise InputError(f"{what} must be positive and at most {MAX_RATE_HZ:g} Hz, got {rate}")
+    return float(rate)
+
+
+def check_gap(previous_s: float, t_s: float) -> None:
+    """InputError when sample times `previous_s` → `t_s` are more than MAX_GAP_S apart."""
+    if t_s - previous_s > MAX_GAP_S:
+        raise InputError(f"{t_s!r} s is {t_s - previous_s:.6g} s after the previous sample at {previous_s!r} s "
+                         f"(at most {MAX_GAP_S:g} s between samples)")  # fmt: skip
+
+
 def validate_recording(rec: Recording) -> None:
     """Recording.validate as a free function."""
-    rate = rec.rate_hz
-    if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)):
-        raise InputError(f"rate_hz must be a number, got {rate!r}")
-    if not math.isfinite(rate) or rate <= 0:
-        raise InputError(f"rate_hz must be positive and finite, got {rate}")
+    check_rate(rec.rate_hz)
     t = rec.timestamps_s
     if not isinstance(t, np.ndarray) or t.ndim != 1 or t.dtype.kind not in "fiu":
         raise InputError("timestamps_s must be a 1-D numeric array")
@@ -167,6 +186,12 @@ def validate_recording(rec: Recording) -> None:
     if (steps <= 0).any():
         i = int(np.argmax(steps <= 0)) + 1
         raise InputError(f"timestamps_s must be strictly increasing (sample {i}: {t[i]} after {t[i - 1]})")
+    if T > 1 and steps.max() > MAX_GAP_S:
+        i = int(np.argmax(steps)) + 1
+        try:
+            check_gap(float(t[i - 1]), float(t[i]))
+        except InputError as exc:
+            raise InputError(f"timestamps_s (sample {i}): {exc}") from None
     names = rec.sensor_names
     _check_names("sensor", names)
     if rec.accelerations is not None:
@@ -391,12 +416,7 @@ def read_csv_table(path, expect: str, on_header=None) -> CsvTable:
     header the "no header row" error suggests. FormatError with the line for anything
     else, and for a file with no row after its header."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
-    except FileNotFoundError:
-        raise FormatError(path, "no such file") from None
-    except UnicodeDecodeError as e:
-        raise FormatError(path, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
+    text = read_input_text(path, encoding="utf-8-sig")  # tolerate a BOM from spreadsheet tools
     comments: dict[str, str] = {}
     comment_lines: dict[str, int] = {}
     header: list[str] | None = None

@@ -17,8 +17,9 @@ import threading
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import Parser, add_calibration_option, add_search_options, os_message, search_options
+from graphsvc.cli_args import COUNT, Parser, ranged, add_calibration_option, add_search_options, os_message, search_options
 from graphsvc.errors import GraphsvcError
+from graphsvc.fileio import read_input_text
 
 
 def _check_output(path: Path) -> None:
@@ -148,7 +149,7 @@ def _cmd_client_batch(args) -> int:
         if args.batch_command == "submit":
             path = Path(args.manifest)
             fmt = args.format or ("json" if path.suffix.lower() == ".json" else "csv")
-            status = submit_batch(conn, path.read_text(encoding="utf-8"), fmt, args.retries, args.timeout)
+            status = submit_batch(conn, read_input_text(path, "manifest"), fmt, args.retries, args.timeout)
             while args.wait and status.state in ("queued", "running"):
                 time.sleep(args.poll)
                 status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=status.batch_id), args.timeout)
@@ -294,10 +295,10 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--tls-cert", metavar="F", help="PEM certificate chain: serve TLS (with --tls-key)")
     p.add_argument("--tls-key", metavar="F", help="PEM private key")
     p.add_argument("--token-file", metavar="F", help="accepted bearer tokens, one per line: require one")
-    p.add_argument("--max-streams", type=int, default=16, metavar="N",
+    p.add_argument("--max-streams", type=COUNT, default=16, metavar="N",
                    help="concurrent live streams; more get RESOURCE_EXHAUSTED (default 16)")  # fmt: skip
-    p.add_argument("--max-message-mb", type=float, default=64.0, metavar="M", help="largest message, MiB (default 64)")
-    p.add_argument("--grace-s", type=float, default=10.0, metavar="S",
+    p.add_argument("--max-message-mb", type=ranged(float, 0.0, 2047.0, low_open=True), default=64.0, metavar="M", help="largest message, MiB (default 64)")
+    p.add_argument("--grace-s", type=ranged(float, 0.0, 3600.0), default=10.0, metavar="S",
                    help="on SIGTERM, time for in-flight calls to finish (default 10)")  # fmt: skip
     p.add_argument("--config-timeout-s", type=float, default=10.0, metavar="S",
                    help="a stream that sends no config within S seconds of connecting ends with "
@@ -306,7 +307,7 @@ def add_service_parsers(sub) -> None:
                                                       "manifest's relative paths are taken from here")  # fmt: skip
     p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "
                                                                 "local cluster, started at the first batch)")  # fmt: skip
-    p.add_argument("--batch-workers", type=int, metavar="N", help="the local cluster's workers (default: one a core)")
+    p.add_argument("--batch-workers", type=COUNT, metavar="N", help="the local cluster's workers (default: one a core)")
     p.set_defaults(run=_cmd_serve)
 
     connection = _connection_parent()
@@ -347,7 +348,7 @@ def add_service_parsers(sub) -> None:
 
     c = client.add_parser("stream", parents=[connection], help="replay a recording live and print per-frame latency")
     c.add_argument("recording", metavar="REC")
-    c.add_argument("--speed", type=float, default=1.0, metavar="X", help="replay X times faster than real time")
+    c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X", help="replay X times faster than real time")
     c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
     add_calibration_option(c)

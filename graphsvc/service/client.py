@@ -17,12 +17,12 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import grpc
 import numpy as np
 
 from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.sensors.recording import Recording
 from graphsvc.service import convert
@@ -69,7 +69,7 @@ class Connection:
 
 def read_token_file(path) -> str:
     """The token: the file's first line that is neither blank nor a # comment."""
-    for line in Path(path).read_text(encoding="utf-8").splitlines():
+    for line in read_input_text(path, "token file").splitlines():
         if line.strip() and not line.strip().startswith("#"):
             return line.strip()
     raise InputError(f"{path}: no token in the token file")
@@ -86,7 +86,7 @@ def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None
     if tls_ca is not None:
         if tls_server_name:
             options.append(("grpc.ssl_target_name_override", tls_server_name))
-        credentials = grpc.ssl_channel_credentials(root_certificates=Path(tls_ca).read_bytes())
+        credentials = grpc.ssl_channel_credentials(root_certificates=read_input_bytes(tls_ca, "TLS CA"))
         channel = grpc.secure_channel(address, credentials, options=options)
     else:
         channel = grpc.insecure_channel(address, options=options)
@@ -141,7 +141,7 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
     except grpc.RpcError as exc:
         raise service_error(exc, "Synthesize") from None
     motion = convert.motion_from_proto(response.motion, skeleton)
-    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.struct_to_dict(response.report))
+    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.report_from_proto(response))
 
 
 # ---------------------------------------------------------------- live

@@ -16,7 +16,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph, summary
 from graphsvc.motion.skeleton import Motion, Skeleton
-from graphsvc.sensors.recording import Recording, validate_constraints
+from graphsvc.sensors.recording import Recording, check_gap, check_rate, validate_constraints
 from graphsvc.service._generated import graphsvc_pb2 as pb
 
 STRATEGY_NAMES = {pb.STRATEGY_UNSPECIFIED: "viterbi", pb.STRATEGY_VITERBI: "viterbi", pb.STRATEGY_OLNG: "olng",
@@ -162,20 +162,18 @@ def json_safe(value):
 # ---------------------------------------------------------------- sensors
 
 
-def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str) -> np.ndarray | None:
+def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str, layout_name: str = "?") -> np.ndarray | None:
     """Indices that put the request's sensor triplets into the graph's order, or None
-    when they already are (or no names were given: the graph's order is implied)."""
+    when they already are (or no names were given: the graph's order is implied).
+    Sensors that are not the layout's are refused with the CLI's line naming them."""
+    from graphsvc.strategies.base import layout_mismatch_message
+
     given = list(given)
     if not given or tuple(given) == tuple(graph_names):
         return None
-    if len(given) != len(graph_names):
-        raise FieldError(field, f"{len(given)} sensors given, the graph's layout has {len(graph_names)} "
-                         f"({', '.join(graph_names)})")  # fmt: skip
-    if len(set(given)) != len(given):
-        raise FieldError(field, "duplicate sensor names")
-    unknown = [n for n in given if n not in graph_names]
-    if unknown:
-        raise FieldError(field, f"not in the graph's layout: {', '.join(unknown)} (the layout has {', '.join(graph_names)})")
+    message = layout_mismatch_message(layout_name, graph_names, given, order_matters=False)
+    if message is not None:
+        raise FieldError(field, message)
     return np.array([given.index(n) for n in graph_names], np.int64)
 
 
@@ -204,26 +202,28 @@ def recording_to_proto(rec: Recording) -> pb.Recording:
 
 
 def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording",
-                         match_layout: bool = True) -> Recording:  # fmt: skip
+                         match_layout: bool = True, layout_name: str = "?") -> Recording:  # fmt: skip
     """A validated Recording with the sensors in the graph's order. Checks shapes,
     finiteness (NaN = missing is allowed in readings, never in times) and order.
     match_layout False (a strategy that reads no accelerations): the sensors are
     whatever the recording names (the graph's when it names none), in its order."""
     rate = msg.rate_hz
-    if not (math.isfinite(rate) and rate > 0):
-        raise FieldError(f"{field}.rate_hz", f"must be a positive number of Hz, got {rate}")
+    try:
+        check_rate(rate, "rate")
+    except InputError as exc:
+        raise FieldError(f"{field}.rate_hz", str(exc)) from None
     t = np.array(msg.timestamps_s, np.float64)
     T = t.shape[0]
     if T == 0:
         raise FieldError(f"{field}.timestamps_s", "no samples")
     _check_times(t, f"{field}.timestamps_s")
     if match_layout:
-        order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names")
+        order = sensor_order(msg.sensor_names, graph_names, f"{field}.sensor_names", layout_name)
     else:
         order, graph_names = None, tuple(msg.sensor_names) or tuple(graph_names)
     S = len(graph_names)
-    acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order)
-    orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order)
+    acc = _per_sensor(msg.accelerations_m_s2, T, S, 3, f"{field}.accelerations_m_s2", order, graph_names)
+    orientations = _per_sensor(msg.orientations_wxyz, T, S, 4, f"{field}.orientations_wxyz", order, graph_names)
     marker_names, markers = tuple(msg.marker_names), None
     if len(msg.marker_positions_m) or marker_names:
         M = len(marker_names)
@@ -255,7 +255,7 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
     return rec
 
 
-def _per_sensor(values, T: int, S: int, width: int, field: str, order) -> np.ndarray | None:
+def _per_sensor(values, T: int, S: int, width: int, field: str, order, names=()) -> np.ndarray | None:
     """(T, S, width) float32 in the graph's sensor order from a flat proto field, None
     when it is empty."""
     a = np.array(values, np.float32)
@@ -263,7 +263,7 @@ def _per_sensor(values, T: int, S: int, width: int, field: str, order) -> np.nda
         return None
     if a.shape[0] != T * S * width:
         raise FieldError(field, f"expected T×S×{width} = {T}×{S}×{width} = {T * S * width} values "
-                         f"({T} timestamps, {S} sensors), got {a.shape[0]}")  # fmt: skip
+                         f"({T} timestamps, {S} sensors{': ' if names else ''}{', '.join(names)}), got {a.shape[0]}")  # fmt: skip
     _check_no_inf(field, a, S * width)
     a = a.reshape(T, S, width)
     return np.ascontiguousarray(a[:, order]) if order is not None else a
@@ -333,6 +333,11 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
     if previous_time_s is not None and not t > previous_time_s:
         raise FieldError(f"{field}.time_s", f"{t!r} s is not after the previous sample's {previous_time_s!r} s "
                          "(times must strictly increase)")  # fmt: skip
+    if previous_time_s is not None:
+        try:
+            check_gap(previous_time_s, t)
+        except InputError as exc:
+            raise FieldError(f"{field}.time_s", str(exc)) from None
     acc = np.array(msg.accelerations_m_s2, np.float64)
     if acc.shape[0] == 0 and not reads_acc:
         acc = None
@@ -726,9 +731,25 @@ def frames_to_motion(frames: list[pb.PoseFrame], skeleton: Skeleton, rate_hz: fl
     return Motion(skeleton, rot, trans, rate_hz, name=name, source="graphsvc live stream")
 
 
-def report_to_struct(report: dict, out) -> None:
-    """Fill a google.protobuf.Struct with a JSON-safe copy of `report`."""
-    out.update(json_safe(report))
+def report_to_proto(report: dict, response: pb.SynthesizeResponse) -> None:
+    """The report into a SynthesizeResponse: JSON text (report_json, types kept) and
+    the Struct (report, every number a double) for clients that read that."""
+    safe = json_safe(report)
+    response.report_json = json.dumps(safe, sort_keys=True, allow_nan=False)
+    response.report.update(safe)
+
+
+def report_from_proto(response: pb.SynthesizeResponse) -> dict:
+    """The report of a SynthesizeResponse with its integers as integers (from
+    report_json; a server that sends only the Struct gives its doubles)."""
+    if response.report_json:
+        try:
+            report = json.loads(response.report_json)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"report_json: not valid JSON ({exc.msg})") from None
+        if isinstance(report, dict):
+            return report
+    return struct_to_dict(response.report)
 
 
 def struct_to_dict(msg) -> dict:

@@ -34,6 +34,7 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
+from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
@@ -114,7 +115,7 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
 def read_tokens(path) -> tuple[str, ...]:
     """Accepted tokens: one per line; blank lines and lines starting with # are
     skipped. Several lines let a token be rotated without downtime."""
-    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    lines = read_input_text(path, "token file").splitlines()
     tokens = tuple(t.strip() for t in lines if t.strip() and not t.strip().startswith("#"))
     if not tokens:
         raise InputError(f"{path}: no token in the token file")
@@ -185,16 +186,28 @@ class RpcStatus(Exception):
         self.message = message
 
 
+MAX_DETAILS_BYTES = 2048  # a status message rides in a trailer gRPC caps at 16 KiB, percent-encoded
+
+
+def status_details(text: str) -> str:
+    """`text` cut to MAX_DETAILS_BYTES of UTF-8 (an echoed oversize value must not
+    turn the answer into RESOURCE_EXHAUSTED)."""
+    data = text.encode("utf-8")
+    if len(data) <= MAX_DETAILS_BYTES:
+        return text
+    return data[: MAX_DETAILS_BYTES - 3].decode("utf-8", "ignore") + "…"
+
+
 def _abort_for(context: grpc.ServicerContext, exc: BaseException) -> None:
     """Map an exception to a status and end the call (context.abort raises)."""
     if isinstance(exc, RpcStatus):
-        context.abort(exc.code, exc.message)
+        context.abort(exc.code, status_details(exc.message))
     if isinstance(exc, StrategyNotImplementedError):
-        context.abort(grpc.StatusCode.UNIMPLEMENTED, str(exc))
+        context.abort(grpc.StatusCode.UNIMPLEMENTED, status_details(str(exc)))
     if isinstance(exc, SearchCancelled):  # the client is gone or out of time; nobody reads this
         context.abort(grpc.StatusCode.CANCELLED, str(exc))
     if isinstance(exc, GraphsvcError):
-        context.abort(grpc.StatusCode.INVALID_ARGUMENT, str(exc))
+        context.abort(grpc.StatusCode.INVALID_ARGUMENT, status_details(str(exc)))
     # A bug: keep the traceback for the operator, tell the client only what failed.
     traceback.print_exception(exc, file=sys.stderr)
     context.abort(grpc.StatusCode.INTERNAL, f"internal error ({type(exc).__name__}); see the server log")
@@ -291,7 +304,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             graph = self._graph(request.graph).graph
             options = convert.options_from_proto(request.options, "options")
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
-            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc)
+            rec = convert.recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
+                                                graph.layout.get("name", "?"))
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
             # Serial kernels: many calls share the machine (and while this one runs, a
@@ -304,7 +318,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                                               bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
             if result.provenance is not None:
                 response.provenance.CopyFrom(convert.provenance_to_proto(result.provenance))
-            convert.report_to_struct(result.report, response.report)
+            convert.report_to_proto(result.report, response)
             return response
         except Exception as exc:  # noqa: BLE001 — every failure becomes a status, never a dead worker
             _abort_for(context, exc)
@@ -378,7 +392,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         options = convert.options_from_proto(config.options, "config.options")
         reads_acc = "accelerations" in get_strategy(options.strategy).uses
         if reads_acc:
-            order = convert.sensor_order(config.sensor_names, names, "config.sensor_names")
+            order = convert.sensor_order(config.sensor_names, names, "config.sensor_names", graph.layout.get("name", "?"))
         else:  # whatever sensors the samples carry (the strategy reads none): the lengths still checked
             order, names = None, tuple(config.sensor_names) or names
         marker_names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")
@@ -552,8 +566,8 @@ def bind_server(config: ServerConfig) -> BoundServer:
     address = f"{config.host}:{config.port}"
     try:
         if config.tls_cert is not None:
-            credentials = grpc.ssl_server_credentials([(Path(config.tls_key).read_bytes(),
-                                                        Path(config.tls_cert).read_bytes())])  # fmt: skip
+            credentials = grpc.ssl_server_credentials([(read_input_bytes(config.tls_key, "TLS key"),
+                                                        read_input_bytes(config.tls_cert, "TLS certificate"))])  # fmt: skip
             port = server.add_secure_port(address, credentials)
         else:
             port = server.add_insecure_port(address)

@@ -36,7 +36,7 @@ from graphsvc.sensors.anatomy import check_frames
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
-from graphsvc.sensors.recording import Recording
+from graphsvc.sensors.recording import Recording, check_gap
 from graphsvc.strategies.options import Options, check_constraints
 
 INPUTS = ("accelerations", "orientations", "markers", "ground_position", "heading", "constraints")
@@ -117,22 +117,45 @@ def check_inputs(strategy: Strategy, have: set[str]) -> list[str]:
     return sorted(have - set(strategy.uses))
 
 
-def check_layout(graph: MotionGraph, sensor_names) -> None:
-    """InputError unless the stream's sensors are the graph's, in the same order."""
-    mine, theirs = tuple(graph.sensor_names), tuple(sensor_names)
+def layout_mismatch(mine, theirs, order_matters: bool = True) -> str | None:
+    """What separates a stream's sensor names `theirs` from a layout's `mine`: the
+    missing sensors, those not in the layout, duplicates or (order_matters) the
+    order; None when they agree. One wording for the CLI and the service."""
+    mine, theirs = tuple(mine), tuple(theirs)
     if mine == theirs:
-        return
+        return None
     missing = [n for n in mine if n not in theirs]
-    extra = [n for n in theirs if n not in mine]
+    extra = [n for n in dict.fromkeys(theirs) if n not in mine]
+    dup = [n for n in dict.fromkeys(theirs) if theirs.count(n) > 1]
     parts = []
     if missing:
         parts.append(f"missing {', '.join(missing)}")
     if extra:
         parts.append(f"not in the graph: {', '.join(extra)}")
+    if dup:
+        parts.append(f"named twice: {', '.join(dup)}")
     if not parts:
+        if not order_matters:
+            return None
         parts.append(f"order {', '.join(theirs)} instead of {', '.join(mine)}")
-    raise InputError(f"the recording's sensors do not match the graph's layout {graph.layout.get('name', '?')!r}: "
-                     + "; ".join(parts) + " (rebuild the graph or run `graphsvc relayout`)")  # fmt: skip
+    return "; ".join(parts)
+
+
+def layout_mismatch_message(layout_name: str, mine, theirs, order_matters: bool = True) -> str | None:
+    """The line that refuses sensors `theirs` for a graph whose layout `layout_name`
+    has sensors `mine`, or None when they fit."""
+    what = layout_mismatch(mine, theirs, order_matters)
+    if what is None:
+        return None
+    return (f"the recording's sensors do not match the graph's layout {layout_name!r}: "
+            f"{what} (rebuild the graph or run `graphsvc relayout`)")  # fmt: skip
+
+
+def check_layout(graph: MotionGraph, sensor_names) -> None:
+    """InputError unless the stream's sensors are the graph's, in the same order."""
+    message = layout_mismatch_message(graph.layout.get("name", "?"), graph.sensor_names, sensor_names)
+    if message is not None:
+        raise InputError(message)
 
 
 def _interp_linear(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -528,6 +551,8 @@ class LiveSession:
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
             raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
+        if self.prev is not None:
+            check_gap(float(self.prev[0]), float(t_s))
         acc = np.asarray(acc, dtype=np.float64) if self.reads_acc else np.zeros((0, 3))  # (else ignored)
         if acc.shape != (self.S, 3):
             raise InputError(f"accelerations must be ({self.S}, 3) for the graph's sensors, got {acc.shape}")

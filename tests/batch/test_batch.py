@@ -251,7 +251,7 @@ def test_items_that_fail_on_their_input_the_rest_finish(tmp_path, batch_files, c
     store = store_rows(out)
     assert {k for k, r in store.items() if r["state"] == "done"} == {"good1", "good2"}
     reasons = {k: r["reason"] for k, r in store.items() if r["state"] == "failed"}
-    assert "absent.rec not found" in reasons["no-recording"]
+    assert "absent.rec: no such file" in reasons["no-recording"]
     assert "unknown graph 'nosuch'" in reasons["no-graph"]
     assert "beam must be a finite cost > 0" in reasons["bad-beam"]
     assert "unrecognized arguments: --frobnicate" in reasons["bad-flag"]

@@ -71,7 +71,7 @@ def test_submit_poll_list_one_output_equals_synthesize(conn, batch_files, batch_
     status = poll(conn, status.batch_id, items=True)
     assert (status.state, status.done, status.failed, status.queued, status.running) == ("finished", 2, 1, 0, 0)
     by_name = {i.output: i for i in status.item_status}
-    assert "absent.rec not found" in by_name["missing"].reason and by_name["v"].attempts == 1
+    assert "absent.rec: no such file" in by_name["missing"].reason and by_name["v"].attempts == 1
     ref = tmp_path / "v.bvh"
     assert main(["synthesize", str(batch_files / "small.graph"), str(batch_root / "perf0.rec"), "-o", str(ref),
                  "--weights", "0.5,1,1"]) == 0  # fmt: skip

@@ -103,7 +103,9 @@ def test_held_out_clip_without_a_twin_is_harder_and_in_graph_is_exact(kb_graph):
     held_out = loo.evaluate_clip(graph, kb[k], k, EXACT)
     assert in_graph["joint_err_cm"] < 0.5 and in_graph["label_acc"] == 1.0 and in_graph["hidden_nodes"] == 0
     assert held_out["joint_err_cm"] > in_graph["joint_err_cm"] + 2.0
-    assert held_out["label_acc"] == 0.0  # no other clip is labelled run
+    # No other clip is labelled run: no path can get the label right, so label
+    # accuracy does not apply (null), rather than 0.
+    assert held_out["label_acc"] is None and held_out["label"] == "run"
     for key in ("samples_per_s", "search_s"):
         assert held_out[key] > 0
 
@@ -175,3 +177,31 @@ def test_label_accuracy_with_per_frame_truth():
     r = evaluate_frames(z, z[:3], np.zeros((4, 2)), np.zeros(4), np.zeros((3, 2)), np.zeros(3),
                         pred_labels=["a", "b", "a", "a"], true_label=["a", "a", "a"])  # fmt: skip
     assert r["frames"] == 3 and r["label_acc"] == pytest.approx(2 / 3)
+
+
+def test_label_accuracy_counts_only_labels_the_searchable_graph_offers(kb_graph):
+    _, graph = kb_graph
+    k = [c["name"] for c in graph.clips].index("run_01")
+    from graphsvc.strategies import get as get_strategy
+
+    everything = np.ones(graph.num_nodes, dtype=bool)
+    hidden = get_strategy("viterbi").allowed_mask(graph, k)
+    offered = loo.offered_labels(graph, everything)
+    assert offered == set(graph.labels) and "run" not in loo.offered_labels(graph, hidden)
+    assert loo.scored_labels("run", offered) == "run" and loo.scored_labels("run", {"walk"}) is None
+    # Per-frame truth: the frames whose label is not offered are left out, all of them → n/a.
+    assert loo.scored_labels(["walk", "run", None], {"walk"}) == ["walk", None, None]
+    assert loo.scored_labels(["run", "run"], {"walk"}) is None
+
+
+def test_table_and_json_say_not_applicable_for_label_accuracy():
+    from graphsvc.evaluate.metrics import summarize
+    from graphsvc.evaluate.report import format_table
+
+    row = {"name": "run_01", "frames": 10, "joint_err_cm": 3.0, "root_err_cm": 9.0, "heading_err_deg": 2.0,
+           "label_acc": None, "per_frame": {}}  # fmt: skip
+    summary = summarize([row])
+    assert summary["mean"]["label_acc"] is None  # null in the JSON
+    lines = format_table(summary).splitlines()
+    assert lines[0].split()[-3:-1] == ["label", "%"]
+    assert all("n/a" in line for line in lines[1:] if "run_01" in line or "mean" in line)

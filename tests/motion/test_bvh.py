@@ -313,7 +313,7 @@ def test_zero_frames_and_missing_file(tmp_path):
     text = SIMPLE.split("Frames:")[0] + "Frames: 0\nFrame Time: 0.0333333\n"
     with pytest.raises(InputError, match="zero frames"):
         read_bvh(write(tmp_path, text))
-    with pytest.raises(FormatError, match="file not found"):
+    with pytest.raises(FormatError, match="no such file"):
         read_bvh(tmp_path / "nope.bvh")
 
 

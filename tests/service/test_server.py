@@ -178,6 +178,34 @@ def test_reflection_lists_and_describes_the_service(server, version):
 # ---------------------------------------------------------------- bad requests
 
 
+def test_report_arrives_with_its_types(conn, graph, recording):
+    """The client's report is the library's as `synthesize --report` writes it: the
+    node path and every count integers, the same keys, the same values but timings."""
+    import json
+
+    from graphsvc.pipeline import reconstruct
+
+    got = C.synthesize(conn, "small", recording).report
+    options = convert.options_from_proto(pb.SynthesisOptions(), "options")  # what the server makes of none
+    want = json.loads(json.dumps(reconstruct(graph, recording, options, threads=False).report, sort_keys=True))
+    assert got["node_path"] and all(type(n) is int for n in got["node_path"])
+
+    def same(a, b, where):
+        assert type(a) is type(b), f"{where}: {a!r} against {b!r}"
+        if isinstance(a, dict):
+            assert sorted(a) == sorted(b), where
+            for k in a:
+                same(a[k], b[k], f"{where}.{k}")
+        elif isinstance(a, list):
+            assert len(a) == len(b), where
+            for k, (x, y) in enumerate(zip(a, b)):
+                same(x, y, f"{where}[{k}]")
+        elif not where.startswith(("report.timings_s", "report.samples_per_s")):
+            assert a == b, f"{where}: {a!r} against {b!r}"
+
+    same(got, want, "report")
+
+
 def _recording_request(recording, **changes) -> pb.SynthesizeRequest:
     request = pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording))
     for key, value in changes.items():
@@ -241,6 +269,29 @@ def test_bad_synthesize_requests_get_the_right_status(conn, recording):
         assert got == code, f"{name}: {got} {details}"
         assert mention in details, f"{name}: {details!r} does not name {mention!r}"
     assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples  # still serving
+
+
+def test_wrong_layout_names_the_sensors_as_the_cli_does(conn, graph, recording):
+    """The service refuses sensors that are not the graph's layout with the CLI's own
+    line: the missing sensors and the strangers by name, not counts."""
+    from graphsvc.errors import InputError
+    from graphsvc.strategies.base import check_layout
+
+    names = list(recording.sensor_names)
+    wrong = ["elbow_x", *names[1:]]
+    with pytest.raises(InputError) as cli:
+        check_layout(graph, wrong)
+    assert f"missing {names[0]}" in str(cli.value) and "not in the graph: elbow_x" in str(cli.value)
+    code, details = _code(conn.stub.Synthesize, _recording_request(recording, **{"recording.sensor_names": wrong}),
+                          timeout=10)
+    assert code == grpc.StatusCode.INVALID_ARGUMENT
+    assert details == f"recording.sensor_names: {cli.value}"
+    samples = list(C.recording_samples(recording))[:3]
+    code, details = _code(lambda: list(conn.stub.StreamSynthesize(
+        _requests(C.stream_config("small", None, names[:-1]), samples), timeout=10)))
+    assert code == grpc.StatusCode.INVALID_ARGUMENT
+    assert f"missing {names[-1]}" in details and details.startswith("config.sensor_names: the recording's sensors")
+    assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples
 
 
 def _stream_cases(recording):

@@ -307,18 +307,20 @@ class SynthesizeRequest(_message.Message):
     def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ...) -> None: ...
 
 class SynthesizeResponse(_message.Message):
-    __slots__ = ("motion", "node_path", "bvh", "report", "provenance")
+    __slots__ = ("motion", "node_path", "bvh", "report", "provenance", "report_json")
     MOTION_FIELD_NUMBER: _ClassVar[int]
     NODE_PATH_FIELD_NUMBER: _ClassVar[int]
     BVH_FIELD_NUMBER: _ClassVar[int]
     REPORT_FIELD_NUMBER: _ClassVar[int]
     PROVENANCE_FIELD_NUMBER: _ClassVar[int]
+    REPORT_JSON_FIELD_NUMBER: _ClassVar[int]
     motion: Motion
     node_path: _containers.RepeatedScalarFieldContainer[int]
     bvh: bytes
     report: _struct_pb2.Struct
     provenance: Provenance
-    def __init__(self, motion: _Optional[_Union[Motion, _Mapping]] = ..., node_path: _Optional[_Iterable[int]] = ..., bvh: _Optional[bytes] = ..., report: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., provenance: _Optional[_Union[Provenance, _Mapping]] = ...) -> None: ...
+    report_json: str
+    def __init__(self, motion: _Optional[_Union[Motion, _Mapping]] = ..., node_path: _Optional[_Iterable[int]] = ..., bvh: _Optional[bytes] = ..., report: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., provenance: _Optional[_Union[Provenance, _Mapping]] = ..., report_json: _Optional[str] = ...) -> None: ...
 
 class Motion(_message.Message):
     __slots__ = ("rate_hz", "frame_count", "joint_count", "rotations_wxyz", "translations_m")

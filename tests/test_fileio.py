@@ -1,0 +1,70 @@
+"""Input files: a missing file is worded one way by every reader ("<path>: no such
+file", after what the file is for where the reader knows it), a folder and
+undecodable text are the project's errors too."""
+
+from __future__ import annotations
+
+import pytest
+
+from graphsvc.errors import FormatError, MissingFileError
+
+
+def _readers():
+    from graphsvc.batch.manifest import read_manifest
+    from graphsvc.evaluate.protocols import load_actor_map
+    from graphsvc.graph.file import load_graph
+    from graphsvc.motion.asfamc import read_asf, read_asf_amc
+    from graphsvc.motion.bvh import read_bvh
+    from graphsvc.motion.joints import load_mapping_file
+    from graphsvc.sensors.calibration import load_calibration
+    from graphsvc.sensors.devices import load_device_map, read_mvnx
+    from graphsvc.sensors.optical import read_c3d, read_marker_csv
+    from graphsvc.sensors.recording import load_recording, read_recording
+    from graphsvc.service.client import read_token_file
+    from graphsvc.service.server import read_tokens
+    from graphsvc.strategies.options import load_constraints
+
+    return {
+        "bvh": (read_bvh, "x.bvh", ""),
+        "asf": (read_asf, "x.asf", ""),
+        "amc": (read_asf_amc, "x.amc", ""),
+        "rec": (load_recording, "x.rec", ""),
+        "device csv": (read_recording, "x.csv", ""),
+        "marker csv": (read_marker_csv, "x.csv", ""),
+        "c3d": (read_c3d, "x.c3d", ""),
+        "mvnx": (read_mvnx, "x.mvnx", ""),
+        "graph": (load_graph, "x.graph", ""),
+        "manifest": (read_manifest, "m.csv", "manifest"),
+        "constraints": (load_constraints, "c.json", ""),
+        "calibration": (load_calibration, "CAL.json", ""),
+        "joint mapping": (load_mapping_file, "map.json", "joint mapping"),
+        "actor map": (load_actor_map, "actors.json", "actor map"),
+        "device map": (load_device_map, "dev.json", "device map"),
+        "server tokens": (read_tokens, "tokens.txt", "token file"),
+        "client token": (read_token_file, "token.txt", "token file"),
+    }
+
+
+@pytest.mark.parametrize("kind", list(_readers()))
+def test_a_missing_input_file_is_worded_one_way(tmp_path, kind):
+    reader, name, what = _readers()[kind]
+    path = tmp_path / name
+    with pytest.raises(MissingFileError) as info:
+        reader(path)
+    assert str(info.value) == (f"{what}: " if what else "") + f"{path}: no such file"
+
+
+def test_a_folder_and_undecodable_text_are_format_errors(tmp_path):
+    from graphsvc.fileio import read_input_text, read_json_file, require_file
+
+    with pytest.raises(FormatError, match="is a folder, not a file"):
+        read_input_text(tmp_path)
+    with pytest.raises(FormatError, match="is a folder, not a file"):
+        require_file(tmp_path)
+    bad = tmp_path / "bad.json"
+    bad.write_bytes(b'{"a": "\xff"}')
+    with pytest.raises(FormatError, match="not UTF-8 text"):
+        read_json_file(bad)
+    bad.write_text('{"a": 1,\n}')
+    with pytest.raises(FormatError, match=r"bad.json:2: not valid JSON"):
+        read_json_file(bad)
