@@ -4,7 +4,6 @@ fails in one line, the strategy flags, and how an OSError reads."""
 from __future__ import annotations
 
 import argparse
-import argparse
 import math
 import re
 
