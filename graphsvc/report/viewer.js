@@ -467,6 +467,8 @@
     clip.drawn = clip.figures.map((f) => buildFigure(f, T));
     clip.markerPoints = buildMarkers(clip.markers);
     $("layout-box").style.display = clip.figures.length > 1 ? "" : "none";
+    $("legend").textContent = ["Blue: reconstruction", clip.figures.length > 1 ? "green: truth" : null,
+      "red discs: feet in contact", clip.markers ? "orange: measured markers" : null].filter(Boolean).join("; ") + ".";
     $("clip-name").textContent = c.name;
     $("clip-info").textContent = Object.entries(c.info).map(([a, b]) => `${a}: ${b}`).join(" · ");
     $("scrub").max = String(T - 1);

@@ -39,6 +39,8 @@ def test_demo_page_plays_scrubs_and_draws_the_bvh_pose(driver, demo_run, tmp_pat
     assert console_errors(driver) == []
     hook = "return window.graphsvcViewer."
     assert driver.execute_script(hook + "figures()") == ["reconstruction", "truth"]
+    legend = driver.find_element("id", "legend").text  # what this page draws, no more
+    assert "green: truth" in legend and "markers" not in legend
     T = driver.execute_script(hook + "frames()")
     recon, truth = load_motion(out / "reconstruction.bvh"), load_motion(out / "performance.bvh")
     assert T == recon.num_frames == truth.num_frames
@@ -145,6 +147,7 @@ def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, stra
     assert console_errors(driver) == []
     hook = "return window.graphsvcViewer."
     T = driver.execute_script(hook + "frames()")
+    assert ("orange: measured markers" in driver.find_element("id", "legend").text) == (strategy == "ssg")
     # A click on the timeline seeks to the frame under it.
     timeline = driver.find_element("id", "timeline")
     from selenium.webdriver.common.action_chains import ActionChains
