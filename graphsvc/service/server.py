@@ -473,16 +473,18 @@ class RunningServer:
     servicer: MotionGraphServicer
     graphs: dict[str, LoadedGraph] = field(default_factory=dict)
 
-    def stop(self, grace_s: float | None = None) -> None:
-        """Refuse new calls, let running ones finish within grace_s, then cancel them."""
+    def stop(self, grace_s: float | None = None, give_up_s: float = 10.0) -> None:
+        """Refuse new calls, let running ones finish within grace_s, then cancel them;
+        returns at the latest give_up_s after the grace."""
         self.health.enter_graceful_shutdown()
         done = self.server.stop(grace_s)
         # gRPC's shutdown completes once every call's objects are freed, and a finished
         # call can sit in a reference cycle until the cyclic GC's next pass (gRPC's own
         # answer to request bytes that do not parse leaves one): with no allocation to
-        # trigger that pass the server would wait forever. Collect while waiting; give
-        # up (the process is ending) 10 s after the grace.
-        give_up = time.monotonic() + (grace_s or 0.0) + 10.0
+        # trigger that pass the server would wait forever. Collect while waiting. Not
+        # every such call is freed even so (seen with the client in the same process),
+        # so give up (the process is ending) give_up_s after the grace.
+        give_up = time.monotonic() + (grace_s or 0.0) + give_up_s
         while not done.wait(0.25) and time.monotonic() < give_up:
             gc.collect()
         if self.servicer.batches is not None:
