@@ -67,7 +67,8 @@ def _immortal(incoming, edge_src, allowed):
 BEAM_CHUNKS = 64
 
 
-def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks, marks_words, touched, total, keep,
+def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks, marks_words, sources, touched, total,
+                  keep,
                   survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
                   readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, beam,
                   state_prev, det_prev, state_new, det_new, arrivals, none, ancestor_prev, ancestor_new,
@@ -82,7 +83,8 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
 
     1. The nodes the live ones reach (out_start, out_dst: `tables.beam_tables`; only allowed
        ones) are marked in marks ((8·⌈N/8⌉,) uint8, zero, left zero; marks_words its
-       uint64 view, scanned eight nodes at a time) and listed ascending in touched.
+       uint64 view, scanned eight nodes at a time) and listed ascending in touched;
+       the live ones are marked in sources ((N,) uint8, zero, left zero).
     2. Each takes its best incoming edge by the float64 rule (`costs._exact_choice`): the
        dense search's choice and total, bit for bit, as long as the sources the dense
        search would pick are live (always with an infinite beam).
@@ -96,6 +98,8 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
     total (N,) float64, keep (N,) uint8, chunk_low (BEAM_CHUNKS, 2): scratch. Returns
     the number of survivors and the lowest cost (which always survives)."""
     arrivals[:] = none
+    for i in range(n_active):
+        sources[active[i]] = 1
     for i in range(n_active):
         m = active[i]
         for k in range(out_start[m], out_start[m + 1]):
@@ -117,7 +121,7 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
             n = touched[i]
             a, t = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, None,
                                  readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
-                                 placed, state_prev, det_prev)  # fmt: skip
+                                 placed, state_prev, det_prev, sources)  # fmt: skip
             total[i] = t
             if a >= 0:
                 arrivals[n] = a
@@ -147,6 +151,8 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
             if placed:
                 _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
                                  edge_turn[e, 0], edge_turn[e, 1], pull)  # fmt: skip
+    for i in range(n_active):
+        sources[active[i]] = 0
     survivors = 0
     for i in range(count):
         if keep[i]:

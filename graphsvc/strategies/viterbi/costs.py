@@ -374,21 +374,36 @@ def _source_total_kernel(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_
     return total
 
 
+def _dead(live, state, m):
+    """Whether source m has no live path: its mark in live ((N,) uint8, 1 on the live
+    nodes), or where live is None its cost (inf)."""
+
+
+@numba.extending.overload(_dead, inline="always")
+def _dead_kernel(live, state, m):
+    # A beam step's few live sources are marked in an array of N bytes, which stays in
+    # the core's cache; the cost rows (N, W) do not, and most sources read are dead.
+    if isinstance(live, numba.types.NoneType):
+        return lambda live, state, m: _cost_at(state, m) == np.inf
+    return lambda live, state, m: live[m] == 0
+
+
 @numba.njit(inline="always")
 def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, readings,
                   meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, state,
-                  det_prev):  # fmt: skip
+                  det_prev, live=None):  # fmt: skip
     """Node n's best incoming edge by the float64 rule of `dense._select_py` (candidates in
     graph order; lower total beyond TIE, else fewer detours, then plainer kind), each
     total from its source's state as pass 2 computes it (`_source_total`; the relative
     rows' values, bit for bit): (arrival index, −1 if no source is live; the total).
-    C_A: see `_edge_ca` (pass 2's near-ties pass every reading's, a beam step None)."""
+    C_A: see `_edge_ca` (pass 2's near-ties pass every reading's, a beam step None).
+    live: see `_dead` (a beam step's marks of its live sources; None: the costs tell)."""
     first = np.int64(incoming[n])
     best = np.int64(-1)
     cb = np.inf
     for e in range(first, np.int64(incoming[n + 1])):
         m = np.int64(edge_src[e])
-        if _cost_at(state, m) == np.inf:  # (never the better; its C_A is not worth computing)
+        if _dead(live, state, m):  # (never the better; its C_A is not worth computing)
             continue
         ca = _edge_ca(reading_cost, readings, meas, mask, scale, edge_reading[e])
         t = _source_total(placed, state, m, mx, mz, mh, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],

@@ -184,6 +184,7 @@ class ViterbiSearch:
             self._immortal = _immortal(tables["incoming"], self.edge_src, self.allowed)
             self._marks = np.zeros(8 * ((N + 7) // 8), dtype=np.uint8)
             self._marks_words = self._marks.view(np.uint64)
+            self._sources = np.zeros(N, dtype=np.uint8)
             # live nodes ascending: at the newest sample (state's), at the one before
             # (_state_new's, whose costs a step resets to inf before writing)
             self._live, self._live_before = np.empty(N, dtype=np.int32), np.empty(N, dtype=np.int32)
@@ -502,7 +503,7 @@ class ViterbiSearch:
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
         kernel = _beam_step if self._kernels is _THREADED else _beam_step_serial
         live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
-                           self._marks, self._marks_words, self._touched, self._total, self._survives,
+                           self._marks, self._marks_words, self._sources, self._touched, self._total, self._survives,
                            self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
                            self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
                            self._scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
