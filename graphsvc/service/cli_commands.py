@@ -35,7 +35,8 @@ def _print(line: str) -> None:
 
 
 def _cmd_serve(args) -> int:
-    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, read_tokens, serve
+    from graphsvc.service.live_workers import LiveWorkers, default_count
+    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, parse_graph_spec, read_tokens, serve
 
     tokens = read_tokens(args.token_file) if args.token_file else ()
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
@@ -43,18 +44,25 @@ def _cmd_serve(args) -> int:
                           max_message_mb=args.max_message_mb, grace_s=args.grace_s,
                           config_timeout_s=args.config_timeout_s,
                           batch_dir=args.batch_dir and Path(args.batch_dir), batch_scheduler=args.batch_scheduler,
-                          batch_workers=args.batch_workers)  # fmt: skip
+                          batch_workers=args.batch_workers,
+                          live_workers=default_count() if args.live_workers is None else args.live_workers)  # fmt: skip
     if config.batch_dir is None and (args.batch_scheduler or args.batch_workers):
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
     bound = bind_server(config)  # a taken port or a bad address fails here, before the graphs load
+    workers = None
     try:
+        if config.live_workers:  # (they load the graphs while this process does)
+            workers = LiveWorkers(dict(parse_graph_spec(spec) for spec in args.graph), config.live_workers)
+            workers.launch()
         graphs = load_graphs(args.graph)
     except BaseException:
         bound.server.stop(None)
+        if workers is not None:
+            workers.stop()
         raise
-    return serve(graphs, config, announce=_print, bound=bound)
+    return serve(graphs, config, announce=_print, bound=bound, live_workers=workers)
 
 
 # ---------------------------------------------------------------- client
@@ -303,6 +311,9 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--config-timeout-s", type=float, default=10.0, metavar="S",
                    help="a stream that sends no config within S seconds of connecting ends with "
                         "DEADLINE_EXCEEDED (default 10)")  # fmt: skip
+    p.add_argument("--live-workers", type=ranged(int, 0, 256), metavar="N",
+                   help="run the live streams' sessions in N worker processes, each stream in one (default: one a "
+                        "core, 0 on a single core; 0: in the server's process)")  # fmt: skip
     p.add_argument("--batch-dir", metavar="DIR", help="take batches (SubmitBatch …): their folders go here, and a "
                                                       "manifest's relative paths are taken from here")  # fmt: skip
     p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "

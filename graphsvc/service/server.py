@@ -38,6 +38,7 @@ from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
+from graphsvc.service.live_workers import LiveWorkers, WorkerLost
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
@@ -80,6 +81,9 @@ class ServerConfig:
     batch_dir: Path | None = None
     batch_scheduler: str | None = None
     batch_workers: int | None = None
+    # Live sessions run in this many worker processes (`live_workers`); 0: in the
+    # server's own process.
+    live_workers: int = 0
 
 
 def parse_graph_spec(text: str) -> tuple[str, Path]:
@@ -204,6 +208,8 @@ def _abort_for(context: grpc.ServicerContext, exc: BaseException) -> None:
         context.abort(exc.code, status_details(exc.message))
     if isinstance(exc, StrategyNotImplementedError):
         context.abort(grpc.StatusCode.UNIMPLEMENTED, status_details(str(exc)))
+    if isinstance(exc, WorkerLost):  # the session's state is gone; a new stream would work
+        context.abort(grpc.StatusCode.UNAVAILABLE, status_details(str(exc)))
     if isinstance(exc, SearchCancelled):  # the client is gone or out of time; nobody reads this
         context.abort(grpc.StatusCode.CANCELLED, str(exc))
     if isinstance(exc, GraphsvcError):
@@ -271,8 +277,10 @@ def first_message(request_iterator, timeout_s: float):
 
 class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None,
-                 config_timeout_s: float = ServerConfig.config_timeout_s):  # fmt: skip
+                 config_timeout_s: float = ServerConfig.config_timeout_s,
+                 live_workers: LiveWorkers | None = None):  # fmt: skip
         self.graphs = graphs
+        self.live_workers = live_workers  # live sessions in worker processes (None: in this process)
         self.config_timeout_s = config_timeout_s
         self.batches = batches  # a batch.service.BatchManager, or None
         self.slots = StreamSlots(max_streams)
@@ -405,61 +413,68 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             except InputError as exc:  # none of the set's (kept) markers among the stream's
                 raise convert.FieldError("config.marker_names", str(exc)) from None
         try:
-            session = LiveSession(graph, options, names, keep_motion=False,  # the client keeps the frames
-                                  marker_names=marker_names, orientations=config.orientations)  # fmt: skip
+            if self.live_workers is not None:
+                session = self.live_workers.open(loaded.name, options, names, marker_names, config.orientations)
+            else:
+                session = LiveSession(graph, options, names, keep_motion=False,  # the client keeps the frames
+                                      marker_names=marker_names, orientations=config.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise convert.FieldError("config.options", str(exc)) from None
-        yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
-            graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames, sensor_names=list(names),
-            skeleton=loaded.info.skeleton))  # fmt: skip
+        try:
+            yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
+                graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames, sensor_names=list(names),
+                skeleton=loaded.info.skeleton))  # fmt: skip
 
-        sample_index = -1
-        previous_t = None
-        frames_out = 0
-        seen_a_marker = False
-        for request in request_iterator:
+            sample_index = -1
+            previous_t = None
+            frames_out = 0
+            seen_a_marker = False
+            for request in request_iterator:
+                if not context.is_active():
+                    return  # cancelled or past the deadline: stop searching now
+                kind = request.WhichOneof("message")
+                if kind == "config":
+                    raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: only the first "
+                                    "message may carry a config; every later one carries a sample")  # fmt: skip
+                if kind is None:
+                    raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
+                sample_index += 1
+                where = f"sample[{sample_index}]"
+                t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t,
+                                                                      where, reads_acc)  # fmt: skip
+                markers = convert.sample_markers_from_proto(request.sample, len(marker_names), where)
+                orientations = convert.sample_orientations_from_proto(request.sample, len(names), order,
+                                                                      config.orientations, where)  # fmt: skip
+                if kept is not None and not seen_a_marker:
+                    seen_a_marker = bool(np.isfinite(markers[kept]).all(axis=-1).any())
+                previous_t = t
+                try:
+                    with self.threads.step() as threaded:  # the threads while this stream runs alone
+                        session.threads = threaded
+                        frames = session.push(t, acc, position, heading, markers=markers, orientations=orientations)
+                except InputError as exc:
+                    raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
+                for frame in frames:
+                    yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, sample_index))
+                frames_out += len(frames)
             if not context.is_active():
-                return  # cancelled or past the deadline: stop searching now
-            kind = request.WhichOneof("message")
-            if kind == "config":
-                raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: only the first "
-                                "message may carry a config; every later one carries a sample")  # fmt: skip
-            if kind is None:
-                raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
-            sample_index += 1
-            where = f"sample[{sample_index}]"
-            t, acc, position, heading = convert.sample_from_proto(request.sample, len(names), order, previous_t, where,
-                                                                  reads_acc)  # fmt: skip
-            markers = convert.sample_markers_from_proto(request.sample, len(marker_names), where)
-            orientations = convert.sample_orientations_from_proto(request.sample, len(names), order,
-                                                                  config.orientations, where)  # fmt: skip
-            if kept is not None and not seen_a_marker:
-                seen_a_marker = bool(np.isfinite(markers[kept]).all(axis=-1).any())
-            previous_t = t
-            try:
-                with self.threads.step() as threaded:  # the threads while this stream runs alone
-                    session.threads = threaded
-                    frames = session.push(t, acc, position, heading, markers=markers, orientations=orientations)
-            except InputError as exc:
-                raise convert.FieldError(f"sample[{sample_index}]", str(exc)) from None
+                return
+            if kept is not None and sample_index >= 0 and not seen_a_marker:
+                # (as Synthesize refuses such a recording; a stream can only tell at its end)
+                raise convert.FieldError("sample[*].marker_positions_m", f"every kept marker "
+                                         f"({', '.join(used.marker_names)}) is NaN in all {sample_index + 1} samples: "
+                                         "nothing to match")  # fmt: skip
+            with self.threads.step() as threaded:
+                session.threads = threaded
+                frames = session.flush()
             for frame in frames:
-                yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, sample_index))
-            frames_out += len(frames)
-        if not context.is_active():
-            return
-        if kept is not None and sample_index >= 0 and not seen_a_marker:
-            # (as Synthesize refuses such a recording; a stream can only tell at its end)
-            raise convert.FieldError("sample[*].marker_positions_m", f"every kept marker "
-                                     f"({', '.join(used.marker_names)}) is NaN in all {sample_index + 1} samples: "
-                                     "nothing to match")  # fmt: skip
-        with self.threads.step() as threaded:
-            session.threads = threaded
-            frames = session.flush()
-        for frame in frames:
-            yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, max(sample_index, 0)))
-            frames_out += 1
-        yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,
-                                                                     frames_emitted=frames_out))  # fmt: skip
+                yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, max(sample_index, 0)))
+                frames_out += 1
+            yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,
+                                                                         frames_emitted=frames_out))  # fmt: skip
+        finally:
+            if self.live_workers is not None:  # (an in-process session is freed with this frame)
+                session.close()
 
 
 # ---------------------------------------------------------------- running
@@ -489,6 +504,8 @@ class RunningServer:
             gc.collect()
         if self.servicer.batches is not None:
             self.servicer.batches.close()
+        if self.servicer.live_workers is not None:
+            self.servicer.live_workers.stop()
 
 
 def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None:
@@ -581,9 +598,12 @@ def bind_server(config: ServerConfig) -> BoundServer:
     return BoundServer(server, port, config.max_streams)
 
 
-def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None) -> RunningServer:
+def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None,
+                 live_workers: LiveWorkers | None = None) -> RunningServer:  # fmt: skip
     """Build (or take the bound server from bind_server), register the services and
-    start; returns at once (port: the bound port)."""
+    start; returns once the live workers are ready (port: the bound port).
+    live_workers: workers already launched for these graphs (else config.live_workers
+    of them are started here)."""
     bound = bound or bind_server(config)
     server = bound.server
     batches = None
@@ -592,7 +612,12 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
 
         batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
                                config.batch_workers)  # fmt: skip
-    servicer = MotionGraphServicer(graphs, config.max_streams, batches, config.config_timeout_s)
+    workers = live_workers
+    if workers is None and config.live_workers:
+        workers = LiveWorkers({n: g.path for n, g in graphs.items()}, config.live_workers)
+    if workers is not None:
+        workers.start()
+    servicer = MotionGraphServicer(graphs, config.max_streams, batches, config.config_timeout_s, workers)
     pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
     health_servicer = health.HealthServicer(experimental_non_blocking=True,
                                             experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
@@ -604,17 +629,20 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
     return RunningServer(server, bound.port, health_servicer, servicer, graphs)
 
 
-def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None) -> int:
+def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None,
+          live_workers: LiveWorkers | None = None) -> int:  # fmt: skip
     """Run until SIGTERM or SIGINT, then drain in-flight calls for config.grace_s and
     return 0. `announce` gets the "listening on" line (port 0 shows the real port)."""
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        running = start_server(graphs, config, bound)
+        running = start_server(graphs, config, bound, live_workers)
+        workers = running.servicer.live_workers
         security = "TLS" if config.tls_cert else "plaintext"
         auth = f"{len(config.tokens)} token(s)" if config.tokens else "no authentication"
         announce(f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "
-                 + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values()))  # fmt: skip
+                 + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values())
+                 + (f"; live sessions in {workers.count} worker process(es)" if workers is not None else ""))  # fmt: skip
         while not stop.wait(0.5):  # a timed wait keeps the main thread responsive to signals
             pass
         announce(f"graphsvc serve: stopping, {running.servicer.slots.active} stream(s) in flight, grace {config.grace_s:g} s")
