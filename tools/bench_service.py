@@ -17,8 +17,13 @@ Prints one JSON object per level:
     late_sends     samples the clients sent more than one period late (client overload:
                    the latencies are then not the server's alone)
     errors         failed streams by status code
-    server_rss_mb  peak resident memory of the server process during the level, MiB
-    server_cores   the server process's CPU time during the level's sending, in cores
+    server_rss_mb  peak memory of the server and its live workers during the level, MiB
+                   (their proportional set sizes summed: the memory-mapped graph's
+                   pages, shared, are counted once)
+    server_cores   the server's and its live workers' CPU time during the level's
+                   sending, in cores
+    front_cores    the part of server_cores in the server's own process (gRPC, the
+                   messages' checks and encoding; all of it without live workers)
                    (CPU seconds a second)
     machine_cores  the whole machine's busy CPU time over the same span, in cores: the
                    clients run on the same machine, so when this nears the core count
@@ -124,9 +129,10 @@ def _stream_inputs(graph_path: str, recordings: list[str] | None, samples: int, 
 
 
 def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, options_bytes, start_at, results,
-                    recordings=None):  # fmt: skip
+                    recordings=None, stagger_s=0.0, streams=1):  # fmt: skip
     """Run len(stream_ids) paced streams in threads; put one result dict per stream.
-    options_bytes: the streams' SynthesisOptions, serialized."""
+    options_bytes: the streams' SynthesisOptions, serialized. Stream i of `streams`
+    sends its first sample stagger_s · i / streams after start_at."""
     from graphsvc.service import client as C
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
@@ -146,7 +152,7 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
             nonlocal late
             try:
                 for k in range(samples):
-                    due = start_at + k / rate_hz
+                    due = start_at + stagger_s * i / streams + k / rate_hz
                     delay = due - time.time()
                     if delay > 0:
                         if stop.wait(delay):
@@ -182,13 +188,36 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
     conn.close()
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time (s) of a process so far."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return float("nan")
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+def process_tree(pid: int) -> list[int]:
+    """pid and every process descended from it (the server's live workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        todo.extend(children.get(p, ()))
+    return out
+
+
+def cpu_seconds(pid: int, tree: bool = True) -> float:
+    """User + system CPU time (s) so far of a process and (tree) its descendants alive now."""
+    total = 0.0
+    for p in process_tree(pid) if tree else [pid]:
+        try:
+            fields = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            if p == pid:
+                return float("nan")
+            continue
+        total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
 
 
 def machine_busy_seconds() -> float:
@@ -198,22 +227,29 @@ def machine_busy_seconds() -> float:
 
 
 def rss_mb(pid: int) -> float:
-    try:
-        text = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return float("nan")
-    m = re.search(r"VmRSS:\s+(\d+) kB", text)
-    return int(m.group(1)) / 1024 if m else float("nan")
+    """Memory of a process and its descendants, MiB: the sum of their proportional set
+    sizes (a page shared by k of them, as the memory-mapped graph, counts 1/k in each)."""
+    total, found = 0.0, False
+    for p in process_tree(pid):
+        try:
+            text = Path(f"/proc/{p}/smaps_rollup").read_text()
+        except OSError:
+            continue
+        m = re.search(r"^Pss:\s+(\d+) kB", text, re.M)
+        if m:
+            total, found = total + int(m.group(1)) / 1024, True
+    return total if found else float("nan")
 
 
 def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, options_bytes, per_process,
-              server_pid, recordings=None) -> dict:  # fmt: skip
+              server_pid, recordings=None, stagger_s=0.0) -> dict:  # fmt: skip
     ctx = mp.get_context("spawn")  # no fork after gRPC is loaded
     results = ctx.Queue()
     start_at = time.time() + 3.0 + 0.05 * streams  # time for the client processes to load inputs
     ids = list(range(streams))
     procs = [ctx.Process(target=_client_process, args=(address, graph_name, graph_path, ids[i:i + per_process], seconds,
-                                                       rate_hz, options_bytes, start_at, results, recordings))
+                                                       rate_hz, options_bytes, start_at, results, recordings,
+                                                       stagger_s, streams))
              for i in range(0, streams, per_process)]  # fmt: skip
     for p in procs:
         p.start()
@@ -223,15 +259,15 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
     while len(collected) < streams:
         peak = max(peak, rss_mb(server_pid)) if server_pid else peak
         now = time.time()
-        if server_pid and len(cpu) < 2 and now >= start_at + (seconds if cpu else 0.0):
-            cpu.append((now, cpu_seconds(server_pid), machine_busy_seconds()))
+        if server_pid and len(cpu) < 2 and now >= start_at + (seconds if cpu else 0.0) + (stagger_s if cpu else 0.0):
+            cpu.append((now, cpu_seconds(server_pid), machine_busy_seconds(), cpu_seconds(server_pid, tree=False)))
         try:
             collected.append(results.get(timeout=0.5))
         except queue.Empty:
             if not any(p.is_alive() for p in procs) and results.empty():
                 break
     if len(cpu) == 1:  # every stream ended within the last poll
-        cpu.append((time.time(), cpu_seconds(server_pid), machine_busy_seconds()))
+        cpu.append((time.time(), cpu_seconds(server_pid), machine_busy_seconds(), cpu_seconds(server_pid, tree=False)))
     cpu_to_end = cpu_seconds(server_pid) - cpu[0][1] if server_pid and cpu else None  # every stream answered
     for p in procs:
         p.join()
@@ -255,6 +291,7 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "server_rss_mb": round(peak, 1) if server_pid else None,
         "server_cores": round((cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "machine_cores": round((cpu[1][2] - cpu[0][2]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
+        "front_cores": round((cpu[1][3] - cpu[0][3]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "server_cpu_ms_per_sample": round(1e3 * cpu_to_end / max(1, sum(r["sent"] for r in collected)), 3)
                                     if cpu_to_end is not None else None,  # fmt: skip
         "seconds": seconds,
@@ -289,6 +326,9 @@ def main(argv=None) -> int:
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
     parser.add_argument("--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks")
+    parser.add_argument("--stagger", type=float, default=0.0, metavar="S",
+                        help="start the streams one after another over S seconds (default 0: all at once)")
+    parser.add_argument("--live-workers", type=int, metavar="N", help="the server's --live-workers (default: its own)")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
     recordings = sorted(str(p) for p in Path(args.recordings).glob("*.rec")) if args.recordings else None
@@ -304,7 +344,8 @@ def main(argv=None) -> int:
     if args.server:
         address, server_pid = args.server, None
     else:
-        proc, address = start_server(graph_path, max(levels))
+        extra = () if args.live_workers is None else ("--live-workers", str(args.live_workers))
+        proc, address = start_server(graph_path, max(levels), *extra)
         server_pid = proc.pid
     options = pb.SynthesisOptions()
     if args.latency is not None:
@@ -319,8 +360,8 @@ def main(argv=None) -> int:
         for streams in levels:
             print(f"level {streams} streams × {args.seconds:g} s ...", file=sys.stderr, flush=True)
             result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
-                               args.streams_per_process, server_pid, recordings)  # fmt: skip
-            print(json.dumps(result), flush=True)
+                               args.streams_per_process, server_pid, recordings, args.stagger)  # fmt: skip
+            print(json.dumps(dict(result, stagger_s=args.stagger)), flush=True)
     finally:
         if proc is not None:
             proc.send_signal(signal.SIGTERM)

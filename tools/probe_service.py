@@ -11,7 +11,11 @@ Prints one JSON object:
                  decode_ms (a serialized request → the session's arrays, as the server
                  checks them), push_ms (LiveSession.push: search step and synthesis),
                  synthesis_ms (the part of push_ms in the streaming synthesis),
-                 encode_ms (the released frames → serialized responses)
+                 encode_ms (the released frames → serialized responses), all after
+                 the first warm_samples; start_push_ms (a session's longest push
+                 among its first warm_samples: the one that starts its search over
+                 the first second's samples at once, every node live) and
+                 first_samples_ms (all those pushes), each a session's mean
     grpc_sync    a server with the service's thread-pool server and a handler that
                  only answers each request message with a pose-frame-sized response:
                  cpu_ms_per_message (the server process's CPU a request in and a
@@ -72,6 +76,7 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
     warm = min(60, samples // 4)
     totals = np.zeros(3)
     counted = 0
+    first_pushes = np.zeros((streams, warm))  # each session's pushes before `warm`
     for k in range(samples):
         for i in range(streams):
             acc, pos, head = inputs[i]
@@ -89,6 +94,8 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
             t1 = time.perf_counter()
             frames = sessions[i].push(t, a, p, h, markers=markers, orientations=orientations)
             t2 = time.perf_counter()
+            if k < warm:
+                first_pushes[i, k] = t2 - t1
             for f in frames:
                 pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(f, k)).SerializeToString()
             t3 = time.perf_counter()
@@ -98,7 +105,9 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
     ms = 1e3 * totals / max(1, counted)
     return {"streams": streams, "samples": counted, "beam": beam, "decode_ms": round(float(ms[0]), 4),
             "push_ms": round(float(ms[1]), 4), "synthesis_ms": round(1e3 * spent[0] / max(1, counted), 4),
-            "encode_ms": round(float(ms[2]), 4)}  # fmt: skip
+            "encode_ms": round(float(ms[2]), 4), "warm_samples": warm,
+            "start_push_ms": round(float(1e3 * first_pushes.max(axis=1).mean()), 2),
+            "first_samples_ms": round(float(1e3 * first_pushes.sum(axis=1).mean()), 2)}  # fmt: skip
 
 
 # ---------------------------------------------------------------- gRPC alone
