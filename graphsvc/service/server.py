@@ -2,14 +2,15 @@
 reflection, bearer-token authentication and optional TLS.
 
 Graphs are loaded once at start (memory-mapped, graphsvc.graph.file.load_graph) and
-shared read-only by every call; each live stream owns its LiveSession. Calls run on
-a thread pool sized for `max_streams` live streams plus a few unary calls; the
-search kernels release the GIL, so streams decode in parallel.
+shared read-only by every call; each live stream owns its LiveSession, in one of the
+live worker processes (`live_workers`) or, without them, in this process. Calls run
+on a thread pool sized for `max_streams` live streams plus a few unary calls.
 
 Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unknown
 graph; UNIMPLEMENTED for a strategy not built (none at present); RESOURCE_EXHAUSTED beyond
 `max_streams` concurrent streams (at once, from a spare worker); DEADLINE_EXCEEDED for a
-stream that sends no config within `config_timeout_s`; UNAUTHENTICATED without a valid token; INTERNAL
+stream that sends no config within `config_timeout_s`; UNAVAILABLE for a stream whose live worker
+died; UNAUTHENTICATED without a valid token; INTERNAL
 (with the traceback on the server's stderr) for bugs — bad input never takes the
 server down.
 """
