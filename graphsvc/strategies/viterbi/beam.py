@@ -68,8 +68,7 @@ BEAM_CHUNKS = 64
 
 
 def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks, marks_words, sources, touched, total,
-                  keep,
-                  survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
+                  keep, survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
                   readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, beam,
                   state_prev, det_prev, state_new, det_new, arrivals, none, ancestor_prev, ancestor_new,
                   chunk_low, pull):  # fmt: skip
