@@ -31,8 +31,10 @@ at once (all must start: no slot leaked), closes them, stops the server with SIG
     rejected_ms     RESOURCE_EXHAUSTED answers: p50, p99 and slowest, ms (a wait for a
                     slot would take a stream's length)
     health          SERVING / other / failed checks, and the slowest check, ms
-    rss_mb          samples (s, MiB), and after the warm-up (the first fifth): the
-                    medians of its first and last quarter and their ratio − 1 (growth)
+    rss_mb          samples (s, MiB) of the server and its live workers (summed
+                    proportional set sizes), and after the warm-up (the first fifth):
+                    the medians of its first and last quarter and their ratio − 1
+                    (growth)
     threads         at the start, the most seen, at the end, and the bound (the start
                     plus the server's worker pool plus THREAD_SLACK)
     slots_probe     streams started out of --max-streams after the churn
