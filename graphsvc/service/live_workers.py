@@ -7,11 +7,15 @@ process pushing 12 sessions' samples in turn spends 1.03–1.09 ms a sample on t
 process the threads queue for the one GIL: that server stopped at 1.23 of 2 cores,
 24 streams falling seconds behind. So the server keeps gRPC, the checking of each
 message and the encoding of the frames in its own process, and runs the sessions in
-`count` worker processes, each one thread that pushes its sessions' samples one after
+`count` worker processes, where one thread pushes the sessions' samples one after
 another (a stream keeps its worker for life; a new stream goes to the worker with
 fewest). The graphs are memory-mapped, so their pages are shared by every process;
-each worker makes its own indexes and tables at start. Measured: 16 streams p50 3.0 s
-→ 23 ms, the server using 1.54 cores at 24 (tools/bench_service.py; BENCHMARKS.md).
+each worker makes its own indexes and tables at start. A session's start is heavy (40–
+160 ms in one push), so its first YOUNG_S seconds of samples, its opening and its
+flush run on a second thread of the worker, beside the other sessions' pushes rather
+than ahead of them. Measured on 2 cores shared with the clients: 24 streams started
+over 20 s at p99 28–37 ms (before the second thread 238 ms; in one process 16 streams
+already fell seconds behind; tools/bench_service.py, BENCHMARKS.md).
 multiprocessing's pipes carry the messages: a round trip with a worker that only echoes
 costs the front about 0.1 ms of CPU, a tenth of a push.
 
@@ -43,6 +47,10 @@ from pathlib import Path
 from graphsvc.errors import GraphsvcError, InputError
 
 READY_TIMEOUT_S = 600.0  # loading and warming every graph in a worker (a fresh install compiles)
+# A session's first seconds of samples: the heavy pushes of its start (a Viterbi
+# search starts after its first second, with most nodes live) run beside the other
+# sessions' pushes instead of ahead of them.
+YOUNG_S = 2.0
 
 
 class WorkerLost(GraphsvcError):
@@ -64,8 +72,11 @@ def default_count() -> int:
 
 
 def _worker_main(conn, graph_paths: dict[str, str]) -> None:
-    """A worker: load and warm every graph, say "ready", then answer requests in order
-    until "stop" or the front's end of the pipe closes."""
+    """A worker: load and warm every graph, say "ready", then answer requests until
+    "stop" or the front's end of the pipe closes. Each session's requests come one at
+    a time (the front waits for each answer), so either thread may take them: a
+    session's opening, its first YOUNG_S seconds of samples and its flush run on the
+    side thread, everything else on this one."""
     try:
         from graphsvc.graph.file import load_graph
         from graphsvc.pipeline import warm_up
@@ -79,45 +90,75 @@ def _worker_main(conn, graph_paths: dict[str, str]) -> None:
         conn.send((None, "error", f"{type(exc).__name__}: {exc}"))
         return
     conn.send((None, "ok", os.getpid()))
+
+    sessions: dict = {}
+    young: dict[int, int] = {}  # session → pushes still to go to the side thread
+    send_lock = threading.Lock()
+    side: queue.SimpleQueue = queue.SimpleQueue()
+
+    def answer(op, sid, payload) -> bool:
+        reply = _answer(graphs, sessions, op, sid, payload)
+        try:
+            with send_lock:
+                conn.send(reply)
+        except (EOFError, OSError):
+            return False  # the front has gone
+        return True
+
+    def side_thread():
+        while (item := side.get()) is not None and answer(*item):
+            pass
+
+    threading.Thread(target=side_thread, name="graphsvc-live-side", daemon=True).start()
+    try:
+        while True:
+            try:
+                op, sid, payload = conn.recv()
+            except (EOFError, OSError):
+                return  # the front has gone
+            if op == "stop":
+                return
+            if op == "close":
+                sessions.pop(sid, None)
+                young.pop(sid, None)
+                continue
+            if op == "open" and payload[0] in graphs:
+                young[sid] = max(1, round(YOUNG_S * graphs[payload[0]].rate_hz))
+            if op in ("open", "flush") or (op == "push" and young.get(sid, 0) > 0):
+                if op == "push":
+                    young[sid] -= 1
+                side.put((op, sid, payload))
+            elif not answer(op, sid, payload):
+                return
+    finally:
+        side.put(None)
+
+
+def _answer(graphs, sessions, op, sid, payload) -> tuple:
+    """One request's answer (sid, status, value); see the module docstring."""
     from graphsvc.pipeline import LiveSession
 
-    sessions: dict[int, LiveSession] = {}
-    while True:
-        try:
-            op, sid, payload = conn.recv()
-        except (EOFError, OSError):
-            return  # the front has gone
-        if op == "stop":
-            return
-        if op == "close":
-            sessions.pop(sid, None)
-            continue
-        try:
-            if op == "open":
-                name, options, names, marker_names, orientations = payload
-                session = LiveSession(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
-                                      orientations=orientations)  # fmt: skip
-                sessions[sid] = session
-                answer = (sid, "ok", session.lag_frames)
-            elif op == "push":
-                threads, args, kwargs = payload
-                session = sessions[sid]
-                session.threads = threads
-                answer = (sid, "ok", session.push(*args, **kwargs))
-            elif op == "flush":
-                session = sessions[sid]
-                session.threads = payload
-                answer = (sid, "ok", session.flush())
-            else:
-                answer = (sid, "error", f"unknown request {op!r}")
-        except InputError as exc:
-            answer = (sid, "input", str(exc))
-        except Exception:  # noqa: BLE001 — a defect: its traceback goes to the front
-            answer = (sid, "error", traceback.format_exc())
-        try:
-            conn.send(answer)
-        except (EOFError, OSError):
-            return
+    try:
+        if op == "open":
+            name, options, names, marker_names, orientations = payload
+            session = LiveSession(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
+                                  orientations=orientations)  # fmt: skip
+            sessions[sid] = session
+            return (sid, "ok", session.lag_frames)
+        if op == "push":
+            threads, args, kwargs = payload
+            session = sessions[sid]
+            session.threads = threads
+            return (sid, "ok", session.push(*args, **kwargs))
+        if op == "flush":
+            session = sessions[sid]
+            session.threads = payload
+            return (sid, "ok", session.flush())
+        return (sid, "error", f"unknown request {op!r}")
+    except InputError as exc:
+        return (sid, "input", str(exc))
+    except Exception:  # noqa: BLE001 — a defect: its traceback goes to the front
+        return (sid, "error", traceback.format_exc())
 
 
 # ---------------------------------------------------------------- the front's side

@@ -192,3 +192,52 @@ def test_the_default_count_is_one_a_core_and_none_on_one_core(monkeypatch):
     assert live_workers.default_count() == 3
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
     assert live_workers.default_count() == 0
+
+
+def test_a_starting_session_does_not_hold_up_the_others(graph_file, graph, recording, monkeypatch):
+    # A worker run as a thread of this process, so that its sessions' push can be held:
+    # a session's first seconds go to the side thread, and while one is held there an
+    # established session's sample is still answered.
+    from multiprocessing import Pipe
+
+    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.service import live_workers
+
+    front, back = Pipe()
+    worker = threading.Thread(target=live_workers._worker_main, args=(back, {"small": str(graph_file)}),
+                              daemon=True)  # fmt: skip
+    worker.start()
+    assert front.poll(120) and front.recv()[1] == "ok"
+    names = tuple(recording.sensor_names)
+
+    def call(op, sid, payload):
+        front.send((op, sid, payload))
+        assert front.poll(60)
+        return front.recv()
+
+    def sample(k):
+        return False, (recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k],
+                       recording.heading[k]), {}  # fmt: skip
+
+    young = round(live_workers.YOUNG_S * graph.rate_hz)
+    assert young < recording.num_samples
+    assert call("open", 1, ("small", Options(), names, (), False))[:2] == (1, "ok")
+    for k in range(young):
+        assert call("push", 1, sample(k))[:2] == (1, "ok")
+    release = threading.Event()
+    push = LiveSession.push
+
+    def held(self, *args, **kwargs):
+        if threading.current_thread().name == "graphsvc-live-side":
+            release.wait(60)
+        return push(self, *args, **kwargs)
+
+    monkeypatch.setattr(LiveSession, "push", held)
+    assert call("open", 2, ("small", Options(), names, (), False))[:2] == (2, "ok")
+    front.send(("push", 2, sample(0)))  # held on the side thread
+    assert call("push", 1, sample(young))[:2] == (1, "ok")  # answered meanwhile
+    release.set()
+    assert front.poll(60) and front.recv()[:2] == (2, "ok")
+    front.send(("stop", 0, None))
+    worker.join(30)
+    assert not worker.is_alive()
