@@ -12,6 +12,8 @@ Prints one JSON object per level:
     p99_settled_ms p99 of the samples sent after the first SETTLE_S seconds: all streams
                    start together, and a search's first samples keep most nodes live
                    (a beam search's too), so the start is a burst the rest is not
+    p99_by_5s_ms   p99 of each 5 s of the streams' own time (0–5 s, 5–10 s, …): the
+                   start's backlog and how long it takes to clear
     dropped        frames that never came back (samples sent − frames received, plus
                    the frames of streams that failed to start)
     late_sends     samples the clients sent more than one period late (client overload:
@@ -61,6 +63,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTLE_S = 3.0  # p99_settled_ms leaves out the samples sent in a level's first seconds
+WINDOW_S = 5.0  # p99_by_5s_ms: a p99 for each such stretch of the streams' time
 sys.path.insert(0, str(ROOT))
 
 
@@ -274,6 +277,10 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
     latencies = np.concatenate([np.asarray(r["latencies_ms"], float) for r in collected]) if collected else np.zeros(0)
     released_by = np.concatenate([np.asarray(r["released_by"], float) for r in collected]) if collected else np.zeros(0)
     settled = latencies[np.isfinite(latencies) & (released_by >= SETTLE_S * rate_hz)]
+    window = np.floor(released_by / (WINDOW_S * rate_hz))
+    by_window = [round(float(np.percentile(latencies[(window == w) & np.isfinite(latencies)], 99)), 1)
+                 for w in range(int(window.max()) + 1 if window.size else 0)
+                 if ((window == w) & np.isfinite(latencies)).any()]  # fmt: skip
     latencies = latencies[np.isfinite(latencies)]
     errors: dict[str, int] = {}
     for r in collected:
@@ -285,6 +292,7 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "p50_ms": round(float(np.percentile(latencies, 50)), 3) if latencies.size else None,
         "p99_ms": round(float(np.percentile(latencies, 99)), 3) if latencies.size else None,
         "p99_settled_ms": round(float(np.percentile(settled, 99)), 3) if settled.size else None,
+        "p99_by_5s_ms": by_window,
         "dropped": int(expected - sum(r["frames"] for r in collected)),
         "late_sends": int(sum(r["late_sends"] for r in collected)),
         "errors": errors,
