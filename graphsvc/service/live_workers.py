@@ -136,10 +136,10 @@ def _worker_main(conn, graph_paths: dict[str, str]) -> None:
 
 def _answer(graphs, sessions, op, sid, payload) -> tuple:
     """One request's answer (sid, status, value); see the module docstring."""
-    from graphsvc.pipeline import LiveSession
-
     try:
         if op == "open":
+            from graphsvc.pipeline import LiveSession  # (here, not on every sample's way)
+
             name, options, names, marker_names, orientations = payload
             session = LiveSession(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
                                   orientations=orientations)  # fmt: skip
