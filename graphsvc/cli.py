@@ -1,4 +1,4 @@
-"""Command line: parses arguments and calls the library. No logic of its own.
+"""The `graphsvc` command: parse arguments, call the library, print what it did.
 
 Errors a user can cause (GraphsvcError, unreadable or unwritable paths) print one
 line on stderr and exit 2 with nothing written; --debug shows the traceback.
@@ -14,10 +14,16 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (COUNT, RATE_HZ, SEED, Parser, add_input_file_options, add_marker_options,
+from graphsvc.cli_args import (COUNT, PATH, RATE_HZ, SEED, Parser, add_input_file_options, add_marker_options,
                                add_search_options, add_synthesize_options, os_message, ranged,
-                               search_options)  # fmt: skip
+                               search_options, synthesize_inputs)  # fmt: skip
+from graphsvc.fileio import check_outputs
 from graphsvc.errors import GraphsvcError
+
+DESCRIPTION = ("graphsvc reconstructs full-body human motion from sparse measurements — body-worn accelerometers, an "
+               "overhead tracker's position and heading, annotations, or a few optical markers — by searching motion "
+               "capture: build a motion graph of a knowledge base of clips, then synthesize motion from a recording, "
+               "in batch, or live through the gRPC service.")
 
 
 def _cmd_inspect(args) -> int:
@@ -47,9 +53,10 @@ def _cmd_simulate(args) -> int:
     if args.markers is None and (args.keep or args.gaps or args.flicker or args.gap_fraction):
         raise InputError("--keep, --gaps, --flicker and --gap-fraction apply to --markers")
     out = Path(args.output)
+    check_outputs([("-o", out, None)], [("the clip", args.clip), ("the joint map", _file_arg(args.mapping)),
+                                        ("the marker set", args.markers)])  # fmt: skip
     if out.suffix.lower() not in (".rec", ".csv"):  # what `inspect` and `synthesize` read back by the suffix
         raise InputError(f"{out}: simulate writes .rec (binary) or .csv, not {out.suffix or 'a file without a suffix'}")
-    _check_output(out)
     if args.markers is not None:
         from graphsvc.sensors.markers import keep_markers, load_marker_set, parse_names
         from graphsvc.sensors.optical import export_marker_csv
@@ -88,8 +95,7 @@ def _cmd_mapping(args) -> int:
     from graphsvc.motion.joints import OPTIONAL, guess_mapping
     from graphsvc.motion.library import load_motion
 
-    if args.output:
-        _check_output(Path(args.output))
+    check_outputs([("-o", args.output, (".json",))], [("the clip", args.clip)])
     motion = load_motion(args.clip)
     mapping, missing = guess_mapping(motion.skeleton)
     text = json.dumps(mapping, indent=1) + "\n"
@@ -100,7 +106,7 @@ def _cmd_mapping(args) -> int:
     required = [c for c in missing if c not in OPTIONAL]
     note = (f"not found: {', '.join(missing)}" + (" — required: map them by hand" if required else
                                                   " (a skeleton may lack these)")) if missing else "every canonical joint found"  # fmt: skip
-    print(f"{motion.skeleton.num_joints} joints; {note}" + (f"; wrote {args.output}" if args.output else ""),
+    print(f"{motion.skeleton.num_joints_excluding_end_sites} joints; {note}" + (f"; wrote {args.output}" if args.output else ""),
           file=sys.stderr)
     return 0 if not required else 2
 
@@ -122,7 +128,8 @@ def _cmd_build(args) -> int:
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
-    _check_output(out)
+    check_outputs([("-o", out, None)], [("a knowledge-base file", k) for k in args.kb] +
+                  [("the joint map", _file_arg(args.mapping))])  # fmt: skip
     progress = False if args.quiet else None
     augment = tuple(a for a in (args.augment or "").split(",") if a)
     mapping = load_mapping_file(args.mapping) if args.mapping and args.mapping != "guess" else None
@@ -182,7 +189,7 @@ def _cmd_relayout(args) -> int:
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
-    _check_output(out)
+    check_outputs([("-o", out, None)], [("the graph", args.graph), ("the layout file", args.layout)])
     layout = load_layout(args.layout)
     graph = load_graph(args.graph)
     acc = recompute_accelerations(graph, layout)
@@ -195,12 +202,12 @@ def _cmd_relayout(args) -> int:
 
 def _cmd_synthesize(args) -> int:
     from graphsvc.graph.file import load_graph
+    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
     from graphsvc.pipeline import synthesize_files
 
     out = Path(args.output)
-    _check_output(out)
-    if args.report:
-        _check_output(Path(args.report))
+    check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))],
+                  synthesize_inputs(args))  # fmt: skip
     options = search_options(args)
     graph = load_graph(args.graph)
     notes: list[str] = []
@@ -209,7 +216,7 @@ def _cmd_synthesize(args) -> int:
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     r = result.report
-    labels = " → ".join(f"{run['label']} {run['frames'] / graph.rate_hz:.1f} s" for run in r["labels"][:12])
+    labels = " → ".join(f"{run['label']} {_seconds(run['frames'] / graph.rate_hz)}" for run in r["labels"][:12])
     more = f" … (+{len(r['labels']) - 12})" if len(r["labels"]) > 12 else ""
     print(f"wrote {out}: {result.motion.num_frames} frames at {graph.rate_hz:g} Hz from {r['samples']} samples"
           + (f" (resampled from {r['input_rate_hz']:g} Hz)" if r["resampled"] else ""))  # fmt: skip
@@ -229,7 +236,8 @@ def _cmd_calibrate(args) -> int:
     from graphsvc.sensors.recording import read_recording
 
     out = Path(args.output)
-    _check_output(out)
+    check_outputs([("-o", out, (".json",))], [("the recording", args.recording), ("the graph", args.graph),
+                                              ("the device map", _file_arg(args.device_map))])  # fmt: skip
     graph = None
     if args.graph:
         from graphsvc.graph.file import load_graph
@@ -322,12 +330,14 @@ def _cmd_evaluate(args) -> int:
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
     actor_map = protocols.load_actor_map(args.actors) if args.actors else None
     setup = replace(setup, protocol=args.hold_out)
-    if args.report_html:
-        _check_output(Path(args.report_html))
+    check_outputs([("--json", args.json, (".json",)), ("--report-html", args.report_html, (".html", ".htm"))],
+                  [("a knowledge-base file", k) for k in args.kb] + [("the graph", args.graph), ("the actor map", args.actors),
+                   ("the joint map", _file_arg(args.mapping))])  # fmt: skip
     keep_tmp = None
     if args.keep_motions:
         keep = Path(args.keep_motions)
-        _check_output(keep)
+        if not keep.parent.is_dir():
+            raise InputError(f"--keep-motions {keep}: folder {keep.parent} does not exist")
         if keep.exists() and not keep.is_dir():
             raise InputError(f"--keep-motions {keep}: is a file, not a folder")
         keep.mkdir(exist_ok=True)
@@ -338,8 +348,6 @@ def _cmd_evaluate(args) -> int:
         keep_tmp = tempfile.TemporaryDirectory(prefix="graphsvc-report-")
         setup = replace(setup, keep_dir=keep_tmp.name)
     layout = load_layout(args.layout) if args.layout else None
-    if args.json:
-        _check_output(Path(args.json))
     progress = False if args.quiet else None
 
     t0 = time.perf_counter()
@@ -357,6 +365,7 @@ def _cmd_evaluate(args) -> int:
             raise InputError(f"{args.graph} was built for layout {graph.layout.get('name')!r}, not {layout.name!r} "
                              "(rebuild it or run `graphsvc relayout`)")  # fmt: skip
         tests = [load_motion(files[k]) for k in picked]
+        _check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
         indices = loo.match_graph_clips(graph, tests)
         offsets = {k: m.skeleton.offsets for m, k in zip(tests, indices) if k is not None}
         missing = [m.name for m, k in zip(tests, indices) if k is None]
@@ -374,6 +383,7 @@ def _cmd_evaluate(args) -> int:
         # load_knowledge_base keeps the files' order and appends augmented copies,
         # so file k is graph clip k.
         tests = [motions[k] for k in picked]
+        _check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
         indices = list(picked)
         offsets = {k: m.skeleton.offsets for k, m in enumerate(motions)}
         build_s = time.perf_counter() - t0
@@ -404,7 +414,11 @@ def _cmd_evaluate(args) -> int:
         **({"keep_motions": setup.keep_dir} if args.keep_motions else {}),
     }  # fmt: skip
     if args.json:
-        write_text_atomic(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
+        # Without --keep-motions the clips' files live only until the page is written:
+        # the JSON does not point at them (`graphsvc report` of it then says so).
+        saved = out if args.keep_motions else {**out, "clips": [{k: v for k, v in c.items() if k != "kept"}
+                                                                for c in out["clips"]]}  # fmt: skip
+        write_text_atomic(args.json, json.dumps(saved, indent=1, sort_keys=True) + "\n")
     if args.report_html:
         from graphsvc.report.html import write_html
         from graphsvc.report.load import evaluation_document
@@ -432,7 +446,7 @@ def _cmd_report(args) -> int:
     from graphsvc.report.load import load_document
 
     out = Path(args.output)
-    _check_output(out)
+    check_outputs([("-o", out, (".html", ".htm"))], [("the result", args.result), ("the truth", args.truth)])
     doc = load_document(args.result, truth=args.truth)
     write_html(out, doc)
     print(f"wrote {out}: {len(doc['clips'])} clip{'s' if len(doc['clips']) != 1 else ''}, "
@@ -440,90 +454,146 @@ def _cmd_report(args) -> int:
     return 0
 
 
-def _check_output(path: Path) -> None:
-    if not path.parent.exists() or not path.parent.is_dir():
-        raise GraphsvcError(f"output folder {path.parent} does not exist")
+def _check_test_skeletons(tests, mapping) -> None:
+    """Every test clip's joints found (SkeletonError naming --mapping otherwise), before
+    any note is printed or any search starts."""
+    from graphsvc.errors import SkeletonError
+    from graphsvc.motion.joints import joint_map
+
+    for m in tests:
+        try:
+            joint_map(m.skeleton, mapping)
+        except SkeletonError as exc:
+            raise SkeletonError(f"test clip {m.name}: {exc}") from None
+
+
+def _seconds(s: float) -> str:
+    """A run's length as the path summary prints it: 0.1 s steps, and a run shorter than
+    that (a frame or two) in hundredths, never as 0.0 s."""
+    return f"{s:.1f} s" if s >= 0.095 else f"{s:.2f} s"
+
+
+def _file_arg(value: str | None) -> str | None:
+    """An argument that is a file or a built-in name (`--mapping guess`, `--device-map
+    xsens`): the file, or None for a name."""
+    return None if value in (None, "guess", "xsens") else value
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = Parser(prog="graphsvc", description=__doc__.splitlines()[0])
-    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    parser.add_argument("--version", action="version", version=_version())
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    parser = Parser(prog="graphsvc", description=DESCRIPTION,
+                    epilog="Run `graphsvc COMMAND --help` for a command's arguments; the README and docs/ for more.")  # fmt: skip
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error instead of one line")
+    parser.add_argument("--version", action="version", version=_version(), help="print the version and exit")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser, metavar="COMMAND")
 
-    p = sub.add_parser("inspect", help="describe motion files, folders and recordings")
-    p.add_argument("paths", nargs="+", metavar="PATH")
+    def command(name: str, summary: str, description: str | None = None):
+        return sub.add_parser(name, help=summary, description=description or summary[0].upper() + summary[1:] + ".")
+
+    p = command("inspect", "describe motion files, folders and recordings",
+                "Describe motion files and folders (searched recursively: per clip frames, rate, joints, duration, "
+                "labels; per-folder and overall totals) or recordings (samples, sensors, channels).")  # fmt: skip
+    p.add_argument("paths", nargs="+", metavar="PATH", type=PATH,
+                   help="a motion file (.bvh, .amc), a folder of them, or a recording (.rec, .csv, .mvnx, .c3d)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(run=_cmd_inspect)
 
-    p = sub.add_parser("simulate", help="simulate sensor readings or optical markers of a clip into a recording")
-    p.add_argument("clip", metavar="CLIP")
+    p = command("simulate", "simulate sensor readings or optical markers of a clip into a recording",
+                "Simulate the readings a layout's accelerometers (--layout) or a marker set's optical markers "
+                "(--markers) would give for a motion clip, with noise, and write them as a recording.")  # fmt: skip
+    p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc) to simulate")
     p.add_argument("--layout", help="accelerometers: preset (wrists-ankles, kelly6, right-wrist) or layout file")
     add_marker_options(p)
     p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
     p.add_argument("--flicker", type=float, metavar="P",
-                   help="markers: each marker unseen this share of samples, in short dropouts (3 samples on average)")
+                   help="markers: each marker unseen this share of samples, in short dropouts (3 samples on average; "
+                        "default 0)")  # fmt: skip
     p.add_argument("--gap-fraction", type=float, metavar="F",
-                   help="markers: random gaps of 5–80 samples until this share of samples is in one")
-    p.add_argument("--noise", default="none", help="PRESET[,key=value...] (presets: none, default, tracker, harsh)")
-    p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M", help="overhead-tracker noise σ in metres")
-    p.add_argument("--seed", type=SEED, default=0)
-    p.add_argument("--rate", type=RATE_HZ, metavar="HZ", help="resample to this rate first")
-    p.add_argument("--mapping", metavar="FILE", help="joint mapping JSON for unknown skeletons, or 'guess'")
-    p.add_argument("-o", "--output", required=True, metavar="REC",
-                   help="output .rec (or .csv: a device CSV, or a marker CSV with --markers)")
+                   help="markers: random gaps of 5–80 samples until this share of samples is in one (default 0)")
+    p.add_argument("--noise", default="none", metavar="NOISE",
+                   help="PRESET[,key=value...] (presets: none, default, tracker, harsh, real; default none)")
+    p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M",
+                   help="overhead-tracker noise σ in metres (default: the noise preset's)")
+    p.add_argument("--seed", type=SEED, default=0, help="noise seed (default 0)")
+    p.add_argument("--rate", type=RATE_HZ, metavar="HZ", help="resample to this rate first (default: the clip's)")
+    p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
+                   help="joint map JSON for a skeleton graphsvc does not know, or 'guess' (`graphsvc mapping`)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.rec", type=PATH,
+                   help="the recording to write: .rec, or .csv (a device CSV, or a marker CSV with --markers)")
     p.set_defaults(run=_cmd_simulate)
 
-    p = sub.add_parser("build", help="build a motion graph from a knowledge base")
-    p.add_argument("kb", nargs="+", metavar="KB", help="motion files, folders or globs (.bvh, .amc)")
-    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p = command("build", "build a motion graph from a knowledge base",
+                "Build the motion graph of a knowledge base of motion clips: transitions at foot contacts, speed "
+                "variations, interpolated nodes, bridges between actions, and each edge's sensor readings for a "
+                "layout.")  # fmt: skip
+    p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="motion files, folders or globs (.bvh, .amc)")
+    p.add_argument("-o", "--output", required=True, metavar="GRAPH", type=PATH, help="the graph file to write")
     p.add_argument("--rate", type=RATE_HZ, default=30.0, metavar="HZ", help="graph rate (default 30)")
-    p.add_argument("--layout", default="wrists-ankles", help="sensor layout for the edge metadata")
+    p.add_argument("--layout", default="wrists-ankles", metavar="LAYOUT",
+                   help="sensor layout of the edge metadata: preset (wrists-ankles, kelly6, right-wrist) or layout "
+                        "file (default wrists-ankles)")  # fmt: skip
     p.add_argument("--no-msv", action="store_true", help="no slow-down nodes or speed-up edges")
     p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
     p.add_argument("--no-bridges", action="store_true", help="no bridges between actions (blended transitions)")
     p.add_argument("--exclude", action="append", metavar="GLOB", help="leave out matching files (repeatable)")
-    p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated)")
-    p.add_argument("--mapping", metavar="FILE",
-                   help="joint mapping JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
-    p.add_argument("--jobs", type=COUNT, default=1, metavar="N", help="threads for loading and preparing clips")
+    p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated; default none)")
+    p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
+                   help="joint map JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
+    p.add_argument("--jobs", type=COUNT, default=1, metavar="N", help="threads for loading and preparing clips (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)
 
-    p = sub.add_parser("info", help="describe a graph file")
-    p.add_argument("graph", metavar="FILE")
-    p.add_argument("--json", action="store_true")
+    p = command("info", "describe a graph file",
+                "Describe a graph file: nodes and edges by kind, labels, layout, build parameters, connectivity.")
+    p.add_argument("graph", metavar="GRAPH", type=PATH, help="a graph file (`graphsvc build`)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a summary")
     p.set_defaults(run=_cmd_info)
 
-    p = sub.add_parser("relayout", help="recompute a graph's sensor metadata for another layout")
-    p.add_argument("graph", metavar="GRAPH")
-    p.add_argument("--layout", required=True, help="preset or layout file")
-    p.add_argument("-o", "--output", required=True, metavar="FILE")
+    p = command("relayout", "recompute a graph's sensor metadata for another layout",
+                "Recompute a graph's per-edge sensor readings for another layout (or an older graph's for today's "
+                "sensor frames), without the knowledge base.")  # fmt: skip
+    p.add_argument("graph", metavar="GRAPH", type=PATH, help="the graph file to read")
+    p.add_argument("--layout", required=True, metavar="LAYOUT", help="preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    p.add_argument("-o", "--output", required=True, metavar="OUT", type=PATH,
+                   help="the graph file to write (not the input)")
     p.set_defaults(run=_cmd_relayout)
 
-    p = sub.add_parser("synthesize", help="reconstruct motion from a recording by searching a graph")
-    p.add_argument("graph", metavar="GRAPH")
-    p.add_argument("recording", metavar="REC", help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
+    p = command("synthesize", "reconstruct motion from a recording by searching a graph",
+                "Reconstruct full-body motion from a recording (accelerometers, tracker, orientations, annotations "
+                "or optical markers) with a strategy over a graph, and write it as BVH (and a report).")  # fmt: skip
+    p.add_argument("graph", metavar="GRAPH", type=PATH, help="a graph file (`graphsvc build`)")
+    p.add_argument("recording", metavar="REC", type=PATH,
+                   help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
+                   help="the motion to write (.bvh; not an input)")
     add_synthesize_options(p)
-    p.add_argument("--report", metavar="OUT.json", help="node path, per-term costs, compression, timings")
+    p.add_argument("--report", metavar="OUT.json", type=PATH,
+                   help="also write a JSON report: node path, labels, per-term costs, compression, timings")
     p.set_defaults(run=_cmd_synthesize)
 
-    p = sub.add_parser("calibrate", help="estimate each sensor's mounting rotation from a calibration take")
-    p.add_argument("recording", metavar="REC", help="device recording: stands still in the pose, then moves")
-    p.add_argument("--graph", metavar="G", help="a graph whose readings of similar motion fix the rotation about gravity")
+    p = command("calibrate", "estimate each sensor's mounting rotation from a calibration take",
+                "Estimate each device's mounting rotation onto the layout's sensor frame from a take that holds a "
+                "known pose, then moves; `--calibration CAL.json` elsewhere applies it.")  # fmt: skip
+    p.add_argument("recording", metavar="REC", type=PATH,
+                   help="device recording: stands still in the pose, then moves")
+    p.add_argument("--graph", metavar="GRAPH", type=PATH,
+                   help="a graph whose readings of similar motion fix the rotation about gravity (default: none, the "
+                        "rotation about gravity stays unknown)")  # fmt: skip
     p.add_argument("--pose", required=True, choices=("npose", "tpose", "stand"),
                    help="the pose held at the start (stand: a natural stance, only approximately an N-pose)")
-    p.add_argument("--from", dest="start", type=float, metavar="S", help="use the recording from S seconds")
-    p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds")
+    p.add_argument("--from", dest="start", type=float, metavar="S",
+                   help="use the recording from S seconds (default: its start)")
+    p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds (default: its end)")
     add_input_file_options(p)
-    p.add_argument("-o", "--output", required=True, metavar="CAL.json")
+    p.add_argument("-o", "--output", required=True, metavar="CAL.json", type=PATH, help="the calibration to write (.json)")
     p.set_defaults(run=_cmd_calibrate)
 
-    p = sub.add_parser("batch", help="reconstruct a manifest of recordings on a local or existing Dask cluster")
-    p.add_argument("manifest", metavar="MANIFEST", help="CSV (header row) or JSON: recording, graph, strategy, output, "
-                                                        "[weights, constraints, calibration, options]; docs/batch.md")
-    p.add_argument("--out", required=True, metavar="DIR", help="outputs, the job store and the summary")
+    p = command("batch", "reconstruct a manifest of recordings on a local or existing Dask cluster",
+                "Reconstruct every row of a manifest as `synthesize` would (the same bytes), on a local or an "
+                "existing Dask cluster, resumably: a rerun skips what is done.")  # fmt: skip
+    p.add_argument("manifest", metavar="MANIFEST", type=PATH,
+                   help="CSV (header row) or JSON: recording, graph, strategy, output, [weights, constraints, "
+                        "calibration, options]; docs/batch.md")  # fmt: skip
+    p.add_argument("--out", required=True, metavar="DIR", type=PATH, help="outputs, the job store and the summary")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="an existing Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else a"
@@ -531,28 +601,37 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--workers", type=COUNT, metavar="N", help="local cluster workers (default: one a core)")
     p.add_argument("--retries", type=int, default=2, metavar="R",
                    help="further attempts after a failure that is not the input's (a worker died; default 2)")
-    p.add_argument("--graph", action="append", metavar="NAME=PATH", help="a graph the manifest names (repeatable)")
+    p.add_argument("--graph", action="append", metavar="NAME=PATH",
+                   help="a graph the manifest names (repeatable; default: the manifest's paths)")
     p.add_argument("--timeout", type=float, default=10.0, metavar="S", help="wait this long for the scheduler (default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_batch)
 
-    p = sub.add_parser("evaluate", help="leave-one-out evaluation on a knowledge base (metrics: docs/evaluation.md)")
-    p.add_argument("kb", nargs="+", metavar="KB", help="knowledge-base files, folders or globs (.bvh, .amc)")
-    p.add_argument("--test", required=True, metavar="GLOB", help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
-    p.add_argument("--layout", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
-    p.add_argument("--graph", metavar="FILE", help="a graph built from the same KB, instead of building one")
-    p.add_argument("--augment", metavar="KINDS", help="build with copies: mirror, reverse (held out with their clip)")
-    p.add_argument("--noise", default="default", help="PRESET[,key=value...] (default: the 'default' preset, docs/sensors.md)")
+    p = command("evaluate", "leave-one-out evaluation on a knowledge base",
+                "Evaluate a strategy on a knowledge base: each test clip's sensors are simulated and reconstructed on "
+                "a graph that hides its takes (or its clip, actor or action), and scored against it; or joined "
+                "performances of several clips (--mixed). Metrics: docs/evaluation.md.")  # fmt: skip
+    p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="knowledge-base files, folders or globs (.bvh, .amc)")
+    p.add_argument("--test", required=True, metavar="GLOB",
+                   help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
+    p.add_argument("--layout", metavar="LAYOUT", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
+    p.add_argument("--graph", metavar="GRAPH", type=PATH,
+                   help="a graph built from the same KB, instead of building one (default: build)")
+    p.add_argument("--augment", metavar="KINDS",
+                   help="build with copies: mirror, reverse (held out with their clip; default none)")
+    p.add_argument("--noise", default="default", metavar="NOISE",
+                   help="PRESET[,key=value...] (default: the 'default' preset, docs/sensors.md)")
     p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M",
-                   help="keep the overhead tracker's positions with this σ in metres (0: exact)")
+                   help="keep the overhead tracker's positions with this σ in metres (0: exact; default: the noise "
+                        "preset's tracker, when it has one)")  # fmt: skip
     add_search_options(p, constraints=False)
     p.add_argument("--flicker", type=float, metavar="P",
-                   help="ssg: each simulated marker unseen this share of samples, in short dropouts")
+                   help="ssg: each simulated marker unseen this share of samples, in short dropouts (default 0)")
     p.add_argument("--gap-fraction", type=float, metavar="F",
-                   help="ssg: random gaps of 5–80 samples (every marker unseen) until this share of samples")
-    p.add_argument("--seed", type=SEED, default=0, help="noise seed (each clip's is derived from it and its name)")
+                   help="ssg: random gaps of 5–80 samples (every marker unseen) until this share of samples (default 0)")
+    p.add_argument("--seed", type=SEED, default=0, help="noise seed (each clip's is derived from it and its name; default 0)")
     p.add_argument("--jobs", type=COUNT, default=1, metavar="N",
-                   help="evaluate N clips at once in worker processes (and build with N threads)")
+                   help="evaluate N clips at once in worker processes (and build with N threads; default 1)")
     p.add_argument("--mixed", type=int, metavar="N",
                    help="score performances of N test clips with N different labels joined end to end (one performer "
                         "each; their clips hidden together) instead of each clip alone")
@@ -560,34 +639,47 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what a test clip hides from the graph: its performance (clip), every take of its content × "
                         "style (takes, the default), every clip of its performer (actor) or of its content label "
                         "(content); docs/evaluation.md")
-    p.add_argument("--actors", metavar="FILE", help="actor map for --hold-out actor: JSON {clip name or glob: actor}")
-    p.add_argument("--mapping", metavar="FILE",
+    p.add_argument("--actors", metavar="FILE", type=PATH,
+                   help="actor map for --hold-out actor: JSON {clip name or glob: actor} (default: from the clips' "
+                        "names, where they say)")  # fmt: skip
+    p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
                    help="the test clips' joint map when their skeleton is not the graph's (JSON, or 'guess')")
-    p.add_argument("--json", metavar="OUT", help="write per-clip and mean metrics as JSON")
-    p.add_argument("--keep-motions", metavar="DIR",
+    p.add_argument("--json", metavar="OUT.json", type=PATH, help="write per-clip and mean metrics as JSON")
+    p.add_argument("--keep-motions", metavar="DIR", type=PATH,
                    help="keep each clip's reconstruction, truth, input and timeline here (for `graphsvc report`)")
-    p.add_argument("--report-html", metavar="OUT.html", help="write the HTML report: metrics table and 3D viewer")
+    p.add_argument("--report-html", metavar="OUT.html", type=PATH,
+                   help="write the HTML report: metrics table and 3D viewer")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
 
-    p = sub.add_parser("report", help="a self-contained HTML page: 3D viewer, errors, sensors, sources, constraints")
-    p.add_argument("result", metavar="RESULT",
+    p = command("report", "a self-contained HTML page of a result",
+                "Write one self-contained HTML page of a result: a 3D viewer of the reconstruction (beside the truth), "
+                "time-aligned errors, sensor readings, source clips and constraints.")  # fmt: skip
+    p.add_argument("result", metavar="RESULT", type=PATH,
                    help="a `synthesize --report` JSON, an `evaluate --json` output with --keep-motions, or a batch folder")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.html")
-    p.add_argument("--truth", metavar="MOTION", help="the true motion (.bvh, .amc) of a synthesize report, shown beside it")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.html", type=PATH, help="the page to write (.html)")
+    p.add_argument("--truth", metavar="MOTION", type=PATH,
+                   help="the true motion (.bvh, .amc) of a synthesize report, shown beside it (default: none)")
     p.set_defaults(run=_cmd_report)
 
-    p = sub.add_parser("mapping", help="propose a joint map for a skeleton graphsvc does not know")
-    p.add_argument("clip", metavar="CLIP", help="a motion file (.bvh, .amc) with that skeleton")
-    p.add_argument("-o", "--output", metavar="MAP.json", help="write the map here (default: print it)")
+    p = command("mapping", "propose a joint map for a skeleton graphsvc does not know",
+                "Propose a joint map (canonical joint → the skeleton's joint) for a skeleton graphsvc does not know, "
+                "for `--mapping FILE` elsewhere; exit 2 when a required joint is not found.")  # fmt: skip
+    p.add_argument("clip", metavar="CLIP", type=PATH, help="a motion file (.bvh, .amc) with that skeleton")
+    p.add_argument("-o", "--output", metavar="MAP.json", type=PATH, help="write the map here (default: print it)")
     p.set_defaults(run=_cmd_mapping)
 
-    p = sub.add_parser("demo", help="run the embedded demo on a procedural knowledge base")
-    p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR")
-    p.add_argument("--seed", type=SEED, default=0)
-    p.add_argument("--layout", default="kelly6")
+    p = command("demo", "run the demo on a procedural knowledge base",
+                "Generate a procedural knowledge base and a held-out performance, simulate its sensors, build the "
+                "graph, reconstruct the performance and print the error, speed and path; writes the files, plots "
+                "and report.html into a folder.")  # fmt: skip
+    p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR", type=PATH,
+                   help="the folder to write (default graphsvc-demo)")
+    p.add_argument("--seed", type=SEED, default=0, help="the knowledge base's and the noise's seed (default 0)")
+    p.add_argument("--layout", default="kelly6", metavar="LAYOUT",
+                   help="sensor layout: preset (wrists-ankles, kelly6, right-wrist) or layout file (default kelly6)")
     p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=3.0,
-                   help="knowledge-base length (at most 600)")
+                   help="knowledge-base length in minutes (default 3, at most 600)")
     p.set_defaults(run=_cmd_demo)
 
     from graphsvc.service.cli_commands import add_service_parsers

@@ -43,6 +43,16 @@ def ranged(kind, low: float, high: float, low_open: bool = False):
     return convert
 
 
+def PATH(text: str) -> str:  # noqa: N802 (an argparse type, named as the others)
+    """An argparse `type` for a file or folder path: an empty string is refused (it is
+    not the current folder), with one line, exit 2."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path is not a file or folder")
+    return text
+
+
+PATH.__name__ = "path"
+
 SEED = ranged(int, 0, 2**63 - 1)
 RATE_HZ = ranged(float, 0.0, 100_000.0, low_open=True)  # (sensors.recording.MAX_RATE_HZ)
 COUNT = ranged(int, 1, 4096)  # threads, workers, streams
@@ -98,9 +108,9 @@ def ssg_options(args):
 
 def add_marker_options(p) -> None:
     """--markers and --keep: the marker set of an optical input and the markers used."""
-    p.add_argument("--markers", metavar="SET",
+    p.add_argument("--markers", metavar="SET", type=PATH,
                    help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file (JSON/TOML)")
-    p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated)")
+    p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated; default: all)")
 
 
 def add_input_file_options(p) -> None:
@@ -111,17 +121,17 @@ def add_input_file_options(p) -> None:
                         "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
     p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
                    help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
-                        "unit (g, m/s2)")
-    p.add_argument("--device-map", metavar="xsens|FILE",
+                        "unit (g, m/s2); default: what the file says")
+    p.add_argument("--device-map", metavar="xsens|FILE", type=PATH,
                    help="rename a device's sensors to the graph layout's: xsens (Xsens segment names, the built-in map "
                         "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
 
 
 def add_calibration_option(p) -> None:
     """--calibration: a device-frame recording's mounting calibration (`graphsvc calibrate`)."""
-    p.add_argument("--calibration", metavar="CAL.json",
+    p.add_argument("--calibration", metavar="CAL.json", type=PATH,
                    help="turn a device-frame recording into the layout's sensor frames with this calibration "
-                        "(`graphsvc calibrate`)")
+                        "(`graphsvc calibrate`; default: none)")
 
 
 def _live_lag_s() -> float:
@@ -143,16 +153,20 @@ def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
                         " orientation (per chord², where the recording has orientations); default 1,1,1,"
                         f"{ORIENTATION_WEIGHT:g}")
     if constraints:
-        p.add_argument("--constraints", metavar="FILE", help="annotation constraint sets (JSON), replacing the recording's")
+        p.add_argument("--constraints", metavar="FILE", type=PATH,
+                       help="annotation constraint sets (JSON), replacing the recording's (default: the recording's)")
     p.add_argument("--latency", type=float, metavar="S",
                    help=f"fixed-lag decoding: output lags the input by S seconds (default: a {_live_lag_s():g} s lag)"
                    if live else
                         "fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")  # fmt: skip
     p.add_argument("--heading-from-track", action="store_true",
-                   help="derive heading from the ground positions: direction of travel above --speed-threshold")
+                   help="derive heading from the ground positions: direction of travel above --speed-threshold "
+                        "(default: the recording's heading)")
     p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
                    help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
-    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S", help="default 2 m/s (Kelly et al.)")
+    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S",
+                   help="with --heading-from-track: the speed above which heading is the direction of travel (default "
+                        "2 m/s, Kelly et al.)")
     p.add_argument("--beam", type=float, metavar="COST",
                    help="beam search: after each sample keep only the paths within COST of the best (faster; default:"
                         " the exact search)")
@@ -190,6 +204,15 @@ def add_synthesize_options(p) -> None:
     add_input_file_options(p)
     add_calibration_option(p)
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
+
+
+def synthesize_inputs(args) -> list[tuple[str, str | None]]:
+    """The files a `synthesize` (or `client synthesize`) reads, as (what, path) pairs for
+    `fileio.check_outputs`: no output may replace one of them."""
+    named = lambda v: None if v in (None, "xsens") else v  # noqa: E731 (a built-in name is no file)
+    return [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
+            ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
+            ("the device map", named(getattr(args, "device_map", None))), ("the marker set", getattr(args, "markers", None))]  # fmt: skip
 
 
 def os_message(exc: OSError) -> str:

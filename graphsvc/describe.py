@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from graphsvc.errors import InputError, UnknownFormatError
@@ -23,6 +22,8 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
     recordings = []
     motion_inputs = []
     for p in paths:
+        if not str(p).strip():
+            raise InputError("an empty path is not a file or folder")
         path = Path(p)
         if path.suffix.lower() in RECORDING_SUFFIXES:
             rec = read_recording(path)
@@ -45,7 +46,7 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
                     "name": m.name,
                     "frames": m.num_frames,
                     "rate_hz": m.rate_hz,
-                    "joints": int(m.skeleton.num_joints - np.count_nonzero(m.skeleton.end_site)),  # End Sites are not joints
+                    "joints": m.skeleton.num_joints_excluding_end_sites,
                     "duration_s": round(m.duration_s, 6),
                     "labels": list(m.labels),
                 }

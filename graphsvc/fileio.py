@@ -144,6 +144,19 @@ def write_text_atomic(path, text: str) -> None:
         f.write(text.encode("utf-8"))
 
 
+def write_texts_atomic(items) -> None:
+    """Write several files, given as (path, text) pairs, so that a crash never leaves a
+    later one without the earlier ones: every file is written and synced beside its
+    target first, then they are renamed into place in the order given (a reader who
+    finds the last file finds them all, of the same run)."""
+    items = [(Path(p), t) for p, t in items]
+    with contextlib.ExitStack() as stack:
+        # atomic_writer renames on leaving; the stack leaves in reverse: enter the last first
+        files = [(stack.enter_context(atomic_writer(p)), t) for p, t in reversed(items)]
+        for f, text in files:
+            f.write(text.encode("utf-8"))
+
+
 def require_file(path, what: str = "") -> Path:
     """`path` as a Path when it is a file; MissingFileError (or FormatError for a
     folder) otherwise. what: what the file is for, named in the message."""
@@ -199,3 +212,42 @@ def file_sha256(path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def same_file(a, b) -> bool:
+    """Whether two paths name one file: the same resolved path, or (both existing) the
+    same inode, as a hard link or a symbolic link to it would."""
+    a, b = Path(a), Path(b)
+    with contextlib.suppress(OSError):
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    return a.resolve() == b.resolve()
+
+
+def check_outputs(outputs, inputs=()) -> None:
+    """Refuse, before anything is read or written, output paths that would lose data or
+    that the command would write in a form nobody reads back. outputs: (option, path,
+    suffixes) triples — suffixes the accepted ones (lower case, with the dot) or None
+    for any; inputs: (what, path) pairs, what the input is (e.g. "the recording").
+    InputError naming the option when a path is empty, its folder is missing, it is a
+    folder, its suffix is not accepted, it names an input, or two outputs name one file.
+    None paths (an option not given) are skipped."""
+    given = [(opt, Path(p), sfx) for opt, p, sfx in outputs if p is not None]
+    for opt, path, suffixes in given:
+        if str(path) in ("", "."):
+            raise InputError(f"{opt}: an empty path is not a file")
+        if not path.parent.is_dir():
+            raise InputError(f"{path}: output folder {path.parent} does not exist")
+        if path.is_dir():
+            raise InputError(f"{path}: is a folder, not a file ({opt})")
+        for what, source in inputs:
+            if source is not None and str(source) != "" and same_file(path, source):
+                raise InputError(f"{path}: {opt} would overwrite {what}; give another output path")
+    for k, (opt, path, _) in enumerate(given):
+        for other, other_path, _ in given[:k]:
+            if same_file(path, other_path):
+                raise InputError(f"{path}: {opt} and {other} name the same file; give each its own")
+    for opt, path, suffixes in given:
+        if suffixes is not None and path.suffix.lower() not in suffixes:
+            raise InputError(f"{path}: {opt} writes {' or '.join(suffixes)}, not "
+                             f"{path.suffix or 'a file without a suffix'}")  # fmt: skip

@@ -89,7 +89,10 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     recording (up, units: as the file does not say), name a device's sensors as the
     graph's layout does (device_map: 'xsens' or a map file), turn a device's readings into
     the layout's frames (calibration: a `graphsvc calibrate` file), reconstruct, write the BVH
-    (scale: units per metre) and, given report_path, the report JSON — both atomically.
+    (scale: units per metre) and, given report_path, the report JSON — each atomically, the
+    report renamed into place before the BVH (a BVH is never without its report);
+    InputError, before anything is read, when an output would replace an input or the
+    other output or has a suffix other than .bvh (output) and .json (report).
     The report's 'files' names the output, graph and recording (and how the recording
     was read); a strategy without a node path adds each frame's heaviest `sources`
     (`report.gather.compact_sources`). notes: a list that
@@ -98,12 +101,16 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     import json
     from pathlib import Path
 
-    from graphsvc.fileio import write_text_atomic
-    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.fileio import check_outputs, write_texts_atomic
+    from graphsvc.motion.bvh import bvh_document
+    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
 
+    check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
+                  [("the graph", graph_path), ("the recording", recording_path),
+                   ("the calibration", calibration), ("the device map", None if device_map == "xsens" else device_map)])  # fmt: skip
     rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes)
     result = reconstruct(graph, rec, options, threads=threads)
-    write_bvh(output, result.motion, scale=scale)
+    bvh = bvh_document(result.motion, scale)
     result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
                               "recording": str(Path(recording_path).resolve())}  # fmt: skip
     read = {k: v for k, v in (("up", up), ("units", units), ("device_map", device_map and _resolved_if_file(device_map)),
@@ -114,8 +121,10 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
         from graphsvc.report.gather import compact_sources
 
         result.report["sources"] = compact_sources(result.provenance)
-    if report_path:
-        write_text_atomic(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    # The report lands first: a BVH is never found without its report, even when the
+    # process is killed between the two (a batch's outputs stay in pairs).
+    report = [(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")] if report_path else []
+    write_texts_atomic(report + [(output, bvh)])
     return result
 
 

@@ -56,6 +56,25 @@ def still_motion(frames: int, rate_hz: float = 30.0) -> Motion:
     return Motion(sk, rot, trans, rate_hz, name="still")
 
 
+def write_gliding_clip(folder: Path) -> Path:
+    """walk_demo_001.bvh in `folder`: the T-pose gliding 1 m along +Z over 40 frames."""
+    from graphsvc.motion.bvh import write_bvh
+
+    m = still_motion(40)
+    m.translations[:, 0, 2] = np.linspace(0, 1.0, 40)
+    path = folder / "walk_demo_001.bvh"
+    write_bvh(path, m, scale=100.0)
+    return path
+
+
+@pytest.fixture(autouse=True)
+def _empty_working_directory(tmp_path_factory, monkeypatch):
+    """Every test starts in an empty folder of its own: what the folder pytest was started
+    from holds (a demo's output, say) never changes a result, and a test that writes
+    into the working directory writes nowhere that matters."""
+    monkeypatch.chdir(tmp_path_factory.mktemp("cwd"))
+
+
 @pytest.fixture
 def skeleton() -> Skeleton:
     return tpose_skeleton()

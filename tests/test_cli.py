@@ -8,17 +8,12 @@ import numpy as np
 import pytest
 
 from graphsvc.cli import main
-from graphsvc.motion.bvh import write_bvh
-from tests.conftest import still_motion, write_procedural_kb
+from tests.conftest import write_gliding_clip, write_procedural_kb
 
 
 @pytest.fixture
 def clip(tmp_path):
-    m = still_motion(40)
-    m.translations[:, 0, 2] = np.linspace(0, 1.0, 40)
-    path = tmp_path / "walk_demo_001.bvh"
-    write_bvh(path, m, scale=100.0)
-    return path
+    return write_gliding_clip(tmp_path)
 
 
 def run(argv, capsys):
@@ -47,7 +42,7 @@ def test_inspect_motion_folder_totals(tmp_path, clip, capsys):
     assert "total: 1 clips, 40 frames at 30 Hz" in out
 
 
-def test_inspect_counts_joints_not_end_sites(tmp_path, capsys):
+def test_inspect_and_mapping_count_joints_not_end_sites(tmp_path, capsys):
     (tmp_path / "two.bvh").write_text(  # a root, one joint, two End Sites: 2 joints
         "HIERARCHY\nROOT hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
         " JOINT spine\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
@@ -55,6 +50,8 @@ def test_inspect_counts_joints_not_end_sites(tmp_path, capsys):
         "MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 90 0 0 0 0 0 0 0\n0 90 0 0 0 0 0 0 0\n")
     code, out, _ = run(["inspect", str(tmp_path / "two.bvh"), "--json"], capsys)
     assert code == 0 and json.loads(out)["clips"][0]["joints"] == 2
+    _, _, err = run(["mapping", str(tmp_path / "two.bvh")], capsys)  # (exit 2: no canonical joints found)
+    assert err.startswith("2 joints;"), err
 
 
 def test_simulate_csv_output(tmp_path, clip, capsys):
@@ -218,3 +215,10 @@ def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, ext
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and needle in err and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_the_path_summary_never_prints_a_run_as_zero_seconds():
+    from graphsvc.cli import _seconds
+
+    assert _seconds(1 / 30) == "0.03 s" and _seconds(2 / 30) == "0.07 s" and _seconds(0.1) == "0.1 s"
+    assert _seconds(3 / 30) == "0.1 s" and _seconds(12.04) == "12.0 s"

@@ -2,7 +2,8 @@
 at the worst moments — its temporary file just made, or written and synced but not
 yet renamed — leaves the output absent (or, when it existed, as it was), never
 partial; rerunning completes and removes what the killed run left. One test per
-writer: build, relayout, simulate, batch, and the server's batch store."""
+writer: build, relayout, simulate, synthesize (a BVH and its report), batch, and the
+server's batch store."""
 
 from __future__ import annotations
 
@@ -92,6 +93,20 @@ def test_simulate_killed_writing_leaves_no_recording_and_a_rerun_completes(kb, t
     assert not out.exists() and len(temporaries(tmp_path)) == 1
     ok(graphsvc("simulate", clip, "--layout", "kelly6", "-o", out))
     assert read_recording(out).num_samples > 0 and temporaries(tmp_path) == []
+
+
+@pytest.mark.parametrize("point", ["open:out.json", "rename:out.json", "open:out.bvh", "rename:out.bvh"])
+def test_synthesize_killed_anywhere_never_leaves_a_bvh_without_its_report(small_graph, kb, tmp_path, point):
+    clip = sorted(kb.glob("*.bvh"))[0]
+    rec = tmp_path / "in.rec"
+    ok(graphsvc("simulate", clip, "--layout", "kelly6", "-o", rec))
+    args = ("synthesize", small_graph, rec, "-o", tmp_path / "out.bvh", "--report", tmp_path / "out.json",
+            "--strategy", "nearest")  # fmt: skip
+    killed(graphsvc(*args, crash=point))
+    bvh, report = (tmp_path / "out.bvh").exists(), (tmp_path / "out.json").exists()
+    assert not bvh and report == (point == "rename:out.bvh")  # the report lands first, the BVH last
+    ok(graphsvc(*args))
+    assert (tmp_path / "out.bvh").exists() and (tmp_path / "out.json").exists() and temporaries(tmp_path) == []
 
 
 def test_batch_killed_writing_its_summary_reruns_to_completion(small_graph, kb, tmp_path):

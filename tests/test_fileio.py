@@ -68,3 +68,32 @@ def test_a_folder_and_undecodable_text_are_format_errors(tmp_path):
     bad.write_text('{"a": 1,\n}')
     with pytest.raises(FormatError, match=r"bad.json:2: not valid JSON"):
         read_json_file(bad)
+
+
+def test_several_files_are_renamed_into_place_in_order_after_all_are_written(tmp_path, monkeypatch):
+    import os
+
+    from graphsvc.fileio import write_texts_atomic
+
+    renamed = []
+    real = os.replace
+
+    def record(src, dst):
+        # every file is complete (written, beside its target) before the first rename
+        assert sorted(p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")) != [] or renamed
+        renamed.append(os.path.basename(dst))
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", record)
+    write_texts_atomic([(tmp_path / "a.json", "{}"), (tmp_path / "b.bvh", "HIERARCHY")])
+    assert renamed == ["a.json", "b.bvh"]
+    assert (tmp_path / "a.json").read_text() == "{}" and (tmp_path / "b.bvh").read_text() == "HIERARCHY"
+
+
+def test_a_failed_write_of_several_files_leaves_none_and_no_temporaries(tmp_path):
+    from graphsvc.errors import InputError
+    from graphsvc.fileio import write_texts_atomic
+
+    with pytest.raises(InputError):  # the second file's folder is missing
+        write_texts_atomic([(tmp_path / "a.json", "{}"), (tmp_path / "missing" / "b.bvh", "x")])
+    assert list(tmp_path.iterdir()) == []

@@ -124,7 +124,7 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
         "layout": graph.layout["name"],
         "sensors": list(graph.sensor_names),
         "rate_hz": graph.rate_hz,
-        "joints": graph.skeleton.num_joints,
+        "joints": graph.skeleton.num_joints_excluding_end_sites,
         "interpolated_segments": len(graph.segments),
         "bridges": len(graph.bridges),
         "sensor_orientations": graph.edge_up is not None,

@@ -650,10 +650,15 @@ def write_bvh(path, motion: Motion, scale: float = 1.0) -> None:
     scale: file units per metre (100 → centimetres). Channels keep the skeleton's
     order; a joint without rotation channels is written unrotated and a joint
     without position channels at its rest offset."""
+    write_text_atomic(path, bvh_document(motion, scale))
+
+
+def bvh_document(motion: Motion, scale: float = 1.0) -> str:
+    """The text `write_bvh` writes; InputError for a scale or joint names BVH cannot hold."""
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"scale must be positive and finite, got {scale}")
     # The reader takes a name as the rest of its line, words joined by one space.
     bad = [n for n in motion.skeleton.names if not n or " ".join(n.split()) != n or re.search(r"[{}]", n)]
     if bad:
         raise InputError(f"joint names cannot be written to BVH: {bad[:5]}")
-    write_text_atomic(path, bvh_text(motion, scale))
+    return bvh_text(motion, scale)

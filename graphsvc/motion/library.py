@@ -17,13 +17,14 @@ import json
 import re
 from pathlib import Path
 
-from graphsvc.errors import FormatError, MissingFileError, UnknownFormatError
+from graphsvc.errors import FormatError, InputError, MissingFileError, UnknownFormatError
 from graphsvc.fileio import read_input_text
 from graphsvc.motion.asfamc import read_asf_amc
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.skeleton import Motion, check_finite
 
 MOTION_SUFFIXES = (".bvh", ".amc")
+MOTION_OUTPUT_SUFFIXES = (".bvh",)  # what a reconstruction is written as
 _BANDAI_NAME = re.compile(r"^dataset-\d+_(?P<content>[^_]+)_(?P<style>[^_]+)_\d+$")
 _GLOB_CHARS = re.compile(r"[*?\[]")
 
@@ -127,6 +128,8 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
     found: set[Path] = set()
     for item in paths:
         text = str(item)
+        if not text.strip():
+            raise InputError("an empty path is not a file or folder")
         p = Path(text)
         if p.is_file():
             _check_suffix(p)

@@ -50,6 +50,12 @@ class Skeleton:
     def num_joints(self) -> int:
         return len(self.names)
 
+    @property
+    def num_joints_excluding_end_sites(self) -> int:
+        """The joints as a user counts them (a BVH's ROOT and JOINT entries): what
+        `inspect`, `mapping` and a graph's summary print."""
+        return int(len(self.names) - np.count_nonzero(self.end_site))
+
     def index(self, name: str) -> int:
         try:
             return self.names.index(name)

@@ -109,8 +109,14 @@ def test_real_data_labels_match_file_names(data_dir):
     root = data_dir / "bandai"
     if not root.is_dir():
         pytest.skip(f"../shared/data not found: {root} missing")
-    files = find_motion_files([str(root)])
+    # datasets 1 and 2 as published (174 + 280 clips); dataset 2's further takes
+    # 005–019 (1,048 clips) where they are shared too
+    files = find_motion_files([str(root / "dataset-1"), str(root / "dataset-2")])
     assert len(files) == 454
+    if (root / "dataset-2-extra").is_dir():
+        extra = find_motion_files([str(root / "dataset-2-extra")])
+        assert len(extra) == 1048 and len(find_motion_files([str(root)])) == 454 + 1048
+        files += extra[::7]
     for f in files[::15]:
         # The JSON id through cfg/content_label.txt names the same content as the file.
         assert content_label(f) == f.stem.split("_")[1], f

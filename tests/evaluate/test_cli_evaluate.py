@@ -1,0 +1,50 @@
+"""`graphsvc evaluate` as a user meets it: what its JSON points at, and every argument
+checked before anything is printed or searched."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from graphsvc.cli import main
+from tests.conftest import write_procedural_kb
+
+UNKNOWN_BVH = (  # a skeleton no built-in joint map knows
+    "HIERARCHY\nROOT Torso\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+    " JOINT Noggin\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
+    "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\n"
+    "MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 90 0 0 0 0 0 0 0\n0 90 0 0 0 0 0 0 0\n"
+)
+
+
+@pytest.fixture(scope="module")
+def kb(tmp_path_factory):
+    return write_procedural_kb(tmp_path_factory.mktemp("kb"), seed=5, minutes=0.3)
+
+
+def test_a_page_without_kept_motions_leaves_a_json_that_says_so(kb, tmp_path, capsys):
+    clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
+    argv = ["evaluate", str(kb), "--test", clip, "--layout", "kelly6", "--hold-out", "clip", "--quiet", "--strategy",
+            "nearest", "--json", str(tmp_path / "E.json"), "--report-html", str(tmp_path / "E.html")]  # fmt: skip
+    assert main(argv) == 0
+    capsys.readouterr()
+    result = json.loads((tmp_path / "E.json").read_text())
+    assert "keep_motions" not in result["config"] and all("kept" not in r for r in result["clips"])
+    assert (tmp_path / "E.html").stat().st_size > 0
+    # `report E.json` says what to do, not that a file was moved
+    assert main(["report", str(tmp_path / "E.json"), "-o", str(tmp_path / "again.html")]) == 2
+    err = capsys.readouterr().err
+    assert "--keep-motions" in err and "does not exist" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_test_clip_of_an_unknown_skeleton_is_refused_before_any_note(kb, tmp_path, capsys):
+    graph = tmp_path / "kb.graph"
+    assert main(["build", str(kb), "-o", str(graph), "--layout", "kelly6", "--quiet", "--no-bridges"]) == 0
+    capsys.readouterr()
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "odd_take.bvh").write_text(UNKNOWN_BVH)
+    code = main(["evaluate", str(tmp_path / "other"), "--test", "odd*", "--graph", str(graph), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("graphsvc: error: test clip odd_take: unknown skeleton"), err
+    assert "note:" not in err and len(err.strip().splitlines()) == 1
