@@ -361,6 +361,39 @@
     return `hsl(${h % 360},55%,68%)`;
   }
 
+  // The prefix every clip name of a list shares, up to and including its last separator
+  // ("dataset-2_" of every Bandai-Namco clip): "" for fewer than two distinct names.
+  function commonPrefix(names) {
+    const distinct = [...new Set(names.filter((n) => typeof n === "string" && n))];
+    if (distinct.length < 2) return "";
+    let p = distinct[0];
+    for (const n of distinct) {
+      let k = 0;
+      while (k < p.length && k < n.length && p[k] === n[k]) k++;
+      p = p.slice(0, k);
+    }
+    let cut = -1;
+    for (const sep of "_- ./") cut = Math.max(cut, p.lastIndexOf(sep));
+    return p.slice(0, cut + 1);
+  }
+
+  const unprefixed = (name, prefix) =>
+    (prefix && name.startsWith(prefix) && name.length > prefix.length ? name.slice(prefix.length) : name);
+
+  // `text` cut in the middle ("walk-tu…_002") to fit `width` px; "" when not even two
+  // characters do
+  function fitText(ctx, text, width) {
+    if (ctx.measureText(text).width <= width) return text;
+    const cut = (n) => text.slice(0, Math.ceil(n / 2)) + "…" + text.slice(text.length - Math.floor(n / 2));
+    let lo = 2, hi = text.length - 1; // (the most characters kept that fit)
+    if (ctx.measureText(cut(lo)).width > width) return "";
+    while (lo < hi) {
+      const mid = Math.ceil((lo + hi) / 2);
+      if (ctx.measureText(cut(mid)).width <= width) lo = mid; else hi = mid - 1;
+    }
+    return cut(lo);
+  }
+
   function drawTimeline() {
     const tl = clip.timeline;
     const nb = tl.neighbours;
@@ -368,13 +401,17 @@
     const c = chartCanvas("timeline", rows * 22 + 8);
     const ctx = c.getContext("2d");
     ctx.font = "11px sans-serif";
+    // clip names without the prefix they all share, cut in the middle where they do not
+    // fit (the full name: hover, or the line under the chart)
+    const prefix = commonPrefix([...tl.segments.map((s) => s.clip), ...(nb ? nb.clips : [])]);
     const row = (r, name) => { ctx.fillStyle = "#555"; ctx.fillText(name, 6, 4 + r * 22 + 14); return 4 + r * 22; };
     let y = row(0, "source clips");
     for (const s of tl.segments) {
       const x0 = xOf(c, s.start), x1 = xOf(c, Math.min(clip.T - 1, s.start + s.frames));
       ctx.fillStyle = KIND_COLORS[s.kind] || "#999";
       ctx.fillRect(x0, y, Math.max(1, x1 - x0), 18);
-      if (x1 - x0 > 50) { ctx.fillStyle = "#222"; ctx.fillText(s.clip.slice(0, Math.floor((x1 - x0) / 6)), x0 + 2, y + 13); }
+      const text = s.clip ? fitText(ctx, unprefixed(s.clip, prefix), x1 - x0 - 4) : "";
+      if (text) { ctx.fillStyle = "#222"; ctx.fillText(text, x0 + 2, y + 13); }
     }
     ctx.fillStyle = "#222";
     for (const t of tl.transitions) ctx.fillRect(xOf(c, t), y - 2, 1, 22);
@@ -387,7 +424,7 @@
     }
     if (nb) {
       nb.clips.forEach((name, k) => {
-        const yy = row(2 + k, name.slice(0, 22));
+        const yy = row(2 + k, fitText(ctx, unprefixed(name, prefix), PAD_L - 12));
         const w = nb.weights[k];
         for (let t = 0; t < clip.T; t++) {
           const v = w.charCodeAt(t) - 48;
@@ -400,6 +437,7 @@
     finishChart("timeline", c);
     const legend = Object.entries(KIND_COLORS).map(([k, col]) => `<span class="sw" style="background:${col}"></span>${k}`).join(" ");
     $("timeline-legend").innerHTML = legend + ' <span class="sw" style="background:#222;width:2px"></span>transition';
+    if (prefix) $("timeline-legend").append(` · clip names without “${prefix}”`);
   }
 
   function drawConstraints() {
@@ -452,7 +490,9 @@
   $("timeline").addEventListener("mousemove", (e) => {
     if (!clip) return;
     const r = e.target.getBoundingClientRect();
-    $("timeline-info").textContent = frameInfo(frameAt(e.target, e.clientX - r.left));
+    const info = frameInfo(frameAt(e.target, e.clientX - r.left));
+    $("timeline-info").textContent = info;
+    e.target.title = info; // (the full clip name as a tooltip too)
   });
 
   function frameInfo(i) {

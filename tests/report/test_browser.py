@@ -2,8 +2,9 @@
 loads without console errors, plays, scrubs to a frame and draws that frame's pose
 (the BVH's within 1 mm), draws something, and an evaluation's table sorts and opens
 its clips; a Bandai-Namco and a CMU clip (../shared/data) are on screen at frame 0,
-with no bone from a root fixed at the origin. The README's screenshot (docs/report.png)
-is made here from the README's demo (procedural data): GRAPHSVC_UPDATE_SCREENSHOT=1 rewrites it."""
+with no bone from a root fixed at the origin; the timeline tells clip names of one
+prefix apart. The README's screenshot (docs/report.png) is made here from the README's
+demo (procedural data): GRAPHSVC_UPDATE_SCREENSHOT=1 rewrites it."""
 
 import io
 import json
@@ -247,3 +248,51 @@ def test_a_real_clips_figures_are_on_screen_at_frame_0(driver, data_dir, tmp_pat
     assert blue.sum() > 50 and green.sum() > 50
     assert console_errors(driver) == []
 
+
+def _fitted(text: str, full: str) -> bool:
+    """`text` is `full`, or `full` cut in the middle with an ellipsis."""
+    if text == full:
+        return True
+    head, sep, tail = text.partition("…")
+    return sep == "…" and len(head) >= 1 and len(tail) >= 1 and full.startswith(head) and full.endswith(tail)
+
+
+def test_timeline_tells_clips_of_one_prefix_apart(driver, tmp_path):
+    """Bandai-Namco clip names all start "dataset-2_": the timeline writes them without
+    it, cut in the middle where a run is narrow, and the neighbours' rows alike."""
+    from graphsvc.report.gather import timeline_from_sources
+    from tests.conftest import still_motion
+
+    names = ["dataset-2_walk_active_001", "dataset-2_run_active_003", "dataset-2_walk-turn-left_normal_002"]
+    T = 90
+    lead = np.array([0] * 40 + [1] * 4 + [2] * 46)  # (the second run 4 frames: about 40 px wide)
+    clip = np.stack([lead, np.full(T, -1)], axis=1)
+    frame = np.stack([np.arange(T, dtype=float), np.zeros(T)], axis=1)
+    weight = np.stack([np.ones(T), np.zeros(T)], axis=1)
+    timeline = timeline_from_sources(names, ["walk"] * T, clip, frame, weight)
+    open_page(driver, _motion_page(still_motion(T), tmp_path / "page.html", timeline=timeline))
+    assert console_errors(driver) == []
+    drawn = driver.execute_script("""
+        const texts = [], fill = CanvasRenderingContext2D.prototype.fillText;
+        CanvasRenderingContext2D.prototype.fillText = function (t, x, y) {
+          if (this.canvas.id === "timeline") texts.push([String(t), x, y, this.measureText(t).width]);
+          return fill.apply(this, arguments);
+        };
+        window.graphsvcViewer.loadClip(0);
+        CanvasRenderingContext2D.prototype.fillText = fill;
+        return texts;""")
+    row0 = [(t, x, w) for t, x, y, w in drawn if y < 22 and x > 100]  # (the runs' names, right of the row names)
+    short = [n[len("dataset-2_"):] for n in names]
+    assert [t for t, _, _ in row0][::2] == [short[0], short[2]]  # (wide runs: the whole name but the prefix)
+    narrow, x, width = row0[1]
+    assert _fitted(narrow, short[1]) and narrow != short[1] and "…" in narrow, narrow
+    width_px = driver.execute_script("""
+        const c = document.getElementById("timeline");
+        return (c.width - 160) * 4 / 89;""")
+    assert width <= width_px
+    # The neighbours' rows (left of the chart, 138 px): all three, told apart.
+    rows = [t for t, x, y, w in drawn if x == 6 and y > 44]
+    assert len(rows) == 3 and len(set(rows)) == 3
+    assert all(any(_fitted(t, s) for s in short) for t in rows), rows
+    assert "dataset-2_" in driver.find_element("id", "timeline-legend").text
+    assert console_errors(driver) == []
