@@ -420,7 +420,8 @@
       const x0 = xOf(c, r.start_frame), x1 = xOf(c, Math.min(clip.T - 1, r.start_frame + r.frames));
       ctx.fillStyle = hashColor(r.label);
       ctx.fillRect(x0, y, Math.max(1, x1 - x0), 18);
-      if (x1 - x0 > 30) { ctx.fillStyle = "#222"; ctx.fillText(r.label, x0 + 2, y + 13); }
+      const text = fitText(ctx, r.label, x1 - x0 - 4);
+      if (text) { ctx.fillStyle = "#222"; ctx.fillText(text, x0 + 2, y + 13); }
     }
     if (nb) {
       nb.clips.forEach((name, k) => {
