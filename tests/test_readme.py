@@ -1,5 +1,5 @@
-"""The README says what the project does today: its demo output is the demo's output,
-its test command is the one CI runs."""
+"""The README says what the project does today: the demo output it quotes is what the
+default demo prints (`tools/readme_demo.py` rewrites the quote), and it stays short."""
 
 from __future__ import annotations
 

@@ -3,10 +3,14 @@
 A view holds, for T frames at `rate_hz`:
 
 - `figures`: the reconstruction and, when known, the truth, each as its skeleton's
-  parents and joint names, the root's positions (T, 3) as int32 millimetres and every
-  joint's position relative to that root (T, J, 3) as int16 millimetres — both
-  base64, little-endian; `round(p · 1000)` exactly, so the page's positions are the
-  motion's within 0.5 mm a coordinate — and the feet's contacts (T, 2) as "0"/"1";
+  parents and joint names, the root's (joint 0's) positions (T, 3) as int32
+  millimetres and every joint's position relative to that root (T, J, 3) as int16
+  millimetres — both base64, little-endian; `round(p · 1000)` exactly, so the page's
+  positions are the motion's within 0.5 mm a coordinate — the feet's contacts (T, 2)
+  as "0"/"1", `centre`: the joint the page follows (its trail, the grid's placement and
+  the camera: `centre_joint`, the pelvis), and `drawn`: the joints drawn, every joint
+  but the centre's ancestors (`drawn_joints`: no bone from a root fixed at the origin,
+  such as the Bandai-Namco skeleton's `joint_Root` above `Hips`);
 - `errors`: per-frame joint, root (cm) and heading (°) error, when the truth is known;
 - `sensors`: per sensor the measured readings on the graph's grid and the virtual
   readings of the output motion (noise-free, the same layout), (T, 3) int16 cm/s²
@@ -49,9 +53,42 @@ def bits(flags: np.ndarray) -> str:
     return "".join("1" if f else "0" for f in np.asarray(flags, dtype=bool))
 
 
+# A joint "moves" over a clip when its position spans more than this on some axis (m).
+MOVING_M = 0.001
+
+
+def centre_joint(world: np.ndarray, table=None) -> int:
+    """The joint the page follows in a motion's world positions (T, J, 3) m: the pelvis
+    of the skeleton's joint table (`joint_map`) when there is one, else the first joint
+    (a skeleton lists parents first) whose position moves over the clip by more than
+    MOVING_M on some axis, else joint 0."""
+    if table is not None:
+        return int(table["pelvis"])
+    world = np.asarray(world, dtype=np.float64)
+    world = world[np.isfinite(world).all(axis=(1, 2))]  # (frames with a non-finite joint left out)
+    if world.shape[0] == 0:
+        return 0
+    moving = np.flatnonzero(np.ptp(world, axis=0).max(axis=-1) > MOVING_M)
+    return int(moving[0]) if moving.size else 0
+
+
+def drawn_joints(parents, centre: int) -> list[int]:
+    """The joints to draw: all but the strict ancestors of `centre`. A root above the
+    pelvis (Bandai-Namco's `joint_Root`, fixed at the origin while `Hips` carries the
+    motion) is not part of the body: neither it nor a bone from it is drawn."""
+    parents = np.asarray(parents, dtype=np.int64)
+    keep = np.ones(parents.size, dtype=bool)
+    j = int(parents[centre]) if 0 <= centre < parents.size else -1
+    while j >= 0:
+        keep[j] = False
+        j = int(parents[j])
+    return [int(k) for k in np.flatnonzero(keep)]
+
+
 def figure_arrays(motion: Motion, name: str, mapping=None) -> dict:
     """One skeleton to draw: names, parents, root (T, 3) int32 mm, joints relative to
-    it (T, J, 3) int16 mm, the feet's contacts and the feet's joints (module docstring)."""
+    it (T, J, 3) int16 mm, the feet's contacts and the feet's joints, the joint to
+    follow and the joints to draw (module docstring)."""
     _, world = motion_fk(motion)
     mm = _mm(world)  # (T, J, 3)
     root = mm[:, 0]
@@ -72,6 +109,10 @@ def figure_arrays(motion: Motion, name: str, mapping=None) -> dict:
     try:
         table = joint_map(motion.skeleton, mapping)
     except Exception:  # (a skeleton no joint map knows: drawn without contacts)
+        table = None
+    out["centre"] = centre_joint(world, table)
+    out["drawn"] = drawn_joints(motion.skeleton.parents, out["centre"])
+    if table is None:
         return out
     contacts = signals.foot_contacts(world, table, motion.rate_hz)
     out["contacts"] = [bits(contacts[:, 0]), bits(contacts[:, 1])]

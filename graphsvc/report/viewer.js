@@ -31,8 +31,17 @@
         }
       }
     }
-    return { name: fig.name, J, parents: fig.parents, pos, contacts: fig.contacts, feet: fig.feet };
+    // the joint followed (gather.py centre_joint: the pelvis) and the joints drawn (not a
+    // root fixed above the pelvis)
+    const centre = Number.isInteger(fig.centre) && fig.centre >= 0 && fig.centre < J ? fig.centre : 0;
+    const drawn = Array.isArray(fig.drawn) ? fig.drawn.filter((j) => Number.isInteger(j) && j >= 0 && j < J)
+      : Array.from({ length: J }, (_, j) => j);
+    return { name: fig.name, J, parents: fig.parents, pos, contacts: fig.contacts, feet: fig.feet, centre, drawn };
   }
+
+  // (x, z) of a figure's centre joint at frame t
+  const centreX = (f, t) => f.pos[(t * f.J + f.centre) * 3];
+  const centreZ = (f, t) => f.pos[(t * f.J + f.centre) * 3 + 2];
 
   function prepareSensors(s, T) {
     if (!s) return null;
@@ -93,20 +102,23 @@
 
   function buildFigure(fig, T) {
     const color = COLORS[fig.name] || 0x555555;
+    // bones between drawn joints only: none from a root fixed above the pelvis
+    const isDrawn = new Uint8Array(fig.J);
+    for (const j of fig.drawn) isDrawn[j] = 1;
     const bones = [];
-    for (let j = 1; j < fig.J; j++) bones.push(fig.parents[j], j);
+    for (const j of fig.drawn) if (fig.parents[j] >= 0 && isDrawn[fig.parents[j]]) bones.push(fig.parents[j], j);
     const segGeom = new THREE.BufferGeometry();
     segGeom.setAttribute("position", new THREE.BufferAttribute(new Float32Array(bones.length * 3), 3));
     const lines = add(new THREE.LineSegments(segGeom, new THREE.LineBasicMaterial({ color })));
     const ptGeom = new THREE.BufferGeometry();
-    ptGeom.setAttribute("position", new THREE.BufferAttribute(new Float32Array(fig.J * 3), 3));
+    ptGeom.setAttribute("position", new THREE.BufferAttribute(new Float32Array(fig.drawn.length * 3), 3));
     const points = add(new THREE.Points(ptGeom, new THREE.PointsMaterial({ color, size: 0.045 })));
     const trailGeom = new THREE.BufferGeometry();
     const trail = new Float32Array(T * 3);
     for (let t = 0; t < T; t++) {
-      trail[t * 3] = fig.pos[t * fig.J * 3];
+      trail[t * 3] = centreX(fig, t);
       trail[t * 3 + 1] = 0.004;
-      trail[t * 3 + 2] = fig.pos[t * fig.J * 3 + 2];
+      trail[t * 3 + 2] = centreZ(fig, t);
     }
     trailGeom.setAttribute("position", new THREE.BufferAttribute(trail, 3));
     const trailLine = add(new THREE.Line(trailGeom, new THREE.LineBasicMaterial({ color, transparent: true, opacity: 0.55 })));
@@ -126,12 +138,12 @@
     return add(new THREE.Points(g, new THREE.PointsMaterial({ color: 0xff7f0e, size: 0.1 })));
   }
 
-  // the ground grid under every figure's trail, 1 m squares
+  // the ground grid under every figure's trail (its centre joint's), 1 m squares
   function placeGrid() {
     let x0 = Infinity, x1 = -Infinity, z0 = Infinity, z1 = -Infinity;
     for (const f of clip.figures) {
       for (let t = 0; t < clip.T; t++) {
-        const x = f.pos[t * f.J * 3], z = f.pos[t * f.J * 3 + 2];
+        const x = centreX(f, t), z = centreZ(f, t);
         x0 = Math.min(x0, x); x1 = Math.max(x1, x); z0 = Math.min(z0, z); z1 = Math.max(z1, z);
       }
     }
@@ -173,11 +185,11 @@
       d.lines.geometry.attributes.position.needsUpdate = true;
       d.lines.geometry.computeBoundingSphere();
       const pts = d.points.geometry.attributes.position.array;
-      for (let j = 0; j < fig.J; j++) {
-        pts[j * 3] = fig.pos[base + j * 3] + d.offset;
-        pts[j * 3 + 1] = fig.pos[base + j * 3 + 1];
-        pts[j * 3 + 2] = fig.pos[base + j * 3 + 2];
-      }
+      fig.drawn.forEach((j, k) => {
+        pts[k * 3] = fig.pos[base + j * 3] + d.offset;
+        pts[k * 3 + 1] = fig.pos[base + j * 3 + 1];
+        pts[k * 3 + 2] = fig.pos[base + j * 3 + 2];
+      });
       d.points.geometry.attributes.position.needsUpdate = true;
       d.points.geometry.computeBoundingSphere();
       d.trailLine.geometry.setDrawRange(0, i + 1);
@@ -200,15 +212,13 @@
       clip.markerPoints.geometry.attributes.position.needsUpdate = true;
       clip.markerPoints.geometry.computeBoundingSphere();
     }
-    if ($("follow").checked) {
-      const d = clip.drawn[0];
+    if ($("follow").checked) { // the middle of the figures' centre joints
       let x = 0, z = 0;
       for (const e of clip.drawn) {
-        x += e.fig.pos[i * e.fig.J * 3] + e.offset;
-        z += e.fig.pos[i * e.fig.J * 3 + 2];
+        x += centreX(e.fig, i) + e.offset;
+        z += centreZ(e.fig, i);
       }
       orbit.target.set(x / clip.drawn.length, 0.9, z / clip.drawn.length);
-      void d;
     }
     placeCamera();
     renderer.render(scene, camera);
@@ -351,6 +361,39 @@
     return `hsl(${h % 360},55%,68%)`;
   }
 
+  // The prefix every clip name of a list shares, up to and including its last separator
+  // ("dataset-2_" of every Bandai-Namco clip): "" for fewer than two distinct names.
+  function commonPrefix(names) {
+    const distinct = [...new Set(names.filter((n) => typeof n === "string" && n))];
+    if (distinct.length < 2) return "";
+    let p = distinct[0];
+    for (const n of distinct) {
+      let k = 0;
+      while (k < p.length && k < n.length && p[k] === n[k]) k++;
+      p = p.slice(0, k);
+    }
+    let cut = -1;
+    for (const sep of "_- ./") cut = Math.max(cut, p.lastIndexOf(sep));
+    return p.slice(0, cut + 1);
+  }
+
+  const unprefixed = (name, prefix) =>
+    (prefix && name.startsWith(prefix) && name.length > prefix.length ? name.slice(prefix.length) : name);
+
+  // `text` cut in the middle ("walk-tu…_002") to fit `width` px; "" when not even two
+  // characters do
+  function fitText(ctx, text, width) {
+    if (ctx.measureText(text).width <= width) return text;
+    const cut = (n) => text.slice(0, Math.ceil(n / 2)) + "…" + text.slice(text.length - Math.floor(n / 2));
+    let lo = 2, hi = text.length - 1; // (the most characters kept that fit)
+    if (ctx.measureText(cut(lo)).width > width) return "";
+    while (lo < hi) {
+      const mid = Math.ceil((lo + hi) / 2);
+      if (ctx.measureText(cut(mid)).width <= width) lo = mid; else hi = mid - 1;
+    }
+    return cut(lo);
+  }
+
   function drawTimeline() {
     const tl = clip.timeline;
     const nb = tl.neighbours;
@@ -358,13 +401,17 @@
     const c = chartCanvas("timeline", rows * 22 + 8);
     const ctx = c.getContext("2d");
     ctx.font = "11px sans-serif";
+    // clip names without the prefix they all share, cut in the middle where they do not
+    // fit (the full name: hover, or the line under the chart)
+    const prefix = commonPrefix([...tl.segments.map((s) => s.clip), ...(nb ? nb.clips : [])]);
     const row = (r, name) => { ctx.fillStyle = "#555"; ctx.fillText(name, 6, 4 + r * 22 + 14); return 4 + r * 22; };
     let y = row(0, "source clips");
     for (const s of tl.segments) {
       const x0 = xOf(c, s.start), x1 = xOf(c, Math.min(clip.T - 1, s.start + s.frames));
       ctx.fillStyle = KIND_COLORS[s.kind] || "#999";
       ctx.fillRect(x0, y, Math.max(1, x1 - x0), 18);
-      if (x1 - x0 > 50) { ctx.fillStyle = "#222"; ctx.fillText(s.clip.slice(0, Math.floor((x1 - x0) / 6)), x0 + 2, y + 13); }
+      const text = s.clip ? fitText(ctx, unprefixed(s.clip, prefix), x1 - x0 - 4) : "";
+      if (text) { ctx.fillStyle = "#222"; ctx.fillText(text, x0 + 2, y + 13); }
     }
     ctx.fillStyle = "#222";
     for (const t of tl.transitions) ctx.fillRect(xOf(c, t), y - 2, 1, 22);
@@ -373,11 +420,12 @@
       const x0 = xOf(c, r.start_frame), x1 = xOf(c, Math.min(clip.T - 1, r.start_frame + r.frames));
       ctx.fillStyle = hashColor(r.label);
       ctx.fillRect(x0, y, Math.max(1, x1 - x0), 18);
-      if (x1 - x0 > 30) { ctx.fillStyle = "#222"; ctx.fillText(r.label, x0 + 2, y + 13); }
+      const text = fitText(ctx, r.label, x1 - x0 - 4);
+      if (text) { ctx.fillStyle = "#222"; ctx.fillText(text, x0 + 2, y + 13); }
     }
     if (nb) {
       nb.clips.forEach((name, k) => {
-        const yy = row(2 + k, name.slice(0, 22));
+        const yy = row(2 + k, fitText(ctx, unprefixed(name, prefix), PAD_L - 12));
         const w = nb.weights[k];
         for (let t = 0; t < clip.T; t++) {
           const v = w.charCodeAt(t) - 48;
@@ -390,6 +438,7 @@
     finishChart("timeline", c);
     const legend = Object.entries(KIND_COLORS).map(([k, col]) => `<span class="sw" style="background:${col}"></span>${k}`).join(" ");
     $("timeline-legend").innerHTML = legend + ' <span class="sw" style="background:#222;width:2px"></span>transition';
+    if (prefix) $("timeline-legend").append(` · clip names without “${prefix}”`);
   }
 
   function drawConstraints() {
@@ -442,7 +491,9 @@
   $("timeline").addEventListener("mousemove", (e) => {
     if (!clip) return;
     const r = e.target.getBoundingClientRect();
-    $("timeline-info").textContent = frameInfo(frameAt(e.target, e.clientX - r.left));
+    const info = frameInfo(frameAt(e.target, e.clientX - r.left));
+    $("timeline-info").textContent = info;
+    e.target.title = info; // (the full clip name as a tooltip too)
   });
 
   function frameInfo(i) {
@@ -473,7 +524,7 @@
     $("clip-info").textContent = Object.entries(c.info).map(([a, b]) => `${a}: ${b}`).join(" · ");
     $("scrub").max = String(T - 1);
     const f0 = clip.figures[0];
-    orbit.target.set(f0.pos[0], 0.9, f0.pos[2]);
+    orbit.target.set(centreX(f0, 0), 0.9, centreZ(f0, 0));
     placeGrid();
     layoutOffsets();
     frame = 0;
@@ -582,12 +633,35 @@
       for (let j = 0; j < f.J; j++) out.push([0, 1, 2].map((c) => f.pos[(i * f.J + j) * 3 + c]));
       return out;
     },
-    // the joints as drawn now (the points' buffer, without the side-by-side offset)
+    // the joints as drawn now (the points' buffer, without the side-by-side offset),
+    // [J][3] metres, null for a joint not drawn
     drawnJointPositions: (fig = 0) => {
       const d = clip.drawn[fig];
       const a = d.points.geometry.attributes.position.array;
+      const out = new Array(d.fig.J).fill(null);
+      d.fig.drawn.forEach((j, k) => { out[j] = [a[k * 3] - d.offset, a[k * 3 + 1], a[k * 3 + 2]]; });
+      return out;
+    },
+    // the bones drawn, [parent, child] joint pairs
+    drawnBones: (fig = 0) => {
+      const b = clip.drawn[fig].bones;
       const out = [];
-      for (let j = 0; j < d.fig.J; j++) out.push([a[j * 3] - d.offset, a[j * 3 + 1], a[j * 3 + 2]]);
+      for (let k = 0; k < b.length; k += 2) out.push([b[k], b[k + 1]]);
+      return out;
+    },
+    // the joint the page follows (gather.py centre_joint)
+    centre: (fig = 0) => clip.figures[fig].centre,
+    // the drawn joints projected by the page's camera as drawn now: [J][3] normalized
+    // device coordinates (x, y in −1..1 on the canvas, z in −1..1 between the near and
+    // far planes), null for a joint not drawn
+    projectedJoints: (fig = 0) => {
+      const d = clip.drawn[fig];
+      const a = d.points.geometry.attributes.position.array;
+      const out = new Array(d.fig.J).fill(null);
+      d.fig.drawn.forEach((j, k) => {
+        const v = new THREE.Vector3(a[k * 3], a[k * 3 + 1], a[k * 3 + 2]).project(camera);
+        out[j] = [v.x, v.y, v.z];
+      });
       return out;
     },
   };

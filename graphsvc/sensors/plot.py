@@ -10,8 +10,15 @@ from graphsvc.sensors.recording import Recording
 
 
 def plot_recording(rec: Recording, path, title: str = "", contacts: np.ndarray | None = None) -> None:
-    """One panel per sensor (x, y, z in g over time); a strip of foot contacts when
-    `contacts` ((T, 2) bool, left then right) is given; the ground track if any."""
+    """`recording_figure` under `title`, written as a PNG to `path` atomically."""
+    save_figure(recording_figure(rec, contacts), path, title)
+
+
+def recording_figure(rec: Recording, contacts: np.ndarray | None = None):
+    """A matplotlib figure of a recording: one panel per sensor (x, y, z in m/s², the
+    recording's unit and the report page's, over time, at least ±1.5 g = ±14.7 m/s²);
+    a strip of foot contacts when `contacts` ((T, 2) bool, left then right) is given;
+    the ground track if any."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -37,11 +44,11 @@ def plot_recording(rec: Recording, path, title: str = "", contacts: np.ndarray |
     for s in range(S):
         ax = axes[s]
         for k, colour in enumerate(("tab:red", "tab:green", "tab:blue")):
-            ax.plot(t, rec.accelerations[:, s, k] / GRAVITY, color=colour, linewidth=0.8, label="xyz"[k])
-        finite = rec.accelerations[:, s][np.isfinite(rec.accelerations[:, s])] / GRAVITY
-        span = max(1.5, float(np.abs(finite).max()) * 1.1) if finite.size else 1.5
+            ax.plot(t, rec.accelerations[:, s, k], color=colour, linewidth=0.8, label="xyz"[k])
+        finite = rec.accelerations[:, s][np.isfinite(rec.accelerations[:, s])]
+        span = max(1.5 * GRAVITY, float(np.abs(finite).max()) * 1.1) if finite.size else 1.5 * GRAVITY
         ax.set_ylim(-span, span)
-        ax.set_ylabel(f"{rec.sensor_names[s]}\n[g]", fontsize=8)
+        ax.set_ylabel(f"{rec.sensor_names[s]}\n[m/s²]", fontsize=8)
         ax.tick_params(labelsize=7, labelbottom=s == S - 1)
         ax.set_xlim(t[0], t[-1])
         if s == 0:
@@ -54,7 +61,7 @@ def plot_recording(rec: Recording, path, title: str = "", contacts: np.ndarray |
         ax.set_xlabel("x [m]", fontsize=8)
         ax.set_ylabel("ground track\nz [m]", fontsize=8)
         ax.tick_params(labelsize=7)
-    save_figure(fig, path, title)
+    return fig
 
 
 def save_figure(fig, path, title: str = "") -> None:

@@ -60,3 +60,30 @@ def test_hysteresis_keeps_flags_steady_between_thresholds(skeleton):
     # Planted for the first second, then rising slowly into the band: stays planted.
     planted_first = np.where(t < 1.0, 0.0, np.minimum(waver, 0.065 * (t - 1.0)))
     assert flags(planted_first).all()
+
+
+def test_speeds_span_two_frame_steps_at_the_ends_too():
+    # x (m) at 30 Hz: central differences 0.012·15 = 0.18, 0, 0.018·15 = 0.27 m/s; the
+    # first and last frames take their neighbours'.
+    x = np.array([0.0, 0.012, 0.012, 0.012, 0.030])
+    pos = np.stack([x, np.zeros(5), np.zeros(5)], axis=-1)
+    np.testing.assert_allclose(signals.speeds(pos, 30.0), [0.18, 0.18, 0.0, 0.27, 0.27], atol=1e-12)
+    np.testing.assert_allclose(signals.speeds(pos[:2], 30.0), [0.36, 0.36], atol=1e-12)  # (one step)
+    assert signals.speeds(pos[:1], 30.0).tolist() == [0.0]
+
+
+def test_a_foot_planted_from_frame_0_is_in_contact_at_frame_0(skeleton):
+    # Both feet planted throughout; the whole body shifted 12 mm between frames 0 and 1
+    # (a reconstruction's track pull): one step of 0.36 m/s, above the 0.35 m/s to
+    # come into contact, but over two steps 0.18 m/s, as every later frame is measured.
+    table = joint_map(skeleton)
+    pos = _feet(30)
+    pos[1:, :, 0] += 0.012
+    contacts = signals.foot_contacts(pos, table, 30.0)
+    assert contacts.all(), contacts[:3]
+    # A foot that leaves the ground at frame 0 is not planted there.
+    for j in ("l_ankle", "l_toe"):
+        pos[:, table[j], 1] += 0.1 * np.arange(30) / 30.0
+        pos[:, table[j], 2] += 1.0 * np.arange(30) / 30.0
+    contacts = signals.foot_contacts(pos, table, 30.0)
+    assert not contacts[:, 0].any() and contacts[:, 1].all()

@@ -1,7 +1,9 @@
 """The report page in a real browser (headless Chromium, tests/report/browser.py): it
 loads without console errors, plays, scrubs to a frame and draws that frame's pose
 (the BVH's within 1 mm), draws something, and an evaluation's table sorts and opens
-its clips. The README's screenshot (docs/report.png) is made here from the README's
+its clips; a Bandai-Namco and a CMU clip (../shared/data) are on screen at frame 0,
+with no bone from a root fixed at the origin; the timeline tells clip names of one
+prefix apart. The README's screenshot (docs/report.png) is made here from the README's
 demo (procedural data): GRAPHSVC_UPDATE_SCREENSHOT=1 rewrites it."""
 
 import io
@@ -164,4 +166,133 @@ def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, stra
     drawn = np.array(driver.execute_script("return document.getElementById('view') && graphsvcViewer.drawnJointPositions(1)"))
     _, world = motion_fk(truth)
     assert np.abs(drawn - world[frame]).max() < 0.001
+    assert console_errors(driver) == []
+
+
+# ---------------------------------------------------------------- real skeletons (../shared/data)
+
+
+def _motion_page(motion, path, truth=None, timeline=None):
+    """A report page of `motion` (and `truth`) made with gather's functions, no graph."""
+    from graphsvc.report.gather import clip_view, timeline_from_labels
+    from graphsvc.report.html import write_html
+
+    if timeline is None:
+        timeline = timeline_from_labels([{"label": "clip", "start_frame": 0, "frames": motion.num_frames}])
+    view = clip_view(motion.name, motion, timeline, truth=truth)
+    write_html(path, {"title": motion.name, "clips": [view], "table": None})
+    return path
+
+
+def _bandai_walk(data_dir):
+    path = data_dir / "bandai" / "dataset-2" / "data" / "dataset-2_walk_active_004.bvh"
+    if not path.is_file():
+        pytest.skip(f"{path} not found (the Bandai-Namco walk the test draws)")
+    return load_motion(path).slice(0, 45), "Hips"
+
+
+def _cmu_walk(data_dir):
+    path = data_dir / "cmu" / "02" / "02_01.amc"
+    if not path.is_file():
+        pytest.skip(f"{path} not found (the CMU walk the test draws)")
+    return load_motion(path).slice(0, 60), "root"
+
+
+@pytest.mark.parametrize("source", [_bandai_walk, _cmu_walk], ids=["bandai", "cmu"])
+def test_a_real_clips_figures_are_on_screen_at_frame_0(driver, data_dir, tmp_path, source):
+    """The page follows the pelvis (Bandai-Namco's `Hips`, CMU's `root`): at frame 0 both
+    figures' drawn joints are inside the viewer, around its middle, and no bone is drawn
+    from a joint that stays put over the clip (Bandai-Namco's `joint_Root`, at the origin
+    while the walk starts more than 5 m from it)."""
+    motion, pelvis_name = source(data_dir)
+    names = list(motion.skeleton.names)
+    parents = motion.skeleton.parents
+    pelvis = names.index(pelvis_name)
+    _, world = motion_fk(motion)
+    fixed = {j for j in range(len(names)) if np.ptp(world[:, j], axis=0).max() < 0.001}
+    above = set()  # (the pelvis's ancestors)
+    j = int(parents[pelvis])
+    while j >= 0:
+        above.add(j)
+        j = int(parents[j])
+    if pelvis_name == "Hips":  # (what makes the case: a fixed root far from the figure)
+        assert above == fixed == {names.index("joint_Root")}
+        assert np.linalg.norm(world[0, pelvis, [0, 2]]) > 5.0
+    open_page(driver, _motion_page(motion, tmp_path / "page.html", truth=motion))
+    assert console_errors(driver) == []
+    hook = "return window.graphsvcViewer."
+    assert driver.execute_script(hook + "frame()") == 0
+    shown = [j for j in range(len(names)) if j not in above]
+    expected_bones = sorted((int(parents[j]), j) for j in shown if parents[j] >= 0 and parents[j] not in above)
+    pelvis_ndc = []
+    for fig in (0, 1):
+        assert driver.execute_script(hook + "centre(arguments[0])", fig) == pelvis
+        bones = sorted(tuple(b) for b in driver.execute_script(hook + "drawnBones(arguments[0])", fig))
+        assert bones == expected_bones
+        assert not any(a in fixed for a, _ in bones)
+        drawn = driver.execute_script(hook + "drawnJointPositions(arguments[0])", fig)
+        assert [j for j, p in enumerate(drawn) if p is None] == sorted(above)
+        assert np.abs(np.array([drawn[j] for j in shown]) - world[0, shown]).max() < 0.001
+        ndc = driver.execute_script(hook + "projectedJoints(arguments[0])", fig)
+        points = np.array([ndc[j] for j in shown])
+        assert (np.abs(points[:, :2]) < 1).all(), f"figure {fig}: joints off screen at frame 0: {points[:, :2]}"
+        assert (np.abs(points[:, 2]) < 1).all()  # (between the near and far planes)
+        pelvis_ndc.append(ndc[pelvis])
+    # The camera looks at the middle of the two pelvises (side by side, 1.5 m apart).
+    middle = np.mean(pelvis_ndc, axis=0)
+    assert abs(middle[0]) < 0.1 and abs(middle[1]) < 0.25, middle
+    # The screenshot has both figures' colours.
+    pixels = np.asarray(_png(driver.find_element("id", "view").screenshot_as_png)).reshape(-1, 3).astype(int)
+    blue = (pixels[:, 2] > 150) & (pixels[:, 0] < 120)
+    green = (pixels[:, 1] > 120) & (pixels[:, 0] < 100) & (pixels[:, 2] < 120)
+    assert blue.sum() > 50 and green.sum() > 50
+    assert console_errors(driver) == []
+
+
+def _fitted(text: str, full: str) -> bool:
+    """`text` is `full`, or `full` cut in the middle with an ellipsis."""
+    if text == full:
+        return True
+    head, sep, tail = text.partition("…")
+    return sep == "…" and len(head) >= 1 and len(tail) >= 1 and full.startswith(head) and full.endswith(tail)
+
+
+def test_timeline_tells_clips_of_one_prefix_apart(driver, tmp_path):
+    """Bandai-Namco clip names all start "dataset-2_": the timeline writes them without
+    it, cut in the middle where a run is narrow, and the neighbours' rows alike."""
+    from graphsvc.report.gather import timeline_from_sources
+    from tests.conftest import still_motion
+
+    names = ["dataset-2_walk_active_001", "dataset-2_run_active_003", "dataset-2_walk-turn-left_normal_002"]
+    T = 90
+    lead = np.array([0] * 40 + [1] * 4 + [2] * 46)  # (the second run 4 frames: about 40 px wide)
+    clip = np.stack([lead, np.full(T, -1)], axis=1)
+    frame = np.stack([np.arange(T, dtype=float), np.zeros(T)], axis=1)
+    weight = np.stack([np.ones(T), np.zeros(T)], axis=1)
+    timeline = timeline_from_sources(names, ["walk"] * T, clip, frame, weight)
+    open_page(driver, _motion_page(still_motion(T), tmp_path / "page.html", timeline=timeline))
+    assert console_errors(driver) == []
+    drawn = driver.execute_script("""
+        const texts = [], fill = CanvasRenderingContext2D.prototype.fillText;
+        CanvasRenderingContext2D.prototype.fillText = function (t, x, y) {
+          if (this.canvas.id === "timeline") texts.push([String(t), x, y, this.measureText(t).width]);
+          return fill.apply(this, arguments);
+        };
+        window.graphsvcViewer.loadClip(0);
+        CanvasRenderingContext2D.prototype.fillText = fill;
+        return texts;""")
+    row0 = [(t, x, w) for t, x, y, w in drawn if y < 22 and x > 100]  # (the runs' names, right of the row names)
+    short = [n[len("dataset-2_"):] for n in names]
+    assert [t for t, _, _ in row0][::2] == [short[0], short[2]]  # (wide runs: the whole name but the prefix)
+    narrow, x, width = row0[1]
+    assert _fitted(narrow, short[1]) and narrow != short[1] and "…" in narrow, narrow
+    width_px = driver.execute_script("""
+        const c = document.getElementById("timeline");
+        return (c.width - 160) * 4 / 89;""")
+    assert width <= width_px
+    # The neighbours' rows (left of the chart, 138 px): all three, told apart.
+    rows = [t for t, x, y, w in drawn if x == 6 and y > 44]
+    assert len(rows) == 3 and len(set(rows)) == 3
+    assert all(any(_fitted(t, s) for s in short) for t in rows), rows
+    assert "dataset-2_" in driver.find_element("id", "timeline-legend").text
     assert console_errors(driver) == []

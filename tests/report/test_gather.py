@@ -10,10 +10,10 @@ import pytest
 from graphsvc.graph.model import EDGE_ORIGINAL, EDGE_SLOW, EDGE_TRANSITION, NODE_SLOW, graph_from_edges
 from graphsvc.motion import quat
 from graphsvc.motion.kinematics import motion_fk
-from graphsvc.motion.skeleton import Motion
+from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.report.gather import (
-    compact_sources, constraint_arrays, figure_arrays, path_edges, path_readings, source_readings, timeline_from_nodes,
-    timeline_from_sources,
+    centre_joint, compact_sources, constraint_arrays, drawn_joints, figure_arrays, path_edges, path_readings,
+    source_readings, timeline_from_nodes, timeline_from_sources,
 )  # fmt: skip
 from graphsvc.report.html import data_json, render_html, three_script
 from graphsvc.strategies.base import Provenance
@@ -41,6 +41,60 @@ def test_figure_positions_are_the_motions_to_half_a_millimetre():
     assert fig["parents"] == sk.parents.tolist() and fig["joints"] == list(sk.names)
     assert fig["feet"] == [sk.names.index("l_ankle"), sk.names.index("r_ankle")]
     assert len(fig["contacts"][0]) == T and set(fig["contacts"][0]) <= {"0", "1"}
+
+
+def _under_a_fixed_root(prefix: str = "") -> Motion:
+    """The T-pose skeleton (joint names prefixed) under a root joint "world" that stays
+    at the origin while the pelvis walks from x = 5 m along +Z (Bandai-Namco's
+    `joint_Root` above `Hips`), 6 frames."""
+    sk = tpose_skeleton()
+    J = sk.num_joints + 1
+    names = ("world",) + tuple(prefix + n for n in sk.names)
+    parents = np.array([-1, 0] + [int(p) + 1 for p in sk.parents[1:]])
+    channels = (("Xposition", "Yposition", "Zposition"),) + sk.channels
+    under = Skeleton(names, parents, np.vstack([np.zeros(3), sk.offsets]), channels, np.zeros(J, bool))
+    T = 6
+    trans = np.broadcast_to(under.offsets, (T, J, 3)).copy()
+    trans[:, 1] = [[5.0, 0.96, 0.1 * t] for t in range(T)]
+    return Motion(under, quat.identity((T, J)), trans, 30.0, name="fixed root")
+
+
+def test_the_page_follows_the_pelvis_and_draws_no_bone_from_a_fixed_root_above_it():
+    motion = _under_a_fixed_root()
+    J = motion.skeleton.num_joints
+    fig = figure_arrays(motion, "truth")  # (a skeleton of the procedural map: its pelvis is joint 1)
+    assert fig["centre"] == 1 and motion.skeleton.names[1] == "pelvis"
+    assert fig["drawn"] == list(range(1, J))  # (every joint but "world")
+    assert fig["contacts"] is not None
+    # The encoding is unchanged: joint 0 (the fixed root) and every joint relative to it.
+    root = _decode(fig["root_mm"], np.int32).reshape(-1, 3)
+    rel = _decode(fig["rel_mm"], np.int16).reshape(-1, J, 3)
+    assert (root == 0).all()
+    assert rel[:, 1].tolist() == [[5000, 960, 100 * t] for t in range(6)]
+    # A skeleton no joint map knows: the first joint that moves (the pelvis, whose
+    # parent stays put), and the same joints drawn.
+    unknown = _under_a_fixed_root(prefix="x_")
+    fig = figure_arrays(unknown, "truth")
+    assert fig["contacts"] is None and fig["centre"] == 1 and fig["drawn"] == list(range(1, J))
+    _, world = motion_fk(unknown)
+    assert centre_joint(world) == 1
+    assert centre_joint(world[:1]) == 0  # (one frame: nothing moves)
+    assert centre_joint(np.full((3, J, 3), np.nan)) == 0  # (bad input: no crash)
+
+
+def test_drawn_joints_leave_out_the_centres_ancestors_only():
+    #        0
+    #        |
+    #        1
+    #      / | \
+    #     2  4  5
+    #     |
+    #     3
+    parents = [-1, 0, 1, 2, 1, 1]
+    assert drawn_joints(parents, 0) == [0, 1, 2, 3, 4, 5]
+    assert drawn_joints(parents, 1) == [1, 2, 3, 4, 5]
+    assert drawn_joints(parents, 3) == [3, 4, 5]
+    assert drawn_joints(parents, 4) == [2, 3, 4, 5]
 
 
 def _path_graph():
