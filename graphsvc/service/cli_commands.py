@@ -50,7 +50,9 @@ def _cmd_serve(args) -> int:
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
-    bound = bind_server(config)  # a taken port or a bad address fails here, before the graphs load
+    # A taken port or a bad address fails here, before the graphs load; from here on
+    # health checks are answered (NOT_SERVING until `serve` has the graphs served).
+    bound = bind_server(config)
     workers = None
     try:
         if config.live_workers:  # (they load the graphs while this process does)
@@ -58,7 +60,7 @@ def _cmd_serve(args) -> int:
             workers.launch()
         graphs = load_graphs(args.graph)
     except BaseException:
-        bound.server.stop(None)
+        bound.close()
         if workers is not None:
             workers.stop()
         raise

@@ -151,6 +151,63 @@ def test_health(server):
         assert code == grpc.StatusCode.NOT_FOUND
 
 
+def _health(port: int) -> dict:
+    """Each service's health status name (overall and graphsvc.v1's)."""
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+    with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
+        stub = health_pb2_grpc.HealthStub(channel)
+        return {service: health_pb2.HealthCheckResponse.ServingStatus.Name(
+            stub.Check(health_pb2.HealthCheckRequest(service=service), timeout=10).status)
+            for service in ("", "graphsvc.v1.MotionGraphService")}  # fmt: skip
+
+
+def test_health_answers_not_serving_until_the_graphs_are_served(loaded_graphs):
+    """`serve` binds (bind_server), loads its graphs, then start_server: in between,
+    health answers NOT_SERVING and every other call UNAVAILABLE."""
+    from graphsvc.service.server import ServerConfig, bind_server, start_server
+
+    config = ServerConfig(host="127.0.0.1", port=0)
+    bound = bind_server(config)
+    running = None
+    try:
+        assert _health(bound.port) == {"": "NOT_SERVING", "graphsvc.v1.MotionGraphService": "NOT_SERVING"}
+        with C.connect(f"127.0.0.1:{bound.port}") as c:
+            code, details = _code(c.stub.ListGraphs, pb.ListGraphsRequest(), timeout=10)
+            assert code == grpc.StatusCode.UNAVAILABLE and "loading its graphs" in details
+            running = start_server(loaded_graphs, config, bound)
+            assert _health(bound.port) == {"": "SERVING", "graphsvc.v1.MotionGraphService": "SERVING"}
+            assert [g.name for g in C.list_graphs(c, timeout_s=10)] == ["small"]
+    finally:
+        running.stop(0) if running is not None else bound.close()
+
+
+def test_health_answers_not_serving_while_the_calls_under_way_drain(loaded_graphs, recording):
+    running = start(loaded_graphs)
+    stopper = None
+    try:
+        with C.connect(f"127.0.0.1:{running.port}") as c:
+            feed = C.SampleFeed(C.stream_config("small"))
+            responses = iter(c.stub.StreamSynthesize(iter(feed), timeout=60))
+            assert next(responses).WhichOneof("message") == "started"
+            stopper = threading.Thread(target=running.stop, args=(60,))
+            stopper.start()
+            _wait_for(lambda: running.gate.stage == "draining")
+            assert _health(running.port) == {"": "NOT_SERVING", "graphsvc.v1.MotionGraphService": "NOT_SERVING"}
+            code, details = _code(c.stub.ListGraphs, pb.ListGraphsRequest(), timeout=10)
+            assert code == grpc.StatusCode.UNAVAILABLE and "shutting down" in details
+            for sample in C.recording_samples(recording):  # the stream under way goes on to its end
+                feed.put(sample)
+            feed.close()
+            kinds = [r.WhichOneof("message") for r in responses]
+            assert kinds.count("frame") == recording.num_samples and kinds[-1] == "finished"
+            stopper.join(30)
+            assert not stopper.is_alive()
+    finally:
+        if stopper is None:
+            running.stop(0)
+
+
 @pytest.mark.parametrize("version", ["v1alpha", "v1"])
 def test_reflection_lists_and_describes_the_service(server, version):
     from google.protobuf import descriptor_pb2
