@@ -302,13 +302,3 @@ def test_serve_answers_health_not_serving_while_its_graphs_load(graph_file, tmp_
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-
-
-def test_stream_help_states_the_live_lag(capsys):
-    from graphsvc.strategies.base import LiveSession
-
-    for command in (["client", "stream"], ["sensor-bridge"]):
-        with pytest.raises(SystemExit):
-            main([*command, "--help"])
-        text = " ".join(capsys.readouterr().out.split())
-        assert f"default: a {LiveSession.DEFAULT_LATENCY_S:g} s lag" in text and "whole input" not in text, command
