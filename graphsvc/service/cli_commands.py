@@ -50,7 +50,9 @@ def _cmd_serve(args) -> int:
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
     if (config.tls_cert is None) != (config.tls_key is None):
         raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
-    bound = bind_server(config)  # a taken port or a bad address fails here, before the graphs load
+    # A taken port or a bad address fails here, before the graphs load; from here on
+    # health checks are answered (NOT_SERVING until `serve` has the graphs served).
+    bound = bind_server(config)
     workers = None
     try:
         if config.live_workers:  # (they load the graphs while this process does)
@@ -58,7 +60,7 @@ def _cmd_serve(args) -> int:
             workers.launch()
         graphs = load_graphs(args.graph)
     except BaseException:
-        bound.server.stop(None)
+        bound.close()
         if workers is not None:
             workers.stop()
         raise
@@ -285,29 +287,59 @@ def _connection_parent() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR", help="HOST:PORT (default 127.0.0.1:50051)")
     p.add_argument("--graph", metavar="NAME", help="graph name on the server (default: its only graph)")
-    p.add_argument("--token-file", metavar="F", help="file holding the bearer token")
-    p.add_argument("--tls-ca", metavar="F", help="PEM CA certificate of the server: use TLS")
-    p.add_argument("--tls-server-name", metavar="NAME", help="name to check the server certificate against")
-    p.add_argument("--timeout", type=float, metavar="S", help="deadline per call, seconds (default none)")
+    p.add_argument("--token-file", metavar="F", help="file holding the bearer token (default: send none)")
+    p.add_argument("--tls-ca", metavar="F", help="PEM CA certificate of the server: use TLS (default: plaintext)")
+    p.add_argument("--tls-server-name", metavar="NAME",
+                   help="name to check the server certificate against (default: the host of --server)")
+    p.add_argument("--timeout", type=float, metavar="S",
+                   help="deadline of each unary call (graph lookup, synthesize, batches), seconds; a live stream has "
+                        "none (default: none)")  # fmt: skip
     return p
+
+
+def _live_latency_help(coda: str = "") -> str:
+    """--latency of the live commands: what the lag is, from the sessions' own sums."""
+    from graphsvc.strategies.viterbi.strategy import ViterbiSession
+
+    rate = 30.0
+    default = ViterbiSession.DEFAULT_LATENCY_S
+    tail = ViterbiSession.synthesis_lag_frames(rate)
+    total = ViterbiSession.output_lag_frames(rate)
+    return (f"the search's fixed lag, seconds: it settles a frame S s after the frame's sample (default {default:g}). "
+            f"The pose comes out later: viterbi's at most round(S × rate) + {tail} frames after its sample at 30 Hz "
+            f"({tail} for the synthesis' blend look-ahead and its batches of {ViterbiSession.SYNTH_BATCH} frames): "
+            f"{total} frames ({total / rate:.2f} s) by default (and none before the search starts, 1 s in); "
+            f"nearest's {tail} frames whatever S; ssg's within S (at least a window and a step); olng's at once"
+            + coda)  # fmt: skip
+
+
+def _json_flag(p, what: str) -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON (default: as text)")
 
 
 def add_service_parsers(sub) -> None:
     """Add `serve`, `client` and `sensor-bridge` to graphsvc's subcommands."""
 
-    p = sub.add_parser("serve", help="serve graphs over gRPC (graphsvc.v1)")
+    what = "serve graphs over gRPC (graphsvc.v1)"
+    p = sub.add_parser("serve", help=what, description=(
+        f"{what[0].upper()}{what[1:]}: live streams, batch synthesis, graph info, health and reflection. The port is "
+        "bound first (health answers NOT_SERVING while the graphs load), then SERVING until SIGTERM or Ctrl-C, "
+        "which drains the calls under way (see docs/service.md)."))  # fmt: skip
     p.add_argument("--graph", action="append", required=True, metavar="NAME=FILE",
-                   help="a graph to serve under NAME (repeatable)")  # fmt: skip
+                   help="a graph to serve under NAME (repeatable; at least one)")  # fmt: skip
     p.add_argument("--host", default="[::]", help="address to bind (default [::]: all interfaces)")
     p.add_argument("--port", type=int, default=50051, help="TCP port (default 50051; 0: any free port)")
-    p.add_argument("--tls-cert", metavar="F", help="PEM certificate chain: serve TLS (with --tls-key)")
-    p.add_argument("--tls-key", metavar="F", help="PEM private key")
-    p.add_argument("--token-file", metavar="F", help="accepted bearer tokens, one per line: require one")
+    p.add_argument("--tls-cert", metavar="F",
+                   help="PEM certificate chain: serve TLS (with --tls-key; default: plaintext)")
+    p.add_argument("--tls-key", metavar="F", help="PEM private key of --tls-cert (default: none, plaintext)")
+    p.add_argument("--token-file", metavar="F",
+                   help="accepted bearer tokens, one per line: require one (default: no authentication)")
     p.add_argument("--max-streams", type=COUNT, default=16, metavar="N",
                    help="concurrent live streams; more get RESOURCE_EXHAUSTED (default 16)")  # fmt: skip
-    p.add_argument("--max-message-mb", type=ranged(float, 0.0, 2047.0, low_open=True), default=64.0, metavar="M", help="largest message, MiB (default 64)")
+    p.add_argument("--max-message-mb", type=ranged(float, 0.0, 2047.0, low_open=True), default=64.0, metavar="M",
+                   help="largest message either way, MiB (default 64)")  # fmt: skip
     p.add_argument("--grace-s", type=ranged(float, 0.0, 3600.0), default=10.0, metavar="S",
-                   help="on SIGTERM, time for in-flight calls to finish (default 10)")  # fmt: skip
+                   help="on SIGTERM, time for in-flight calls to finish, health answering NOT_SERVING (default 10)")
     p.add_argument("--config-timeout-s", type=float, default=10.0, metavar="S",
                    help="a stream that sends no config within S seconds of connecting ends with "
                         "DEADLINE_EXCEEDED (default 10)")  # fmt: skip
@@ -315,67 +347,106 @@ def add_service_parsers(sub) -> None:
                    help="run the live streams' sessions in N worker processes, each stream in one (default: one a "
                         "core, 0 on a single core; 0: in the server's process)")  # fmt: skip
     p.add_argument("--batch-dir", metavar="DIR", help="take batches (SubmitBatch …): their folders go here, and a "
-                                                      "manifest's relative paths are taken from here")  # fmt: skip
+                                                      "manifest's relative paths are taken from here (default: "
+                                                      "take no batches)")  # fmt: skip
     p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "
                                                                 "local cluster, started at the first batch)")  # fmt: skip
     p.add_argument("--batch-workers", type=COUNT, metavar="N", help="the local cluster's workers (default: one a core)")
     p.set_defaults(run=_cmd_serve)
 
     connection = _connection_parent()
-    p = sub.add_parser("client", help="call a graphsvc server")
-    client = p.add_subparsers(dest="client_command", required=True, parser_class=type(p))
+    what = "call a graphsvc server"
+    p = sub.add_parser("client", help=what, description=(
+        "Call a graphsvc server (graphsvc serve): list its graphs, reconstruct a recording, replay one live, run "
+        "batches."))  # fmt: skip
+    client = p.add_subparsers(dest="client_command", required=True, parser_class=type(p), help="what to call")
 
-    c = client.add_parser("graphs", parents=[connection], help="list the server's graphs (--graph: one in full)")
-    c.add_argument("--json", action="store_true")
+    what = "list the server's graphs (--graph: one in full)"
+    c = client.add_parser("graphs", parents=[connection], help=what, description=(
+        "List the server's graphs, one line each; with --graph NAME, that graph in full, as `graphsvc info` "
+        "prints it."))  # fmt: skip
+    _json_flag(c, "the graphs (with --graph: that graph)")
     c.set_defaults(run=_cmd_client_graphs)
 
-    c = client.add_parser("synthesize", parents=[connection], help="reconstruct a recording on the server")
+    what = "reconstruct a recording on the server"
+    c = client.add_parser("synthesize", parents=[connection], help=what, description=(
+        "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
+        "BVH; the recording's own constraint sets are sent unless --constraints replaces them."))  # fmt: skip
     c.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
-    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh")
-    c.add_argument("--report", metavar="OUT.json", help="write the search report")
+    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", help="BVH file to write (required; cm)")
+    c.add_argument("--report", metavar="OUT.json", help="write the search report (default: none)")
     add_calibration_option(c)
     add_search_options(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
-    c = client.add_parser("batch", help="batches on the server: submit, status, list, cancel")
-    batch = c.add_subparsers(dest="batch_command", required=True, parser_class=type(p))
-    b = batch.add_parser("submit", parents=[connection], help="submit a manifest (its paths: the server's files)")
+    what = "batches on the server: submit, status, list, cancel"
+    c = client.add_parser("batch", help=what, description=(
+        "Batches of recordings on the server's files, run on its Dask cluster (a server started with --batch-dir; "
+        "docs/batch.md): submit, status, list, cancel."))  # fmt: skip
+    batch = c.add_subparsers(dest="batch_command", required=True, parser_class=type(p), help="what to do")
+    what = "submit a manifest (its paths: the server's files)"
+    b = batch.add_parser("submit", parents=[connection], help=what, description=(
+        "Submit a manifest of recordings to reconstruct; its paths are the server's files. Prints the batch's "
+        "state (with --wait: once it ends; exit 1 if any item failed)."))  # fmt: skip
     b.add_argument("manifest", metavar="MANIFEST", help="CSV or JSON manifest (docs/batch.md)")
-    b.add_argument("--format", choices=("csv", "json"), help="default: by the file's extension")
+    b.add_argument("--format", choices=("csv", "json"), help="the manifest's format (default: by the file's extension, "
+                                                             "csv unless .json)")  # fmt: skip
     b.add_argument("--retries", type=int, metavar="R", help="further attempts after a worker's failure (default 2)")
-    b.add_argument("--wait", action="store_true", help="poll until the batch ends")
-    b.add_argument("--poll", type=float, default=2.0, metavar="S", help="with --wait: seconds between polls")
-    b.add_argument("--json", action="store_true")
-    b = batch.add_parser("status", parents=[connection], help="a batch's state and counts")
-    b.add_argument("batch_id", metavar="ID")
-    b.add_argument("--items", action="store_true", help="every item's state, attempts and reason")
-    b.add_argument("--json", action="store_true")
-    b = batch.add_parser("list", parents=[connection], help="the server's batches, newest first")
-    b.add_argument("--json", action="store_true")
-    b = batch.add_parser("cancel", parents=[connection], help="stop a batch (its unfinished items queued)")
-    b.add_argument("batch_id", metavar="ID")
-    b.add_argument("--json", action="store_true")
+    b.add_argument("--wait", action="store_true", help="poll until the batch ends (default: return once submitted)")
+    b.add_argument("--poll", type=float, default=2.0, metavar="S",
+                   help="with --wait: seconds between polls (default 2)")
+    _json_flag(b, "the batch's status")
+    what = "a batch's state and counts"
+    b = batch.add_parser("status", parents=[connection], help=what, description=(
+        "Print a batch's state and item counts (exit 1 if any item failed)."))  # fmt: skip
+    b.add_argument("batch_id", metavar="ID", help="the batch's id (as submit printed it)")
+    b.add_argument("--items", action="store_true",
+                   help="every item's state, attempts and reason (default: counts only)")
+    _json_flag(b, "the batch's status")
+    what = "the server's batches, newest first"
+    b = batch.add_parser("list", parents=[connection], help=what, description=(
+        "List the server's batches, newest first, one line each."))  # fmt: skip
+    _json_flag(b, "the batches")
+    what = "stop a batch (its unfinished items queued)"
+    b = batch.add_parser("cancel", parents=[connection], help=what, description=(
+        "Stop a running batch (its unfinished items are left queued, to resume with `graphsvc batch`) and print "
+        "its status."))  # fmt: skip
+    b.add_argument("batch_id", metavar="ID", help="the batch's id (as submit printed it)")
+    _json_flag(b, "the batch's status")
     c.set_defaults(run=_cmd_client_batch)
 
-    c = client.add_parser("stream", parents=[connection], help="replay a recording live and print per-frame latency")
-    c.add_argument("recording", metavar="REC")
-    c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X", help="replay X times faster than real time")
-    c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion")
-    c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame")
+    what = "replay a recording live and print per-frame latency"
+    c = client.add_parser("stream", parents=[connection], help=what, description=(
+        "Replay a recording live through StreamSynthesize, in real time or --speed times faster; print one line per "
+        "frame with its latency (receipt minus sending of the sample that released it), then p50/p99/max beyond "
+        "the stream's lag, which the summary states."))  # fmt: skip
+    c.add_argument("recording", metavar="REC", help="recording to replay (.rec or device CSV)")
+    c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X",
+                   help="replay X times faster than real time (default 1: real time)")  # fmt: skip
+    c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion as BVH, cm (default: none)")
+    c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_calibration_option(c)
     add_search_options(c, live=True)
+    c._option_string_actions["--latency"].help = _live_latency_help(". The summary names the stream's lag")
     c.set_defaults(run=_cmd_client_stream)
 
-    p = sub.add_parser("sensor-bridge", parents=[connection], help="stream a serial accelerometer device to a server")
-    p.add_argument("--device", required=True, metavar="DEV", help="serial device, e.g. /dev/ttyUSB0")
+    what = "stream a serial accelerometer device to a server"
+    p = sub.add_parser("sensor-bridge", parents=[connection], help=what, description=(
+        "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
+        "rate, stream them to a server and write the motion that comes back; ends when the device closes, after "
+        "--duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge)."))  # fmt: skip
+    p.add_argument("--device", required=True, metavar="DEV", help="serial device, e.g. /dev/ttyUSB0 (required)")
     p.add_argument("--baud", type=int, default=115200, metavar="B", help="baud rate (default 115200)")
-    p.add_argument("--units", choices=("m/s2", "g"), default="m/s2", help="units of the device's readings")
+    p.add_argument("--units", choices=("m/s2", "g"), default="m/s2",
+                   help="units of the device's readings (default m/s2)")
     p.add_argument("--calibrate-seconds", type=float, default=0.0, metavar="S",
-                   help="stand still in the rest pose for the first S seconds to estimate sensor biases")  # fmt: skip
+                   help="stand still in the rest pose for the first S seconds to estimate sensor biases (default 0: "
+                        "no bias estimated)")  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
-    p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion")
+    p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion as BVH, cm (default: none)")
     add_calibration_option(p)
     add_search_options(p, live=True)
+    p._option_string_actions["--latency"].help = _live_latency_help()
     p.set_defaults(run=_cmd_sensor_bridge)
 
 

@@ -1,7 +1,8 @@
 """The graphsvc.v1 gRPC server: graph registry, batch and live synthesis, health,
 reflection, bearer-token authentication and optional TLS.
 
-Graphs are loaded once at start (memory-mapped, graphsvc.graph.file.load_graph) and
+The port is bound and health checks answered (NOT_SERVING) before the graphs load;
+graphs are loaded once at start (memory-mapped, graphsvc.graph.file.load_graph) and
 shared read-only by every call; each live stream owns its LiveSession, in one of the
 live worker processes (`live_workers`) or, without them, in this process. Calls run
 on a thread pool sized for `max_streams` live streams plus a few unary calls.
@@ -10,9 +11,10 @@ Status codes: INVALID_ARGUMENT names the offending field; NOT_FOUND for an unkno
 graph; UNIMPLEMENTED for a strategy not built (none at present); RESOURCE_EXHAUSTED beyond
 `max_streams` concurrent streams (at once, from a spare worker); DEADLINE_EXCEEDED for a
 stream that sends no config within `config_timeout_s`; UNAVAILABLE for a stream whose live worker
-died; UNAUTHENTICATED without a valid token; INTERNAL
-(with the traceback on the server's stderr) for bugs — bad input never takes the
-server down.
+died, and for every call but a health check while the graphs load or, after SIGTERM,
+while the calls under way drain (health answers NOT_SERVING then); UNAUTHENTICATED
+without a valid token; INTERNAL (with the traceback on the server's stderr) for bugs —
+bad input never takes the server down.
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ from __future__ import annotations
 import gc
 import hmac
 import math
+import re
 import signal
 import sys
 import threading
 import time
 import traceback
 from concurrent import futures
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -160,14 +164,15 @@ class BearerTokenInterceptor(grpc.ServerInterceptor):
         handler = continuation(handler_call_details)
         if handler is None:  # unknown method: gRPC answers UNIMPLEMENTED itself
             return None
-        return _deny(handler, "missing or invalid bearer token (metadata 'authorization: Bearer <token>')")
+        return _answer(handler, grpc.StatusCode.UNAUTHENTICATED,
+                       "missing or invalid bearer token (metadata 'authorization: Bearer <token>')")
 
 
-def _deny(handler: grpc.RpcMethodHandler, message: str) -> grpc.RpcMethodHandler:
-    """A handler of the same shape as `handler` that answers UNAUTHENTICATED."""
+def _answer(handler: grpc.RpcMethodHandler, code: grpc.StatusCode, message: str) -> grpc.RpcMethodHandler:
+    """A handler of the same shape as `handler` that ends the call with `code`."""
 
     def abort(request_or_iterator, context):
-        context.abort(grpc.StatusCode.UNAUTHENTICATED, message)
+        context.abort(code, message)
 
     if handler.request_streaming and handler.response_streaming:
         return grpc.stream_stream_rpc_method_handler(abort)
@@ -176,6 +181,85 @@ def _deny(handler: grpc.RpcMethodHandler, message: str) -> grpc.RpcMethodHandler
     if handler.response_streaming:
         return grpc.unary_stream_rpc_method_handler(abort)
     return grpc.unary_unary_rpc_method_handler(abort)
+
+
+# ---------------------------------------------------------------- serving state
+
+
+class CallGate(grpc.ServerInterceptor):
+    """Which calls the server takes, by its stage: while the graphs load (`loading`)
+    and while it drains after SIGTERM (`draining`) every call but a health check is
+    answered UNAVAILABLE, so health stays open from the moment the port is bound to
+    the moment the server stops; while `serving` every call goes through, and the
+    calls under way are counted until each ends (gRPC's termination callback, after
+    its status went out), so a drain can wait for exactly those."""
+
+    LOADING, SERVING, DRAINING = "loading", "serving", "draining"
+    REFUSALS = {LOADING: "the server is loading its graphs (health answers NOT_SERVING until it serves); try again",
+                DRAINING: "the server is shutting down"}  # fmt: skip
+
+    def __init__(self, open_prefixes: tuple[str, ...] = (HEALTH_METHOD_PREFIX,)):
+        self._open = open_prefixes
+        self._stage = self.LOADING
+        self._active = 0
+        self._changed = threading.Condition()
+
+    @property
+    def stage(self) -> str:
+        return self._stage
+
+    @property
+    def active(self) -> int:
+        """Calls under way (health checks not counted)."""
+        return self._active
+
+    def open(self) -> None:
+        with self._changed:
+            self._stage = self.SERVING
+
+    def drain(self) -> None:
+        with self._changed:
+            self._stage = self.DRAINING
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until no counted call is under way, at most timeout_s; whether none is."""
+        with self._changed:
+            return self._changed.wait_for(lambda: self._active == 0, timeout=max(0.0, timeout_s))
+
+    def _enter(self) -> str | None:
+        """Count a call that starts now; the refusal's message when the server takes none."""
+        with self._changed:
+            if self._stage != self.SERVING:
+                return self.REFUSALS[self._stage]
+            self._active += 1
+            return None
+
+    def _leave(self) -> None:
+        with self._changed:
+            self._active -= 1
+            self._changed.notify_all()
+
+    def intercept_service(self, continuation, handler_call_details):
+        handler = continuation(handler_call_details)
+        if handler is None or handler_call_details.method.startswith(self._open):
+            return handler  # (None: unknown method, gRPC answers UNIMPLEMENTED itself)
+        if self._stage != self.SERVING:
+            return _answer(handler, grpc.StatusCode.UNAVAILABLE, self.REFUSALS[self._stage])
+        kind = ("stream" if handler.request_streaming else "unary") + "_" + \
+            ("stream" if handler.response_streaming else "unary")  # fmt: skip
+        return handler._replace(**{kind: self._counted(getattr(handler, kind))})
+
+    def _counted(self, behavior):
+        def run(request_or_iterator, context):
+            # (checked again here: the drain may have begun since the call arrived)
+            refusal = self._enter()
+            if refusal is not None:
+                context.abort(grpc.StatusCode.UNAVAILABLE, refusal)
+            if not context.add_callback(self._leave):  # (False: the call has ended already)
+                self._leave()
+            return behavior(request_or_iterator, context)
+
+        return run
 
 
 # ---------------------------------------------------------------- the service
@@ -286,6 +370,14 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         self.batches = batches  # a batch.service.BatchManager, or None
         self.slots = StreamSlots(max_streams)
         self.threads = ThreadShare()  # numba's threads for a live stream's steps while it runs alone
+
+    def take(self, graphs: dict[str, LoadedGraph], batches=None, live_workers: LiveWorkers | None = None) -> None:
+        """Serve these graphs (and batches, live workers) from now on: `bind_server`
+        registers the servicer before the graphs load, and its CallGate lets no call
+        through to it until start_server has handed them over."""
+        self.graphs = graphs
+        self.batches = batches
+        self.live_workers = live_workers
 
     def _graph(self, name: str, field: str = "graph") -> LoadedGraph:
         if not name:
@@ -488,19 +580,27 @@ class RunningServer:
     health: health.HealthServicer
     servicer: MotionGraphServicer
     graphs: dict[str, LoadedGraph] = field(default_factory=dict)
+    gate: CallGate = field(default_factory=CallGate)
 
     def stop(self, grace_s: float | None = None, give_up_s: float = 10.0) -> None:
-        """Refuse new calls, let running ones finish within grace_s, then cancel them;
-        returns at the latest give_up_s after the grace."""
+        """Health turns NOT_SERVING (and goes on answering), every other new call is
+        refused with UNAVAILABLE, the calls under way get grace_s to finish, then the
+        rest are cancelled; returns at the latest give_up_s after that.
+
+        The drain is the CallGate's, not gRPC's `stop(grace)`, which would refuse the
+        health checks too for the whole grace."""
         self.health.enter_graceful_shutdown()
-        done = self.server.stop(grace_s)
+        self.gate.drain()
+        if grace_s:
+            self.gate.wait_idle(grace_s)
+        done = self.server.stop(0)  # (not None: that would block until the shutdown completes)
         # gRPC's shutdown completes once every call's objects are freed, and a finished
         # call can sit in a reference cycle until the cyclic GC's next pass (gRPC's own
         # answer to request bytes that do not parse leaves one): with no allocation to
         # trigger that pass the server would wait forever. Collect while waiting. Not
         # every such call is freed even so (seen with the client in the same process),
         # so give up (the process is ending) give_up_s after the grace.
-        give_up = time.monotonic() + (grace_s or 0.0) + give_up_s
+        give_up = time.monotonic() + give_up_s
         while not done.wait(0.25) and time.monotonic() < give_up:
             gc.collect()
         if self.servicer.batches is not None:
@@ -528,10 +628,11 @@ def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None
 
 
 def check_address(host: str, port: int) -> None:
-    """Refuse, with one line, a port outside 0–65535, a host that does not resolve, or
-    an address another socket already listens on (checked with a plain socket bound
-    like gRPC binds, SO_REUSEADDR on, SO_REUSEPORT off), before gRPC logs its own
-    failure and before any graph is loaded."""
+    """Refuse, with one line, a port outside 0–65535, a host that does not resolve or
+    is not an address of this machine, or an address another socket already listens on,
+    before gRPC logs its own failure and before any graph is loaded. Checked with a
+    plain socket bound as gRPC binds (SO_REUSEADDR on, SO_REUSEPORT off), port 0
+    included (any free port: whether the host is this machine's is still checked)."""
     import socket
 
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
@@ -541,29 +642,77 @@ def check_address(host: str, port: int) -> None:
         infos = socket.getaddrinfo(name or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     except (socket.gaierror, UnicodeError, OSError) as exc:
         raise InputError(f"cannot listen on {host}:{port}: not an address of this machine ({exc})") from None
-    if port == 0:
-        return
     family, kind, proto, _, sockaddr = infos[0]
-    with socket.socket(family, kind, proto) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
+    try:
+        with socket.socket(family, kind, proto) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.bind(sockaddr)
-        except OSError as exc:
-            raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    except OSError as exc:
+        raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+
+
+@contextmanager
+def _fd2_captured():
+    """What is written to file descriptor 2 meanwhile, in a temporary file; yields a
+    list that holds the text afterwards. gRPC's C core logs a failed bind there itself
+    (an `E… add_port.cc] Failed to add port …` line, whatever sys.stderr is and
+    whatever GRPC_VERBOSITY was when gRPC started), so the bind runs inside this and
+    the reason goes into graphsvc's own one line."""
+    import os
+    import tempfile
+
+    sys.stderr.flush()
+    text: list[str] = []
+    with tempfile.TemporaryFile() as log:
+        saved = os.dup(2)
+        try:
+            os.dup2(log.fileno(), 2)
+            yield text
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            log.seek(0)
+            text.append(log.read().decode("utf-8", "replace"))
+
+
+_GRPC_LOG_PREFIX = re.compile(r"^[EWIFD]\d{4} [\d:.]+\s+\d+ [^\]]*\] ")  # E1203 16:00:37.251041 6808 add_port.cc:83]
+
+
+def bind_failure_reason(log: str) -> str:
+    """Why gRPC could not bind, from what it logged: each address' bind error ("Cannot
+    assign requested address"), else its "Failed to add port" line, else its last
+    line (without the log prefix)."""
+    reasons = list(dict.fromkeys(re.findall(r"Error in bind for address '[^']*': ([^)\n]+)\)", log)))
+    if reasons:
+        return "; ".join(reasons)
+    lines = [_GRPC_LOG_PREFIX.sub("", line).strip() for line in log.splitlines() if line.strip()]
+    failed = [line for line in lines if "Failed to add port" in line]
+    return (failed or lines or ["gRPC gave no reason"])[-1]
 
 
 @dataclass
 class BoundServer:
-    """A gRPC server that holds its port but serves nothing yet (bind_server)."""
+    """A started gRPC server on its port that answers health checks (NOT_SERVING) and
+    refuses every other call (UNAVAILABLE) until start_server hands it its graphs."""
 
     server: grpc.Server
     port: int
     max_streams: int
+    health: health.HealthServicer
+    servicer: MotionGraphServicer
+    gate: CallGate
+
+    def close(self, give_up_s: float = 5.0) -> None:
+        """Stop at once (its graphs could not be served), waiting at most give_up_s for
+        gRPC's shutdown (see RunningServer.stop)."""
+        self.server.stop(0).wait(give_up_s)
 
 
 def bind_server(config: ServerConfig) -> BoundServer:
-    """Validate the config, build the gRPC server and bind its port; nothing served yet.
-    `serve` binds before it loads graphs, so a taken port fails in a moment."""
+    """Validate the config, build the gRPC server, bind its port and start it with
+    every service registered, health answering NOT_SERVING and every other call
+    refused until start_server. `serve` binds before it loads graphs, so a taken port
+    fails in a moment and health checks are answered while the graphs load."""
     if config.max_streams < 1:
         raise InputError(f"--max-streams must be at least 1, got {config.max_streams}")
     if not (math.isfinite(config.max_message_mb) and config.max_message_mb > 0):
@@ -573,6 +722,10 @@ def bind_server(config: ServerConfig) -> BoundServer:
     if (config.tls_cert is None) != (config.tls_key is None):
         raise InputError("TLS needs both --tls-cert and --tls-key")
     check_address(config.host, config.port)
+    credentials = None
+    if config.tls_cert is not None:
+        credentials = grpc.ssl_server_credentials([(read_input_bytes(config.tls_key, "TLS key"),
+                                                    read_input_bytes(config.tls_cert, "TLS certificate"))])  # fmt: skip
     max_bytes = int(config.max_message_mb * 2**20)
     # SO_REUSEPORT off: two servers can never share a port (nor port 0 land on a held one).
     # Keepalive: a client whose machine or network vanished (no FIN) stops answering
@@ -580,54 +733,67 @@ def bind_server(config: ServerConfig) -> BoundServer:
     options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
                ("grpc.so_reuseport", 0), ("grpc.keepalive_time_ms", 30_000), ("grpc.keepalive_timeout_ms", 10_000),
                ("grpc.http2.max_pings_without_data", 0)]  # fmt: skip
-    interceptors = [BearerTokenInterceptor(config.tokens)] if config.tokens else []
+    gate = CallGate()  # outermost: while loading or draining, nothing else runs
+    interceptors = [gate] + ([BearerTokenInterceptor(config.tokens)] if config.tokens else [])
     executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
     server = grpc.server(executor, interceptors=interceptors, options=options)
     address = f"{config.host}:{config.port}"
-    try:
-        if config.tls_cert is not None:
-            credentials = grpc.ssl_server_credentials([(read_input_bytes(config.tls_key, "TLS key"),
-                                                        read_input_bytes(config.tls_cert, "TLS certificate"))])  # fmt: skip
-            port = server.add_secure_port(address, credentials)
-        else:
-            port = server.add_insecure_port(address)
-    except RuntimeError:  # grpcio ≥ 1.60 raises where older versions returned 0
-        port = 0
+    with _fd2_captured() as logged:
+        try:
+            if credentials is None:
+                port = server.add_insecure_port(address)
+            else:
+                port = server.add_secure_port(address, credentials)
+        except RuntimeError:  # grpcio ≥ 1.60 raises where older versions returned 0
+            port = 0
     if port == 0:
         server.stop(None)
-        raise GraphsvcError(f"cannot listen on {address}")
-    return BoundServer(server, port, config.max_streams)
+        raise GraphsvcError(f"cannot listen on {address}: {bind_failure_reason(logged[0])}")
+    if logged[0]:  # (nothing gRPC logged beside a bind that worked is lost)
+        sys.stderr.write(logged[0])
+    try:
+        servicer = MotionGraphServicer({}, config.max_streams, config_timeout_s=config.config_timeout_s)
+        pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
+        health_servicer = health.HealthServicer(experimental_non_blocking=True,
+                                                experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
+        health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+        for name in ("", SERVICE_NAME):
+            health_servicer.set(name, health_pb2.HealthCheckResponse.NOT_SERVING)
+        _add_reflection(server, (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME))
+        server.start()
+    except BaseException:
+        server.stop(0).wait(5.0)
+        raise
+    return BoundServer(server, port, config.max_streams, health_servicer, servicer, gate)
 
 
 def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None,
                  live_workers: LiveWorkers | None = None) -> RunningServer:  # fmt: skip
-    """Build (or take the bound server from bind_server), register the services and
-    start; returns once the live workers are ready (port: the bound port).
-    live_workers: workers already launched for these graphs (else config.live_workers
-    of them are started here)."""
+    """Serve `graphs` on the server bind_server started (or one bound here): once the
+    live workers are ready, calls go through and health turns SERVING (port: the bound
+    port). live_workers: workers already launched for these graphs (else
+    config.live_workers of them are started here)."""
     bound = bound or bind_server(config)
-    server = bound.server
-    batches = None
-    if config.batch_dir is not None:
-        from graphsvc.batch.service import BatchManager
+    try:
+        batches = None
+        if config.batch_dir is not None:
+            from graphsvc.batch.service import BatchManager
 
-        batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
-                               config.batch_workers)  # fmt: skip
-    workers = live_workers
-    if workers is None and config.live_workers:
-        workers = LiveWorkers({n: g.path for n, g in graphs.items()}, config.live_workers)
-    if workers is not None:
-        workers.start()
-    servicer = MotionGraphServicer(graphs, config.max_streams, batches, config.config_timeout_s, workers)
-    pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
-    health_servicer = health.HealthServicer(experimental_non_blocking=True,
-                                            experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
-    health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+            batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
+                                   config.batch_workers)  # fmt: skip
+        workers = live_workers
+        if workers is None and config.live_workers:
+            workers = LiveWorkers({n: g.path for n, g in graphs.items()}, config.live_workers)
+        if workers is not None:
+            workers.start()
+        bound.servicer.take(graphs, batches, workers)
+    except BaseException:
+        bound.close()
+        raise
+    bound.gate.open()  # (before SERVING: a client that sees SERVING gets through)
     for name in ("", SERVICE_NAME):
-        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
-    _add_reflection(server, (SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME))
-    server.start()
-    return RunningServer(server, bound.port, health_servicer, servicer, graphs)
+        bound.health.set(name, health_pb2.HealthCheckResponse.SERVING)
+    return RunningServer(bound.server, bound.port, bound.health, bound.servicer, graphs, bound.gate)
 
 
 def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None,

@@ -497,6 +497,15 @@ class LiveSession:
     DEFAULT_LATENCY_S = 1.0
     SYNTH_BATCH = 3  # 0.1 s at 30 Hz
 
+    @classmethod
+    def synthesis_lag_frames(cls, rate_hz: float) -> int:
+        """Frames a streamed pose can come out after its frame of the path is final:
+        the streaming synthesis' look-ahead (half its blend window, plus one) and up to
+        SYNTH_BATCH − 1 frames waiting for its batch to fill; 12 + 2 at 30 Hz."""
+        from graphsvc.synthesis.stream import lookahead_frames
+
+        return lookahead_frames(rate_hz) + cls.SYNTH_BATCH - 1
+
     def __new__(cls, graph: MotionGraph, options: Options = Options(), *args, **kwargs):
         if cls is LiveSession:
             from graphsvc.strategies import get

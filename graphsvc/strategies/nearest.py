@@ -30,7 +30,7 @@ from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Re
 from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.strategies.options import TRACK_PULL_S, Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
-from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
+from graphsvc.synthesis.stream import StreamingSynthesizer
 
 INDEX_VERSION = 1
 
@@ -154,7 +154,7 @@ class NearestSession(LiveSession):
         self.start_position: np.ndarray | None = None
         self.start_heading: float | None = None
         self.previous = -1
-        self.lag_frames = lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
+        self.lag_frames = self.synthesis_lag_frames(self.rate)
 
     def _decode(self, acc, position, heading, markers=None, up=None):
         if self.start_position is None and position is not None and np.all(np.isfinite(position)):

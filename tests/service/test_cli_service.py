@@ -13,7 +13,7 @@ import pytest
 
 from graphsvc.service import client as C
 from graphsvc.service.cli_commands import main
-from tests.service.conftest import popen_cli
+from tests.service.conftest import popen_cli, run_cli
 
 
 @pytest.fixture
@@ -119,6 +119,14 @@ def test_client_commands_apply_a_calibration_before_sending(served, graph, recor
     assert "not a graphsvc calibration" in capsys.readouterr().err
 
 
+def _health(address: str) -> str:
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+    with grpc.insecure_channel(address) as channel:
+        answer = health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=10)
+    return health_pb2.HealthCheckResponse.ServingStatus.Name(answer.status)
+
+
 def test_sigterm_drains_in_flight_streams_then_exits_0(served, recording):
     proc, address, token = served
     with C.connect(address, token=C.read_token_file(token)) as conn:
@@ -132,10 +140,12 @@ def test_sigterm_drains_in_flight_streams_then_exits_0(served, recording):
         proc.send_signal(signal.SIGTERM)
         assert "stopping, 1 stream(s) in flight" in proc.stdout.readline()
         time.sleep(0.2)
-        # New calls are refused while draining; the running stream goes on to the end.
+        # New calls are refused while draining, health checks answered NOT_SERVING
+        # (open without the token); the running stream goes on to the end.
         with pytest.raises(C.ServiceError) as info:
             C.list_graphs(conn, timeout_s=5)
         assert info.value.code == grpc.StatusCode.UNAVAILABLE
+        assert _health(address) == "NOT_SERVING"
         for s in samples[10:]:
             feed.put(s)
         feed.close()
@@ -187,23 +197,108 @@ def test_serve_fails_fast_on_a_taken_port_or_bad_address(server, tmp_path, capsy
     assert "missing.graph" in capsys.readouterr().err
 
 
-def test_grpc_port_reuse_is_off(server, monkeypatch):
+def test_grpc_port_reuse_is_off(server, monkeypatch, capfd):
     """A second gRPC server on the very port of a running one must fail to bind, even
-    past the plain-socket check (gRPC's own SO_REUSEPORT is off)."""
+    past the plain-socket check (gRPC's own SO_REUSEPORT is off), in one line with
+    the reason gRPC logged, and its log line kept off stderr."""
+    import errno
+    import os
+
     from graphsvc.errors import GraphsvcError
     from graphsvc.service import server as S
     from graphsvc.service.server import ServerConfig, bind_server
 
     monkeypatch.setattr(S, "check_address", lambda host, port: None)
-    with pytest.raises(GraphsvcError, match="cannot listen"):
+    capfd.readouterr()
+    with pytest.raises(GraphsvcError) as info:
         bind_server(ServerConfig(host="127.0.0.1", port=server.port))
+    assert str(info.value) == f"cannot listen on 127.0.0.1:{server.port}: {os.strerror(errno.EADDRINUSE)}"
+    assert capfd.readouterr().err == ""
 
 
-def test_stream_help_states_the_live_lag(capsys):
-    from graphsvc.strategies.base import LiveSession
+def test_serve_on_an_address_not_of_this_machine_says_why_in_one_line(graph_file):
+    """Port 0 as well as a fixed port: exit 2 and one line with the reason; gRPC's own
+    `E… add_port.cc] Failed to add port` line must not reach stderr."""
+    import errno
+    import os
+    import socket
 
-    for command in (["client", "stream"], ["sensor-bridge"]):
-        with pytest.raises(SystemExit):
-            main([*command, "--help"])
-        text = " ".join(capsys.readouterr().out.split())
-        assert f"default: a {LiveSession.DEFAULT_LATENCY_S:g} s lag" in text and "whole input" not in text, command
+    host = "192.0.2.1"  # TEST-NET-1 (RFC 5737): for documentation, no machine's address
+    with socket.socket() as probe:
+        try:
+            probe.bind((host, 0))
+            pytest.skip(f"{host} is an address of this machine")
+        except OSError:
+            pass
+    for port in (0, 50999):
+        result = run_cli("serve", "--graph", f"a={graph_file}", "--host", host, "--port", port, "--live-workers", 0)
+        assert result.returncode == 2, result.stderr
+        assert result.stderr == f"graphsvc: error: cannot listen on {host}:{port}: {os.strerror(errno.EADDRNOTAVAIL)}\n"
+
+
+# The serve command with its graph loading held until the test says so: it prints the
+# bound port first (the listening line comes once the graphs are served).
+_HELD_LOAD = """
+import sys
+import graphsvc.service.server as S
+from graphsvc.service.cli_commands import main
+
+bind, load = S.bind_server, S.load_graphs
+
+def bound_then_printed(config):
+    bound = bind(config)
+    print("bound", bound.port, flush=True)
+    return bound
+
+def held_load(specs):
+    with open(sys.argv[1]) as gate:  # blocks until the test opens the FIFO for writing
+        gate.read()
+    return load(specs)
+
+S.bind_server, S.load_graphs = bound_then_printed, held_load
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_serve_answers_health_not_serving_while_its_graphs_load(graph_file, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from tests.service.conftest import ROOT, _env, wait_for
+
+    gate = tmp_path / "gate"
+    os.mkfifo(gate)
+    proc = subprocess.Popen([sys.executable, "-c", _HELD_LOAD, str(gate), "serve", "--graph", f"small={graph_file}",
+                             "--host", "127.0.0.1", "--port", "0", "--live-workers", "0"],
+                            cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("bound "), line + proc.stderr.read()
+        address = f"127.0.0.1:{int(line.split()[1])}"
+        assert _health(address) == "NOT_SERVING"  # the load waits on the FIFO meanwhile
+        with C.connect(address) as conn:
+            with pytest.raises(C.ServiceError) as info:
+                C.list_graphs(conn, timeout_s=10)
+            assert info.value.code == grpc.StatusCode.UNAVAILABLE and "loading its graphs" in str(info.value)
+            writer = []
+
+            def opened() -> bool:  # (the server opens its end once its load starts)
+                assert proc.poll() is None, proc.stderr.read()
+                try:
+                    writer.append(os.open(gate, os.O_WRONLY | os.O_NONBLOCK))
+                except OSError:
+                    return False
+                return True
+
+            wait_for(opened, timeout_s=30)
+            os.close(writer[0])  # the load goes on
+            assert "listening on" in proc.stdout.readline()
+            assert _health(address) == "SERVING"
+            assert [g.name for g in C.list_graphs(conn, timeout_s=10)] == ["small"]
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

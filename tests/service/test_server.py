@@ -96,6 +96,21 @@ def test_stream_matches_live_session(conn, graph, recording):
     assert motion.num_frames == len(expected)
 
 
+def test_a_default_stream_lags_by_the_frames_it_reports(conn, recording):
+    """No latency given: the decoder's 1 s (30 frames at the graph's 30 Hz), the
+    synthesis' look-ahead ceil(0.35 × 30) + 1 = 12 and up to 2 frames of its batches of
+    3: 44 frames, as `client stream --help` says; the recording is at the graph rate,
+    so sample k is frame k's, and the last frames out of a push wait exactly that."""
+    feed = C.SampleFeed(C.stream_config("small"))
+    for sample in C.recording_samples(recording):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert result.started.lag_frames == 44
+    waits = [f.input_sample_index - f.index for f in result.frames]
+    assert max(waits) == 44 and len(result.frames) == recording.num_samples
+
+
 def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(conn, server, graph, recording,
                                                                             monkeypatch):  # fmt: skip
     # While a stream runs alone the server gives its steps numba's threads; the frames
@@ -149,6 +164,63 @@ def test_health(server):
             assert reply.status == health_pb2.HealthCheckResponse.SERVING
         code, _ = _code(stub.Check, health_pb2.HealthCheckRequest(service="nope"), timeout=5)
         assert code == grpc.StatusCode.NOT_FOUND
+
+
+def _health(port: int) -> dict:
+    """Each service's health status name (overall and graphsvc.v1's)."""
+    from grpc_health.v1 import health_pb2, health_pb2_grpc
+
+    with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
+        stub = health_pb2_grpc.HealthStub(channel)
+        return {service: health_pb2.HealthCheckResponse.ServingStatus.Name(
+            stub.Check(health_pb2.HealthCheckRequest(service=service), timeout=10).status)
+            for service in ("", "graphsvc.v1.MotionGraphService")}  # fmt: skip
+
+
+def test_health_answers_not_serving_until_the_graphs_are_served(loaded_graphs):
+    """`serve` binds (bind_server), loads its graphs, then start_server: in between,
+    health answers NOT_SERVING and every other call UNAVAILABLE."""
+    from graphsvc.service.server import ServerConfig, bind_server, start_server
+
+    config = ServerConfig(host="127.0.0.1", port=0)
+    bound = bind_server(config)
+    running = None
+    try:
+        assert _health(bound.port) == {"": "NOT_SERVING", "graphsvc.v1.MotionGraphService": "NOT_SERVING"}
+        with C.connect(f"127.0.0.1:{bound.port}") as c:
+            code, details = _code(c.stub.ListGraphs, pb.ListGraphsRequest(), timeout=10)
+            assert code == grpc.StatusCode.UNAVAILABLE and "loading its graphs" in details
+            running = start_server(loaded_graphs, config, bound)
+            assert _health(bound.port) == {"": "SERVING", "graphsvc.v1.MotionGraphService": "SERVING"}
+            assert [g.name for g in C.list_graphs(c, timeout_s=10)] == ["small"]
+    finally:
+        running.stop(0) if running is not None else bound.close()
+
+
+def test_health_answers_not_serving_while_the_calls_under_way_drain(loaded_graphs, recording):
+    running = start(loaded_graphs)
+    stopper = None
+    try:
+        with C.connect(f"127.0.0.1:{running.port}") as c:
+            feed = C.SampleFeed(C.stream_config("small"))
+            responses = iter(c.stub.StreamSynthesize(iter(feed), timeout=60))
+            assert next(responses).WhichOneof("message") == "started"
+            stopper = threading.Thread(target=running.stop, args=(60,))
+            stopper.start()
+            _wait_for(lambda: running.gate.stage == "draining")
+            assert _health(running.port) == {"": "NOT_SERVING", "graphsvc.v1.MotionGraphService": "NOT_SERVING"}
+            code, details = _code(c.stub.ListGraphs, pb.ListGraphsRequest(), timeout=10)
+            assert code == grpc.StatusCode.UNAVAILABLE and "shutting down" in details
+            for sample in C.recording_samples(recording):  # the stream under way goes on to its end
+                feed.put(sample)
+            feed.close()
+            kinds = [r.WhichOneof("message") for r in responses]
+            assert kinds.count("frame") == recording.num_samples and kinds[-1] == "finished"
+            stopper.join(30)
+            assert not stopper.is_alive()
+    finally:
+        if stopper is None:
+            running.stop(0)
 
 
 @pytest.mark.parametrize("version", ["v1alpha", "v1"])

@@ -28,7 +28,7 @@ from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Re
                                       start_placement, start_samples, start_state)  # fmt: skip
 from graphsvc.strategies.options import Options, check_constraints
 from graphsvc.synthesis.path import pulled_track, synthesize_motion, warm_up_synthesis
-from graphsvc.synthesis.stream import StreamingSynthesizer, lookahead_frames
+from graphsvc.synthesis.stream import StreamingSynthesizer
 
 
 class ViterbiStrategy(Strategy):
@@ -156,10 +156,9 @@ class ViterbiSession(LiveSession):
                  threads: bool = False, keep_motion: bool = True, marker_names=None,
                  orientations: bool = False):  # fmt: skip
         super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
-        latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         constraints = check_constraints(options.constraints or [], graph)
-        self.decoder = FixedLagDecoder(graph, options.weights, int(round(latency * self.rate)), constraints, allowed,
-                                       self.rate, threads, beam=options.beam,
+        self.decoder = FixedLagDecoder(graph, options.weights, self.decoder_lag(self.rate, options.latency_s),
+                                       constraints, allowed, self.rate, threads, beam=options.beam,
                                        start_samples=start_samples(self.rate),
                                        pull_s=options.track_pull_s, oriented=self.reads_up)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
@@ -168,7 +167,19 @@ class ViterbiSession(LiveSession):
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
-        self.lag_frames = self.decoder.lag + lookahead_frames(self.rate) + self.SYNTH_BATCH - 1
+        self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate)
+
+    @classmethod
+    def decoder_lag(cls, rate_hz: float, latency_s: float | None = None) -> int:
+        """The fixed-lag decoder's lag, samples at the graph rate: latency_s (default
+        DEFAULT_LATENCY_S) of them."""
+        return int(round((cls.DEFAULT_LATENCY_S if latency_s is None else latency_s) * rate_hz))
+
+    @classmethod
+    def output_lag_frames(cls, rate_hz: float, latency_s: float | None = None) -> int:
+        """A session's `lag_frames`: the decoder's lag plus the synthesis' (44 frames at
+        30 Hz with the default 1 s: 30 + 12 + 2)."""
+        return cls.decoder_lag(rate_hz, latency_s) + cls.synthesis_lag_frames(rate_hz)
 
     @property
     def threads(self) -> bool:
