@@ -134,14 +134,9 @@ def add_calibration_option(p) -> None:
                         "(`graphsvc calibrate`; default: none)")
 
 
-def _live_lag_s() -> float:
-    from graphsvc.strategies.base import LiveSession
-
-    return LiveSession.DEFAULT_LATENCY_S
-
-
-def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
-    """live: the command streams (a LiveSession), so --latency defaults to its lag."""
+def add_search_options(p, constraints: bool = True, latency_help: str | None = None) -> None:
+    """The strategy flags. latency_help: --latency's help where the command streams (a
+    live session's lag is its default there)."""
     from graphsvc.strategies import names
     from graphsvc.strategies.options import TRACK_PULL_S
 
@@ -156,9 +151,8 @@ def add_search_options(p, constraints: bool = True, live: bool = False) -> None:
         p.add_argument("--constraints", metavar="FILE", type=PATH,
                        help="annotation constraint sets (JSON), replacing the recording's (default: the recording's)")
     p.add_argument("--latency", type=float, metavar="S",
-                   help=f"fixed-lag decoding: output lags the input by S seconds (default: a {_live_lag_s():g} s lag)"
-                   if live else
-                        "fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)")  # fmt: skip
+                   help=latency_help or "fixed-lag decoding with this lag in seconds, as a live stream would (default: "
+                                        "whole input)")  # fmt: skip
     p.add_argument("--heading-from-track", action="store_true",
                    help="derive heading from the ground positions: direction of travel above --speed-threshold "
                         "(default: the recording's heading)")

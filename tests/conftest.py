@@ -12,6 +12,7 @@ import pytest
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion, Skeleton
 
+ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("GRAPHSVC_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 
 _TPOSE = [  # name, parent, offset (m): faces +Z, left is +X
@@ -71,8 +72,10 @@ def write_gliding_clip(folder: Path) -> Path:
 def _empty_working_directory(tmp_path_factory, monkeypatch):
     """Every test starts in an empty folder of its own: what the folder pytest was started
     from holds (a demo's output, say) never changes a result, and a test that writes
-    into the working directory writes nowhere that matters."""
+    into the working directory writes nowhere that matters. Child processes find this
+    checkout's `graphsvc` and `tests` through PYTHONPATH, wherever they start."""
     monkeypatch.chdir(tmp_path_factory.mktemp("cwd"))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p))
 
 
 @pytest.fixture

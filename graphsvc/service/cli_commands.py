@@ -17,14 +17,18 @@ import threading
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import COUNT, Parser, ranged, add_calibration_option, add_search_options, os_message, search_options
+from graphsvc.cli_args import (COUNT, PATH, Parser, add_calibration_option, add_search_options, os_message, ranged,
+                               search_options, synthesize_inputs)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import read_input_text
 
 
-def _check_output(path: Path) -> None:
-    if not path.parent.is_dir():
-        raise GraphsvcError(f"output folder {path.parent} does not exist")
+def _check_output(path: Path, inputs=()) -> None:
+    """A BVH output: its folder there, .bvh, none of the inputs (`fileio.check_outputs`)."""
+    from graphsvc.fileio import check_outputs
+    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+
+    check_outputs([("-o", path, MOTION_OUTPUT_SUFFIXES)], inputs)
 
 
 def _print(line: str) -> None:
@@ -122,9 +126,10 @@ def _cmd_client_synthesize(args) -> int:
     from graphsvc.service.convert import skeleton_from_proto
 
     out = Path(args.output)
-    _check_output(out)
-    if args.report:
-        _check_output(Path(args.report))
+    from graphsvc.fileio import check_outputs
+    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+
+    check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
     rec = _calibrated(read_recording(args.recording), args.calibration)
     options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
@@ -194,7 +199,7 @@ def _cmd_client_stream(args) -> int:
 
     out = Path(args.output) if args.output else None
     if out is not None:
-        _check_output(out)
+        _check_output(out, synthesize_inputs(args))
     rec = _calibrated(read_recording(args.recording), args.calibration)
     options = _options(args, recording=rec)
 
@@ -228,7 +233,7 @@ def _cmd_sensor_bridge(args) -> int:
 
     out = Path(args.output) if args.output else None
     if out is not None:
-        _check_output(out)
+        _check_output(out, [("the calibration", args.calibration), ("the constraints", args.constraints)])
     if args.calibrate_seconds < 0:
         raise GraphsvcError(f"--calibrate-seconds must be ≥ 0, got {args.calibrate_seconds}")
     options = _options(args)
@@ -287,8 +292,8 @@ def _connection_parent() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR", help="HOST:PORT (default 127.0.0.1:50051)")
     p.add_argument("--graph", metavar="NAME", help="graph name on the server (default: its only graph)")
-    p.add_argument("--token-file", metavar="F", help="file holding the bearer token (default: send none)")
-    p.add_argument("--tls-ca", metavar="F", help="PEM CA certificate of the server: use TLS (default: plaintext)")
+    p.add_argument("--token-file", metavar="F", type=PATH, help="file holding the bearer token (default: send none)")
+    p.add_argument("--tls-ca", metavar="F", type=PATH, help="PEM CA certificate of the server: use TLS (default: plaintext)")
     p.add_argument("--tls-server-name", metavar="NAME",
                    help="name to check the server certificate against (default: the host of --server)")
     p.add_argument("--timeout", type=float, metavar="S",
@@ -329,10 +334,10 @@ def add_service_parsers(sub) -> None:
                    help="a graph to serve under NAME (repeatable; at least one)")  # fmt: skip
     p.add_argument("--host", default="[::]", help="address to bind (default [::]: all interfaces)")
     p.add_argument("--port", type=int, default=50051, help="TCP port (default 50051; 0: any free port)")
-    p.add_argument("--tls-cert", metavar="F",
+    p.add_argument("--tls-cert", metavar="F", type=PATH,
                    help="PEM certificate chain: serve TLS (with --tls-key; default: plaintext)")
-    p.add_argument("--tls-key", metavar="F", help="PEM private key of --tls-cert (default: none, plaintext)")
-    p.add_argument("--token-file", metavar="F",
+    p.add_argument("--tls-key", metavar="F", type=PATH, help="PEM private key of --tls-cert (default: none, plaintext)")
+    p.add_argument("--token-file", metavar="F", type=PATH,
                    help="accepted bearer tokens, one per line: require one (default: no authentication)")
     p.add_argument("--max-streams", type=COUNT, default=16, metavar="N",
                    help="concurrent live streams; more get RESOURCE_EXHAUSTED (default 16)")  # fmt: skip
@@ -346,7 +351,7 @@ def add_service_parsers(sub) -> None:
     p.add_argument("--live-workers", type=ranged(int, 0, 256), metavar="N",
                    help="run the live streams' sessions in N worker processes, each stream in one (default: one a "
                         "core, 0 on a single core; 0: in the server's process)")  # fmt: skip
-    p.add_argument("--batch-dir", metavar="DIR", help="take batches (SubmitBatch …): their folders go here, and a "
+    p.add_argument("--batch-dir", metavar="DIR", type=PATH, help="take batches (SubmitBatch …): their folders go here, and a "
                                                       "manifest's relative paths are taken from here (default: "
                                                       "take no batches)")  # fmt: skip
     p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "
@@ -372,9 +377,9 @@ def add_service_parsers(sub) -> None:
     c = client.add_parser("synthesize", parents=[connection], help=what, description=(
         "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
         "BVH; the recording's own constraint sets are sent unless --constraints replaces them."))  # fmt: skip
-    c.add_argument("recording", metavar="REC", help="recording (.rec or device CSV)")
-    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", help="BVH file to write (required; cm)")
-    c.add_argument("--report", metavar="OUT.json", help="write the search report (default: none)")
+    c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec or device CSV)")
+    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH, help="BVH file to write (required; cm)")
+    c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_calibration_option(c)
     add_search_options(c)
     c.set_defaults(run=_cmd_client_synthesize)
@@ -388,7 +393,7 @@ def add_service_parsers(sub) -> None:
     b = batch.add_parser("submit", parents=[connection], help=what, description=(
         "Submit a manifest of recordings to reconstruct; its paths are the server's files. Prints the batch's "
         "state (with --wait: once it ends; exit 1 if any item failed)."))  # fmt: skip
-    b.add_argument("manifest", metavar="MANIFEST", help="CSV or JSON manifest (docs/batch.md)")
+    b.add_argument("manifest", metavar="MANIFEST", type=PATH, help="CSV or JSON manifest (docs/batch.md)")
     b.add_argument("--format", choices=("csv", "json"), help="the manifest's format (default: by the file's extension, "
                                                              "csv unless .json)")  # fmt: skip
     b.add_argument("--retries", type=int, metavar="R", help="further attempts after a worker's failure (default 2)")
@@ -420,14 +425,13 @@ def add_service_parsers(sub) -> None:
         "Replay a recording live through StreamSynthesize, in real time or --speed times faster; print one line per "
         "frame with its latency (receipt minus sending of the sample that released it), then p50/p99/max beyond "
         "the stream's lag, which the summary states."))  # fmt: skip
-    c.add_argument("recording", metavar="REC", help="recording to replay (.rec or device CSV)")
+    c.add_argument("recording", metavar="REC", type=PATH, help="recording to replay (.rec or device CSV)")
     c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X",
                    help="replay X times faster than real time (default 1: real time)")  # fmt: skip
-    c.add_argument("-o", "--output", metavar="OUT.bvh", help="write the streamed motion as BVH, cm (default: none)")
+    c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the streamed motion as BVH, cm (default: none)")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_calibration_option(c)
-    add_search_options(c, live=True)
-    c._option_string_actions["--latency"].help = _live_latency_help(". The summary names the stream's lag")
+    add_search_options(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 
     what = "stream a serial accelerometer device to a server"
@@ -435,7 +439,7 @@ def add_service_parsers(sub) -> None:
         "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
         "rate, stream them to a server and write the motion that comes back; ends when the device closes, after "
         "--duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge)."))  # fmt: skip
-    p.add_argument("--device", required=True, metavar="DEV", help="serial device, e.g. /dev/ttyUSB0 (required)")
+    p.add_argument("--device", required=True, metavar="DEV", type=PATH, help="serial device, e.g. /dev/ttyUSB0 (required)")
     p.add_argument("--baud", type=int, default=115200, metavar="B", help="baud rate (default 115200)")
     p.add_argument("--units", choices=("m/s2", "g"), default="m/s2",
                    help="units of the device's readings (default m/s2)")
@@ -443,10 +447,9 @@ def add_service_parsers(sub) -> None:
                    help="stand still in the rest pose for the first S seconds to estimate sensor biases (default 0: "
                         "no bias estimated)")  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
-    p.add_argument("-o", "--output", metavar="OUT.bvh", help="write the returned motion as BVH, cm (default: none)")
+    p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the returned motion as BVH, cm (default: none)")
     add_calibration_option(p)
-    add_search_options(p, live=True)
-    p._option_string_actions["--latency"].help = _live_latency_help()
+    add_search_options(p, latency_help=_live_latency_help())
     p.set_defaults(run=_cmd_sensor_bridge)
 
 
