@@ -3,7 +3,7 @@
 Dispatch only. `reconstruct` looks the strategy up by name (`graphsvc.strategies`),
 checks the recording against it and the graph and puts it on the graph's sample grid
 (`strategies.base.prepare_input`), and runs the strategy's batch reconstruction;
-`LiveSession(graph, options)` opens the strategy's live session. Both raise InputError
+`open_session(graph, options)` opens the strategy's live session. Both raise InputError
 for recordings that do not fit (naming a missing input, sensor or label) and
 StrategyNotImplementedError for strategies not built yet.
 
@@ -20,14 +20,19 @@ import numpy as np
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.recording import Recording
 from graphsvc.strategies import get as get_strategy
-from graphsvc.strategies.base import (  # noqa: F401  (the names callers import from here)
-    Frame, LiveSession, Provenance, Reconstruction, check_layout, path_labels, prepare_input, start_state,
-    to_graph_rate,
-)
 from graphsvc.strategies.base import prepared_index
-from graphsvc.strategies.options import (  # noqa: F401
+from graphsvc.strategies.inputs import prepare_input
+
+# The names callers import from here: the library's face for a reconstruction.
+from graphsvc.sensors.grid import readings_at_rate  # noqa: F401, E402
+from graphsvc.strategies import open_session  # noqa: F401, E402
+from graphsvc.strategies.inputs import check_layout  # noqa: F401, E402
+from graphsvc.strategies.live import LiveSession  # noqa: F401, E402
+from graphsvc.strategies.options import (  # noqa: F401, E402
     Options, Weights, check_constraints, check_options, load_constraints, parse_weights,
 )
+from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels  # noqa: F401, E402
+from graphsvc.strategies.start import start_state  # noqa: F401, E402
 
 
 def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,

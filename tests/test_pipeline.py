@@ -13,7 +13,7 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.procedural import generate_knowledge_base
-from graphsvc.pipeline import LiveSession, Options, parse_weights, reconstruct, to_graph_rate
+from graphsvc.pipeline import open_session, Options, parse_weights, readings_at_rate, reconstruct
 from graphsvc.strategies.options import Weights
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS as NOISE
@@ -59,14 +59,14 @@ def test_other_rates_are_resampled_to_the_graph_rate(graph, kb, rec):
     assert r.report["resampled"] and r.report["input_rate_hz"] == 60.0
     assert abs(r.motion.num_frames - rec.num_samples) <= 1
     # The 30 Hz grid falls on every other 60 Hz sample: those values, untouched.
-    acc, position, heading, resampled = to_graph_rate(fast, 30.0)
+    acc, position, heading, resampled = readings_at_rate(fast, 30.0)
     assert resampled and acc.shape[0] == r.motion.num_frames
     np.testing.assert_allclose(acc, fast.accelerations[::2][: acc.shape[0]], rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(position, fast.ground_position[::2][: acc.shape[0]], atol=1e-12)
     # 15 Hz → 30 Hz: half-way values, headings the short way round (3.1 → −3.1 via π).
     slow = replace(fast, rate_hz=15.0, timestamps_s=np.array([0.0, 1 / 15]), accelerations=fast.accelerations[:2],
                    ground_position=np.array([[0.0, 0.0], [1.0, np.nan]]), heading=np.array([3.1, -3.1]))  # fmt: skip
-    acc, position, heading, _ = to_graph_rate(slow, 30.0)
+    acc, position, heading, _ = readings_at_rate(slow, 30.0)
     np.testing.assert_allclose(acc[1], fast.accelerations[:2].astype(float).mean(axis=0), rtol=1e-6)
     assert position[1, 0] == pytest.approx(0.5) and np.isnan(position[1, 1])  # a gap stays a gap
     assert abs(heading[1]) == pytest.approx(np.pi)
@@ -116,7 +116,7 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec, pull):
     # A tracker offset the path cannot follow by itself: pulled, the root follows it.
     rec = replace(rec, ground_position=rec.ground_position + np.linspace(0, 1, rec.num_samples)[:, None] * [0.6, 0])
     batch = reconstruct(graph, rec, opts)
-    live = LiveSession(graph, opts, rec.sensor_names)
+    live = open_session(graph, opts, rec.sensor_names)
     frames = []
     for k in range(rec.num_samples):
         frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k], rec.heading[k])
@@ -136,7 +136,7 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec, pull):
 
 def test_a_live_session_keeping_no_motion_emits_the_same_frames(graph, rec):
     opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5)
-    sessions = [LiveSession(graph, opts, rec.sensor_names, keep_motion=keep) for keep in (True, False)]
+    sessions = [open_session(graph, opts, rec.sensor_names, keep_motion=keep) for keep in (True, False)]
     frames = [[], []]
     for k in range(rec.num_samples):
         sample = float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k], rec.heading[k]
@@ -164,7 +164,7 @@ def test_paths_start_where_the_track_starts_when_its_first_samples_lack_it(graph
     for weights in (Weights(0.5, 1, 1), Weights(1, 0, 0)):  # with the track searched, and only placing the output
         opts = Options(weights=weights, latency_s=0.5)
         batch = reconstruct(graph, gappy, opts)
-        live = LiveSession(graph, opts, rec.sensor_names)
+        live = open_session(graph, opts, rec.sensor_names)
         frames = []
         for k in range(rec.num_samples):
             frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], position[k], heading[k])
@@ -179,7 +179,7 @@ def test_paths_start_where_the_track_starts_when_its_first_samples_lack_it(graph
 
 def test_live_session_with_a_long_lag_equals_the_whole_input_search(graph, rec):
     whole = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1)))
-    live = LiveSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=1000.0), rec.sensor_names)
+    live = open_session(graph, Options(weights=Weights(0.5, 1, 1), latency_s=1000.0), rec.sensor_names)
     frames = []
     for k in range(rec.num_samples):
         # Before the lag, a frame comes out only once every surviving path agrees on it
@@ -195,7 +195,7 @@ def test_live_session_with_a_long_lag_equals_the_whole_input_search(graph, rec):
 
 
 def test_live_session_rejects_bad_samples(graph, rec):
-    live = LiveSession(graph, Options(), rec.sensor_names)
+    live = open_session(graph, Options(), rec.sensor_names)
     live.push(0.0, rec.accelerations[0])
     with pytest.raises(InputError, match="increase"):
         live.push(0.0, rec.accelerations[1])
@@ -206,11 +206,11 @@ def test_live_session_rejects_bad_samples(graph, rec):
     with pytest.raises(InputError, match="infinite"):
         live.push(0.1, np.full((6, 3), np.inf))
     with pytest.raises(InputError, match="layout"):
-        LiveSession(graph, Options(), ("a", "b"))
+        open_session(graph, Options(), ("a", "b"))
 
 
 def test_live_session_resamples_irregular_timestamps(graph, rec):
-    live = LiveSession(graph, Options(latency_s=0.2), rec.sensor_names)
+    live = open_session(graph, Options(latency_s=0.2), rec.sensor_names)
     rng = np.random.default_rng(0)
     t = np.cumsum(rng.uniform(0.01, 0.05, 200))  # 20–100 Hz jitter
     frames = []

@@ -20,7 +20,8 @@ import numpy as np
 
 from graphsvc.graph.file import load_graph
 from graphsvc.sensors.recording import load_recording
-from graphsvc.strategies.base import orientations_to_graph_rate, to_graph_rate
+from graphsvc.graph.metadata import sensor_up
+from graphsvc.sensors.grid import readings_at_rate, values_at_rate
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 from graphsvc.strategies.viterbi.tables import search_index
@@ -37,8 +38,8 @@ def main() -> None:
     parts = []
     for path in args.recordings:
         rec = load_recording(path)
-        acc, position, heading, _ = to_graph_rate(rec, graph.rate_hz)
-        parts.append((acc, position, heading, orientations_to_graph_rate(rec, graph.rate_hz)))
+        acc, position, heading, _ = readings_at_rate(rec, graph.rate_hz)
+        parts.append((acc, position, heading, values_at_rate(rec, sensor_up(rec.orientations), graph.rate_hz)))
     acc = np.concatenate([p[0] for p in parts])
     position = np.concatenate([p[1] for p in parts])
     heading = np.concatenate([p[2] for p in parts])

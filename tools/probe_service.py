@@ -50,7 +50,7 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
     import numpy as np
 
     from bench_service import joined_recordings
-    from graphsvc.pipeline import LiveSession
+    from graphsvc.pipeline import open_session
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.server import load_graphs
@@ -71,7 +71,7 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
     graph = load_graphs([f"probe={graph_path}"])["probe"].graph
     options = convert.options_from_proto(pb.SynthesisOptions(beam=beam), "options")
     names = graph.sensor_names
-    sessions = [LiveSession(graph, options, names, keep_motion=False) for _ in range(streams)]
+    sessions = [open_session(graph, options, names, keep_motion=False) for _ in range(streams)]
     inputs = [joined_recordings(recordings, samples, seed) for seed in range(streams)]
     warm = min(60, samples // 4)
     totals = np.zeros(3)

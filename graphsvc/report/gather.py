@@ -34,6 +34,7 @@ from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.skeleton import Motion
+from graphsvc.sensors.grid import markers_at_rate, readings_at_rate
 
 MISSING_I16 = -32768
 MISSING_I32 = -(2**31)
@@ -168,9 +169,7 @@ def sensor_arrays(rec, motion: Motion, mapping=None, virtual: np.ndarray | None 
     from graphsvc.sensors.layout import layout_from_dict
     from graphsvc.sensors.noise import PRESETS
     from graphsvc.sensors.simulate import simulate_recording
-    from graphsvc.strategies.base import to_graph_rate
-
-    measured, _, _, _ = to_graph_rate(rec, motion.rate_hz)
+    measured, _, _, _ = readings_at_rate(rec, motion.rate_hz)
     T = motion.num_frames
     if virtual is None or virtual.shape[1] != measured.shape[1]:
         try:
@@ -194,9 +193,7 @@ def marker_arrays(rec, frames: int, rate_hz: float) -> dict | None:
     """The recording's optical markers on the frame grid, (T, M, 3) int32 mm, or None."""
     if rec is None or rec.marker_positions is None:
         return None
-    from graphsvc.strategies.base import markers_to_graph_rate
-
-    points = markers_to_graph_rate(rec, rate_hz)
+    points = markers_at_rate(rec, rate_hz)
     out = np.full((frames, points.shape[1], 3), MISSING_I32, dtype=np.int64)
     n = min(frames, points.shape[0])
     seen = np.isfinite(points[:n])
@@ -295,7 +292,7 @@ def timeline_from_nodes(graph, nodes) -> dict:
             segments.append({"start": start, "frames": t - start, "clip": names[clip[start]], "label": labels[start],
                              "kind": KINDS[kind[start]], "from_frame": round(float(src[start]), 1)})  # fmt: skip
             start = t
-    from graphsvc.strategies.base import label_runs
+    from graphsvc.strategies.results import label_runs
 
     return {"segments": segments, "transitions": [int(t) for t in np.flatnonzero(jump)], "labels": label_runs(labels),
             "neighbours": None}  # fmt: skip
@@ -308,7 +305,7 @@ def timeline_from_sources(clip_names, labels, clip: np.ndarray, frame: np.ndarra
     "blend" where a frame has more than one source), the frames where that clip
     changes, the labels as runs, and `neighbours`: the `rows` clips of most total
     weight, each with its weight in every frame as one digit 0–9 a frame."""
-    from graphsvc.strategies.base import label_runs
+    from graphsvc.strategies.results import label_runs
 
     clip = np.asarray(clip, dtype=np.int64)
     weight = np.where(clip >= 0, np.asarray(weight, dtype=np.float64), 0.0)

@@ -52,6 +52,7 @@ from graphsvc.fileio import read_json_file, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.anatomy import ANATOMICAL, CONVENTIONS, REST_POSE
+from graphsvc.sensors.grid import readings_at_rate, uniform_grid
 
 FORMAT = "graphsvc-calibration"
 VERSION = 1
@@ -320,8 +321,6 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     """The calibration (the CAL.json document, `save_calibration`) of a recording's
     sensors from a calibration take in `pose` (POSES), against `graph`'s readings of
     similar motion. InputError when it cannot be done (module docstring)."""
-    from graphsvc.strategies.base import to_graph_rate
-
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     if rec.accelerations is None or rec.num_sensors == 0:
@@ -344,7 +343,7 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
         raise InputError(f"pose {pose} does not say where gravity points for {', '.join(unknown)}")
     rate = float(graph.rate_hz) if graph is not None else float(rec.rate_hz)
     rec = _span(rec, start_s, end_s)
-    acc = np.asarray(to_graph_rate(rec, rate)[0], dtype=np.float64)
+    acc = np.asarray(readings_at_rate(rec, rate)[0], dtype=np.float64)
     orient = None
     if rec.orientations is not None:
         orient = _orientations_at(rec, rate)
@@ -487,10 +486,8 @@ def _span(rec, start_s: float | None, end_s: float | None):
 
 
 def _orientations_at(rec, rate: float) -> np.ndarray:
-    """The recording's orientations on `to_graph_rate`'s grid (nearest sample)."""
-    from graphsvc.strategies.base import _grid
-
-    t, grid = _grid(rec, rate)
+    """The recording's orientations on `readings_at_rate`'s grid (nearest sample)."""
+    t, grid = uniform_grid(rec, rate)
     q = np.asarray(rec.orientations, dtype=np.float64)
     if grid is None:
         return q

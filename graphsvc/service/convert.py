@@ -166,7 +166,7 @@ def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str, lay
     """Indices that put the request's sensor triplets into the graph's order, or None
     when they already are (or no names were given: the graph's order is implied).
     Sensors that are not the layout's are refused with the CLI's line naming them."""
-    from graphsvc.strategies.base import layout_mismatch_message
+    from graphsvc.strategies.inputs import layout_mismatch_message
 
     given = list(given)
     if not given or tuple(given) == tuple(graph_names):

@@ -138,10 +138,10 @@ def _answer(graphs, sessions, op, sid, payload) -> tuple:
     """One request's answer (sid, status, value); see the module docstring."""
     try:
         if op == "open":
-            from graphsvc.pipeline import LiveSession  # (here, not on every sample's way)
+            from graphsvc.pipeline import open_session  # (here, not on every sample's way)
 
             name, options, names, marker_names, orientations = payload
-            session = LiveSession(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
+            session = open_session(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
                                   orientations=orientations)  # fmt: skip
             sessions[sid] = session
             return (sid, "ok", session.lag_frames)

@@ -479,7 +479,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             release()
 
     def _stream(self, request_iterator, context):
-        from graphsvc.pipeline import LiveSession
+        from graphsvc.pipeline import open_session
 
         first = first_message(request_iterator, self.config_timeout_s)
         if first is None:
@@ -509,7 +509,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             if self.live_workers is not None:
                 session = self.live_workers.open(loaded.name, options, names, marker_names, config.orientations)
             else:
-                session = LiveSession(graph, options, names, keep_motion=False,  # the client keeps the frames
+                session = open_session(graph, options, names, keep_motion=False,  # the client keeps the frames
                                       marker_names=marker_names, orientations=config.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise convert.FieldError("config.options", str(exc)) from None

@@ -59,6 +59,23 @@ def available() -> tuple[str, ...]:
     return tuple(_REGISTRY)
 
 
+def open_session(graph, options=None, sensor_names=None, allowed=None, threads: bool = False,
+                 keep_motion: bool = True, marker_names=None, orientations: bool = False):
+    """The live session of `options.strategy` on `graph` (its `session_class`, a
+    `strategies.live.LiveSession`): samples in by `push`, pose frames out as they become
+    final, `flush` at the end. sensor_names: the stream's sensors, in the graph's order
+    (default: the graph's); allowed: (N,) bool node mask (hidden clips left out);
+    threads: numba's threads in its steps; keep_motion: keep every frame for
+    `motion()`; marker_names: the markers a stream of markers carries; orientations:
+    its samples carry each sensor's orientation. InputError for options or a stream the
+    strategy cannot take."""
+    from graphsvc.strategies.options import Options
+
+    options = Options() if options is None else options
+    return get(options.strategy).session_class(graph, options, sensor_names, allowed, threads, keep_motion, marker_names,
+                                               orientations)  # fmt: skip
+
+
 def names() -> tuple[str, ...]:
     """Every strategy name a request may give: the built ones, then the planned ones."""
     return available() + tuple(n for n in PLANNED if n not in _REGISTRY)

@@ -25,8 +25,11 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy,
-                                      first_measured, frame_by_frame_ignored, path_labels)  # fmt: skip
+from graphsvc.strategies.base import frame_by_frame_ignored, Strategy
+from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.live import LiveSession
+from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
+from graphsvc.strategies.start import first_measured
 from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.strategies.options import TRACK_PULL_S, Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis

@@ -16,7 +16,7 @@ from graphsvc.report.gather import (
     source_readings, timeline_from_nodes, timeline_from_sources,
 )  # fmt: skip
 from graphsvc.report.html import data_json, render_html, three_script
-from graphsvc.strategies.base import Provenance
+from graphsvc.strategies.results import Provenance
 from tests.conftest import tpose_skeleton
 
 

@@ -227,7 +227,7 @@ def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_e
 def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, strategy):
     from dataclasses import replace
 
-    from graphsvc.pipeline import LiveSession, Options, reconstruct
+    from graphsvc.pipeline import open_session, Options, reconstruct
     from graphsvc.sensors.layout import layout_from_dict
     from graphsvc.sensors.noise import PRESETS as NOISE
     from graphsvc.sensors.simulate import simulate_recording
@@ -239,7 +239,7 @@ def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built
     plain = reconstruct(g, replace(rec, orientations=None), opts)
     assert not np.array_equal(batch.motion.rotations, plain.motion.rotations)  # (they changed the result)
     for orientations, want in ((True, batch), (False, plain)):  # a session not told of them ignores them
-        live = LiveSession(g, opts, rec.sensor_names, orientations=orientations)
+        live = open_session(g, opts, rec.sensor_names, orientations=orientations)
         frames = []
         for k in range(rec.num_samples):
             frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k],
@@ -248,5 +248,5 @@ def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built
         assert [f.index for f in frames] == list(range(rec.num_samples))
         np.testing.assert_allclose(live.motion().rotations, want.motion.rotations, atol=1e-6)
     with pytest.raises(InputError, match="orientations must be"):
-        LiveSession(g, opts, rec.sensor_names, orientations=True).push(0.0, rec.accelerations[0],
+        open_session(g, opts, rec.sensor_names, orientations=True).push(0.0, rec.accelerations[0],
                                                                          orientations=np.ones((2, 4)))  # fmt: skip

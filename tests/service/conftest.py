@@ -110,9 +110,9 @@ def conn(server):
 
 def live_frames(graph, recording, options):
     """What a LiveSession returns for the recording's samples, pushed in order."""
-    from graphsvc.pipeline import LiveSession
+    from graphsvc.pipeline import open_session
 
-    session = LiveSession(graph, options, recording.sensor_names)
+    session = open_session(graph, options, recording.sensor_names)
     frames = []
     for k in range(recording.num_samples):
         frames += session.push(recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k],

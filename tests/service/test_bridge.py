@@ -123,7 +123,7 @@ def _unread(fd) -> int:
 
 def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path):
     from graphsvc.motion.bvh import read_bvh
-    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.pipeline import open_session, Options
     from graphsvc.service.convert import rest_pose_readings
     from tests.service.conftest import popen_cli
 
@@ -172,7 +172,7 @@ def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path):
 
     # The motion written is what a live session makes of the corrected samples.
     motion = read_bvh(out)
-    session = LiveSession(graph, Options(latency_s=0.3), graph.sensor_names)
+    session = open_session(graph, Options(latency_s=0.3), graph.sensor_names)
     t = recording.timestamps_s + 15 / 30
     expected = []
     for k in range(recording.num_samples):

@@ -78,9 +78,9 @@ def test_live_help_states_the_lag_a_stream_has(command, capsys):
 
 
 def test_a_default_session_reports_the_lag_the_help_states(graph):
-    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.pipeline import open_session, Options
 
     assert graph.rate_hz == 30.0
-    assert LiveSession(graph, Options()).lag_frames == 30 + 12 + 2
-    assert LiveSession(graph, Options(latency_s=0.5)).lag_frames == 15 + 12 + 2
-    assert LiveSession(graph, Options(strategy="nearest")).lag_frames == 12 + 2
+    assert open_session(graph, Options()).lag_frames == 30 + 12 + 2
+    assert open_session(graph, Options(latency_s=0.5)).lag_frames == 15 + 12 + 2
+    assert open_session(graph, Options(strategy="nearest")).lag_frames == 12 + 2

@@ -115,7 +115,7 @@ def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(con
                                                                             monkeypatch):  # fmt: skip
     # While a stream runs alone the server gives its steps numba's threads; the frames
     # are those of a serial LiveSession all the same.
-    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.pipeline import open_session, Options
 
     expected, _ = live_frames(graph, recording, Options())
     used = []  # whether each push and the flush ran with the threads
@@ -347,7 +347,7 @@ def test_wrong_layout_names_the_sensors_as_the_cli_does(conn, graph, recording):
     """The service refuses sensors that are not the graph's layout with the CLI's own
     line: the missing sensors and the strangers by name, not counts."""
     from graphsvc.errors import InputError
-    from graphsvc.strategies.base import check_layout
+    from graphsvc.strategies.inputs import check_layout
 
     names = list(recording.sensor_names)
     wrong = ["elbow_x", *names[1:]]
@@ -634,7 +634,7 @@ def test_a_stream_with_orientations_matches_a_live_session_given_them(conn, grap
     q[5, 1] = np.nan  # a missing one
     rec = replace(recording, orientations=q)
     options = Options(latency_s=0.4, weights=Weights(1, 1, 1, 3.0))
-    session = LiveSession(graph, options, rec.sensor_names, orientations=True)
+    session = open_session(graph, options, rec.sensor_names, orientations=True)
     expected = []
     for k in range(rec.num_samples):
         expected += session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k], rec.heading[k],

@@ -88,11 +88,11 @@ def test_ssg_options_cross_the_wire(tmp_path):
 
 
 def test_stream_matches_live_session_and_batch(conn, graph, marker_recording):
-    from graphsvc.pipeline import LiveSession, reconstruct
+    from graphsvc.pipeline import open_session, reconstruct
 
     rec = marker_recording
     options = _ssg(markers="hands-feet", latency_s=0.5)
-    session = LiveSession(graph, options, marker_names=rec.marker_names)
+    session = open_session(graph, options, marker_names=rec.marker_names)
     expected = []
     for k in range(rec.num_samples):
         expected += session.push(rec.timestamps_s[k], markers=rec.marker_positions[k])

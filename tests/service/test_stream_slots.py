@@ -140,14 +140,14 @@ def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recor
     from graphsvc import pipeline
 
     opened = []  # weak references to the sessions the server opens
-    real = pipeline.LiveSession
+    real = pipeline.open_session
 
     def tracked(*args, **kwargs):
         session = real(*args, **kwargs)
         opened.append(weakref.ref(session))
         return session
 
-    monkeypatch.setattr(pipeline, "LiveSession", tracked)
+    monkeypatch.setattr(pipeline, "open_session", tracked)
     samples = list(C.recording_samples(recording))
 
     def slow():

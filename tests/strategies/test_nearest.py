@@ -13,7 +13,7 @@ from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.model import EDGE_ORIGINAL
 from graphsvc.motion.bvh import write_bvh
 from graphsvc.motion.procedural import make_clip, standard_skeleton
-from graphsvc.pipeline import LiveSession, Options, reconstruct
+from graphsvc.pipeline import open_session, Options, reconstruct
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
@@ -84,7 +84,7 @@ def test_batch_and_live_give_the_same_motion(graph_file):
     motion = make_clip("walk", np.random.default_rng(9), standard_skeleton(), 30.0, 3.0, "walk_x", 9)
     rec = simulate_recording(motion, PRESETS["kelly6"], NOISE["default"], seed=3)
     batch = reconstruct(g, rec, Options(strategy="nearest"))
-    live = LiveSession(g, Options(strategy="nearest"), rec.sensor_names)
+    live = open_session(g, Options(strategy="nearest"), rec.sensor_names)
     frames = []
     for k in range(rec.num_samples):
         frames += live.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k], rec.heading[k])

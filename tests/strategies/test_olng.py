@@ -14,7 +14,7 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.resample import resample
-from graphsvc.pipeline import LiveSession, Options, reconstruct
+from graphsvc.pipeline import open_session, Options, reconstruct
 from graphsvc.sensors.layout import layout_from_dict
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
@@ -120,7 +120,7 @@ def test_live_equals_batch_frame_for_frame(graph, kb, fix_feet):
     rec = _rec(graph, kb[2], "default", seed=4)
     options = Options(strategy="olng", olng=OlngOptions(fix_feet=fix_feet))
     batch = reconstruct(graph, rec, options)
-    live = LiveSession(graph, options, rec.sensor_names)
+    live = open_session(graph, options, rec.sensor_names)
     assert live.lag_frames == 0
     frames = []
     for t in range(rec.num_samples):

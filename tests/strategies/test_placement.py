@@ -15,11 +15,11 @@ from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.skeleton import Motion
-from graphsvc.pipeline import LiveSession, Options, reconstruct
+from graphsvc.pipeline import open_session, Options, reconstruct
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.simulate import simulate_recording
-from graphsvc.strategies.base import START_TRAVEL_M, start_placement, start_samples
+from graphsvc.strategies.start import start_placement, start_samples, START_TRAVEL_M
 from graphsvc.strategies.options import Weights
 
 RATE = 30.0
@@ -122,7 +122,7 @@ def test_positions_without_heading_start_facing_the_direction_of_travel(graph, k
         assert start_error < math.radians(20), math.degrees(start_error)  # (facing +Z: 180° off)
         assert np.hypot(*(ground - true_ground).T).mean() < 0.15
     # Live: the same start, once the first second has arrived.
-    session = LiveSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.5))
+    session = open_session(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.5))
     frames = [f for k in range(rec.num_samples)
               for f in session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k])]
     frames += session.flush()

@@ -7,12 +7,13 @@ import pytest
 from graphsvc.errors import InputError, StrategyNotImplementedError
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
-from graphsvc.pipeline import LiveSession, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.simulate import simulate_recording
 from graphsvc.strategies import available, get, names
 from graphsvc.strategies.base import INPUTS, Strategy
+from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.nearest import NearestSession
 from graphsvc.strategies.viterbi import ViterbiSession
 
@@ -50,21 +51,21 @@ def test_names_and_lookup(monkeypatch):
 def test_live_session_opens_the_strategys_session(graph, rec, monkeypatch):
     from graphsvc.strategies.ssg import SsgSession
 
-    assert type(LiveSession(graph, Options(), rec.sensor_names)) is ViterbiSession
-    assert type(LiveSession(graph, Options(strategy="nearest"), rec.sensor_names)) is NearestSession
+    assert type(open_session(graph, Options(), rec.sensor_names)) is ViterbiSession
+    assert type(open_session(graph, Options(strategy="nearest"), rec.sensor_names)) is NearestSession
     with pytest.raises(InputError, match="needs the names of the markers"):
-        LiveSession(graph, Options(strategy="ssg"), rec.sensor_names)
+        open_session(graph, Options(strategy="ssg"), rec.sensor_names)
     with pytest.raises(InputError, match="needs a marker set"):
-        LiveSession(graph, Options(strategy="ssg"), marker_names=("l_hand",))
+        open_session(graph, Options(strategy="ssg"), marker_names=("l_hand",))
     from graphsvc.strategies.options import SsgOptions
 
-    ssg = LiveSession(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet")), marker_names=("l_hand",))
+    ssg = open_session(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet")), marker_names=("l_hand",))
     assert type(ssg) is SsgSession
     import graphsvc.strategies as registry
 
     monkeypatch.setattr(registry, "PLANNED", ("hosvd",))
     with pytest.raises(StrategyNotImplementedError):
-        LiveSession(graph, Options(strategy="hosvd"), rec.sensor_names)
+        open_session(graph, Options(strategy="hosvd"), rec.sensor_names)
 
 
 @pytest.mark.parametrize("strategy", ["viterbi", "nearest", "olng"])

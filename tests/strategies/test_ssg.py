@@ -18,7 +18,7 @@ from graphsvc.graph.file import save_graph
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
-from graphsvc.pipeline import LiveSession, Options, reconstruct
+from graphsvc.pipeline import open_session, Options, reconstruct
 from graphsvc.sensors.markers import PRESETS as MARKERS
 from graphsvc.sensors.markers import MarkerSet
 from graphsvc.sensors.noise import PRESETS as NOISE
@@ -103,7 +103,7 @@ def test_live_equals_batch_at_the_same_lag(graph, performance):
                                     pattern=MarkerPattern(gaps=((40, 30),), flicker=0.1))  # fmt: skip
     options = Options(strategy="ssg", latency_s=0.8, ssg=SsgOptions(markers="hands-feet"))
     batch = reconstruct(graph, rec, options)
-    session = LiveSession(graph, options, marker_names=rec.marker_names)
+    session = open_session(graph, options, marker_names=rec.marker_names)
     frames, released = [], []
     for t in range(rec.num_samples):
         got = session.push(float(rec.timestamps_s[t]), markers=rec.marker_positions[t])
@@ -197,7 +197,7 @@ def test_bad_input_is_refused(graph, kb):
         with pytest.raises(InputError, match=needle):
             reconstruct(graph, rec, Options(strategy="ssg", ssg=bad))
     with pytest.raises(InputError, match="offsets 'fit' needs the whole input"):
-        LiveSession(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet", offsets="fit")),
+        open_session(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet", offsets="fit")),
                     marker_names=rec.marker_names)  # fmt: skip
 
 

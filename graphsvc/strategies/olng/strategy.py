@@ -17,8 +17,10 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy,
-                                      frame_by_frame_ignored, label_runs)  # fmt: skip
+from graphsvc.strategies.base import frame_by_frame_ignored, Strategy
+from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.live import LiveSession
+from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
 from graphsvc.strategies.olng.index import OlngIndex, load_index
 from graphsvc.strategies.olng.pose import pose_model

@@ -29,7 +29,10 @@ from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.markers import TRUNK_SEGMENTS, MarkerSet, keep_markers, load_marker_set, marker_set_from_dict
-from graphsvc.strategies.base import LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, label_runs
+from graphsvc.strategies.base import Strategy
+from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.live import LiveSession
+from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.options import Options, SsgOptions
 from graphsvc.strategies.ssg import dtw
 from graphsvc.strategies.ssg.decoder import SsgDecoder, Windows

@@ -24,8 +24,11 @@ from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
 from graphsvc.strategies.viterbi.batch import (needs_placement, orientation_counts, viterbi_search, warm_up_search,
                                                warm_up_search_once)  # fmt: skip
 from graphsvc.sensors.noise import CausalTrackHeading
-from graphsvc.strategies.base import (LiveSession, PreparedInput, Provenance, Reconstruction, Strategy, path_labels,
-                                      start_placement, start_samples, start_state)  # fmt: skip
+from graphsvc.strategies.base import Strategy
+from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.live import LiveSession
+from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
+from graphsvc.strategies.start import start_placement, start_samples, start_state
 from graphsvc.strategies.options import Options, check_constraints
 from graphsvc.synthesis.path import pulled_track, synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer

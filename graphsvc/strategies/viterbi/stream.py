@@ -123,7 +123,7 @@ class FixedLagDecoder:
 
     def _start_pending(self) -> tuple[np.ndarray, np.ndarray]:
         """Start the search placed from the samples waiting, then run them through it."""
-        from graphsvc.strategies.base import start_placement
+        from graphsvc.strategies.start import start_placement
 
         pending, self._pending = self._pending, []
         position = np.array([np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64)
