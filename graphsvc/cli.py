@@ -14,9 +14,9 @@ import sys
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (COUNT, PATH, RATE_HZ, SEED, Parser, add_input_file_options, add_marker_options,
-                               add_search_options, add_synthesize_options, os_message, ranged,
-                               search_options, synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (COUNT, PATH, RATE_HZ, SEED, Parser, add_input_file_flags, add_marker_flags,
+                            add_search_flags, add_synthesize_flags, options_from_flags, os_message, ranged,
+                            synthesize_inputs)  # fmt: skip
 from graphsvc.fileio import check_outputs
 from graphsvc.errors import GraphsvcError
 
@@ -208,9 +208,8 @@ def _cmd_synthesize(args) -> int:
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))],
                   synthesize_inputs(args))  # fmt: skip
-    options = search_options(args)
+    options, notes = options_from_flags(args)
     graph = load_graph(args.graph)
-    notes: list[str] = []
     result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report, scale=args.scale,
                               up=args.up, units=args.units, device_map=args.device_map, calibration=args.calibration, notes=notes)  # fmt: skip
     for note in notes:
@@ -285,14 +284,18 @@ def _cmd_evaluate(args) -> int:
     from graphsvc.evaluate import loo, protocols
     from graphsvc.evaluate.report import format_table
     from graphsvc.fileio import write_text_atomic
+    from graphsvc.strategies.options import values_of
     from graphsvc.motion.library import find_motion_files, load_motion
-    from graphsvc.pipeline import check_options
     from graphsvc.sensors.layout import load_layout
     from graphsvc.sensors.noise import parse_noise
+    from graphsvc.strategies import check_options, get
 
     # Every argument is checked before the (long) build and searches start.
-    options = search_options(args)
-    check_options(options)
+    options, notes = options_from_flags(args)
+    options = check_options(options)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    strategy = get(options.strategy)
     noise = parse_noise(args.noise)
     if args.position_noise is not None:
         if not (args.position_noise >= 0 and args.position_noise != float("inf")):
@@ -311,15 +314,9 @@ def _cmd_evaluate(args) -> int:
         test_mapping = load_mapping_file(test_mapping)
     setup = loo.EvalSetup(noise=noise, positions=args.position_noise is not None or noise.position > 0,
                           options=options, seed=args.seed, pattern=pattern, mapping=test_mapping)  # fmt: skip
-    if loo.reads_markers(setup) and not options.ssg.markers:
-        raise InputError(f"--strategy {options.strategy} reads optical markers: give the set to simulate, --markers")
-    if loo.reads_markers(setup):
-        from graphsvc.sensors.markers import keep_markers
-        from graphsvc.strategies.ssg.strategy import parse_marker_set
-
-        keep_markers(parse_marker_set(options.ssg.markers), options.ssg.keep)  # (a bad set: before the build)
+    strategy.check_simulation(options)
     if not loo.reads_markers(setup) and (args.flicker or args.gap_fraction):
-        raise InputError("--flicker and --gap-fraction apply to a strategy that reads optical markers (ssg)")
+        raise InputError("--flicker and --gap-fraction apply to a strategy that reads optical markers")
     if options.heading_from_track and not setup.positions:
         raise InputError("--heading-from-track needs the tracker's positions: give --position-noise M")
     if args.jobs < 1:
@@ -435,7 +432,8 @@ def _cmd_evaluate(args) -> int:
     searched = (f"{graph.num_nodes:,} nodes, {loo.inputs_description(setup)}, strategy {options.strategy}"
                 if loo.reads_markers(setup) else
                 f"{graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
-                f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}" + (f", beam {options.beam:g}" if options.beam else ""))  # fmt: skip
+                f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}"
+                + "".join(f", {k} {v}" for k, v in values_of(options.own, changed_only=True).items()))  # fmt: skip
     print(f"{what} on {searched}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
           f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
     return 0
@@ -502,7 +500,7 @@ def build_parser() -> argparse.ArgumentParser:
                 "(--markers) would give for a motion clip, with noise, and write them as a recording.")  # fmt: skip
     p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc) to simulate")
     p.add_argument("--layout", help="accelerometers: preset (wrists-ankles, kelly6, right-wrist) or layout file")
-    add_marker_options(p)
+    add_marker_flags(p)
     p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
     p.add_argument("--flicker", type=float, metavar="P",
                    help="markers: each marker unseen this share of samples, in short dropouts (3 samples on average; "
@@ -565,7 +563,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
                    help="the motion to write (.bvh; not an input)")
-    add_synthesize_options(p)
+    add_synthesize_flags(p)
     p.add_argument("--report", metavar="OUT.json", type=PATH,
                    help="also write a JSON report: node path, labels, per-term costs, compression, timings")
     p.set_defaults(run=_cmd_synthesize)
@@ -583,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="start", type=float, metavar="S",
                    help="use the recording from S seconds (default: its start)")
     p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds (default: its end)")
-    add_input_file_options(p)
+    add_input_file_flags(p)
     p.add_argument("-o", "--output", required=True, metavar="CAL.json", type=PATH, help="the calibration to write (.json)")
     p.set_defaults(run=_cmd_calibrate)
 
@@ -624,11 +622,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--position-noise", type=ranged(float, 0.0, 1e3), metavar="M",
                    help="keep the overhead tracker's positions with this σ in metres (0: exact; default: the noise "
                         "preset's tracker, when it has one)")  # fmt: skip
-    add_search_options(p, constraints=False)
+    add_search_flags(p, constraints=False)
     p.add_argument("--flicker", type=float, metavar="P",
-                   help="ssg: each simulated marker unseen this share of samples, in short dropouts (default 0)")
+                   help="a strategy reading optical markers: each simulated marker unseen this share of samples, in short "
+                        "dropouts (default 0)")
     p.add_argument("--gap-fraction", type=float, metavar="F",
-                   help="ssg: random gaps of 5–80 samples (every marker unseen) until this share of samples (default 0)")
+                   help="a strategy reading optical markers: random gaps of 5–80 samples (every marker unseen) until this "
+                        "share of samples (default 0)")
     p.add_argument("--seed", type=SEED, default=0, help="noise seed (each clip's is derived from it and its name; default 0)")
     p.add_argument("--jobs", type=COUNT, default=1, metavar="N",
                    help="evaluate N clips at once in worker processes (and build with N threads; default 1)")

@@ -40,6 +40,16 @@ class InputError(GraphsvcError):
     """Values are unusable: NaN or infinite, zero frames, shapes that disagree."""
 
 
+class FieldError(InputError):
+    """A request field with an unusable value. field: its path in the request
+    (`options.ssg.overlap_s`); message: what is wrong with it."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        self.detail = message
+        super().__init__(f"{field}: {message}")
+
+
 class SkeletonError(GraphsvcError):
     """A skeleton lacks joints a layout, mapping or operation needs."""
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.recording import Recording
+from graphsvc.strategies import check_options
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.base import prepared_index
 from graphsvc.strategies.inputs import prepare_input
@@ -29,7 +30,7 @@ from graphsvc.strategies import open_session  # noqa: F401, E402
 from graphsvc.strategies.inputs import check_layout  # noqa: F401, E402
 from graphsvc.strategies.live import LiveSession  # noqa: F401, E402
 from graphsvc.strategies.options import (  # noqa: F401, E402
-    Options, Weights, check_constraints, check_options, load_constraints, parse_weights,
+    Options, SharedOptions, Weights, check_constraints, load_constraints, parse_weights,
 )
 from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels  # noqa: F401, E402
 from graphsvc.strategies.start import start_state  # noqa: F401, E402
@@ -41,7 +42,7 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     (N,) bool node mask (leave-one-out evaluation) or None; threads: numba threads
     inside the strategy (False where many run side by side); should_stop: callable
     polled during the search, raising SearchCancelled when it returns true."""
-    check_options(options)
+    options = check_options(options)
     strategy = get_strategy(options.strategy)
     t0 = time.perf_counter()
     inp = prepare_input(strategy, graph, rec, options)
@@ -61,8 +62,10 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
         "heading_source": inp.heading_source,
         "constraint_sets": len(inp.constraints),
         **own,
+        # (every report has these four, a strategy's own after them)
         "timings_s": {"warm_up": timings.get("warm_up", 0.0), "prepare": round(prepare_s, 4),
-                      **{k: v for k, v in timings.items() if k != "warm_up"}},  # fmt: skip
+                      "search": timings.get("search", 0.0), "synthesis": timings.get("synthesis", 0.0),
+                      **{k: v for k, v in timings.items() if k not in ("warm_up", "search", "synthesis")}},  # fmt: skip
     }
     report["samples_per_s"] = report.pop("samples_per_s", None)
     ignored_options = strategy.ignored_options(options)

@@ -289,7 +289,7 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
     from graphsvc.strategies.ssg.decoder import COST_BLOCK
     from graphsvc.strategies.ssg.index import point_window, window_points
     from graphsvc.strategies.ssg.strategy import MAX_POINTS, warm_up, windows_for
-    from graphsvc.strategies.options import SsgOptions
+    from graphsvc.strategies.ssg.options import SsgOptions
 
     marker_set = load_marker_set(KERNEL_SET)
     names = [c["name"] for c in graph.clips]

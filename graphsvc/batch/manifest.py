@@ -180,7 +180,7 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
                  "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
                  if item.calibration else None}  # fmt: skip
     except (GraphsvcError, OSError) as exc:
-        from graphsvc.cli_args import os_message
+        from graphsvc.flags import os_message
 
         reason = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
@@ -221,8 +221,8 @@ def option_argv(item: Item, folder: Path) -> list[str]:
 
 
 class _ItemParser:
-    """The `synthesize` flags, parsed into the values `search_options` reads; a flag
-    it refuses raises InputError instead of exiting."""
+    """The `synthesize` flags (`graphsvc.flags`), parsed into the values
+    `options_from_flags` reads; a flag it refuses raises InputError instead of exiting."""
 
     _parser = None
 
@@ -231,14 +231,14 @@ class _ItemParser:
         if cls._parser is None:
             import argparse
 
-            from graphsvc.cli_args import add_synthesize_options
+            from graphsvc.flags import add_synthesize_flags
 
             class Raising(argparse.ArgumentParser):
                 def error(self, message):
                     raise InputError(f"options: {message}")
 
             p = Raising(prog="options", add_help=False, allow_abbrev=False)
-            add_synthesize_options(p)
+            add_synthesize_flags(p)
             cls._parser = p
         return cls._parser
 
@@ -246,13 +246,12 @@ class _ItemParser:
 def parse_item_options(argv: list[str]):
     """(Options, the parsed flags) of an item's flags, checked as `synthesize` checks
     them: InputError or FormatError for what it would refuse."""
-    from graphsvc.cli_args import search_options
-    from graphsvc.pipeline import check_options
+    from graphsvc.flags import options_from_flags
+    from graphsvc.strategies import check_options
 
     args = _ItemParser.get().parse_args(argv)
-    options = search_options(args)
-    check_options(options)
-    return options, args
+    options, _ = options_from_flags(args)  # (another strategy's options: kept, listed as ignored in its report)
+    return check_options(options), args
 
 
 def _graph_path(graph: str, folder: Path, graphs: dict) -> Path:

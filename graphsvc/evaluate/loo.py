@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from graphsvc.errors import InputError
 from graphsvc.evaluate.metrics import evaluate_frames, summarize
 from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
@@ -44,7 +43,7 @@ from graphsvc.strategies import get as get_strategy
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
-from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording, simulate_recording
+from graphsvc.sensors.simulate import MarkerPattern
 
 def clip_file_name(source: str, name: str) -> str:
     """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
@@ -112,8 +111,8 @@ class EvalSetup:
     seed: int = 0
     protocol: str = "clip"  # (`protocols`: what hides the clip list given; "content": label accuracy not applicable)
     # Optical markers instead of accelerometers, for a strategy that reads markers: how
-    # they are lost (`sensors.simulate.MarkerPattern`); the set and the kept markers
-    # are the strategy's (`options.ssg.markers`, `options.ssg.keep`).
+    # they are lost (`sensors.simulate.MarkerPattern`); the rest of what is simulated
+    # is the strategy's (`Strategy.simulate_input`).
     pattern: MarkerPattern = MarkerPattern()
     # The test clips' joint map when their skeleton is not the graph's family (a file, a
     # dict or "guess"; None: the graph's).
@@ -130,13 +129,9 @@ def reads_markers(setup: EvalSetup) -> bool:
 
 def inputs_description(setup: EvalSetup) -> str:
     """Which streams the recordings carry, e.g. "accelerometers + positions (σ 0.1 m) + heading (noisy)"."""
-    if reads_markers(setup):
-        ssg, pat = setup.options.ssg, setup.pattern
-        kept = f" ({','.join(ssg.keep)})" if ssg.keep else ""
-        return (f"markers {ssg.markers}{kept}, σ {setup.noise.marker:g} mm"
-                + (f", {100 * pat.gap_fraction:g} % in gaps" if pat.gap_fraction else "")
-                + (f", gaps {pat.gaps}" if pat.gaps else "")
-                + (f", flicker {100 * pat.flicker:g} %" if pat.flicker else ""))  # fmt: skip
+    own = get_strategy(setup.options.strategy).describe_input(setup.options, setup.noise, setup.pattern)
+    if own:
+        return own
     parts = ["accelerometers"]
     if setup.noise.orientations:
         parts.append(f"orientations (σ {setup.noise.orient_sigma:g}°, yaw drift {setup.noise.yaw_drift:g}°/√s)")
@@ -150,20 +145,13 @@ def inputs_description(setup: EvalSetup) -> str:
 
 
 def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_hz: float, mapping=None) -> Recording:
-    """The simulated input of a test clip (already at `rate_hz`), noise seeded by
-    `clip_seed`; positions dropped unless `setup.positions`. For a strategy that reads
-    markers, the markers of `setup.options.ssg.markers` lost to `setup.pattern`."""
-    if reads_markers(setup):
-        if not setup.options.ssg.markers:
-            raise InputError(f"strategy {setup.options.strategy!r} reads optical markers: give the marker set to "
-                             "simulate (--markers)")  # fmt: skip
-        from graphsvc.sensors.markers import load_marker_set
-
-        return simulate_marker_recording(motion, load_marker_set(setup.options.ssg.markers), setup.noise,
-                                         seed=clip_seed(setup.seed, motion.name), rate_hz=rate_hz, mapping=mapping,
-                                         keep=setup.options.ssg.keep, pattern=setup.pattern)  # fmt: skip
-    rec = simulate_recording(motion, layout, setup.noise, seed=clip_seed(setup.seed, motion.name), rate_hz=rate_hz,
-                             mapping=mapping)  # fmt: skip
+    """The simulated input of a test clip (already at `rate_hz`): what its strategy
+    reads (`Strategy.simulate_input`: by default the layout's accelerometers; markers
+    lost to `setup.pattern` for one that reads markers), noise seeded by `clip_seed`;
+    positions dropped unless `setup.positions`."""
+    strategy = get_strategy(setup.options.strategy)
+    rec = strategy.simulate_input(motion, layout, setup.options, setup.noise, clip_seed(setup.seed, motion.name),
+                                  rate_hz, mapping, setup.pattern)  # fmt: skip
     if not setup.positions:
         rec = replace(rec, ground_position=None)
     return rec

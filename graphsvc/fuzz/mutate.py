@@ -145,7 +145,10 @@ def _fields(msg, out: list, depth: int = 0) -> list:
             if msg.HasField(fd.name) or depth < 2:
                 _fields(getattr(msg, fd.name), out, depth + 1)
         elif fd.message_type is not None and depth < 4:
-            for child in list(getattr(msg, fd.name))[:3]:
+            children = getattr(msg, fd.name)
+            if fd.message_type.GetOptions().map_entry:  # (a map, a Struct's fields: its values)
+                children = children.values() if fd.message_type.fields_by_name["value"].message_type else ()
+            for child in list(children)[:3]:
                 _fields(child, out, depth + 1)
     return out
 
@@ -172,6 +175,35 @@ def _hostile(fd, rng: random.Random):
     return value
 
 
+_HOSTILE_KEYS = ("k", "m", "i", "beam", "markers", "keep", "window_s", "overlap_s", "offsets", "track_pull_s",
+                 "extended", "w_prior", "", "nope", "x" * 200)  # fmt: skip
+
+
+def _mutate_map(entries, entry_type, rng: random.Random) -> None:
+    """A map field (a Struct's fields): an entry removed, or one set to a hostile
+    key and value (for a Struct: a number, a flag, a text, a list, a null)."""
+    if len(entries) and rng.random() < 0.3:
+        del entries[rng.choice(list(entries))]
+        return
+    key = rng.choice(_HOSTILE_KEYS)
+    value_fd = entry_type.fields_by_name["value"]
+    if value_fd.message_type is None:
+        entries[key] = _hostile(value_fd, rng)
+        return
+    value = entries[key]  # (a Value: one of its kinds)
+    kind = rng.randrange(5)
+    if kind == 0:
+        value.number_value = rng.choice(_HOSTILE_FLOATS)
+    elif kind == 1:
+        value.bool_value = rng.random() < 0.5
+    elif kind == 2:
+        value.string_value = rng.choice(_HOSTILE_STRINGS)
+    elif kind == 3:
+        value.list_value.values.add().string_value = rng.choice(_HOSTILE_STRINGS)
+    else:
+        value.null_value = 0
+
+
 def mutate_message(msg, rng: random.Random) -> None:
     """Set one reachable field of `msg` to a hostile value: a scalar to an extreme or
     non-finite one, a repeated field cleared, cut, lengthened (up to 100,000 values) or
@@ -180,7 +212,9 @@ def mutate_message(msg, rng: random.Random) -> None:
     if not fields:
         return
     parent, fd = rng.choice(fields)
-    if fd.is_repeated:
+    if fd.message_type is not None and fd.message_type.GetOptions().map_entry:
+        _mutate_map(getattr(parent, fd.name), fd.message_type, rng)
+    elif fd.is_repeated:
         values = getattr(parent, fd.name)
         op = rng.randrange(5)
         if op == 0:

@@ -289,7 +289,8 @@ def device_map_seeds() -> list[bytes]:
 def grpc_synthesize_seeds() -> list[bytes]:
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
-    from graphsvc.strategies.options import Options, SsgOptions
+    from graphsvc.strategies.options import Options
+    from graphsvc.strategies.ssg.options import SsgOptions
 
     rec = sensor_recording(5)
     a = pb.SynthesizeRequest(graph="g", recording=convert.recording_to_proto(rec),
@@ -304,7 +305,8 @@ def grpc_synthesize_seeds() -> list[bytes]:
 def grpc_stream_seeds() -> list[bytes]:
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
-    from graphsvc.strategies.options import OlngOptions, Options
+    from graphsvc.strategies.olng.options import OlngOptions
+    from graphsvc.strategies.options import Options
 
     rec = sensor_recording(2)
     config = pb.StreamSynthesizeRequest(config=pb.StreamConfig(

@@ -234,15 +234,14 @@ def _grpc_stream(data: bytes) -> None:
     if msg.WhichOneof("message") == "config":
         config = msg.config
 
-        def ssg_markers():
-            options = convert.options_from_proto(config.options, "config.options")
+        def stream_checks():  # what the server checks of a config before its session opens
+            from graphsvc.strategies import check_options, get
+
+            options = check_options(convert.options_from_proto(config.options, "config.options"))
             names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")
-            if options.strategy == "ssg":
-                from graphsvc.strategies.ssg.strategy import used_markers
+            get(options.strategy).check_stream(options, tuple(config.sensor_names), names)
 
-                used_markers(options.ssg, names, None)
-
-        return _each(ssg_markers, lambda: convert.sensor_order(config.sensor_names, _LAYOUT, "config.sensor_names"))
+        return _each(stream_checks, lambda: convert.sensor_order(config.sensor_names, _LAYOUT, "config.sensor_names"))
     sample = msg.sample
     order = convert.sensor_order(list(reversed(_LAYOUT)), _LAYOUT, "config.sensor_names")
     return _each(lambda: convert.sample_from_proto(sample, len(_LAYOUT), order, 0.0, "sample[1]", True),
@@ -262,7 +261,10 @@ def _proto_mutator(message_name: str) -> Callable:
         if msg is None:
             return data
         mutate_message(msg, rng)
-        return msg.SerializeToString()
+        try:
+            return msg.SerializeToString()
+        except Exception:  # noqa: BLE001 (a parse that lets through what serialising refuses: keep the input)
+            return data
 
     return mutate
 

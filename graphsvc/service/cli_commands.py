@@ -17,8 +17,8 @@ import threading
 import time
 from pathlib import Path
 
-from graphsvc.cli_args import (COUNT, PATH, Parser, add_calibration_option, add_search_options, os_message, ranged,
-                               search_options, synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (COUNT, PATH, Parser, add_calibration_flag, add_search_flags, options_from_flags, os_message,
+                            ranged, synthesize_inputs)  # fmt: skip
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import read_input_text
 
@@ -82,12 +82,16 @@ def _connect(args):
 
 
 def _options(args, constraints=None, recording=None):
-    """SynthesisOptions from the strategy flags (graphsvc.cli_args.search_options), for
-    `recording` when given (convert.for_recording: SSG's marker set and offsets as the
-    recording decides them locally; a --markers file is sent as its content)."""
+    """SynthesisOptions from the strategy flags (`graphsvc.flags.options_from_flags`), for
+    `recording` when given (the strategy's `options_for_recording`: what the recording
+    decides locally, such as SSG's marker set and offsets; a marker set file is sent as
+    its content)."""
     from graphsvc.service.convert import options_to_proto
 
-    return options_to_proto(search_options(args), constraints, recording)
+    options, notes = options_from_flags(args)
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    return options_to_proto(options, constraints, recording)
 
 
 def _calibrated(rec, path):
@@ -303,19 +307,14 @@ def _connection_parent() -> argparse.ArgumentParser:
 
 
 def _live_latency_help(coda: str = "") -> str:
-    """--latency of the live commands: what the lag is, from the sessions' own sums."""
-    from graphsvc.strategies.viterbi.strategy import ViterbiSession
+    """--latency of the live commands: what the lag is, from each strategy's own account
+    (`Strategy.describe_lag`, at 30 Hz)."""
+    from graphsvc.strategies import available, get
+    from graphsvc.strategies.live import LiveSession
 
-    rate = 30.0
-    default = ViterbiSession.DEFAULT_LATENCY_S
-    tail = ViterbiSession.synthesis_lag_frames(rate)
-    total = ViterbiSession.output_lag_frames(rate)
-    return (f"the search's fixed lag, seconds: it settles a frame S s after the frame's sample (default {default:g}). "
-            f"The pose comes out later: viterbi's at most round(S × rate) + {tail} frames after its sample at 30 Hz "
-            f"({tail} for the synthesis' blend look-ahead and its batches of {ViterbiSession.SYNTH_BATCH} frames): "
-            f"{total} frames ({total / rate:.2f} s) by default (and none before the search starts, 1 s in); "
-            f"nearest's {tail} frames whatever S; ssg's within S (at least a window and a step); olng's at once"
-            + coda)  # fmt: skip
+    lags = "; ".join(f"{name}'s {get(name).describe_lag(30.0)}" for name in available())
+    return (f"the search's fixed lag, seconds: it settles a frame S s after the frame's sample (default "
+            f"{LiveSession.DEFAULT_LATENCY_S:g}). The pose comes out later: {lags}" + coda)  # fmt: skip
 
 
 def _json_flag(p, what: str) -> None:
@@ -380,8 +379,8 @@ def add_service_parsers(sub) -> None:
     c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec or device CSV)")
     c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH, help="BVH file to write (required; cm)")
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
-    add_calibration_option(c)
-    add_search_options(c)
+    add_calibration_flag(c)
+    add_search_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
     what = "batches on the server: submit, status, list, cancel"
@@ -430,8 +429,8 @@ def add_service_parsers(sub) -> None:
                    help="replay X times faster than real time (default 1: real time)")  # fmt: skip
     c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the streamed motion as BVH, cm (default: none)")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
-    add_calibration_option(c)
-    add_search_options(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
+    add_calibration_flag(c)
+    add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 
     what = "stream a serial accelerometer device to a server"
@@ -448,8 +447,8 @@ def add_service_parsers(sub) -> None:
                         "no bias estimated)")  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
     p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the returned motion as BVH, cm (default: none)")
-    add_calibration_option(p)
-    add_search_options(p, latency_help=_live_latency_help())
+    add_calibration_flag(p)
+    add_search_flags(p, latency_help=_live_latency_help())
     p.set_defaults(run=_cmd_sensor_bridge)
 
 

@@ -1,4 +1,5 @@
-"""Protocol buffers ↔ numpy arrays, Recordings, Motions and pipeline Options.
+"""Protocol buffers ↔ numpy arrays, Recordings, Motions (and, from
+`service.options_proto`, the options).
 
 Every `*_from_proto` checks what it reads and raises FieldError naming the field
 (its path in the request, e.g. "recording.timestamps_s[12]"), which the server turns
@@ -10,31 +11,18 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 
 import numpy as np
 
-from graphsvc.errors import InputError
+from graphsvc.errors import FieldError, InputError
 from graphsvc.graph.model import MotionGraph, summary
 from graphsvc.motion.skeleton import Motion, Skeleton
-from graphsvc.sensors.recording import Recording, check_gap, check_rate, validate_constraints
+from graphsvc.sensors.recording import Recording, check_gap, check_rate
 from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service.options_proto import (  # noqa: F401  (the options' conversions, named here too)
+    constraints_from_proto, constraints_to_proto, for_recording, options_from_proto, options_to_proto)
 
-STRATEGY_NAMES = {pb.STRATEGY_UNSPECIFIED: "viterbi", pb.STRATEGY_VITERBI: "viterbi", pb.STRATEGY_OLNG: "olng",
-                  pb.STRATEGY_SSG: "ssg", pb.STRATEGY_NEAREST: "nearest"}  # fmt: skip
-STRATEGY_VALUES = {"viterbi": pb.STRATEGY_VITERBI, "olng": pb.STRATEGY_OLNG, "ssg": pb.STRATEGY_SSG,
-                   "nearest": pb.STRATEGY_NEAREST}  # fmt: skip
-CONTACT_NAMES = {pb.CONTACT_STATE_LEFT: "left", pb.CONTACT_STATE_RIGHT: "right", pb.CONTACT_STATE_BOTH: "both",
-                 pb.CONTACT_STATE_NONE: "none"}  # fmt: skip
-CONTACT_VALUES = {v: k for k, v in CONTACT_NAMES.items()}
-
-
-class FieldError(InputError):
-    """A request field with an unusable value. field: its path in the request."""
-
-    def __init__(self, field: str, message: str):
-        self.field = field
-        self.detail = message
-        super().__init__(f"{field}: {message}")
 
 
 # ---------------------------------------------------------------- skeleton and graph
@@ -388,297 +376,9 @@ def marker_names_from_proto(names, field: str) -> tuple[str, ...]:
             raise FieldError(f"{field}[{i}]", f"bad marker name {n!r} (non-empty, no commas, quotes, newlines or "
                              "edge spaces)")  # fmt: skip
     if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise FieldError(field, f"duplicate marker names: {', '.join(dup)}")
+        dup = sorted(n for n, c in Counter(names).items() if c > 1)
+        raise FieldError(field, f"duplicate marker names: {', '.join(dup[:8])}" + (f" … (+{len(dup) - 8})" if len(dup) > 8 else ""))
     return names
-
-
-# ---------------------------------------------------------------- options
-
-
-def constraints_to_proto(constraint_sets: list) -> list[pb.ConstraintSet]:
-    """Constraint sets as in a Recording / constraint file → protos."""
-    out = []
-    for cset in constraint_sets:
-        msg = pb.ConstraintSet()
-        for c in cset:
-            (key, value), = c["require"].items()
-            item = msg.constraints.add(start_s=float(c["start_s"]), end_s=float(c["end_s"]))
-            if key == "contact":
-                item.contact = CONTACT_VALUES[value]
-            else:
-                item.label = value
-        out.append(msg)
-    return out
-
-
-def constraints_from_proto(sets, field: str) -> list:
-    out = []
-    for i, cset in enumerate(sets):
-        items = []
-        for j, c in enumerate(cset.constraints):
-            where = f"{field}[{i}].constraints[{j}]"
-            for key in ("start_s", "end_s"):
-                v = getattr(c, key)
-                if not math.isfinite(v):
-                    raise FieldError(f"{where}.{key}", f"not a finite number of seconds ({v})")
-            if not 0 <= c.start_s < c.end_s:
-                raise FieldError(where, f"need 0 ≤ start_s < end_s, got {c.start_s}..{c.end_s}")
-            kind = c.WhichOneof("requirement")
-            if kind is None:
-                raise FieldError(where, "no requirement (set contact or label)")
-            if kind == "contact":
-                if c.contact not in CONTACT_NAMES:
-                    raise FieldError(f"{where}.contact", f"must be LEFT, RIGHT, BOTH or NONE, got {c.contact}")
-                require = {"contact": CONTACT_NAMES[c.contact]}
-            else:
-                if not c.label:
-                    raise FieldError(f"{where}.label", "empty label")
-                require = {"label": c.label}
-            items.append({"start_s": c.start_s, "end_s": c.end_s, "require": require})
-        out.append(items)
-    try:
-        validate_constraints(out)
-    except InputError as exc:
-        raise FieldError(field, str(exc)) from None
-    return out
-
-
-def options_to_proto(options=None, constraints: list | None = None,
-                     recording: Recording | None = None) -> pb.SynthesisOptions:  # fmt: skip
-    """pipeline.Options (None: the defaults) → SynthesisOptions. constraints: sets to
-    send when options.constraints is None (a recording's own), else ignored.
-    recording: the recording the options go with (`for_recording`)."""
-    from graphsvc.pipeline import Options
-
-    options = Options() if options is None else options
-    if recording is not None:
-        options = for_recording(options, recording)
-    if options.strategy not in STRATEGY_VALUES:
-        raise InputError(f"unknown strategy {options.strategy!r} (choose from {', '.join(STRATEGY_VALUES)})")
-    w = options.weights
-    msg = pb.SynthesisOptions(strategy=STRATEGY_VALUES[options.strategy],
-                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading,
-                                                     orientation=w.orientation))  # fmt: skip
-    if options.latency_s is not None:
-        msg.latency_s = float(options.latency_s)
-    # The heading rule and the beam in ViterbiOptions; the old flat fields too, which
-    # a server before ViterbiOptions reads.
-    msg.viterbi.heading_from_track = msg.heading_from_track = bool(options.heading_from_track)
-    msg.viterbi.rest_heading_deg = msg.rest_heading_deg = float(options.rest_heading_deg)
-    msg.viterbi.speed_threshold_m_s = msg.speed_threshold_m_s = float(options.speed_threshold)
-    if options.beam is not None:
-        msg.viterbi.beam = msg.beam = float(options.beam)
-    if options.strategy == "olng":
-        o = options.olng
-        msg.olng.SetInParent()  # (the oneof: Viterbi's own fields go as the flat ones above)
-        for key in ("k", "i"):
-            if getattr(o, key) is not None:
-                setattr(msg.olng, key, int(getattr(o, key)))
-        msg.olng.m = int(o.m)
-        msg.olng.basic_steps = not o.extended
-        for key in ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth"):
-            setattr(msg.olng, key, float(getattr(o, key)))
-        msg.olng.fix_feet = bool(o.fix_feet)
-        msg.olng.track_pull_s = float(options.track_pull_s)
-    elif options.strategy == "ssg":
-        msg.ssg.SetInParent()  # (the oneof, as for OLNG)
-        msg.ssg.CopyFrom(ssg_to_proto(options.ssg))
-    else:
-        msg.viterbi.track_pull_s = float(options.track_pull_s)
-    sets = list(options.constraints) if options.constraints is not None else list(constraints or [])
-    msg.constraint_sets.extend(constraints_to_proto(sets))
-    return msg
-
-
-def for_recording(options, rec: Recording):
-    """The options as the library would read them with `rec` (client side): what the
-    recording's meta decides does not cross the wire. For SSG: the marker set the
-    recording names when the options name none, and "auto" offsets as "nominal" for a
-    recording graphsvc simulated (`strategies.ssg`: auto fits the offsets unless it was)."""
-    from dataclasses import replace
-
-    if options.strategy != "ssg":
-        return options
-    o = options.ssg
-    meta = rec.meta or {}
-    if o.markers is None and isinstance(meta.get("marker_set"), dict):
-        o = replace(o, markers=json.dumps(meta["marker_set"], sort_keys=True))
-    if o.offsets == "auto" and meta.get("simulated"):
-        o = replace(o, offsets="nominal")
-    return replace(options, ssg=o)
-
-
-def ssg_to_proto(o) -> pb.SsgOptions:
-    """SsgOptions → proto. A marker set that is neither a built-in name nor JSON text
-    is a file on this side: it is read here and sent as JSON (the server reads no files)."""
-    from graphsvc.sensors.markers import PRESETS, load_marker_set
-
-    msg = pb.SsgOptions(offsets=o.offsets, keep=list(o.keep or ()))
-    if o.markers is not None:
-        text = o.markers.strip()
-        if text.startswith("{") or text in PRESETS:
-            msg.markers = text
-        else:
-            msg.markers = json.dumps(load_marker_set(text).to_dict(), sort_keys=True)
-    for key in ("window_s", "overlap_s", "weight"):
-        if getattr(o, key) is not None:
-            setattr(msg, key, float(getattr(o, key)))
-    if o.k is not None:
-        msg.k = int(o.k)
-    return msg
-
-
-def strategy_from_proto(value: int, field: str) -> str:
-    if value not in STRATEGY_NAMES:
-        raise FieldError(field, f"unknown strategy {value} (VITERBI = 1, OLNG = 2, SSG = 3, NEAREST = 4)")
-    return STRATEGY_NAMES[value]
-
-
-def options_from_proto(msg: pb.SynthesisOptions, field: str = "options"):
-    """pipeline.Options from a SynthesisOptions, every value checked (FieldError).
-    Whether the strategy is built is left to the pipeline (StrategyNotImplementedError)."""
-    from graphsvc.strategies.options import Options, Weights
-
-    strategy = strategy_from_proto(msg.strategy, f"{field}.strategy")
-    weights = Weights()
-    if msg.HasField("weights"):
-        w = msg.weights
-        for key in ("acceleration", "position", "heading", "orientation"):
-            v = getattr(w, key)
-            if not (math.isfinite(v) and v >= 0):
-                raise FieldError(f"{field}.weights.{key}", f"must be a finite number ≥ 0, got {v}")
-        weights = Weights(w.acceleration, w.position, w.heading,
-                          w.orientation if w.HasField("orientation") else None)  # fmt: skip
-    latency = None
-    if msg.HasField("latency_s"):
-        latency = msg.latency_s
-        if not (math.isfinite(latency) and latency >= 0):
-            raise FieldError(f"{field}.latency_s", f"must be a finite number of seconds ≥ 0, got {latency}")
-    # ViterbiOptions when given, else the flat fields it supersedes (older clients).
-    own, where = (msg.viterbi, f"{field}.viterbi") if msg.HasField("viterbi") else (msg, field)
-    if not math.isfinite(own.rest_heading_deg):
-        raise FieldError(f"{where}.rest_heading_deg", f"must be finite, got {own.rest_heading_deg}")
-    extra = {}
-    if own.HasField("speed_threshold_m_s"):
-        v = own.speed_threshold_m_s
-        if not (math.isfinite(v) and v >= 0):
-            raise FieldError(f"{where}.speed_threshold_m_s", f"must be a finite speed ≥ 0, got {v}")
-        extra["speed_threshold"] = v
-    if own.HasField("beam"):
-        if not (math.isfinite(own.beam) and own.beam > 0):
-            raise FieldError(f"{where}.beam", f"must be a finite cost > 0, got {own.beam}")
-        extra["beam"] = own.beam
-    if msg.HasField("viterbi") and msg.viterbi.HasField("track_pull_s"):
-        v = msg.viterbi.track_pull_s
-        if not (math.isfinite(v) and v >= 0):
-            raise FieldError(f"{field}.viterbi.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
-        extra["track_pull_s"] = v
-    if msg.HasField("olng"):
-        extra.update(olng_from_proto(msg.olng, f"{field}.olng"))
-    if msg.HasField("ssg"):
-        extra["ssg"] = ssg_from_proto(msg.ssg, f"{field}.ssg")
-    if strategy == "ssg" and ("ssg" not in extra or extra["ssg"].markers is None):
-        # (the library would take the recording's own set, which does not cross the wire)
-        raise FieldError(f"{field}.ssg.markers", "strategy SSG needs a marker set: a built-in name "
-                         f"({', '.join(_marker_presets())}) or a marker set as JSON")  # fmt: skip
-    constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
-    return Options(strategy=strategy, weights=weights, latency_s=latency, heading_from_track=own.heading_from_track,
-                   rest_heading_deg=own.rest_heading_deg, constraints=tuple(constraints), **extra)  # fmt: skip
-
-
-def olng_from_proto(msg, field: str) -> dict:
-    """Options keyword arguments (olng, track_pull_s) from an OlngOptions, checked."""
-    from graphsvc.strategies.options import OlngOptions, check_olng
-
-    kw = {}
-    for key in ("k", "i", "m"):
-        if msg.HasField(key):
-            kw[key] = int(getattr(msg, key))
-    for key in ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth"):
-        if msg.HasField(key):
-            v = getattr(msg, key)
-            if not (math.isfinite(v) and v >= 0):
-                raise FieldError(f"{field}.{key}", f"must be a finite number ≥ 0, got {v}")
-            kw[key] = v
-    o = OlngOptions(extended=not msg.basic_steps, fix_feet=msg.fix_feet, **kw)
-    try:
-        check_olng(o)
-    except InputError as exc:
-        raise FieldError(field, str(exc)) from None
-    out = {"olng": o}
-    if msg.HasField("track_pull_s"):
-        v = msg.track_pull_s
-        if not (math.isfinite(v) and v >= 0):
-            raise FieldError(f"{field}.track_pull_s", f"must be a finite number of seconds ≥ 0, got {v}")
-        out["track_pull_s"] = v
-    return out
-
-
-def _marker_presets() -> tuple[str, ...]:
-    from graphsvc.sensors.markers import PRESETS
-
-    return tuple(PRESETS)
-
-
-def ssg_from_proto(msg: pb.SsgOptions, field: str):
-    """strategies.options.SsgOptions from its proto, checked (FieldError naming the
-    field). The marker set is a built-in name or JSON text, never a path: the server
-    reads no files for a client."""
-    from graphsvc.errors import GraphsvcError
-    from graphsvc.sensors.markers import PRESETS, keep_markers, marker_set_from_dict
-    from graphsvc.strategies.options import SSG_OFFSETS, SsgOptions, check_ssg
-
-    text = msg.markers.strip()
-    marker_set = None
-    if text.startswith("{"):
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise FieldError(f"{field}.markers", f"marker set JSON does not parse: {exc.msg} (at character "
-                             f"{exc.pos})") from None  # fmt: skip
-        try:
-            marker_set = marker_set_from_dict(data, "marker set")
-        except GraphsvcError as exc:
-            raise FieldError(f"{field}.markers", str(exc)) from None
-    elif text in PRESETS:
-        marker_set = PRESETS[text]
-    elif text:
-        raise FieldError(f"{field}.markers", f"unknown marker set {text!r}: not a built-in set "
-                         f"({', '.join(PRESETS)}) nor a marker set as JSON (the server reads no files)")  # fmt: skip
-    keep = tuple(msg.keep) or None
-    if keep is not None:
-        for i, name in enumerate(keep):
-            if not name:
-                raise FieldError(f"{field}.keep[{i}]", "empty marker name")
-    if keep is not None and marker_set is not None:
-        try:
-            keep_markers(marker_set, keep)
-        except InputError as exc:
-            raise FieldError(f"{field}.keep", str(exc)) from None
-    kw = {}
-    for key, low in (("window_s", "> 0"), ("overlap_s", "≥ 0"), ("weight", "≥ 0")):
-        if msg.HasField(key):
-            v = getattr(msg, key)
-            if not (math.isfinite(v) and (v > 0 if low == "> 0" else v >= 0)):
-                raise FieldError(f"{field}.{key}", f"must be a finite number {low}, got {v}")
-            kw[key] = v
-    if "window_s" in kw and "overlap_s" in kw and kw["overlap_s"] > 0.5 * kw["window_s"]:
-        raise FieldError(f"{field}.overlap_s", f"{kw['overlap_s']:g} s is more than half of window_s "
-                         f"({kw['window_s']:g} s)")  # fmt: skip
-    if msg.HasField("k"):
-        if not 1 <= msg.k <= 256:
-            raise FieldError(f"{field}.k", f"must be from 1 to 256, got {msg.k}")
-        kw["k"] = int(msg.k)
-    offsets = msg.offsets or "auto"
-    if offsets not in SSG_OFFSETS:
-        raise FieldError(f"{field}.offsets", f"must be one of {', '.join(SSG_OFFSETS)} (empty: auto), got {offsets!r}")
-    o = SsgOptions(markers=text or None, keep=keep, offsets=offsets, **kw)
-    try:
-        check_ssg(o)
-    except InputError as exc:  # anything the checks above missed still names the message
-        raise FieldError(field, str(exc)) from None
-    return o
 
 
 # ---------------------------------------------------------------- motion and frames

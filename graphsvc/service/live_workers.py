@@ -25,8 +25,9 @@ On a worker's pipe (a multiprocessing Connection; pickled tuples):
                      (threads, the sample's arguments) → frames; "flush" (threads) →
                      frames; "close" (no answer); "stop" ends the worker.
     worker → front   (sid, status, value): status "ok"; "input" (an InputError's
-                     message: the client's input); "error" (any other failure: its
-                     traceback, a defect).
+                     message and the option or field it names, `options.on_field`:
+                     the client's input); "error" (any other failure: its traceback,
+                     a defect).
 A worker that dies (killed, out of memory) ends each stream it held with `WorkerLost`
 (the service answers UNAVAILABLE: the session's state is gone; a new stream starts
 afresh) and is replaced in the background; new streams go to the workers alive.
@@ -156,7 +157,7 @@ def _answer(graphs, sessions, op, sid, payload) -> tuple:
             return (sid, "ok", session.flush())
         return (sid, "error", f"unknown request {op!r}")
     except InputError as exc:
-        return (sid, "input", str(exc))
+        return (sid, "input", (str(exc), getattr(exc, "option_field", None)))
     except Exception:  # noqa: BLE001 — a defect: its traceback goes to the front
         return (sid, "error", traceback.format_exc())
 
@@ -217,7 +218,11 @@ class RemoteSession:
         if status == "ok":
             return value
         if status == "input":
-            raise InputError(value)
+            message, name = value
+            exc = InputError(message)
+            if name is not None:
+                exc.option_field = name
+            raise exc
         if status == "lost":
             raise WorkerLost(value)
         raise LiveWorkerError(f"in live worker {self.worker.pid}:\n{value}")

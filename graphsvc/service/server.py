@@ -34,12 +34,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import grpc
-import numpy as np
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
 from graphsvc.errors import GraphsvcError, InputError, SearchCancelled, StrategyNotImplementedError
 from graphsvc.fileio import read_input_bytes, read_input_text
+from graphsvc.strategies import check_options
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 from graphsvc.service import convert
@@ -287,6 +287,13 @@ def status_details(text: str) -> str:
     return data[: MAX_DETAILS_BYTES - 3].decode("utf-8", "ignore") + "…"
 
 
+def _config_error(exc: InputError) -> convert.FieldError:
+    """A stream's config refused: the field it names (a strategy's `check_stream` names
+    what the config announced: `marker_names`), else its options."""
+    name = getattr(exc, "option_field", None)
+    return convert.FieldError(f"config.{name}" if name else "config.options", str(exc))
+
+
 def _abort_for(context: grpc.ServicerContext, exc: BaseException) -> None:
     """Map an exception to a status and end the call (context.abort raises)."""
     if isinstance(exc, RpcStatus):
@@ -491,28 +498,24 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         graph = loaded.graph
         names = graph.sensor_names
         options = convert.options_from_proto(config.options, "config.options")
-        reads_acc = "accelerations" in get_strategy(options.strategy).uses
+        strategy = get_strategy(options.strategy)
+        reads_acc = "accelerations" in strategy.uses
         if reads_acc:
             order = convert.sensor_order(config.sensor_names, names, "config.sensor_names", graph.layout.get("name", "?"))
         else:  # whatever sensors the samples carry (the strategy reads none): the lengths still checked
             order, names = None, tuple(config.sensor_names) or names
         marker_names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")
-        kept = None  # SSG: the columns of the markers it matches, to tell a stream that never saw one
-        if options.strategy == "ssg":
-            from graphsvc.strategies.ssg.strategy import used_markers
-
-            try:
-                used, kept, _, _ = used_markers(options.ssg, marker_names, None)
-            except InputError as exc:  # none of the set's (kept) markers among the stream's
-                raise convert.FieldError("config.marker_names", str(exc)) from None
         try:
+            # (the strategy's own checks of what the stream announces, here too when a
+            # worker process opens the session)
+            strategy.check_stream(check_options(options), names, marker_names)
             if self.live_workers is not None:
                 session = self.live_workers.open(loaded.name, options, names, marker_names, config.orientations)
             else:
                 session = open_session(graph, options, names, keep_motion=False,  # the client keeps the frames
                                       marker_names=marker_names, orientations=config.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
-            raise convert.FieldError("config.options", str(exc)) from None
+            raise _config_error(exc) from None
         try:
             yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
                 graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames, sensor_names=list(names),
@@ -521,7 +524,6 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             sample_index = -1
             previous_t = None
             frames_out = 0
-            seen_a_marker = False
             for request in request_iterator:
                 if not context.is_active():
                     return  # cancelled or past the deadline: stop searching now
@@ -538,8 +540,6 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 markers = convert.sample_markers_from_proto(request.sample, len(marker_names), where)
                 orientations = convert.sample_orientations_from_proto(request.sample, len(names), order,
                                                                       config.orientations, where)  # fmt: skip
-                if kept is not None and not seen_a_marker:
-                    seen_a_marker = bool(np.isfinite(markers[kept]).all(axis=-1).any())
                 previous_t = t
                 try:
                     with self.threads.step() as threaded:  # the threads while this stream runs alone
@@ -552,14 +552,13 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 frames_out += len(frames)
             if not context.is_active():
                 return
-            if kept is not None and sample_index >= 0 and not seen_a_marker:
-                # (as Synthesize refuses such a recording; a stream can only tell at its end)
-                raise convert.FieldError("sample[*].marker_positions_m", f"every kept marker "
-                                         f"({', '.join(used.marker_names)}) is NaN in all {sample_index + 1} samples: "
-                                         "nothing to match")  # fmt: skip
-            with self.threads.step() as threaded:
-                session.threads = threaded
-                frames = session.flush()
+            try:
+                with self.threads.step() as threaded:
+                    session.threads = threaded
+                    frames = session.flush()
+            except InputError as exc:  # (what only the stream's end tells: its samples as a whole)
+                name = getattr(exc, "option_field", None)
+                raise convert.FieldError(f"sample[*].{name}" if name else "sample[*]", str(exc)) from None
             for frame in frames:
                 yield pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(frame, max(sample_index, 0)))
                 frames_out += 1

@@ -1,7 +1,8 @@
 """Reconstruction strategies behind one interface (`base.Strategy`), looked up by name.
 
-The pipeline, the evaluation, the CLI and the server find a strategy here and nothing
-else; each strategy owns its index, its batch reconstruction and its live session.
+The pipeline, the evaluation, the CLI, batch and the server find a strategy here and
+nothing else; each strategy owns its options, its checks, its index, its batch
+reconstruction and its live session.
 
 | name | needs | also uses | good at |
 | --- | --- | --- | --- |
@@ -10,42 +11,71 @@ else; each strategy owns its index, its batch reconstruction and its live sessio
 | `olng` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample the neighbourhood of frames moving as the readings do (Tautges et al. 2011) and a pose optimised from it |
 | `ssg` | labelled optical markers | | sparse, gappy markers: the knowledge base's subsequences that fit each window of the input, joined by a subsequence graph (Tautges 2012) |
 
-`register` adds one (a `Strategy` instance); the built-in ones load on first lookup, so
-importing this package compiles and loads nothing.
+A strategy is registered by `register(strategy)`: the built-in ones (BUILTIN, one line
+each: a module whose `STRATEGY` is the instance) on first lookup, and every strategy an
+installed package declares in the `graphsvc.strategies` entry-point group
+(`name = "package.module:STRATEGY"`), so one installed as its own package reaches the
+CLI, batch workers and the service's live-worker processes alike (docs/code-layout.md,
+"Adding a strategy"). Importing this package compiles and loads nothing.
 """
 
 from __future__ import annotations
 
-from graphsvc.errors import InputError, StrategyNotImplementedError
-from graphsvc.strategies.base import Strategy
+import sys
+from dataclasses import replace
+from importlib import import_module
 
-PLANNED: tuple[str, ...] = ()
+from graphsvc.errors import InputError, StrategyNotImplementedError
+from graphsvc.strategies import options as _options
+from graphsvc.strategies.base import Strategy
+from graphsvc.strategies.options import Options, SharedOptions, check_common, option_specs
+
+DEFAULT = "viterbi"
+ENTRY_POINTS = "graphsvc.strategies"
+BUILTIN = (
+    "graphsvc.strategies.viterbi",
+    "graphsvc.strategies.nearest",
+    "graphsvc.strategies.olng",
+    "graphsvc.strategies.ssg",
+)
+PLANNED: tuple[str, ...] = ()  # specified, not built: asked for, they answer "not implemented yet"
 _REGISTRY: dict[str, Strategy] = {}
 _loaded = False
 
 
-def register(strategy: Strategy) -> None:
-    _REGISTRY[strategy.name] = strategy
+def register(strategy: Strategy) -> Strategy:
+    """Make `strategy` (a `base.Strategy` instance) available by its name; the first
+    registered under a name stays. Returns it."""
+    if not isinstance(strategy, Strategy) or not strategy.name:
+        raise TypeError(f"a strategy must be a named graphsvc.strategies.base.Strategy instance, got {strategy!r}")
+    if strategy.session_class is None:
+        raise TypeError(f"strategy {strategy.name!r} has no session_class")
+    _REGISTRY.setdefault(strategy.name, strategy)
+    return strategy
 
 
-def _builtins() -> None:
+def _load() -> None:
+    """The built-in strategies, then the installed ones (entry points), once."""
     global _loaded
     if _loaded:
         return
     _loaded = True
-    from graphsvc.strategies.nearest import NearestStrategy
-    from graphsvc.strategies.olng.strategy import OlngStrategy
-    from graphsvc.strategies.ssg import SsgStrategy
-    from graphsvc.strategies.viterbi import ViterbiStrategy
+    for module in BUILTIN:
+        register(import_module(module).STRATEGY)
+    from importlib.metadata import entry_points
 
-    for s in (ViterbiStrategy(), NearestStrategy(), OlngStrategy(), SsgStrategy()):
-        _REGISTRY.setdefault(s.name, s)
+    for ep in sorted(entry_points(group=ENTRY_POINTS), key=lambda e: e.name):
+        try:
+            register(ep.load())
+        except Exception as exc:  # noqa: BLE001  (one broken plug-in must not stop the others)
+            print(f"graphsvc: warning: strategy plug-in {ep.name!r} ({ep.value}) did not load: "
+                  f"{type(exc).__name__}: {exc}", file=sys.stderr)  # fmt: skip
 
 
 def get(name: str) -> Strategy:
     """The strategy called `name`: InputError if there is none, StrategyNotImplementedError
     for one that is specified but not built."""
-    _builtins()
+    _load()
     if name in _REGISTRY:
         return _REGISTRY[name]
     if name in PLANNED:
@@ -55,12 +85,34 @@ def get(name: str) -> Strategy:
 
 def available() -> tuple[str, ...]:
     """The strategies that are built, in registration order."""
-    _builtins()
+    _load()
     return tuple(_REGISTRY)
 
 
-def open_session(graph, options=None, sensor_names=None, allowed=None, threads: bool = False,
-                 keep_motion: bool = True, marker_names=None, orientations: bool = False):
+def names() -> tuple[str, ...]:
+    """Every strategy name a request may give: the built ones, then the planned ones."""
+    return available() + tuple(n for n in PLANNED if n not in _REGISTRY)
+
+
+def check_options(options: Options) -> Options:
+    """`options` checked — what every strategy reads, the shared options, the chosen
+    strategy's own (its declared fields and its rule) and every other strategy's given
+    — and returned with the chosen strategy's own options filled in (its defaults where
+    none were given): the settings a report shows. InputError (an `OptionError` naming
+    the field) or StrategyNotImplementedError."""
+    if not isinstance(options, Options):
+        raise InputError(f"options must be graphsvc Options, got {type(options).__name__}")
+    if not isinstance(options.strategy, str):
+        raise InputError(f"strategy must be a name, got {options.strategy!r}")
+    strategy = get(options.strategy)
+    check_common(options)
+    for name, own in options.settings:
+        get(name).check_own(own)
+    return options if options.own is not None else replace(options, own=strategy.options_class())
+
+
+def open_session(graph, options: Options | None = None, sensor_names=None, allowed=None, threads: bool = False,
+                 keep_motion: bool = True, marker_names=None, orientations: bool = False):  # fmt: skip
     """The live session of `options.strategy` on `graph` (its `session_class`, a
     `strategies.live.LiveSession`): samples in by `push`, pose frames out as they become
     final, `flush` at the end. sensor_names: the stream's sensors, in the graph's order
@@ -69,13 +121,31 @@ def open_session(graph, options=None, sensor_names=None, allowed=None, threads: 
     `motion()`; marker_names: the markers a stream of markers carries; orientations:
     its samples carry each sensor's orientation. InputError for options or a stream the
     strategy cannot take."""
-    from graphsvc.strategies.options import Options
+    options = check_options(Options() if options is None else options)
+    strategy = get(options.strategy)
+    strategy.check_stream(options, sensor_names, marker_names)
+    return strategy.session_class(strategy, graph, options, sensor_names, allowed, threads, keep_motion, marker_names,
+                                  orientations)  # fmt: skip
 
-    options = Options() if options is None else options
-    return get(options.strategy).session_class(graph, options, sensor_names, allowed, threads, keep_motion, marker_names,
-                                               orientations)  # fmt: skip
+
+def _legacy_names(name: str, default: bool = False):
+    """Where an older `Options` field lives now (`options.LEGACY_NAMES`); with default,
+    strategy `name`'s default own options."""
+    if default:
+        return get(name).options_class()
+    if name in {s.name for s in option_specs(SharedOptions)}:
+        return ("shared", name)
+    if name in available():
+        return ("strategy", name)
+    flag = f"--{name.replace('_', '-')}"
+    for s in _REGISTRY.values():
+        for spec in option_specs(s.options_class):
+            if flag in spec.aliases:
+                return ("option", s.name, spec.name)
+    return None
 
 
-def names() -> tuple[str, ...]:
-    """Every strategy name a request may give: the built ones, then the planned ones."""
-    return available() + tuple(n for n in PLANNED if n not in _REGISTRY)
+_options.LEGACY_NAMES = _legacy_names
+
+__all__ = ["BUILTIN", "DEFAULT", "ENTRY_POINTS", "Strategy", "available", "check_options", "get", "names",
+           "open_session", "register"]  # fmt: skip

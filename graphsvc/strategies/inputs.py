@@ -11,6 +11,7 @@ is all a strategy's batch reconstruction reads.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,21 +61,27 @@ def layout_mismatch(mine, theirs, order_matters: bool = True) -> str | None:
     mine, theirs = tuple(mine), tuple(theirs)
     if mine == theirs:
         return None
-    missing = [n for n in mine if n not in theirs]
-    extra = [n for n in dict.fromkeys(theirs) if n not in mine]
-    dup = [n for n in dict.fromkeys(theirs) if theirs.count(n) > 1]
+    counts = Counter(theirs)  # (linear: a stream may announce any number of names)
+    missing = [n for n in mine if n not in counts]
+    known = set(mine)
+    extra = [n for n in counts if n not in known]
+    dup = [n for n, c in counts.items() if c > 1]
     parts = []
     if missing:
-        parts.append(f"missing {', '.join(missing)}")
+        parts.append(f"missing {_names(missing)}")
     if extra:
-        parts.append(f"not in the graph: {', '.join(extra)}")
+        parts.append(f"not in the graph: {_names(extra)}")
     if dup:
-        parts.append(f"named twice: {', '.join(dup)}")
+        parts.append(f"named twice: {_names(dup)}")
     if not parts:
         if not order_matters:
             return None
         parts.append(f"order {', '.join(theirs)} instead of {', '.join(mine)}")
     return "; ".join(parts)
+
+
+def _names(names: list, most: int = 8) -> str:
+    return ", ".join(names[:most]) + (f" … (+{len(names) - most})" if len(names) > most else "")
 
 
 def layout_mismatch_message(layout_name: str, mine, theirs, order_matters: bool = True) -> str | None:

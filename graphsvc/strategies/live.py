@@ -21,6 +21,7 @@ from graphsvc.sensors.recording import check_gap
 from graphsvc.strategies.inputs import check_layout
 from graphsvc.strategies.options import Options
 from graphsvc.strategies.results import Frame, Provenance
+from graphsvc.synthesis.stream import lookahead_frames
 
 
 class LiveSession:
@@ -43,18 +44,16 @@ class LiveSession:
         """Frames a streamed pose can come out after its frame of the path is final:
         the streaming synthesis' look-ahead (half its blend window, plus one) and up to
         SYNTH_BATCH − 1 frames waiting for its batch to fill; 12 + 2 at 30 Hz."""
-        from graphsvc.synthesis.stream import lookahead_frames
-
         return lookahead_frames(rate_hz) + cls.SYNTH_BATCH - 1
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
+    def __init__(self, strategy, graph: MotionGraph, options: Options, sensor_names=None, allowed=None,
                  threads: bool = False, keep_motion: bool = True, marker_names=None,
                  orientations: bool = False):  # fmt: skip
-        from graphsvc.strategies import get
-        from graphsvc.strategies.options import check_options
-
-        check_options(options)
-        self.strategy = get(options.strategy)
+        """strategy: the `base.Strategy` whose session this is; options: checked
+        (`strategies.check_options`). Opened by `strategies.open_session`, which says
+        what the rest are. A strategy's session sets itself up in `_open`."""
+        self.strategy = strategy
+        self.own = strategy.own(options)
         self.reads_acc = "accelerations" in self.strategy.uses
         if self.reads_acc:
             check_layout(graph, graph.sensor_names if sensor_names is None else sensor_names)
@@ -79,6 +78,11 @@ class LiveSession:
         self._rot: list[np.ndarray] = []
         self._trans: list[np.ndarray] = []
         self.flushed = False
+        self._open(allowed, threads)
+
+    def _open(self, allowed, threads: bool) -> None:
+        """The strategy's own set-up (its decoder, `lag_frames`), after the common one:
+        allowed, the node mask of a leave-out run (or None); threads, numba's threads."""
 
     @property
     def threads(self) -> bool:

@@ -1,19 +1,231 @@
-"""What a reconstruction is asked for, as values: the cost weights, the options every
-strategy shares and those only some use, and the annotation constraints.
+"""What a reconstruction is asked for, as values, and how an option is declared once.
 
-Plain data and checks, no kernels: the CLI, the service and every strategy import these
-without pulling a search in. A strategy uses the options that mean something to it
-and names the others it ignored in its report (`ignored_options`).
+`Options` holds what every strategy reads (the strategy's name, the cost weights, the
+live decoder's lag, the heading rule, the annotation constraints), the options several
+strategies share (`SharedOptions`: the track pull today) and the chosen strategy's own
+options (`own`: an instance of its `options_class`, None for its defaults).
+
+A strategy declares its own options once, as a frozen dataclass whose fields are made by
+`option()`: type (from the annotation: int, float, bool, str or tuple[str, ...], each
+optionally `| None`), default, range or choices, help text, the command line's extra
+names (today's flags) and how messages name it. Everything else is derived from that
+declaration: the command-line flags (`graphsvc.flags`), the checks (`check_fields`,
+one message style, the field named), the gRPC form (`values_of`, `from_values`: a name
+and a map of values) and the report's settings (`Options.to_dict`). A cross-field rule
+is the dataclass's own `check()` method.
+
+Plain data and checks, no kernels: the CLI, the service and every strategy import this
+without pulling a search in.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import asdict, dataclass
+import typing
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.sensors.recording import validate_constraints
+
+# ---------------------------------------------------------------- declaring options
+
+
+@dataclass(frozen=True)
+class OptionSpec:
+    """One declared option (`option()`). kind: int, float, bool, str or tuple (of
+    str); optional: None is a value (the option unset: the strategy's own rule);
+    low/high: the range (low_open: low itself refused); choices: the allowed values of
+    a str; noun: what a valid value is, in messages ("a finite cost"); label: how
+    messages name it (default: the field's name); aliases: further command-line
+    flags; negated: flags that set a bool option False (`--olng-basic-steps`);
+    metavar: the flag's placeholder."""
+
+    name: str
+    kind: type
+    optional: bool
+    default: object
+    help: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    choices: tuple | None = None
+    noun: str | None = None
+    label: str | None = None
+    aliases: tuple[str, ...] = ()
+    negated: tuple[str, ...] = ()
+    metavar: str | None = None
+
+    @property
+    def title(self) -> str:
+        return self.label or self.name
+
+
+def option(default, help: str, *, low=None, high=None, low_open: bool = False, choices=None, noun=None, label=None,
+           aliases=(), negated=(), metavar=None):  # fmt: skip
+    """A dataclass field declaring an option (module docstring); the type is the field's
+    annotation."""
+    meta = {"option": dict(help=help, low=low, high=high, low_open=low_open, choices=None if choices is None
+                           else tuple(choices), noun=noun, label=label, aliases=tuple(aliases), negated=tuple(negated),
+                           metavar=metavar)}  # fmt: skip
+    return field(default=default, metadata=meta)
+
+
+_KINDS = {int: int, float: float, bool: bool, str: str}
+
+
+def _kind(hint) -> tuple[type, bool]:
+    """(kind, optional) of a field's resolved annotation."""
+    args = typing.get_args(hint)
+    optional = type(None) in args
+    if optional:
+        rest = [a for a in args if a is not type(None)]
+        if len(rest) != 1:
+            raise TypeError(f"an option's type must be one type or None, not {hint}")
+        hint = rest[0]
+    if typing.get_origin(hint) is tuple:
+        if typing.get_args(hint) != (str, Ellipsis):
+            raise TypeError(f"a tuple option must be tuple[str, ...], not {hint}")
+        return tuple, optional
+    if hint not in _KINDS:
+        raise TypeError(f"an option's type must be int, float, bool, str or tuple[str, ...], not {hint}")
+    return hint, optional
+
+
+@lru_cache(maxsize=None)
+def option_specs(cls) -> tuple[OptionSpec, ...]:
+    """The declared options of an options dataclass, in field order."""
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        meta = f.metadata.get("option")
+        if meta is None:
+            raise TypeError(f"{cls.__name__}.{f.name} is not declared with option()")
+        kind, optional = _kind(hints[f.name])
+        out.append(OptionSpec(f.name, kind, optional, f.default, **meta))
+    return tuple(out)
+
+
+# ---------------------------------------------------------------- checking values
+
+
+class OptionError(InputError):
+    """An option's value refused. field: the option's name (a conversion prefixes where
+    it came from: `options.ssg.overlap_s`, `--ssg-overlap`)."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        super().__init__(message)
+
+
+def on_field(exc: Exception, name: str) -> Exception:
+    """`exc` marked as caused by option `name` (`option_field`), for a conversion to say
+    which field of a request it came from; its type and message unchanged."""
+    exc.option_field = name
+    return exc
+
+
+def _range_text(spec: OptionSpec) -> str:
+    lo, hi = spec.low, spec.high
+    if lo is not None and hi is not None and not spec.low_open:
+        return f"from {lo:g} to {hi:g}"
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if spec.low_open else '≥'} {lo:g}")
+    if hi is not None:
+        parts.append(f"at most {hi:g}")
+    return " and ".join(parts)
+
+
+def check_value(spec: OptionSpec, value, prefix: str = ""):
+    """`value` as option `spec` takes it (an int for an int, a tuple for a tuple), or
+    OptionError naming it: "<prefix><label> must be …, got …"."""
+    label = f"{prefix}{spec.title}"
+    if value is None:
+        if spec.optional:
+            return None
+        raise OptionError(spec.name, f"{label} must be given")
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise OptionError(spec.name, f"{label} must be true or false, got {value!r}")
+        return value
+    if spec.kind is str:
+        if not isinstance(value, str) or not value:
+            raise OptionError(spec.name, f"{label} must be {spec.noun or 'a non-empty text'}, got {value!r}")
+        if spec.choices is not None and value not in spec.choices:
+            raise OptionError(spec.name, f"{label} must be one of {', '.join(spec.choices)}, got {value!r}")
+        return value
+    if spec.kind is tuple:
+        if isinstance(value, str) or not isinstance(value, (tuple, list)) or not value \
+                or not all(isinstance(v, str) and v for v in value):  # fmt: skip
+            raise OptionError(spec.name, f"{label} must be {spec.noun or 'a list of names'}, got {value!r}")
+        return tuple(value)
+    whole = spec.kind is int
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (whole and value != int(value)):  # fmt: skip
+        noun = spec.noun or ("a whole number" if whole else "a finite number")
+        limits = _range_text(spec)
+        raise OptionError(spec.name, f"{label} must be {noun}{' ' + limits if limits else ''}, got {value!r}")
+    value = int(value) if whole else float(value)
+    noun = spec.noun + " " if spec.noun and not whole else ""
+    if spec.low is not None and (value <= spec.low if spec.low_open else value < spec.low):
+        raise OptionError(spec.name, f"{label} must be {noun}{'>' if spec.low_open else '≥'} {spec.low:g}, got {value!r}")
+    if spec.high is not None and value > spec.high:
+        raise OptionError(spec.name, f"{label} must be {noun}at most {spec.high:g}, got {value!r}")
+    return value
+
+
+def check_fields(obj, prefix: str = "") -> None:
+    """Every declared field of an options object checked (`check_value`), then its own
+    cross-field rule (`obj.check()`, where it has one). OptionError naming the field."""
+    for spec in option_specs(type(obj)):
+        check_value(spec, getattr(obj, spec.name), prefix)
+    if hasattr(obj, "check"):
+        obj.check()
+
+
+def from_values(cls, values: dict, prefix: str = ""):
+    """An options object of `cls` from {field name: value} (absent: the default), each
+    value checked and given its declared type (a whole float for an int, a list for a
+    tuple). OptionError for an unknown name or a value refused."""
+    specs = {s.name: s for s in option_specs(cls)}
+    unknown = [k for k in values if k not in specs]
+    if unknown:
+        raise OptionError(unknown[0], f"{prefix}{unknown[0]} is not an option here (options: "
+                                      f"{', '.join(specs) or 'none'})")  # fmt: skip
+    obj = cls(**{k: check_value(specs[k], v, prefix) for k, v in values.items()})
+    check_fields(obj, prefix)
+    return obj
+
+
+def values_of(obj, changed_only: bool = False) -> dict:
+    """{field name: value} of an options object (tuples as lists: JSON's form);
+    changed_only: only those that differ from their defaults."""
+    out = {}
+    for spec in option_specs(type(obj)):
+        v = getattr(obj, spec.name)
+        if changed_only and v == spec.default:
+            continue
+        out[spec.name] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def given_names(owner: str, obj) -> list[str]:
+    """The options of `obj` (strategy `owner`'s) set other than their defaults, named
+    as a report lists ignored options: the field's own flag for one with a flag of its
+    own (`beam`, `markers`), else owner_field (`olng_k`)."""
+    out = []
+    for spec in option_specs(type(obj)):
+        if getattr(obj, spec.name) == spec.default:
+            continue
+        bare = [a[2:].replace("-", "_") for a in spec.aliases if not a[2:].startswith(f"{owner}-")]
+        out.append(bare[0] if bare else f"{owner}_{spec.name}")
+    return out
+
+
+# ---------------------------------------------------------------- what every strategy reads
 
 
 @dataclass(frozen=True)
@@ -46,133 +258,56 @@ ORIENTATION_WEIGHT = 1.0
 TRACK_PULL_S = 0.5
 
 
-@dataclass(frozen=True)
-class OlngOptions:
-    """The OLNG strategy's settings (Tautges et al. 2011; defaults from the paper). k: neighbours a
-    sample (None: the paper's share of the knowledge base, 4096 of about 600,000
-    frames, i.e. frames / 150, at least 16 and at most 4096); m: window columns; i:
-    paths the pose is made from (None: the paper's K / 16, at least 4 and at most 256);
-    extended: the extended steps (a column skipped, two to four frames on);
-    w_prior, w_contr, w_pose, w_motion, w_smooth: the energy's weights (eq. 2–11);
-    fix_feet: while the neighbourhood has a foot in contact, let it move only as the
-    neighbours' feet moved (off by default: on Bandai dataset-2's takes 002, the tuning
-    set, it cost 0.6 cm of mean joint error, 1.0 cm on gestures)."""
-
-    k: int | None = None
-    m: int = 32
-    i: int | None = None
-    extended: bool = True
-    w_prior: float = 5.0
-    w_contr: float = 1.0
-    w_pose: float = 0.6
-    w_motion: float = 0.2
-    w_smooth: float = 0.2
-    fix_feet: bool = False
-
-    def resolved(self, frames: int) -> "OlngOptions":
-        """K and I filled in for a knowledge base of `frames` frames."""
-        k = self.k if self.k is not None else min(frames, 4096, max(16, round(frames / 150)))
-        i = self.i if self.i is not None else min(k, 256, max(4, k // 16))
-        return OlngOptions(k, self.m, i, self.extended, self.w_prior, self.w_contr, self.w_pose, self.w_motion,
-                           self.w_smooth, self.fix_feet)  # fmt: skip
-
-
-def check_olng(o: "OlngOptions") -> None:
-    """InputError for OLNG settings no knowledge base accepts (K against the frames is
-    checked where the index is known)."""
-    for name in ("k", "m", "i"):
-        v = getattr(o, name)
-        if v is None and name != "m":
-            continue
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise InputError(f"OLNG {name.upper()} must be a whole number, got {v!r}")
-    if o.k is not None and o.k < 1:
-        raise InputError(f"OLNG K must be ≥ 1, got {o.k}")
-    if o.m < 2:
-        raise InputError(f"OLNG M must be ≥ 2 (a path needs two columns), got {o.m}")
-    if o.i is not None and (o.i < 1 or (o.k is not None and o.i > o.k)):
-        raise InputError(f"OLNG I must be between 1 and K ({o.k if o.k is not None else 'its default'}), got {o.i}")
-    for name in ("w_prior", "w_contr", "w_pose", "w_motion", "w_smooth"):
-        v = getattr(o, name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise InputError(f"OLNG weight {name[2:]} must be a finite number ≥ 0, got {v!r}")
-    if o.w_prior * (o.w_pose + o.w_motion + o.w_smooth) + o.w_contr <= 0:
-        raise InputError("OLNG weights are all zero: the pose would be undetermined")
-
-
-SSG_OFFSETS = ("auto", "fit", "nominal")
+def track_pull(pull_s: float | None, rate_hz: float) -> float:
+    """The share α of the gap to the measured position a reconstruction's placement
+    closes each sample, for a time constant of pull_s seconds at rate_hz: 1 − exp(−1 /
+    (pull_s · rate)); 0 (never pulled: placed once, at the start) for None or 0."""
+    if not pull_s:
+        return 0.0
+    return float(-math.expm1(-1.0 / (float(pull_s) * float(rate_hz))))
 
 
 @dataclass(frozen=True)
-class SsgOptions:
-    """The SSG strategy's settings (Tautges 2012, ch. 4). markers: the marker set — a
-    built-in name (hands-feet, left-foot, head-back, vicon), a JSON/TOML file, or a set
-    as JSON text (None: the one the recording names, as `simulate --markers` writes);
-    keep: the markers to use (None: every marker of the set the recording has);
-    window_s, overlap_s: a window's length and consecutive windows' overlap (thesis: N =
-    20 and o = 10 frames at 60 Hz, 0.33 s and 0.17 s; 15 and 6, 0.25 s and 0.1 s, for
-    markers on the head and trunk only — None picks by the kept markers); k:
-    subsequences a window (8; 16 for head and trunk); weight: the transition costs'
-    weight against the node costs (1; 4 for head and trunk, whose windows say less of
-    the limbs: the thesis raises it there); offsets: the markers' offsets on their
-    segments — "nominal" (the set's), "fit" (estimated from the input against the
-    knowledge-base poses it is matched to, `strategies.ssg.offsets`), "auto" (fit
-    unless the recording was simulated by graphsvc with this set)."""
+class SharedOptions:
+    """The options several strategies share; a strategy names those it uses
+    (`Strategy.shared`), and the others, set, are listed as ignored in its report.
+    track_pull_s: the time constant (s) with which the reconstruction's ground placement
+    is pulled toward the measured positions, so it follows the tracker instead of
+    drifting from where it started (0: placed once, at the start)."""
 
-    markers: str | None = None
-    keep: tuple[str, ...] | None = None
-    window_s: float | None = None
-    overlap_s: float | None = None
-    k: int | None = None
-    weight: float | None = None
-    offsets: str = "auto"
-
-    def resolved(self, trunk_only: bool) -> "SsgOptions":
-        """The defaults filled in for a set whose kept markers are (not) all on the head
-        and trunk."""
-        d = (0.25, 0.1, 16, 4.0) if trunk_only else (1.0 / 3.0, 1.0 / 6.0, 8, 1.0)
-        pick = lambda v, default: default if v is None else v  # noqa: E731
-        return SsgOptions(self.markers, self.keep, pick(self.window_s, d[0]), pick(self.overlap_s, d[1]),
-                          pick(self.k, d[2]), pick(self.weight, d[3]), self.offsets)  # fmt: skip
-
-
-def check_ssg(o: "SsgOptions") -> None:
-    """InputError for SSG settings no input accepts."""
-    for name in ("window_s", "overlap_s", "weight"):
-        v = getattr(o, name)
-        if v is None:
-            continue
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise InputError(f"SSG {name.replace('_s', '').replace('_', ' ')} must be a finite number ≥ 0, got {v!r}")
-    if o.window_s is not None and o.window_s <= 0:
-        raise InputError(f"SSG window must be > 0 seconds, got {o.window_s}")
-    if o.window_s is not None and o.overlap_s is not None and o.overlap_s > 0.5 * o.window_s:
-        raise InputError(f"SSG overlap ({o.overlap_s:g} s) must be at most half the window ({o.window_s:g} s)")
-    if o.k is not None and (isinstance(o.k, bool) or not isinstance(o.k, int) or not 1 <= o.k <= 256):
-        raise InputError(f"SSG k must be a whole number from 1 to 256, got {o.k!r}")
-    if o.offsets not in SSG_OFFSETS:
-        raise InputError(f"SSG offsets must be one of {', '.join(SSG_OFFSETS)}, got {o.offsets!r}")
-    if o.keep is not None and (not isinstance(o.keep, tuple) or not all(isinstance(n, str) and n for n in o.keep)):
-        raise InputError("SSG keep must be marker names")
-    if o.markers is not None and (not isinstance(o.markers, str) or not o.markers):
-        raise InputError("SSG markers must name a marker set")
+    track_pull_s: float = option(TRACK_PULL_S, low=0.0, label="track pull", noun="a finite number of seconds",
+                                 aliases=("--track-pull",), metavar="S",
+                                 help="time constant (s) with which the reconstruction's placement follows the "
+                                      f"measured positions (0: placed once, at the start; default {TRACK_PULL_S:g})")  # fmt: skip
 
 
 @dataclass(frozen=True)
+class NoOptions:
+    """The options of a strategy that has none of its own."""
+
+
+# Where an older Options field name lives now, set by the registry (graphsvc.strategies,
+# always imported before this module): name → ("shared", field), ("strategy", name) or
+# ("option", strategy, field) — a shared option (track_pull_s), a strategy's own options
+# by its name (olng, ssg), a strategy option by its own flag (beam) — or None.
+LEGACY_NAMES = None
+
+
+@dataclass(frozen=True, init=False)
 class Options:
     """How to reconstruct. strategy: a registered name (`graphsvc.strategies`).
-    weights: Kelly et al. 2013, eq. 6 (per g², per m, per rad). latency_s: fixed lag (s) of the live
-    decoder; None in batch = the whole input at once. heading_from_track: derive the
-    heading from the ground positions (Kelly et al. 2013, §6: direction of travel above
-    `speed_threshold` m/s, else `rest_heading_deg`). constraints: annotation constraint
-    sets in priority order (None: the recording's own). beam (Viterbi): a cost; after
-    each sample only the paths within it of the best one go on (faster on built
-    graphs, no longer always the cheapest path; None: the exact search). track_pull_s
-    (Viterbi): the time constant (s) with which each path's ground placement is pulled
-    toward the measured positions, so the path and the synthesized root follow the
-    tracker instead of drifting from where they started (0: placed once, at the
-    start); OLNG pulls its root (and heading) the same way. olng: the OLNG strategy's
-    settings (`OlngOptions`); ssg: the SSG strategy's (`SsgOptions`)."""
+    weights: Kelly et al. 2013, eq. 6 (per g², per m, per rad). latency_s: fixed lag (s)
+    of the live decoder; None in batch = the whole input at once. heading_from_track:
+    derive the heading from the ground positions (Kelly et al. 2013, §6: direction of
+    travel above `speed_threshold` m/s, else `rest_heading_deg`). constraints:
+    annotation constraint sets in priority order (None: the recording's own). shared:
+    the options several strategies share (`SharedOptions`). settings: the own options
+    given for each strategy, by name (a strategy's `options_class` instance; the others'
+    are listed as ignored in a report). own: shorthand for the chosen strategy's entry
+    of settings (the property `own` reads it; None: its defaults).
+
+    The fields of older versions (`beam`, `track_pull_s`, `olng`, `ssg`) are still read
+    and taken as keywords (`LEGACY_NAMES`): deprecated, for existing callers."""
 
     strategy: str = "viterbi"
     weights: Weights = Weights()
@@ -181,23 +316,68 @@ class Options:
     rest_heading_deg: float = 0.0
     speed_threshold: float = 2.0
     constraints: tuple | None = None
-    beam: float | None = None
-    track_pull_s: float = TRACK_PULL_S
-    olng: OlngOptions = OlngOptions()
-    ssg: SsgOptions = SsgOptions()
+    shared: SharedOptions = SharedOptions()
+    settings: tuple = ()  # ((strategy name, its options), ...) sorted by name
+
+    def __init__(self, strategy: str = "viterbi", weights: Weights = Weights(), latency_s: float | None = None,
+                 heading_from_track: bool = False, rest_heading_deg: float = 0.0, speed_threshold: float = 2.0,
+                 constraints: tuple | None = None, shared: SharedOptions = SharedOptions(), settings=(),
+                 own=None, **legacy):  # fmt: skip
+        settings = dict(settings.items() if isinstance(settings, dict) else settings)
+        if own is not None:
+            settings[strategy] = own
+        for key, value in legacy.items():
+            where = LEGACY_NAMES(key) if LEGACY_NAMES is not None else None
+            if where is None:
+                raise TypeError(f"Options got an unexpected keyword argument {key!r}")
+            if where[0] == "shared":
+                shared = dataclasses.replace(shared, **{where[1]: value})
+            elif where[0] == "strategy":
+                settings[where[1]] = value
+            else:
+                _, name, field_name = where
+                settings[name] = dataclasses.replace(settings.get(name) or LEGACY_NAMES(name, default=True),
+                                                     **{field_name: value})  # fmt: skip
+        for name, value in (("strategy", strategy), ("weights", weights), ("latency_s", latency_s),
+                            ("heading_from_track", heading_from_track), ("rest_heading_deg", rest_heading_deg),
+                            ("speed_threshold", speed_threshold), ("constraints", constraints), ("shared", shared),
+                            ("settings", tuple(sorted(settings.items(), key=lambda kv: str(kv[0]))))):  # fmt: skip
+            object.__setattr__(self, name, value)
+
+    def __getattr__(self, name: str):
+        # (only for names the instance lacks: an older field name, `LEGACY_NAMES`)
+        where = LEGACY_NAMES(name) if LEGACY_NAMES is not None and not name.startswith("__") else None
+        if where is None:
+            raise AttributeError(f"'Options' object has no attribute {name!r}")
+        if where[0] == "shared":
+            return getattr(self.shared, where[1])
+        own = self.of(where[1]) or LEGACY_NAMES(where[1], default=True)
+        return own if where[0] == "strategy" else getattr(own, where[2])
+
+    @property
+    def own(self):
+        """The chosen strategy's own options, or None (its defaults)."""
+        return dict(self.settings).get(self.strategy)
+
+    def of(self, name: str):
+        """The own options given for strategy `name`, or None."""
+        return dict(self.settings).get(name)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
+        """The settings as a report shows them: what every strategy reads, the shared
+        options and the chosen strategy's own (`values_of`), in one object."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("shared", "settings")}
+        d["weights"] = asdict(self.weights)
         d["constraints"] = None if self.constraints is None else list(self.constraints)
+        d.update(values_of(self.shared))
+        if self.own is not None:
+            d.update(values_of(self.own))
         return d
 
 
-def check_options(options: Options) -> None:
-    """InputError for values no strategy accepts; InputError or
-    StrategyNotImplementedError for a strategy name that is unknown or not built."""
-    from graphsvc.strategies import get
-
-    get(options.strategy)
+def check_common(options: Options) -> None:
+    """InputError for values of what every strategy reads, or of the shared options,
+    that no strategy accepts (the strategy's own: `strategies.check_options`)."""
     w = options.weights
     for name in ("acc", "position", "heading", "orientation"):
         v = getattr(w, name)
@@ -207,18 +387,9 @@ def check_options(options: Options) -> None:
         raise InputError("weights are all 0: every path would cost the same; give at least one weight > 0")
     if options.latency_s is not None and (not math.isfinite(options.latency_s) or options.latency_s < 0):
         raise InputError(f"latency must be a finite number of seconds ≥ 0, got {options.latency_s}")
-    if options.beam is not None and (isinstance(options.beam, bool) or not isinstance(options.beam, (int, float))
-                                     or not math.isfinite(options.beam) or options.beam <= 0):
-        raise InputError(f"beam must be a finite cost > 0, got {options.beam!r}")
-    p = options.track_pull_s
-    if isinstance(p, bool) or not isinstance(p, (int, float)) or not math.isfinite(p) or p < 0:
-        raise InputError(f"track pull must be a finite number of seconds ≥ 0, got {p!r}")
-    if not isinstance(options.olng, OlngOptions):
-        raise InputError(f"olng options must be OlngOptions, got {type(options.olng).__name__}")
-    check_olng(options.olng)
-    if not isinstance(options.ssg, SsgOptions):
-        raise InputError(f"ssg options must be SsgOptions, got {type(options.ssg).__name__}")
-    check_ssg(options.ssg)
+    if not isinstance(options.shared, SharedOptions):
+        raise InputError(f"shared options must be SharedOptions, got {type(options.shared).__name__}")
+    check_fields(options.shared)
     if not math.isfinite(options.rest_heading_deg):
         raise InputError(f"rest heading must be finite, got {options.rest_heading_deg}")
     if not (math.isfinite(options.speed_threshold) and options.speed_threshold >= 0):
@@ -238,6 +409,9 @@ def parse_weights(text: str) -> Weights:
     if len(values) == 3 and not any(values):  # the default R counts only where a recording has orientations
         raise InputError(f"weights {text!r} are all 0: give at least one of A,P,O > 0 (or R, as A,P,O,R)")
     return Weights(*values)
+
+
+# ---------------------------------------------------------------- annotation constraints
 
 
 def check_constraints(constraints, graph=None) -> list:

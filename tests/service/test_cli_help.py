@@ -32,11 +32,11 @@ def _service_parsers():
 def _shared_options() -> set[str]:
     """The strategy and calibration flags graphsvc.cli_args adds to many commands
     (their texts are the main CLI's)."""
-    from graphsvc.cli_args import add_calibration_option, add_search_options
+    from graphsvc.flags import add_calibration_flag, add_search_flags
 
     p = argparse.ArgumentParser(add_help=False)
-    add_search_options(p)
-    add_calibration_option(p)
+    add_search_flags(p)
+    add_calibration_flag(p)
     return {s for a in p._actions for s in a.option_strings}
 
 

@@ -66,7 +66,7 @@ def test_client_commands(served, rec_file, graph, recording, marker_rec_file, ma
 
     # SSG: a marker-only recording, the set by name or from a file (sent as its content).
     from graphsvc.sensors.markers import PRESETS
-    from graphsvc.strategies.options import SsgOptions
+    from graphsvc.strategies.ssg.options import SsgOptions
 
     set_file = tmp_path / "feet.json"
     set_file.write_text(json.dumps({**PRESETS["hands-feet"].to_dict(), "name": "feet"}))

@@ -59,7 +59,7 @@ def test_workers_are_processes_of_their_own(worker_server):
 
 def _options(kind: str):
     from graphsvc.pipeline import Options
-    from graphsvc.strategies.options import OlngOptions
+    from graphsvc.strategies.olng.options import OlngOptions
 
     return {"viterbi": Options(latency_s=0.4, beam=10.0), "nearest": Options(strategy="nearest"),
             "olng": Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False))}[kind]  # fmt: skip

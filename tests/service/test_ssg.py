@@ -23,7 +23,7 @@ INVALID = grpc.StatusCode.INVALID_ARGUMENT
 
 def _ssg(**kw):
     from graphsvc.pipeline import Options
-    from graphsvc.strategies.options import SsgOptions
+    from graphsvc.strategies.ssg.options import SsgOptions
 
     latency = kw.pop("latency_s", None)
     return Options(strategy="ssg", latency_s=latency, ssg=SsgOptions(**kw))

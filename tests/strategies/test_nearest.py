@@ -22,7 +22,7 @@ from graphsvc.sensors.simulate import simulate_recording
 from graphsvc.strategies import get
 from graphsvc.strategies.base import prepared_index
 from graphsvc.strategies.index import index_path
-from graphsvc.strategies.nearest import _index, choose
+from graphsvc.strategies.nearest.strategy import _index, choose
 
 from tests.graph.test_connectivity import mixed_kb
 

@@ -27,7 +27,7 @@ from graphsvc.strategies.olng.pose import (
     pose_positions,
     weighted_pca,
 )
-from graphsvc.strategies.options import OlngOptions
+from graphsvc.strategies.olng.options import OlngOptions
 
 
 @pytest.fixture(scope="module")

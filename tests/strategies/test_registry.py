@@ -57,7 +57,7 @@ def test_live_session_opens_the_strategys_session(graph, rec, monkeypatch):
         open_session(graph, Options(strategy="ssg"), rec.sensor_names)
     with pytest.raises(InputError, match="needs a marker set"):
         open_session(graph, Options(strategy="ssg"), marker_names=("l_hand",))
-    from graphsvc.strategies.options import SsgOptions
+    from graphsvc.strategies.ssg.options import SsgOptions
 
     ssg = open_session(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet")), marker_names=("l_hand",))
     assert type(ssg) is SsgSession

@@ -24,7 +24,7 @@ from graphsvc.sensors.markers import MarkerSet
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
 from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording
-from graphsvc.strategies.options import SsgOptions
+from graphsvc.strategies.ssg.options import SsgOptions
 
 
 @pytest.fixture(scope="module")

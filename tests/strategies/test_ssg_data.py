@@ -16,7 +16,7 @@ from graphsvc.pipeline import Options, reconstruct
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import read_recording
 from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording
-from graphsvc.strategies.options import SsgOptions
+from graphsvc.strategies.ssg.options import SsgOptions
 
 LIGHT = BuildOptions(msv=False, interp=False, bridges=False, progress=False, jobs=2)  # (the SSG reads original frames)
 

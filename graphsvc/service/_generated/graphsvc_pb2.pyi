@@ -137,7 +137,7 @@ class JointChannels(_message.Message):
     def __init__(self, names: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class SynthesisOptions(_message.Message):
-    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi", "olng", "ssg")
+    __slots__ = ("strategy", "weights", "latency_s", "heading_from_track", "rest_heading_deg", "constraint_sets", "speed_threshold_m_s", "beam", "viterbi", "olng", "ssg", "strategy_name", "strategy_settings", "shared_settings")
     STRATEGY_FIELD_NUMBER: _ClassVar[int]
     WEIGHTS_FIELD_NUMBER: _ClassVar[int]
     LATENCY_S_FIELD_NUMBER: _ClassVar[int]
@@ -149,6 +149,9 @@ class SynthesisOptions(_message.Message):
     VITERBI_FIELD_NUMBER: _ClassVar[int]
     OLNG_FIELD_NUMBER: _ClassVar[int]
     SSG_FIELD_NUMBER: _ClassVar[int]
+    STRATEGY_NAME_FIELD_NUMBER: _ClassVar[int]
+    STRATEGY_SETTINGS_FIELD_NUMBER: _ClassVar[int]
+    SHARED_SETTINGS_FIELD_NUMBER: _ClassVar[int]
     strategy: Strategy
     weights: CostWeights
     latency_s: float
@@ -160,7 +163,10 @@ class SynthesisOptions(_message.Message):
     viterbi: ViterbiOptions
     olng: OlngOptions
     ssg: SsgOptions
-    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ..., olng: _Optional[_Union[OlngOptions, _Mapping]] = ..., ssg: _Optional[_Union[SsgOptions, _Mapping]] = ...) -> None: ...
+    strategy_name: str
+    strategy_settings: _struct_pb2.Struct
+    shared_settings: _struct_pb2.Struct
+    def __init__(self, strategy: _Optional[_Union[Strategy, str]] = ..., weights: _Optional[_Union[CostWeights, _Mapping]] = ..., latency_s: _Optional[float] = ..., heading_from_track: _Optional[bool] = ..., rest_heading_deg: _Optional[float] = ..., constraint_sets: _Optional[_Iterable[_Union[ConstraintSet, _Mapping]]] = ..., speed_threshold_m_s: _Optional[float] = ..., beam: _Optional[float] = ..., viterbi: _Optional[_Union[ViterbiOptions, _Mapping]] = ..., olng: _Optional[_Union[OlngOptions, _Mapping]] = ..., ssg: _Optional[_Union[SsgOptions, _Mapping]] = ..., strategy_name: _Optional[str] = ..., strategy_settings: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., shared_settings: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ...) -> None: ...
 
 class OlngOptions(_message.Message):
     __slots__ = ("k", "i", "m", "basic_steps", "w_prior", "w_contr", "w_pose", "w_motion", "w_smooth", "fix_feet", "track_pull_s")

@@ -45,7 +45,7 @@ from graphsvc.strategies.olng.index import OlngIndex
 from graphsvc.strategies.olng.lattice import Lattice, LatticeOptions
 from graphsvc.strategies.olng.pose import (EnergyTerms, PoseModel, optimise, pose_positions, sensor_orientations,
                                            weighted_pca)  # fmt: skip
-from graphsvc.strategies.options import OlngOptions
+from graphsvc.strategies.olng.options import OlngOptions
 from graphsvc.synthesis.path import FOOT_BLEND_S, _two_bone_ik, path_tables
 
 SOURCES = 8  # provenance: the heaviest neighbours a frame lists

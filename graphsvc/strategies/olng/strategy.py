@@ -3,8 +3,8 @@
 each emitted as its sample arrives (the steps look back only: no look-ahead).
 
 Index: `index.load_index` (cached beside the graph file); hidden clips are dropped at
-query time. Options: `Options.olng` (K, M, I, the step set, the energy weights, foot
-clean-up); the tracker is followed with `track_pull_s` as the Viterbi search follows
+query time. Its own options: `options.OlngOptions` (K, M, I, the step set, the energy weights, foot
+clean-up); the tracker is followed with the shared `track_pull_s` as the Viterbi search follows
 it; a weight of 0 for position or heading leaves that stream out.
 """
 
@@ -14,18 +14,18 @@ import time
 
 import numpy as np
 
-from graphsvc.errors import InputError
+from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.base import frame_by_frame_ignored, Strategy
+from graphsvc.strategies.base import Strategy, frame_by_frame_ignored, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
 from graphsvc.strategies.olng.index import OlngIndex, load_index
 from graphsvc.strategies.olng.pose import pose_model
-from graphsvc.strategies.options import Options, OlngOptions
-from graphsvc.strategies.viterbi.costs import track_pull
+from graphsvc.strategies.olng.options import OlngOptions
+from graphsvc.strategies.options import Options, track_pull
 
 
 def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
@@ -38,9 +38,9 @@ def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
     return o
 
 
-def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options) -> OlngDecoder:
-    decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, options.olng),
-                          track_pull(options.track_pull_s, float(graph.rate_hz)))  # fmt: skip
+def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options, own: OlngOptions) -> OlngDecoder:
+    decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, own),
+                          track_pull(options.shared.track_pull_s, float(graph.rate_hz)))  # fmt: skip
     decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry "up" vectors)
     return decoder
 
@@ -55,6 +55,8 @@ class OlngStrategy(Strategy):
     needs = frozenset({"accelerations"})
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})
     summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
+    options_class = OlngOptions
+    shared = frozenset({"track_pull_s"})  # the tracker is followed as the Viterbi search follows it
 
     def prepare(self, graph: MotionGraph) -> OlngIndex:
         return load_index(graph)
@@ -66,13 +68,13 @@ class OlngStrategy(Strategy):
         out = frame_by_frame_ignored(options)  # every frame is final as its sample arrives
         if options.weights.acc != 1.0:
             out.append("weights.acc")  # (its own energy weights: olng)
-        return out
+        return sorted(out + super().ignored_options(options))
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
         t0 = time.perf_counter()
         idx = index.with_allowed(allowed)
-        decoder = make_decoder(graph, idx, options)
+        decoder = make_decoder(graph, idx, options, self.own(options))
         up = inp.up if options.weights.orientation > 0 else None
         if up is not None:
             idx.oriented_tree(decoder.up_weight)  # (made once per weight, with the warm-up's time)
@@ -87,8 +89,6 @@ class OlngStrategy(Strategy):
         labels, rows = [], []
         for t in range(T):
             if should_stop is not None and t % 64 == 0 and should_stop():
-                from graphsvc.errors import SearchCancelled
-
                 raise SearchCancelled("reconstruction cancelled")
             r, tr, sources, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
                                                       None if heading is None else heading[t],
@@ -152,14 +152,10 @@ def warm_up(graph: MotionGraph, index: OlngIndex) -> None:
 class OlngSession(LiveSession):
     """OLNG live: each grid sample's frame as it arrives (lag 0)."""
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None,
-                 orientations: bool = False):  # fmt: skip
-        from graphsvc.strategies.base import prepared_index
-
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
+    def _open(self, allowed, threads: bool) -> None:
+        graph, options = self.graph, self.options
         index = prepared_index(self.strategy, graph)
-        self.decoder = make_decoder(graph, index.with_allowed(allowed), options)
+        self.decoder = make_decoder(graph, index.with_allowed(allowed), options, self.own)
         if self.reads_up:
             self.decoder.index.oriented_tree(self.decoder.up_weight)  # (made now, not on a client's first sample)
         warm_up(graph, index)
@@ -182,3 +178,4 @@ class OlngSession(LiveSession):
 
 
 OlngStrategy.session_class = OlngSession
+STRATEGY = OlngStrategy()

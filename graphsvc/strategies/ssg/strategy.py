@@ -21,19 +21,23 @@ from __future__ import annotations
 import json
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
-from graphsvc.errors import InputError
+from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
+from graphsvc.sensors.markers import PRESETS as MARKER_PRESETS
 from graphsvc.sensors.markers import TRUNK_SEGMENTS, MarkerSet, keep_markers, load_marker_set, marker_set_from_dict
-from graphsvc.strategies.base import Strategy
+from graphsvc.sensors.simulate import simulate_marker_recording
+from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
-from graphsvc.strategies.options import Options, SsgOptions
+from graphsvc.strategies.options import Options, on_field
+from graphsvc.strategies.ssg.options import SsgOptions, parse_marker_set
 from graphsvc.strategies.ssg import dtw
 from graphsvc.strategies.ssg.decoder import SsgDecoder, Windows
 from graphsvc.strategies.ssg.graph import BACKWARD, FORWARD, RETRIEVED
@@ -44,18 +48,6 @@ from graphsvc.strategies.ssg.synthesis import poses, provenance
 # A knowledge-base cloud holds at most this many points (markers × frames of the point
 # window): with many markers the window keeps fewer frames (its ends, its centre).
 MAX_POINTS = 64
-
-
-def parse_marker_set(text: str) -> MarkerSet:
-    """A marker set from an option: a built-in name, a file, or a set as JSON text."""
-    text = text.strip()
-    if text.startswith("{"):
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"marker set JSON does not parse: {exc.msg}") from None
-        return marker_set_from_dict(data, "marker set")
-    return load_marker_set(text)
 
 
 def used_markers(options: SsgOptions, names: tuple, meta: dict | None) -> tuple[MarkerSet, np.ndarray, list, list]:
@@ -131,6 +123,7 @@ class SsgStrategy(Strategy):
     needs = frozenset({"markers"})
     uses = frozenset({"markers"})
     summary = "sparse, gappy optical markers: the subsequences of the knowledge base that fit each window, joined"
+    options_class = SsgOptions
 
     def prepare(self, graph: MotionGraph) -> SsgIndex:
         return load_index(graph)
@@ -139,10 +132,78 @@ class SsgStrategy(Strategy):
         warm_up()
 
     def ignored_options(self, options: Options) -> list[str]:
-        out = [name for name, v in (("beam", options.beam),) if v is not None]
-        if options.heading_from_track:
-            out.append("heading_from_track")
-        return out
+        out = ["heading_from_track"] if options.heading_from_track else []
+        return sorted(out + super().ignored_options(options))
+
+    def options_for_recording(self, options: Options, rec) -> Options:
+        """The marker set the recording names when the options name none, and "auto"
+        offsets as "nominal" for a recording graphsvc simulated (auto fits the offsets
+        unless it was): what the recording's provenance decides, for a client that does
+        not send it."""
+        o = self.own(options)
+        meta = rec.meta or {}
+        if o.markers is None and isinstance(meta.get("marker_set"), dict):
+            o = replace(o, markers=json.dumps(meta["marker_set"], sort_keys=True))
+        if o.offsets == "auto" and meta.get("simulated"):
+            o = replace(o, offsets="nominal")
+        return replace(options, own=o)
+
+    def describe_lag(self, rate_hz: float) -> str:
+        return "within S (at least a window and a step)"
+
+    def to_wire(self, own: SsgOptions) -> SsgOptions:
+        """A marker set that is neither a built-in name nor JSON text is a file on this
+        side: sent as its JSON."""
+        text = None if own.markers is None else own.markers.strip()
+        if text is None or text.startswith("{") or text in MARKER_PRESETS:
+            return own
+        return replace(own, markers=json.dumps(load_marker_set(text).to_dict(), sort_keys=True))
+
+    def check_wire(self, values: dict, chosen: bool) -> None:
+        text = values.get("markers")
+        if text is None:
+            if chosen:  # (the library would take the recording's own set, which does not cross the wire)
+                raise on_field(InputError(f"strategy {self.name!r} needs a marker set: a built-in name "
+                                          f"({', '.join(MARKER_PRESETS)}) or a marker set as JSON"), "markers")  # fmt: skip
+            return
+        if isinstance(text, str) and not text.strip().startswith("{") and text.strip() not in MARKER_PRESETS:
+            raise on_field(InputError(f"unknown marker set {text!r}: not a built-in set ({', '.join(MARKER_PRESETS)}) "
+                                      "nor a marker set as JSON (the server reads no files)"), "markers")  # fmt: skip
+
+    def check_stream(self, options: Options, sensor_names, marker_names) -> None:
+        if not marker_names:
+            raise on_field(InputError(f"strategy {self.name!r} needs the names of the markers the stream carries"),
+                           "marker_names")  # fmt: skip
+        if self.own(options).offsets == "fit":
+            raise InputError("SSG offsets 'fit' needs the whole input: fit them in a batch run (its report's "
+                             "fitted_marker_set) and stream with that set")  # fmt: skip
+        try:
+            used_markers(self.own(options), tuple(marker_names), None)
+        except GraphsvcError as exc:  # none of the set's (kept) markers among the stream's
+            raise on_field(exc, "marker_names") from None
+
+    def check_simulation(self, options: Options) -> None:
+        if not self.own(options).markers:
+            raise InputError(f"--strategy {self.name} reads optical markers: give the set to simulate, --markers")
+
+    def simulate_input(self, motion, layout, options: Options, noise, seed: int, rate_hz: float, mapping=None,
+                       pattern=None):  # fmt: skip
+        """The markers of the options' set (those kept) lost to `pattern`."""
+        self.check_simulation(options)
+        o = self.own(options)
+        kwargs = {} if pattern is None else {"pattern": pattern}
+        return simulate_marker_recording(motion, load_marker_set(o.markers), noise, seed=seed, rate_hz=rate_hz,
+                                         mapping=mapping, keep=o.keep, **kwargs)  # fmt: skip
+
+    def describe_input(self, options: Options, noise, pattern=None) -> str:
+        o = self.own(options)
+        kept = f" ({','.join(o.keep)})" if o.keep else ""
+        text = f"markers {o.markers}{kept}, σ {noise.marker:g} mm"
+        if pattern is not None:
+            text += ((f", {100 * pattern.gap_fraction:g} % in gaps" if pattern.gap_fraction else "")
+                     + (f", gaps {pattern.gaps}" if pattern.gaps else "")
+                     + (f", flicker {100 * pattern.flicker:g} %" if pattern.flicker else ""))  # fmt: skip
+        return text
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
@@ -151,16 +212,17 @@ class SsgStrategy(Strategy):
         idx = index.with_allowed(allowed)
         if idx.searchable == 0:
             raise InputError("every knowledge-base frame is hidden: nothing to search")
-        used, columns, ignored, missing = used_markers(options.ssg, inp.marker_names, inp.meta)
+        own = self.own(options)
+        used, columns, ignored, missing = used_markers(own, inp.marker_names, inp.meta)
         points = np.asarray(inp.markers, dtype=np.float64)[:, columns]
         seen = np.isfinite(points).all(axis=-1)
         if not seen.any():
             raise InputError(f"every kept marker ({', '.join(used.marker_names)}) is missing for the whole input")
         points = np.where(seen[..., None], points, 0.0)
         rate = float(graph.rate_hz)
-        w, resolved = windows_for(used, options.ssg, rate)
+        w, resolved = windows_for(used, own, rate)
         lag = lag_windows(options.latency_s, w, rate, looks_ahead(rate))
-        mode = options.ssg.offsets
+        mode = own.offsets
         fit = mode == "fit" or (mode == "auto" and not inp.meta.get("simulated"))
         warm_up_s = time.perf_counter() - t0
 
@@ -294,18 +356,11 @@ class SsgSession(LiveSession):
     then. Offsets are the set's own (a fitted set from a batch run's report can be
     passed as the marker set)."""
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None,
-                 orientations: bool = False):  # fmt: skip
-        from graphsvc.strategies.base import prepared_index
-
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
-        if options.ssg.offsets == "fit":
-            raise InputError("SSG offsets 'fit' needs the whole input: fit them in a batch run (its report's "
-                             "fitted_marker_set) and stream with that set")  # fmt: skip
+    def _open(self, allowed, threads: bool) -> None:
+        graph, options = self.graph, self.options
         index = prepared_index(self.strategy, graph).with_allowed(allowed)
-        self.used, self.columns, self.ignored, self.missing = used_markers(options.ssg, self.marker_names, None)
-        self.windows, _ = windows_for(self.used, options.ssg, self.rate)
+        self.used, self.columns, self.ignored, self.missing = used_markers(self.own, self.marker_names, None)
+        self.windows, _ = windows_for(self.used, self.own, self.rate)
         latency = self.DEFAULT_LATENCY_S if options.latency_s is None else options.latency_s
         lag = lag_windows(latency, self.windows, self.rate, looks_ahead(self.rate))
         kb_markers, kb = _prepared_markers(graph, index, self.used, None)
@@ -331,9 +386,11 @@ class SsgSession(LiveSession):
         return out
 
     def _finish(self):
-        if not self.any_seen:
-            raise InputError(f"every kept marker ({', '.join(self.used.marker_names)}) was missing for the whole stream")
+        if not self.any_seen:  # (as a batch run refuses such a recording; a stream can only tell at its end)
+            raise on_field(InputError(f"every kept marker ({', '.join(self.used.marker_names)}) is NaN in all "
+                                      f"{self.samples_in} samples: nothing to match"), "marker_positions_m")  # fmt: skip
         return self._frames(self.decoder.finish())
 
 
 SsgStrategy.session_class = SsgSession
+STRATEGY = SsgStrategy()

@@ -3,7 +3,9 @@ motion graph that best explains the accelerometers, the overhead tracker's groun
 position and heading and the animator's constraints, synthesized on the
 knowledge-base skeleton.
 
-- `strategy`: the strategy (batch reconstruction) and its live session.
+- `options`: its own options (`ViterbiOptions`: the beam).
+- `strategy`: the strategy (batch reconstruction) and its live session; `STRATEGY`, the
+  instance the registry registers.
 - `costs`: the cost terms L(e, t) = W_A·C_A + W_P·C_P + W_O·C_O and the path state
   they read, with the list of every place each term is computed.
 - `tables`: the graph's arrays in the search's layouts (`SearchIndex`).
@@ -18,6 +20,7 @@ knowledge-base skeleton.
 - `intrinsics`: LLVM instructions for the hot loops; the threaded and serial compile.
 """
 
-from graphsvc.strategies.viterbi.strategy import ViterbiSession, ViterbiStrategy, warm_up
+from graphsvc.strategies.viterbi.options import ViterbiOptions
+from graphsvc.strategies.viterbi.strategy import STRATEGY, ViterbiSession, ViterbiStrategy, warm_up
 
-__all__ = ["ViterbiSession", "ViterbiStrategy", "warm_up"]
+__all__ = ["STRATEGY", "ViterbiOptions", "ViterbiSession", "ViterbiStrategy", "warm_up"]

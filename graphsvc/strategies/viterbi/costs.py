@@ -66,17 +66,9 @@ import numba
 import numba.extending
 import numpy as np
 
+from graphsvc.strategies.options import track_pull  # noqa: F401  (the pull's α, for the search)
 from graphsvc.strategies.viterbi.intrinsics import compile_kernel as _compile
 from graphsvc.strategies.viterbi.intrinsics import fma as _fma
-
-
-def track_pull(pull_s: float | None, rate_hz: float) -> float:
-    """The share α of the gap to the measured position a path's placement closes each
-    sample, for a time constant of pull_s seconds at rate_hz: 1 − exp(−1 / (pull_s ·
-    rate)); 0 (never pulled: placed once, at the start) for None or 0."""
-    if not pull_s:
-        return 0.0
-    return float(-np.expm1(-1.0 / (float(pull_s) * float(rate_hz))))
 
 
 def pull_row(alpha: float, position, counts: bool) -> np.ndarray:

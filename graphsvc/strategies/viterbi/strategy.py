@@ -29,7 +29,8 @@ from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
 from graphsvc.strategies.start import start_placement, start_samples, start_state
-from graphsvc.strategies.options import Options, check_constraints
+from graphsvc.strategies.options import Options, Weights, check_constraints
+from graphsvc.strategies.viterbi.options import ViterbiOptions
 from graphsvc.synthesis.path import pulled_track, synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer
 
@@ -39,6 +40,15 @@ class ViterbiStrategy(Strategy):
     needs = frozenset({"accelerations"})
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading", "constraints"})
     summary = "the motion-graph path that best explains the readings, the track and the constraints"
+    options_class = ViterbiOptions
+    shared = frozenset({"track_pull_s"})
+
+    def describe_lag(self, rate_hz: float) -> str:
+        s = ViterbiSession
+        tail, total = s.synthesis_lag_frames(rate_hz), s.output_lag_frames(rate_hz)
+        return (f"at most round(S × rate) + {tail} frames after its sample at {rate_hz:g} Hz ({tail} for the synthesis' "
+                f"blend look-ahead and its batches of {s.SYNTH_BATCH} frames): {total} frames ({total / rate_hz:.2f} s) "
+                f"by default (and none before the search starts, 1 s in)")  # fmt: skip
 
     def prepare(self, graph: MotionGraph) -> SearchIndex:
         return search_index(graph)  # (its tables are made on first use: by the warm-up at load)
@@ -52,6 +62,7 @@ class ViterbiStrategy(Strategy):
         rate = float(graph.rate_hz)
         T = acc.shape[0]
         w = options.weights
+        beam, pull_s = self.own(options).beam, options.shared.track_pull_s
         use_pos = position if w.position else None
         use_head = heading if w.heading else None
         # numba compiles (or loads) the search and synthesis kernels and the graph's tables
@@ -70,12 +81,12 @@ class ViterbiStrategy(Strategy):
         start = start_placement(position, heading, rate)
         start_ground, start_heading = start_state(position, heading, rate)
         # The positions the search pulls its paths toward, which synthesis follows too.
-        alpha = track_pull(options.track_pull_s, rate)
+        alpha = track_pull(pull_s, rate)
         targets = pull_targets(use_pos, T)
         if options.latency_s is None:
             result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                    should_stop=should_stop, beam=options.beam, start=start,
-                                    pull_s=options.track_pull_s, up=inp.up)  # fmt: skip
+                                    should_stop=should_stop, beam=beam, start=start,
+                                    pull_s=pull_s, up=inp.up)  # fmt: skip
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
@@ -87,8 +98,8 @@ class ViterbiStrategy(Strategy):
         else:
             lag = int(round(options.latency_s * rate))
             decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
-                                      needs_placement(w, use_pos, use_head), beam=options.beam,
-                                      start_samples=start_samples(rate), pull_s=options.track_pull_s,
+                                      needs_placement(w, use_pos, use_head), beam=beam,
+                                      start_samples=start_samples(rate), pull_s=pull_s,
                                       oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
                                          pull_alpha=alpha)  # fmt: skip
@@ -123,7 +134,7 @@ class ViterbiStrategy(Strategy):
                      "converged_early_frames": decoder.converged_frames, "compression": round(s.compression, 2),
                      "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
         if alpha and np.isfinite(targets).all(axis=1).any():
-            extra["track_pull_s"] = float(options.track_pull_s)  # (the paths and the root followed the tracker)
+            extra["track_pull_s"] = float(pull_s)  # (the paths and the root followed the tracker)
         report = {
             **extra,
             "labels": path_labels(graph, nodes),
@@ -155,17 +166,15 @@ class ViterbiSession(LiveSession):
     default, since a live server runs many sessions side by side (it turns them on
     while a session runs alone: `threads`)."""
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None,
-                 orientations: bool = False):  # fmt: skip
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
+    def _open(self, allowed, threads: bool) -> None:
+        graph, options = self.graph, self.options
         constraints = check_constraints(options.constraints or [], graph)
         self.decoder = FixedLagDecoder(graph, options.weights, self.decoder_lag(self.rate, options.latency_s),
-                                       constraints, allowed, self.rate, threads, beam=options.beam,
+                                       constraints, allowed, self.rate, threads, beam=self.own.beam,
                                        start_samples=start_samples(self.rate),
-                                       pull_s=options.track_pull_s, oriented=self.reads_up)  # fmt: skip
+                                       pull_s=options.shared.track_pull_s, oriented=self.reads_up)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
-        self.pull_alpha = track_pull(options.track_pull_s, self.rate)
+        self.pull_alpha = track_pull(options.shared.track_pull_s, self.rate)
         self.counts_position = options.weights.position != 0
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
@@ -232,14 +241,13 @@ class ViterbiSession(LiveSession):
 
 
 ViterbiStrategy.session_class = ViterbiSession
+STRATEGY = ViterbiStrategy()
 
 
 def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     """Run a few samples through a live session and a batch search, so numba's
     compilation (or loading from its cache) and the graph's search tables are paid at
     load, not by the first client. Returns the seconds it took."""
-    from graphsvc.strategies.options import Weights
-
     t0 = time.perf_counter()
     S = len(graph.sensor_names)
     rng = np.random.default_rng(0)
@@ -248,7 +256,8 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     acc[:, :, 1] += 9.81
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     heading = np.zeros(T)
-    session = ViterbiSession(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2), threads=threads)
+    session = ViterbiSession(STRATEGY, graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2, own=ViterbiOptions()),
+                             threads=threads)  # fmt: skip
     for t in range(T):
         session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
     session.flush()

@@ -25,13 +25,13 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.strategies.base import frame_by_frame_ignored, Strategy
+from graphsvc.strategies.base import Strategy, frame_by_frame_ignored, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
 from graphsvc.strategies.start import first_measured
 from graphsvc.strategies.index import cached_arrays, frame_readings
-from graphsvc.strategies.options import TRACK_PULL_S, Options
+from graphsvc.strategies.options import Options
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer
 
@@ -75,6 +75,9 @@ class NearestStrategy(Strategy):
     uses = frozenset({"accelerations", "ground_position", "heading"})  # the track only places the start
     summary = "per sample the knowledge-base frame with the nearest readings: the floor a search must beat"
 
+    def describe_lag(self, rate_hz: float) -> str:
+        return f"{NearestSession.synthesis_lag_frames(rate_hz)} frames (the synthesis' blend), whatever S"
+
     def prepare(self, graph: MotionGraph):
         return cached_arrays(graph, self.name, INDEX_VERSION, lambda: _build_arrays(graph))
 
@@ -82,10 +85,9 @@ class NearestStrategy(Strategy):
         warm_up_synthesis(graph)
 
     def ignored_options(self, options: Options) -> list[str]:
-        out = frame_by_frame_ignored(options)  # each frame is decided from its own sample
-        if options.track_pull_s != TRACK_PULL_S:
-            out.append("track_pull_s")  # (its start is placed from the track, no path follows it)
-        return out
+        # each frame is decided from its own sample; the track only places its start, no
+        # path follows it (the shared track pull is not among what it reads)
+        return sorted(frame_by_frame_ignored(options) + super().ignored_options(options))
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
@@ -146,12 +148,8 @@ class NearestSession(LiveSession):
     """`nearest` live: each sample's frame at once, synthesized a few frames behind
     (the blend at a jump reaches half its window forward)."""
 
-    def __init__(self, graph: MotionGraph, options: Options = Options(), sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None,
-                 orientations: bool = False):  # fmt: skip
-        from graphsvc.strategies.base import prepared_index
-
-        super().__init__(graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations)
+    def _open(self, allowed, threads: bool) -> None:
+        graph = self.graph
         self.index = _index(graph, prepared_index(self.strategy, graph), allowed)
         self.synth: StreamingSynthesizer | None = None
         self.start_position: np.ndarray | None = None
@@ -183,3 +181,4 @@ class NearestSession(LiveSession):
 
 
 NearestStrategy.session_class = NearestSession
+STRATEGY = NearestStrategy()

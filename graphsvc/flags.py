@@ -1,0 +1,276 @@
+"""The reconstruction's command-line flags as a library: the CLI's `synthesize`,
+`evaluate`, `client` and `sensor-bridge`, a batch manifest's `options` column and the
+service's batches all parse them here, with the same checks and messages.
+
+What every strategy reads has its own flags (`--strategy`, `--weights`, `--latency`,
+the heading rule, `--constraints`). The shared options and each registered strategy's
+own options are derived from their declarations (`strategies.options.option`): a flag
+`--<strategy>-<field>` for each field (`--<field>` for a shared one), a strategy's
+`flag_groups` as one comma-separated flag, and the field's declared aliases (today's
+names: `--beam`, `--track-pull`, `--markers`, `--keep`, `--ssg-window` …) beside it; a
+bool field takes `--x` / `--no-x` and its declared negations (`--olng-basic-steps`).
+Values are parsed by type here and checked, with the field named, by the options'
+declarations (`strategies.check_options`). A strategy installed as a plug-in gets its
+flags with no edit here.
+
+Also the argument types every command uses (`Parser`, one line and exit 2 on a bad
+argument; `ranged`, `PATH`) and how an OSError reads.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+
+from graphsvc.strategies.options import ORIENTATION_WEIGHT, Options, SharedOptions, from_values, option_specs
+
+
+class Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a value starting with a minus and a digit is a value, not an option: number lists
+        # such as `--weights -1,1,1` reach our own validation (argparse knows only -1, -.5)
+        self._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
+
+    def error(self, message):  # one line, exit 2, like every other user error
+        self.exit(2, f"graphsvc: error: {message} (see --help)\n")
+
+
+def _number(kind, text: str, low: float, high: float, low_open: bool):
+    try:
+        value = kind(text)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+    if not math.isfinite(value) or value > high or (value <= low if low_open else value < low):
+        bound = f"> {low:g}" if low_open else f"≥ {low:g}"
+        raise argparse.ArgumentTypeError(f"{text!r} must be finite, {bound} and at most {high:g}")
+    return value
+
+
+def ranged(kind, low: float, high: float, low_open: bool = False):
+    """An argparse `type`: a finite int or float in [low, high] ((low, high] when
+    low_open); anything else is refused with one line, exit 2."""
+
+    def convert(text: str):
+        return _number(kind, text, low, high, low_open)
+
+    convert.__name__ = "integer" if kind is int else "number"  # (argparse names the type in its message)
+    return convert
+
+
+def PATH(text: str) -> str:  # noqa: N802 (an argparse type, named as the others)
+    """An argparse `type` for a file or folder path: an empty string is refused (it is
+    not the current folder), with one line, exit 2."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path is not a file or folder")
+    return text
+
+
+PATH.__name__ = "path"
+
+SEED = ranged(int, 0, 2**63 - 1)
+RATE_HZ = ranged(float, 0.0, 100_000.0, low_open=True)  # (sensors.recording.MAX_RATE_HZ)
+COUNT = ranged(int, 1, 4096)  # threads, workers, streams
+
+
+def os_message(exc: OSError) -> str:
+    where = f"{exc.filename}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc}"
+
+
+# ---------------------------------------------------------------- declared options as flags
+
+
+def _parse_int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def _parse_float(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def _parse_names(text: str) -> tuple[str, ...] | None:
+    names = tuple(n.strip() for n in str(text).split(",") if n.strip())
+    return names or None
+
+
+_PARSE = {int: _parse_int, float: _parse_float, str: str, tuple: _parse_names}
+
+
+def _numbers(count: int, metavar: str):
+    def convert(text: str):
+        try:
+            values = [float(v) for v in str(text).split(",")]
+        except ValueError:
+            values = []
+        if len(values) != count:
+            words = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six"}
+            raise argparse.ArgumentTypeError(f"{text!r} must be {words.get(count, count)} numbers {metavar}")
+        return values
+
+    convert.__name__ = "numbers"
+    return convert
+
+
+def _dest(owner: str, field: str) -> str:
+    return f"option__{owner}__{field}"
+
+
+def _add_declared(g, owner: str | None, cls) -> None:
+    """Flags for every declared field of `cls` (a strategy's own options, owner its
+    name; or the shared ones, owner None) into argument group `g`."""
+    for spec in option_specs(cls):
+        stem = spec.name.replace("_", "-")
+        flags = [f"--{owner}-{stem}" if owner else f"--{stem}", *spec.aliases]
+        dest = _dest(owner or "shared", spec.name)
+        if spec.kind is bool:
+            g.add_argument(*flags, dest=dest, action=argparse.BooleanOptionalAction, default=None, help=spec.help)
+            for neg in spec.negated:
+                g.add_argument(neg, dest=dest, action="store_const", const=False,
+                               help=f"the same as --no-{flags[0][2:]}")  # fmt: skip
+            continue
+        g.add_argument(*flags, dest=dest, type=_PARSE[spec.kind], default=None, choices=spec.choices,
+                       metavar=None if spec.choices else (spec.metavar or stem.upper()), help=spec.help)  # fmt: skip
+    for group, fields in getattr(cls, "flag_groups", {}).items():
+        metavar = ",".join(f.split("_", 1)[-1].upper() for f in fields)
+        g.add_argument(f"--{owner}-{group}", dest=_dest(owner, f"group:{group}"), type=_numbers(len(fields), metavar),
+                       default=None, metavar=metavar, help=f"{', '.join(fields)} at once")  # fmt: skip
+
+
+def _given(args, owner: str, cls) -> dict:
+    """{field: value} of the flags of `cls` given on the command line (a flag group
+    spread over its fields; a field's own flag wins over its group's)."""
+    values = {}
+    for group, fields in getattr(cls, "flag_groups", {}).items():
+        v = getattr(args, _dest(owner, f"group:{group}"), None)
+        if v is not None:
+            values.update(zip(fields, v))
+    for spec in option_specs(cls):
+        v = getattr(args, _dest(owner, spec.name), None)
+        if v is not None:
+            values[spec.name] = v
+    return values
+
+
+# ---------------------------------------------------------------- the search flags
+
+
+def add_search_flags(p, constraints: bool = True, latency_help: str | None = None) -> None:
+    """The flags of a reconstruction (module docstring). latency_help: --latency's help
+    where the command streams (a live session's lag is its default there)."""
+    from graphsvc.strategies import DEFAULT, available, get, names
+
+    p.add_argument("--strategy", default=DEFAULT, choices=names(),
+                   help=f"reconstruction strategy (default {DEFAULT}): "
+                        + "; ".join(f"{n}: {get(n).summary}" for n in available()))  # fmt: skip
+    p.add_argument("--weights", default="1,1,1", metavar="A,P,O[,R]",
+                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad), sensor"
+                        " orientation (per chord², where the recording has orientations); default 1,1,1,"
+                        f"{ORIENTATION_WEIGHT:g}")
+    if constraints:
+        p.add_argument("--constraints", metavar="FILE", type=PATH,
+                       help="annotation constraint sets (JSON), replacing the recording's (default: the recording's)")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help=latency_help or "fixed-lag decoding with this lag in seconds, as a live stream would (default: "
+                                        "whole input)")  # fmt: skip
+    p.add_argument("--heading-from-track", action="store_true",
+                   help="derive heading from the ground positions: direction of travel above --speed-threshold "
+                        "(default: the recording's heading)")
+    p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
+                   help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
+    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S",
+                   help="with --heading-from-track: the speed above which heading is the direction of travel (default "
+                        "2 m/s, Kelly et al.)")
+    _add_declared(p.add_argument_group("shared by the strategies that use them"), None, SharedOptions)
+    for name in available():
+        s = get(name)
+        if option_specs(s.options_class):
+            _add_declared(p.add_argument_group(f"--strategy {name}"), name, s.options_class)
+
+
+def options_from_flags(args) -> tuple[Options, list[str]]:
+    """(Options, notes) from `add_search_flags`' flags: the chosen strategy's own options,
+    the shared ones, and those given for other strategies (kept, and listed as ignored
+    in the report); notes: one line for each flag of another strategy that was given.
+    InputError (an `OptionError` naming the flag's field) for a value refused."""
+    from graphsvc.strategies import available, get
+    from graphsvc.strategies.options import load_constraints, parse_weights
+
+    constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
+    shared = from_values(SharedOptions, _given(args, "shared", SharedOptions))
+    settings, notes = {}, []
+    for name in available():
+        cls = get(name).options_class
+        given = _given(args, name, cls)
+        if given:
+            settings[name] = from_values(cls, given)
+            if name != args.strategy:
+                notes.append(f"--{name}-… options apply to --strategy {name}; ignored with --strategy {args.strategy} "
+                             f"({', '.join(sorted(given))})")  # fmt: skip
+    options = Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
+                      heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
+                      speed_threshold=args.speed_threshold, constraints=constraints, shared=shared,
+                      settings=settings)  # fmt: skip
+    return options, notes
+
+
+# ---------------------------------------------------------------- reading a recording file
+
+
+def add_marker_flags(p) -> None:
+    """--markers and --keep of `simulate`: the marker set to simulate and the markers kept."""
+    p.add_argument("--markers", metavar="SET", type=PATH,
+                   help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file (JSON/TOML)")
+    p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated; default: all)")
+
+
+def add_input_file_flags(p) -> None:
+    """--up, --units and --device-map: how to read a recording file where it does not say,
+    and how to name a device's sensors as the graph's layout does."""
+    p.add_argument("--up", choices=("y", "z"),
+                   help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
+                        "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
+    p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
+                   help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
+                        "unit (g, m/s2); default: what the file says")
+    p.add_argument("--device-map", metavar="xsens|FILE", type=PATH,
+                   help="rename a device's sensors to the graph layout's: xsens (Xsens segment names, the built-in map "
+                        "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
+
+
+def add_calibration_flag(p) -> None:
+    """--calibration: a device-frame recording's mounting calibration (`graphsvc calibrate`)."""
+    p.add_argument("--calibration", metavar="CAL.json", type=PATH,
+                   help="turn a device-frame recording into the layout's sensor frames with this calibration "
+                        "(`graphsvc calibrate`; default: none)")
+
+
+def add_synthesize_flags(p) -> None:
+    """Every flag of `synthesize` but its files: the search flags, how to read the
+    recording, the BVH scale (a batch manifest's `options` column takes the same)."""
+    add_search_flags(p)
+    add_input_file_flags(p)
+    add_calibration_flag(p)
+    p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
+
+
+def synthesize_inputs(args) -> list[tuple[str, str | None]]:
+    """The files a `synthesize` (or `client synthesize`) reads, as (what, path) pairs for
+    `fileio.check_outputs`: no output may replace one of them."""
+    from pathlib import Path
+
+    named = lambda v: None if v in (None, "xsens") else v  # noqa: E731 (a built-in name is no file)
+    files = [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
+             ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
+             ("the device map", named(getattr(args, "device_map", None)))]  # fmt: skip
+    # a strategy's option that names a file (a marker set file, say)
+    files += [(f"the file of --{k.split('__')[1]}-{k.split('__')[2]}", v) for k, v in sorted(vars(args).items())
+              if k.startswith("option__") and isinstance(v, str) and Path(v).is_file()]  # fmt: skip
+    return files
