@@ -140,7 +140,7 @@ def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=N
     (device_map), its readings turned into the layout's frames (calibration). notes:
     a list that collects remarks for the user, or None."""
     from graphsvc.errors import InputError
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     rec = read_recording(recording_path, up=up, units=units)
     if device_map:

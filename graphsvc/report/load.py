@@ -62,7 +62,7 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
     from graphsvc.motion.library import load_motion
     from graphsvc.motion.resample import resample
     from graphsvc.pipeline import read_searched_recording
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
@@ -140,7 +140,7 @@ def keep_clip(folder: Path, stem: str, motion, truth, rec, timeline: dict, per_f
 
 def kept_view(folder: Path, files: dict, row: dict) -> dict:
     from graphsvc.motion.library import load_motion
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     doc = read_json_file(_file(files["view"], "kept clip", folder))
     motion = load_motion(_file(files["output"], "kept motion", folder))
