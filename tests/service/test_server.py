@@ -115,7 +115,7 @@ def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(con
                                                                             monkeypatch):  # fmt: skip
     # While a stream runs alone the server gives its steps numba's threads; the frames
     # are those of a serial LiveSession all the same.
-    from graphsvc.pipeline import open_session, Options
+    from graphsvc.pipeline import LiveSession, Options
 
     expected, _ = live_frames(graph, recording, Options())
     used = []  # whether each push and the flush ran with the threads
@@ -624,7 +624,7 @@ def test_recordings_with_orientations_and_markers_cross_the_wire(graph, recordin
 def test_a_stream_with_orientations_matches_a_live_session_given_them(conn, graph, recording):
     from dataclasses import replace
 
-    from graphsvc.pipeline import LiveSession, Options
+    from graphsvc.pipeline import Options, open_session
     from graphsvc.strategies.options import Weights
 
     # random orientations (none matches the path's sensors): the term weighs something
