@@ -135,9 +135,8 @@ def sensor_arrays(rec, motion: Motion, mapping=None, virtual: np.ndarray | None 
     and the path's virtual readings: `virtual` (T, S, 3) m/s² when given (a node
     path's edges, `strategies.sources.path_readings`), else those of `motion` itself
     (the same layout, no noise): {"names", "measured": [b64 (T, 3) int16 cm/s²],
-    "virtual": [...]}. None
-    for a recording without accelerations or without a layout, or a skeleton the
-    layout cannot be placed on."""
+    "virtual": [...]}. None for a recording without accelerations or without a layout,
+    or a skeleton the layout cannot be placed on."""
     if rec is None or rec.accelerations is None or not rec.accelerations.size or not rec.layout:
         return None
     from graphsvc.errors import GraphsvcError
@@ -213,10 +212,10 @@ def clip_view(name: str, motion: Motion, timeline: dict, rec=None, truth: Motion
     """Everything the page shows of one reconstruction (module docstring). motion:
     the output; timeline: `strategies.sources.timeline_from_*`'s; rec: the input
     recording (or None); truth: the true motion at the same rate (or None); per_frame:
-    its errors (`truth_errors`' per_frame; computed from `truth` when None); constraints: the
-    sets the search was given; labels: the output's per-frame labels (default: from
-    the timeline); info: a few lines shown above the viewer; virtual: the path's
-    virtual readings (`sensor_arrays`)."""
+    its errors (`truth_errors`' per_frame; computed from `truth` when None);
+    constraints: the sets the search was given; labels: the output's per-frame labels
+    (default: from the timeline); info: a few lines shown above the viewer; virtual:
+    the path's virtual readings (`sensor_arrays`)."""
     T = motion.num_frames
     figures = [figure_arrays(motion, "reconstruction", mapping)]
     if truth is not None:
