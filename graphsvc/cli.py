@@ -231,8 +231,9 @@ def _cmd_synthesize(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
-    from graphsvc.sensors.calibration import calibrate, save_calibration
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.graph.calibration import calibrate
+    from graphsvc.sensors.calibration import save_calibration
+    from graphsvc.sensors.files import read_recording
 
     out = Path(args.output)
     check_outputs([("-o", out, (".json",))], [("the recording", args.recording), ("the graph", args.graph),

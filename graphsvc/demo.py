@@ -18,6 +18,7 @@ import numpy as np
 
 from graphsvc import precompile
 from graphsvc.errors import GraphsvcError
+from graphsvc.evaluate.metrics import truth_errors
 from graphsvc.evaluate.report import plot_errors
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.motion import signals
@@ -27,9 +28,10 @@ from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.pipeline import Options, reconstruct
-from graphsvc.report.gather import clip_view, path_readings, timeline_from_nodes, truth_errors
+from graphsvc.report.gather import clip_view
 from graphsvc.report.html import write_html
 from graphsvc.strategies.options import Weights
+from graphsvc.strategies.sources import path_readings, timeline_from_nodes
 from graphsvc.strategies.viterbi.batch import warm_up_search
 from graphsvc.synthesis.path import warm_up_synthesis
 from graphsvc.sensors.layout import load_layout

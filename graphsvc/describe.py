@@ -10,9 +10,8 @@ from tqdm import tqdm
 
 from graphsvc.errors import InputError, UnknownFormatError
 from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
-from graphsvc.sensors.recording import describe_recording, read_recording
-
-RECORDING_SUFFIXES = (".rec", ".csv", ".c3d", ".mvnx")
+from graphsvc.sensors.files import RECORDING_SUFFIXES, read_recording
+from graphsvc.sensors.recording import describe_recording
 
 
 def describe_paths(paths: list[str], progress: bool | None = None) -> dict:

@@ -23,6 +23,7 @@ from graphsvc.strategies import check_options
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.base import prepared_index
 from graphsvc.strategies.inputs import prepare_input
+from graphsvc.strategies.sources import compact_sources
 
 # The names callers import from here: the library's face for a reconstruction.
 from graphsvc.sensors.grid import readings_at_rate  # noqa: F401, E402
@@ -103,7 +104,7 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     other output or has a suffix other than .bvh (output) and .json (report).
     The report's 'files' names the output, graph and recording (and how the recording
     was read); a strategy without a node path adds each frame's heaviest `sources`
-    (`report.gather.compact_sources`). notes: a list that
+    (`strategies.sources.compact_sources`). notes: a list that
     collects remarks for the user (None: dropped). Same inputs, same output bytes, with
     or without threads."""
     import json
@@ -126,8 +127,6 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     if read:  # (how the recording was read, for `graphsvc report`)
         result.report["files"]["read"] = read
     if result.node_path is None and result.provenance is not None:
-        from graphsvc.report.gather import compact_sources
-
         result.report["sources"] = compact_sources(result.provenance)
     # The report lands first: a BVH is never found without its report, even when the
     # process is killed between the two (a batch's outputs stay in pairs).
@@ -143,7 +142,7 @@ def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=N
     (device_map), its readings turned into the layout's frames (calibration). notes:
     a list that collects remarks for the user, or None."""
     from graphsvc.errors import InputError
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     rec = read_recording(recording_path, up=up, units=units)
     if device_map:

@@ -85,7 +85,7 @@ def test_relayout_killed_over_an_existing_graph_leaves_it_as_it_was(small_graph,
 
 @pytest.mark.parametrize("suffix", [".rec", ".csv"])
 def test_simulate_killed_writing_leaves_no_recording_and_a_rerun_completes(kb, tmp_path, suffix):
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     clip = sorted(kb.glob("*.bvh"))[0]
     out = tmp_path / f"sim{suffix}"
@@ -112,7 +112,7 @@ def test_synthesize_killed_anywhere_never_leaves_a_bvh_without_its_report(small_
 def test_batch_killed_writing_its_summary_reruns_to_completion(small_graph, kb, tmp_path):
     import json
 
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     clip = sorted(kb.glob("*.bvh"))[0]
     ok(graphsvc("simulate", clip, "--layout", "kelly6", "-o", tmp_path / "in.rec"))

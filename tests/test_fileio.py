@@ -18,8 +18,9 @@ def _readers():
     from graphsvc.motion.joints import load_mapping_file
     from graphsvc.sensors.calibration import load_calibration
     from graphsvc.sensors.devices import load_device_map, read_mvnx
+    from graphsvc.sensors.files import read_recording
     from graphsvc.sensors.optical import read_c3d, read_marker_csv
-    from graphsvc.sensors.recording import load_recording, read_recording
+    from graphsvc.sensors.recording import load_recording
     from graphsvc.service.client import read_token_file
     from graphsvc.service.server import read_tokens
     from graphsvc.strategies.options import load_constraints

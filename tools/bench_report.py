@@ -22,13 +22,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from graphsvc.graph.build import BuildOptions, build_graph  # noqa: E402
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance  # noqa: E402
 from graphsvc.pipeline import Options, Weights, reconstruct  # noqa: E402
-from graphsvc.report.gather import (  # noqa: E402
-    clip_view, path_readings, source_readings, timeline_from_nodes, timeline_from_sources,
-)  # fmt: skip
+from graphsvc.report.gather import clip_view  # noqa: E402
 from graphsvc.report.html import data_json, three_script, write_html  # noqa: E402
 from graphsvc.sensors.layout import load_layout  # noqa: E402
 from graphsvc.sensors.noise import PRESETS  # noqa: E402
 from graphsvc.sensors.simulate import simulate_recording  # noqa: E402
+from graphsvc.strategies.sources import (  # noqa: E402
+    path_readings, source_readings, timeline_from_nodes, timeline_from_sources,
+)  # fmt: skip
 
 
 def main() -> None:

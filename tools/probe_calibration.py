@@ -39,6 +39,7 @@ import numpy as np  # noqa: E402
 def main() -> int:
     from graphsvc.evaluate.loo import _global_signals, place_start
     from graphsvc.evaluate.metrics import joint_err_cm, root_err_cm
+    from graphsvc.graph.calibration import calibrate
     from graphsvc.graph.file import load_graph
     from graphsvc.motion import quat
     from graphsvc.motion.joints import joint_map
@@ -72,7 +73,7 @@ def main() -> int:
     match_motion = resample(load_motion(Path(args.data) / args.match_take), graph.rate_hz)
     take = simulate_recording(calib_motion, layout, noise, seed=args.seed)
     t0 = time.perf_counter()
-    cal = calibration.check_calibration(calibration.calibrate(take, args.pose, graph))
+    cal = calibration.check_calibration(calibrate(take, args.pose, graph))
     calib_s = time.perf_counter() - t0
     true = mounting(args.seed, names, noise.mount)
     # The calibration take's own misalignment (drawn as simulate_recording draws it).

@@ -289,8 +289,8 @@ def placed_motion(motion: Motion, d: float, g0, shift) -> Motion:
 def _keep(graph, setup: EvalSetup, motion, truth, rec, result, pred_labels, per_frame, fixes, starts) -> dict:
     """Write the clip's files into setup.keep_dir (`report.load.keep_clip`), the
     reconstruction placed as the metrics placed it."""
-    from graphsvc.report.gather import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
-    from graphsvc.report.load import keep_clip, kept_name
+    from graphsvc.evaluate.keep import keep_clip, kept_name
+    from graphsvc.strategies.sources import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
 
     out = result.motion
     (fix_position, fix_heading), (true_g0, true_h0, pred_ground, pred_heading) = fixes, starts

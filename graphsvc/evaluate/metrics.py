@@ -13,6 +13,10 @@ positions and headings are those of `graphsvc.motion.signals.ground_position` an
 Each metric returns `(per_frame, mean)`: a (T,) float array and its mean as a Python
 float. Every function raises `graphsvc.errors.InputError` on empty, non-finite or
 shape-mismatched input, so outputs never contain NaN.
+
+`truth_errors` scores two motions (a reconstruction against its truth: forward
+kinematics, the joints both skeletons have), and `error_arrays` rounds the per-frame
+errors for a JSON document (the report page, an evaluation's kept clips).
 """
 
 from __future__ import annotations
@@ -20,7 +24,11 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.errors import InputError
+from graphsvc.motion import signals
+from graphsvc.motion.joints import common_joints, joint_map
+from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.quat import wrap_angle
+from graphsvc.motion.skeleton import Motion
 
 METRICS = ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc")
 
@@ -222,3 +230,31 @@ def summarize(results: list[dict]) -> dict:
         weight = sum(int(r["frames"]) for r in have)
         mean[k] = float(sum(int(r["frames"]) * r[k] for r in have) / weight) if weight > 0 else None
     return {"clips": rows, "mean": mean}
+
+
+# ---------------------------------------------------------------- two motions, and for a JSON document
+
+
+def truth_errors(predicted: Motion, truth: Motion, pred_labels=None, true_labels=None,
+                 pred_mapping=None, true_mapping=None) -> dict:  # fmt: skip
+    """`evaluate_frames` of a reconstruction against its truth (both at one rate; the
+    shorter length counts): the scalar metrics and `per_frame` arrays."""
+    pt, tt = joint_map(predicted.skeleton, pred_mapping), joint_map(truth.skeleton, true_mapping)
+    names = common_joints(tt, pt)
+    _, pw = motion_fk(predicted)
+    _, tw = motion_fk(truth)
+    return evaluate_frames(
+        pw[:, [pt[c] for c in names]], tw[:, [tt[c] for c in names]],
+        signals.ground_position(pw, pt["pelvis"]), signals.heading(pw, pt),
+        signals.ground_position(tw, tt["pelvis"]), signals.heading(tw, tt),
+        pred_labels=pred_labels, true_label=true_labels, name=predicted.name,
+    )  # fmt: skip
+
+
+def error_arrays(per_frame: dict | None) -> dict | None:
+    """Per-frame joint, root (cm) and heading (°) errors rounded to 0.01, or None."""
+    if not per_frame:
+        return None
+    keys = ("joint_err_cm", "root_err_cm", "heading_err_deg")
+    return {k: [round(float(v), 2) if np.isfinite(v) else None for v in np.asarray(per_frame[k], dtype=np.float64)]
+            for k in keys if per_frame.get(k) is not None}  # fmt: skip

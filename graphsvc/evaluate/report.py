@@ -47,7 +47,7 @@ def plot_errors(path, rate_hz: float, per_frame: dict, pred_labels, true_labels,
     panel each, heading error (°) on the root panel's right axis, and two label strips
     (true above predicted), one colour per label. per_frame: `evaluate_frames`'s
     per-frame dict ((T,) arrays); pred_labels, true_labels: (T,) strings."""
-    import matplotlib
+    import matplotlib  # (here, not at start-up: only the plots need it)
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -81,7 +81,7 @@ def _amc(data: bytes) -> None:
 
 def _reader(suffix: str) -> Callable[[bytes], None]:
     def run(data: bytes) -> None:
-        from graphsvc.sensors.recording import read_recording
+        from graphsvc.sensors.files import read_recording
 
         read_recording(as_file(data, "in" + suffix))
 

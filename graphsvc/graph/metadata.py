@@ -28,6 +28,7 @@ from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.resample import resample_arrays
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.layout import Placement
+from graphsvc.sensors.orientation import sensor_up
 
 BEFORE, AFTER = 2, 3  # context frames of a bridge's readings: the 5-point stencil's reach, and b's frame q
 
@@ -304,26 +305,16 @@ def graph_placement(graph, layout=None):
     return anatomical_placement(layout, sk, mapping, world_rot, world_pos)
 
 
-def sensor_up(orientation: np.ndarray) -> np.ndarray:
-    """(..., 3) world +Y seen in the sensor frames of orientations (..., 4) w, x, y, z
-    (each the sensor frame's rotation into the world): R(q)ᵀ·ŷ, the second row of R(q),
-    a unit vector. NaN orientations give NaN."""
-    q = np.asarray(orientation, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)], axis=-1)
-
-
 # Nodes whose world poses are computed at a time (bounds the FK's memory on large graphs).
 _UP_CHUNK = 8192
 
 
 def edge_up_vectors(graph, layout) -> np.ndarray:
     """(E, S, 3) float16: each edge's sensor "up" — world +Y in each sensor's frame
-    (`sensor_up`) — for `layout`, from the graph's stored poses. An edge plays its
-    destination node's pose whatever its speed (a slow-down edge the slerped pose its
-    slow-down node stores, a bridge's exit edge clip b's frame turned about the
-    vertical, which leaves "up" alone), so every edge's is its destination's, placed as
+    (`sensors.orientation.sensor_up`) — for `layout`, from the graph's stored poses. An
+    edge plays its destination node's pose whatever its speed (a slow-down edge the
+    slerped pose its slow-down node stores, a bridge's exit edge clip b's frame turned
+    about the vertical, which leaves "up" alone), so every edge's is its destination's, placed as
     that node's readings are: on its clip's skeleton, a bridge's or an interpolated
     segment's on clip a's (`clip_placements`). The orientation cost is yaw-free (a rotation about the
     vertical leaves it unchanged), so "up" is all it needs of the sensor's rotation;

@@ -11,13 +11,14 @@ A view holds, for T frames at `rate_hz`:
   the camera: `centre_joint`, the pelvis), and `drawn`: the joints drawn, every joint
   but the centre's ancestors (`drawn_joints`: no bone from a root fixed at the origin,
   such as the Bandai-Namco skeleton's `joint_Root` above `Hips`);
-- `errors`: per-frame joint, root (cm) and heading (°) error, when the truth is known;
+- `errors`: per-frame joint, root (cm) and heading (°) error, when the truth is known
+  (`evaluate.metrics.truth_errors`, `error_arrays`);
 - `sensors`: per sensor the measured readings on the graph's grid and the virtual
   readings of the output motion (noise-free, the same layout), (T, 3) int16 cm/s²
   (−32768: missing), base64;
 - `markers`: measured optical markers (T, M, 3) as int32 mm (missing: −2³¹), for an
   input of markers;
-- `timeline`: the source of every frame (`timeline_from_nodes`,
+- `timeline`: the source of every frame (`strategies.sources`: `timeline_from_nodes`,
   `timeline_from_sources`);
 - `constraints`: each annotation constraint with the frames where it was met.
 
@@ -30,6 +31,7 @@ import base64
 
 import numpy as np
 
+from graphsvc.evaluate.metrics import error_arrays, truth_errors
 from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
@@ -121,34 +123,6 @@ def figure_arrays(motion: Motion, name: str, mapping=None) -> dict:
     return out
 
 
-def truth_errors(predicted: Motion, truth: Motion, pred_labels=None, true_labels=None,
-                 pred_mapping=None, true_mapping=None) -> dict:  # fmt: skip
-    """`evaluate_frames` of a reconstruction against its truth (both at one rate; the
-    shorter length counts): the scalar metrics and `per_frame` arrays."""
-    from graphsvc.evaluate.metrics import evaluate_frames
-    from graphsvc.motion.joints import common_joints
-
-    pt, tt = joint_map(predicted.skeleton, pred_mapping), joint_map(truth.skeleton, true_mapping)
-    names = common_joints(tt, pt)
-    _, pw = motion_fk(predicted)
-    _, tw = motion_fk(truth)
-    return evaluate_frames(
-        pw[:, [pt[c] for c in names]], tw[:, [tt[c] for c in names]],
-        signals.ground_position(pw, pt["pelvis"]), signals.heading(pw, pt),
-        signals.ground_position(tw, tt["pelvis"]), signals.heading(tw, tt),
-        pred_labels=pred_labels, true_label=true_labels, name=predicted.name,
-    )  # fmt: skip
-
-
-def error_arrays(per_frame: dict | None) -> dict | None:
-    """Per-frame joint, root (cm) and heading (°) errors rounded to 0.01, or None."""
-    if not per_frame:
-        return None
-    keys = ("joint_err_cm", "root_err_cm", "heading_err_deg")
-    return {k: [round(float(v), 2) if np.isfinite(v) else None for v in np.asarray(per_frame[k], dtype=np.float64)]
-            for k in keys if per_frame.get(k) is not None}  # fmt: skip
-
-
 def _cms2(acc: np.ndarray) -> np.ndarray:
     a = np.asarray(acc, dtype=np.float64) * 100.0
     out = np.clip(np.rint(np.nan_to_num(a, nan=0.0)), -32767, 32767).astype(np.int16)
@@ -159,10 +133,10 @@ def _cms2(acc: np.ndarray) -> np.ndarray:
 def sensor_arrays(rec, motion: Motion, mapping=None, virtual: np.ndarray | None = None) -> dict | None:
     """Per sensor, the recording's measured accelerations on the motion's frame grid
     and the path's virtual readings: `virtual` (T, S, 3) m/s² when given (a node
-    path's edges, `path_readings`), else those of `motion` itself (the same layout, no
-    noise): {"names", "measured": [b64 (T, 3) int16 cm/s²], "virtual": [...]}. None
-    for a recording without accelerations or without a layout, or a skeleton the
-    layout cannot be placed on."""
+    path's edges, `strategies.sources.path_readings`), else those of `motion` itself
+    (the same layout, no noise): {"names", "measured": [b64 (T, 3) int16 cm/s²],
+    "virtual": [...]}. None for a recording without accelerations or without a layout,
+    or a skeleton the layout cannot be placed on."""
     if rec is None or rec.accelerations is None or not rec.accelerations.size or not rec.layout:
         return None
     from graphsvc.errors import GraphsvcError
@@ -201,162 +175,6 @@ def marker_arrays(rec, frames: int, rate_hz: float) -> dict | None:
     return {"names": list(rec.marker_names), "mm": b64(out, np.int32)}
 
 
-# ---------------------------------------------------------------- where each frame comes from
-
-# A frame's kind on the timeline: the source clip played as captured, at another speed,
-# through an interpolated (blended) segment, over a bridge between actions, or a blend of
-# several sources (OLNG, SSG).
-KINDS = ("original", "speed", "interpolated", "bridge", "blend")
-
-
-def path_edges(graph, nodes) -> np.ndarray:
-    """(T,) the graph edge entering each frame of a node path (−1: none — the first
-    frame, or a jump no edge makes)."""
-    nodes = np.asarray(nodes, dtype=np.int64)
-    out = np.full(nodes.size, -1, dtype=np.int64)
-    for t in range(1, nodes.size):
-        a, b = int(nodes[t - 1]), int(nodes[t])
-        lo, hi = int(graph.incoming[b]), int(graph.incoming[b + 1])
-        k = lo + int(np.searchsorted(np.asarray(graph.edge_src[lo:hi]), a))
-        if k < hi and int(graph.edge_src[k]) == a:
-            out[t] = k
-    return out
-
-
-def path_readings(graph, nodes) -> np.ndarray:
-    """(T, S, 3) m/s² the virtual readings a node path was scored against: each
-    entering edge's metadata (NaN where no edge enters)."""
-    edges = path_edges(graph, nodes)
-    acc = np.asarray(graph.edge_acc, dtype=np.float64)[np.maximum(edges, 0)]
-    acc[edges < 0] = np.nan
-    return acc
-
-
-def source_readings(graph, clip: np.ndarray, frame: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """(T, S, 3) m/s² the virtual readings of frames made of several knowledge-base
-    sources (OLNG, SSG): per frame the weighted mean of its sources' readings — each
-    source frame's original node's entering edge in its clip (NaN where none)."""
-    from graphsvc.graph.model import EDGE_ORIGINAL, NODE_ORIGINAL
-
-    clip = np.asarray(clip, dtype=np.int64)
-    weight = np.where(clip >= 0, np.asarray(weight, dtype=np.float64), 0.0)
-    frame = np.rint(np.asarray(frame, dtype=np.float64)).astype(np.int64)
-    original = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
-    dst = np.asarray(graph.edge_dst)[original].astype(np.int64)
-    keep = np.asarray(graph.node_kind)[dst] == NODE_ORIGINAL
-    original, dst = original[keep], dst[keep]
-    span = int(np.asarray(graph.node_frame).max(initial=0)) + 2
-    keys = np.asarray(graph.node_clip)[dst].astype(np.int64) * span + np.rint(np.asarray(graph.node_frame)[dst]).astype(np.int64)
-    order = np.argsort(keys, kind="stable")
-    keys, original = keys[order], original[order]
-    want = np.maximum(clip, 0) * span + frame
-    at = np.clip(np.searchsorted(keys, want), 0, max(len(keys) - 1, 0))
-    found = (len(keys) > 0) & (keys[at] == want) & (weight > 0) if len(keys) else np.zeros(want.shape, bool)
-    S = np.asarray(graph.edge_acc).shape[1]
-    acc = np.asarray(graph.edge_acc, dtype=np.float64)[original[at]] if len(keys) else np.zeros(want.shape + (S, 3))
-    w = np.where(found, weight, 0.0)
-    total = w.sum(axis=1)
-    out = np.einsum("tk,tksc->tsc", w, np.where(found[..., None, None], acc, 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = out / total[:, None, None]
-    out[total <= 0] = np.nan
-    return out
-
-
-def timeline_from_nodes(graph, nodes) -> dict:
-    """The timeline of a path of graph nodes: runs of one source clip and kind
-    ({start, frames, clip, label, kind, from_frame}), the frames entered by a
-    transition (another clip, or a jump within one), and the labels as runs."""
-    from graphsvc.graph.model import EDGE_BRIDGE, EDGE_INTERP, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION
-    from graphsvc.graph.model import NODE_BRIDGE, NODE_INTERP, NODE_SLOW
-
-    nodes = np.asarray(nodes, dtype=np.int64)
-    T = nodes.size
-    clip = np.asarray(graph.node_clip)[nodes].astype(np.int64)
-    src = np.asarray(graph.node_frame)[nodes].astype(np.float64)
-    nkind = np.asarray(graph.node_kind)[nodes]
-    edges = path_edges(graph, nodes)
-    ekind = np.where(edges >= 0, np.asarray(graph.edge_kind)[np.maximum(edges, 0)], 255).astype(np.int64)
-    kind = np.zeros(T, dtype=np.int64)
-    kind[(nkind == NODE_SLOW) | (ekind == EDGE_SLOW) | (ekind == EDGE_SPEEDUP)] = 1
-    kind[(nkind == NODE_INTERP) | (ekind == EDGE_INTERP)] = 2
-    kind[(nkind == NODE_BRIDGE) | (ekind == EDGE_BRIDGE)] = 3
-    jump = np.zeros(T, dtype=bool)
-    jump[1:] = (ekind[1:] == EDGE_TRANSITION) | (ekind[1:] == 255) | (clip[1:] != clip[:-1])
-    labels = [str(graph.labels[int(k)]) for k in np.asarray(graph.node_label)[nodes]]
-    names = [str(c["name"]) for c in graph.clips]
-    segments = []
-    start = 0
-    for t in range(1, T + 1):
-        if t == T or jump[t] or kind[t] != kind[start] or clip[t] != clip[start]:
-            segments.append({"start": start, "frames": t - start, "clip": names[clip[start]], "label": labels[start],
-                             "kind": KINDS[kind[start]], "from_frame": round(float(src[start]), 1)})  # fmt: skip
-            start = t
-    from graphsvc.strategies.results import label_runs
-
-    return {"segments": segments, "transitions": [int(t) for t in np.flatnonzero(jump)], "labels": label_runs(labels),
-            "neighbours": None}  # fmt: skip
-
-
-def timeline_from_sources(clip_names, labels, clip: np.ndarray, frame: np.ndarray, weight: np.ndarray,
-                          rows: int = 8) -> dict:  # fmt: skip
-    """The timeline of frames made of several knowledge-base sources (OLNG's
-    neighbourhood, SSG's cross-fades): runs of the heaviest source's clip (kind
-    "blend" where a frame has more than one source), the frames where that clip
-    changes, the labels as runs, and `neighbours`: the `rows` clips of most total
-    weight, each with its weight in every frame as one digit 0–9 a frame."""
-    from graphsvc.strategies.results import label_runs
-
-    clip = np.asarray(clip, dtype=np.int64)
-    weight = np.where(clip >= 0, np.asarray(weight, dtype=np.float64), 0.0)
-    T = clip.shape[0]
-    top = np.argmax(weight, axis=1)
-    lead = clip[np.arange(T), top]
-    lead_frame = np.asarray(frame, dtype=np.float64)[np.arange(T), top]
-    blended = (weight > 0).sum(axis=1) > 1
-    labels = [str(v) for v in labels]
-    segments = []
-    start = 0
-    for t in range(1, T + 1):
-        if t == T or lead[t] != lead[start] or blended[t] != blended[start]:
-            segments.append({"start": start, "frames": t - start,
-                             "clip": clip_names[lead[start]] if lead[start] >= 0 else "",
-                             "label": labels[start], "kind": "blend" if blended[start] else "original",
-                             "from_frame": round(float(lead_frame[start]), 1)})  # fmt: skip
-            start = t
-    changes = [int(t) for t in range(1, T) if lead[t] != lead[t - 1]]
-    totals: dict[int, float] = {}
-    for c, w in zip(clip.ravel(), weight.ravel()):
-        if c >= 0 and w > 0:
-            totals[int(c)] = totals.get(int(c), 0.0) + float(w)
-    chosen = sorted(totals, key=lambda c: (-totals[c], c))[:rows]
-    neighbours = {"clips": [clip_names[c] for c in chosen], "weights": []}
-    for c in chosen:
-        w = np.where(clip == c, weight, 0.0).sum(axis=1)
-        neighbours["weights"].append("".join(str(int(v)) for v in np.clip(np.rint(w * 9.0), 0, 9)))
-    return {"segments": segments, "transitions": changes, "labels": label_runs(labels), "neighbours": neighbours}
-
-
-def timeline_from_labels(runs: list[dict]) -> dict:
-    """A timeline from label runs alone (no graph to name the sources)."""
-    segments = [{"start": int(r["start_frame"]), "frames": int(r["frames"]), "clip": "", "label": str(r["label"]),
-                 "kind": "original", "from_frame": 0.0} for r in runs]  # fmt: skip
-    return {"segments": segments, "transitions": [s["start"] for s in segments[1:]], "labels": runs,
-            "neighbours": None}  # fmt: skip
-
-
-def compact_sources(provenance, top: int = 4) -> dict:
-    """A reconstruction's provenance for a report JSON: per frame its `top` heaviest
-    sources' clip, frame (0.1) and weight (0.001), heaviest first (clip −1: none)."""
-    w = np.where(provenance.clip >= 0, provenance.weight, -1.0)
-    order = np.argsort(-w, axis=1, kind="stable")[:, :top]
-    rows = np.arange(w.shape[0])[:, None]
-    clip = np.where(w[rows, order] > 0, provenance.clip[rows, order], -1)
-    return {"clip": clip.astype(int).tolist(),
-            "frame": np.round(provenance.frame[rows, order].astype(float), 1).tolist(),
-            "weight": np.round(np.clip(w[rows, order], 0.0, None), 3).tolist()}  # fmt: skip
-
-
 # ---------------------------------------------------------------- constraints
 
 
@@ -392,12 +210,12 @@ def clip_view(name: str, motion: Motion, timeline: dict, rec=None, truth: Motion
               per_frame: dict | None = None, constraints=None, labels=None, mapping=None,
               info: dict | None = None, virtual: np.ndarray | None = None) -> dict:  # fmt: skip
     """Everything the page shows of one reconstruction (module docstring). motion:
-    the output; timeline: `timeline_from_*`'s; rec: the input recording (or None);
-    truth: the true motion at the same rate (or None); per_frame: its errors
-    (`truth_errors`' per_frame; computed from `truth` when None); constraints: the
-    sets the search was given; labels: the output's per-frame labels (default: from
-    the timeline); info: a few lines shown above the viewer; virtual: the path's
-    virtual readings (`sensor_arrays`)."""
+    the output; timeline: `strategies.sources.timeline_from_*`'s; rec: the input
+    recording (or None); truth: the true motion at the same rate (or None); per_frame:
+    its errors (`truth_errors`' per_frame; computed from `truth` when None);
+    constraints: the sets the search was given; labels: the output's per-frame labels
+    (default: from the timeline); info: a few lines shown above the viewer; virtual:
+    the path's virtual readings (`sensor_arrays`)."""
     T = motion.num_frames
     figures = [figure_arrays(motion, "reconstruction", mapping)]
     if truth is not None:

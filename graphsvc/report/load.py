@@ -4,21 +4,22 @@ page's document ({"title", "clips": [view...], "table"}).
 
 A synthesize report names its output BVH, graph and recording (`files`); the graph
 gives the timeline its clips and kinds (without it, the labels alone). A kept
-evaluation clip (`keep_clip`) is a small JSON beside its BVH files that already holds
-its timeline, per-frame errors and labels, so the page needs no graph.
+evaluation clip (`evaluate.keep.keep_clip`) is a small JSON beside its BVH files that
+already holds its timeline, per-frame errors and labels, so the page needs no graph.
 """
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.fileio import read_json_file, write_text_atomic
-from graphsvc.report.gather import (
-    b64, clip_view, path_readings, source_readings, timeline_from_labels, timeline_from_nodes, timeline_from_sources,
+from graphsvc.fileio import read_json_file
+from graphsvc.pipeline import read_searched_recording
+from graphsvc.report.gather import clip_view
+from graphsvc.strategies.sources import (
+    path_readings, source_readings, timeline_from_labels, timeline_from_nodes, timeline_from_sources,
 )  # fmt: skip
 
 TABLE_COLUMNS = ("clip", "label", "frames", "joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc",
@@ -61,8 +62,7 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
     loaded, else read from the report's path when it is there (else no sources)."""
     from graphsvc.motion.library import load_motion
     from graphsvc.motion.resample import resample
-    from graphsvc.pipeline import read_searched_recording
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
@@ -106,41 +106,11 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
 # ---------------------------------------------------------------- evaluation
 
 
-def kept_name(name: str, key: str) -> str:
-    """A file-name stem for a kept evaluation clip: its name, safe on any file
-    system, and a key that tells clips of one name apart."""
-    return (re.sub(r"[^A-Za-z0-9._-]+", "_", str(name)).strip("._") or "clip")[:80] + f"_{key}"
-
-
-def keep_clip(folder: Path, stem: str, motion, truth, rec, timeline: dict, per_frame: dict, labels,
-              constraints=(), virtual: np.ndarray | None = None) -> dict:  # fmt: skip
-    """Write one evaluated clip into `folder`: the reconstruction (STEM.bvh), the truth
-    at the graph rate (STEM.truth.bvh), the simulated input (STEM.rec) and STEM.json
-    (timeline, per-frame errors and labels, and the path's virtual readings (T, S, 3)
-    as float32 base64 when the path was of graph nodes). Returns the file names
-    (relative to `folder`) for the evaluation's row."""
-    import json
-
-    from graphsvc.motion.bvh import write_bvh
-    from graphsvc.report.gather import error_arrays
-    from graphsvc.sensors.recording import save_recording
-
-    folder = Path(folder)
-    files = {"output": f"{stem}.bvh", "truth": f"{stem}.truth.bvh", "recording": f"{stem}.rec", "view": f"{stem}.json"}
-    write_bvh(folder / files["output"], motion, scale=100.0)
-    write_bvh(folder / files["truth"], truth, scale=100.0)
-    save_recording(rec, folder / files["recording"])
-    doc = {"name": motion.name, "timeline": timeline, "per_frame": error_arrays(per_frame),
-           "labels": [str(v) for v in labels], "constraints": list(constraints or [])}  # fmt: skip
-    if virtual is not None:
-        doc["virtual"] = {"shape": list(virtual.shape), "f32": b64(virtual, np.float32)}
-    write_text_atomic(folder / files["view"], json.dumps(doc, sort_keys=True, separators=(",", ":")) + "\n")
-    return files
-
-
 def kept_view(folder: Path, files: dict, row: dict) -> dict:
+    """The view of one kept evaluation clip (the files `evaluate.keep.keep_clip` wrote
+    into `folder`) with its evaluation row's scores above it."""
     from graphsvc.motion.library import load_motion
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
 
     doc = read_json_file(_file(files["view"], "kept clip", folder))
     motion = load_motion(_file(files["output"], "kept motion", folder))

@@ -29,19 +29,25 @@ estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device �
    closed form over every pair (the pose fixes the tilt). Steps 2–3 run `ITERATIONS`
    times, each from the last estimate. With orientation output the fits also pair the
    vertical each device frame saw, D(t)⁻¹·ŷ (free of the yaw drift and of linear
-   acceleration), with the matched graph frames' (`graph_verticals`, FK of the poses
+   acceleration), with the matched graph frames' (`Reference.verticals`, FK of the poses
    the graph stores): the relative rotations D(t0)⁻¹D(t) = M⁻¹·S(t0)⁻¹S(t)·M tie M to
    the segment's motion, seen through gravity. A sensor the motion hardly turns off its
    rest axis (`SEEN_RATIO`) cannot show its rotation about gravity and keeps none.
 
 Without a graph the rotation about gravity cannot be determined (a single direction
-fixes two of three degrees of freedom): `calibrate` refuses.
+fixes two of three degrees of freedom): `calibrate_against` refuses.
+
+The graph's part — its readings in clip order and the verticals of the poses it
+stores, as a `Reference` — is `graph.calibration`, whose `calibrate(rec, pose, graph)`
+is what `graphsvc calibrate` runs; this module takes the arrays.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba
@@ -51,7 +57,7 @@ from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import read_json_file, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.sensors.anatomy import ANATOMICAL, CONVENTIONS, REST_POSE
+from graphsvc.sensors.anatomy import ANATOMICAL, CONVENTIONS
 from graphsvc.sensors.grid import readings_at_rate, uniform_grid
 
 FORMAT = "graphsvc-calibration"
@@ -177,52 +183,12 @@ def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> tup
     return i, j + W, ever
 
 
-# ------------------------------------------------------------------ graph readings in clip order
+# ------------------------------------------------------------------ matching a reference's readings
 
 
-def graph_stream(graph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The graph's readings at normal speed in clip order: (N, S, 3) float64 (the
-    original edges, by clip then frame), (N,) int64 run ids (a new id wherever the
-    clip changes or a frame is skipped) and (N,) the edges' destination nodes."""
-    from graphsvc.graph.model import EDGE_ORIGINAL
-
-    edges = np.flatnonzero(graph.edge_kind == EDGE_ORIGINAL)
-    dst = graph.edge_dst[edges]
-    clip = graph.node_clip[dst].astype(np.int64)
-    frame = graph.node_frame[dst].astype(np.float64)
-    order = np.lexsort((frame, clip))
-    edges, clip, frame = edges[order], clip[order], frame[order]
-    brk = np.ones(edges.size, dtype=bool)
-    brk[1:] = (clip[1:] != clip[:-1]) | (np.abs(frame[1:] - frame[:-1] - 1.0) > 1e-3)
-    return np.asarray(graph.edge_acc[edges], dtype=np.float64), np.cumsum(brk) - 1, graph.edge_dst[edges]
-
-
-def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
-    """(len(nodes), S, 3) the world's vertical (a unit vector) in the layout's frame of
-    sensors `names` at original nodes `nodes`, from the poses the graph stores (each
-    clip's skeleton placing the sensors, as `graph.metadata.recompute_accelerations`)."""
-    from graphsvc.graph.metadata import clip_placement
-    from graphsvc.motion.kinematics import forward_kinematics
-    from graphsvc.sensors.accelerometer import sensor_poses
-    from graphsvc.sensors.layout import layout_from_dict
-
-    layout = layout_from_dict(graph.layout)
-    sk = graph.skeleton
-    cols = [layout.sensor_names.index(n) for n in names]
-    out = np.zeros((nodes.size, len(names), 3))
-    clips = graph.node_clip[nodes]
-    for c in np.unique(clips):
-        pick = np.flatnonzero(clips == c)
-        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes[pick]].astype(np.float64),
-                                                  graph.node_translations[nodes[pick]].astype(np.float64), sk.parents)  # fmt: skip
-        placement = clip_placement(graph, layout, int(c))
-        _, orientation = sensor_poses(world_rot, world_pos, placement)
-        out[pick] = _vertical(orientation)[:, cols]
-    return out
-
-
-def _vertical(q: np.ndarray) -> np.ndarray:
-    """(..., 3) the world's +Y seen in frames q (..., 4)."""
+def world_vertical(q: np.ndarray) -> np.ndarray:
+    """(..., 3) the world's +Y seen in frames q (..., 4): a device frame's view of the
+    vertical, and a reference frame's (`Reference.verticals`), alike."""
     return quat.inv_rotate(q, np.broadcast_to([0.0, 1.0, 0.0], q.shape[:-1] + (3,)))
 
 
@@ -313,24 +279,49 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
 def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rest: tuple[int, int]) -> tuple[np.ndarray, str]:
     a, b = rest
     if orient is not None and np.isfinite(orient[a:b]).all():
-        return _unit(_vertical(quat.normalize(np.asarray(orient[a:b], dtype=np.float64))).mean(axis=0)), "orientation"
+        up = world_vertical(quat.normalize(np.asarray(orient[a:b], dtype=np.float64)))
+        return _unit(up.mean(axis=0)), "orientation"
     return _unit(np.nanmean(np.asarray(acc[a:b], dtype=np.float64), axis=0)), "acceleration"
 
 
-def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: float | None = None) -> dict:
+@dataclass(frozen=True)
+class Reference:
+    """What a calibration take's motion is matched against: readings of similar motion in
+    the layout's sensor frames, as a graph holds them (`graph.calibration.graph_reference`).
+
+    layout: the layout description (which segment each sensor is on); sensor_names: its
+    sensors, in the readings' order; rate_hz: the readings' rate; sensor_frames: their
+    frames' convention (`sensors.anatomy`); readings: (N, S, 3) float64 m/s² at normal
+    speed, in order; runs: (N,) int64 a run id a reading (a new one wherever a clip
+    changes or a frame is skipped: a window never straddles two); verticals: (K,)
+    indices into readings and sensor names → (K, len(names), 3) the world's vertical
+    in those sensors' layout frames at those readings' frames (`world_vertical`)."""
+
+    layout: dict | None
+    sensor_names: tuple
+    rate_hz: float
+    sensor_frames: str
+    readings: np.ndarray
+    runs: np.ndarray
+    verticals: Callable[[np.ndarray, tuple], np.ndarray]
+
+
+def calibrate_against(rec, pose: str, reference: Reference | None = None, start_s: float | None = None,
+                      end_s: float | None = None) -> dict:  # fmt: skip
     """The calibration (the CAL.json document, `save_calibration`) of a recording's
-    sensors from a calibration take in `pose` (POSES), against `graph`'s readings of
-    similar motion. InputError when it cannot be done (module docstring)."""
+    sensors from a calibration take in `pose` (POSES), against a reference's readings of
+    similar motion (a graph's: `graph.calibration.calibrate`). InputError when it cannot
+    be done (module docstring)."""
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     if rec.accelerations is None or rec.num_sensors == 0:
         raise InputError("the recording has no accelerometer readings to calibrate")
     if rec.meta.get("sensor_frame") == "layout":
         raise InputError("the recording's readings are already in the layout's sensor frames (sensor_frame=layout)")
-    layout = graph.layout if graph is not None else rec.layout
+    layout = reference.layout if reference is not None else rec.layout
     names = tuple(rec.sensor_names)
-    if graph is not None:
-        gnames = graph.sensor_names
+    if reference is not None:
+        gnames = reference.sensor_names
         if sorted(gnames) != sorted(names):
             hint = ("" if rec.meta.get("device_sensors") is not None
                     else ": give --device-map to name them as the layout does")  # (mapped already: some are missing)
@@ -341,7 +332,7 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     unknown = [f"{n} ({s})" for n, s in zip(names, segments) if s not in table]
     if unknown:
         raise InputError(f"pose {pose} does not say where gravity points for {', '.join(unknown)}")
-    rate = float(graph.rate_hz) if graph is not None else float(rec.rate_hz)
+    rate = float(reference.rate_hz) if reference is not None else float(rec.rate_hz)
     rec = _span(rec, start_s, end_s)
     acc = np.asarray(readings_at_rate(rec, rate)[0], dtype=np.float64)
     orient = None
@@ -354,7 +345,7 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     r0, r1, has_rest = rest
     up_dev, rest_source = _rest_up_device(acc, orient, (r0, r1))
     up_lay = _unit(np.array([table[s] for s in segments], dtype=np.float64))
-    if graph is None:
+    if reference is None:
         raise InputError(f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
                          "(the motion after the rest, matched against the graph's readings, fixes it)")  # fmt: skip
     S = len(names)
@@ -362,13 +353,13 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     R = R0.copy()
     still = np.asarray(acc[r0:r1], dtype=np.float64)
     noise_var = np.mean(np.sum((still - still.mean(axis=0)) ** 2, axis=-1), axis=0) / 3.0  # (S,) per axis
-    stream, runs, stream_nodes = graph_stream(graph)
-    cols = [list(graph.sensor_names).index(n) for n in names]
+    stream, runs = reference.readings, reference.runs
+    cols = [list(reference.sensor_names).index(n) for n in names]
     stream = np.ascontiguousarray(stream[:, cols])
     moving = acc[r0:r0 + int(MAX_MOTION_S * rate)]  # (the rest and the motion after it)
     # With orientation output: the vertical each device frame saw (free of the yaw drift
     # and of linear acceleration), paired with the matched graph frames' (FK of its poses).
-    dev_up = None if orient is None else _vertical(quat.normalize(orient[r0:r0 + moving.shape[0]]))
+    dev_up = None if orient is None else world_vertical(quat.normalize(orient[r0:r0 + moving.shape[0]]))
     window, stride = max(4, int(round(WINDOW_S * rate))), max(1, int(round(STRIDE_S * rate)))
     if moving.shape[0] < 2 * window:
         raise InputError(f"the recording has {moving.shape[0] / rate:.2f} s from its rest on; calibration needs "
@@ -396,7 +387,7 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
         lay_up = None
         if dev_up is not None:
             used, back = np.unique(idx_g, return_inverse=True)
-            lay_up = graph_verticals(graph, stream_nodes[used], names)[back]
+            lay_up = reference.verticals(used, names)[back]
         for s in range(S):
             dev, lay, w_s = moving[idx_q, s], stream[idx_g, s], w_pair
             if lay_up is not None:  # (gravity's pairs beside the readings', NaN orientations left out)
@@ -428,7 +419,7 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
         "pose": pose,
         # The convention of the layout frames it calibrates onto (`sensors.anatomy`): the
         # graph's, else the pose table's (anatomical).
-        "sensor_frames": graph.params.get("sensor_frames", REST_POSE) if graph is not None else ANATOMICAL,
+        "sensor_frames": reference.sensor_frames if reference is not None else ANATOMICAL,
         "source": str(rec.meta.get("source", "")),
         "rest_s": [round(rest[0] / rate, 4), round(rest[1] / rate, 4)],
         "matched_samples": int(pairs),

@@ -4,11 +4,12 @@ that rename a device's sensors to a graph layout's.
 Axes
     A device whose world has +Z up (Xsens: X forward/north, Y left/west, Z up) is
     turned onto graphsvc's world (+Y up, facing +Z, +X the body's left) by the cyclic
-    change (x, y, z) → (y, z, x), as for C3D and marker files (`sensors.optical`):
-    the device's X (forward) becomes graphsvc's Z, Y (left) X, Z (up) Y. It is the
+    change (x, y, z) → (y, z, x), as for C3D and marker files (`sensors.axes`): the
+    device's X (forward) becomes graphsvc's Z, Y (left) X, Z (up) Y. It is the
     rotation Q_Z_UP_TO_Y_UP = (0.5, −0.5, −0.5, −0.5) (w, x, y, z), −120° about
     (1, 1, 1)/√3, and a sensor's orientation becomes q_world = Q_Z_UP_TO_Y_UP ⊗
-    q_device. Readings stay in each sensor's own frame, which this does not touch.
+    q_device (`sensors.axes.z_up_to_y_up`). Readings stay in each sensor's own frame,
+    which this does not touch.
 
 MVNX (`read_mvnx`)
     XML from Xsens MVN (MVNX 3 and 4). Sensors are the ``<sensors><sensor label=…>``
@@ -69,11 +70,8 @@ from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import read_input_text, require_file
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.axes import z_up_to_y_up
 from graphsvc.sensors.recording import Recording
-
-# A Z-up world (X forward, Y left) onto graphsvc's Y-up world: (x, y, z) → (y, z, x).
-# Its matrix has columns X → (0, 0, 1), Y → (1, 0, 0), Z → (0, 1, 0).
-Q_Z_UP_TO_Y_UP = np.array([0.5, -0.5, -0.5, -0.5])
 
 CALIBRATION_POSES = ("tpose", "tpose-isb", "npose")  # frames whose sensor orientations meta keeps
 _ACCELERATION_FIELDS = ("sensorAcceleration", "sensorFreeAcceleration")
@@ -81,14 +79,6 @@ _ORIENTATION_FIELD = "sensorOrientation"
 # expat's "no element found" and "unclosed token": the text stopped inside an element.
 _XML_ENDS_EARLY = (expat_errors.codes[expat_errors.XML_ERROR_NO_ELEMENTS],
                    expat_errors.codes[expat_errors.XML_ERROR_UNCLOSED_TOKEN])  # fmt: skip
-
-
-def z_up_to_y_up(q: np.ndarray) -> np.ndarray:
-    """Orientations (..., 4) (w, x, y, z) of sensor frames in a Z-up world (X forward, Y
-    left) → the same frames in graphsvc's Y-up world: Q_Z_UP_TO_Y_UP ⊗ q. NaN stays
-    NaN; the dtype is kept."""
-    q = np.asarray(q)
-    return quat.mul(Q_Z_UP_TO_Y_UP, q.astype(np.float64)).astype(q.dtype, copy=False)
 
 
 # ---------------------------------------------------------------- MVNX

@@ -24,9 +24,9 @@ Marker CSV
     Without ``units`` the values are metres; without ``up``, +Y is up.
 
 Axes: a file with +Z up is turned onto +Y up by the cyclic change (x, y, z) → (y, z, x),
-a proper rotation; it is how HDM05's Vicon exports relate their C3D to the skeleton
-fitted to the same take (measured on the shared HDM05 take: 10 cm RMS between markers
-and the nearest joints, the skin's offset). For C3D without `up`, the vertical is the
+a proper rotation (`sensors.axes.to_y_up`); it is how HDM05's Vicon exports relate
+their C3D to the skeleton fitted to the same take (measured on the shared HDM05 take:
+10 cm RMS between markers and the nearest joints, the skin's offset). For C3D without `up`, the vertical is the
 axis along which the markers of a frame spread most (a standing body is taller than
 wide) when that is clear, else what `POINT:Y_SCREEN` says (+Y or +Z), else +Z, the
 usual C3D convention; the recording's meta says which and why. The SSG strategy's
@@ -43,18 +43,12 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import require_file
+from graphsvc.sensors.axes import to_y_up
 from graphsvc.sensors.recording import Recording, csv_rows, read_csv_table, sample_rate
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 UPS = ("y", "z")
 CSV_MAGIC = "# graphsvc markers v1"
-
-
-def to_y_up(points: np.ndarray, up: str) -> np.ndarray:
-    """(..., 3) points with `up` ("y" or "z") vertical → +Y up (module docstring)."""
-    if up == "y":
-        return points
-    return points[..., [1, 2, 0]]
 
 
 def _unit_scale(units: str, source) -> float:
@@ -178,19 +172,6 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
 
 
 # ---------------------------------------------------------------- CSV
-
-
-def is_marker_csv(path) -> bool:
-    """Whether a CSV file is a marker CSV (its header's first column is `time`)."""
-    try:
-        with open(path, encoding="utf-8-sig") as f:
-            for line in f:
-                s = line.strip()
-                if s and not s.startswith("#"):
-                    return s.split(",")[0].strip().lower() in ("time", "time_s")
-    except (OSError, UnicodeDecodeError):
-        return False
-    return False
 
 
 def _marker_columns(path: Path, header: list, line: int) -> dict[str, dict[str, int]]:

@@ -19,7 +19,7 @@ def recording_figure(rec: Recording, contacts: np.ndarray | None = None):
     recording's unit and the report page's, over time, at least ±1.5 g = ±14.7 m/s²);
     a strip of foot contacts when `contacts` ((T, 2) bool, left then right) is given;
     the ground track if any."""
-    import matplotlib
+    import matplotlib  # (here, not at start-up: only the plots need it)
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

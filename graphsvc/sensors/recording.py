@@ -1,4 +1,5 @@
-"""Input streams on disk: the native `.rec` container and CSV for real devices.
+"""Input streams on disk: the native `.rec` container and CSV for real devices (any
+recording file, by its format: `sensors.files.read_recording`).
 
 A Recording is what the body-worn sensors, an optical capture and the overhead tracker
 reported, each stream optional: timestamps, per-sensor accelerations in each sensor's
@@ -35,7 +36,7 @@ CSV format
           the vertical axis of the world the orientations are given in (default y,
           graphsvc's). A Z-up world (X forward, Y left, as Xsens's) is turned onto
           graphsvc's Y-up world by (x, y, z) → (y, z, x), as for MVNX and C3D:
-          q_world = Q_Z_UP_TO_Y_UP ⊗ q (`sensors.devices`). It concerns the
+          q_world = Q_Z_UP_TO_Y_UP ⊗ q (`sensors.axes`). It concerns the
           orientations only; markers, ground position and heading are always in
           graphsvc's world. ``import_csv(..., up=)`` overrides it.
       ``sensor_frame=device|layout``
@@ -79,6 +80,7 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.axes import z_up_to_y_up
 from graphsvc.fileio import atomic_writer, read_input_text
 from graphsvc.store import read_container, write_container
 
@@ -499,8 +501,6 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
         acc = acc * GRAVITY
     orientations = gather(quat_cols, 4)
     if orientations is not None and up == "z":
-        from graphsvc.sensors.devices import z_up_to_y_up
-
         orientations = z_up_to_y_up(orientations)
     rec = Recording(
         rate_hz=float(rate_hz),
@@ -672,32 +672,3 @@ def describe_recording(rec: Recording) -> dict:
         out["markers"] = list(rec.marker_names)
         out["markers_seen"] = round(float(np.isfinite(rec.marker_positions).all(axis=-1).mean()), 4)
     return out
-
-
-def read_recording(path, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
-    """A recording from a `.rec` file, a device CSV, an Xsens MVNX file, a C3D file or a
-    marker CSV (by suffix, and a CSV by its first column: `time` for markers, `t_s` for
-    devices). up, units: where the file does not say, for marker files the vertical axis
-    and length unit (m, cm, mm; `sensors.optical`), for a device CSV its orientations'
-    up axis and acceleration unit (m/s2, g); an MVNX file takes neither (Xsens's axes
-    and units)."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".mvnx":
-        from graphsvc.sensors.devices import read_mvnx
-
-        if up is not None or units is not None:
-            raise InputError(f"{path}: up and units do not apply to an MVNX file (Xsens's axes, m/s²)")
-        return read_mvnx(path)
-    if suffix not in (".c3d", ".csv"):
-        return load_recording(path)
-    from graphsvc.sensors.optical import is_marker_csv, read_c3d, read_marker_csv
-
-    if suffix == ".csv" and not is_marker_csv(path):
-        if units is not None and units not in UNITS:
-            raise InputError(f"{path}: a device CSV's acceleration unit is {' or '.join(UNITS)}, not {units!r}")
-        return import_csv(path, rate_hz=rate_hz, units=units, up=up)
-    if units in UNITS:
-        raise InputError(f"{path}: {units} is an acceleration unit; a marker file's unit is a length (m, cm, mm)")
-    if suffix == ".c3d":
-        return read_c3d(path, up=up, units=units)
-    return read_marker_csv(path, up=up, units=units, rate_hz=rate_hz)

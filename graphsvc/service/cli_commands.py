@@ -125,7 +125,7 @@ def _cmd_client_graphs(args) -> int:
 
 def _cmd_client_synthesize(args) -> int:
     from graphsvc.fileio import atomic_writer, write_text_atomic
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
     from graphsvc.service.client import resolve_graph, synthesize
     from graphsvc.service.convert import skeleton_from_proto
 
@@ -198,7 +198,7 @@ def _cmd_client_batch(args) -> int:
 
 def _cmd_client_stream(args) -> int:
     from graphsvc.motion.bvh import write_bvh
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
     from graphsvc.service.client import latency_summary, resolve_graph, stream_recording
 
     out = Path(args.output) if args.output else None

@@ -7,11 +7,12 @@ import pytest
 
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
-from graphsvc.graph.metadata import edge_up_vectors, sensor_up
+from graphsvc.graph.metadata import edge_up_vectors
 from graphsvc.graph.model import EDGE_ORIGINAL, NODE_BRIDGE, NODE_INTERP
 from graphsvc.motion import quat
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import parse_noise
+from graphsvc.sensors.orientation import sensor_up
 from graphsvc.sensors.simulate import simulate_recording
 
 from tests.graph.test_connectivity import mixed_kb

@@ -174,8 +174,9 @@ def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, stra
 
 def _motion_page(motion, path, truth=None, timeline=None):
     """A report page of `motion` (and `truth`) made with gather's functions, no graph."""
-    from graphsvc.report.gather import clip_view, timeline_from_labels
+    from graphsvc.report.gather import clip_view
     from graphsvc.report.html import write_html
+    from graphsvc.strategies.sources import timeline_from_labels
 
     if timeline is None:
         timeline = timeline_from_labels([{"label": "clip", "start_frame": 0, "frames": motion.num_frames}])
@@ -260,7 +261,7 @@ def _fitted(text: str, full: str) -> bool:
 def test_timeline_tells_clips_of_one_prefix_apart(driver, tmp_path):
     """Bandai-Namco clip names all start "dataset-2_": the timeline writes them without
     it, cut in the middle where a run is narrow, and the neighbours' rows alike."""
-    from graphsvc.report.gather import timeline_from_sources
+    from graphsvc.strategies.sources import timeline_from_sources
     from tests.conftest import still_motion
 
     names = ["dataset-2_walk_active_001", "dataset-2_run_active_003", "dataset-2_walk-turn-left_normal_002"]

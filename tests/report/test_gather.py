@@ -11,12 +11,12 @@ from graphsvc.graph.model import EDGE_ORIGINAL, EDGE_SLOW, EDGE_TRANSITION, NODE
 from graphsvc.motion import quat
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.skeleton import Motion, Skeleton
-from graphsvc.report.gather import (
-    centre_joint, compact_sources, constraint_arrays, drawn_joints, figure_arrays, path_edges, path_readings,
-    source_readings, timeline_from_nodes, timeline_from_sources,
-)  # fmt: skip
+from graphsvc.report.gather import centre_joint, constraint_arrays, drawn_joints, figure_arrays
 from graphsvc.report.html import data_json, render_html, three_script
 from graphsvc.strategies.results import Provenance
+from graphsvc.strategies.sources import (
+    compact_sources, path_edges, path_readings, source_readings, timeline_from_nodes, timeline_from_sources,
+)  # fmt: skip
 from tests.conftest import tpose_skeleton
 
 

@@ -65,7 +65,7 @@ def test_the_term_is_yaw_free_and_chord_squared():
     assert base.cost == pytest.approx(2.0 * (T - 1) * (2 - 2 * np.cos(np.radians(25))), rel=1e-5)
     # a device's yaw drift turns its reported orientation about the world vertical
     # (q → R_y(δ)·q): its "up", and so the input and the cost, do not change
-    from graphsvc.graph.metadata import sensor_up
+    from graphsvc.sensors.orientation import sensor_up
 
     q0 = quat.from_axis_angle(np.array([1.0, 0.0, 0.0]), np.radians(-25))
     drifted = quat.mul(quat.about_y(np.linspace(0.0, 1.5, T)), np.broadcast_to(q0, (T, 4)))

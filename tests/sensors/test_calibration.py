@@ -12,11 +12,12 @@ from scipy.spatial.transform import Rotation
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.graph.build import BuildOptions, build_graph
+from graphsvc.graph.calibration import calibrate
 from graphsvc.motion import quat
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors import calibration as cal_mod
-from graphsvc.sensors.calibration import (POSE_READINGS, angle_deg, apply_calibration, calibrate, calibrate_sample,
+from graphsvc.sensors.calibration import (POSE_READINGS, angle_deg, apply_calibration, calibrate_sample,
                                           check_calibration, find_rest, load_calibration, match_windows, wahba)  # fmt: skip
 from graphsvc.sensors.device_model import mounting
 from graphsvc.sensors.layout import load_layout

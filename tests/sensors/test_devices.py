@@ -15,8 +15,9 @@ from graphsvc.cli import main
 from graphsvc.errors import FormatError, InputError
 from graphsvc.motion import quat
 from graphsvc.sensors.devices import DEVICE_MAPS, apply_device_map, device_map, read_mvnx
+from graphsvc.sensors.files import read_recording
 from graphsvc.sensors.layout import PRESETS
-from graphsvc.sensors.recording import Recording, export_csv, import_csv, read_recording
+from graphsvc.sensors.recording import Recording, export_csv, import_csv
 from tests.conftest import still_motion
 
 G = 9.81
@@ -66,7 +67,7 @@ def normal(k, rate=60, **fields):
 def test_xsens_axes_onto_graphsvc_axes():
     """A sensor whose Xsens orientation is the identity has its X (Xsens forward) along
     graphsvc +Z, its Y (Xsens left) along +X and its Z (up) along +Y."""
-    from graphsvc.sensors.devices import Q_Z_UP_TO_Y_UP, z_up_to_y_up
+    from graphsvc.sensors.axes import Q_Z_UP_TO_Y_UP, z_up_to_y_up
 
     q = z_up_to_y_up(quat.identity())
     for local, world in (((1, 0, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0)), ((0, 0, 1), (0, 1, 0))):

@@ -10,11 +10,12 @@ from graphsvc.errors import FormatError, InputError, LayoutError
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base
+from graphsvc.sensors.files import read_recording
 from graphsvc.sensors.markers import PRESETS, keep_markers, load_marker_set, marker_positions, place_markers
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.optical import export_marker_csv, read_c3d, read_marker_csv, to_y_up
-from graphsvc.sensors.recording import load_recording, read_recording, save_recording
+from graphsvc.sensors.recording import load_recording, save_recording
 from graphsvc.sensors.simulate import MarkerPattern, marker_visibility, parse_gaps, simulate_marker_recording
 
 

@@ -13,8 +13,8 @@ from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.library import load_motion
 from graphsvc.motion.resample import resample
 from graphsvc.pipeline import Options, reconstruct
+from graphsvc.sensors.files import read_recording
 from graphsvc.sensors.noise import PRESETS as NOISE
-from graphsvc.sensors.recording import read_recording
 from graphsvc.sensors.simulate import MarkerPattern, simulate_marker_recording
 from graphsvc.strategies.ssg.options import SsgOptions
 

@@ -193,7 +193,7 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     (ground position (2,) m or None, heading rad or None), where every path starts
     (`strategies.base.start_placement`); None: at the first measured position and
     heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch. up: (T, S, 3)
-    the sensors' measured "up" vectors (`graph.metadata.sensor_up` of the recording's
+    the sensors' measured "up" vectors (`sensors.orientation.sensor_up` of the recording's
     orientations; NaN = missing), weighed by W_R where the graph has orientation
     metadata (`orientation_counts`); None: no orientation term."""
     acc = np.asarray(acc)
