@@ -156,7 +156,7 @@ def test_batch_runs_it_on_dask_workers(files, capsys):
 
 def test_the_service_takes_it_unary_and_streaming_in_live_workers(files):
     from graphsvc.pipeline import Options, reconstruct
-    from graphsvc.sensors.recording import read_recording
+    from graphsvc.sensors.files import read_recording
     from graphsvc.service import client as C
     from graphsvc.service import convert
     from graphsvc.service.server import ServerConfig, load_graphs, start_server
