@@ -23,7 +23,8 @@ import argparse
 import math
 import re
 
-from graphsvc.strategies.options import ORIENTATION_WEIGHT, Options, SharedOptions, from_values, option_specs
+from graphsvc.strategies import DEFAULT, available, get, names
+from graphsvc.strategies.options import (ORIENTATION_WEIGHT, Options, SharedOptions, from_values, load_constraints, option_specs, parse_weights)  # fmt: skip
 
 
 class Parser(argparse.ArgumentParser):
@@ -165,8 +166,6 @@ def _given(args, owner: str, cls) -> dict:
 def add_search_flags(p, constraints: bool = True, latency_help: str | None = None) -> None:
     """The flags of a reconstruction (module docstring). latency_help: --latency's help
     where the command streams (a live session's lag is its default there)."""
-    from graphsvc.strategies import DEFAULT, available, get, names
-
     p.add_argument("--strategy", default=DEFAULT, choices=names(),
                    help=f"reconstruction strategy (default {DEFAULT}): "
                         + "; ".join(f"{n}: {get(n).summary}" for n in available()))  # fmt: skip
@@ -200,9 +199,6 @@ def options_from_flags(args) -> tuple[Options, list[str]]:
     the shared ones, and those given for other strategies (kept, and listed as ignored
     in the report); notes: one line for each flag of another strategy that was given.
     InputError (an `OptionError` naming the flag's field) for a value refused."""
-    from graphsvc.strategies import available, get
-    from graphsvc.strategies.options import load_constraints, parse_weights
-
     constraints = tuple(load_constraints(args.constraints)) if getattr(args, "constraints", None) else None
     shared = from_values(SharedOptions, _given(args, "shared", SharedOptions))
     settings, notes = {}, []

@@ -13,29 +13,39 @@ so `reconstruct` predicts what a live client gets.
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 
 import numpy as np
 
+from graphsvc.errors import InputError
+from graphsvc.fileio import check_outputs, write_texts_atomic
 from graphsvc.graph.model import MotionGraph
+from graphsvc.motion.bvh import bvh_document
+from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+from graphsvc.sensors.calibration import apply_calibration, load_calibration
+from graphsvc.sensors.devices import apply_device_map
+from graphsvc.sensors.devices import device_map as load_device_map
+from graphsvc.sensors.files import read_recording
+from graphsvc.sensors.grid import readings_at_rate
 from graphsvc.sensors.recording import Recording
-from graphsvc.strategies import check_options
+from graphsvc.strategies import available, check_options, open_session
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.base import prepared_index
-from graphsvc.strategies.inputs import prepare_input
+from graphsvc.strategies.inputs import check_layout, prepare_input
+from graphsvc.strategies.live import LiveSession
+from graphsvc.strategies.options import (Options, SharedOptions, Weights, check_constraints, load_constraints,
+                                        parse_weights)  # fmt: skip
+from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels
 from graphsvc.strategies.sources import compact_sources
+from graphsvc.strategies.start import start_state
 
-# The names callers import from here: the library's face for a reconstruction.
-from graphsvc.sensors.grid import readings_at_rate  # noqa: F401, E402
-from graphsvc.strategies import open_session  # noqa: F401, E402
-from graphsvc.strategies.inputs import check_layout  # noqa: F401, E402
-from graphsvc.strategies.live import LiveSession  # noqa: F401, E402
-from graphsvc.strategies.options import (  # noqa: F401, E402
-    Options, SharedOptions, Weights, check_constraints, load_constraints, parse_weights,
-)
-from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels  # noqa: F401, E402
-from graphsvc.strategies.start import start_state  # noqa: F401, E402
-
+# The library's face for a reconstruction: what callers import from here.
+__all__ = ["Frame", "LiveSession", "Options", "Provenance", "Reconstruction", "SharedOptions", "Weights",
+           "check_constraints", "check_layout", "check_options", "load_constraints", "open_session", "parse_weights",
+           "path_labels", "read_searched_recording", "readings_at_rate", "reconstruct", "start_state",
+           "synthesize_files", "warm_up"]  # fmt: skip
 
 def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,
                 threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
@@ -82,8 +92,6 @@ def warm_up(graph: MotionGraph, threads: bool = False, strategies=None) -> float
     """Load each strategy's compiled code and make its index and tables for `graph` now
     (numba compiles on a fresh install, or loads from its cache), not on a client's
     first sample. strategies: names (default: every built one). Returns the seconds."""
-    from graphsvc.strategies import available
-
     t0 = time.perf_counter()
     for name in strategies or available():
         s = get_strategy(name)
@@ -107,13 +115,6 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     (`strategies.sources.compact_sources`). notes: a list that
     collects remarks for the user (None: dropped). Same inputs, same output bytes, with
     or without threads."""
-    import json
-    from pathlib import Path
-
-    from graphsvc.fileio import check_outputs, write_texts_atomic
-    from graphsvc.motion.bvh import bvh_document
-    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
-
     check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
                   [("the graph", graph_path), ("the recording", recording_path),
                    ("the calibration", calibration), ("the device map", None if device_map == "xsens" else device_map)])  # fmt: skip
@@ -141,14 +142,8 @@ def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=N
     file does not say), a device's sensors named as the graph's layout does
     (device_map), its readings turned into the layout's frames (calibration). notes:
     a list that collects remarks for the user, or None."""
-    from graphsvc.errors import InputError
-    from graphsvc.sensors.files import read_recording
-
     rec = read_recording(recording_path, up=up, units=units)
     if device_map:
-        from graphsvc.sensors.devices import apply_device_map
-        from graphsvc.sensors.devices import device_map as load_device_map
-
         mapping = load_device_map(device_map, graph.layout.get("name"))
         rec = apply_device_map(rec, mapping, order=graph.sensor_names)
     elif rec.meta.get("imported_from") == "mvnx" and tuple(rec.sensor_names) != tuple(graph.sensor_names):
@@ -157,8 +152,6 @@ def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=N
                          f"give --device-map xsens (or a map file) to name them as layout "
                          f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
     if calibration:
-        from graphsvc.sensors.calibration import apply_calibration, load_calibration
-
         rec = apply_calibration(rec, load_calibration(calibration))
     elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None and notes is not None:
         notes.append(f"{recording_path}'s readings are in each device's own frame; they are used as if in the "

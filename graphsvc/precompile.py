@@ -40,6 +40,8 @@ def wait(process: subprocess.Popen | None, timeout_s: float = 600.0) -> None:
 
 
 def warm_threaded_kernels() -> None:
+    # (imported here, in the child process only: the command that starts it does not
+    # wait for numba and the search's modules to load)
     import numpy as np
 
     from graphsvc.graph.model import graph_from_edges

@@ -15,6 +15,7 @@ item's own failure (`plan_item`), so the rest of the batch still runs.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import io
@@ -25,6 +26,10 @@ from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import file_sha256, read_input_text, require_file
+from graphsvc.flags import add_synthesize_flags, options_from_flags, os_message
+from graphsvc.graph.file import graph_file_meta
+from graphsvc.store import file_checksum
+from graphsvc.strategies import check_options
 
 REQUIRED = ("recording", "graph", "strategy", "output")
 OPTIONAL = ("weights", "constraints", "calibration", "options")
@@ -162,9 +167,6 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
     the strategy and flags, the constraints' contents, `version`. graphs: {name: path}
     of `--graph NAME=PATH`. A missing file, an unknown graph or bad options give a
     Plan with `error` (the item fails, the batch goes on)."""
-    from graphsvc.graph.file import graph_file_meta
-    from graphsvc.store import file_checksum
-
     try:
         argv = option_argv(item, folder)
         parse_item_options(argv)  # refused here as synthesize would refuse it
@@ -180,8 +182,6 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
                  "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
                  if item.calibration else None}  # fmt: skip
     except (GraphsvcError, OSError) as exc:
-        from graphsvc.flags import os_message
-
         reason = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
     task = {"output": item.output, "out_dir": str(out_dir), "graph": str(graph_path), "graph_checksum": checksum,
@@ -229,9 +229,6 @@ class _ItemParser:
     @classmethod
     def get(cls):
         if cls._parser is None:
-            import argparse
-
-            from graphsvc.flags import add_synthesize_flags
 
             class Raising(argparse.ArgumentParser):
                 def error(self, message):
@@ -246,9 +243,6 @@ class _ItemParser:
 def parse_item_options(argv: list[str]):
     """(Options, the parsed flags) of an item's flags, checked as `synthesize` checks
     them: InputError or FormatError for what it would refuse."""
-    from graphsvc.flags import options_from_flags
-    from graphsvc.strategies import check_options
-
     args = _ItemParser.get().parse_args(argv)
     options, _ = options_from_flags(args)  # (another strategy's options: kept, listed as ignored in its report)
     return check_options(options), args

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from graphsvc.batch import store
 from graphsvc.batch.manifest import plan_item, read_manifest
+from graphsvc.batch.work import run_item
 from graphsvc.errors import InputError
 from graphsvc.fileio import file_sha256, require_file, write_text_atomic
 
@@ -62,7 +63,7 @@ def local_cluster(workers: int | None = None):
     core), no dashboard; its scheduler fails a task at its first worker death."""
     import logging
 
-    from distributed import LocalCluster
+    from distributed import LocalCluster  # (lazy: dask only where a batch runs)
 
     n = workers or os.cpu_count() or 1
     if n < 1:
@@ -145,8 +146,6 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
 
 
 def _run(client, manifest: Path, items, out: Path, graphs, retries, progress, should_stop, on_item, base: Path) -> dict:
-    from graphsvc.batch.work import run_item
-
     t0 = time.perf_counter()
     ver = version()
     plans = [plan_item(item, base, graphs, out, ver) for item in items]

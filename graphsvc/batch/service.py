@@ -19,6 +19,7 @@ from pathlib import Path
 
 from graphsvc.batch import store
 from graphsvc.batch.manifest import read_manifest
+from graphsvc.batch.run import check_out_dir, connect, run_batch
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import owner_tag, stale_temporary, write_text_atomic
 
@@ -35,8 +36,6 @@ class BatchManager:
         self.root = Path(root)
         if not self.root.is_dir():
             raise InputError(f"batch folder {self.root} does not exist")
-        from graphsvc.batch.run import check_out_dir
-
         check_out_dir(self.root, create=False)
         for tmp in self.root.glob(".*.tmp"):  # batches a killed server was making
             if tmp.is_dir() and stale_temporary(tmp, tmp.name[1:].split(".", 1)[0]):
@@ -50,8 +49,6 @@ class BatchManager:
     def _dask(self):
         with self._lock:
             if self._client is None:
-                from graphsvc.batch.run import connect
-
                 self._client, self._cluster = connect(self.scheduler, self.workers)
             return self._client
 
@@ -96,8 +93,6 @@ class BatchManager:
         return batch_id
 
     def _run(self, folder: Path, manifest: Path, retries: int, stop: threading.Event) -> None:
-        from graphsvc.batch.run import run_batch
-
         try:
             run_batch(manifest, folder, graphs=self.graphs, client=self._dask(), retries=retries, progress=False,
                       should_stop=stop.is_set, base=self.root)  # fmt: skip

@@ -18,8 +18,11 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from graphsvc.batch.manifest import parse_item_options
 from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.fileio import file_sha256
+from graphsvc.graph.file import load_graph
+from graphsvc.pipeline import synthesize_files, warm_up
 
 _GRAPHS: dict = {}  # (path, checksum) → MotionGraph, memory-mapped
 _WARM: set = set()  # (path, checksum, strategy) whose kernels and index are loaded
@@ -31,8 +34,6 @@ def worker_graph(path: str, checksum: str):
     key = (path, checksum)
     graph = _GRAPHS.get(key)
     if graph is None:
-        from graphsvc.graph.file import load_graph
-
         graph = load_graph(path, mmap=True)
         if graph.checksum != checksum:
             raise InputError(f"graph {path} changed since the batch was planned (checksum {graph.checksum[:12]}…, "
@@ -45,8 +46,6 @@ def warm(graph, key: tuple, strategy: str) -> float:
     """Load `strategy`'s kernels and index for `graph` once per process; the seconds it took (0 after)."""
     if (*key, strategy) in _WARM:
         return 0.0
-    from graphsvc.pipeline import warm_up
-
     seconds = warm_up(graph, threads=False, strategies=[strategy])
     _WARM.add((*key, strategy))
     return seconds
@@ -56,9 +55,6 @@ def run_item(task: dict) -> dict:
     """Reconstruct one planned item (`manifest.plan_item`'s task) into
     out_dir/OUTPUT.bvh and OUTPUT.json. Returns its figures, or {"error": reason} for
     a user error."""
-    from graphsvc.batch.manifest import parse_item_options
-    from graphsvc.pipeline import synthesize_files
-
     t0 = time.perf_counter()
     out_dir = Path(task["out_dir"])
     bvh, report_path = out_dir / f"{task['output']}.bvh", out_dir / f"{task['output']}.json"

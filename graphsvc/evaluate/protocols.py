@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graphsvc.errors import InputError
+from graphsvc.fileio import read_json_file
 from graphsvc.graph.holdout import performance_key
 from graphsvc.graph.model import MotionGraph
 
@@ -83,8 +84,6 @@ def builtin_actor(name: str) -> str | None:
 
 def load_actor_map(path) -> dict[str, str]:
     """An actor map file: a JSON object from clip names or globs to actor names."""
-    from graphsvc.fileio import read_json_file
-
     data = read_json_file(path, "actor map")
     if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
         raise InputError(f"actor map {path}: want an object of clip name or glob → actor name")

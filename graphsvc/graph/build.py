@@ -19,27 +19,21 @@ import numpy as np
 from tqdm import tqdm
 
 from graphsvc.errors import InputError, SkeletonError
-from graphsvc.graph import bridges as br
-from graphsvc.graph import interpolation as interp
-from graphsvc.graph import metadata as meta
-from graphsvc.graph.distance import (
-    DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, take, window_frames,
-)  # fmt: skip
-from graphsvc.graph.model import (
-    EDGE_BRIDGE, EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_BRIDGE, NODE_INTERP,
-    NODE_ORIGINAL, NODE_SLOW, MotionGraph, incoming_offsets,
-)  # fmt: skip
+from graphsvc.graph import bridges as br, interpolation as interp, metadata as meta
 from graphsvc.graph.connectivity import label_hops, typical_times
+from graphsvc.graph.distance import (DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, take, window_frames)  # fmt: skip
+from graphsvc.graph.model import (EDGE_BRIDGE, EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, MotionGraph, NODE_BRIDGE, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW, incoming_offsets)  # fmt: skip
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
-from graphsvc.motion import quat, signals
+from graphsvc.motion import augment as aug, quat, signals
 from graphsvc.motion.augment import mirror_label
 from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
+from graphsvc.motion.library import find_motion_files, load_motion
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.anatomy import ANATOMICAL
-from graphsvc.sensors.layout import Layout, Placement, anatomical_placement, place
+from graphsvc.sensors.layout import Layout, PRESETS, Placement, anatomical_placement, place
 
 
 
@@ -190,8 +184,6 @@ def build_graph(motions: list[Motion], options: BuildOptions,
     whose clips hold more than one action (the procedural one's stop clips walk first);
     a node then carries the label of the frame it comes from (`_node_labels`), else its
     clip's. Mirrored and reversed copies take their original's, mirrored or reversed."""
-    from graphsvc.sensors.layout import PRESETS
-
     layout = options.layout or PRESETS["wrists-ankles"]
     rate = float(options.rate_hz)
     if not (np.isfinite(rate) and rate > 0):
@@ -607,8 +599,6 @@ def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tupl
                         progress: bool | None = None) -> list[Motion]:  # fmt: skip
     """Load KB files/folders/globs, then add the requested augmented copies
     (`mirror`: left/right mirror images, `reverse`: time-reversed clips; OLNG paper)."""
-    from graphsvc.motion.library import find_motion_files, load_motion
-
     unknown = sorted(set(augment) - {"mirror", "reverse"})
     if unknown:
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
@@ -619,8 +609,6 @@ def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tupl
         motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
                             disable=None if progress is None else not progress))  # fmt: skip
     if augment:
-        from graphsvc.motion import augment as aug
-
         extra = []
         if "mirror" in augment:
             extra += [aug.mirror_motion(m) for m in motions]

@@ -23,11 +23,14 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from graphsvc.graph.model import EDGE_BRIDGE, EDGE_SLOW, EDGE_SPEEDUP, NODE_BRIDGE, NODE_SLOW
 from graphsvc.motion import quat, signals
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.resample import resample_arrays
-from graphsvc.sensors.accelerometer import simulate_accelerations
-from graphsvc.sensors.layout import Placement
+from graphsvc.motion.skeleton import Skeleton
+from graphsvc.sensors.accelerometer import sensor_poses, simulate_accelerations
+from graphsvc.sensors.anatomy import ANATOMICAL, REST_POSE
+from graphsvc.sensors.layout import Placement, anatomical_placement, layout_from_dict, place
 from graphsvc.sensors.orientation import sensor_up
 
 BEFORE, AFTER = 2, 3  # context frames of a bridge's readings: the 5-point stencil's reach, and b's frame q
@@ -197,9 +200,6 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     """(E, S, 3) float32 edge readings of `layout` for an existing graph, from the
     poses it stores (no knowledge base needed). Equal to the built metadata up to
     the float32 rounding of the stored poses (≈ 1e-3 m/s²)."""
-    from graphsvc.graph.model import EDGE_SLOW, EDGE_SPEEDUP, NODE_SLOW
-    from graphsvc.sensors.anatomy import ANATOMICAL
-
     sk = graph.skeleton
     N = graph.num_nodes
     S = len(layout.sensors)
@@ -243,8 +243,6 @@ def _bridge_accelerations(graph, placements, out) -> None:
     """Bridge edges' readings, in place on out (E, S, 3), from the stored poses of the
     bridges and of the clip frames around them (`bridge_readings`); placements: the
     layout on each clip."""
-    from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE
-
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
     ctx_rot, ctx_pos = forward_kinematics(graph.node_rotations[:N0].astype(np.float64),
@@ -290,9 +288,6 @@ def graph_placement(graph, layout=None):
     its clips, evenly spread. What the searches use to turn a measured reading into the
     world (OLNG's pose model, the rest-pose readings a live bridge calibrates against);
     each clip's own readings were simulated with its own estimate."""
-    from graphsvc.sensors.anatomy import ANATOMICAL
-    from graphsvc.sensors.layout import anatomical_placement, layout_from_dict, place
-
     layout = layout or layout_from_dict(graph.layout)
     sk = graph.skeleton
     mapping = graph.params.get("mapping")
@@ -319,8 +314,6 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
     segment's on clip a's (`clip_placements`). The orientation cost is yaw-free (a rotation about the
     vertical leaves it unchanged), so "up" is all it needs of the sensor's rotation;
     float16 keeps it to 5e-4 (0.03°)."""
-    from graphsvc.sensors.accelerometer import sensor_poses
-
     sk = graph.skeleton
     N, S = graph.num_nodes, len(layout.sensors)
     owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
@@ -342,8 +335,6 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
 def clip_placements(graph, layout) -> list:
     """The layout on each of the graph's clips in anatomical frames, each estimated from
     the clip's stored poses, as `recompute_accelerations` places them."""
-    from graphsvc.sensors.anatomy import ANATOMICAL
-
     return [clip_placement(graph, layout, c, ANATOMICAL) for c in range(len(graph.clips))]
 
 
@@ -352,10 +343,6 @@ def clip_placement(graph, layout, c: int, convention: str | None = None, poses=N
     the graph's readings): anatomical frames estimated from the clip's stored poses
     (`clip_placements`; poses: their world rotations and positions when the caller has
     them), or the rest-pose frames of a graph built before them."""
-    from graphsvc.motion.skeleton import Skeleton
-    from graphsvc.sensors.anatomy import ANATOMICAL, REST_POSE
-    from graphsvc.sensors.layout import anatomical_placement, place
-
     sk = graph.skeleton
     skeleton = Skeleton(sk.names, sk.parents, graph.clip_offsets[c], sk.channels, sk.end_site)
     if (convention or graph.params.get("sensor_frames", REST_POSE)) != ANATOMICAL:

@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.fileio import write_text_atomic
+from graphsvc.fileio import read_input_bytes, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion, Skeleton
 
@@ -424,8 +424,6 @@ _FRAME_TIME = re.compile(rb"^[ \t]*Frame[ \t]+Time[ \t]*:[ \t]*(\S*)[ \t]*\r?$")
 
 def read_file_bytes(path) -> bytes:
     """Whole file as bytes; the project's errors for a missing or unreadable file."""
-    from graphsvc.fileio import read_input_bytes
-
     return read_input_bytes(path)
 
 

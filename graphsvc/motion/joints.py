@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, SkeletonError
+from graphsvc.fileio import read_json_file
 from graphsvc.motion.skeleton import Skeleton
 
 CANONICAL = (
@@ -59,8 +60,6 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
 
 
 def load_mapping_file(path) -> dict[str, str]:
-    from graphsvc.fileio import read_json_file
-
     path = Path(path)
     data = read_json_file(path, "joint mapping")
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):

@@ -31,12 +31,16 @@ import base64
 
 import numpy as np
 
+from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.evaluate.metrics import error_arrays, truth_errors
 from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.grid import markers_at_rate, readings_at_rate
+from graphsvc.sensors.layout import layout_from_dict
+from graphsvc.sensors.noise import PRESETS
+from graphsvc.sensors.simulate import simulate_recording
 
 MISSING_I16 = -32768
 MISSING_I32 = -(2**31)
@@ -97,8 +101,6 @@ def figure_arrays(motion: Motion, name: str, mapping=None) -> dict:
     root = mm[:, 0]
     rel = mm - root[:, None, :]
     if np.abs(rel).max(initial=0) > 32767:
-        from graphsvc.errors import InputError
-
         raise InputError(f"{motion.name}: a joint lies more than 32 m from the root")
     out = {
         "name": name,
@@ -139,10 +141,6 @@ def sensor_arrays(rec, motion: Motion, mapping=None, virtual: np.ndarray | None 
     or a skeleton the layout cannot be placed on."""
     if rec is None or rec.accelerations is None or not rec.accelerations.size or not rec.layout:
         return None
-    from graphsvc.errors import GraphsvcError
-    from graphsvc.sensors.layout import layout_from_dict
-    from graphsvc.sensors.noise import PRESETS
-    from graphsvc.sensors.simulate import simulate_recording
     measured, _, _, _ = readings_at_rate(rec, motion.rate_hz)
     T = motion.num_frames
     if virtual is None or virtual.shape[1] != measured.shape[1]:

@@ -16,11 +16,13 @@ import numpy as np
 
 from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import read_json_file
+from graphsvc.graph.file import load_graph
+from graphsvc.motion.library import load_motion
+from graphsvc.motion.resample import resample
 from graphsvc.pipeline import read_searched_recording
 from graphsvc.report.gather import clip_view
-from graphsvc.strategies.sources import (
-    path_readings, source_readings, timeline_from_labels, timeline_from_nodes, timeline_from_sources,
-)  # fmt: skip
+from graphsvc.sensors.files import read_recording
+from graphsvc.strategies.sources import (path_readings, source_readings, timeline_from_labels, timeline_from_nodes, timeline_from_sources)  # fmt: skip
 
 TABLE_COLUMNS = ("clip", "label", "frames", "joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc",
                  "samples_per_s")  # fmt: skip
@@ -60,17 +62,11 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
     """The view of one synthesize report (its files resolved against `base` when
     relative). truth: a Motion, or a path to one, or None. graph: the graph already
     loaded, else read from the report's path when it is there (else no sources)."""
-    from graphsvc.motion.library import load_motion
-    from graphsvc.motion.resample import resample
-    from graphsvc.sensors.files import read_recording
-
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
         raise InputError("the report names no output file (write it with `graphsvc synthesize --report`)")
     motion = load_motion(_file(files["output"], "output", base))
     if graph is None and files.get("graph") and Path(files["graph"]).is_file():
-        from graphsvc.graph.file import load_graph
-
         graph = load_graph(files["graph"], mmap=True, verify=False)
     rec = None
     if files.get("recording"):
@@ -109,9 +105,6 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
 def kept_view(folder: Path, files: dict, row: dict) -> dict:
     """The view of one kept evaluation clip (the files `evaluate.keep.keep_clip` wrote
     into `folder`) with its evaluation row's scores above it."""
-    from graphsvc.motion.library import load_motion
-    from graphsvc.sensors.files import read_recording
-
     doc = read_json_file(_file(files["view"], "kept clip", folder))
     motion = load_motion(_file(files["output"], "kept motion", folder))
     truth = load_motion(_file(files["truth"], "kept truth", folder))

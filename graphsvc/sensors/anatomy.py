@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.motion import quat
 from graphsvc.motion.kinematics import forward_kinematics
 
@@ -94,8 +95,6 @@ def recording_frames(meta: dict) -> str | None:
 def check_frames(graph_params: dict, meta: dict, what: str = "the recording") -> None:
     """InputError when a recording's readings and a graph's are in different sensor-frame
     conventions (they would be compared axis by axis, silently wrong)."""
-    from graphsvc.errors import InputError
-
     ours = recording_frames(meta)
     theirs = graph_params.get("sensor_frames", REST_POSE)
     if ours is not None and ours != theirs:

@@ -35,6 +35,7 @@ from graphsvc.errors import LayoutError, SkeletonError
 from graphsvc.motion import quat
 from graphsvc.motion.joints import CANONICAL, CANONICAL_CHILD, joint_map
 from graphsvc.motion.skeleton import Skeleton
+from graphsvc.sensors import anatomy
 
 
 @dataclass(frozen=True)
@@ -266,8 +267,6 @@ def anatomical_placement(layout: Layout, skeleton: Skeleton, mapping, world_rot:
     estimated from the motion world_rot (F, J, 4), world_pos (F, J, 3) that the sensors
     ride on (a clip, or a sample of a graph's nodes). Sensors whose layout gives
     rotation_wxyz keep it."""
-    from graphsvc.sensors import anatomy
-
     base = place(layout, skeleton, mapping)
     table = joint_map(skeleton, mapping)
     rest_rot, rest_pos = anatomy.rest_pose(skeleton)

@@ -42,8 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.fileio import require_file
+from graphsvc.fileio import atomic_writer, require_file
 from graphsvc.sensors.axes import to_y_up
+from graphsvc.sensors.c3d_guard import check_c3d, read_isolated
 from graphsvc.sensors.recording import Recording, csv_rows, read_csv_table, sample_rate
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -108,8 +109,6 @@ def _declared_frames(path: Path) -> int | None:
 def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording:
     """A C3D file's labelled markers as a recording (module docstring). up: "y" or "z"
     (None: decided as the module docstring says); units: overrides the file's."""
-    from graphsvc.sensors.c3d_guard import check_c3d, read_isolated
-
     _check_up(up)
     path = require_file(path)
     data = path.read_bytes()
@@ -227,8 +226,6 @@ def read_marker_csv(path, up: str | None = None, units: str | None = None, rate_
 
 def export_marker_csv(rec: Recording, path) -> None:
     """Write a recording's markers as a marker CSV (metres, +Y up), atomically."""
-    from graphsvc.fileio import atomic_writer
-
     if rec.marker_positions is None:
         raise InputError("the recording has no markers")
     rec.validate()

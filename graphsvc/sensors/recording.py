@@ -79,9 +79,10 @@ from pathlib import Path
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.sensors.axes import z_up_to_y_up
 from graphsvc.fileio import atomic_writer, read_input_text
+from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.anatomy import CONVENTIONS, REST_POSE
+from graphsvc.sensors.axes import z_up_to_y_up
 from graphsvc.store import read_container, write_container
 
 KIND = "recording"
@@ -523,8 +524,6 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
 def _frames_comment(path, comments: dict, lines: dict, ours_in_layout: bool) -> dict:
     """{"sensor_frames": convention} from a `# sensor_frames=` comment (`sensors.anatomy`);
     a layout-frame file graphsvc wrote without one predates anatomical frames."""
-    from graphsvc.sensors.anatomy import CONVENTIONS, REST_POSE
-
     if "sensor_frames" not in comments:
         return {"sensor_frames": REST_POSE} if ours_in_layout else {}
     value = comments["sensor_frames"].lower()

@@ -10,18 +10,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from graphsvc.errors import InputError
-
 from graphsvc.motion import quat, signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, check_finite
 from graphsvc.sensors.accelerometer import second_derivative, sensor_poses, to_sensor_frames
-from graphsvc.sensors.device_model import TISSUE_SEGMENTS, impacts, mounting, orientation_output, soft_tissue
 from graphsvc.sensors.anatomy import ANATOMICAL
+from graphsvc.sensors.device_model import TISSUE_SEGMENTS, impacts, mounting, orientation_output, soft_tissue
 from graphsvc.sensors.layout import Layout, anatomical_placement
+from graphsvc.sensors.markers import keep_markers, load_marker_set, marker_positions, place_markers
 from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_heading, corrupt_positions
 from graphsvc.sensors.recording import Recording
+
 
 
 def device_readings(world_rot: np.ndarray, world_pos: np.ndarray, placement, table, rate_hz: float,
@@ -194,8 +195,6 @@ def simulate_marker_recording(motion: Motion, marker_set, noise: NoiseModel, see
     `rate_hz` (default the clip's), lost to `pattern` and moved by `noise.marker` (mm)
     drawn from `np.random.default_rng(seed)` (same seed → same bytes). It carries no
     accelerations; its meta holds the marker set, so `synthesize` needs no --markers."""
-    from graphsvc.sensors.markers import keep_markers, load_marker_set, marker_positions, place_markers
-
     check_finite(motion)
     marker_set = keep_markers(load_marker_set(marker_set), keep)
     clip_rate = float(motion.rate_hz)

@@ -31,8 +31,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.graph.derived import derived
+from graphsvc.graph.holdout import held_out_mask
 from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.simulate import simulate_recording
 from graphsvc.strategies.options import NoOptions, Options, SharedOptions, check_fields, given_names, values_of
 
 INPUTS = ("accelerations", "orientations", "markers", "ground_position", "heading", "constraints")
@@ -61,8 +64,6 @@ class Strategy:
         """InputError (an `options.OptionError` naming the field) for own options no
         input accepts: every declared field's type and range, then the options' own
         cross-field rule."""
-        from graphsvc.errors import InputError
-
         if not isinstance(own, self.options_class):
             raise InputError(f"strategy {self.name!r} takes {self.options_class.__name__}, got {type(own).__name__}")
         check_fields(own)
@@ -123,8 +124,6 @@ class Strategy:
     def allowed_mask(self, graph: MotionGraph, clips) -> np.ndarray:
         """(N,) bool: the nodes a search may use when graph clips `clips` (their
         performances) are held out."""
-        from graphsvc.graph.holdout import held_out_mask
-
         return held_out_mask(graph, clips)
 
     def check_simulation(self, options: Options) -> None:
@@ -135,8 +134,6 @@ class Strategy:
                        pattern=None):  # fmt: skip
         """The recording an evaluation reconstructs a test clip from: by default the
         layout's accelerometers (and the tracker, where the noise model keeps it)."""
-        from graphsvc.sensors.simulate import simulate_recording
-
         return simulate_recording(motion, layout, noise, seed=seed, rate_hz=rate_hz, mapping=mapping)
 
     def describe_input(self, options: Options, noise, pattern=None) -> str:

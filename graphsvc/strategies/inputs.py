@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.graph.metadata import sensor_up
+from graphsvc.sensors.orientation import sensor_up
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.anatomy import check_frames
 from graphsvc.sensors.grid import markers_at_rate, readings_at_rate, values_at_rate

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from graphsvc.errors import InputError
+from graphsvc.sensors.orientation import sensor_up
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
@@ -129,8 +130,6 @@ class LiveSession:
                 raise InputError(f"orientations must be ({S}, 4) finite quaternions w, x, y, z (NaN for missing), "
                                  f"got shape {q.shape}")  # fmt: skip
             if self.reads_up:
-                from graphsvc.graph.metadata import sensor_up
-
                 with np.errstate(invalid="ignore", divide="ignore"):
                     up = sensor_up(q)  # (a zero or NaN quaternion gives NaN: missing)
         return float(t_s), acc, position, heading, markers, up

@@ -28,6 +28,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from graphsvc.errors import FormatError, InputError
+from graphsvc.fileio import read_json_file
 from graphsvc.sensors.recording import validate_constraints
 
 # ---------------------------------------------------------------- declaring options
@@ -438,8 +439,6 @@ def check_constraints(constraints, graph=None) -> list:
 
 def load_constraints(path) -> list:
     """A constraint file: a JSON list of sets in priority order (see `Recording`)."""
-    from graphsvc.fileio import read_json_file
-
     path = Path(path)
     data = read_json_file(path)
     try:

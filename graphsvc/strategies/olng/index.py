@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.index import cached_arrays, frame_readings
+from graphsvc.strategies.olng.pose import frame_poses, pose_model
 
 INDEX_VERSION = 2
 
@@ -41,8 +42,6 @@ def build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
     """The index's arrays: nodes (F,) int64, edges (F,) int64 (the original edge into
     each), readings (F, 3S) float32 g, run_of (F,) int64, and what the pose energy reads
     of each frame (`pose`): poses (F, D) and positions (F, Ja, 3) float32."""
-    from graphsvc.strategies.olng.pose import frame_poses, pose_model
-
     arrays = frame_readings(graph)
     dst = arrays["nodes"]
     poses, positions = frame_poses(graph, pose_model(graph), dst)

@@ -49,13 +49,12 @@ import numba
 import numpy as np
 from scipy.optimize import minimize
 
+from graphsvc.errors import InputError
+from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.joints import joint_map
-from graphsvc.motion.kinematics import forward_kinematics
-from graphsvc.motion.kinematics import qmul4 as _qmul
-from graphsvc.motion.kinematics import qrot3 as _qrot
+from graphsvc.motion.kinematics import forward_kinematics, qmul4 as _qmul, qrot3 as _qrot
 from graphsvc.motion.placement import joint_tables, relative_pose
-from graphsvc.graph.metadata import graph_placement
 from graphsvc.sensors.accelerometer import carried_frame
 
 EPS = 1e-4  # ρ's smoothing (units of each term)
@@ -111,8 +110,6 @@ def pose_model(graph: MotionGraph) -> PoseModel:
     carried = placement.carrier[placement.carrier >= 0]
     missing = [int(j) for j in np.concatenate([placement.segment, placement.toward, carried]) if int(j) not in where]
     if missing:
-        from graphsvc.errors import InputError
-
         raise InputError(f"OLNG needs every sensor on the body under the pelvis; joint {sk.names[missing[0]]!r} is not")
     return PoseModel(active, parent_slot, slot, descendant,
                      np.array([where[int(j)] for j in placement.segment], dtype=np.int64),

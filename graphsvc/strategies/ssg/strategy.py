@@ -25,24 +25,23 @@ from dataclasses import replace
 
 import numpy as np
 
-from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.errors import GraphsvcError, InputError, SearchCancelled
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.sensors.markers import PRESETS as MARKER_PRESETS
-from graphsvc.sensors.markers import TRUNK_SEGMENTS, MarkerSet, keep_markers, load_marker_set, marker_set_from_dict
+from graphsvc.sensors.markers import (MarkerSet, PRESETS as MARKER_PRESETS, TRUNK_SEGMENTS, keep_markers, load_marker_set, marker_set_from_dict)  # fmt: skip
 from graphsvc.sensors.simulate import simulate_marker_recording
 from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
-from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.options import Options, on_field
-from graphsvc.strategies.ssg.options import SsgOptions, parse_marker_set
+from graphsvc.strategies.results import Provenance, Reconstruction, label_runs
 from graphsvc.strategies.ssg import dtw
 from graphsvc.strategies.ssg.decoder import SsgDecoder, Windows
 from graphsvc.strategies.ssg.graph import BACKWARD, FORWARD, RETRIEVED
-from graphsvc.strategies.ssg.index import SsgIndex, load_index, point_window, window_points
+from graphsvc.strategies.ssg.index import SsgIndex, WindowPoints, load_index, point_window, window_points
 from graphsvc.strategies.ssg.offsets import FIT_ROUNDS, FIT_SETTLED_M, FIT_SPAN_S, fit_offsets, fitted_set
+from graphsvc.strategies.ssg.options import SsgOptions, parse_marker_set
 from graphsvc.strategies.ssg.synthesis import poses, provenance
 
 # A knowledge-base cloud holds at most this many points (markers × frames of the point
@@ -272,8 +271,6 @@ def _run(graph, idx, used, local, w, lag, points, seen, should_stop) -> SsgDecod
     block = 256 if lag is None else 1  # (a cancelled client is noticed within a block)
     for t in range(0, len(points), block):
         if should_stop is not None and t % 256 == 0 and should_stop():
-            from graphsvc.errors import SearchCancelled
-
             raise SearchCancelled("reconstruction cancelled")
         decoder.push(points[t:t + block], seen[t:t + block])
     decoder.finish()
@@ -334,8 +331,6 @@ def warm_up() -> None:
         return
     F, P = 16, 6
     rng = np.random.default_rng(0)
-    from graphsvc.strategies.ssg.index import WindowPoints
-
     pts = rng.standard_normal((4, F, P)).astype(np.float32)
     kb = WindowPoints(pts[0], pts[1], pts[2], np.abs(pts[3]), np.array([-1, 0, 1]), np.ones(3))  # (P = 3 · 2)
     points = rng.standard_normal((5, 2, 3))

@@ -23,6 +23,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.options import Weights
+from graphsvc.strategies.start import start_placement
 from graphsvc.strategies.viterbi.batch import compile_constraints
 from graphsvc.strategies.viterbi.search import ViterbiSearch
 
@@ -123,8 +124,6 @@ class FixedLagDecoder:
 
     def _start_pending(self) -> tuple[np.ndarray, np.ndarray]:
         """Start the search placed from the samples waiting, then run them through it."""
-        from graphsvc.strategies.start import start_placement
-
         pending, self._pending = self._pending, []
         position = np.array([np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64)
                              for _, p, _, _ in pending])  # fmt: skip
