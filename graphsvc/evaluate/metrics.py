@@ -143,6 +143,63 @@ def label_acc(pred_labels, true_label):
     return per_frame, float(per_frame[scored].mean())
 
 
+# ---------------------------------------------------------------- what a viewer sees
+
+# A foot this high above its lowest (5th-percentile) height counts half as planted for
+# the skate (Zhang et al. 2018, "Mode-Adaptive Neural Networks for Quadruped Motion
+# Control": weight clip(2 − 2^(h / H), 0, 1), H = 2.5 cm: 1 on the floor, 0 from 2.5 cm up).
+SKATE_HEIGHT_M = 0.025
+PLAUSIBILITY = ("jitter_km_s3", "skate_cm_s", "penetration_cm")
+
+
+def jitter_km_s3(pos, rate_hz: float):
+    """Jitter, as sparse-IMU posers report it: the norm of the third time difference of
+    the joints' global positions (T, P, 3) m, times rate³, mean over joints: ((T−3,)
+    per-frame, mean) in km/s³; (empty, None) for fewer than four frames."""
+    p = _finite("pos", pos, (None, 3))
+    if p.shape[0] < 4:
+        return np.zeros(0), None
+    jerk = np.diff(p, n=3, axis=0) * float(rate_hz) ** 3  # (T−3, P, 3) m/s³
+    per_frame = np.linalg.norm(jerk, axis=-1).mean(axis=1) / 1000.0
+    return per_frame, float(per_frame.mean())
+
+
+def skate_cm_s(pos, rate_hz: float, feet):
+    """Foot skate: each foot joint's horizontal speed weighted by its nearness to the
+    floor, clip(2 − 2^(h / 2.5 cm), 0, 1), h its height above its own 5th-percentile
+    height over the clip (Zhang et al. 2018), mean over the feet: ((T−1,) per step,
+    mean) in cm/s; (empty, None) for a single frame. pos: (T, P, 3) m; feet: the foot
+    joints' indices in P (the ankles)."""
+    p = _finite("pos", pos, (None, 3))
+    if p.shape[0] < 2:
+        return np.zeros(0), None
+    f = p[:, list(feet)]  # (T, F, 3)
+    h = f[..., 1] - np.percentile(f[..., 1], 5, axis=0)
+    h = 0.5 * (h[1:] + h[:-1])  # (each step's height: its two frames')
+    w = np.clip(2.0 - np.power(2.0, h / SKATE_HEIGHT_M), 0.0, 1.0)
+    v = np.linalg.norm(np.diff(f[..., [0, 2]], axis=0), axis=-1) * float(rate_hz)  # (T−1, F) m/s
+    per_frame = 100.0 * (w * v).mean(axis=1)
+    return per_frame, float(per_frame.mean())
+
+
+def penetration_cm(pos, floor_m: float = 0.0):
+    """Ground penetration: how far the lowest joint of each frame is below the floor
+    (Y = floor_m): ((T,) per-frame, mean) in centimetres, 0 where none is."""
+    p = _finite("pos", pos, (None, 3))
+    per_frame = 100.0 * np.maximum(0.0, floor_m - p[..., 1].min(axis=1))
+    return per_frame, float(per_frame.mean())
+
+
+def plausibility(pos, rate_hz: float, feet) -> tuple[dict, dict]:
+    """({"jitter_km_s3", "skate_cm_s", "penetration_cm": mean or None}, their per-frame
+    arrays) of a motion's global joint positions (T, P, 3) m at rate_hz."""
+    out, per_frame = {}, {}
+    for key, (values, mean) in (("jitter_km_s3", jitter_km_s3(pos, rate_hz)), ("skate_cm_s", skate_cm_s(pos, rate_hz, feet)),
+                                ("penetration_cm", penetration_cm(pos))):  # fmt: skip
+        out[key], per_frame[key] = mean, values
+    return out, per_frame
+
+
 def evaluate_frames(
     pred_pos,
     true_pos,
