@@ -287,32 +287,34 @@ def device_map_seeds() -> list[bytes]:
 
 
 def grpc_synthesize_seeds() -> list[bytes]:
-    from graphsvc.service import convert
+    from graphsvc.service.convert_recording import recording_to_proto
+    from graphsvc.service.options_proto import options_to_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies.options import Options
     from graphsvc.strategies.ssg.options import SsgOptions
 
     rec = sensor_recording(5)
-    a = pb.SynthesizeRequest(graph="g", recording=convert.recording_to_proto(rec),
-                             options=convert.options_to_proto(Options(beam=10.0, latency_s=1.0),
-                                                              constraints=rec.constraints))  # fmt: skip
-    m = pb.SynthesizeRequest(graph="g", recording=convert.recording_to_proto(sensor_recording(4, markers=True)),
-                             options=convert.options_to_proto(Options(strategy="ssg", ssg=SsgOptions(
+    a = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec),
+                             options=options_to_proto(Options(beam=10.0, latency_s=1.0),
+                                                      constraints=rec.constraints))  # fmt: skip
+    m = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(sensor_recording(4, markers=True)),
+                             options=options_to_proto(Options(strategy="ssg", ssg=SsgOptions(
                                  markers="hands-feet", keep=("LWRA",)))))  # fmt: skip
     return [a.SerializeToString(deterministic=True), m.SerializeToString(deterministic=True)]
 
 
 def grpc_stream_seeds() -> list[bytes]:
-    from graphsvc.service import convert
+    from graphsvc.service.convert_recording import sample_to_proto
+    from graphsvc.service.options_proto import options_to_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies.olng.options import OlngOptions
     from graphsvc.strategies.options import Options
 
     rec = sensor_recording(2)
     config = pb.StreamSynthesizeRequest(config=pb.StreamConfig(
-        graph="g", options=convert.options_to_proto(Options(strategy="olng", olng=OlngOptions(k=32))),
+        graph="g", options=options_to_proto(Options(strategy="olng", olng=OlngOptions(k=32))),
         sensor_names=list(reversed(rec.sensor_names)), marker_names=["LWRA", "RTOE"], orientations=True))  # fmt: skip
-    sample = convert.sample_to_proto(0.5, rec.accelerations[0], rec.ground_position[0], rec.heading[0],
-                                     markers=np.zeros((2, 3)), orientations=rec.orientations[0])  # fmt: skip
+    sample = sample_to_proto(0.5, rec.accelerations[0], rec.ground_position[0], rec.heading[0],
+                             markers=np.zeros((2, 3)), orientations=rec.orientations[0])  # fmt: skip
     return [config.SerializeToString(deterministic=True),
             pb.StreamSynthesizeRequest(sample=sample).SerializeToString(deterministic=True)]

@@ -208,7 +208,8 @@ def _each(*calls) -> str:
 
 
 def _grpc_synthesize(data: bytes) -> None:
-    from graphsvc.service import convert
+    from graphsvc.service.convert_recording import recording_from_proto
+    from graphsvc.service.options_proto import options_from_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies import get as get_strategy
 
@@ -218,14 +219,17 @@ def _grpc_synthesize(data: bytes) -> None:
     reads_acc = [True]
 
     def options():
-        o = convert.options_from_proto(msg.options, "options")
+        o = options_from_proto(msg.options, "options")
         reads_acc[0] = "accelerations" in get_strategy(o.strategy).uses
 
-    return _each(options, lambda: convert.recording_from_proto(msg.recording, _LAYOUT, "recording", reads_acc[0]))
+    return _each(options, lambda: recording_from_proto(msg.recording, _LAYOUT, "recording", reads_acc[0]))
 
 
 def _grpc_stream(data: bytes) -> None:
-    from graphsvc.service import convert
+    from graphsvc.service.convert_recording import (marker_names_from_proto, sample_from_proto,
+                                                    sample_markers_from_proto, sample_orientations_from_proto,
+                                                    sensor_order)  # fmt: skip
+    from graphsvc.service.options_proto import options_from_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
 
     msg = _decode(pb.StreamSynthesizeRequest, data)
@@ -237,19 +241,19 @@ def _grpc_stream(data: bytes) -> None:
         def stream_checks():  # what the server checks of a config before its session opens
             from graphsvc.strategies import check_options, get
 
-            options = check_options(convert.options_from_proto(config.options, "config.options"))
-            names = convert.marker_names_from_proto(config.marker_names, "config.marker_names")
+            options = check_options(options_from_proto(config.options, "config.options"))
+            names = marker_names_from_proto(config.marker_names, "config.marker_names")
             get(options.strategy).check_stream(options, tuple(config.sensor_names), names)
 
-        return _each(stream_checks, lambda: convert.sensor_order(config.sensor_names, _LAYOUT, "config.sensor_names"))
+        return _each(stream_checks, lambda: sensor_order(config.sensor_names, _LAYOUT, "config.sensor_names"))
     sample = msg.sample
-    order = convert.sensor_order(list(reversed(_LAYOUT)), _LAYOUT, "config.sensor_names")
-    return _each(lambda: convert.sample_from_proto(sample, len(_LAYOUT), order, 0.0, "sample[1]", True),
-                 lambda: convert.sample_from_proto(sample, 4, None, None, "sample[0]", False),
-                 lambda: convert.sample_markers_from_proto(sample, 2, "sample[0]"),
-                 lambda: convert.sample_markers_from_proto(sample, 0, "sample[0]"),
-                 lambda: convert.sample_orientations_from_proto(sample, len(_LAYOUT), order, True, "sample[0]"),
-                 lambda: convert.sample_orientations_from_proto(sample, len(_LAYOUT), None, False, "sample[0]"))
+    order = sensor_order(list(reversed(_LAYOUT)), _LAYOUT, "config.sensor_names")
+    return _each(lambda: sample_from_proto(sample, len(_LAYOUT), order, 0.0, "sample[1]", True),
+                 lambda: sample_from_proto(sample, 4, None, None, "sample[0]", False),
+                 lambda: sample_markers_from_proto(sample, 2, "sample[0]"),
+                 lambda: sample_markers_from_proto(sample, 0, "sample[0]"),
+                 lambda: sample_orientations_from_proto(sample, len(_LAYOUT), order, True, "sample[0]"),
+                 lambda: sample_orientations_from_proto(sample, len(_LAYOUT), None, False, "sample[0]"))
 
 
 def _proto_mutator(message_name: str) -> Callable:
@@ -296,7 +300,7 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("marker-set", _marker_set, seeds.marker_set_seeds, doc="sensors.markers.load_marker_set"),
     Target("device-map", _device_map, seeds.device_map_seeds, doc="sensors.devices.load_device_map"),
     Target("grpc-synthesize", _grpc_synthesize, seeds.grpc_synthesize_seeds, structured=_proto_mutator(
-        "SynthesizeRequest"), doc="service.convert: a SynthesizeRequest's options and recording"),
+        "SynthesizeRequest"), doc="service.options_proto, convert_recording: a SynthesizeRequest's options and recording"),
     Target("grpc-stream", _grpc_stream, seeds.grpc_stream_seeds, structured=_proto_mutator(
-        "StreamSynthesizeRequest"), doc="service.convert: a stream's config and samples"),
+        "StreamSynthesizeRequest"), doc="service.options_proto, convert_recording: a stream's config and samples"),
 )}  # fmt: skip

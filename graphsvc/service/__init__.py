@@ -1,9 +1,21 @@
 """The graphsvc.v1 gRPC service: server, client, serial sensor bridge.
 
-server.py    the MotionGraphService, health, reflection, auth, TLS, `graphsvc serve`
-client.py    connections and calls, used by `graphsvc client ...` and the bridge
-bridge.py    serial line protocol → live stream (`graphsvc sensor-bridge`)
-convert.py   protos ↔ numpy arrays, Recording, Motion, pipeline Options
+server.py        bind, start, run and stop the server (`graphsvc serve`): TLS, health,
+                 reflection, the drain after SIGTERM
+servicer.py      the MotionGraphService's handlers (graphs, Synthesize, streams, batches)
+graphs.py        the graphs a server serves, loaded once (`--graph NAME=FILE`)
+streams.py       a live stream's slot, its first message and what its config announces
+interceptors.py  the call gate (loading, serving, draining) and bearer-token auth
+status.py        failures → gRPC status codes and details
+live_workers.py  live sessions in worker processes
+client.py        connections and calls, used by `graphsvc client ...` and the bridge
+bridge.py        serial line protocol → live stream (`graphsvc sensor-bridge`)
+convert.py       protos ↔ graphsvc's objects, every conversion re-exported from:
+  convert_graph.py      Skeleton, GraphInfo
+  convert_recording.py  Recording, a stream's samples and marker names, sensor order
+  convert_motion.py     Motion, PoseFrame, Provenance
+  convert_report.py     reports, BatchStatus, Struct values
+  options_proto.py      the pipeline's Options
 cli_commands.py  the command-line entry points (wired into graphsvc/cli.py)
-_generated/  stubs from proto/graphsvc/v1/graphsvc.proto (tools/gen_proto.py)
+_generated/      stubs from proto/graphsvc/v1/graphsvc.proto (tools/gen_proto.py)
 """

@@ -349,11 +349,11 @@ def read_device(port, protocol: LineProtocol, feed, stop: threading.Event, durat
     """Read `port` (a pyserial Serial or anything with read(n) and in_waiting) until
     the device goes away, `stop` is set or `duration_s` passes; put each graph-rate
     sample into `feed`, then close it. Returns why it ended."""
-    from graphsvc.service import convert
+    from graphsvc.service.convert_recording import sample_to_proto
 
     def send(samples):
         for t, acc in samples:
-            feed.put(convert.sample_to_proto(t, acc))
+            feed.put(sample_to_proto(t, acc))
 
     start = time.monotonic()
     reason = "stopped"

@@ -25,7 +25,10 @@ from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.sensors.recording import Recording
-from graphsvc.service import convert
+from graphsvc.service.convert_graph import skeleton_from_proto
+from graphsvc.service.convert_motion import frames_to_motion, motion_from_proto
+from graphsvc.service.convert_recording import recording_to_proto, sample_to_proto
+from graphsvc.service.convert_report import report_from_proto
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
@@ -133,15 +136,15 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
                timeout_s: float | None = None, skeleton: Skeleton | None = None) -> BatchResult:  # fmt: skip
     """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None)."""
     if skeleton is None:
-        skeleton = convert.skeleton_from_proto(get_graph(conn, graph).skeleton)
-    request = pb.SynthesizeRequest(graph=graph, recording=convert.recording_to_proto(rec),
+        skeleton = skeleton_from_proto(get_graph(conn, graph).skeleton)
+    request = pb.SynthesizeRequest(graph=graph, recording=recording_to_proto(rec),
                                    options=options or pb.SynthesisOptions())  # fmt: skip
     try:
         response = conn.stub.Synthesize(request, timeout=timeout_s, metadata=conn.metadata)
     except grpc.RpcError as exc:
         raise service_error(exc, "Synthesize") from None
-    motion = convert.motion_from_proto(response.motion, skeleton)
-    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, convert.report_from_proto(response))
+    motion = motion_from_proto(response.motion, skeleton)
+    return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, report_from_proto(response))
 
 
 # ---------------------------------------------------------------- live
@@ -190,8 +193,8 @@ class StreamResult:
     def motion(self) -> Motion:
         if self.started is None:
             raise InputError("the stream never started")
-        sk = convert.skeleton_from_proto(self.started.skeleton)
-        return convert.frames_to_motion(self.frames, sk, self.started.rate_hz)
+        sk = skeleton_from_proto(self.started.skeleton)
+        return frames_to_motion(self.frames, sk, self.started.rate_hz)
 
 
 def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = None, timeout_s: float | None = None,
@@ -243,7 +246,7 @@ def recording_samples(rec: Recording) -> Iterator[pb.SensorSample]:
         head = None if rec.heading is None else float(rec.heading[k])
         markers = None if rec.marker_positions is None else rec.marker_positions[k]
         orient = None if rec.orientations is None else rec.orientations[k]
-        yield convert.sample_to_proto(rec.timestamps_s[k], acc, pos, head, markers, orient)
+        yield sample_to_proto(rec.timestamps_s[k], acc, pos, head, markers, orient)
 
 
 def replay(rec: Recording, feed: SampleFeed, speed: float = 1.0, stop: threading.Event | None = None) -> None:

@@ -424,7 +424,7 @@ def _rpc_threads_busy() -> int:
 
 def _in_stream_handler(frame) -> bool:
     while frame is not None:
-        if frame.f_code.co_name == "_stream" and "service/server.py" in frame.f_code.co_filename:
+        if frame.f_code.co_name == "_stream" and "service/servicer.py" in frame.f_code.co_filename:
             return True
         frame = frame.f_back
     return False
