@@ -94,13 +94,12 @@ def _options(args, constraints=None, recording=None):
     return options_to_proto(options, constraints, recording)
 
 
-def _calibrated(rec, path):
-    """The recording in the layout's sensor frames with calibration file `path` (client-side), or as it is."""
-    if not path:
-        return rec
-    from graphsvc.sensors.calibration import apply_calibration, load_calibration
+def _recording(args):
+    """The recording as the client sends it: read, in the layout's sensor frames with
+    --calibration (`pipeline.read_recording_file`)."""
+    from graphsvc.pipeline import read_recording_file
 
-    return apply_calibration(rec, load_calibration(path))
+    return read_recording_file(args.recording, calibration=args.calibration)
 
 
 def _cmd_client_graphs(args) -> int:
@@ -125,7 +124,6 @@ def _cmd_client_graphs(args) -> int:
 
 def _cmd_client_synthesize(args) -> int:
     from graphsvc.fileio import atomic_writer, write_text_atomic
-    from graphsvc.sensors.files import read_recording
     from graphsvc.service.client import resolve_graph, synthesize
     from graphsvc.service.convert import skeleton_from_proto
 
@@ -134,7 +132,7 @@ def _cmd_client_synthesize(args) -> int:
     from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
 
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
-    rec = _calibrated(read_recording(args.recording), args.calibration)
+    rec = _recording(args)
     options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
@@ -198,13 +196,12 @@ def _cmd_client_batch(args) -> int:
 
 def _cmd_client_stream(args) -> int:
     from graphsvc.motion.bvh import write_bvh
-    from graphsvc.sensors.files import read_recording
     from graphsvc.service.client import latency_summary, resolve_graph, stream_recording
 
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, synthesize_inputs(args))
-    rec = _calibrated(read_recording(args.recording), args.calibration)
+    rec = _recording(args)
     options = _options(args, recording=rec)
 
     def on_frame(frame, latency_ms):
