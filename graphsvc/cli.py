@@ -279,165 +279,31 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_evaluate(args) -> int:
-    from dataclasses import replace
+    from graphsvc.evaluate.run import EvalConfig, run, summary_lines
+    from graphsvc.strategies import check_options
 
-    from graphsvc.errors import InputError
-    from graphsvc.evaluate import loo, protocols
-    from graphsvc.evaluate.report import format_table
-    from graphsvc.fileio import write_text_atomic
-    from graphsvc.strategies.options import values_of
-    from graphsvc.motion.library import find_motion_files, load_motion
-    from graphsvc.sensors.layout import load_layout
-    from graphsvc.sensors.noise import parse_noise
-    from graphsvc.strategies import check_options, get
-
-    # Every argument is checked before the (long) build and searches start.
     options, notes = options_from_flags(args)
     options = check_options(options)
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
-    strategy = get(options.strategy)
-    noise = parse_noise(args.noise)
-    if args.position_noise is not None:
-        if not (args.position_noise >= 0 and args.position_noise != float("inf")):
-            raise InputError(f"--position-noise must be a finite number of metres ≥ 0, got {args.position_noise}")
-        noise = replace(noise, position=args.position_noise)
-    # The tracker stream is there when asked for: --position-noise, or a noise spec
-    # with a tracker σ (the default and harsh presets, position=M).
-    from graphsvc.sensors.simulate import MarkerPattern, check_pattern
-
-    pattern = MarkerPattern((), args.flicker or 0.0, args.gap_fraction or 0.0)
-    check_pattern(pattern)
-    test_mapping = args.mapping
-    if test_mapping and test_mapping != "guess":
-        from graphsvc.motion.joints import load_mapping_file
-
-        test_mapping = load_mapping_file(test_mapping)
-    setup = loo.EvalSetup(noise=noise, positions=args.position_noise is not None or noise.position > 0,
-                          options=options, seed=args.seed, pattern=pattern, mapping=test_mapping)  # fmt: skip
-    strategy.check_simulation(options)
-    if not loo.reads_markers(setup) and (args.flicker or args.gap_fraction):
-        raise InputError("--flicker and --gap-fraction apply to a strategy that reads optical markers")
-    if options.heading_from_track and not setup.positions:
-        raise InputError("--heading-from-track needs the tracker's positions: give --position-noise M")
-    if args.jobs < 1:
-        raise InputError(f"--jobs must be ≥ 1, got {args.jobs}")
-    if args.mixed is not None and args.mixed < 2:
-        raise InputError(f"--mixed needs at least 2 clips a performance, got {args.mixed}")
-    if args.graph and args.augment:
-        raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
-    actor_map = protocols.load_actor_map(args.actors) if args.actors else None
-    setup = replace(setup, protocol=args.hold_out)
-    check_outputs([("--json", args.json, (".json",)), ("--report-html", args.report_html, (".html", ".htm"))],
-                  [("a knowledge-base file", k) for k in args.kb] + [("the graph", args.graph), ("the actor map", args.actors),
-                   ("the joint map", _file_arg(args.mapping))])  # fmt: skip
-    keep_tmp = None
-    if args.keep_motions:
-        keep = Path(args.keep_motions)
-        if not keep.parent.is_dir():
-            raise InputError(f"--keep-motions {keep}: folder {keep.parent} does not exist")
-        if keep.exists() and not keep.is_dir():
-            raise InputError(f"--keep-motions {keep}: is a file, not a folder")
-        keep.mkdir(exist_ok=True)
-        setup = replace(setup, keep_dir=str(keep.resolve()))
-    elif args.report_html:  # (the page holds everything: the clips' files live only until it is written)
-        import tempfile
-
-        keep_tmp = tempfile.TemporaryDirectory(prefix="graphsvc-report-")
-        setup = replace(setup, keep_dir=keep_tmp.name)
-    layout = load_layout(args.layout) if args.layout else None
-    progress = False if args.quiet else None
-
-    t0 = time.perf_counter()
-    files = find_motion_files(args.kb)
-    names = [f.name for f in files]
-    picked = loo.select_clips(names, args.test)
-    if not picked:
-        raise InputError(f"--test {args.test!r} matches none of the {len(files)} knowledge-base files (matched against "
-                         "file names, e.g. '*_001.bvh')")  # fmt: skip
-    if args.graph:
-        from graphsvc.graph.file import load_graph
-
-        graph = load_graph(args.graph)
-        if layout is not None and layout.name != graph.layout.get("name"):
-            raise InputError(f"{args.graph} was built for layout {graph.layout.get('name')!r}, not {layout.name!r} "
-                             "(rebuild it or run `graphsvc relayout`)")  # fmt: skip
-        tests = [load_motion(files[k]) for k in picked]
-        _check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
-        indices = loo.match_graph_clips(graph, tests)
-        offsets = {k: m.skeleton.offsets for m, k in zip(tests, indices) if k is not None}
-        missing = [m.name for m, k in zip(tests, indices) if k is None]
-        if missing:
-            print(f"note: {len(missing)} test clips are not in {args.graph} and are evaluated with nothing hidden: "
-                  + ", ".join(missing[:5]) + (" …" if len(missing) > 5 else ""), file=sys.stderr)  # fmt: skip
-        build_s = time.perf_counter() - t0
-    else:
-        from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
-
-        augment = tuple(a for a in (args.augment or "").split(",") if a)
-        motions = load_knowledge_base([str(f) for f in files], augment=augment, jobs=args.jobs, progress=progress)
-        graph, _ = build_graph(motions, BuildOptions(layout=layout or load_layout("wrists-ankles"), augment=augment,
-                                                     jobs=args.jobs, progress=progress))  # fmt: skip
-        # load_knowledge_base keeps the files' order and appends augmented copies,
-        # so file k is graph clip k.
-        tests = [motions[k] for k in picked]
-        _check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
-        indices = list(picked)
-        offsets = {k: m.skeleton.offsets for k, m in enumerate(motions)}
-        build_s = time.perf_counter() - t0
-    hides = protocols.hide_lists(graph, tests, args.hold_out, offsets, actor_map)
-    if args.hold_out == "actor":
-        for problem in protocols.check_actor_map(protocols.graph_clips(graph, offsets), actor_map):
-            print(f"note: {problem}", file=sys.stderr)
-    items = list(zip(tests, hides))
-    if args.mixed is not None:
-        from graphsvc.evaluate.mixed import mixed_items
-
-        items = mixed_items(tests, hides, args.mixed, float(graph.rate_hz), graph.params.get("mapping"), args.seed)
-        if not items:
-            raise InputError(f"--mixed {args.mixed}: the test clips of no one performer cover {args.mixed} different "
-                             "labels")  # fmt: skip
-    t0 = time.perf_counter()
-    rows = loo.run_leave_one_out(graph, items, setup, jobs=args.jobs, graph_path=args.graph,
-                                 progress=progress)  # fmt: skip
-    eval_s = time.perf_counter() - t0
-    out = loo.summarize_run(rows)
-    out["mean"]["peak_rss_mb"] = round(loo.peak_rss_mb(), 1)
-    out["config"] = {
-        "kb": list(args.kb), "test": args.test, "graph": args.graph, "layout": graph.layout.get("name"),
-        "graph_nodes": graph.num_nodes, "graph_edges": graph.num_edges, "inputs": loo.inputs_description(setup),
-        "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": args.seed,
-        "jobs": args.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": args.mixed,
-        "hold_out": args.hold_out, "actors": args.actors,
-        **({"keep_motions": setup.keep_dir} if args.keep_motions else {}),
-    }  # fmt: skip
-    if args.json:
-        # Without --keep-motions the clips' files live only until the page is written:
-        # the JSON does not point at them (`graphsvc report` of it then says so).
-        saved = out if args.keep_motions else {**out, "clips": [{k: v for k, v in c.items() if k != "kept"}
-                                                                for c in out["clips"]]}  # fmt: skip
-        write_text_atomic(args.json, json.dumps(saved, indent=1, sort_keys=True) + "\n")
-    if args.report_html:
-        from graphsvc.report.html import write_html
-        from graphsvc.report.load import evaluation_document
-
-        write_html(args.report_html, evaluation_document({**out, "config": {**out["config"], "keep_motions": setup.keep_dir}},
-                                                         Path(setup.keep_dir)))  # fmt: skip
-        print(f"wrote {args.report_html}")
-    if keep_tmp is not None:
-        keep_tmp.cleanup()
-    print(format_table(out))
-    w = options.weights
-    what = (f"{len(items)} joined performances of {args.mixed} actions" if args.mixed else "leave-one-out") + \
-        f" (hold-out {args.hold_out})"
-    searched = (f"{graph.num_nodes:,} nodes, {loo.inputs_description(setup)}, strategy {options.strategy}"
-                if loo.reads_markers(setup) else
-                f"{graph.num_nodes:,} nodes ({graph.layout.get('name')}), {loo.inputs_description(setup)}, "
-                f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}"
-                + "".join(f", {k} {v}" for k, v in values_of(options.own, changed_only=True).items()))  # fmt: skip
-    print(f"{what} on {searched}; graph {build_s:.1f} s, evaluation {eval_s:.1f} s, "
-          f"peak memory {out['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {args.json}" if args.json else ""))  # fmt: skip
+    config = EvalConfig(kb=tuple(args.kb), test=args.test, graph=args.graph, layout=args.layout, augment=args.augment,
+                        noise=args.noise, position_noise=args.position_noise, options=options, seed=args.seed,
+                        jobs=args.jobs, mixed=args.mixed, hold_out=args.hold_out, actors=args.actors,
+                        mapping=args.mapping, flicker=args.flicker, gap_fraction=args.gap_fraction, json=args.json,
+                        keep_motions=args.keep_motions, report_html=args.report_html,
+                        progress=False if args.quiet else None)  # fmt: skip
+    summary = run(config, note=lambda text: print(f"note: {text}", file=sys.stderr), write_page=_write_page)
+    for line in summary_lines(summary, config):
+        print(line)
     return 0
+
+
+def _write_page(path, summary: dict, folder: Path) -> None:
+    """The page of an evaluation whose clips are kept in `folder`."""
+    from graphsvc.report.html import write_html
+    from graphsvc.report.load import evaluation_document
+
+    write_html(path, evaluation_document(summary, folder))
 
 
 def _cmd_report(args) -> int:
@@ -451,19 +317,6 @@ def _cmd_report(args) -> int:
     print(f"wrote {out}: {len(doc['clips'])} clip{'s' if len(doc['clips']) != 1 else ''}, "
           f"{out.stat().st_size / 1e6:.1f} MB")
     return 0
-
-
-def _check_test_skeletons(tests, mapping) -> None:
-    """Every test clip's joints found (SkeletonError naming --mapping otherwise), before
-    any note is printed or any search starts."""
-    from graphsvc.errors import SkeletonError
-    from graphsvc.motion.joints import joint_map
-
-    for m in tests:
-        try:
-            joint_map(m.skeleton, mapping)
-        except SkeletonError as exc:
-            raise SkeletonError(f"test clip {m.name}: {exc}") from None
 
 
 def _seconds(s: float) -> str:
