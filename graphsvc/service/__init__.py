@@ -4,6 +4,5 @@ server.py    the MotionGraphService, health, reflection, auth, TLS, `graphsvc se
 client.py    connections and calls, used by `graphsvc client ...` and the bridge
 bridge.py    serial line protocol → live stream (`graphsvc sensor-bridge`)
 convert.py   protos ↔ numpy arrays, Recording, Motion, pipeline Options
-cli_commands.py  the command-line entry points (wired into graphsvc/cli.py)
 _generated/  stubs from proto/graphsvc/v1/graphsvc.proto (tools/gen_proto.py)
 """
