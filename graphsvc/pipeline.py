@@ -44,7 +44,7 @@ from graphsvc.strategies.start import start_state
 # The library's face for a reconstruction: what callers import from here.
 __all__ = ["Frame", "LiveSession", "Options", "Provenance", "Reconstruction", "SharedOptions", "Weights",
            "check_constraints", "check_layout", "check_options", "load_constraints", "open_session", "parse_weights",
-           "path_labels", "read_searched_recording", "readings_at_rate", "reconstruct", "start_state",
+           "path_labels", "read_recording_file", "read_searched_recording", "readings_at_rate", "reconstruct", "start_state",
            "synthesize_files", "warm_up"]  # fmt: skip
 
 def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,
@@ -138,19 +138,30 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
 
 def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,
                             notes=None) -> Recording:  # fmt: skip
-    """A recording as `synthesize_files` searches it on `graph`: read (up, units: as the
-    file does not say), a device's sensors named as the graph's layout does
-    (device_map), its readings turned into the layout's frames (calibration). notes:
-    a list that collects remarks for the user, or None."""
+    """A recording as `synthesize_files` searches it on `graph`: `read_recording_file`
+    for the graph's layout and sensors."""
+    return read_recording_file(recording_path, up, units, device_map, calibration, notes,
+                               layout_name=graph.layout.get("name"), sensor_names=graph.sensor_names)  # fmt: skip
+
+
+def read_recording_file(recording_path, up=None, units=None, device_map=None, calibration=None, notes=None,
+                        layout_name=None, sensor_names=None) -> Recording:  # fmt: skip
+    """A recording file as it is searched, here or sent to a server (`graphsvc client`):
+    read (up, units: as the file does not say), a device's sensors named as the layout
+    `layout_name` does (device_map: 'xsens' or a map file), its readings turned into the
+    layout's frames (calibration: a `graphsvc calibrate` file). sensor_names: the
+    graph's sensors, the order a device map puts them in; an Xsens recording not named
+    so without a device map is refused (None: not checked). notes: a list that
+    collects remarks for the user, or None."""
     rec = read_recording(recording_path, up=up, units=units)
     if device_map:
-        mapping = load_device_map(device_map, graph.layout.get("name"))
-        rec = apply_device_map(rec, mapping, order=graph.sensor_names)
-    elif rec.meta.get("imported_from") == "mvnx" and tuple(rec.sensor_names) != tuple(graph.sensor_names):
+        rec = apply_device_map(rec, load_device_map(device_map, layout_name), order=sensor_names)
+    elif (sensor_names is not None and rec.meta.get("imported_from") == "mvnx"
+          and tuple(rec.sensor_names) != tuple(sensor_names)):  # fmt: skip
         raise InputError(f"{recording_path} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
                          f"{' …' if rec.num_sensors > 4 else ''}): "
                          f"give --device-map xsens (or a map file) to name them as layout "
-                         f"{graph.layout.get('name')!r} does ({', '.join(graph.sensor_names)})")  # fmt: skip
+                         f"{layout_name!r} does ({', '.join(sensor_names)})")  # fmt: skip
     if calibration:
         rec = apply_calibration(rec, load_calibration(calibration))
     elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None and notes is not None:

@@ -218,7 +218,7 @@ def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, ext
 
 
 def test_the_path_summary_never_prints_a_run_as_zero_seconds():
-    from graphsvc.cli import _seconds
+    from graphsvc.cli.reconstruction import _seconds
 
     assert _seconds(1 / 30) == "0.03 s" and _seconds(2 / 30) == "0.07 s" and _seconds(0.1) == "0.1 s"
     assert _seconds(3 / 30) == "0.1 s" and _seconds(12.04) == "12.0 s"

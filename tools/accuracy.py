@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The accuracy table: `graphsvc evaluate --json` runs on Bandai-Namco dataset 2.
 
-One graph a layout is built from the whole of dataset 2 (`graphsvc build`); every row
-is an `evaluate --graph` run whose hold-out protocol hides the test clips' sets:
+One graph a layout is built from the whole of dataset 2 (as `graphsvc build` builds
+it); every row is an `evaluate --graph` run (`graphsvc.evaluate.run`, in this process)
+whose hold-out protocol hides the test clips' sets:
 
 - hold-out `takes`: the takes 001 and 004 of every content × style as tests (140 clips),
   each hiding every take of its content × style;
@@ -14,8 +15,12 @@ default,position=0,heading=none`), + overhead positions (`default,heading=none`,
 0.5,1,1), + positions and heading (`default`, weights 0.5,1,1: Kelly et al.'s, not
 tuned here); every registered strategy that reads accelerometers on the same clips
 (the optical-marker strategy has its own figures: tools/bench_ssg.py). Prints one JSON object a
-run (its row, the command and the figures, the locomotion and gesture means), then
-the table in Markdown.
+run (its row, the equivalent `graphsvc evaluate` command and the figures, the
+locomotion and gesture means), then the table in Markdown.
+
+The builds and runs share this process: an evaluation JSON's `peak_rss_mb` is this
+process's peak so far (a graph build's included), not one run's as `graphsvc evaluate`
+reports it.
 
 `--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
 
@@ -33,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
-import subprocess
 import sys
 import tempfile
 import time
@@ -48,26 +52,41 @@ PROTOCOLS = {
     "clip": "*_00[14].bvh",  # (only with --only clip: the least a test can hide)
 }
 DEFAULT_PROTOCOLS = ("takes", "actor")
-INPUTS = {
-    "acc": ("accelerometers", ["--noise", "default,position=0,heading=none"]),
-    "pos": ("+ overhead positions", ["--noise", "default,heading=none", "--weights", "0.5,1,1"]),
-    "pos+heading": ("+ positions and heading", ["--noise", "default", "--weights", "0.5,1,1"]),
+INPUTS = {  # what the recordings carry: (row text, --noise, --weights or None for the default)
+    "acc": ("accelerometers", "default,position=0,heading=none", None),
+    "pos": ("+ overhead positions", "default,heading=none", "0.5,1,1"),
+    "pos+heading": ("+ positions and heading", "default", "0.5,1,1"),
 }
 
 
-def graphsvc() -> list[str]:
-    exe = Path(sys.executable).with_name("graphsvc")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "graphsvc.cli"]
+def build(kb: Path, layout: str, jobs: int, out: Path) -> None:
+    """`graphsvc build KB --layout LAYOUT --jobs JOBS --quiet -o OUT`."""
+    from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
+    from graphsvc.graph.file import save_graph
+    from graphsvc.sensors.layout import load_layout
+
+    motions = load_knowledge_base([str(kb)], jobs=jobs, progress=False)
+    graph, _ = build_graph(motions, BuildOptions(layout=load_layout(layout), jobs=jobs, progress=False))
+    save_graph(graph, out)
 
 
-def run(cmd: list[str]) -> None:
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise SystemExit(f"failed: {shlex.join(cmd)}\n{done.stderr[-2000:]}")
+def evaluate(config, command: str) -> None:
+    """`graphsvc.evaluate.run` of `config` (the same run as `command`); SystemExit naming
+    the command for an error."""
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.evaluate.run import run
+
+    try:
+        run(config)
+    except (GraphsvcError, OSError) as exc:
+        raise SystemExit(f"failed: {command}\n{exc}") from None
 
 
 def main() -> None:
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.evaluate.run import EvalConfig
     from graphsvc.strategies import available, get
+    from graphsvc.strategies.options import Options, parse_weights
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("data", help="the Bandai-Namco folder (with dataset-2/data)")
@@ -93,22 +112,30 @@ def main() -> None:
     for layout in args.layouts.split(","):
         graph = work / f"dataset-2.{layout}.graph"
         if not graph.exists():
-            run(graphsvc() + ["build", str(kb), "--layout", layout, "--jobs", str(args.jobs), "--quiet", "-o", str(graph)])
+            try:
+                build(kb, layout, args.jobs, graph)
+            except GraphsvcError as exc:
+                raise SystemExit(f"failed: building {graph}\n{exc}") from None
         for protocol in [args.only] if args.only else DEFAULT_PROTOCOLS:
             for key in args.inputs.split(","):
-                what, flags = INPUTS[key]
-                flags = [f.replace("default", args.preset, 1) if f.startswith("default") else f for f in flags]
+                what, noise, weights = INPUTS[key]
+                noise = noise.replace("default", args.preset, 1)
                 for strategy in args.strategies.split(","):
                     tag = "" if args.preset == "default" else f".{args.preset}"
                     out = work / f"{protocol}.{layout}.{key}.{strategy}{tag}.json"
-                    cmd = graphsvc() + ["evaluate", str(kb), "--graph", str(graph), "--test", PROTOCOLS[protocol],
-                                        "--hold-out", protocol, *flags, "--strategy", strategy, "--jobs",
-                                        str(args.jobs), "--json", str(out), "--quiet"]  # fmt: skip
+                    config = EvalConfig(kb=(str(kb),), graph=str(graph), test=PROTOCOLS[protocol], hold_out=protocol,
+                                        noise=noise, options=Options(strategy=strategy,
+                                                                     weights=parse_weights(weights or "1,1,1")),
+                                        jobs=args.jobs, json=str(out), progress=False)  # fmt: skip
+                    command = shlex.join(["graphsvc", "evaluate", str(kb), "--graph", str(graph), "--test",
+                                          PROTOCOLS[protocol], "--hold-out", protocol, "--noise", noise,
+                                          *(["--weights", weights] if weights else []), "--strategy", strategy,
+                                          "--jobs", str(args.jobs), "--json", str(out), "--quiet"])  # fmt: skip
                     t0 = time.perf_counter()
                     stamp = out.with_suffix(".cmd")  # the command that wrote `out`
-                    if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == shlex.join(cmd)):
-                        run(cmd)
-                        stamp.write_text(shlex.join(cmd))
+                    if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == command):
+                        evaluate(config, command)
+                        stamp.write_text(command)
                     result = json.loads(out.read_text())
                     m, groups = result["mean"], result.get("groups", {})
                     row = {"hold_out": protocol, "layout": layout, "inputs": what, "strategy": strategy,
@@ -119,7 +146,7 @@ def main() -> None:
                            "groups": {g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}
                                       for g, v in groups.items()},
                            "seconds": round(time.perf_counter() - t0, 1),
-                           "command": shlex.join(["graphsvc", *cmd[len(graphsvc()):]])}  # fmt: skip
+                           "command": command}  # fmt: skip
                     rows.append(row)
                     print(json.dumps(row), flush=True)
     print()

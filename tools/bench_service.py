@@ -311,7 +311,7 @@ def start_server(graph_path: str, max_streams: int, *extra: str) -> tuple[subpro
     """A `graphsvc serve` subprocess on a free loopback port serving graph_path as
     "bench" (extra: more serve flags); (process, address)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-m", "graphsvc.service.cli_commands", "serve", "--graph",
+    proc = subprocess.Popen([sys.executable, "-m", "graphsvc.cli", "serve", "--graph",
                              f"bench={graph_path}", "--host", "127.0.0.1", "--port", "0", "--max-streams",
                              str(max_streams), "--grace-s", "2", *extra], cwd=ROOT, stdout=subprocess.PIPE, text=True,
                             env=env)  # fmt: skip

@@ -16,6 +16,5 @@ convert.py       protos ↔ graphsvc's objects, every conversion re-exported fro
   convert_motion.py     Motion, PoseFrame, Provenance
   convert_report.py     reports, BatchStatus, Struct values
   options_proto.py      the pipeline's Options
-cli_commands.py  the command-line entry points (wired into graphsvc/cli.py)
 _generated/      stubs from proto/graphsvc/v1/graphsvc.proto (tools/gen_proto.py)
 """

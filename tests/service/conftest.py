@@ -121,13 +121,13 @@ def live_frames(graph, recording, options):
 
 
 def run_cli(*args, timeout=60, **kwargs) -> subprocess.CompletedProcess:
-    """`python -m graphsvc.service.cli_commands ARGS` (the service commands as a process)."""
-    return subprocess.run([sys.executable, "-m", "graphsvc.service.cli_commands", *map(str, args)], cwd=ROOT,
+    """`python -m graphsvc.cli ARGS` (graphsvc as a process)."""
+    return subprocess.run([sys.executable, "-m", "graphsvc.cli", *map(str, args)], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout, env=_env(), check=False, **kwargs)  # fmt: skip
 
 
 def popen_cli(*args, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "graphsvc.service.cli_commands", *map(str, args)], cwd=ROOT,
+    return subprocess.Popen([sys.executable, "-m", "graphsvc.cli", *map(str, args)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), **kwargs)  # fmt: skip
 
 

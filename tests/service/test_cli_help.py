@@ -30,7 +30,7 @@ def _service_parsers():
 
 
 def _shared_options() -> set[str]:
-    """The strategy and calibration flags graphsvc.cli_args adds to many commands
+    """The strategy and calibration flags graphsvc.flags adds to many commands
     (their texts are the main CLI's)."""
     from graphsvc.flags import add_calibration_flag, add_search_flags
 

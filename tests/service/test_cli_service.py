@@ -12,7 +12,7 @@ import grpc
 import pytest
 
 from graphsvc.service import client as C
-from graphsvc.service.cli_commands import main
+from graphsvc.cli import main
 from tests.service.conftest import popen_cli, run_cli
 
 
@@ -241,7 +241,7 @@ def test_serve_on_an_address_not_of_this_machine_says_why_in_one_line(graph_file
 _HELD_LOAD = """
 import sys
 import graphsvc.service.server as S
-from graphsvc.service.cli_commands import main
+from graphsvc.cli import main
 
 bind, load = S.bind_server, S.load_graphs
 

@@ -1,77 +1,26 @@
-"""Command-line entry points of the service: `graphsvc serve`, `graphsvc client
-graphs|synthesize|stream`, `graphsvc sensor-bridge`.
-
-graphsvc/cli.py wires them with `add_service_parsers(sub)`. The same parser also
-runs on its own, for tools and tests that start a server as a subprocess:
-
-    python -m graphsvc.service.cli_commands serve --graph small=small.graph --port 0
-"""
+"""Commands that call a graphsvc server: `client graphs|synthesize|stream|batch` and
+`sensor-bridge` (a serial accelerometer device streamed to a server)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import signal
-import sys
 import threading
 import time
 from pathlib import Path
 
-from graphsvc.flags import (COUNT, PATH, Parser, add_calibration_flag, add_search_flags, options_from_flags, os_message,
-                            ranged, synthesize_inputs)  # fmt: skip
+from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
-from graphsvc.fileio import read_input_text
+from graphsvc.fileio import check_outputs, read_input_text
+from graphsvc.flags import PATH, add_calibration_flag, add_search_flags, options_from_flags, ranged, synthesize_inputs
 
 
 def _check_output(path: Path, inputs=()) -> None:
     """A BVH output: its folder there, .bvh, none of the inputs (`fileio.check_outputs`)."""
-    from graphsvc.fileio import check_outputs
     from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
 
     check_outputs([("-o", path, MOTION_OUTPUT_SUFFIXES)], inputs)
-
-
-def _print(line: str) -> None:
-    print(line, flush=True)  # flushed: tests and tools read these lines from a pipe
-
-
-# ---------------------------------------------------------------- serve
-
-
-def _cmd_serve(args) -> int:
-    from graphsvc.service.live_workers import LiveWorkers, default_count
-    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, parse_graph_spec, read_tokens, serve
-
-    tokens = read_tokens(args.token_file) if args.token_file else ()
-    config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),
-                          tls_key=args.tls_key and Path(args.tls_key), tokens=tokens, max_streams=args.max_streams,
-                          max_message_mb=args.max_message_mb, grace_s=args.grace_s,
-                          config_timeout_s=args.config_timeout_s,
-                          batch_dir=args.batch_dir and Path(args.batch_dir), batch_scheduler=args.batch_scheduler,
-                          batch_workers=args.batch_workers,
-                          live_workers=default_count() if args.live_workers is None else args.live_workers)  # fmt: skip
-    if config.batch_dir is None and (args.batch_scheduler or args.batch_workers):
-        raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
-    if (config.tls_cert is None) != (config.tls_key is None):
-        raise GraphsvcError("TLS needs both --tls-cert and --tls-key")
-    # A taken port or a bad address fails here, before the graphs load; from here on
-    # health checks are answered (NOT_SERVING until `serve` has the graphs served).
-    bound = bind_server(config)
-    workers = None
-    try:
-        if config.live_workers:  # (they load the graphs while this process does)
-            workers = LiveWorkers(dict(parse_graph_spec(spec) for spec in args.graph), config.live_workers)
-            workers.launch()
-        graphs = load_graphs(args.graph)
-    except BaseException:
-        bound.close()
-        if workers is not None:
-            workers.stop()
-        raise
-    return serve(graphs, config, announce=_print, bound=bound, live_workers=workers)
-
-
-# ---------------------------------------------------------------- client
 
 
 def _connect(args):
@@ -89,18 +38,16 @@ def _options(args, constraints=None, recording=None):
     from graphsvc.service.convert import options_to_proto
 
     options, notes = options_from_flags(args)
-    for note in notes:
-        print(f"note: {note}", file=sys.stderr)
+    print_notes(notes)
     return options_to_proto(options, constraints, recording)
 
 
-def _calibrated(rec, path):
-    """The recording in the layout's sensor frames with calibration file `path` (client-side), or as it is."""
-    if not path:
-        return rec
-    from graphsvc.sensors.calibration import apply_calibration, load_calibration
+def _recording(args):
+    """The recording as the client sends it: read, in the layout's sensor frames with
+    --calibration (`pipeline.read_recording_file`)."""
+    from graphsvc.pipeline import read_recording_file
 
-    return apply_calibration(rec, load_calibration(path))
+    return read_recording_file(args.recording, calibration=args.calibration)
 
 
 def _cmd_client_graphs(args) -> int:
@@ -125,16 +72,13 @@ def _cmd_client_graphs(args) -> int:
 
 def _cmd_client_synthesize(args) -> int:
     from graphsvc.fileio import atomic_writer, write_text_atomic
-    from graphsvc.sensors.files import read_recording
+    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
     from graphsvc.service.client import resolve_graph, synthesize
     from graphsvc.service.convert import skeleton_from_proto
 
     out = Path(args.output)
-    from graphsvc.fileio import check_outputs
-    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
-
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
-    rec = _calibrated(read_recording(args.recording), args.calibration)
+    rec = _recording(args)
     options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
@@ -198,19 +142,18 @@ def _cmd_client_batch(args) -> int:
 
 def _cmd_client_stream(args) -> int:
     from graphsvc.motion.bvh import write_bvh
-    from graphsvc.sensors.files import read_recording
     from graphsvc.service.client import latency_summary, resolve_graph, stream_recording
 
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, synthesize_inputs(args))
-    rec = _calibrated(read_recording(args.recording), args.calibration)
+    rec = _recording(args)
     options = _options(args, recording=rec)
 
     def on_frame(frame, latency_ms):
         if not args.quiet:
-            _print(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
-                   f"  latency {latency_ms:7.2f} ms")  # fmt: skip
+            print_flushed(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
+                          f"  latency {latency_ms:7.2f} ms")  # fmt: skip
 
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
@@ -223,9 +166,6 @@ def _cmd_client_stream(args) -> int:
         write_bvh(out, result.motion(), scale=100.0)
         print(f"wrote {out}")
     return 0
-
-
-# ---------------------------------------------------------------- sensor bridge
 
 
 def _cmd_sensor_bridge(args) -> int:
@@ -259,10 +199,10 @@ def _cmd_sensor_bridge(args) -> int:
             # Ctrl-C / SIGTERM end the input; the server's last frames still arrive.
             previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
-            _print(f"sensor-bridge: reading {args.device} at {args.baud} baud ({args.units}), streaming to "
-                   f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
-                   + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
-                      if args.calibrate_seconds else ""))  # fmt: skip
+            print_flushed(f"sensor-bridge: reading {args.device} at {args.baud} baud ({args.units}), streaming to "
+                          f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
+                          + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
+                             if args.calibrate_seconds else ""))  # fmt: skip
             result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration,
                                 mounting=mounting)  # fmt: skip
         finally:
@@ -271,21 +211,22 @@ def _cmd_sensor_bridge(args) -> int:
                 signal.signal(s, handler)
     st = result.stats
     reasons = ", ".join(f"{n} {r}" for r, n in sorted(st.corrupt.items()))
-    _print(f"sensor-bridge: {result.end_reason}; {st.lines} lines, {st.corrupt_lines} corrupt skipped"
-           + (f" ({reasons})" if reasons else "")
-           + f"; {st.device_samples} device samples ({st.incomplete_samples} incomplete, {st.calibration_samples} "
-           f"calibrating) → {st.samples_streamed} samples at {info.rate_hz:g} Hz; {len(result.stream.frames)} frames")  # fmt: skip
+    print_flushed(f"sensor-bridge: {result.end_reason}; {st.lines} lines, {st.corrupt_lines} corrupt skipped"
+                  + (f" ({reasons})" if reasons else "")
+                  + f"; {st.device_samples} device samples ({st.incomplete_samples} incomplete, "
+                  f"{st.calibration_samples} calibrating) → {st.samples_streamed} samples at {info.rate_hz:g} Hz; "
+                  f"{len(result.stream.frames)} frames")  # fmt: skip
     if result.calibration is not None:
         cal = result.calibration
         bias = "; ".join(f"{n} ({', '.join(f'{v:+.2f}' for v in b)})" for n, b in zip(info.sensor_names, cal.bias))
-        _print(f"sensor-bridge: calibration bias m/s²: {bias}")
+        print_flushed(f"sensor-bridge: calibration bias m/s²: {bias}")
         for w in cal.warnings:
-            _print(f"sensor-bridge: warning: {w}")
+            print_flushed(f"sensor-bridge: warning: {w}")
     if out is not None:
         if not result.stream.frames:
             raise GraphsvcError(f"no frames came back; {out} not written")
         write_bvh(out, result.stream.motion(), scale=100.0)
-        _print(f"wrote {out}: {len(result.stream.frames)} frames")
+        print_flushed(f"wrote {out}: {len(result.stream.frames)} frames")
     return 0
 
 
@@ -321,48 +262,12 @@ def _json_flag(p, what: str) -> None:
     p.add_argument("--json", action="store_true", help=f"print {what} as JSON (default: as text)")
 
 
-def add_service_parsers(sub) -> None:
-    """Add `serve`, `client` and `sensor-bridge` to graphsvc's subcommands."""
-
-    what = "serve graphs over gRPC (graphsvc.v1)"
-    p = sub.add_parser("serve", help=what, description=(
-        f"{what[0].upper()}{what[1:]}: live streams, batch synthesis, graph info, health and reflection. The port is "
-        "bound first (health answers NOT_SERVING while the graphs load), then SERVING until SIGTERM or Ctrl-C, "
-        "which drains the calls under way (see docs/service.md)."))  # fmt: skip
-    p.add_argument("--graph", action="append", required=True, metavar="NAME=FILE",
-                   help="a graph to serve under NAME (repeatable; at least one)")  # fmt: skip
-    p.add_argument("--host", default="[::]", help="address to bind (default [::]: all interfaces)")
-    p.add_argument("--port", type=int, default=50051, help="TCP port (default 50051; 0: any free port)")
-    p.add_argument("--tls-cert", metavar="F", type=PATH,
-                   help="PEM certificate chain: serve TLS (with --tls-key; default: plaintext)")
-    p.add_argument("--tls-key", metavar="F", type=PATH, help="PEM private key of --tls-cert (default: none, plaintext)")
-    p.add_argument("--token-file", metavar="F", type=PATH,
-                   help="accepted bearer tokens, one per line: require one (default: no authentication)")
-    p.add_argument("--max-streams", type=COUNT, default=16, metavar="N",
-                   help="concurrent live streams; more get RESOURCE_EXHAUSTED (default 16)")  # fmt: skip
-    p.add_argument("--max-message-mb", type=ranged(float, 0.0, 2047.0, low_open=True), default=64.0, metavar="M",
-                   help="largest message either way, MiB (default 64)")  # fmt: skip
-    p.add_argument("--grace-s", type=ranged(float, 0.0, 3600.0), default=10.0, metavar="S",
-                   help="on SIGTERM, time for in-flight calls to finish, health answering NOT_SERVING (default 10)")
-    p.add_argument("--config-timeout-s", type=float, default=10.0, metavar="S",
-                   help="a stream that sends no config within S seconds of connecting ends with "
-                        "DEADLINE_EXCEEDED (default 10)")  # fmt: skip
-    p.add_argument("--live-workers", type=ranged(int, 0, 256), metavar="N",
-                   help="run the live streams' sessions in N worker processes, each stream in one (default: one a "
-                        "core, 0 on a single core; 0: in the server's process)")  # fmt: skip
-    p.add_argument("--batch-dir", metavar="DIR", type=PATH, help="take batches (SubmitBatch …): their folders go here, and a "
-                                                      "manifest's relative paths are taken from here (default: "
-                                                      "take no batches)")  # fmt: skip
-    p.add_argument("--batch-scheduler", metavar="ADDRESS", help="run batches on this Dask scheduler (default: a "
-                                                                "local cluster, started at the first batch)")  # fmt: skip
-    p.add_argument("--batch-workers", type=COUNT, metavar="N", help="the local cluster's workers (default: one a core)")
-    p.set_defaults(run=_cmd_serve)
-
+def add_client(sub) -> None:
+    """`client` and its subcommands: graphs, synthesize, batch …, stream."""
     connection = _connection_parent()
-    what = "call a graphsvc server"
-    p = sub.add_parser("client", help=what, description=(
-        "Call a graphsvc server (graphsvc serve): list its graphs, reconstruct a recording, replay one live, run "
-        "batches."))  # fmt: skip
+    p = command(sub, "client", "call a graphsvc server",
+                "Call a graphsvc server (graphsvc serve): list its graphs, reconstruct a recording, replay one live, "
+                "run batches.")  # fmt: skip
     client = p.add_subparsers(dest="client_command", required=True, parser_class=type(p), help="what to call")
 
     what = "list the server's graphs (--graph: one in full)"
@@ -433,11 +338,13 @@ def add_service_parsers(sub) -> None:
     add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 
-    what = "stream a serial accelerometer device to a server"
-    p = sub.add_parser("sensor-bridge", parents=[connection], help=what, description=(
-        "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
-        "rate, stream them to a server and write the motion that comes back; ends when the device closes, after "
-        "--duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge)."))  # fmt: skip
+
+def add_sensor_bridge(sub) -> None:
+    p = command(sub, "sensor-bridge", "stream a serial accelerometer device to a server",
+                "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
+                "rate, stream them to a server and write the motion that comes back; ends when the device closes, "
+                "after --duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge).",
+                parents=[_connection_parent()])  # fmt: skip
     p.add_argument("--device", required=True, metavar="DEV", type=PATH, help="serial device, e.g. /dev/ttyUSB0 (required)")
     p.add_argument("--baud", type=int, default=115200, metavar="B", help="baud rate (default 115200)")
     p.add_argument("--units", choices=("m/s2", "g"), default="m/s2",
@@ -450,31 +357,3 @@ def add_service_parsers(sub) -> None:
     add_calibration_flag(p)
     add_search_flags(p, latency_help=_live_latency_help())
     p.set_defaults(run=_cmd_sensor_bridge)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Standalone entry point with graphsvc's error handling (one line, exit 2)."""
-    parser = Parser(prog="graphsvc", description="graphsvc gRPC service commands")
-    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    add_service_parsers(parser.add_subparsers(dest="command", required=True, parser_class=Parser))
-    args = parser.parse_args(argv)
-    try:
-        return args.run(args)
-    except BrokenPipeError:  # the reader went away (`| head`): not an error
-        import os
-
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-    except (GraphsvcError, OSError) as exc:
-        if args.debug:
-            raise
-        message = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
-        print(f"graphsvc: error: {message}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("graphsvc: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
