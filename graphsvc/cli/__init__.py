@@ -9,6 +9,10 @@ beyond graphsvc/flags.py.
 Errors a user can cause (GraphsvcError, unreadable or unwritable paths) print one
 line on stderr and exit 2 with nothing written; --debug shows the traceback (`main`,
 for every command).
+
+Each command function imports the library it calls inside itself: `graphsvc --help`
+and a command load only what they use (numba's kernels, grpc, dask are seconds of
+start-up a command that does not need them should not pay).
 """
 
 from __future__ import annotations

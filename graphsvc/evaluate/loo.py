@@ -21,29 +21,36 @@ from __future__ import annotations
 import fnmatch
 import hashlib
 import math
+import multiprocessing
 import os
 import resource
+import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 
+from graphsvc.evaluate.keep import keep_clip, kept_name
 from graphsvc.evaluate.metrics import evaluate_frames, summarize
 from graphsvc.evaluate.protocols import activity
+from graphsvc.graph.build import content_digest
+from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
 from graphsvc.graph.model import MotionGraph
-from graphsvc.motion import signals
+from graphsvc.motion import quat, signals
 from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
-from graphsvc.pipeline import Options
-from graphsvc.strategies import get as get_strategy
+from graphsvc.pipeline import Options, reconstruct
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
 from graphsvc.sensors.simulate import MarkerPattern
+from graphsvc.strategies import get as get_strategy
+from graphsvc.strategies.sources import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
 
 def clip_file_name(source: str, name: str) -> str:
     """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
@@ -64,8 +71,6 @@ def match_graph_clips(graph: MotionGraph, motions: list[Motion]) -> list[int | N
     """The graph clip index of each motion (None when the graph lacks it): by content
     hash (`sha256` in graph.clips) and name, else by resolved source path and name —
     the hash survives moving the knowledge base, the path a re-export."""
-    from graphsvc.graph.build import content_digest
-
     by_hash = {}
     by_path = {}
     for k, c in enumerate(graph.clips):
@@ -215,8 +220,6 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     `evaluate_frames`'s dict (name, frames, the four metrics, per_frame arrays) plus
     file, label, samples_per_s, search_s, hidden_nodes, in_graph, start_placed, and
     `node_path` / `pred_labels` ((T,) arrays, for plots; not in the JSON)."""
-    from graphsvc.pipeline import reconstruct
-
     mapping = graph.params.get("mapping")
     test_mapping = setup.mapping if setup.mapping is not None else mapping  # (the test clip's skeleton)
     rate = float(graph.rate_hz)
@@ -275,8 +278,6 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
 def placed_motion(motion: Motion, d: float, g0, shift) -> Motion:
     """`place_start`'s rigid move applied to a motion's root: turned by d rad about +Y
     around ground point g0 (x, z), then shifted by `shift` (x, z)."""
-    from graphsvc.motion import quat
-
     rot, trans = motion.rotations.copy(), motion.translations.copy()
     rot[:, 0] = quat.mul(quat.about_y(np.full(motion.num_frames, d)), rot[:, 0])
     c, s = math.cos(d), math.sin(d)
@@ -289,9 +290,6 @@ def placed_motion(motion: Motion, d: float, g0, shift) -> Motion:
 def _keep(graph, setup: EvalSetup, motion, truth, rec, result, pred_labels, per_frame, fixes, starts) -> dict:
     """Write the clip's files into setup.keep_dir (`report.load.keep_clip`), the
     reconstruction placed as the metrics placed it."""
-    from graphsvc.evaluate.keep import keep_clip, kept_name
-    from graphsvc.strategies.sources import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
-
     out = result.motion
     (fix_position, fix_heading), (true_g0, true_h0, pred_ground, pred_heading) = fixes, starts
     if fix_position or fix_heading:  # (the same rigid move as `place_start`)
@@ -318,10 +316,6 @@ _worker: dict = {}
 
 
 def _init_worker(graph_path: str, setup: EvalSetup, threads: int) -> None:
-    import numba
-
-    from graphsvc.graph.file import load_graph
-
     # The search kernels are numba-parallel: share the cores among workers rather
     # than letting every worker start a thread per core.
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
@@ -348,11 +342,6 @@ def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, 
     jobs = max(1, min(int(jobs), len(tests)))
     if jobs == 1:
         return [evaluate_clip(graph, *item[:2], setup, *item[2:]) for item in tqdm(tests, **bar)]
-    import multiprocessing
-    import tempfile
-
-    from graphsvc.graph.file import save_graph
-
     with tempfile.TemporaryDirectory(prefix="graphsvc-eval-") as tmp:
         if graph_path is None:
             graph_path = Path(tmp) / "graph.mgraph"

@@ -19,7 +19,20 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from graphsvc.strategies.options import Options
+from graphsvc.errors import InputError, SkeletonError
+from graphsvc.evaluate import loo, protocols
+from graphsvc.evaluate.mixed import mixed_items
+from graphsvc.evaluate.report import format_table
+from graphsvc.fileio import check_outputs, write_text_atomic
+from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
+from graphsvc.graph.file import load_graph
+from graphsvc.motion.joints import joint_map, load_mapping_file
+from graphsvc.motion.library import find_motion_files, load_motion
+from graphsvc.sensors.layout import load_layout
+from graphsvc.sensors.noise import parse_noise
+from graphsvc.sensors.simulate import MarkerPattern, check_pattern
+from graphsvc.strategies import check_options, get
+from graphsvc.strategies.options import Options, values_of
 
 # (path, summary with each clip's kept files, the folder they are in) → the page written
 PageWriter = Callable[[str, dict, Path], None]
@@ -72,15 +85,6 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     problem). write_page: writes `config.report_html` (`PageWriter`). InputError (or
     another GraphsvcError) before the graph is built or loaded for an argument that
     does not fit."""
-    from graphsvc.errors import InputError
-    from graphsvc.evaluate import loo, protocols
-    from graphsvc.fileio import check_outputs, write_text_atomic
-    from graphsvc.motion.library import find_motion_files, load_motion
-    from graphsvc.sensors.layout import load_layout
-    from graphsvc.sensors.noise import parse_noise
-    from graphsvc.sensors.simulate import MarkerPattern, check_pattern
-    from graphsvc.strategies import check_options, get
-
     note = note or (lambda text: None)
     if config.report_html and write_page is None:
         raise ValueError("a report_html page needs write_page, the function that writes it")
@@ -98,8 +102,6 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     check_pattern(pattern)
     test_mapping = config.mapping
     if test_mapping and test_mapping != "guess":
-        from graphsvc.motion.joints import load_mapping_file
-
         test_mapping = load_mapping_file(test_mapping)
     setup = loo.EvalSetup(noise=noise, positions=config.position_noise is not None or noise.position > 0,
                           options=options, seed=config.seed, pattern=pattern, mapping=test_mapping)  # fmt: skip
@@ -145,8 +147,6 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
             raise InputError(f"--test {config.test!r} matches none of the {len(files)} knowledge-base files (matched "
                              "against file names, e.g. '*_001.bvh')")  # fmt: skip
         if config.graph:
-            from graphsvc.graph.file import load_graph
-
             graph = load_graph(config.graph)
             if layout is not None and layout.name != graph.layout.get("name"):
                 raise InputError(f"{config.graph} was built for layout {graph.layout.get('name')!r}, not "
@@ -161,8 +161,6 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
                      + ", ".join(missing[:5]) + (" …" if len(missing) > 5 else ""))  # fmt: skip
             build_s = time.perf_counter() - t0
         else:
-            from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
-
             augment = tuple(a for a in (config.augment or "").split(",") if a)
             motions = load_knowledge_base([str(f) for f in files], augment=augment, jobs=config.jobs,
                                           progress=config.progress)  # fmt: skip
@@ -180,8 +178,6 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
                 note(problem)
         items = list(zip(tests, hides))
         if config.mixed is not None:
-            from graphsvc.evaluate.mixed import mixed_items
-
             items = mixed_items(tests, hides, config.mixed, float(graph.rate_hz), graph.params.get("mapping"),
                                 config.seed)  # fmt: skip
             if not items:
@@ -220,10 +216,6 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
     """What `graphsvc evaluate` prints of `run`'s summary: the page written, the metrics
     table (`report.format_table`) and one line of what was evaluated on what, how long
     it took and the files written."""
-    from graphsvc.evaluate.report import format_table
-    from graphsvc.strategies import check_options, get
-    from graphsvc.strategies.options import values_of
-
     cfg = summary["config"]
     options = check_options(config.options)
     lines = [f"wrote {config.report_html}"] if config.report_html else []
@@ -245,9 +237,6 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
 def check_test_skeletons(tests, mapping) -> None:
     """Every test clip's joints found (SkeletonError naming --mapping otherwise), before
     any note is printed or any search starts."""
-    from graphsvc.errors import SkeletonError
-    from graphsvc.motion.joints import joint_map
-
     for m in tests:
         try:
             joint_map(m.skeleton, mapping)

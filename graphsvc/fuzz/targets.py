@@ -7,7 +7,8 @@ File readers see the bytes as a file with the format's suffix in a scratch folde
 (their real entry point, path in); `rec-sealed` and `graph-sealed` first give the bytes
 a valid trailer (length and SHA-256), so mutations reach the header's and arrays'
 checks behind the checksum; the gRPC targets decode a serialized request as the
-server does before it runs anything."""
+server does before it runs anything. Each target imports its reader inside itself, so
+a fuzzing child loads only the one it runs."""
 
 from __future__ import annotations
 

@@ -48,6 +48,8 @@ import numpy as np
 
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.calibration import calibrate_sample
+from graphsvc.service import client
+from graphsvc.service.convert_recording import sample_to_proto
 
 LINE_MAX_BYTES = 256  # longer without a newline: noise or a wrong baud rate
 MAX_GAP_S = 0.5  # resampling does not interpolate across a longer silence
@@ -349,8 +351,6 @@ def read_device(port, protocol: LineProtocol, feed, stop: threading.Event, durat
     """Read `port` (a pyserial Serial or anything with read(n) and in_waiting) until
     the device goes away, `stop` is set or `duration_s` passes; put each graph-rate
     sample into `feed`, then close it. Returns why it ended."""
-    from graphsvc.service.convert_recording import sample_to_proto
-
     def send(samples):
         for t, acc in samples:
             feed.put(sample_to_proto(t, acc))
@@ -383,8 +383,6 @@ def run_bridge(port, conn, graph_info, options, units: str = "m/s2", calibrate_s
     or `duration_s` passes, after the server has sent the last frames. `mounting` (S,
     4): each sensor's rotation from its device frame into the layout's
     (`sensors.calibration`), applied to every reading first."""
-    from graphsvc.service import client
-
     names = tuple(graph_info.sensor_names)
     calibration = None
     if calibrate_s > 0:

@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphsvc.errors import FieldError
+from graphsvc.errors import FieldError, GraphsvcError
+from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph, summary
+from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.skeleton import Skeleton
+from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service.convert_report import json_safe
 
@@ -38,11 +41,6 @@ def rest_pose_readings(graph: MotionGraph) -> np.ndarray:
     still in its rest pose (all local rotations identity) — gravity only. NaN when
     the layout cannot be placed on the skeleton (an unknown skeleton without the
     mapping it was built with)."""
-    from graphsvc.errors import GraphsvcError
-    from graphsvc.motion.kinematics import forward_kinematics
-    from graphsvc.sensors.accelerometer import simulate_accelerations
-    from graphsvc.graph.metadata import graph_placement
-
     sk = graph.skeleton
     S = len(graph.sensor_names)
     try:

@@ -18,14 +18,13 @@ import numpy as np
 from graphsvc.errors import FieldError, InputError
 from graphsvc.sensors.recording import Recording, check_gap, check_rate
 from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.strategies.inputs import layout_mismatch_message
 
 
 def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str, layout_name: str = "?") -> np.ndarray | None:
     """Indices that put the request's sensor triplets into the graph's order, or None
     when they already are (or no names were given: the graph's order is implied).
     Sensors that are not the layout's are refused with the CLI's line naming them."""
-    from graphsvc.strategies.inputs import layout_mismatch_message
-
     given = list(given)
     if not given or tuple(given) == tuple(graph_names):
         return None

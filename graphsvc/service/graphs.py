@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from graphsvc.errors import InputError
+from graphsvc.graph.file import load_graph
+from graphsvc.pipeline import warm_up
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service.convert_graph import graph_info
 
@@ -35,9 +37,6 @@ def parse_graph_spec(text: str) -> tuple[str, Path]:
 
 def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
     """Load each "NAME=FILE" graph once (memory-mapped, checksum verified)."""
-    from graphsvc.graph.file import load_graph
-    from graphsvc.pipeline import warm_up
-
     if not specs:
         raise InputError("no graphs to serve (give --graph NAME=FILE at least once)")
     graphs: dict[str, LoadedGraph] = {}

@@ -46,6 +46,8 @@ import traceback
 from pathlib import Path
 
 from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.graph.file import load_graph
+from graphsvc.pipeline import open_session, warm_up
 
 READY_TIMEOUT_S = 600.0  # loading and warming every graph in a worker (a fresh install compiles)
 # A session's first seconds of samples: the heavy pushes of its start (a Viterbi
@@ -79,9 +81,6 @@ def _worker_main(conn, graph_paths: dict[str, str]) -> None:
     session's opening, its first YOUNG_S seconds of samples and its flush run on the
     side thread, everything else on this one."""
     try:
-        from graphsvc.graph.file import load_graph
-        from graphsvc.pipeline import warm_up
-
         graphs = {}
         for name, path in graph_paths.items():
             graphs[name] = load_graph(Path(path))
@@ -139,8 +138,6 @@ def _answer(graphs, sessions, op, sid, payload) -> tuple:
     """One request's answer (sid, status, value); see the module docstring."""
     try:
         if op == "open":
-            from graphsvc.pipeline import open_session  # (here, not on every sample's way)
-
             name, options, names, marker_names, orientations = payload
             session = open_session(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
                                   orientations=orientations)  # fmt: skip

@@ -25,7 +25,7 @@ import math
 from graphsvc.errors import FieldError, GraphsvcError, InputError
 from graphsvc.sensors.recording import Recording, validate_constraints
 from graphsvc.service._generated import graphsvc_pb2 as pb
-from graphsvc.strategies import DEFAULT, get
+from graphsvc.strategies import DEFAULT, available, get
 from graphsvc.strategies.options import Options, SharedOptions, Weights, from_values, option_specs, values_of
 
 # SynthesisOptions' own fields for what every strategy reads (proto name → Options field),
@@ -74,8 +74,6 @@ def _flat_aliases() -> dict[str, tuple[str, str]]:
     """{flat SynthesisOptions field: (strategy, option)} for the options whose own flag
     names a flat field (`--beam` → beam)."""
     flat = {f.name for f in pb.SynthesisOptions.DESCRIPTOR.fields}
-    from graphsvc.strategies import available
-
     out = {}
     for name in available():
         for spec in option_specs(get(name).options_class):

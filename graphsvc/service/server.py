@@ -42,20 +42,18 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
+from graphsvc.batch.service import BatchManager
 from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.fileio import read_input_bytes
-from graphsvc.service.graphs import LoadedGraph
-from graphsvc.service.interceptors import BearerTokenInterceptor, CallGate
+from graphsvc.service._generated import graphsvc_pb2 as pb, graphsvc_pb2_grpc as pb_grpc
+from graphsvc.service.graphs import LoadedGraph, load_graphs, parse_graph_spec
+from graphsvc.service.interceptors import BearerTokenInterceptor, CallGate, read_tokens
 from graphsvc.service.live_workers import LiveWorkers
 from graphsvc.service.servicer import MotionGraphServicer
 from graphsvc.service.streams import CONFIG_TIMEOUT_S
-from graphsvc.service._generated import graphsvc_pb2 as pb
-from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
 # What `graphsvc serve` reads before it binds, named here too: the command line and
 # the tests import them from this module.
-from graphsvc.service.graphs import load_graphs, parse_graph_spec  # noqa: F401
-from graphsvc.service.interceptors import read_tokens  # noqa: F401
 
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["MotionGraphService"].full_name  # "graphsvc.v1.MotionGraphService"
 UNARY_WORKERS = 4  # threads beyond the live streams' for ListGraphs/GetGraph/Synthesize and rejections
@@ -297,8 +295,6 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
     try:
         batches = None
         if config.batch_dir is not None:
-            from graphsvc.batch.service import BatchManager
-
             batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
                                    config.batch_workers)  # fmt: skip
         workers = live_workers

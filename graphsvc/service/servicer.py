@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import grpc
 
+from graphsvc.batch.service import BatchNotFound
 from graphsvc.errors import FieldError, InputError
-from graphsvc.strategies import check_options
-from graphsvc.strategies import get as get_strategy
-from graphsvc.strategies.threads import ThreadShare
+from graphsvc.motion.bvh import bvh_text
+from graphsvc import pipeline
+from graphsvc.service._generated import graphsvc_pb2 as pb, graphsvc_pb2_grpc as pb_grpc
 from graphsvc.service.convert_motion import frame_to_proto, motion_to_proto, provenance_to_proto
 from graphsvc.service.convert_recording import recording_from_proto
 from graphsvc.service.convert_report import batch_status_to_proto, report_to_proto
@@ -26,8 +27,8 @@ from graphsvc.service.live_workers import LiveWorkers
 from graphsvc.service.options_proto import options_from_proto
 from graphsvc.service.status import RpcStatus, abort_for
 from graphsvc.service.streams import CONFIG_TIMEOUT_S, StreamInput, StreamSlots, first_message
-from graphsvc.service._generated import graphsvc_pb2 as pb
-from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
+from graphsvc.strategies import check_options, get as get_strategy
+from graphsvc.strategies.threads import ThreadShare
 
 
 def _config_error(exc: InputError) -> FieldError:
@@ -78,9 +79,6 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             abort_for(context, exc)
 
     def Synthesize(self, request, context):
-        from graphsvc.motion.bvh import bvh_text
-        from graphsvc.pipeline import reconstruct
-
         try:
             graph = self._graph(request.graph).graph
             options = options_from_proto(request.options, "options")
@@ -93,7 +91,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             # live stream does not take the threads). The search polls the call and
             # stops when the client cancels or its deadline passes.
             with self.threads.running():
-                result = reconstruct(graph, rec, options, threads=False, should_stop=lambda: not context.is_active())
+                result = pipeline.reconstruct(graph, rec, options, threads=False,
+                                              should_stop=lambda: not context.is_active())  # fmt: skip
             response = pb.SynthesizeResponse(motion=motion_to_proto(result.motion),
                                              node_path=[] if result.node_path is None else result.node_path.tolist(),
                                              bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
@@ -105,8 +104,6 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             abort_for(context, exc)
 
     def _batch_call(self, context, call):
-        from graphsvc.batch.service import BatchNotFound
-
         try:
             if self.batches is None:
                 raise RpcStatus(grpc.StatusCode.FAILED_PRECONDITION,
@@ -223,14 +220,12 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         """The stream's live session, in a live worker process or in this one, once the
         strategy's own checks of what the stream announces pass (here too when a worker
         opens the session); a refusal names the config's field."""
-        from graphsvc.pipeline import open_session
-
         try:
             strategy.check_stream(check_options(options), stream.names, stream.marker_names)
             if self.live_workers is not None:
                 return self.live_workers.open(loaded.name, options, stream.names, stream.marker_names,
                                               stream.orientations)  # fmt: skip
-            return open_session(loaded.graph, options, stream.names, keep_motion=False,  # the client keeps the frames
+            return pipeline.open_session(loaded.graph, options, stream.names, keep_motion=False,  # (the client keeps them)
                                 marker_names=stream.marker_names, orientations=stream.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise _config_error(exc) from None
