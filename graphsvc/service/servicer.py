@@ -226,6 +226,6 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 return self.live_workers.open(loaded.name, options, stream.names, stream.marker_names,
                                               stream.orientations)  # fmt: skip
             return pipeline.open_session(loaded.graph, options, stream.names, keep_motion=False,  # (the client keeps them)
-                                marker_names=stream.marker_names, orientations=stream.orientations)  # fmt: skip
+                                         marker_names=stream.marker_names, orientations=stream.orientations)  # fmt: skip
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise _config_error(exc) from None
