@@ -16,7 +16,9 @@ default,position=0,heading=none`), + overhead positions (`default,heading=none`,
 tuned here); every registered strategy that reads accelerometers on the same clips
 (the optical-marker strategy has its own figures: tools/bench_ssg.py). Prints one JSON object a
 run (its row, the equivalent `graphsvc evaluate` command and the figures, the
-locomotion and gesture means), then the table in Markdown.
+locomotion and gesture means, what a viewer sees: jitter, foot skate and ground
+penetration of the output and of the truth), then the table in Markdown, jitter and
+skate as multiples of the truth's.
 
 The builds and runs share this process: an evaluation JSON's `peak_rss_mb` is this
 process's peak so far (a graph build's included), not one run's as `graphsvc evaluate`
@@ -95,7 +97,9 @@ def main() -> None:
     parser.add_argument("--only", choices=sorted(PROTOCOLS))
     parser.add_argument("--layouts", default="wrists-ankles,kelly6")
     parser.add_argument("--inputs", default=",".join(INPUTS))
-    accelerometer_strategies = [n for n in available() if "accelerations" in get(n).needs]  # (ssg: tools/bench_ssg.py)
+    # every strategy but those reading markers (ssg: tools/bench_ssg.py); an installed plug-in too
+    # (`pip install -e examples/strategy-plugin` adds meanpose, the mean pose: a floor)
+    accelerometer_strategies = [n for n in available() if "markers" not in get(n).needs]
     parser.add_argument("--strategies", default=",".join(accelerometer_strategies))
     parser.add_argument("--preset", default="default",
                         help="the sensors' noise preset (default; real: tools/fit_real_noise.py's devices)")
@@ -143,6 +147,8 @@ def main() -> None:
                            "clips": m["clips"], "frames": m["frames"], "joint_err_cm": m["joint_err_cm"],
                            "root_err_cm": m["root_err_cm"], "heading_err_deg": m["heading_err_deg"],
                            "label_acc": m["label_acc"], "samples_per_s": m.get("samples_per_s"),
+                           **{k: m.get(k) for k in ("jitter_km_s3", "skate_cm_s", "penetration_cm",
+                                                    "truth_jitter_km_s3", "truth_skate_cm_s", "truth_penetration_cm")},
                            "groups": {g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}
                                       for g, v in groups.items()},
                            "seconds": round(time.perf_counter() - t0, 1),
@@ -157,15 +163,21 @@ def _f(x, spec, scale=1.0):
     return "—" if x is None else format(x * scale, spec)
 
 
+def _ratio(r: dict, key: str):
+    value, truth = r.get(key), r.get(f"truth_{key}")
+    return None if value is None or not truth else value / truth
+
+
 def table(rows: list[dict]) -> str:
     head = ("hold-out", "layout", "inputs", "strategy", "clips", "joint cm", "root cm", "heading °", "label",
-            "locomotion joint cm", "gestures joint cm")  # fmt: skip
+            "jitter ×truth", "skate ×truth", "locomotion joint cm", "gestures joint cm")  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for r in rows:
         g = r["groups"]
         cells = (r["hold_out"], f"`{r['layout']}`", r["inputs"], f"`{r['strategy']}`", str(r["clips"]),
                  _f(r["joint_err_cm"], ".2f"), _f(r["root_err_cm"], ".1f"), _f(r["heading_err_deg"], ".1f"),
                  (_f(r["label_acc"], ".0f", 100.0) + " %") if r["label_acc"] is not None else "n/a",
+                 _f(_ratio(r, "jitter_km_s3"), ".1f") + "×", _f(_ratio(r, "skate_cm_s"), ".2f") + "×",
                  _f(g.get("locomotion", {}).get("joint_err_cm"), ".2f"),
                  _f(g.get("gestures", {}).get("joint_err_cm"), ".2f"))  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")

@@ -241,8 +241,8 @@ def _remove_temporaries(out: Path, outputs) -> None:
 
 
 def make_summary(con, outputs, seconds: float, skipped: int, state: str) -> dict:
-    """Per item (state, attempts, seconds, samples/s, per-term costs or the reason),
-    the totals, the failures."""
+    """Per item (state, attempts, seconds, samples/s, the output's jitter and foot skate,
+    per-term costs or the reason), the totals, the failures."""
     by_name = {r["output"]: r for r in store.rows(con)}
     items, failures = [], []
     total_samples = total_input = total_item_s = 0.0
@@ -253,7 +253,8 @@ def make_summary(con, outputs, seconds: float, skipped: int, state: str) -> dict
         if r["state"] == "done":
             entry.update(seconds=round(res["seconds"], 4), samples=res["samples"], input_s=round(res["input_s"], 3),
                          samples_per_s=res.get("samples_per_s"), cost=res.get("cost"), terms=res.get("terms", {}),
-                         path=r["output_path"], checksum=r["checksum"])  # fmt: skip
+                         path=r["output_path"], checksum=r["checksum"],
+                         **{k: res[k] for k in ("jitter_km_s3", "skate_cm_s") if k in res})  # fmt: skip
             total_samples += res["samples"]
             total_input += res["input_s"]
             total_item_s += res["seconds"]
@@ -276,14 +277,17 @@ def make_summary(con, outputs, seconds: float, skipped: int, state: str) -> dict
 
 
 def format_summary(summary: dict) -> str:
-    """The summary as a table: per item seconds, samples/s, cost and its terms; totals; failures."""
+    """The summary as a table: per item seconds, samples/s, what a viewer sees (jitter,
+    foot skate), cost and its terms; totals; failures."""
     terms = sorted({t for e in summary["items"] for t in e.get("terms", {})})
-    head = ["output", "state", "tries", "s", "samples/s", "cost", *terms]
+    head = ["output", "state", "tries", "s", "samples/s", "jitter km/s³", "skate cm/s", "cost", *terms]
     lines = [head]
     for e in summary["items"]:
         if e["state"] == "done":
             lines.append([e["output"], e["state"], str(e["attempts"]), f"{e['seconds']:.2f}",
                           f"{e['samples_per_s']:,.0f}" if e.get("samples_per_s") else "-",
+                          f"{e['jitter_km_s3']:.2f}" if e.get("jitter_km_s3") is not None else "-",
+                          f"{e['skate_cm_s']:.1f}" if e.get("skate_cm_s") is not None else "-",
                           f"{e['cost']:.2f}" if e.get("cost") is not None else "-",
                           *(f"{e['terms'][t]:.2f}" if t in e.get("terms", {}) else "-" for t in terms)])  # fmt: skip
         else:

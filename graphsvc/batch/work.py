@@ -20,6 +20,7 @@ from pathlib import Path
 
 from graphsvc.batch.manifest import parse_item_options
 from graphsvc.errors import GraphsvcError, InputError
+from graphsvc.evaluate.metrics import motion_plausibility
 from graphsvc.fileio import file_sha256
 from graphsvc.graph.file import load_graph
 from graphsvc.pipeline import synthesize_files, warm_up
@@ -51,6 +52,15 @@ def warm(graph, key: tuple, strategy: str) -> float:
     return seconds
 
 
+def _seen(motion, mapping) -> dict:
+    """The output's jitter and foot skate (`evaluate.metrics.motion_plausibility`), or
+    nothing for a skeleton no joint map knows."""
+    try:
+        return {k: v for k, v in motion_plausibility(motion, mapping).items() if k in ("jitter_km_s3", "skate_cm_s")}
+    except GraphsvcError:
+        return {}
+
+
 def run_item(task: dict) -> dict:
     """Reconstruct one planned item (`manifest.plan_item`'s task) into
     out_dir/OUTPUT.bvh and OUTPUT.json. Returns its figures, or {"error": reason} for
@@ -78,6 +88,8 @@ def run_item(task: dict) -> dict:
         "terms": r.get("terms", {}),
         "output": str(bvh),
         "checksum": file_sha256(bvh),
+        # what a viewer sees of the output (no truth here: `graphsvc evaluate` compares)
+        **_seen(result.motion, graph.params.get("mapping")),
         "report": str(report_path),
     }
 

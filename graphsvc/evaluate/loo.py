@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from graphsvc.evaluate.keep import keep_clip, kept_name
-from graphsvc.evaluate.metrics import evaluate_frames, summarize
+from graphsvc.evaluate.metrics import evaluate_frames, plausibility, summarize
 from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.build import content_digest
 from graphsvc.graph.file import load_graph, save_graph
@@ -249,6 +249,13 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
                           pred_labels=pred_labels, true_label=scored, name=motion.name)  # fmt: skip
+    # What a viewer sees, of the output and of the truth (each over its own frames).
+    feet = [compared.index(f) for f in ("l_ankle", "r_ankle")]
+    seen, seen_per_frame = plausibility(pred_canon, rate, feet)
+    truth_seen, _ = plausibility(true_canon, rate, feet)
+    row.update(seen)
+    row.update({f"truth_{k}": v for k, v in truth_seen.items()})
+    row["per_frame"].update(seen_per_frame)
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     if setup.keep_dir:

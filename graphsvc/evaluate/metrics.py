@@ -25,7 +25,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.motion import signals
-from graphsvc.motion.joints import common_joints, joint_map
+from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.quat import wrap_angle
 from graphsvc.motion.skeleton import Motion
@@ -200,6 +200,16 @@ def plausibility(pos, rate_hz: float, feet) -> tuple[dict, dict]:
     return out, per_frame
 
 
+def motion_plausibility(motion: Motion, mapping=None) -> dict:
+    """`plausibility` of a motion's canonical joints (its skeleton's joint map, or
+    `mapping`): {"jitter_km_s3", "skate_cm_s", "penetration_cm"}, means or None."""
+    table = joint_map(motion.skeleton, mapping)
+    names = [c for c in CANONICAL if c in table]
+    pos = motion_fk(motion)[1][:, [table[c] for c in names]]
+    values, _ = plausibility(pos, float(motion.rate_hz), [names.index("l_ankle"), names.index("r_ankle")])
+    return values
+
+
 def evaluate_frames(
     pred_pos,
     true_pos,
@@ -273,7 +283,9 @@ def summarize(results: list[dict]) -> dict:
     Each row is the result without `per_frame` (other extra keys, e.g. runtime, pass
     through). `mean` holds `clips`, total `frames` and, per metric, the frame-weighted
     mean over clips, Σ frames_i·m_i / Σ frames_i, which equals the mean over all frames;
-    label_acc is averaged only over clips that have it and is None when none do."""
+    label_acc is averaged only over clips that have it and is None when none do. The
+    plausibility figures (`PLAUSIBILITY`, the output's and the truth's `truth_…`) are
+    averaged the same way where rows have them."""
     rows = []
     for r in results:
         row = {k: v for k, v in r.items() if k != "per_frame"}
@@ -282,7 +294,8 @@ def summarize(results: list[dict]) -> dict:
                 row[k] = float(row[k])
         rows.append(row)
     mean: dict = {"clips": len(rows), "frames": int(sum(int(r["frames"]) for r in rows))}
-    for k in METRICS:
+    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY)) if any(k in r for r in rows)]
+    for k in (*METRICS, *plausible):
         have = [r for r in rows if r.get(k) is not None]
         weight = sum(int(r["frames"]) for r in have)
         mean[k] = float(sum(int(r["frames"]) * r[k] for r in have) / weight) if weight > 0 else None

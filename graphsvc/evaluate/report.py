@@ -14,19 +14,25 @@ def _fmt(value, spec: str, scale: float = 1.0, none: str = "—") -> str:
 
 def format_table(summary: dict) -> str:
     """One row per clip and a mean row from `loo.summarize_run`'s dict: frames,
-    joint error (cm), root error (cm), heading error (°), label accuracy (%),
-    search speed (samples/s); then, when both occur, the means of the locomotion and
-    the gesture clips (`protocols.activity`)."""
-    head = ("clip", "frames", "joint cm", "root cm", "heading °", "label %", "samples/s")
-    rows = []
-    for r in summary["clips"]:
-        rows.append((str(r.get("file") or r["name"]), f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"),
-                     _fmt(r["root_err_cm"], ".1f"), _fmt(r["heading_err_deg"], ".1f"),
-                     _fmt(r["label_acc"], ".0f", 100.0, "n/a"), _fmt(r.get("samples_per_s"), ",.0f")))  # fmt: skip
+    joint error (cm), root error (cm), heading error (°), jitter (km/s³) and foot skate
+    (cm/s) of the output and of the truth, label accuracy (%), search speed
+    (samples/s); then, when both occur, the means of the locomotion and the gesture
+    clips (`protocols.activity`)."""
+    head = ("clip", "frames", "joint cm", "root cm", "heading °", "jitter out/truth", "skate out/truth", "label %",
+            "samples/s")  # fmt: skip
+
+    def pair(r, key, spec):
+        return f"{_fmt(r.get(key), spec)} / {_fmt(r.get('truth_' + key), spec)}" if key in r else "—"
+
+    def cells(title, r):
+        return (title, f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"), _fmt(r["root_err_cm"], ".1f"),
+                _fmt(r["heading_err_deg"], ".1f"), pair(r, "jitter_km_s3", ".2f"), pair(r, "skate_cm_s", ".1f"),
+                _fmt(r["label_acc"], ".0f", 100.0, "n/a"), _fmt(r.get("samples_per_s"), ",.0f"))  # fmt: skip
+
+    rows = [cells(str(r.get("file") or r["name"]), r) for r in summary["clips"]]
+
     def summary_row(title, m):
-        return (title, f"{m['frames']:,}", _fmt(m["joint_err_cm"], ".2f"), _fmt(m["root_err_cm"], ".1f"),
-                _fmt(m["heading_err_deg"], ".1f"), _fmt(m["label_acc"], ".0f", 100.0, "n/a"),
-                _fmt(m.get("samples_per_s"), ",.0f"))  # fmt: skip
+        return cells(title, m)
 
     m = summary["mean"]
     means = [summary_row(f"mean of {m['clips']} clips", m)]

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import FormatError, GraphsvcError, InputError
+from graphsvc.evaluate.metrics import motion_plausibility
 from graphsvc.fileio import read_json_file
 from graphsvc.graph.file import load_graph
 from graphsvc.motion.library import load_motion
@@ -22,10 +23,12 @@ from graphsvc.motion.resample import resample
 from graphsvc.pipeline import read_searched_recording
 from graphsvc.report.gather import clip_view
 from graphsvc.sensors.files import read_recording
-from graphsvc.strategies.sources import (path_readings, source_readings, timeline_from_labels, timeline_from_nodes, timeline_from_sources)  # fmt: skip
+from graphsvc.strategies.sources import (path_readings, source_readings, timeline_from_labels, timeline_from_nodes,
+                                         timeline_from_sources)  # fmt: skip
 
 TABLE_COLUMNS = ("clip", "label", "frames", "joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc",
-                 "samples_per_s")  # fmt: skip
+                 "samples_per_s", "jitter_km_s3", "truth_jitter_km_s3", "skate_cm_s", "truth_skate_cm_s")  # fmt: skip
+SEEN = ("jitter_km_s3", "truth_jitter_km_s3", "skate_cm_s", "truth_skate_cm_s")  # (what a viewer sees, in a view's info)
 
 
 def _file(path, what: str, base: Path) -> Path:
@@ -89,6 +92,12 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
             "graph": Path(files.get("graph", "")).name}  # fmt: skip
     if "cost" in report:
         info["cost"] = round(float(report["cost"]), 3)
+    try:  # what a viewer sees, of the output (and of the truth)
+        info.update({k: _num(v) for k, v in motion_plausibility(motion, mapping).items() if k in SEEN})
+        if truth is not None:
+            info.update({f"truth_{k}": _num(v) for k, v in motion_plausibility(truth).items() if f"truth_{k}" in SEEN})
+    except GraphsvcError:  # (a skeleton no joint map knows, too few frames: shown without them)
+        pass
     virtual = None
     if graph is not None and report.get("node_path") and len(report["node_path"]) == motion.num_frames:
         virtual = path_readings(graph, np.asarray(report["node_path"], dtype=np.int64))
@@ -119,7 +128,7 @@ def kept_view(folder: Path, files: dict, row: dict) -> dict:
         v = doc["virtual"]
         virtual = np.frombuffer(base64.b64decode(v["f32"]), dtype="<f4").astype(np.float64).reshape(v["shape"])
     info = {k: round(row[k], 2) if isinstance(row[k], float) else row[k]
-            for k in ("file", "label", "joint_err_cm", "root_err_cm", "heading_err_deg") if row.get(k) is not None}
+            for k in ("file", "label", "joint_err_cm", "root_err_cm", "heading_err_deg", *SEEN) if row.get(k) is not None}
     return clip_view(str(row.get("name", motion.name)), motion, doc["timeline"], rec, truth, per_frame,
                      doc.get("constraints"), doc.get("labels"), info=info, virtual=virtual)  # fmt: skip
 

@@ -76,6 +76,7 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
     assert summary["totals"]["done"] == 6 and summary["failures"] == []
     assert [e["output"] for e in summary["items"]] == [r["output"] for r in SIX]
     assert summary["totals"]["samples"] == sum(e["samples"] for e in summary["items"])
+    assert all(e["jitter_km_s3"] > 0 and e["skate_cm_s"] >= 0 for e in summary["items"])  # (what a viewer sees)
     ref = tmp_path / "ref"
     ref.mkdir()
     for row in SIX:

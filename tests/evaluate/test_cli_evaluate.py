@@ -48,3 +48,33 @@ def test_a_test_clip_of_an_unknown_skeleton_is_refused_before_any_note(kb, tmp_p
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("graphsvc: error: test clip odd_take: unknown skeleton"), err
     assert "note:" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp_path, capsys):
+    import numpy as np
+
+    from graphsvc.evaluate.metrics import PLAUSIBILITY, jitter_km_s3, skate_cm_s
+    from graphsvc.motion.joints import CANONICAL, joint_map
+    from graphsvc.motion.kinematics import motion_fk
+    from graphsvc.motion.library import load_motion
+
+    clips = sorted(p.name for p in kb.glob("*.bvh"))[:2]
+    out = tmp_path / "E.json"
+    assert main(["evaluate", str(kb), "--test", ",".join(clips), "--layout", "kelly6", "--hold-out", "clip", "--quiet",
+                 "--strategy", "nearest", "--json", str(out)]) == 0  # fmt: skip
+    assert "jitter out/truth" in capsys.readouterr().out
+    e = json.loads(out.read_text())
+    for row in e["clips"]:
+        for key in PLAUSIBILITY:
+            assert row[key] >= 0 and row[f"truth_{key}"] >= 0
+        # the truth's figures, computed here from the clip itself (30 Hz, the graph's rate)
+        truth = load_motion(kb / row["file"])
+        table = joint_map(truth.skeleton)
+        pos = motion_fk(truth)[1][:, [table[c] for c in CANONICAL]]
+        assert row["truth_jitter_km_s3"] == pytest.approx(jitter_km_s3(pos, 30.0)[1], rel=1e-9)
+        feet = [CANONICAL.index("l_ankle"), CANONICAL.index("r_ankle")]
+        assert row["truth_skate_cm_s"] == pytest.approx(skate_cm_s(pos, 30.0, feet)[1], rel=1e-9)
+    frames = np.array([r["frames"] for r in e["clips"]], dtype=float)
+    for key in ("jitter_km_s3", "truth_skate_cm_s"):  # the summary: frame-weighted means over the clips
+        want = float(np.sum(frames * [r[key] for r in e["clips"]]) / frames.sum())
+        assert e["mean"][key] == pytest.approx(want)
