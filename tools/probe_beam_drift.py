@@ -31,10 +31,9 @@ def main() -> None:
     import bench_beam
 
     from graphsvc.graph.metadata import integrate_path
-    from graphsvc.strategies.options import TRACK_PULL_S, Weights
+    from graphsvc.strategies.options import TRACK_DRIFT, TRACK_PULL_S, TRACK_SIGMA_M, Weights
     from graphsvc.strategies.viterbi.batch import viterbi_search
-    from graphsvc.strategies.viterbi.costs import track_pull
-    from graphsvc.synthesis.path import pulled_track
+    from graphsvc.synthesis.track import TrackModel, fused_track
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--graph", help="a built graph file (default: bench_viterbi.py's generated G_E graph)")
@@ -62,9 +61,9 @@ def main() -> None:
         seconds = time.perf_counter() - t0
         track, turn = integrate_path(position[0], heading[0], graph.edge_offset[r.edge_path],
                                      graph.edge_heading[r.edge_path])  # fmt: skip
-        if pull:  # (the root a synthesis of this path places: on the pulled track)
-            track = pulled_track(graph, r.edge_path, position[0], heading[0], position,
-                                 track_pull(pull, graph.rate_hz))  # fmt: skip
+        if args.mode == "APO":  # (the root a synthesis of this path places: fused with the tracker)
+            track = fused_track(graph, r.node_path, r.edge_path, position[0], heading[0], position,
+                                TrackModel(TRACK_SIGMA_M, TRACK_DRIFT, graph.rate_hz))  # fmt: skip
         root_err = np.linalg.norm(track - true_position, axis=1)
         heading_err = np.abs((turn - true_heading + np.pi) % (2 * np.pi) - np.pi)
         row = {"search": "exact" if beam is None else f"beam {beam:g}", "mode": args.mode, "track_pull_s": pull,

@@ -257,6 +257,12 @@ ORIENTATION_WEIGHT = 1.0
 # dataset-2's takes 002 with the takes held out (docs/reconstruction.md), not on the clips
 # the accuracy table reports.
 TRACK_PULL_S = 0.5
+# The tracker fused with a reconstruction's own root track (`synthesis.track`): its
+# white noise σ (m, Kelly et al.'s system's 10 cm) and how fast the rate of the offset
+# between the two may change (m/s per √s), chosen on dataset-2's takes 002
+# (docs/reconstruction.md).
+TRACK_SIGMA_M = 0.10
+TRACK_DRIFT = 0.3
 
 
 def track_pull(pull_s: float | None, rate_hz: float) -> float:
@@ -272,14 +278,26 @@ def track_pull(pull_s: float | None, rate_hz: float) -> float:
 class SharedOptions:
     """The options several strategies share; a strategy names those it uses
     (`Strategy.shared`), and the others, set, are listed as ignored in its report.
-    track_pull_s: the time constant (s) with which the reconstruction's ground placement
-    is pulled toward the measured positions, so it follows the tracker instead of
-    drifting from where it started (0: placed once, at the start)."""
+    track_pull_s: the time constant (s) with which a search's paths are placed toward the
+    measured positions as it scores them (0: placed once, at the start), and OLNG's
+    heading turned toward the measured one. track_sigma_m, track_drift: the tracker's
+    noise σ (m) and how fast the rate of the offset between the reconstruction's own root
+    track and the tracker may change (m/s per √s), with which the output's root is fused
+    with the measured positions (`synthesis.track`)."""
 
     track_pull_s: float = option(TRACK_PULL_S, low=0.0, label="track pull", noun="a finite number of seconds",
                                  aliases=("--track-pull",), metavar="S",
-                                 help="time constant (s) with which the reconstruction's placement follows the "
-                                      f"measured positions (0: placed once, at the start; default {TRACK_PULL_S:g})")  # fmt: skip
+                                 help="time constant (s) with which the search's paths are placed toward the measured "
+                                      "positions as it scores them, and OLNG's heading turned toward the measured one "
+                                      f"(0: placed once, at the start; default {TRACK_PULL_S:g})")  # fmt: skip
+    track_sigma_m: float = option(TRACK_SIGMA_M, low=0.0, low_open=True, label="track sigma",
+                                  noun="a finite number of metres", metavar="M", aliases=("--track-sigma",),
+                                  help="the overhead tracker's white noise σ, m, with which the output's root is "
+                                       f"fused with the measured positions (default {TRACK_SIGMA_M:g})")  # fmt: skip
+    track_drift: float = option(TRACK_DRIFT, low=0.0, label="track drift", noun="a finite number", metavar="D",
+                                help="how fast the rate of the offset between the reconstruction's own root track and "
+                                     "the tracker may change, m/s per √s (0: one constant rate; default "
+                                     f"{TRACK_DRIFT:g})")  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,7 @@ from graphsvc.motion.placement import joint_tables as _joint_tables
 from graphsvc.motion.placement import place_poses as _place
 from graphsvc.motion.placement import relative_pose as _relative_pose
 from graphsvc.motion.skeleton import Motion
+from graphsvc.synthesis.track import warm_up_track
 
 FOOT_BLEND_S = 0.1  # blend-out of the foot pinning after a contact span (s)
 
@@ -457,14 +458,12 @@ def synthesize_motion(
     ground on both sides. fix_feet: footskate clean-up during contact flags.
     allow_jumps: edges may leave another node than the previous one (a streaming
     decoder's revision); such a step is blended as a cut, its edge still moves the root.
-    track (T, 2) m: the ground track to follow instead of the path's own (`pulled_track`:
-    pulled toward a tracker's positions). The motion is synthesized on the path's own
-    track, clean-up included, and then moved frame by frame onto `track`, the whole
-    body at once: bending the legs to hold planted feet against the pull cost the
-    procedural demo 2.9 cm of joint error (4.9 against 2.0 cm), while a whole-body
-    shift keeps the poses and slides the planted feet by the pull's step (10 mm a
-    frame on average there at the default 0.5 s time constant, 7 mm at 1 s, against
-    1.5 mm placed once)."""
+    track (T, 2) m: the ground track to follow instead of the path's own
+    (`synthesis.track.fused_track`: fused with a tracker's positions). The motion is
+    synthesized on the path's own track, clean-up included, and then moved frame by
+    frame onto `track`, the whole body at once (docs/reconstruction.md, *Following the
+    tracker*: holding the planted feet with the legs instead cost 0.8 cm of joint error
+    on eight clips of a held-out actor)."""
     node_path = np.asarray(node_path, dtype=np.int64).reshape(-1)
     edge_path = np.asarray(edge_path, dtype=np.int64).reshape(-1)
     check_path(graph, node_path, edge_path, allow_jumps)
@@ -539,26 +538,6 @@ def synthesize_motion(
     return Motion(sk, rot, trans, rate, name="synthesized", source="graph path")
 
 
-def pulled_track(graph: MotionGraph, edge_path: np.ndarray, start_ground, start_heading: float,
-                 positions: np.ndarray, alpha: float) -> np.ndarray:  # fmt: skip
-    """The root's ground track (T, 2) m along a path (edges (T−1,)) pulled toward a
-    tracker's positions (T, 2) m (NaN where none; frame 0's is not used) by the share
-    alpha a frame, as the Viterbi search pulls each path's placement
-    (`strategies.viterbi.costs.track_pull`); for `synthesize_motion`'s track. (A second
-    filter on the root's offset from the path's own track, against the tracker noise
-    the pull lets through, doubled the procedural demo's root error, 16 → 31 cm at a
-    1 s time constant, and cut the planted feet's slide only from 7.2 to 5.6 mm a
-    frame: the slide is mostly the pull making up for a path whose steps differ from
-    the performer's.)"""
-    edge_path = np.asarray(edge_path, dtype=np.int64).reshape(-1)
-    ground, _ = meta.integrate_path(
-        np.asarray(start_ground, dtype=np.float64), float(start_heading),
-        graph.edge_offset[edge_path].astype(np.float64), graph.edge_heading[edge_path].astype(np.float64),
-        np.asarray(positions, dtype=np.float64)[1:], alpha,
-    )  # fmt: skip
-    return ground
-
-
 def path_world_positions(motion: Motion) -> np.ndarray:
     """(T, J, 3) world joint positions (m) of a synthesized motion."""
     return motion_fk(motion)[1]
@@ -573,6 +552,7 @@ def warm_up_synthesis(graph: MotionGraph) -> None:
         return
     warmed[0] = True
     path_tables(graph)
+    warm_up_track()
     entered = np.zeros(graph.num_nodes, dtype=bool)
     entered[graph.edge_dst] = True
     in_contact = np.flatnonzero(graph.node_contacts.any(axis=1) & entered)  # (a clip's first frame has no way in)

@@ -18,6 +18,7 @@ import numpy as np
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
 from graphsvc.synthesis.path import FOOT_BLEND_S, path_tables, synthesize_motion
+from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
 
 
 def lookahead_frames(rate_hz: float, blend_s: float = 0.7) -> int:
@@ -29,19 +30,20 @@ def lookahead_frames(rate_hz: float, blend_s: float = 0.7) -> int:
 class StreamingSynthesizer:
     """add(nodes, arrival_edges[, positions]) → (first frame index, rotations (K, J, 4),
     translations (K, J, 3)) of the frames that became final; finish() → the rest.
-    pull_alpha, with each frame's measured position (K, 2) m given to add (NaN: none):
-    the root's track is pulled toward them as a batch synthesis pulls it."""
+    track_model, with each frame's measured position (K, 2) m given to add (NaN: none):
+    the root's track is the path's own fused with them (`synthesis.track`), each frame's
+    offset smoothed over the `lookahead` frames after it that a frame waits for anyway."""
 
     def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
                  flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
-                 batch: int = 1, pull_alpha: float = 0.0):  # fmt: skip
+                 batch: int = 1, track_model: TrackModel | None = None):  # fmt: skip
         self.graph = graph
-        self.pull_alpha = float(pull_alpha)
         self.blend_s = blend_s
         self.flight_root_blend_s = flight_root_blend_s
         self.fix_feet = fix_feet
         rate = float(graph.rate_hz)
         self.lookahead = lookahead_frames(rate, blend_s)
+        self.smoother = None if track_model is None else FixedLagSmoother(track_model, self.lookahead)
         # Synthesize once `batch` frames are final, not every frame: each update
         # re-synthesizes a trailing stretch, so this divides the cost by `batch` and
         # adds up to batch − 1 frames of delay.
@@ -52,9 +54,9 @@ class StreamingSynthesizer:
         self.base = 0
         self.nodes = np.zeros(0, np.int64)
         self.edges = np.zeros(0, np.int64)  # arrival edge of each node (−1 for frame 0)
-        self.ground = [np.asarray(start_ground, dtype=np.float64).reshape(2)]
         self.heading = [float(start_heading)]
-        self.plain = [self.ground[0]]  # the path's own track, which synthesis places the poses on
+        self.plain = [np.asarray(start_ground, dtype=np.float64).reshape(2)]  # the path's own track
+        self.ground: list = []  # the fused track of the frames whose offset is final (with a track model)
         self.done = 0  # frames emitted
 
     def add(self, nodes: np.ndarray, arrival_edges: np.ndarray, positions: np.ndarray | None = None):
@@ -67,16 +69,18 @@ class StreamingSynthesizer:
         first = self.base + self.nodes.size == 0
         new = edges[(1 if first else 0):]
         if new.size:
-            # integrate_path, as a batch synthesis does (`pulled_track` and the path's own
-            # track): the same float64 steps, so the same root.
+            # integrate_path, as a batch synthesis does (the path's own track): the same
+            # float64 steps, so the same root.
             offsets, turns = self.graph.edge_offset[new], self.graph.edge_heading[new]
             g, h = meta.integrate_path(self.plain[-1], self.heading[-1], offsets, turns)
             self.plain.extend(g[1:])
-            if self.pull_alpha:
-                g, _ = meta.integrate_path(self.ground[-1], self.heading[-1], offsets, turns,
-                                           positions[(1 if first else 0):], self.pull_alpha)  # fmt: skip
-            self.ground.extend(g[1:])
             self.heading.extend(h[1:].tolist())
+        if self.smoother is not None:
+            free = free_steps(self.graph.node_contacts[nodes])
+            for k in range(nodes.size):  # (each frame's measured − own offset: the smoother's input)
+                t = self.base + self.nodes.size + k
+                self.smoother.push(positions[k] - self.plain[t - self.base], free[k])
+                self._take_finals()
         self.nodes = np.concatenate([self.nodes, nodes])
         self.edges = np.concatenate([self.edges, edges])
         until = self.base + self.nodes.size - self.lookahead
@@ -86,7 +90,16 @@ class StreamingSynthesizer:
         return self._synthesize(until)
 
     def finish(self):
+        if self.smoother is not None:
+            self.smoother.flush()
+            self._take_finals()
         return self._synthesize(self.base + self.nodes.size)
+
+    def _take_finals(self) -> None:
+        """The fused track of the frames whose smoothed offset became final."""
+        while self.smoother.finals:
+            t = self.base + len(self.ground)
+            self.ground.append(self.plain[t - self.base] + self.smoother.take(t))
 
     def _before_cuts(self, start: int, lo: int) -> int:
         """Move a window's first frame back before every cut whose blend reaches it: a
@@ -128,10 +141,18 @@ class StreamingSynthesizer:
                     start = min(start, lo + last + 1 - length)
             start = max(lo, self._before_cuts(start, lo))
         k = start - b
+        track = None
+        if self.smoother is not None:
+            # The frames past the final ones (synthesized, not emitted): their own track
+            # at the last final offset.
+            final = np.array(self.ground[k:]).reshape(-1, 2)
+            n = final.shape[0]
+            last = final[-1] - self.plain[k + n - 1] if n else np.zeros(2)
+            track = np.concatenate([final, np.array(self.plain[k + n:]).reshape(-1, 2) + last])
         motion = synthesize_motion(
             self.graph, self.nodes[k:], self.edges[k + 1 :], self.plain[k], self.heading[k],
             blend_s=self.blend_s, flight_root_blend_s=self.flight_root_blend_s, fix_feet=self.fix_feet,
-            allow_jumps=True, track=np.array(self.ground[k:]) if self.pull_alpha else None,
+            allow_jumps=True, track=track,
         )  # fmt: skip
         lo, hi = self.done - start, until - start
         first = self.done

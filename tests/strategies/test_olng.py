@@ -119,7 +119,20 @@ def test_speed_changes_are_followed_with_the_extended_steps(graph, kb):
 def test_live_equals_batch_frame_for_frame(graph, kb, fix_feet):
     rec = _rec(graph, kb[2], "default", seed=4)
     options = Options(strategy="olng", olng=OlngOptions(fix_feet=fix_feet))
-    batch = reconstruct(graph, rec, options)
+    # A batch run with a latency is what a live client gets: the tracker filtered.
+    batch = reconstruct(graph, rec, Options(strategy="olng", olng=OlngOptions(fix_feet=fix_feet), latency_s=0.5))
+    assert "ignored_options" not in batch.report and batch.report["track"]["smoothed"] is False
+    # Without one, the root is smoothed over the whole recording: the same poses, the
+    # whole body shifted on the ground, and a steadier root.
+    whole = reconstruct(graph, rec, options)
+    assert whole.report["track"]["smoothed"] is True
+    np.testing.assert_array_equal(whole.motion.rotations, batch.motion.rotations)
+    np.testing.assert_array_equal(whole.motion.translations[:, 1:], batch.motion.translations[:, 1:])
+    np.testing.assert_array_equal(whole.motion.translations[:, 0, 1], batch.motion.translations[:, 0, 1])
+    shift = whole.motion.translations[:, 0, [0, 2]] - batch.motion.translations[:, 0, [0, 2]]
+    assert np.abs(shift).max() > 1e-3
+    jerk = [np.linalg.norm(np.diff(m.translations[:, 0, [0, 2]], n=3, axis=0), axis=1).mean() for m in (whole.motion, batch.motion)]
+    assert jerk[0] < jerk[1], jerk
     live = open_session(graph, options, rec.sensor_names)
     assert live.lag_frames == 0
     frames = []

@@ -216,7 +216,7 @@ def test_a_track_moves_the_whole_body_onto_it_and_keeps_every_pose(graph, transi
     # joint's position relative to the root are the own-track synthesis', and the root
     # stands on the track wherever the own-track synthesis stood on its own.
     from graphsvc.motion.kinematics import motion_fk
-    from graphsvc.synthesis.path import pulled_track
+    from graphsvc.synthesis.track import TrackModel, fused_track
 
     g = graph
     nodes, edges, _ = transition_path
@@ -224,7 +224,7 @@ def test_a_track_moves_the_whole_body_onto_it_and_keeps_every_pose(graph, transi
     own = synthesize_motion(g, nodes, edges, *start)
     rng = np.random.default_rng(0)
     positions = np.cumsum(rng.normal(0.0, 0.05, (nodes.size, 2)), axis=0) + 1.0
-    track = pulled_track(g, edges, *start, positions, 0.1)
+    track = fused_track(g, nodes, edges, *start, positions, TrackModel(0.1, 0.3, float(g.rate_hz)))
     ground, _ = meta.integrate_path(start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float))
     moved = synthesize_motion(g, nodes, edges, *start, track=track)
     np.testing.assert_array_equal(moved.rotations, own.rotations)

@@ -3,11 +3,13 @@
 import numpy as np
 import pytest
 
+from graphsvc.graph import metadata as meta
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.model import EDGE_TRANSITION
 from graphsvc.motion.procedural import generate_knowledge_base
-from graphsvc.synthesis.path import pulled_track, synthesize_motion
+from graphsvc.synthesis.path import synthesize_motion
 from graphsvc.synthesis.stream import StreamingSynthesizer
+from graphsvc.synthesis.track import TrackModel, free_steps, fused_track, smooth_offsets
 
 
 @pytest.fixture(scope="module")
@@ -28,21 +30,36 @@ def _walk(g, steps, rng):
     return np.array(nodes), np.array(edges)
 
 
-@pytest.mark.parametrize("pull", [0.0, 0.1], ids=["placed-once", "pulled"])
-def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, pull):
+def _fixed_lag_track(g, nodes, edges, start, positions, model, lag):
+    """The fused track a stream with `lag` frames of look-ahead makes: frame t's offset
+    smoothed over the frames up to t + lag (all of them for the last lag frames)."""
+    own, _ = meta.integrate_path(np.asarray(start[0]), start[1], g.edge_offset[edges].astype(np.float64),
+                                 g.edge_heading[edges].astype(np.float64))  # fmt: skip
+    z, free = positions - own, free_steps(g.node_contacts[nodes])
+    T = nodes.size
+    offsets = np.array([smooth_offsets(z[: t + lag + 1], model, free[: t + lag + 1])[t] for t in range(T)])
+    return own + offsets
+
+
+@pytest.mark.parametrize("fused", [False, True], ids=["placed-once", "fused"])
+def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused):
     g = graph
     rng = np.random.default_rng(2)
     nodes, edges = _walk(g, 150, rng)
     start = np.array([0.5, -1.0]), 0.3
-    # A tracker's positions (some missing) the root is pulled toward, when it is.
+    # A tracker's positions (some missing) the root is fused with, when it is.
     positions = np.cumsum(rng.normal(0, 0.05, (nodes.size, 2)), axis=0)
     positions[rng.random(nodes.size) < 0.2] = np.nan
-    track = pulled_track(g, edges, *start, positions, pull) if pull else None
+    model = TrackModel(0.1, 0.3, float(g.rate_hz)) if fused else None
+    synth = StreamingSynthesizer(g, *start, batch=3, track_model=model)
+    track = _fixed_lag_track(g, nodes, edges, start, positions, model, synth.lookahead) if fused else None
     whole = synthesize_motion(g, nodes, edges, *start, track=track)
-    if pull:
+    if fused:
         placed_once = synthesize_motion(g, nodes, edges, *start)
         assert np.abs(whole.translations[:, 0] - placed_once.translations[:, 0]).max() > 0.05
-    synth = StreamingSynthesizer(g, *start, batch=3, pull_alpha=pull)
+        # Where the look-ahead reaches the end, the whole path's smoother.
+        batch = fused_track(g, nodes, edges, *start, positions, model)
+        np.testing.assert_allclose(track[-synth.lookahead:], batch[-synth.lookahead:], atol=1e-12)
     arrival = np.concatenate([[-1], edges])
     rot, trans = [], []
     for a in range(0, nodes.size, 7):

@@ -12,12 +12,15 @@ Per sample t (readings a_t, optionally a ground position and heading):
 2. The pose (`pose`): the neighbours' poses aligned to the previous pose's quaternion
    signs, their weighted PCA, and the energy minimised from the previous pose.
 3. The root: each neighbour's own step into its frame (its original edge's ground
-   offset and turn) averaged by weight and applied at the current heading; with a
-   tracker, the ground position and heading are then pulled toward the measured ones by
-   the share α = 1 − exp(−1 / (τ · rate)) (τ = `track_pull_s`, as the Viterbi search
-   pulls its paths), and snapped to the first measurement that arrives. The pose is
-   placed on the unpulled track and the whole body then shifted onto the pulled one,
-   as Viterbi synthesis does, so the pull does not bend the legs of a held foot.
+   offset and turn) averaged by weight and applied at the current heading, snapped to
+   the first measured position and heading that arrive. With a tracker, the offset from
+   this own track to the measured positions is Kalman-filtered (`synthesis.track`, the
+   shared `track_sigma_m` and `track_drift`; it moves only while the neighbourhood's
+   vote has a foot off the ground), and the heading is pulled toward the measured one
+   by the share α = 1 − exp(−1 / (τ · rate)) (τ = `track_pull_s`). The pose is placed
+   on the own track and the whole body then shifted by the filtered offset, as Viterbi
+   synthesis does, so the correction does not bend the legs of a held foot. A batch
+   run then replaces the filtered offsets by the smoothed ones (`strategy`).
 4. The feet (`OlngOptions.fix_feet`, off by default): while the neighbourhood's weighted contact vote for a foot is over one
    half, its ankle and toe move only as the neighbours' own ankles and toes moved
    (heel and toe roll kept, as in Viterbi synthesis), from where they were when the
@@ -38,6 +41,7 @@ from graphsvc.graph.metadata import rotate_ground
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
+from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
 from graphsvc.motion import quat
 from graphsvc.motion.quat import wrap_angle
 from graphsvc.sensors.accelerometer import G_UP, GRAVITY
@@ -56,13 +60,19 @@ class OlngDecoder:
     None) → (rotations (J, 4), translations (J, 3), sources [(clip, frame, weight)],
     label, row), row being the frame's report entry."""
 
-    def __init__(self, graph: MotionGraph, index: OlngIndex, model: PoseModel, options: OlngOptions, pull_alpha: float):
+    def __init__(self, graph: MotionGraph, index: OlngIndex, model: PoseModel, options: OlngOptions, pull_alpha: float,
+                 track_model: TrackModel | None = None):  # fmt: skip
         self.graph = graph
         self.index = index
         self.model = model
         self.options = options
         self.lattice = Lattice(index.run_of, LatticeOptions(options.k, options.m, options.i, options.extended))
-        self.alpha = float(pull_alpha)
+        self.alpha = float(pull_alpha)  # the heading's pull toward the tracker's
+        self.track_model = track_model
+        self.filter = None if track_model is None else FixedLagSmoother(track_model, 0)
+        # Per frame (measured − own (2,), gate, filtered offset (2,)) for a batch's
+        # smoother, when it is a list (a live session keeps none).
+        self.track_inputs: list | None = None
         self.up_weight = 0.0  # W_R: the weight of the sensors' "up" vectors in the neighbour query (0: not used)
         self.rate = float(graph.rate_hz)
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
@@ -86,8 +96,8 @@ class OlngDecoder:
         self.p_prev: np.ndarray | None = None
         self.x_t: np.ndarray | None = None
         self.x_tm1: np.ndarray | None = None
-        self.ground = np.zeros(2)  # pulled toward the tracker
-        self.own = np.zeros(2)  # the neighbours' steps alone: where the feet are held
+        self.ground = np.zeros(2)  # fused with the tracker
+        self.own = np.zeros(2)  # the neighbours' steps alone: where the pose is placed
         self.heading = 0.0
         self.placed = False
         self.heading_placed = False
@@ -128,11 +138,12 @@ class OlngDecoder:
         x = pose_positions(p, self.offsets, self.model)
         self.x_tm1, self.x_t, self.p_prev = self.x_t, x, p
         heading_before = self.heading
-        self._root(best, w, position, heading)
+        contacts = self._contacts(best, w)
+        self._root(best, w, position, heading, contacts)
         rot, trans = self._place(best[0], p)
         if self.options.fix_feet:
-            self._fix_feet(rot, trans, self._contacts(best, w), self._foot_steps(best, w, heading_before))
-        for root in np.flatnonzero(self.parents < 0):  # onto the pulled track, the whole body at once
+            self._fix_feet(rot, trans, contacts, self._foot_steps(best, w, heading_before))
+        for root in np.flatnonzero(self.parents < 0):  # onto the fused track, the whole body at once
             trans[0, root, 0] += self.ground[0] - self.own[0]
             trans[0, root, 2] += self.ground[1] - self.own[1]
         t3 = time.perf_counter()
@@ -202,21 +213,26 @@ class OlngDecoder:
         v_dt = 0.5 * (self._sensor_points(X) - self._sensor_points(X2))
         return s_t[None] + v_dt + 0.5 * a_hat[None] * dt * dt
 
-    def _root(self, best, w, position, heading):
+    def _root(self, best, w, position, heading, contacts):
         e = self.index.edges[best]
         if self.t > 0:
             step = w @ self.edge_offset[e]
             turn = float(w @ self.edge_heading[e])
             move = rotate_ground(step[None], np.array([self.heading]), np.zeros((1, 2)))[0]
-            self.ground = self.ground + move
             self.own = self.own + move
             self.heading = float(wrap_angle(self.heading + turn))
-        if position is not None and np.all(np.isfinite(position)):
-            position = np.asarray(position, dtype=np.float64)
-            if not self.placed:
-                self.ground, self.own, self.placed = position.copy(), position.copy(), True
-            elif self.alpha > 0.0:
-                self.ground = (1.0 - self.alpha) * self.ground + self.alpha * position
+        measured = position is not None and bool(np.all(np.isfinite(position)))
+        if measured and not self.placed:
+            self.own, self.placed = np.asarray(position, dtype=np.float64).copy(), True
+        self.ground = self.own
+        if self.filter is not None:
+            z = np.asarray(position, dtype=np.float64) - self.own if measured else np.full(2, np.nan)
+            free = float(free_steps(contacts[None])[0])
+            self.filter.push(z, free)
+            offset = self.filter.take(self.t)
+            self.ground = self.own + offset
+            if self.track_inputs is not None:
+                self.track_inputs.append((z, free, offset))
         if heading is not None and math.isfinite(heading):
             if not self.heading_placed:
                 self.heading, self.heading_placed = float(heading), True

@@ -4,8 +4,10 @@ each emitted as its sample arrives (the steps look back only: no look-ahead).
 
 Index: `index.load_index` (cached beside the graph file); hidden clips are dropped at
 query time. Its own options: `options.OlngOptions` (K, M, I, the step set, the energy weights, foot
-clean-up); the tracker is followed with the shared `track_pull_s` as the Viterbi search follows
-it; a weight of 0 for position or heading leaves that stream out.
+clean-up); the root is fused with the tracker's positions with the shared `track_sigma_m` and
+`track_drift` (`synthesis.track`: a Kalman filter live, and in batch the smoother over the
+whole recording, unless `latency_s` asks for what a live client gets), the heading pulled
+with `track_pull_s`; a weight of 0 for position or heading leaves that stream out.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from graphsvc.strategies.olng.index import OlngIndex, load_index
 from graphsvc.strategies.olng.pose import pose_model
 from graphsvc.strategies.olng.options import OlngOptions
 from graphsvc.strategies.options import Options, track_pull
+from graphsvc.synthesis.track import TrackModel, smooth_offsets
 
 
 def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
@@ -39,8 +42,11 @@ def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
 
 
 def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options, own: OlngOptions) -> OlngDecoder:
+    rate = float(graph.rate_hz)
+    model = (TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate) if options.weights.position
+             else None)  # fmt: skip
     decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, own),
-                          track_pull(options.shared.track_pull_s, float(graph.rate_hz)))  # fmt: skip
+                          track_pull(options.shared.track_pull_s, rate), model)  # fmt: skip
     decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry "up" vectors)
     return decoder
 
@@ -56,7 +62,7 @@ class OlngStrategy(Strategy):
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})
     summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
     options_class = OlngOptions
-    shared = frozenset({"track_pull_s"})  # the tracker is followed as the Viterbi search follows it
+    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift"})  # (the heading's pull, the root's fusion)
 
     def prepare(self, graph: MotionGraph) -> OlngIndex:
         return load_index(graph)
@@ -65,7 +71,9 @@ class OlngStrategy(Strategy):
         warm_up(graph, index)
 
     def ignored_options(self, options: Options) -> list[str]:
-        out = frame_by_frame_ignored(options)  # every frame is final as its sample arrives
+        # Every frame is final as its sample arrives; a latency asks for the live root
+        # (the tracker filtered, not smoothed over the whole recording) where there is one.
+        out = [] if options.weights.position else frame_by_frame_ignored(options)
         if options.weights.acc != 1.0:
             out.append("weights.acc")  # (its own energy weights: olng)
         return sorted(out + super().ignored_options(options))
@@ -75,6 +83,8 @@ class OlngStrategy(Strategy):
         t0 = time.perf_counter()
         idx = index.with_allowed(allowed)
         decoder = make_decoder(graph, idx, options, self.own(options))
+        if options.latency_s is None:
+            decoder.track_inputs = []  # (for the smoother over the whole recording)
         up = inp.up if options.weights.orientation > 0 else None
         if up is not None:
             idx.oriented_tree(decoder.up_weight)  # (made once per weight, with the warm-up's time)
@@ -98,10 +108,27 @@ class OlngStrategy(Strategy):
                 clip[t, k], frame[t, k], weight[t, k] = c, f, w
             labels.append(label)
             rows.append(row)
+        smooth_root(decoder, trans)
         total_s = time.perf_counter() - t0
         motion = Motion(graph.skeleton, rot, trans, float(graph.rate_hz), name="synthesized", source="olng")
         provenance = Provenance(clip, frame, weight, np.asarray(labels, dtype=object))
         return Reconstruction(motion, None, None, report(decoder, rows, labels, warm_up_s, total_s), provenance)
+
+
+def smooth_root(decoder: OlngDecoder, trans: np.ndarray) -> None:
+    """A batch run's root, in place on translations (T, J, 3): each frame shifted from the
+    tracker's filtered offset, which a live frame gets, to the smoother's over the whole
+    recording (`synthesis.track`), the whole body at once."""
+    inputs = decoder.track_inputs
+    if not inputs or decoder.track_model is None:
+        return
+    z = np.array([i[0] for i in inputs])
+    free = np.array([i[1] for i in inputs])
+    filtered = np.array([i[2] for i in inputs])
+    shift = smooth_offsets(z, decoder.track_model, free) - filtered
+    for root in np.flatnonzero(decoder.parents < 0):
+        trans[:, root, 0] += shift[:, 0]
+        trans[:, root, 2] += shift[:, 1]
 
 
 def report(decoder: OlngDecoder, rows: list[dict], labels: list, warm_up_s: float, total_s: float) -> dict:
@@ -124,6 +151,8 @@ def report(decoder: OlngDecoder, rows: list[dict], labels: list, warm_up_s: floa
         "olng": {"k": o.k, "i": o.i, "m": o.m, "extended": o.extended, "w_prior": o.w_prior, "w_contr": o.w_contr,
                  "w_pose": o.w_pose, "w_motion": o.w_motion, "w_smooth": o.w_smooth, "fix_feet": o.fix_feet,
                  "track_pull_alpha": round(decoder.alpha, 6)},  # fmt: skip
+        **({"track": {"sigma_m": decoder.track_model.sigma_m, "drift": decoder.track_model.drift,
+                      "smoothed": decoder.track_inputs is not None}} if decoder.track_model else {}),  # fmt: skip
         "candidate_frames": int(decoder.index.searchable),
         "per_frame": {"path_cost": [round(v, 5) for v in col("cost")], "energy": [round(v, 5) for v in col("energy")],
                       "path_length": [round(v, 3) for v in col("path_length")],
@@ -142,10 +171,12 @@ def warm_up(graph: MotionGraph, index: OlngIndex) -> None:
     if getattr(index, "_warmed", False):
         return
     o = OlngOptions(k=min(8, index.frames), i=min(4, index.frames), m=4)
-    decoder = OlngDecoder(graph, index, pose_model(graph), o, 0.1)
+    decoder = OlngDecoder(graph, index, pose_model(graph), o, 0.1, TrackModel(0.1, 0.3, float(graph.rate_hz)))
     reading = np.asarray(index.readings[min(2, index.frames - 1)], dtype=np.float64).reshape(-1, 3) * 9.81
+    decoder.track_inputs = []
     for t in range(3):
         decoder.step(reading, np.zeros(2), 0.0)
+    smooth_root(decoder, np.zeros((3, graph.skeleton.num_joints, 3)))
     index._warmed = True
 
 

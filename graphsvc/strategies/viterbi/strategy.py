@@ -18,7 +18,6 @@ import numpy as np
 from graphsvc.errors import SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
 from graphsvc.strategies.viterbi.batch import (needs_placement, orientation_counts, viterbi_search, warm_up_search,
@@ -31,8 +30,9 @@ from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
 from graphsvc.strategies.start import start_placement, start_samples, start_state
 from graphsvc.strategies.options import Options, Weights, check_constraints
 from graphsvc.strategies.viterbi.options import ViterbiOptions
-from graphsvc.synthesis.path import pulled_track, synthesize_motion, warm_up_synthesis
+from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer
+from graphsvc.synthesis.track import TrackModel, fused_track
 
 
 class ViterbiStrategy(Strategy):
@@ -41,7 +41,7 @@ class ViterbiStrategy(Strategy):
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading", "constraints"})
     summary = "the motion-graph path that best explains the readings, the track and the constraints"
     options_class = ViterbiOptions
-    shared = frozenset({"track_pull_s"})
+    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift"})
 
     def describe_lag(self, rate_hz: float) -> str:
         s = ViterbiSession
@@ -80,9 +80,10 @@ class ViterbiStrategy(Strategy):
         # and the motion is synthesized from there.
         start = start_placement(position, heading, rate)
         start_ground, start_heading = start_state(position, heading, rate)
-        # The positions the search pulls its paths toward, which synthesis follows too.
-        alpha = track_pull(pull_s, rate)
+        # The positions the search pulls its paths toward, with which synthesis fuses the
+        # path's own root track (`synthesis.track`).
         targets = pull_targets(use_pos, T)
+        model = track_model(options, rate) if np.isfinite(targets).all(axis=1).any() else None
         if options.latency_s is None:
             result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
                                     should_stop=should_stop, beam=beam, start=start,
@@ -90,7 +91,7 @@ class ViterbiStrategy(Strategy):
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
-            track = pulled_track(graph, edges, start_ground, start_heading, targets, alpha) if alpha else None
+            track = fused_track(graph, nodes, edges, start_ground, start_heading, targets, model) if model else None
             motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
             synth_s = time.perf_counter() - t0
             extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
@@ -102,7 +103,7 @@ class ViterbiStrategy(Strategy):
                                       start_samples=start_samples(rate), pull_s=pull_s,
                                       oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
-                                         pull_alpha=alpha)  # fmt: skip
+                                         track_model=track_model(options, rate) if use_pos is not None else None)  # fmt: skip
             emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
@@ -133,8 +134,8 @@ class ViterbiStrategy(Strategy):
             extra = {"lag_samples": lag, "revisions": decoder.revisions,
                      "converged_early_frames": decoder.converged_frames, "compression": round(s.compression, 2),
                      "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
-        if alpha and np.isfinite(targets).all(axis=1).any():
-            extra["track_pull_s"] = float(pull_s)  # (the paths and the root followed the tracker)
+        if model is not None:  # (the paths were placed toward the tracker, the root fused with it)
+            extra["track"] = {"pull_s": float(pull_s), "sigma_m": model.sigma_m, "drift": model.drift}
         report = {
             **extra,
             "labels": path_labels(graph, nodes),
@@ -144,6 +145,11 @@ class ViterbiStrategy(Strategy):
             "samples_per_s": round(T / max(search_s, 1e-9), 1),
         }
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
+
+
+def track_model(options: Options, rate_hz: float) -> TrackModel:
+    """How the synthesized root is fused with the tracker (the shared options)."""
+    return TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate_hz)
 
 
 def pull_targets(position, T: int) -> np.ndarray:
@@ -174,7 +180,6 @@ class ViterbiSession(LiveSession):
                                        start_samples=start_samples(self.rate),
                                        pull_s=options.shared.track_pull_s, oriented=self.reads_up)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
-        self.pull_alpha = track_pull(options.shared.track_pull_s, self.rate)
         self.counts_position = options.weights.position != 0
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
@@ -228,7 +233,8 @@ class ViterbiSession(LiveSession):
         heading measured only later moves the search's paths, not frames already out)."""
         if self.synth is None:
             g, h = self.decoder.search.start_placement
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, pull_alpha=self.pull_alpha)
+            model = track_model(self.options, self.rate) if self.counts_position else None
+            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, track_model=model)
         return self.synth
 
     def _frames(self, synthesized):
