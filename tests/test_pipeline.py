@@ -289,3 +289,17 @@ def test_a_graph_in_other_sensor_frames_is_refused_and_relayout_converts_it(grap
     assert new.params["sensor_frames"] == "anatomical"
     np.testing.assert_allclose(new.edge_acc, graph.edge_acc, atol=2e-2)  # (float32 poses, as test_build)
     assert main(["synthesize", str(tmp_path / "new.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 0
+
+
+def test_the_poses_filter_steadies_the_output_and_zero_turns_it_off(graph, rec):
+    from graphsvc.evaluate.metrics import motion_plausibility
+    from graphsvc.synthesis.smooth import smooth_poses
+
+    raw = reconstruct(graph, rec, Options(smooth_s=0.0))
+    default = reconstruct(graph, rec, Options())
+    assert default.node_path.tolist() == raw.node_path.tolist()  # (the same path, its poses filtered)
+    rot, trans = smooth_poses(raw.motion.rotations, raw.motion.translations, graph.rate_hz / 30.0)
+    np.testing.assert_array_equal(default.motion.rotations, rot)
+    np.testing.assert_array_equal(default.motion.translations, trans)
+    jitter = [motion_plausibility(r.motion)["jitter_km_s3"] for r in (default, raw)]
+    assert jitter[0] < 0.8 * jitter[1], jitter

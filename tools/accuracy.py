@@ -15,7 +15,9 @@ default,position=0,heading=none`), + overhead positions (`default,heading=none`,
 0.5,1,1), + positions and heading (`default`, weights 0.5,1,1: Kelly et al.'s, not
 tuned here); every registered strategy that reads accelerometers on the same clips
 (the optical-marker strategy has its own figures: tools/bench_ssg.py). Prints one JSON object a
-run (its row, the equivalent `graphsvc evaluate` command and the figures, the
+run (its row, the equivalent `graphsvc evaluate` command and the figures — the `nearest`
+rows with the pose-oracle floor, `evaluate --pose-oracle`: per frame the usable graph
+pose closest to the truth, the bound of any strategy that retrieves poses —, the
 locomotion and gesture means, what a viewer sees: jitter, foot skate and ground
 penetration of the output and of the truth), then the table in Markdown, jitter and
 skate as multiples of the truth's.
@@ -130,11 +132,13 @@ def main() -> None:
                     config = EvalConfig(kb=(str(kb),), graph=str(graph), test=PROTOCOLS[protocol], hold_out=protocol,
                                         noise=noise, options=Options(strategy=strategy,
                                                                      weights=parse_weights(weights or "1,1,1")),
-                                        jobs=args.jobs, json=str(out), progress=False)  # fmt: skip
+                                        jobs=args.jobs, json=str(out), pose_oracle=strategy == "nearest",
+                                        progress=False)  # fmt: skip
                     command = shlex.join(["graphsvc", "evaluate", str(kb), "--graph", str(graph), "--test",
                                           PROTOCOLS[protocol], "--hold-out", protocol, "--noise", noise,
                                           *(["--weights", weights] if weights else []), "--strategy", strategy,
-                                          "--jobs", str(args.jobs), "--json", str(out), "--quiet"])  # fmt: skip
+                                          "--jobs", str(args.jobs), "--json", str(out), "--quiet",
+                                          *(["--pose-oracle"] if strategy == "nearest" else [])])  # fmt: skip
                     t0 = time.perf_counter()
                     stamp = out.with_suffix(".cmd")  # the command that wrote `out`
                     if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == command):
@@ -147,6 +151,7 @@ def main() -> None:
                            "clips": m["clips"], "frames": m["frames"], "joint_err_cm": m["joint_err_cm"],
                            "root_err_cm": m["root_err_cm"], "heading_err_deg": m["heading_err_deg"],
                            "label_acc": m["label_acc"], "samples_per_s": m.get("samples_per_s"),
+                           "oracle_joint_err_cm": m.get("oracle_joint_err_cm"),
                            **{k: m.get(k) for k in ("jitter_km_s3", "skate_cm_s", "penetration_cm",
                                                     "truth_jitter_km_s3", "truth_skate_cm_s", "truth_penetration_cm")},
                            "groups": {g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}
@@ -169,13 +174,13 @@ def _ratio(r: dict, key: str):
 
 
 def table(rows: list[dict]) -> str:
-    head = ("hold-out", "layout", "inputs", "strategy", "clips", "joint cm", "root cm", "heading °", "label",
+    head = ("hold-out", "layout", "inputs", "strategy", "clips", "joint cm", "oracle cm", "root cm", "heading °", "label",
             "jitter ×truth", "skate ×truth", "locomotion joint cm", "gestures joint cm")  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for r in rows:
         g = r["groups"]
         cells = (r["hold_out"], f"`{r['layout']}`", r["inputs"], f"`{r['strategy']}`", str(r["clips"]),
-                 _f(r["joint_err_cm"], ".2f"), _f(r["root_err_cm"], ".1f"), _f(r["heading_err_deg"], ".1f"),
+                 _f(r["joint_err_cm"], ".2f"), _f(r.get("oracle_joint_err_cm"), ".2f"), _f(r["root_err_cm"], ".1f"), _f(r["heading_err_deg"], ".1f"),
                  (_f(r["label_acc"], ".0f", 100.0) + " %") if r["label_acc"] is not None else "n/a",
                  _f(_ratio(r, "jitter_km_s3"), ".1f") + "×", _f(_ratio(r, "skate_cm_s"), ".2f") + "×",
                  _f(g.get("locomotion", {}).get("joint_err_cm"), ".2f"),

@@ -21,7 +21,7 @@ def _cmd_evaluate(args) -> int:
                         jobs=args.jobs, mixed=args.mixed, hold_out=args.hold_out, actors=args.actors,
                         mapping=args.mapping, flicker=args.flicker, gap_fraction=args.gap_fraction, json=args.json,
                         keep_motions=args.keep_motions, report_html=args.report_html,
-                        progress=False if args.quiet else None)  # fmt: skip
+                        pose_oracle=args.pose_oracle, progress=False if args.quiet else None)  # fmt: skip
     summary = run(config, note=print_note, write_page=_write_page)
     for line in summary_lines(summary, config):
         print(line)
@@ -94,6 +94,9 @@ def add_evaluate(sub) -> None:
                    help="keep each clip's reconstruction, truth, input and timeline here (for `graphsvc report`)")
     p.add_argument("--report-html", metavar="OUT.html", type=PATH,
                    help="write the HTML report: metrics table and 3D viewer")
+    p.add_argument("--pose-oracle", action="store_true",
+                   help="also score the pose-oracle floor: per frame the usable graph pose closest to the truth"
+                        " (oracle_joint_err_cm), the bound any strategy that retrieves poses faces")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
 

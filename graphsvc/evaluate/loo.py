@@ -32,6 +32,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from graphsvc.evaluate import oracle
 from graphsvc.evaluate.keep import keep_clip, kept_name
 from graphsvc.evaluate.metrics import evaluate_frames, plausibility, summarize
 from graphsvc.evaluate.protocols import activity
@@ -125,6 +126,9 @@ class EvalSetup:
     # A folder to keep each clip's reconstruction, truth, input and timeline in, for
     # `graphsvc report` (`report.load.keep_clip`); None: kept nowhere.
     keep_dir: str | None = None
+    # Score the pose-oracle floor too (`evaluate.oracle`): per frame the usable node
+    # closest in pose to the truth, as `oracle_joint_err_cm`.
+    pose_oracle: bool = False
 
 
 def reads_markers(setup: EvalSetup) -> bool:
@@ -210,6 +214,9 @@ def scored_labels(true_label, offered: set[str]):
     return kept if any(w is not None for w in kept) else None
 
 
+_oracle_nodes: dict = {}
+
+
 def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSetup, true_labels=None) -> dict:
     """Reconstruct one test clip with its performance hidden and score it.
 
@@ -256,6 +263,15 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     row.update(seen)
     row.update({f"truth_{k}": v for k, v in truth_seen.items()})
     row["per_frame"].update(seen_per_frame)
+    if setup.pose_oracle:
+        names = tuple(compared)
+        key = (id(graph), names)
+        if _oracle_nodes.get("key") != key:  # (one graph a worker: its nodes' poses once)
+            _oracle_nodes.update(key=key, local=oracle.node_local_positions(graph, list(names)))
+        floor, _ = oracle.pose_oracle(_oracle_nodes["local"], allowed,
+                                      oracle.local_positions(true_canon, true_ground, true_heading))  # fmt: skip
+        row["oracle_joint_err_cm"] = float(floor.mean())
+        row["per_frame"]["oracle_joint_err_cm"] = floor
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     if setup.keep_dir:

@@ -31,6 +31,7 @@ from graphsvc.motion.quat import wrap_angle
 from graphsvc.motion.skeleton import Motion
 
 METRICS = ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc")
+FLOORS = ("oracle_joint_err_cm",)  # (a row's bound, where asked for: `evaluate.oracle`)
 
 
 def _finite(name: str, a, shape_tail: tuple) -> np.ndarray:
@@ -285,7 +286,8 @@ def summarize(results: list[dict]) -> dict:
     mean over clips, Σ frames_i·m_i / Σ frames_i, which equals the mean over all frames;
     label_acc is averaged only over clips that have it and is None when none do. The
     plausibility figures (`PLAUSIBILITY`, the output's and the truth's `truth_…`) are
-    averaged the same way where rows have them."""
+    averaged the same way where rows have them, and so is the pose-oracle floor
+    (`FLOORS`, `evaluate.oracle`)."""
     rows = []
     for r in results:
         row = {k: v for k, v in r.items() if k != "per_frame"}
@@ -294,7 +296,7 @@ def summarize(results: list[dict]) -> dict:
                 row[k] = float(row[k])
         rows.append(row)
     mean: dict = {"clips": len(rows), "frames": int(sum(int(r["frames"]) for r in rows))}
-    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY)) if any(k in r for r in rows)]
+    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY), *FLOORS) if any(k in r for r in rows)]
     for k in (*METRICS, *plausible):
         have = [r for r in rows if r.get(k) is not None]
         weight = sum(int(r["frames"]) for r in have)

@@ -53,7 +53,8 @@ class EvalConfig:
     actors: the actor map file. mapping: the test clips' joint map (a file or 'guess').
     flicker, gap_fraction: how simulated optical markers are lost. json: the summary's
     file; keep_motions: a folder for each clip's files; report_html: the page (with the
-    `write_page` of `run`). progress: progress bars (None: on a terminal; False: none)."""
+    `write_page` of `run`). pose_oracle: score the pose-oracle floor too
+    (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean). progress: progress bars (None: on a terminal; False: none)."""
 
     kb: tuple[str, ...]
     test: str
@@ -74,6 +75,7 @@ class EvalConfig:
     json: str | None = None
     keep_motions: str | None = None
     report_html: str | None = None
+    pose_oracle: bool = False
     progress: bool | None = None
 
 
@@ -117,7 +119,7 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     if config.graph and config.augment:
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
     actor_map = protocols.load_actor_map(config.actors) if config.actors else None
-    setup = replace(setup, protocol=config.hold_out)
+    setup = replace(setup, protocol=config.hold_out, pose_oracle=bool(config.pose_oracle))
     check_outputs([("--json", config.json, (".json",)), ("--report-html", config.report_html, (".html", ".htm"))],
                   [("a knowledge-base file", k) for k in config.kb] + [("the graph", config.graph),
                    ("the actor map", config.actors),

@@ -22,6 +22,7 @@ from graphsvc.sensors.recording import check_gap
 from graphsvc.strategies.inputs import check_layout
 from graphsvc.strategies.options import Options
 from graphsvc.strategies.results import Frame, Provenance
+from graphsvc.synthesis.smooth import half_width
 from graphsvc.synthesis.stream import lookahead_frames
 
 
@@ -41,11 +42,13 @@ class LiveSession:
     SYNTH_BATCH = 3  # 0.1 s at 30 Hz
 
     @classmethod
-    def synthesis_lag_frames(cls, rate_hz: float) -> int:
+    def synthesis_lag_frames(cls, rate_hz: float, smooth_s: float = 0.0) -> int:
         """Frames a streamed pose can come out after its frame of the path is final:
-        the streaming synthesis' look-ahead (half its blend window, plus one) and up to
-        SYNTH_BATCH − 1 frames waiting for its batch to fill; 12 + 2 at 30 Hz."""
-        return lookahead_frames(rate_hz) + cls.SYNTH_BATCH - 1
+        the streaming synthesis' look-ahead (half its blend window, plus one), up to
+        SYNTH_BATCH − 1 frames waiting for its batch to fill, and the frames the poses'
+        filter waits for (`synthesis.smooth`, σ = smooth_s); 12 + 2 + 3 at 30 Hz with
+        the default σ."""
+        return lookahead_frames(rate_hz) + cls.SYNTH_BATCH - 1 + half_width(smooth_s * rate_hz)
 
     def __init__(self, strategy, graph: MotionGraph, options: Options, sensor_names=None, allowed=None,
                  threads: bool = False, keep_motion: bool = True, marker_names=None,

@@ -263,6 +263,9 @@ TRACK_PULL_S = 0.5
 # (docs/reconstruction.md).
 TRACK_SIGMA_M = 0.10
 TRACK_DRIFT = 0.3
+# σ (s) of the Gaussian over the output's poses (`synthesis.smooth`), chosen on
+# dataset-2's takes 002 (docs/reconstruction.md, *Smoothing*).
+SMOOTH_S = 1.0 / 30.0
 
 
 def track_pull(pull_s: float | None, rate_hz: float) -> float:
@@ -283,7 +286,8 @@ class SharedOptions:
     heading turned toward the measured one. track_sigma_m, track_drift: the tracker's
     noise σ (m) and how fast the rate of the offset between the reconstruction's own root
     track and the tracker may change (m/s per √s), with which the output's root is fused
-    with the measured positions (`synthesis.track`)."""
+    with the measured positions (`synthesis.track`). smooth_s: σ (s) of the filter over
+    the output's poses (`synthesis.smooth`; 0: off)."""
 
     track_pull_s: float = option(TRACK_PULL_S, low=0.0, label="track pull", noun="a finite number of seconds",
                                  aliases=("--track-pull",), metavar="S",
@@ -298,6 +302,10 @@ class SharedOptions:
                                 help="how fast the rate of the offset between the reconstruction's own root track and "
                                      "the tracker may change, m/s per √s (0: one constant rate; default "
                                      f"{TRACK_DRIFT:g})")  # fmt: skip
+    smooth_s: float = option(SMOOTH_S, low=0.0, label="smoothing", noun="a finite number of seconds", metavar="S",
+                             aliases=("--smooth",),
+                             help="σ (s) of the Gaussian over the output's poses that removes frame-to-frame jitter; a "
+                                  f"live stream waits about 3σ longer (0: off; default {SMOOTH_S:.3g})")  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,7 @@ from graphsvc.motion.placement import joint_tables as _joint_tables
 from graphsvc.motion.placement import place_poses as _place
 from graphsvc.motion.placement import relative_pose as _relative_pose
 from graphsvc.motion.skeleton import Motion
+from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import warm_up_track
 
 FOOT_BLEND_S = 0.1  # blend-out of the foot pinning after a contact span (s)
@@ -553,6 +554,7 @@ def warm_up_synthesis(graph: MotionGraph) -> None:
     warmed[0] = True
     path_tables(graph)
     warm_up_track()
+    smooth_poses(np.tile([1.0, 0.0, 0.0, 0.0], (3, 2, 1)), np.zeros((3, 2, 3)), 1.0)
     entered = np.zeros(graph.num_nodes, dtype=bool)
     entered[graph.edge_dst] = True
     in_contact = np.flatnonzero(graph.node_contacts.any(axis=1) & entered)  # (a clip's first frame has no way in)

@@ -18,6 +18,7 @@ import numpy as np
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
 from graphsvc.synthesis.path import FOOT_BLEND_S, path_tables, synthesize_motion
+from graphsvc.synthesis.smooth import StreamingSmoother
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
 
 
@@ -32,18 +33,22 @@ class StreamingSynthesizer:
     translations (K, J, 3)) of the frames that became final; finish() → the rest.
     track_model, with each frame's measured position (K, 2) m given to add (NaN: none):
     the root's track is the path's own fused with them (`synthesis.track`), each frame's
-    offset smoothed over the `lookahead` frames after it that a frame waits for anyway."""
+    offset smoothed over the `lookahead` frames after it that a frame waits for anyway.
+    smooth_frames: σ (frames) of the poses' filter (`synthesis.smooth`), which holds
+    each frame back until the h = ⌈3σ⌉ after it are final too (`smooth_lag`)."""
 
     def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
                  flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
-                 batch: int = 1, track_model: TrackModel | None = None):  # fmt: skip
+                 batch: int = 1, track_model: TrackModel | None = None, smooth_frames: float = 0.0):  # fmt: skip
         self.graph = graph
+        self.smoother = StreamingSmoother(smooth_frames, graph.skeleton.num_joints)
+        self.smooth_lag = self.smoother.h
         self.blend_s = blend_s
         self.flight_root_blend_s = flight_root_blend_s
         self.fix_feet = fix_feet
         rate = float(graph.rate_hz)
         self.lookahead = lookahead_frames(rate, blend_s)
-        self.smoother = None if track_model is None else FixedLagSmoother(track_model, self.lookahead)
+        self.track = None if track_model is None else FixedLagSmoother(track_model, self.lookahead)
         # Synthesize once `batch` frames are final, not every frame: each update
         # re-synthesizes a trailing stretch, so this divides the cost by `batch` and
         # adds up to batch − 1 frames of delay.
@@ -75,31 +80,33 @@ class StreamingSynthesizer:
             g, h = meta.integrate_path(self.plain[-1], self.heading[-1], offsets, turns)
             self.plain.extend(g[1:])
             self.heading.extend(h[1:].tolist())
-        if self.smoother is not None:
+        if self.track is not None:
             free = free_steps(self.graph.node_contacts[nodes])
             for k in range(nodes.size):  # (each frame's measured − own offset: the smoother's input)
                 t = self.base + self.nodes.size + k
-                self.smoother.push(positions[k] - self.plain[t - self.base], free[k])
+                self.track.push(positions[k] - self.plain[t - self.base], free[k])
                 self._take_finals()
         self.nodes = np.concatenate([self.nodes, nodes])
         self.edges = np.concatenate([self.edges, edges])
         until = self.base + self.nodes.size - self.lookahead
         if until - self.done < self.batch:
             J = self.graph.skeleton.num_joints
-            return self.done, np.zeros((0, J, 4)), np.zeros((0, J, 3))
-        return self._synthesize(until)
+            return self.smoother.done, np.zeros((0, J, 4)), np.zeros((0, J, 3))
+        return self.smoother.add(*self._synthesize(until))
 
     def finish(self):
-        if self.smoother is not None:
-            self.smoother.flush()
+        if self.track is not None:
+            self.track.flush()
             self._take_finals()
-        return self._synthesize(self.base + self.nodes.size)
+        a = self.smoother.add(*self._synthesize(self.base + self.nodes.size))
+        b = self.smoother.finish()
+        return a[0], np.concatenate([a[1], b[1]]), np.concatenate([a[2], b[2]])
 
     def _take_finals(self) -> None:
         """The fused track of the frames whose smoothed offset became final."""
-        while self.smoother.finals:
+        while self.track.finals:
             t = self.base + len(self.ground)
-            self.ground.append(self.plain[t - self.base] + self.smoother.take(t))
+            self.ground.append(self.plain[t - self.base] + self.track.take(t))
 
     def _before_cuts(self, start: int, lo: int) -> int:
         """Move a window's first frame back before every cut whose blend reaches it: a
@@ -142,7 +149,7 @@ class StreamingSynthesizer:
             start = max(lo, self._before_cuts(start, lo))
         k = start - b
         track = None
-        if self.smoother is not None:
+        if self.track is not None:
             # The frames past the final ones (synthesized, not emitted): their own track
             # at the last final offset.
             final = np.array(self.ground[k:]).reshape(-1, 2)

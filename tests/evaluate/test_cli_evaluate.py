@@ -78,3 +78,15 @@ def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp
     for key in ("jitter_km_s3", "truth_skate_cm_s"):  # the summary: frame-weighted means over the clips
         want = float(np.sum(frames * [r[key] for r in e["clips"]]) / frames.sum())
         assert e["mean"][key] == pytest.approx(want)
+
+
+def test_pose_oracle_adds_the_floor_to_the_json_and_the_table(kb, tmp_path, capsys):
+    clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
+    out = tmp_path / "E.json"
+    assert main(["evaluate", str(kb), "--test", clip, "--layout", "kelly6", "--hold-out", "clip", "--quiet",
+                 "--strategy", "nearest", "--pose-oracle", "--json", str(out)]) == 0  # fmt: skip
+    assert "oracle cm" in capsys.readouterr().out
+    e = json.loads(out.read_text())
+    row = e["clips"][0]
+    assert 0 < row["oracle_joint_err_cm"] <= row["joint_err_cm"]
+    assert e["mean"]["oracle_joint_err_cm"] == pytest.approx(row["oracle_joint_err_cm"])

@@ -65,15 +65,16 @@ def test_every_service_subcommand_has_a_description_and_every_argument_a_help():
 def test_live_help_states_the_lag_a_stream_has(command, capsys):
     """The lag of a stream with the default --latency on a 30 Hz graph, by hand: the
     decoder's 1 s = 30 frames, the synthesis' look-ahead ceil(0.35 × 30) + 1 = 12
-    frames and its batches of 3 frames, up to 2 more: 44 frames, 44 / 30 = 1.47 s."""
+    frames, its batches of 3 frames, up to 2 more, and the poses' filter, ceil(3σ) = 3
+    frames at σ = 1/30 s: 47 frames, 47 / 30 = 1.57 s."""
     from graphsvc.cli import build_parser
 
     with pytest.raises(SystemExit):
         build_parser().parse_args([*command, "--help"])  # (what `graphsvc client stream --help` prints)
     text = " ".join(capsys.readouterr().out.split())
     assert "(default 1)" in text
-    assert "round(S × rate) + 14 frames after its sample at 30 Hz" in text
-    assert "44 frames (1.47 s) by default" in text
+    assert "round(S × rate) + 17 frames after its sample at 30 Hz" in text
+    assert "47 frames (1.57 s) by default" in text
     assert "output lags the input by S seconds" not in text
 
 
@@ -81,6 +82,7 @@ def test_a_default_session_reports_the_lag_the_help_states(graph):
     from graphsvc.pipeline import open_session, Options
 
     assert graph.rate_hz == 30.0
-    assert open_session(graph, Options()).lag_frames == 30 + 12 + 2
-    assert open_session(graph, Options(latency_s=0.5)).lag_frames == 15 + 12 + 2
+    # the search's latency, the blend's half window, the root's step, the poses' filter's half width (3σ)
+    assert open_session(graph, Options()).lag_frames == 30 + 12 + 2 + 3
+    assert open_session(graph, Options(latency_s=0.5)).lag_frames == 15 + 12 + 2 + 3
     assert open_session(graph, Options(strategy="nearest")).lag_frames == 12 + 2

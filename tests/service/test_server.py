@@ -98,17 +98,18 @@ def test_stream_matches_live_session(conn, graph, recording):
 
 def test_a_default_stream_lags_by_the_frames_it_reports(conn, recording):
     """No latency given: the decoder's 1 s (30 frames at the graph's 30 Hz), the
-    synthesis' look-ahead ceil(0.35 × 30) + 1 = 12 and up to 2 frames of its batches of
-    3: 44 frames, as `client stream --help` says; the recording is at the graph rate,
+    synthesis' look-ahead ceil(0.35 × 30) + 1 = 12, up to 2 frames of its batches of 3,
+    and 3 for the poses' filter (ceil(3σ), σ = 1/30 s): 47 frames, as `client stream
+    --help` says; the recording is at the graph rate,
     so sample k is frame k's, and the last frames out of a push wait exactly that."""
     feed = C.SampleFeed(C.stream_config("small"))
     for sample in C.recording_samples(recording):
         feed.put(sample)
     feed.close()
     result = C.run_stream(conn, feed)
-    assert result.started.lag_frames == 44
+    assert result.started.lag_frames == 47
     waits = [f.input_sample_index - f.index for f in result.frames]
-    assert max(waits) == 44 and len(result.frames) == recording.num_samples
+    assert max(waits) == 47 and len(result.frames) == recording.num_samples
 
 
 def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(conn, server, graph, recording,

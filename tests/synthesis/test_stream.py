@@ -8,6 +8,7 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.model import EDGE_TRANSITION
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.synthesis.path import synthesize_motion
+from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.stream import StreamingSynthesizer
 from graphsvc.synthesis.track import TrackModel, free_steps, fused_track, smooth_offsets
 
@@ -41,8 +42,9 @@ def _fixed_lag_track(g, nodes, edges, start, positions, model, lag):
     return own + offsets
 
 
-@pytest.mark.parametrize("fused", [False, True], ids=["placed-once", "fused"])
-def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused):
+@pytest.mark.parametrize("fused, smooth", [(False, 0.0), (True, 0.0), (True, 1.0)],
+                         ids=["placed-once", "fused", "fused-smoothed"])
+def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused, smooth):
     g = graph
     rng = np.random.default_rng(2)
     nodes, edges = _walk(g, 150, rng)
@@ -51,9 +53,13 @@ def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused
     positions = np.cumsum(rng.normal(0, 0.05, (nodes.size, 2)), axis=0)
     positions[rng.random(nodes.size) < 0.2] = np.nan
     model = TrackModel(0.1, 0.3, float(g.rate_hz)) if fused else None
-    synth = StreamingSynthesizer(g, *start, batch=3, track_model=model)
+    synth = StreamingSynthesizer(g, *start, batch=3, track_model=model, smooth_frames=smooth)
+    assert synth.smooth_lag == (3 if smooth else 0)
     track = _fixed_lag_track(g, nodes, edges, start, positions, model, synth.lookahead) if fused else None
     whole = synthesize_motion(g, nodes, edges, *start, track=track)
+    if smooth:  # (the poses' filter over the whole path, as a batch run applies it)
+        r, t = smooth_poses(whole.rotations, whole.translations, smooth)
+        whole = whole.copy(rotations=r, translations=t)
     if fused:
         placed_once = synthesize_motion(g, nodes, edges, *start)
         assert np.abs(whole.translations[:, 0] - placed_once.translations[:, 0]).max() > 0.05

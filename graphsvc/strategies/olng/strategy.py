@@ -7,7 +7,9 @@ query time. Its own options: `options.OlngOptions` (K, M, I, the step set, the e
 clean-up); the root is fused with the tracker's positions with the shared `track_sigma_m` and
 `track_drift` (`synthesis.track`: a Kalman filter live, and in batch the smoother over the
 whole recording, unless `latency_s` asks for what a live client gets), the heading pulled
-with `track_pull_s`; a weight of 0 for position or heading leaves that stream out.
+with `track_pull_s`; a batch run without `latency_s` filters the poses (`smooth_s`,
+`synthesis.smooth`), which a live frame, final as its sample arrives, cannot be; a
+weight of 0 for position or heading leaves that stream out.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.base import Strategy, frame_by_frame_ignored, prepared_index
+from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
@@ -28,6 +30,7 @@ from graphsvc.strategies.olng.index import OlngIndex, load_index
 from graphsvc.strategies.olng.pose import pose_model
 from graphsvc.strategies.olng.options import OlngOptions
 from graphsvc.strategies.options import Options, track_pull
+from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import TrackModel, smooth_offsets
 
 
@@ -62,7 +65,8 @@ class OlngStrategy(Strategy):
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})
     summary = "per sample the neighbourhood of knowledge-base frames moving as the readings do, and an optimised pose"
     options_class = OlngOptions
-    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift"})  # (the heading's pull, the root's fusion)
+    # (the heading's pull, the root's fusion, the poses' filter in batch)
+    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift", "smooth_s"})
 
     def prepare(self, graph: MotionGraph) -> OlngIndex:
         return load_index(graph)
@@ -71,9 +75,10 @@ class OlngStrategy(Strategy):
         warm_up(graph, index)
 
     def ignored_options(self, options: Options) -> list[str]:
-        # Every frame is final as its sample arrives; a latency asks for the live root
-        # (the tracker filtered, not smoothed over the whole recording) where there is one.
-        out = [] if options.weights.position else frame_by_frame_ignored(options)
+        # Every frame is final as its sample arrives; a latency asks for what a live client
+        # gets: the tracker filtered, not smoothed over the whole recording, and the poses
+        # not filtered.
+        out = []
         if options.weights.acc != 1.0:
             out.append("weights.acc")  # (its own energy weights: olng)
         return sorted(out + super().ignored_options(options))
@@ -109,6 +114,8 @@ class OlngStrategy(Strategy):
             labels.append(label)
             rows.append(row)
         smooth_root(decoder, trans)
+        if options.latency_s is None:  # (live frames are final as they come: no filter over later ones)
+            rot, trans = smooth_poses(rot, trans, options.shared.smooth_s * float(graph.rate_hz))
         total_s = time.perf_counter() - t0
         motion = Motion(graph.skeleton, rot, trans, float(graph.rate_hz), name="synthesized", source="olng")
         provenance = Provenance(clip, frame, weight, np.asarray(labels, dtype=object))

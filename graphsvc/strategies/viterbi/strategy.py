@@ -28,9 +28,10 @@ from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
 from graphsvc.strategies.start import start_placement, start_samples, start_state
-from graphsvc.strategies.options import Options, Weights, check_constraints
+from graphsvc.strategies.options import SMOOTH_S, Options, Weights, check_constraints
 from graphsvc.strategies.viterbi.options import ViterbiOptions
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
+from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.stream import StreamingSynthesizer
 from graphsvc.synthesis.track import TrackModel, fused_track
 
@@ -41,14 +42,14 @@ class ViterbiStrategy(Strategy):
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading", "constraints"})
     summary = "the motion-graph path that best explains the readings, the track and the constraints"
     options_class = ViterbiOptions
-    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift"})
+    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift", "smooth_s"})
 
     def describe_lag(self, rate_hz: float) -> str:
         s = ViterbiSession
-        tail, total = s.synthesis_lag_frames(rate_hz), s.output_lag_frames(rate_hz)
+        tail, total = s.synthesis_lag_frames(rate_hz, SMOOTH_S), s.output_lag_frames(rate_hz)
         return (f"at most round(S × rate) + {tail} frames after its sample at {rate_hz:g} Hz ({tail} for the synthesis' "
-                f"blend look-ahead and its batches of {s.SYNTH_BATCH} frames): {total} frames ({total / rate_hz:.2f} s) "
-                f"by default (and none before the search starts, 1 s in)")  # fmt: skip
+                f"blend look-ahead, its batches of {s.SYNTH_BATCH} frames and the poses' smoothing): {total} frames "
+                f"({total / rate_hz:.2f} s) by default (and none before the search starts, 1 s in)")  # fmt: skip
 
     def prepare(self, graph: MotionGraph) -> SearchIndex:
         return search_index(graph)  # (its tables are made on first use: by the warm-up at load)
@@ -92,7 +93,8 @@ class ViterbiStrategy(Strategy):
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
             track = fused_track(graph, nodes, edges, start_ground, start_heading, targets, model) if model else None
-            motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
+            motion = smoothed(synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track),
+                              options)  # fmt: skip
             synth_s = time.perf_counter() - t0
             extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
                      "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
@@ -103,7 +105,8 @@ class ViterbiStrategy(Strategy):
                                       start_samples=start_samples(rate), pull_s=pull_s,
                                       oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
-                                         track_model=track_model(options, rate) if use_pos is not None else None)  # fmt: skip
+                                         track_model=track_model(options, rate) if use_pos is not None else None,
+                                         smooth_frames=options.shared.smooth_s * rate)  # fmt: skip
             emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
@@ -147,6 +150,13 @@ class ViterbiStrategy(Strategy):
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
 
 
+def smoothed(motion: Motion, options: Options) -> Motion:
+    """The motion with its poses filtered (`synthesis.smooth`, the shared smooth_s)."""
+    rot, trans = smooth_poses(motion.rotations, motion.translations, options.shared.smooth_s * motion.rate_hz)
+    return motion if rot is motion.rotations else Motion(motion.skeleton, rot, trans, motion.rate_hz, name=motion.name,
+                                                         source=motion.source)  # fmt: skip
+
+
 def track_model(options: Options, rate_hz: float) -> TrackModel:
     """How the synthesized root is fused with the tracker (the shared options)."""
     return TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate_hz)
@@ -184,7 +194,7 @@ class ViterbiSession(LiveSession):
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
-        self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate)
+        self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate, options.shared.smooth_s)
 
     @classmethod
     def decoder_lag(cls, rate_hz: float, latency_s: float | None = None) -> int:
@@ -193,10 +203,10 @@ class ViterbiSession(LiveSession):
         return int(round((cls.DEFAULT_LATENCY_S if latency_s is None else latency_s) * rate_hz))
 
     @classmethod
-    def output_lag_frames(cls, rate_hz: float, latency_s: float | None = None) -> int:
-        """A session's `lag_frames`: the decoder's lag plus the synthesis' (44 frames at
-        30 Hz with the default 1 s: 30 + 12 + 2)."""
-        return cls.decoder_lag(rate_hz, latency_s) + cls.synthesis_lag_frames(rate_hz)
+    def output_lag_frames(cls, rate_hz: float, latency_s: float | None = None, smooth_s: float = SMOOTH_S) -> int:
+        """A session's `lag_frames`: the decoder's lag plus the synthesis' (47 frames at
+        30 Hz with the defaults: 30 + 12 + 2 + 3)."""
+        return cls.decoder_lag(rate_hz, latency_s) + cls.synthesis_lag_frames(rate_hz, smooth_s)
 
     @property
     def threads(self) -> bool:
@@ -234,7 +244,8 @@ class ViterbiSession(LiveSession):
         if self.synth is None:
             g, h = self.decoder.search.start_placement
             model = track_model(self.options, self.rate) if self.counts_position else None
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, track_model=model)
+            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, track_model=model,
+                                              smooth_frames=self.options.shared.smooth_s * self.rate)  # fmt: skip
         return self.synth
 
     def _frames(self, synthesized):
