@@ -287,7 +287,8 @@ class SharedOptions:
     noise σ (m) and how fast the rate of the offset between the reconstruction's own root
     track and the tracker may change (m/s per √s), with which the output's root is fused
     with the measured positions (`synthesis.track`). smooth_s: σ (s) of the filter over
-    the output's poses (`synthesis.smooth`; 0: off)."""
+    the output's poses (`synthesis.smooth`; 0: off). refine: each frame's pose from a
+    local model of the knowledge base around the measured readings (`strategies.refine`)."""
 
     track_pull_s: float = option(TRACK_PULL_S, low=0.0, label="track pull", noun="a finite number of seconds",
                                  aliases=("--track-pull",), metavar="S",
@@ -306,6 +307,9 @@ class SharedOptions:
                              aliases=("--smooth",),
                              help="σ (s) of the Gaussian over the output's poses that removes frame-to-frame jitter; a "
                                   f"live stream waits about 3σ longer (0: off; default {SMOOTH_S:.3g})")  # fmt: skip
+    refine: bool = option(True, label="refinement",
+                          help="each frame's pose from a local linear model of the knowledge-base frames whose readings "
+                               "move as the measured ones do, on the strategy's root (default on)")  # fmt: skip
 
 
 @dataclass(frozen=True)

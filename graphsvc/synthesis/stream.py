@@ -35,13 +35,18 @@ class StreamingSynthesizer:
     the root's track is the path's own fused with them (`synthesis.track`), each frame's
     offset smoothed over the `lookahead` frames after it that a frame waits for anyway.
     smooth_frames: σ (frames) of the poses' filter (`synthesis.smooth`), which holds
-    each frame back until the h = ⌈3σ⌉ after it are final too (`smooth_lag`)."""
+    each frame back until the h = ⌈3σ⌉ after it are final too (`smooth_lag`). refiner:
+    a `strategies.refine.Refiner` its owner feeds the samples: each final frame's pose
+    gets its correction before the filter, as `strategies.refine.refine_motion` does in
+    batch (it reads the path's nodes a few frames past the frame, within `lookahead`)."""
 
     def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
                  flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
-                 batch: int = 1, track_model: TrackModel | None = None, smooth_frames: float = 0.0):  # fmt: skip
+                 batch: int = 1, track_model: TrackModel | None = None, smooth_frames: float = 0.0,
+                 refiner=None):  # fmt: skip
         self.graph = graph
         self.smoother = StreamingSmoother(smooth_frames, graph.skeleton.num_joints)
+        self.refiner = refiner
         self.smooth_lag = self.smoother.h
         self.blend_s = blend_s
         self.flight_root_blend_s = flight_root_blend_s
@@ -92,15 +97,27 @@ class StreamingSynthesizer:
         if until - self.done < self.batch:
             J = self.graph.skeleton.num_joints
             return self.smoother.done, np.zeros((0, J, 4)), np.zeros((0, J, 3))
-        return self.smoother.add(*self._synthesize(until))
+        return self._filtered(self._synthesize(until))
 
     def finish(self):
         if self.track is not None:
             self.track.flush()
             self._take_finals()
-        a = self.smoother.add(*self._synthesize(self.base + self.nodes.size))
+        a = self._filtered(self._synthesize(self.base + self.nodes.size), self.base + self.nodes.size - 1)
         b = self.smoother.finish()
         return a[0], np.concatenate([a[1], b[1]]), np.concatenate([a[2], b[2]])
+
+    def _filtered(self, part, last: int | None = None):
+        """Final frames through the refinement's correction (last: the path's last frame,
+        at the end) and the poses' filter."""
+        if self.refiner is not None:
+            first, rot, trans = part
+            rot, trans = self.refiner.correct(first, rot, trans, self._nodes_of, last)
+            part = first, rot, trans
+        return self.smoother.add(*part)
+
+    def _nodes_of(self, lo: int, hi: int) -> np.ndarray:
+        return self.nodes[lo - self.base: hi - self.base]
 
     def _take_finals(self) -> None:
         """The fused track of the frames whose smoothed offset became final."""

@@ -31,6 +31,7 @@ from graphsvc.strategies.start import start_placement, start_samples, start_stat
 from graphsvc.strategies.options import SMOOTH_S, Options, Weights, check_constraints
 from graphsvc.strategies.viterbi.options import ViterbiOptions
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
+from graphsvc.strategies.refine import refine_index, refine_motion, Refiner, warm_up_refine
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.stream import StreamingSynthesizer
 from graphsvc.synthesis.track import TrackModel, fused_track
@@ -42,7 +43,7 @@ class ViterbiStrategy(Strategy):
     uses = frozenset({"accelerations", "orientations", "ground_position", "heading", "constraints"})
     summary = "the motion-graph path that best explains the readings, the track and the constraints"
     options_class = ViterbiOptions
-    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift", "smooth_s"})
+    shared = frozenset({"track_pull_s", "track_sigma_m", "track_drift", "smooth_s", "refine"})
 
     def describe_lag(self, rate_hz: float) -> str:
         s = ViterbiSession
@@ -56,6 +57,7 @@ class ViterbiStrategy(Strategy):
 
     def warm_up(self, index, graph: MotionGraph, threads: bool = False) -> None:
         warm_up(graph, threads)
+        warm_up_refine(graph)  # (its arrays on disk, its tree in memory: a session opens at once)
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
@@ -74,6 +76,7 @@ class ViterbiStrategy(Strategy):
         if orientation_counts(graph, w, inp.up):  # (the oriented index's tables, once per graph, not in the search's time)
             oriented = search_index(graph, True)
             _ = oriented.slots if constraints else (oriented.tables, oriented.float32)
+        refining = refine_index(graph, allowed) if options.shared.refine else None
         warm_up_s = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -93,8 +96,9 @@ class ViterbiStrategy(Strategy):
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
             track = fused_track(graph, nodes, edges, start_ground, start_heading, targets, model) if model else None
-            motion = smoothed(synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track),
-                              options)  # fmt: skip
+            motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
+            motion = (refine_motion(graph, motion, nodes, refining, acc, options.shared.smooth_s * rate)
+                      if refining is not None else smoothed(motion, options))  # fmt: skip
             synth_s = time.perf_counter() - t0
             extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
                      "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
@@ -106,13 +110,18 @@ class ViterbiStrategy(Strategy):
                                       oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
                                          track_model=track_model(options, rate) if use_pos is not None else None,
-                                         smooth_frames=options.shared.smooth_s * rate)  # fmt: skip
+                                         smooth_frames=options.shared.smooth_s * rate,
+                                         refiner=None if refining is None else Refiner(graph, refining))  # fmt: skip
             emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
             for t in range(T + 1):
                 if should_stop is not None and t % 32 == 31 and should_stop():
                     raise SearchCancelled(f"search stopped at sample {t} of {T}")
+                if t < T and synth.refiner is not None:
+                    synth.refiner.push(acc[t])
+                elif synth.refiner is not None:
+                    synth.refiner.finish()
                 if t < T:  # (the raw streams: the search scores only what its weights count)
                     n, e = decoder.push(acc[t], None if position is None else position[t],
                                         None if heading is None else heading[t],
@@ -195,6 +204,7 @@ class ViterbiSession(LiveSession):
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
         self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate, options.shared.smooth_s)
+        self.refiner = Refiner(graph, refine_index(graph, allowed)) if options.shared.refine else None
 
     @classmethod
     def decoder_lag(cls, rate_hz: float, latency_s: float | None = None) -> int:
@@ -219,6 +229,8 @@ class ViterbiSession(LiveSession):
         self.decoder.search.threads = on
 
     def _decode(self, acc, position, heading, markers=None, up=None):
+        if self.refiner is not None:
+            self.refiner.push(acc)
         if self.track is not None:
             heading = self.track.push(position)
         nodes, edges = self.decoder.push(acc, position, heading, up)  # (the search scores what its weights count)
@@ -245,7 +257,8 @@ class ViterbiSession(LiveSession):
             g, h = self.decoder.search.start_placement
             model = track_model(self.options, self.rate) if self.counts_position else None
             self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, track_model=model,
-                                              smooth_frames=self.options.shared.smooth_s * self.rate)  # fmt: skip
+                                              smooth_frames=self.options.shared.smooth_s * self.rate,
+                                              refiner=self.refiner)  # fmt: skip
         return self.synth
 
     def _frames(self, synthesized):
@@ -253,6 +266,8 @@ class ViterbiSession(LiveSession):
 
     def _finish(self):
         nodes, edges = self.decoder.flush()
+        if self.refiner is not None:
+            self.refiner.finish()
         synth = self._synthesizer()
         return self._frames(_join(synth.add(nodes, edges, self._take_targets(len(nodes))), synth.finish()))
 

@@ -1,0 +1,113 @@
+"""Local poses as flat vectors, and a motion's local poses replaced by others.
+
+A local pose says how the body is posed and not where it stands or faces: the pelvis
+rotation with the frame's heading taken off (4), the pelvis height (1, m), and the local
+rotation of every joint under the pelvis (4 each), each quaternion on the w ≥ 0 side so
+that poses can be averaged and regressed component by component (`strategies.refine`).
+The heading is `signals.heading`, the one the graph's nodes carry. `place_local_poses`
+puts such vectors into a motion at each frame's own ground position and heading, so the
+root's track and turning stay the motion's and only the pose changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from graphsvc.graph.model import MotionGraph
+from graphsvc.motion import signals
+from graphsvc.motion.joints import joint_map
+from graphsvc.motion.kinematics import forward_kinematics
+from graphsvc.motion.placement import joint_tables, place_poses, relative_pose
+
+CHUNK = 32768
+
+
+@dataclass(frozen=True)
+class PoseLayout:
+    """Where a skeleton's local pose sits in a vector: the joints under the pelvis
+    (`joints`, in skeleton order) from index 5 on, four values each; the joint map,
+    the pelvis and the carrier joint (`placement.joint_tables`)."""
+
+    joints: np.ndarray
+    table: dict
+    pelvis: int
+    carrier: int
+
+    @property
+    def dims(self) -> int:
+        return 5 + 4 * self.joints.size
+
+
+def pose_layout(skeleton, mapping=None) -> PoseLayout:
+    table = joint_map(skeleton, mapping)
+    below, carrier = joint_tables(skeleton, table)
+    return PoseLayout(np.flatnonzero(below).astype(np.int64), table, int(table["pelvis"]), int(carrier))
+
+
+@numba.njit(cache=True, nogil=True)
+def _positive(p):
+    """Each quaternion of pose vectors p (F, D) (at 0, then 5, 9, …: the height is at
+    4) onto its w ≥ 0 side, in place."""
+    for f in range(p.shape[0]):
+        s = 0
+        while s + 4 <= p.shape[1]:
+            if p[f, s] < 0.0:
+                for c in range(4):
+                    p[f, s + c] = -p[f, s + c]
+            s = 5 if s == 0 else s + 4
+
+
+def pose_vectors(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout) -> np.ndarray:
+    """(F, D) float64 local poses of frames with local rotations (F, J, 4) and
+    translations (F, J, 3)."""
+    world_rot, world_pos = forward_kinematics(rot, trans, parents)
+    heading = signals.heading(world_pos, layout.table)
+    rel, height = relative_pose(world_rot, world_pos, heading, layout.pelvis)
+    F = rot.shape[0]
+    p = np.empty((F, layout.dims))
+    p[:, 0:4] = rel
+    p[:, 4] = height
+    p[:, 5:] = rot[:, layout.joints].reshape(F, -1)
+    _positive(p)
+    return p
+
+
+def node_pose_vectors(graph: MotionGraph, nodes: np.ndarray, layout: PoseLayout) -> np.ndarray:
+    """(F, D) float32 local poses of graph nodes."""
+    nodes = np.asarray(nodes, dtype=np.int64)
+    out = np.empty((nodes.size, layout.dims), np.float32)
+    parents = graph.skeleton.parents
+    for lo in range(0, nodes.size, CHUNK):
+        n = nodes[lo: lo + CHUNK]
+        out[lo: lo + n.size] = pose_vectors(graph.node_rotations[n].astype(np.float64),
+                                            graph.node_translations[n].astype(np.float64), parents, layout)  # fmt: skip
+    return out
+
+
+def place_local_poses(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout,
+                      poses: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Copies of a motion's (rot (T, J, 4), trans (T, J, 3)) with the frames where `use`
+    (T,) holds posed as `poses` (T, D) says (quaternions normalised here), each at its
+    own ground position and heading (`signals`); the other frames untouched. Frame by
+    frame: the same frames give the same output whatever else is in the call."""
+    rot = np.array(rot, dtype=np.float64, copy=True)
+    trans = np.array(trans, dtype=np.float64, copy=True)
+    idx = np.flatnonzero(np.asarray(use, dtype=bool))
+    if idx.size == 0:
+        return rot, trans
+    p = np.asarray(poses, dtype=np.float64)[idx]
+    _, world_pos = forward_kinematics(rot[idx], trans[idx], parents)
+    ground = signals.ground_position(world_pos, layout.pelvis)
+    heading = signals.heading(world_pos, layout.table)
+    rel = p[:, 0:4] / np.linalg.norm(p[:, 0:4], axis=1, keepdims=True)
+    q = p[:, 5:].reshape(idx.size, -1, 4)
+    r, tr = rot[idx], trans[idx]
+    r[:, layout.joints] = q / np.linalg.norm(q, axis=2, keepdims=True)
+    src_rot, src_pos = forward_kinematics(r, tr, parents)
+    place_poses(r, tr, rel, p[:, 4].copy(), ground, heading, src_rot, src_pos, np.ascontiguousarray(parents, np.int64),
+                layout.pelvis, layout.carrier)  # fmt: skip
+    rot[idx], trans[idx] = r, tr
+    return rot, trans
