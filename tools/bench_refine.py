@@ -2,8 +2,8 @@
 """What the refinement costs (`graphsvc.strategies.refine`): the index, the k-d tree,
 and the correction of a path's motion in batch and live, on a built graph.
 
-The path is a stretch of consecutive knowledge-base frames (original edges) of
-`--frames` frames, its readings the graph's own with 0.3 m/s² of white noise (seed 1).
+The path is the longest stretch of consecutive knowledge-base frames (original edges)
+from a clip's start, at most `--frames`, its readings the graph's own with 0.3 m/s² of white noise (seed 1).
 Prints one JSON object: the index's build (when not cached beside the graph) and load,
 the tree's build, the regression per frame, `refine_motion` over the path and a live
 `Refiner` correcting 3 frames at a time (as a live session's synthesizer asks), per
@@ -48,16 +48,19 @@ def main() -> None:
     refine.warm_up_refine(graph)
     warm_up_synthesis(graph)
 
-    # The longest run of original edges, cut to --frames.
+    # The longest run of original edges from a clip's first frame, cut to --frames.
     e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
     nxt = np.full(graph.num_nodes, -1, dtype=np.int64)
     nxt[np.asarray(graph.edge_src)[e]] = np.asarray(graph.edge_dst)[e]
     into = np.full(graph.num_nodes, -1, dtype=np.int64)
     into[np.asarray(graph.edge_dst)[e]] = e
-    start = int(np.asarray(graph.clips[0]["first_node"]))
-    nodes = [start]
-    while len(nodes) < args.frames and nxt[nodes[-1]] >= 0:
-        nodes.append(int(nxt[nodes[-1]]))
+    nodes = []
+    for clip in graph.clips:
+        run = [int(clip["first_node"])]
+        while len(run) < args.frames and nxt[run[-1]] >= 0:
+            run.append(int(nxt[run[-1]]))
+        if len(run) > len(nodes):
+            nodes = run
     nodes = np.asarray(nodes, dtype=np.int64)
     edges = into[nodes[1:]]
     T = nodes.size
