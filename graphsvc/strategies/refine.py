@@ -205,6 +205,7 @@ class Refiner:
         self.base = 0  # the index of samples[0]
         self.ended = False
         self.deltas: list = []  # the corrections of frames dbase, dbase + 1, …
+        self.node_poses: list = []  # and their path nodes' local poses
         self.dbase = 0
         self.hold = FootHold(graph.skeleton, index.rate_hz, index.mapping)
 
@@ -242,6 +243,7 @@ class Refiner:
         poses, ok = self.regressed(lo, hi)
         delta = np.where(ok[:, None], _aligned(poses, node) - node, 0.0)
         self.deltas.extend(delta)
+        self.node_poses.extend(node)
         # Forget the samples and corrections no later frame reads.
         drop = hi - self.h - 1 + int(self.offsets.min()) - self.base
         if drop > 256:
@@ -263,16 +265,16 @@ class Refiner:
         for k, tap in enumerate(self.taps):  # (the same order of sums, live or not)
             at = np.clip(np.arange(first, first + K) + k - self.h, 0, top) - row0
             corr += tap * rows[at]
+        node = np.asarray(self.node_poses[first - self.dbase: first + K - self.dbase])
         drop = first + K - self.h - 1 - self.dbase
         if drop > 256:
-            del self.deltas[:drop]
+            del self.deltas[:drop], self.node_poses[:drop]
             self.dbase += drop
-        nodes = nodes_of(first, first + K)
-        node = node_pose_vectors(self.graph, nodes, self.index.layout).astype(np.float64)
         parents = self.graph.skeleton.parents
         pose = _aligned(pose_vectors(rot, trans, parents, self.index.layout), node)
         out_rot, out_trans = place_local_poses(rot, trans, parents, self.index.layout, pose + corr, np.ones(K, dtype=bool))
-        return self.hold.apply(out_rot, out_trans, rot, trans, self.graph.node_contacts[nodes]), out_trans
+        contacts = self.graph.node_contacts[nodes_of(first, first + K)]
+        return self.hold.apply(out_rot, out_trans, rot, trans, contacts), out_trans
 
 
 def refine_motion(graph: MotionGraph, motion: Motion, nodes: np.ndarray, index: RefineIndex, acc: np.ndarray,

@@ -40,6 +40,11 @@ class PoseLayout:
     def dims(self) -> int:
         return 5 + 4 * self.joints.size
 
+    @property
+    def slot(self) -> np.ndarray:
+        """(1 + joints,) the column each quaternion starts at: 0, then 5, 9, …"""
+        return np.concatenate([[0], 5 + 4 * np.arange(self.joints.size)]).astype(np.int64)
+
 
 def pose_layout(skeleton, mapping=None) -> PoseLayout:
     table = joint_map(skeleton, mapping)
@@ -48,30 +53,32 @@ def pose_layout(skeleton, mapping=None) -> PoseLayout:
 
 
 @numba.njit(cache=True, nogil=True)
-def _positive(p):
-    """Each quaternion of pose vectors p (F, D) (at 0, then 5, 9, …: the height is at
-    4) onto its w ≥ 0 side, in place."""
+def positive_quaternions(p, slot):
+    """Each quaternion of pose vectors p (F, D), starting at the columns `slot` (K,),
+    onto its w ≥ 0 side, in place."""
     for f in range(p.shape[0]):
-        s = 0
-        while s + 4 <= p.shape[1]:
+        for k in range(slot.shape[0]):
+            s = slot[k]
             if p[f, s] < 0.0:
                 for c in range(4):
                     p[f, s + c] = -p[f, s + c]
-            s = 5 if s == 0 else s + 4
 
 
-def pose_vectors(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout) -> np.ndarray:
+def pose_vectors(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout,
+                 heading: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """(F, D) float64 local poses of frames with local rotations (F, J, 4) and
-    translations (F, J, 3)."""
+    translations (F, J, 3); heading (F,) rad: the frames' own when known (a graph's
+    nodes carry theirs), else `signals.heading` of their pose."""
     world_rot, world_pos = forward_kinematics(rot, trans, parents)
-    heading = signals.heading(world_pos, layout.table)
+    if heading is None:
+        heading = signals.heading(world_pos, layout.table)
     rel, height = relative_pose(world_rot, world_pos, heading, layout.pelvis)
     F = rot.shape[0]
     p = np.empty((F, layout.dims))
     p[:, 0:4] = rel
     p[:, 4] = height
     p[:, 5:] = rot[:, layout.joints].reshape(F, -1)
-    _positive(p)
+    positive_quaternions(p, layout.slot)
     return p
 
 

@@ -53,9 +53,10 @@ from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.joints import joint_map
-from graphsvc.motion.kinematics import forward_kinematics, qmul4 as _qmul, qrot3 as _qrot
-from graphsvc.motion.placement import joint_tables, relative_pose
+from graphsvc.motion.kinematics import qmul4 as _qmul, qrot3 as _qrot
+from graphsvc.motion.placement import joint_tables
 from graphsvc.sensors.accelerometer import carried_frame
+from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
 
 EPS = 1e-4  # ρ's smoothing (units of each term)
 VARIANCE_KEPT = 0.99
@@ -128,32 +129,16 @@ def frame_poses(graph: MotionGraph, model: PoseModel, nodes: np.ndarray) -> tupl
     D = model.dims
     P = np.empty((F, D), np.float32)
     X = np.empty((F, model.active.size, 3), np.float32)
+    layout = pose_layout(graph.skeleton, graph.params.get("mapping"))  # (its joints: model.active[1:])
     for lo in range(0, F, 65536):
         n = nodes[lo: lo + 65536]
         rot = graph.node_rotations[n].astype(np.float64)
         trans = graph.node_translations[n].astype(np.float64)
-        world_rot, world_pos = forward_kinematics(rot, trans, graph.skeleton.parents)
-        rel, height = relative_pose(world_rot, world_pos, graph.node_heading[n].astype(np.float64), model.pelvis)
-        p = np.empty((n.size, D))
-        p[:, 0:4] = rel
-        p[:, 4] = height
-        for k in range(1, model.active.size):
-            p[:, model.slot[k]: model.slot[k] + 4] = rot[:, model.active[k]]
-        _positive(p, model.slot)
+        p = pose_vectors(rot, trans, graph.skeleton.parents, layout, graph.node_heading[n].astype(np.float64))
         P[lo: lo + n.size] = p
         offsets = np.ascontiguousarray(trans[:, model.active])
         X[lo: lo + n.size] = _positions(p, offsets, model.parent_slot, model.slot)
     return P, X
-
-
-@numba.njit(cache=True, nogil=True)
-def _positive(p, slot):
-    for f in range(p.shape[0]):
-        for k in range(slot.shape[0]):
-            s = slot[k]
-            if p[f, s] < 0.0:
-                for c in range(4):
-                    p[f, s + c] = -p[f, s + c]
 
 
 @numba.njit(cache=True, nogil=True)
