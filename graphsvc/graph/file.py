@@ -12,6 +12,8 @@ import numpy as np
 from graphsvc.errors import FormatError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Skeleton
+from graphsvc.sensors.layout import ROOT_SEGMENT
+from graphsvc.sensors.orientation import RELATIVE_WIDTH, WIDTHS
 from graphsvc.store import file_checksum, read_container, read_header, write_container
 
 KIND = "graph"
@@ -85,11 +87,21 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
     shapes = {"node_kind": (N,), "node_clip": (N,), "node_frame": (N,), "node_contacts": (N, 2), "node_label": (N,),
               "node_rotations": (N, J, 4), "node_translations": (N, J, 3), "node_ground": (N, 2), "node_heading": (N,),
               "edge_src": (E,), "edge_dst": (E,), "edge_kind": (E,), "edge_acc": (E, S, 3), "edge_offset": (E, 2),
-              "edge_heading": (E,), "incoming": (N + 1,), "clip_offsets": (C, J, 3), "edge_up": (E, S, 3)}  # fmt: skip
+              "edge_heading": (E,), "incoming": (N + 1,), "clip_offsets": (C, J, 3)}  # fmt: skip
     for name, shape in shapes.items():
         a = getattr(graph, name)
         if a is not None and (a.shape != shape or a.dtype.kind not in "biuf"):
             raise FormatError(path, f"graph array {name} is {a.dtype}{list(a.shape)}, expected numbers of shape {list(shape)}")
+    up = graph.edge_up
+    if up is not None:
+        # The orientation cue: tilt (3) or relative to the root sensor (9, `sensors.orientation`).
+        width = up.shape[-1] if up.ndim == 3 else None
+        if up.shape[:2] != (E, S) or width not in WIDTHS or up.dtype.kind not in "f":
+            raise FormatError(path, f"graph array edge_up is {up.dtype}{list(up.shape)}, expected numbers of shape "
+                                    f"[{E}, {S}, 3 or 9]")  # fmt: skip
+        if width == RELATIVE_WIDTH and not any(s.get("segment") == ROOT_SEGMENT for s in layout["sensors"]):
+            raise FormatError(path, "graph metadata: orientations relative to a root sensor, and the layout has no "
+                                    f"sensor on the {ROOT_SEGMENT}")  # fmt: skip
     for name in ("edge_src", "edge_dst", "node_clip", "node_label", "incoming", "node_kind", "edge_kind"):
         if getattr(graph, name).dtype.kind not in "iu":
             raise FormatError(path, f"graph array {name} holds {getattr(graph, name).dtype}, expected integers")

@@ -30,8 +30,8 @@ from graphsvc.motion.resample import resample_arrays
 from graphsvc.motion.skeleton import Skeleton
 from graphsvc.sensors.accelerometer import sensor_poses, simulate_accelerations
 from graphsvc.sensors.anatomy import ANATOMICAL, REST_POSE
-from graphsvc.sensors.layout import Placement, anatomical_placement, layout_from_dict, place
-from graphsvc.sensors.orientation import sensor_up
+from graphsvc.sensors.layout import Placement, anatomical_placement, layout_from_dict, place, root_sensor
+from graphsvc.sensors.orientation import RELATIVE_WIDTH, TILT_WIDTH, orientation_cue
 
 BEFORE, AFTER = 2, 3  # context frames of a bridge's readings: the 5-point stencil's reach, and b's frame q
 
@@ -305,21 +305,25 @@ _UP_CHUNK = 8192
 
 
 def edge_up_vectors(graph, layout) -> np.ndarray:
-    """(E, S, 3) float16: each edge's sensor "up" — world +Y in each sensor's frame
-    (`sensors.orientation.sensor_up`) — for `layout`, from the graph's stored poses. An
-    edge plays its destination node's pose whatever its speed (a slow-down edge the
-    slerped pose its slow-down node stores, a bridge's exit edge clip b's frame turned
-    about the vertical, which leaves "up" alone), so every edge's is its destination's, placed as
-    that node's readings are: on its clip's skeleton, a bridge's or an interpolated
-    segment's on clip a's (`clip_placements`). The orientation cost is yaw-free (a rotation about the
-    vertical leaves it unchanged), so "up" is all it needs of the sensor's rotation;
-    float16 keeps it to 5e-4 (0.03°)."""
+    """(E, S, W) float16: each edge's sensor orientation cue (`sensors.orientation`) for
+    `layout`, from the graph's stored poses: the sensors' rotations relative to the
+    root sensor's heading (W = 9) where the layout has a root sensor
+    (`sensors.layout.root_sensor`), else their "up" vectors, world +Y in each sensor's
+    frame (W = 3). An edge plays its destination node's pose whatever its speed (a
+    slow-down edge the slerped pose its slow-down node stores, a bridge's exit edge clip
+    b's frame turned about the vertical, which leaves either cue alone), so every
+    edge's is its destination's, placed as that node's readings are: on its clip's
+    skeleton, a bridge's or an interpolated segment's on clip a's (`clip_placements`).
+    Both cues are yaw-free (a rotation of the whole body about the vertical leaves them
+    unchanged); float16 keeps them to 5e-4 (0.03°)."""
     sk = graph.skeleton
     N, S = graph.num_nodes, len(layout.sensors)
+    root = root_sensor(layout)
+    width = TILT_WIDTH if root is None else RELATIVE_WIDTH
     owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
     for rec in list(graph.segments) + list(graph.bridges):
         owner[int(rec["first_node"]):int(rec["first_node"]) + int(rec["count"])] = int(rec["clip_a"])
-    node_up = np.zeros((N, S, 3), np.float16)
+    node_cue = np.zeros((N, S, width), np.float16)
     placements = clip_placements(graph, layout)
     for c in np.unique(owner):
         placement = placements[c]
@@ -328,8 +332,8 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
             part = nodes[k:k + _UP_CHUNK]
             world_rot, world_pos = forward_kinematics(graph.node_rotations[part].astype(np.float64),
                                                       graph.node_translations[part].astype(np.float64), sk.parents)  # fmt: skip
-            node_up[part] = sensor_up(sensor_poses(world_rot, world_pos, placement)[1])
-    return node_up[np.asarray(graph.edge_dst, dtype=np.int64)]
+            node_cue[part] = orientation_cue(sensor_poses(world_rot, world_pos, placement)[1], width, root)
+    return node_cue[np.asarray(graph.edge_dst, dtype=np.int64)]
 
 
 def clip_placements(graph, layout) -> list:

@@ -42,9 +42,11 @@ class MotionGraph:
     (m/s²); edge_offset (E, 2) float32 (m, in the source node's local frame);
     edge_heading (E,) float32 (rad); incoming (N + 1,) int64 CSR offsets by destination.
     clip_offsets (C, J, 3) float64: each clip's skeleton offsets (sensor placement).
-    edge_up (E, S, 3) float16 or None: each edge's sensor "up", world +Y in the sensor
-    frame (`metadata.edge_up_vectors`); None in graph files written before it, which
-    then cannot weigh measured orientations.
+    edge_up (E, S, W) float16 or None: each edge's sensor orientation cue
+    (`metadata.edge_up_vectors`, `sensors.orientation`): W = 3, the sensors' "up" (world
+    +Y in the sensor frame), or W = 9, their rotations relative to the root sensor's
+    heading (layouts with a sensor on the pelvis); None in graph files written before
+    it, which then cannot weigh measured orientations.
     """
 
     rate_hz: float
@@ -154,7 +156,7 @@ def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, 
                      rate_hz: float = 30.0, up=None) -> MotionGraph:  # fmt: skip
     """A MotionGraph of bare edges, for synthetic studies (benchmarks, tests): N nodes
     (the largest index + 1) on a one-joint skeleton, without poses or clips. src, dst
-    (E,) node indices; acc (E, S, 3) readings (m/s²); up (E, S, 3) sensor "up" vectors
+    (E,) node indices; acc (E, S, 3) readings (m/s²); up (E, S, 3 or 9) the orientation cue
     (None: no orientation metadata); offsets (E, 2) m, dheading (E,)
     rad (default 0); contacts (N, 2) bool (default all planted); labels (N,) int into
     ("a", "b") (default 0); kinds (E,) edge kinds (default original). Edges are

@@ -105,6 +105,19 @@ PRESETS: dict[str, Layout] = {
 }
 
 
+ROOT_SEGMENT = "pelvis"
+
+
+def root_sensor(layout: Layout) -> int | None:
+    """The index of the layout's root sensor, the first on the pelvis segment (kelly6's
+    `lower_back`, dip6's `pelvis`), against which the others' orientations are read
+    (`sensors.orientation`); None when no sensor is on the pelvis."""
+    for i, s in enumerate(layout.sensors):
+        if s.segment == ROOT_SEGMENT:
+            return i
+    return None
+
+
 def layout_from_dict(data: dict, source: str = "layout") -> Layout:
     """Validate a layout description (as in a layout file or a recording)."""
     if not isinstance(data, dict) or not isinstance(data.get("sensors"), list) or not data["sensors"]:

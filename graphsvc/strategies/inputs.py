@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.sensors.orientation import sensor_up
+from graphsvc.sensors.layout import layout_from_dict, root_sensor
+from graphsvc.sensors.orientation import orientation_cue
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.anatomy import check_frames
 from graphsvc.sensors.grid import markers_at_rate, readings_at_rate, values_at_rate
@@ -25,6 +26,14 @@ from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
 from graphsvc.sensors.recording import Recording
 from graphsvc.strategies.base import INPUTS, Strategy
 from graphsvc.strategies.options import Options, check_constraints
+
+
+def graph_cue(graph: MotionGraph, orientations) -> np.ndarray:
+    """(..., S, W) the orientation cue the graph's edges carry (`graph.edge_up`: its width
+    W says which, `sensors.orientation`) of orientations (..., S, 4); NaN where missing."""
+    width = int(graph.edge_up.shape[-1])
+    root = root_sensor(layout_from_dict(graph.layout)) if width != 3 else None
+    return orientation_cue(np.asarray(orientations, dtype=np.float64), width, root)
 
 
 def recording_inputs(rec: Recording) -> set[str]:
@@ -119,9 +128,10 @@ class PreparedInput:
     markers: np.ndarray | None = None  # (T, M, 3) m, NaN = not seen
     marker_names: tuple = ()
     meta: dict = field(default_factory=dict)  # the recording's provenance
-    # (T, S, 3) the sensors' measured "up" vectors (world +Y in each sensor's frame,
-    # `graph.metadata.sensor_up`; NaN = missing), where the strategy uses orientations
-    # and the graph has their metadata; else None
+    # (T, S, W) the sensors' measured orientation cue, of the graph's kind
+    # (`sensors.orientation`: "up" vectors or rotations relative to the root sensor;
+    # NaN = missing), where the strategy uses orientations and the graph has their
+    # metadata; else None
     up: np.ndarray | None = None
 
     @property
@@ -161,7 +171,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
         if graph.edge_up is None:  # (a graph file written before orientation metadata)
             ignored = sorted(set(ignored) | {"orientations"})
         else:
-            up = values_at_rate(rec, sensor_up(np.asarray(rec.orientations, dtype=np.float64)), graph.rate_hz)
+            up = values_at_rate(rec, graph_cue(graph, rec.orientations), graph.rate_hz)
     heading_source = "recording" if heading is not None else "none"
     if options.heading_from_track:
         if position is None:

@@ -14,12 +14,11 @@ import math
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.sensors.orientation import sensor_up
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.recording import check_gap
-from graphsvc.strategies.inputs import check_layout
+from graphsvc.strategies.inputs import check_layout, graph_cue
 from graphsvc.strategies.options import Options
 from graphsvc.strategies.results import Frame, Provenance
 from graphsvc.synthesis.smooth import half_width
@@ -134,7 +133,7 @@ class LiveSession:
                                  f"got shape {q.shape}")  # fmt: skip
             if self.reads_up:
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    up = sensor_up(q)  # (a zero or NaN quaternion gives NaN: missing)
+                    up = graph_cue(self.graph, q)  # (a zero or NaN quaternion gives NaN: missing)
         return float(t_s), acc, position, heading, markers, up
 
     def push(self, t_s: float, acc=None, position=None, heading=None, markers=None,
@@ -178,7 +177,7 @@ class LiveSession:
 
     def _decode(self, acc, position, heading, markers=None, up=None) -> list[Frame]:
         """One sample on the graph's grid → the frames now final. up: (S, 3) the
-        sensors' "up" vectors (`graph.metadata.sensor_up`), or None."""
+        sensors' orientation cue (`strategies.inputs.graph_cue`), or None."""
         raise NotImplementedError
 
     def _finish(self) -> list[Frame]:

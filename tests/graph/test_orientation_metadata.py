@@ -10,9 +10,9 @@ from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.metadata import edge_up_vectors
 from graphsvc.graph.model import EDGE_ORIGINAL, NODE_BRIDGE, NODE_INTERP
 from graphsvc.motion import quat
-from graphsvc.sensors.layout import PRESETS
+from graphsvc.sensors.layout import PRESETS, root_sensor
 from graphsvc.sensors.noise import parse_noise
-from graphsvc.sensors.orientation import sensor_up
+from graphsvc.sensors.orientation import relative_orientations, sensor_up
 from graphsvc.sensors.simulate import simulate_recording
 
 from tests.graph.test_connectivity import mixed_kb
@@ -61,8 +61,21 @@ def test_relayout_and_a_saved_graph_agree_with_the_build(built, tmp_path):
     loaded = load_graph(tmp_path / "g.graph")
     np.testing.assert_array_equal(loaded.edge_up, g.edge_up)
     np.testing.assert_array_equal(edge_up_vectors(loaded, PRESETS["wrists-ankles"]), g.edge_up)
-    six = edge_up_vectors(loaded, PRESETS["kelly6"])
-    assert six.shape == (g.num_edges, 6, 3)
+    six = edge_up_vectors(loaded, PRESETS["kelly6"])  # (a root sensor: rotations relative to it)
+    assert six.shape == (g.num_edges, 6, 9)
+
+
+def test_a_layout_with_a_root_sensor_gets_what_its_devices_report_relative_to_the_root(built):
+    kb, g = built
+    layout = PRESETS["kelly6"]
+    six = edge_up_vectors(g, layout).astype(np.float64)
+    noise = parse_noise("none,orientations=1")
+    motion = kb[1]
+    rec = simulate_recording(motion, layout, noise, rate_hz=g.rate_hz)
+    measured = relative_orientations(rec.orientations, root_sensor(layout))
+    first, frames = g.clips[1]["first_node"], g.clips[1]["frames"]
+    edges = np.flatnonzero((g.edge_kind == EDGE_ORIGINAL) & (g.edge_dst >= first) & (g.edge_dst < first + frames))
+    np.testing.assert_allclose(six[edges], measured[g.edge_dst[edges] - first], atol=2e-3)
 
 
 def test_graph_files_without_orientation_metadata_still_load(built, tmp_path):

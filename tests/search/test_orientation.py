@@ -128,14 +128,62 @@ def test_weights_take_an_optional_orientation_weight():
             parse_weights(bad)
 
 
-@pytest.fixture(scope="module")
-def built():
+def _build(layout: str):
     from graphsvc.graph.build import BuildOptions, build_graph
     from graphsvc.motion.procedural import generate_knowledge_base
+    from graphsvc.sensors.layout import PRESETS
 
     kb = generate_knowledge_base(seed=5, minutes=0.4)
-    g, _ = build_graph(kb, BuildOptions(interp=False, progress=False))
+    g, _ = build_graph(kb, BuildOptions(interp=False, progress=False, layout=PRESETS[layout]))
     return kb, g
+
+
+@pytest.fixture(scope="module")
+def built():
+    return _build("wrists-ankles")
+
+
+@pytest.fixture(scope="module")
+def built6():
+    """kelly6: a root sensor (lower_back), so the cue is the rotations relative to it."""
+    return _build("kelly6")
+
+
+def relative_two_paths(S=3):
+    """As `two_paths` with the cue relative to a root sensor (width 9): chain 2's sensor
+    1 is turned 40° about the vertical relative to the root, which no tilt shows."""
+    from graphsvc.sensors.orientation import relative_orientations
+
+    src, dst = [0, 0, 1, 2], [1, 2, 1, 2]
+    acc = np.tile([0.0, 9.81, 0.0], (4, S, 1))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (4, S, 1))
+    q[[1, 3], 1] = quat.about_y(np.radians(np.array([40.0, 40.0])))
+    g = graph_from_edges(np.array(src), np.array(dst), acc, up=relative_orientations(q, 0))
+    return g, q
+
+
+@pytest.mark.parametrize("chain", (1, 2))
+def test_orientations_relative_to_the_root_pick_the_path_whose_sensors_turned_as_measured(chain):
+    from graphsvc.sensors.orientation import relative_orientations, sensor_up
+
+    g, q = relative_two_paths()
+    assert g.edge_up.shape[-1] == 9
+    np.testing.assert_allclose(sensor_up(q[1]), sensor_up(q[2]), atol=1e-12)  # (the tilt cannot tell them apart)
+    T = 10
+    acc = np.tile([0.0, 9.81, 0.0], (T, 3, 1)) + np.random.default_rng(1).normal(0, 0.05, (T, 3, 3))
+    measured = np.broadcast_to(q[chain - 1], (T, 3, 4)).copy()  # (edge 0 → 1 is upright, 0 → 2 turned)
+    heading = quat.about_y(np.linspace(0.0, 2.0, T))[:, None]  # the whole body turns: nothing relative changes
+    up = relative_orientations(quat.mul(heading, measured), 0)
+    w = Weights(1, 0, 0, 1.0)
+    r = viterbi_search(g, acc, weights=w, up=up)
+    assert set(r.node_path[1:].tolist()) == {chain}
+    ref_path, ref_cost = reference_viterbi(g, acc, weights=w, up=up)
+    np.testing.assert_array_equal(ref_path, r.node_path)
+    assert r.cost == pytest.approx(ref_cost, rel=1e-6)
+    forced = viterbi_search(g, acc, weights=w, up=up, allowed=np.array([True, chain == 2, chain == 1]))
+    # one sensor of three off by 40°: the mean chord² is (2 − 2·cos 40°) / 3 a sample
+    assert forced.terms["orientation_chord2"] == pytest.approx((T - 1) * (2 - 2 * np.cos(np.radians(40))) / 3,
+                                                               rel=2e-3)  # fmt: skip
 
 
 def test_old_graph_files_search_as_before_and_list_orientations_ignored(built, tmp_path):
@@ -223,8 +271,9 @@ def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_e
     assert differs  # (the orientation term changed what was emitted)
 
 
-@pytest.mark.parametrize("strategy", ["viterbi", "olng"])
-def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, strategy):
+@pytest.mark.parametrize("strategy,layout", [("viterbi", "wrists-ankles"), ("olng", "wrists-ankles"),
+                                             ("viterbi", "kelly6"), ("olng", "kelly6"), ("nearest", "kelly6")])
+def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, built6, strategy, layout):
     from dataclasses import replace
 
     from graphsvc.pipeline import open_session, Options, reconstruct
@@ -232,7 +281,8 @@ def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built
     from graphsvc.sensors.noise import PRESETS as NOISE
     from graphsvc.sensors.simulate import simulate_recording
 
-    kb, g = built
+    kb, g = built if layout == "wrists-ankles" else built6
+    assert g.edge_up.shape[-1] == (3 if layout == "wrists-ankles" else 9)
     rec = simulate_recording(kb[2], layout_from_dict(g.layout), NOISE["real"], seed=6, rate_hz=g.rate_hz)
     # (a latency asks OLNG's batch for what a live client gets: the poses not filtered over later frames)
     opts = Options(strategy=strategy, weights=Weights(0.5, 1, 1, 1.0), latency_s=0.5)
@@ -250,4 +300,4 @@ def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built
         np.testing.assert_allclose(live.motion().rotations, want.motion.rotations, atol=1e-6)
     with pytest.raises(InputError, match="orientations must be"):
         open_session(g, opts, rec.sensor_names, orientations=True).push(0.0, rec.accelerations[0],
-                                                                         orientations=np.ones((2, 4)))  # fmt: skip
+                                                                         orientations=np.ones((1, 4)))  # fmt: skip

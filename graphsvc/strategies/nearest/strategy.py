@@ -3,7 +3,10 @@ are nearest the measured ones.
 
 No search over time, no track, no constraints: each sample is matched on its own by a
 kd-tree (scipy's cKDTree) over every original graph frame's readings on arrival (the
-layout's accelerations in g, S × 3 values), and the chosen frames are synthesized with
+layout's accelerations in g, S × 3 values; with measured orientations and W_R > 0,
+also the sensors' orientation cue times √W_R, `sensors.orientation`, so a frame's
+squared distance is S·(C_A + W_R·C_R), the Viterbi search's weighing; a sample whose
+cue is incomplete is matched on its readings alone), and the chosen frames are synthesized with
 the same clean-up as a graph path (`synthesis.path`: blends at every jump, each
 frame's own root step, foot clean-up). A sample with a missing sensor continues the
 previous frame's clip. It is the floor a search has to beat in every accuracy table,
@@ -18,13 +21,14 @@ allowed frames only.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.base import Strategy, frame_by_frame_ignored, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
@@ -49,6 +53,14 @@ class NearestIndex:
     readings: np.ndarray
     tree: cKDTree
     next_of: np.ndarray
+    cue: np.ndarray | None = None  # (M, W·S) float32: the frames' orientation cue (None: the graph has none)
+    oriented: dict = field(default_factory=dict)  # weight → the tree over readings and √weight · cue
+
+    def oriented_tree(self, weight: float) -> cKDTree:
+        """The tree over the readings and √weight · the orientation cue (made once per weight)."""
+        if weight not in self.oriented:
+            self.oriented[weight] = cKDTree(np.concatenate([self.readings, np.sqrt(weight) * self.cue], axis=1))
+        return self.oriented[weight]
 
 
 def _build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
@@ -66,13 +78,15 @@ def _index(graph: MotionGraph, arrays: dict, allowed: np.ndarray | None = None) 
     e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
     next_of = np.full(graph.num_nodes, -1, dtype=np.int64)
     next_of[np.asarray(graph.edge_src)[e]] = position[np.asarray(graph.edge_dst)[e]]
-    return NearestIndex(np.asarray(nodes), np.asarray(edges), np.asarray(readings), cKDTree(readings), next_of)
+    cue = None if graph.edge_up is None else np.asarray(graph.edge_up, np.float32)[np.asarray(edges)].reshape(
+        nodes.size, -1)  # fmt: skip
+    return NearestIndex(np.asarray(nodes), np.asarray(edges), np.asarray(readings), cKDTree(readings), next_of, cue)
 
 
 class NearestStrategy(Strategy):
     name = "nearest"
     needs = frozenset({"accelerations"})
-    uses = frozenset({"accelerations", "ground_position", "heading"})  # the track only places the start
+    uses = frozenset({"accelerations", "orientations", "ground_position", "heading"})  # the track only places the start
     summary = "per sample the knowledge-base frame with the nearest readings: the floor a search must beat"
 
     def describe_lag(self, rate_hz: float) -> str:
@@ -94,9 +108,13 @@ class NearestStrategy(Strategy):
         t0 = time.perf_counter()
         idx = _index(graph, index, allowed)
         warm_up_synthesis(graph)
+        weight = float(options.weights.orientation)
+        up = inp.up if weight > 0 and idx.cue is not None else None
+        if up is not None:
+            idx.oriented_tree(weight)  # (made once per weight, with the warm-up's time)
         warm_up_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        picks, cost = choose(idx, inp.acc)
+        picks, cost = choose(idx, inp.acc, up=up, weight=weight)
         nodes = idx.nodes[picks]
         edges = idx.edges[picks[1:]]
         search_s = time.perf_counter() - t0
@@ -116,10 +134,13 @@ class NearestStrategy(Strategy):
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
 
 
-def choose(idx: NearestIndex, acc: np.ndarray, previous: int = -1) -> tuple[np.ndarray, float]:
+def choose(idx: NearestIndex, acc: np.ndarray, previous: int = -1, up: np.ndarray | None = None,
+           weight: float = 0.0) -> tuple[np.ndarray, float]:  # fmt: skip
     """(T,) positions in idx.nodes of each sample's frame, and the summed cost (mean over
-    sensors of the squared reading difference, g², as the Viterbi search's C_A).
-    acc (T, S, 3) m/s²; a sample with a missing sensor plays on from the previous
+    sensors of the squared reading difference, g², as the Viterbi search's C_A, plus
+    W_R·C_R where the orientation cue counted). acc (T, S, 3) m/s²; up (T, S, W) the
+    measured orientation cue or None, weighed by weight (W_R; the index must hold the
+    graph's cue). A sample with a missing sensor plays on from the previous
     frame (its clip's next frame when it can be matched, else the same frame; with none
     before it, the first complete sample's frame). previous: the frame before acc[0]
     (−1: none)."""
@@ -128,10 +149,19 @@ def choose(idx: NearestIndex, acc: np.ndarray, previous: int = -1) -> tuple[np.n
     complete = np.all(np.isfinite(x), axis=1)
     picks = np.empty(T, dtype=np.int64)
     dist = np.zeros(T)
-    if complete.any():
-        d, k = idx.tree.query(x[complete])
-        picks[complete] = k
-        dist[complete] = d
+    oriented = np.zeros(T, dtype=bool)
+    if up is not None and weight > 0:
+        cue, valid = normalised_rows(np.asarray(up, dtype=np.float64).reshape(T, acc.shape[1], -1))
+        oriented = complete & valid.all(axis=1)
+        if oriented.any():
+            q = np.concatenate([x[oriented], np.sqrt(weight) * cue[oriented].reshape(int(oriented.sum()), -1)], axis=1)
+            d, k = idx.oriented_tree(weight).query(q)
+            picks[oriented], dist[oriented] = k, d
+    plain = complete & ~oriented
+    if plain.any():
+        d, k = idx.tree.query(x[plain])
+        picks[plain] = k
+        dist[plain] = d
     S = acc.shape[1]
     for t in np.flatnonzero(~complete):  # in order: each follows the one before
         last = picks[t - 1] if t else previous
@@ -158,11 +188,13 @@ class NearestSession(LiveSession):
         self.lag_frames = self.synthesis_lag_frames(self.rate)
 
     def _decode(self, acc, position, heading, markers=None, up=None):
+        weight = float(self.options.weights.orientation)
+        up = None if up is None or self.index.cue is None else np.asarray(up)[None]
         if self.start_position is None and position is not None and np.all(np.isfinite(position)):
             self.start_position = np.asarray(position, dtype=np.float64)
         if self.start_heading is None and heading is not None and np.isfinite(heading):
             self.start_heading = float(heading)
-        picks, _ = choose(self.index, np.asarray(acc, dtype=np.float64)[None], self.previous)
+        picks, _ = choose(self.index, np.asarray(acc, dtype=np.float64)[None], self.previous, up, weight)
         first = self.previous < 0
         self.previous = int(picks[0])
         node = self.index.nodes[picks]

@@ -39,6 +39,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import rotate_ground
 from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
@@ -109,17 +110,16 @@ class OlngDecoder:
     # ------------------------------------------------------------ one sample
 
     def step(self, acc, position=None, heading=None, up=None):
-        """up: (S, 3) the sensors' measured "up" vectors, or None; used (weighed by
-        `up_weight`) when every sensor's is finite."""
+        """up: (S, W) the sensors' measured orientation cue (`sensors.orientation`), or
+        None; used (weighed by `up_weight`) when every sensor's is finite."""
         t0 = time.perf_counter()
         self.t += 1
         reading = np.asarray(acc, dtype=np.float64).reshape(-1) / GRAVITY
         complete = bool(np.all(np.isfinite(reading)))
         dropped = 0
         if up is not None:
-            up = np.asarray(up, dtype=np.float64)
-            norm = np.linalg.norm(up, axis=-1, keepdims=True)
-            up = (up / norm).reshape(-1) if np.all(np.isfinite(up)) and np.all(norm > 0) else None
+            up, valid = normalised_rows(up)
+            up = up.reshape(-1) if valid.all() else None
         if complete:
             nb = self.index.query(reading, self.options.k, up, self.up_weight if up is not None else 0.0)
             frames, distances, dropped = nb.frames, nb.distances, nb.dropped

@@ -14,8 +14,8 @@ loads); the tree is built on load (scipy's cKDTree).
 
 With measured sensor orientations (a recording that has them, a graph with their
 metadata, W_R > 0) the query runs on a second tree whose features are each frame's
-readings and its sensors' "up" vectors times √W_R (`graph.edge_up` of the edge into
-the frame), so a neighbour's squared distance is ‖Δa‖² (g²) + W_R·Σ chord² — the
+readings and its sensors' orientation cue times √W_R (`graph.edge_up` of the edge into
+the frame: "up" vectors, or rotations relative to the root sensor, `sensors.orientation`), so a neighbour's squared distance is ‖Δa‖² (g²) + W_R·Σ chord² — the
 Viterbi search's weighing of C_R against C_A, summed over the sensors. It is built
 on first use for each weight.
 
@@ -119,8 +119,8 @@ class OlngIndex:
 
     def query(self, reading: np.ndarray, k: int, up: np.ndarray | None = None, weight: float = 0.0) -> Neighbours:
         """The k searchable frames nearest `reading` ((3S,) g, every sensor present: a
-        kd-tree cannot leave a missing axis out of its distance); with up ((3S,), the
-        sensors' measured "up" vectors, unit, all finite) and weight > 0, nearest in
+        kd-tree cannot leave a missing axis out of its distance); with up ((W·S,), the
+        sensors' measured orientation cue, `sensors.orientation.normalised_rows`, all finite) and weight > 0, nearest in
         readings and √weight · up (`oriented_tree`)."""
         reading = np.asarray(reading, dtype=np.float64).reshape(-1)
         if reading.size != self.readings.shape[1]:

@@ -77,13 +77,13 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
     T = nodes.shape[0]
     if search.oriented:  # (each term alone: C_A by the accelerations' own mask, C_R by unit masks on the up axes)
         meas, mask, _ = search.measurements(acc[:T], None if up is None else up[:T]) if measured is None else measured
-        D = mask.shape[1] // 2
         _, a_mask, a_present = search.acc_measurements(acc[:T])
+        D = a_mask.shape[1]
         r_mask = np.zeros_like(mask)
         r_mask[:, D:] = mask[:, D:] != 0
-        terms = _terms(search, edges, meas, np.concatenate([a_mask, np.zeros_like(a_mask)], axis=1), a_present,
+        terms = _terms(search, edges, meas, np.concatenate([a_mask, np.zeros_like(mask[:, D:])], axis=1), a_present,
                        position, heading, T)  # fmt: skip
-        r_present = r_mask.sum(axis=1) / 3.0
+        r_present = r_mask.sum(axis=1) / search.graph.edge_up.shape[-1]
         terms["orientation_chord2"] = _terms(search, edges, meas, r_mask, r_present, None, None, T)["acc_g2"]
         return terms
     meas, mask, present = search.measurements(acc[:T]) if measured is None else measured
@@ -103,8 +103,8 @@ def _terms(search, edges, meas, mask, present, position, heading, T) -> dict:
 
 
 def orientation_counts(graph: MotionGraph, weights: Weights, up=None) -> bool:
-    """Whether the orientation term can count: W_R > 0, some measured "up" vector
-    (T, S, 3) finite, and the graph has orientation metadata (`graph.edge_up`)."""
+    """Whether the orientation term can count: W_R > 0, some measured orientation cue
+    (T, S, W) finite, and the graph has orientation metadata (`graph.edge_up`)."""
     return bool(up is not None and weights.orientation > 0 and graph.edge_up is not None
                 and np.isfinite(np.asarray(up)).all(axis=-1).any())
 
@@ -192,9 +192,9 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     server stops work for a client that went away); beam: see ViterbiSearch. start:
     (ground position (2,) m or None, heading rad or None), where every path starts
     (`strategies.base.start_placement`); None: at the first measured position and
-    heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch. up: (T, S, 3)
-    the sensors' measured "up" vectors (`sensors.orientation.sensor_up` of the recording's
-    orientations; NaN = missing), weighed by W_R where the graph has orientation
+    heading (see `ViterbiSearch.start`). pull_s: see ViterbiSearch. up: (T, S, W)
+    the sensors' measured orientation cue (`sensors.orientation.orientation_cue` of the
+    recording's orientations, of the graph's width; NaN = missing), weighed by W_R where the graph has orientation
     metadata (`orientation_counts`); None: no orientation term."""
     acc = np.asarray(acc)
     T = acc.shape[0]

@@ -14,15 +14,16 @@ from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import compile_constraints, orientation_counts
 from graphsvc.strategies.viterbi.costs import track_pull
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.orientation import normalised_rows
 
 
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
                       constraint_sets=None, pull_s=None, up=None) -> tuple[np.ndarray, float]:  # fmt: skip
     """(node path (T,), cost) — same inputs and meaning as `batch.viterbi_search`."""
     oriented = orientation_counts(graph, weights, up)
-    if oriented:  # unit vectors rounded to float32, as the search's tables and measurements
-        u = np.asarray(up, dtype=np.float64)
-        u = (u / np.linalg.norm(u, axis=-1, keepdims=True)).astype(np.float32).astype(np.float64)
+    if oriented:  # rows scaled to their norm, rounded to float32, as the search's tables and measurements
+        u, valid = normalised_rows(up)
+        u = np.where(valid[..., None], u, np.nan).astype(np.float32).astype(np.float64)
         e_up = graph.edge_up.astype(np.float32).astype(np.float64)
     alpha = track_pull(pull_s, graph.rate_hz)
     # Readings and measurements rounded to float32 in g as the search stores them; the

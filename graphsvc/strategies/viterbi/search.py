@@ -27,6 +27,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.threads import StepTimer
 from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
@@ -463,17 +464,16 @@ class ViterbiSearch(SurvivorMemory):
         if not self.oriented:
             return meas, mask, present
         B, S = meas.shape[0], meas.shape[1] // 3
-        u = np.full((B, S, 3), np.nan) if up is None else np.asarray(up, dtype=np.float64).reshape(B, S, 3)
-        norm = np.linalg.norm(u, axis=-1)
-        valid = np.isfinite(norm) & (norm > 0)
-        u = np.where(valid[..., None], u / np.where(valid, norm, 1.0)[..., None], 0.0)
+        W = self.graph.edge_up.shape[-1]  # the graph's orientation cue (`sensors.orientation`)
+        u = np.full((B, S, W), np.nan) if up is None else np.asarray(up, dtype=np.float64).reshape(B, S, W)
+        u, valid = normalised_rows(u)
         n_r = valid.sum(axis=1).astype(np.float64)
         w = self.weights
         acc_on = w.acc > 0
         n = np.where(acc_on & (present > 0), present, n_r)
         rho = np.sqrt(np.where(n_r > 0, (w.orientation / self.w_reading) * n / np.maximum(n_r, 1.0), 0.0))
         meas = np.concatenate([meas, u.reshape(B, -1).astype(np.float32)], axis=1)
-        mask = np.concatenate([mask * np.float32(acc_on), np.repeat(valid * rho[:, None], 3, axis=1).astype(np.float32)],
+        mask = np.concatenate([mask * np.float32(acc_on), np.repeat(valid * rho[:, None], W, axis=1).astype(np.float32)],
                               axis=1)  # fmt: skip
         return meas, mask, n.astype(present.dtype)
 

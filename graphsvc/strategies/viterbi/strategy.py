@@ -77,6 +77,9 @@ class ViterbiStrategy(Strategy):
             oriented = search_index(graph, True)
             _ = oriented.slots if constraints else (oriented.tables, oriented.float32)
         refining = refine_index(graph, allowed) if options.shared.refine else None
+        refine_weight = float(w.orientation) if inp.up is not None else 0.0
+        if refining is not None and refine_weight > 0:
+            refining.features(refine_weight)  # (the oriented tree, once per weight)
         warm_up_s = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -97,7 +100,8 @@ class ViterbiStrategy(Strategy):
             t0 = time.perf_counter()
             track = fused_track(graph, nodes, edges, start_ground, start_heading, targets, model) if model else None
             motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
-            motion = (refine_motion(graph, motion, nodes, refining, acc, options.shared.smooth_s * rate)
+            motion = (refine_motion(graph, motion, nodes, refining, acc, options.shared.smooth_s * rate, inp.up,
+                                    refine_weight)
                       if refining is not None else smoothed(motion, options))  # fmt: skip
             synth_s = time.perf_counter() - t0
             extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
@@ -111,7 +115,8 @@ class ViterbiStrategy(Strategy):
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
                                          track_model=track_model(options, rate) if use_pos is not None else None,
                                          smooth_frames=options.shared.smooth_s * rate,
-                                         refiner=None if refining is None else Refiner(graph, refining))  # fmt: skip
+                                         refiner=None if refining is None else Refiner(graph, refining,
+                                                                                       refine_weight))  # fmt: skip
             emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
@@ -119,7 +124,7 @@ class ViterbiStrategy(Strategy):
                 if should_stop is not None and t % 32 == 31 and should_stop():
                     raise SearchCancelled(f"search stopped at sample {t} of {T}")
                 if t < T and synth.refiner is not None:
-                    synth.refiner.push(acc[t])
+                    synth.refiner.push(acc[t], None if inp.up is None else inp.up[t])
                 elif synth.refiner is not None:
                     synth.refiner.finish()
                 if t < T:  # (the raw streams: the search scores only what its weights count)
@@ -204,7 +209,8 @@ class ViterbiSession(LiveSession):
         self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
                       if options.heading_from_track else None)  # fmt: skip
         self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate, options.shared.smooth_s)
-        self.refiner = Refiner(graph, refine_index(graph, allowed)) if options.shared.refine else None
+        self.refiner = (Refiner(graph, refine_index(graph, allowed), options.weights.orientation if self.reads_up else 0.0)
+                        if options.shared.refine else None)  # fmt: skip
 
     @classmethod
     def decoder_lag(cls, rate_hz: float, latency_s: float | None = None) -> int:
@@ -230,7 +236,7 @@ class ViterbiSession(LiveSession):
 
     def _decode(self, acc, position, heading, markers=None, up=None):
         if self.refiner is not None:
-            self.refiner.push(acc)
+            self.refiner.push(acc, up)
         if self.track is not None:
             heading = self.track.push(position)
         nodes, edges = self.decoder.push(acc, position, heading, up)  # (the search scores what its weights count)
