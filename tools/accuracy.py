@@ -29,7 +29,9 @@ reports it.
 `--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
 
 `--preset real` runs the same rows with the `real` sensor noise (real IMUs: more white
-noise, the legs' soft tissue, foot-strike jolts; docs/sensors.md) in place of `default`.
+noise, the legs' soft tissue, foot-strike jolts, the devices' orientation output;
+docs/sensors.md) in place of `default`; `--inputs acc-no-orientation` and
+`pos+heading-no-orientation` run its rows with the orientations weighed 0.
 
 Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor|clip] [--layouts L,...]
                          [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest] [--preset real]
@@ -60,6 +62,12 @@ INPUTS = {  # what the recordings carry: (row text, --noise, --weights or None f
     "acc": ("accelerometers", "default,position=0,heading=none", None),
     "pos": ("+ overhead positions", "default,heading=none", "0.5,1,1"),
     "pos+heading": ("+ positions and heading", "default", "0.5,1,1"),
+}
+# Rows asked for by name only (`--inputs`): the same inputs with the devices' orientations
+# weighed 0, the baseline a `real` preset's orientation rows are compared with.
+EXTRA_INPUTS = {
+    "acc-no-orientation": ("accelerometers, orientations weighed 0", "default,position=0,heading=none", "1,1,1,0"),
+    "pos+heading-no-orientation": ("+ positions and heading, orientations weighed 0", "default", "0.5,1,1,0"),
 }
 
 
@@ -109,6 +117,9 @@ def main() -> None:
                         help="keep a run already in --work that the same command wrote (after a change that cannot"
                              " move it, e.g. one to how positions are used, for the accelerometer-only rows)")
     args = parser.parse_args()
+    unknown = set(args.inputs.split(",")) - set(INPUTS) - set(EXTRA_INPUTS)
+    if unknown:
+        raise SystemExit(f"unknown --inputs {', '.join(sorted(unknown))} (known: {', '.join([*INPUTS, *EXTRA_INPUTS])})")
     kb = Path(args.data) / "dataset-2" / "data"
     if not kb.is_dir():
         raise SystemExit(f"{kb} not found (give the Bandai-Namco folder)")
@@ -124,7 +135,7 @@ def main() -> None:
                 raise SystemExit(f"failed: building {graph}\n{exc}") from None
         for protocol in [args.only] if args.only else DEFAULT_PROTOCOLS:
             for key in args.inputs.split(","):
-                what, noise, weights = INPUTS[key]
+                what, noise, weights = {**INPUTS, **EXTRA_INPUTS}[key]
                 noise = noise.replace("default", args.preset, 1)
                 for strategy in args.strategies.split(","):
                     tag = "" if args.preset == "default" else f".{args.preset}"
