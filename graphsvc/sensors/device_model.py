@@ -23,8 +23,11 @@ tissue_damping, impact, orientations, orient_sigma, yaw_drift; the `real` preset
   the pelvis and trunk, none on the arms and head.
 - **Orientation output** (`orientation_output`): the device's orientation (mounting and
   misalignment included) turned by white noise of σ degrees about a random axis per
-  sample and by a yaw that wanders about the world's vertical (a random walk, degrees
-  per √s: a device without a magnetometer).
+  sample, by a yaw that wanders about the world's vertical (a random walk, degrees
+  per √s: a device without a magnetometer), and by a heading drift common to every
+  device (a random walk about the vertical too: the world frame the devices share
+  turning away from the knowledge base's, as a magnetic field distorted over the
+  pitch turns every device's north alike).
 """
 
 from __future__ import annotations
@@ -110,10 +113,12 @@ def impacts(contacts: np.ndarray, segments, rate_hz: float, amplitude: float) ->
 
 
 def orientation_output(orientation: np.ndarray, rate_hz: float, sigma_deg: float, yaw_drift_deg: float,
-                       rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+                       rng: np.random.Generator, heading_drift_deg: float = 0.0) -> np.ndarray:  # fmt: skip
     """(F, S, 4) the device orientations a real IMU would report: white rotation noise of
-    σ degrees about a random axis a sample, and a yaw about world +Y wandering
-    `yaw_drift_deg` per √s (a random walk from 0)."""
+    σ degrees about a random axis a sample, a yaw about world +Y wandering
+    `yaw_drift_deg` per √s (a random walk from 0) for each device, and one wandering
+    `heading_drift_deg` per √s common to all (drawn after the others: a model without
+    it reports what it did before, bit for bit)."""
     F, S = orientation.shape[:2]
     axis = rng.standard_normal((F, S, 3))
     axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
@@ -121,4 +126,7 @@ def orientation_output(orientation: np.ndarray, rate_hz: float, sigma_deg: float
     yaw = np.cumsum(rng.standard_normal((F, S)), axis=0) * np.deg2rad(yaw_drift_deg) / np.sqrt(float(rate_hz))
     yaw -= yaw[:1]
     noisy = quat.mul(quat.from_axis_angle(axis, angle), orientation)
+    if heading_drift_deg:
+        common = np.cumsum(rng.standard_normal(F)) * np.deg2rad(heading_drift_deg) / np.sqrt(float(rate_hz))
+        yaw = yaw + (common - common[0])[:, None]
     return quat.normalize(quat.mul(quat.about_y(yaw), noisy))

@@ -53,6 +53,7 @@ class NoiseModel:
     orientations: float = 0.0  # 1: the recording carries the devices' orientation output
     orient_sigma: float = 0.0  # its white noise, degrees
     yaw_drift: float = 0.0  # its yaw random walk, degrees per √s
+    heading_drift: float = 0.0  # a yaw random walk common to every device, degrees per √s
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -79,11 +80,12 @@ PRESETS: dict[str, NoiseModel] = {
     # differed from its optical track: gravity-free norms 0.86 and 5.5 m/s² RMS,
     # correlations 0.99 and 0.70, against 0.8–1.0 / 0.99 and 5.4–5.6 / 0.6–0.7): white
     # noise 0.8 m/s², the legs' sensors on a 3 Hz spring damped 0.5, 20 m/s² jolts at foot
-    # strikes; an orientation output with 2° of noise drifting 0.5° per √s in yaw; the
-    # default tracker.
+    # strikes; an orientation output with 2° of noise, each device's yaw drifting 0.5° per
+    # √s and the heading they share 1° per √s; the default tracker.
     "real": NoiseModel(
         sigma=0.8, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0, marker=1.0,
         tissue=3.0, tissue_damping=0.5, impact=20.0, orientations=1.0, orient_sigma=2.0, yaw_drift=0.5,
+        heading_drift=1.0,
     ),
     "harsh": NoiseModel(
         sigma=1.0, bias=0.5, misalign=10.0, range=8.0, drop=0.05, position=0.30,

@@ -76,7 +76,7 @@ def simulate_recording(
     if noise.orientations:
         (orient_rng,) = rng.spawn(1)  # (its own stream: the other draws stay as they were)
         orientations = orientation_output(quat.mul(device, misalign[None]), rate, noise.orient_sigma, noise.yaw_drift,
-                                          orient_rng).astype(np.float32)  # fmt: skip
+                                          orient_rng, noise.heading_drift).astype(np.float32)  # fmt: skip
     rec = Recording(
         rate_hz=float(rate),
         timestamps_s=np.arange(motion.num_frames, dtype=np.float64) / rate,

@@ -97,9 +97,26 @@ def test_orientation_output_noise_and_drift():
     assert np.sqrt(np.mean(angle**2)) == pytest.approx(2.0, rel=0.05)
 
 
+def test_a_common_heading_drift_turns_every_device_alike():
+    from graphsvc.sensors.orientation import relative_orientations
+
+    rng = np.random.default_rng(2)
+    q = quat.normalize(rng.normal(size=(3000, 6, 4)))
+    plain = orientation_output(q, 30.0, 1.0, 0.5, np.random.default_rng(3))
+    common = orientation_output(q, 30.0, 1.0, 0.5, np.random.default_rng(3), heading_drift_deg=1.0)
+    turn = quat.mul(common, quat.conjugate(plain))  # what the common drift added, device by device
+    yaw = np.degrees(quat.heading_angle(turn))
+    np.testing.assert_allclose(yaw, np.broadcast_to(yaw[:, :1], yaw.shape), atol=1e-6)  # the same turn for all ...
+    np.testing.assert_allclose(turn[..., [1, 3]], 0.0, atol=1e-9)  # ... about the vertical
+    assert np.abs(yaw[:, 0]).max() > 5.0  # (a random walk of 1°/√s over 100 s)
+    # what the strategies read of orientations relative to a root sensor does not see it
+    np.testing.assert_allclose(relative_orientations(common, 0), relative_orientations(plain, 0), atol=1e-9)
+
+
 def test_the_real_preset_and_bad_keys(walk):
     real = parse_noise("real")
     assert real.orientations == 1.0 and real.tissue > 0 and real.impact > 0 and real.mount == 0
+    assert real.heading_drift > 0
     rec = simulate_recording(walk, PRESETS["wrists-ankles"], real, seed=2)
     assert rec.orientations is not None and rec.orientations.shape == (walk.num_frames, 4, 4)
     np.testing.assert_allclose(np.linalg.norm(rec.orientations, axis=-1), 1.0, atol=1e-5)
