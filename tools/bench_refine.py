@@ -7,9 +7,11 @@ from a clip's start, at most `--frames`, its readings the graph's own with 0.3 m
 Prints one JSON object: the index's build (when not cached beside the graph) and load,
 the tree's build, the regression per frame, `refine_motion` over the path and a live
 `Refiner` correcting 3 frames at a time (as a live session's synthesizer asks), per
-frame.
+frame. `--orientations`: the path's sensors' orientation cue too (the graph's own,
+`graph.edge_up`, with 2° of noise), weighed 1 as the search's default, so the query
+carries it and, with a root sensor, the measured segments' orientations are imposed.
 
-Usage: tools/bench_refine.py GRAPH [--frames 3000]
+Usage: tools/bench_refine.py GRAPH [--frames 3000] [--orientations]
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("graph")
     parser.add_argument("--frames", type=int, default=3000)
+    parser.add_argument("--orientations", action="store_true")
     args = parser.parse_args()
     graph = load_graph(args.graph, mmap=True)
     cached = index_path(args.graph, "refine").is_file()
@@ -67,21 +70,29 @@ def main() -> None:
     rng = np.random.default_rng(1)
     acc = np.asarray(graph.edge_acc, dtype=np.float64)[np.concatenate([edges[:1], edges])] + rng.normal(0, 0.3, (T, *graph.edge_acc.shape[1:]))
     motion = synthesize_motion(graph, nodes, edges, np.zeros(2), 0.0)
+    up, weight = None, 0.0
+    if args.orientations:
+        if graph.edge_up is None:
+            raise SystemExit("the graph has no orientation metadata")
+        up = np.asarray(graph.edge_up, dtype=np.float64)[np.concatenate([edges[:1], edges])]
+        up = up + rng.normal(0, np.radians(2.0) / np.sqrt(2.0), up.shape)
+        weight = 1.0
+        index.features(weight * refine.ORIENTATION_GAIN)
 
-    r = refine.Refiner(graph, index)
-    for a in acc:
-        r.push(a)
+    r = refine.Refiner(graph, index, weight)
+    for t, a in enumerate(acc):
+        r.push(a, None if up is None else up[t])
     r.finish()
     t0 = time.perf_counter()
     r.regressed(0, T)
     regress_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    refine.refine_motion(graph, motion, nodes, index, acc, 1.0)
+    refine.refine_motion(graph, motion, nodes, index, acc, 1.0, up, weight)
     batch_s = time.perf_counter() - t0
 
-    live = refine.Refiner(graph, index)
-    for a in acc:  # (pushing a sample only appends it: the cost is the corrections')
-        live.push(a)
+    live = refine.Refiner(graph, index, weight)
+    for t, a in enumerate(acc):  # (pushing a sample only appends it: the cost is the corrections')
+        live.push(a, None if up is None else up[t])
     live.finish()
     t_live = 0.0
     for lo in range(0, T, 3):
@@ -93,7 +104,7 @@ def main() -> None:
     print(json.dumps({
         "graph": args.graph, "nodes": graph.num_nodes, "index_frames": int(arrays["nodes"].size),
         "window_dims": int(arrays["windows"].shape[1]), "pose_dims": int(arrays["poses"].shape[1]),
-        "index_cached": cached, "index_s": round(arrays_s, 3), "tree_s": round(tree_s, 3), "frames": T,
+        "orientations": bool(args.orientations), "imposed": bool(r.impose), "index_cached": cached, "index_s": round(arrays_s, 3), "tree_s": round(tree_s, 3), "frames": T,
         "regress_ms_per_frame": round(1e3 * regress_s / T, 3),
         "batch_ms_per_frame": round(1e3 * batch_s / T, 3),
         "live_ms_per_frame": round(1e3 * t_live / T, 3),

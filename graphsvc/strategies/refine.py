@@ -76,6 +76,7 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.graph.derived import derived
 from graphsvc.graph.metadata import clip_placements
 from graphsvc.sensors.layout import layout_from_dict, root_sensor
 from graphsvc.sensors.orientation import RELATIVE_WIDTH, normalised_rows
@@ -149,17 +150,19 @@ class RefineIndex:
     mapping: object = None  # (the graph's joint map)
     cue: np.ndarray | None = None
     oriented: dict = field(default_factory=dict)  # weight → (features (M, d + W·S), their tree)
-    _placements: dict | None = None
 
-    def placements(self, graph: MotionGraph) -> dict:
+    @staticmethod
+    def placements(graph: MotionGraph) -> dict:
         """The layout's placement on each clip (`graph.metadata.clip_placements`), as
-        rotation (C, S, 4), segment (S,), carrier (S,) and the root sensor's index."""
-        if self._placements is None:
+        rotation (C, S, 4), segment (S,), carrier (S,) and the root sensor's index; made
+        once per graph in a process (`graph.derived`)."""
+        def make() -> dict:
             layout = layout_from_dict(graph.layout)
             every = clip_placements(graph, layout)
-            self._placements = {"rotation": np.stack([p.rotation for p in every]), "segment": every[0].segment,
-                                "carrier": every[0].carrier, "root": root_sensor(layout)}  # fmt: skip
-        return self._placements
+            return {"rotation": np.stack([p.rotation for p in every]), "segment": every[0].segment,
+                    "carrier": every[0].carrier, "root": root_sensor(layout)}  # fmt: skip
+
+        return derived(graph, "refine.placements", make)
 
     def features(self, weight: float) -> tuple[np.ndarray, cKDTree]:
         """The frames' query features and their tree: the windows alone (weight 0 or no
@@ -397,6 +400,8 @@ def warm_up_refine(graph: MotionGraph) -> None:
     """The index over the whole graph made (its arrays written beside the graph file)
     and the kernels compiled or loaded, so that a session's first frames do not wait."""
     index = refine_index(graph)
+    if index.cue is not None and index.cue.shape[1] == RELATIVE_WIDTH * len(graph.sensor_names):
+        index.placements(graph)  # (each clip's placement, for imposing measured orientations)
     nodes = np.arange(min(2, graph.num_nodes), dtype=np.int64)
     rot, trans = graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64)
     pose = pose_vectors(rot, trans, graph.skeleton.parents, index.layout)
