@@ -76,11 +76,8 @@ from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.graph.derived import derived
-from graphsvc.graph.metadata import clip_placements
-from graphsvc.sensors.layout import layout_from_dict, root_sensor
-from graphsvc.sensors.orientation import RELATIVE_WIDTH, normalised_rows
-from graphsvc.synthesis.sensor_orientations import impose_sensor_orientations
+from graphsvc.sensors.orientation import normalised_rows
+from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, impose_at_nodes, imposes
 from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.motion.skeleton import Motion
 from graphsvc.synthesis.foot_hold import FootHold
@@ -150,19 +147,6 @@ class RefineIndex:
     mapping: object = None  # (the graph's joint map)
     cue: np.ndarray | None = None
     oriented: dict = field(default_factory=dict)  # weight → (features (M, d + W·S), their tree)
-
-    @staticmethod
-    def placements(graph: MotionGraph) -> dict:
-        """The layout's placement on each clip (`graph.metadata.clip_placements`), as
-        rotation (C, S, 4), segment (S,), carrier (S,) and the root sensor's index; made
-        once per graph in a process (`graph.derived`)."""
-        def make() -> dict:
-            layout = layout_from_dict(graph.layout)
-            every = clip_placements(graph, layout)
-            return {"rotation": np.stack([p.rotation for p in every]), "segment": every[0].segment,
-                    "carrier": every[0].carrier, "root": root_sensor(layout)}  # fmt: skip
-
-        return derived(graph, "refine.placements", make)
 
     def features(self, weight: float) -> tuple[np.ndarray, cKDTree]:
         """The frames' query features and their tree: the windows alone (weight 0 or no
@@ -258,7 +242,7 @@ class Refiner:
         self.cues: list = []  # each sample's normalised cue (W·S,), NaN where incomplete
         # Measured orientations relative to a root sensor are imposed on their segments
         # (`synthesis.sensor_orientations`).
-        self.impose = self.weight > 0 and index.cue.shape[1] == RELATIVE_WIDTH * len(graph.sensor_names)
+        self.impose = self.weight > 0 and imposes(graph)
         self.offsets = window_offsets(index.rate_hz)
         self.taps = gaussian_taps(CORRECTION_S * index.rate_hz)
         self.h = (self.taps.size - 1) // 2
@@ -370,14 +354,7 @@ class Refiner:
 
     def _imposed(self, cue: np.ndarray, rot: np.ndarray, nodes: np.ndarray) -> np.ndarray:
         """rot (K, J, 4) with the measured orientation cue (K, W·S) of its frames imposed."""
-        K, S = rot.shape[0], len(self.graph.sensor_names)
-        cue = cue.reshape(K, S, RELATIVE_WIDTH)
-        present = np.all(np.isfinite(cue), axis=-1)
-        table = self.index.placements(self.graph)
-        clip = np.asarray(self.graph.node_clip, dtype=np.int64)[np.asarray(nodes, dtype=np.int64)]
-        return impose_sensor_orientations(rot, self.graph.skeleton.parents, np.where(present[..., None], cue, 0.0),
-                                          table["rotation"][clip], table["segment"], table["carrier"], table["root"],
-                                          present)  # fmt: skip
+        return impose_at_nodes(self.graph, rot, cue.reshape(rot.shape[0], len(self.graph.sensor_names), -1), nodes)
 
 
 def refine_motion(graph: MotionGraph, motion: Motion, nodes: np.ndarray, index: RefineIndex, acc: np.ndarray,
@@ -400,8 +377,8 @@ def warm_up_refine(graph: MotionGraph) -> None:
     """The index over the whole graph made (its arrays written beside the graph file)
     and the kernels compiled or loaded, so that a session's first frames do not wait."""
     index = refine_index(graph)
-    if index.cue is not None and index.cue.shape[1] == RELATIVE_WIDTH * len(graph.sensor_names):
-        index.placements(graph)  # (each clip's placement, for imposing measured orientations)
+    if imposes(graph):
+        clip_sensor_placements(graph)  # (each clip's placement, for imposing measured orientations)
     nodes = np.arange(min(2, graph.num_nodes), dtype=np.int64)
     rot, trans = graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64)
     pose = pose_vectors(rot, trans, graph.skeleton.parents, index.layout)

@@ -24,8 +24,42 @@ from __future__ import annotations
 
 import numpy as np
 
+from graphsvc.graph.derived import derived
+from graphsvc.graph.metadata import clip_placements
 from graphsvc.motion import quat
+from graphsvc.sensors.layout import layout_from_dict, root_sensor
 from graphsvc.sensors.orientation import RELATIVE_WIDTH, heading_twist
+
+
+def clip_sensor_placements(graph) -> dict:
+    """The graph layout's placement on each of its clips (`graph.metadata.clip_placements`:
+    the anatomical frames estimated per clip), as rotation (C, S, 4), segment (S,),
+    carrier (S,) and the root sensor's index; made once per graph in a process."""
+    def make() -> dict:
+        layout = layout_from_dict(graph.layout)
+        every = clip_placements(graph, layout)
+        return {"rotation": np.stack([p.rotation for p in every]), "segment": every[0].segment,
+                "carrier": every[0].carrier, "root": root_sensor(layout)}  # fmt: skip
+
+    return derived(graph, "sensor_orientations.placements", make)
+
+
+def imposes(graph) -> bool:
+    """Whether measured orientations can be imposed on the graph's poses: its orientation
+    cue is relative to a root sensor."""
+    return graph.edge_up is not None and graph.edge_up.shape[-1] == RELATIVE_WIDTH
+
+
+def impose_at_nodes(graph, local: np.ndarray, cue: np.ndarray, nodes) -> np.ndarray:
+    """`impose_sensor_orientations` on K poses (K, J, 4) played from graph nodes (K,), each
+    on its node's clip's placement; cue (K, S, 9), NaN rows where not measured."""
+    cue = np.asarray(cue, dtype=np.float64)
+    present = np.all(np.isfinite(cue), axis=-1)
+    table = clip_sensor_placements(graph)
+    clip = np.asarray(graph.node_clip, dtype=np.int64)[np.asarray(nodes, dtype=np.int64)]
+    return impose_sensor_orientations(local, graph.skeleton.parents, np.where(present[..., None], cue, 0.0),
+                                      table["rotation"][clip], table["segment"], table["carrier"], table["root"],
+                                      present)  # fmt: skip
 
 
 def world_rotations(local: np.ndarray, parents) -> np.ndarray:

@@ -40,6 +40,7 @@ from graphsvc.errors import InputError
 from graphsvc.graph.metadata import rotate_ground
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.orientation import normalised_rows
+from graphsvc.synthesis.sensor_orientations import impose_at_nodes
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
@@ -74,7 +75,8 @@ class OlngDecoder:
         # Per frame (measured − own (2,), gate, filtered offset (2,)) for a batch's
         # smoother, when it is a list (a live session keeps none).
         self.track_inputs: list | None = None
-        self.up_weight = 0.0  # W_R: the weight of the sensors' "up" vectors in the neighbour query (0: not used)
+        self.up_weight = 0.0  # W_R: the weight of the sensors' orientation cue in the neighbour query (0: not used)
+        self.impose = False  # whether measured orientations relative to a root sensor are imposed on the pose
         self.rate = float(graph.rate_hz)
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
         sk = graph.skeleton
@@ -117,9 +119,11 @@ class OlngDecoder:
         reading = np.asarray(acc, dtype=np.float64).reshape(-1) / GRAVITY
         complete = bool(np.all(np.isfinite(reading)))
         dropped = 0
+        cue = None
         if up is not None:
-            up, valid = normalised_rows(up)
-            up = up.reshape(-1) if valid.all() else None
+            cue, valid = normalised_rows(up)
+            up = cue.reshape(-1) if valid.all() else None
+            cue = np.where(valid[:, None], cue, np.nan)
         if complete:
             nb = self.index.query(reading, self.options.k, up, self.up_weight if up is not None else 0.0)
             frames, distances, dropped = nb.frames, nb.distances, nb.dropped
@@ -141,6 +145,8 @@ class OlngDecoder:
         contacts = self._contacts(best, w)
         self._root(best, w, position, heading, contacts)
         rot, trans = self._place(best[0], p)
+        if self.impose and cue is not None:  # (each measured segment gets its measured orientation)
+            rot = impose_at_nodes(self.graph, rot, cue[None], self.index.nodes[best[:1]])
         if self.options.fix_feet:
             self._fix_feet(rot, trans, contacts, self._foot_steps(best, w, heading_before))
         for root in np.flatnonzero(self.parents < 0):  # onto the fused track, the whole body at once

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, imposes
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
@@ -50,7 +51,10 @@ def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options, own: Ol
              else None)  # fmt: skip
     decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, own),
                           track_pull(options.shared.track_pull_s, rate), model)  # fmt: skip
-    decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry "up" vectors)
+    decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry the orientation cue)
+    decoder.impose = decoder.up_weight > 0 and imposes(graph)
+    if decoder.impose:
+        clip_sensor_placements(graph)  # (made now, not on the first sample)
     return decoder
 
 
