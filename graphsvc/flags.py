@@ -23,6 +23,7 @@ import argparse
 import math
 import re
 
+from graphsvc.sensors.layout import preset_names
 from graphsvc.strategies import DEFAULT, available, get, names
 from graphsvc.strategies.options import (ORIENTATION_WEIGHT, Options, SharedOptions, from_values, load_constraints, option_specs, parse_weights)  # fmt: skip
 
@@ -69,6 +70,10 @@ def PATH(text: str) -> str:  # noqa: N802 (an argparse type, named as the others
 
 
 PATH.__name__ = "path"
+
+# What --layout takes, as every command's help says it: the presets from
+# `sensors.layout.PRESETS`, so a new preset shows everywhere.
+LAYOUT_HELP = f"preset ({preset_names()}) or layout file"
 
 SEED = ranged(int, 0, 2**63 - 1)
 RATE_HZ = ranged(float, 0.0, 100_000.0, low_open=True)  # (sensors.recording.MAX_RATE_HZ)

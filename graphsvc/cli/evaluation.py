@@ -6,7 +6,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, PATH, SEED, add_search_flags, options_from_flags, ranged
+from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, SEED, add_search_flags, options_from_flags, ranged
 
 
 def _cmd_evaluate(args) -> int:
@@ -57,7 +57,7 @@ def add_evaluate(sub) -> None:
     p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="knowledge-base files, folders or globs (.bvh, .amc)")
     p.add_argument("--test", required=True, metavar="GLOB",
                    help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
-    p.add_argument("--layout", metavar="LAYOUT", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
+    p.add_argument("--layout", metavar="LAYOUT", help=f"sensor layout: {LAYOUT_HELP} (default wrists-ankles, or the graph's with --graph)")
     p.add_argument("--graph", metavar="GRAPH", type=PATH,
                    help="a graph built from the same KB, instead of building one (default: build)")
     p.add_argument("--augment", metavar="KINDS",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import PATH, RATE_HZ, SEED, add_marker_flags, ranged
+from graphsvc.flags import LAYOUT_HELP, PATH, RATE_HZ, SEED, add_marker_flags, ranged
 
 
 def _cmd_inspect(args) -> int:
@@ -111,7 +111,7 @@ def add_simulate(sub) -> None:
                 "Simulate the readings a layout's accelerometers (--layout) or a marker set's optical markers "
                 "(--markers) would give for a motion clip, with noise, and write them as a recording.")  # fmt: skip
     p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc) to simulate")
-    p.add_argument("--layout", help="accelerometers: preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    p.add_argument("--layout", help=f"accelerometers: {LAYOUT_HELP}")
     add_marker_flags(p)
     p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
     p.add_argument("--flicker", type=float, metavar="P",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
+from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
                             synthesize_inputs)  # fmt: skip
 
 
@@ -129,7 +129,7 @@ def add_demo(sub) -> None:
                    help="the folder to write (default graphsvc-demo)")
     p.add_argument("--seed", type=SEED, default=0, help="the knowledge base's and the noise's seed (default 0)")
     p.add_argument("--layout", default="kelly6", metavar="LAYOUT",
-                   help="sensor layout: preset (wrists-ankles, kelly6, right-wrist) or layout file (default kelly6)")
+                   help=f"sensor layout: {LAYOUT_HELP} (default kelly6)")
     p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=3.0,
                    help="knowledge-base length in minutes (default 3, at most 600)")
     p.set_defaults(run=_cmd_demo)
