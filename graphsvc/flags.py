@@ -241,9 +241,18 @@ def add_input_file_flags(p) -> None:
     p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
                    help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
                         "unit (g, m/s2); default: what the file says")
-    p.add_argument("--device-map", metavar="xsens|FILE", type=PATH,
-                   help="rename a device's sensors to the graph layout's: xsens (Xsens segment names, the built-in map "
-                        "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
+    add_device_map_flag(p)
+
+
+def add_device_map_flag(p) -> None:
+    """--device-map: how to name a device recording's sensors as the graph's layout does."""
+    from graphsvc.sensors.devices import DEVICES
+
+    p.add_argument("--device-map", metavar="|".join(DEVICES) + "|FILE", type=PATH,
+                   help="rename a device's sensors to the graph layout's: a built-in map for the graph's layout preset "
+                        "(xsens: Xsens MVN segment or skeleton names, whichever fits more; mvn: MVN skeleton names; "
+                        "generic: left_wrist, l_knee, pelvis, head and their spellings) or a JSON map file; unmapped "
+                        "sensors are dropped (default: none)")
 
 
 def add_calibration_flag(p) -> None:
@@ -267,7 +276,9 @@ def synthesize_inputs(args) -> list[tuple[str, str | None]]:
     `fileio.check_outputs`: no output may replace one of them."""
     from pathlib import Path
 
-    named = lambda v: None if v in (None, "xsens") else v  # noqa: E731 (a built-in name is no file)
+    from graphsvc.sensors.devices import DEVICES
+
+    named = lambda v: None if v is None or v in DEVICES else v  # noqa: E731 (a built-in name is no file)
     files = [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
              ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
              ("the device map", named(getattr(args, "device_map", None)))]  # fmt: skip
