@@ -629,3 +629,55 @@ def test_export_csv_keeps_a_device_recordings_frame(tmp_path):
     export_csv(Recording(rate_hz=10.0, timestamps_s=np.arange(3) / 10.0, sensor_names=("a",),
                          accelerations=np.zeros((3, 1, 3), np.float32)), tmp_path / "l.csv")
     assert import_csv(tmp_path / "l.csv").meta["sensor_frame"] == "layout"
+
+
+@pytest.fixture
+def kelly6_csv(tmp_path, capsys):
+    """(a kelly6 graph of the gliding T-pose, a CSV of its clip's kelly6 readings)."""
+    graph = gliding_graph(tmp_path, capsys, "kelly6")
+    rec = tmp_path / "rec.csv"
+    assert run(["simulate", str(tmp_path / "walk_demo_001.bvh"), "--layout", "kelly6", "--noise", "default",
+                "-o", str(rec)], capsys)[0] == 0  # fmt: skip
+    return graph, rec
+
+
+def _with_sensors(rec: Recording, names, cols) -> Recording:
+    from dataclasses import replace
+
+    return replace(rec, sensor_names=tuple(names), accelerations=np.ascontiguousarray(rec.accelerations[:, cols]))
+
+
+def test_cli_csv_with_the_graphs_sensors_in_another_order(tmp_path, kelly6_csv, capsys):
+    """The same readings with their columns in another order reconstruct to the same
+    bytes: the recording is put in the graph's order."""
+    graph, ordered = kelly6_csv
+    rec = import_csv(ordered)
+    cols = [5, 3, 1, 0, 2, 4]
+    shuffled = tmp_path / "shuffled.csv"
+    export_csv(_with_sensors(rec, [rec.sensor_names[c] for c in cols], cols), shuffled)
+    assert import_csv(shuffled).sensor_names == ("chest", "r_shin", "r_forearm", "l_forearm", "l_shin", "lower_back")
+    outputs = []
+    for name, path in (("a", ordered), ("b", shuffled)):
+        out, report = tmp_path / f"{name}.bvh", tmp_path / f"{name}.json"
+        code, _, err = run(["synthesize", str(graph), str(path), "-o", str(out), "--report", str(report)], capsys)
+        assert code == 0, err
+        r = json.loads(report.read_text())
+        r.pop("files"), r.pop("timings_s"), r.pop("samples_per_s")
+        outputs.append((out.read_bytes(), r))
+    assert outputs[0][0] == outputs[1][0] and outputs[0][1] == outputs[1][1]
+
+
+def test_cli_csv_with_foreign_sensor_names_is_advised_a_device_map(tmp_path, kelly6_csv, capsys):
+    graph, ordered = kelly6_csv
+    rec = import_csv(ordered)
+    foreign = tmp_path / "foreign.csv"
+    export_csv(_with_sensors(rec, ["S1", "S2", "S3", "S4", "S5", "S6"], list(range(6))), foreign)
+    code, _, err = run(["synthesize", str(graph), str(foreign), "-o", str(tmp_path / "o.bvh")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "not in the graph: S1, S2" in err and "--device-map (xsens, mvn, generic or a map file)" in err
+    assert "relayout" not in err
+    # A recording of another preset's sensors: another graph is the fix.
+    other = tmp_path / "other.csv"
+    export_csv(_with_sensors(rec, PRESETS["dip6"].sensor_names, list(range(6))), other)
+    code, _, err = run(["synthesize", str(graph), str(other), "-o", str(tmp_path / "o.bvh")], capsys)
+    assert code == 2 and "rebuild the graph or run `graphsvc relayout`" in err and "--device-map" not in err
