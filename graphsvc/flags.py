@@ -235,13 +235,18 @@ def add_marker_flags(p) -> None:
 def add_input_file_flags(p) -> None:
     """--up, --units and --device-map: how to read a recording file where it does not say,
     and how to name a device's sensors as the graph's layout does."""
+    add_reading_flags(p)
+    add_device_map_flag(p)
+
+
+def add_reading_flags(p) -> None:
+    """--up and --units: how to read a recording file where it does not say."""
     p.add_argument("--up", choices=("y", "z"),
                    help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
                         "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
     p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
                    help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
                         "unit (g, m/s2); default: what the file says")
-    add_device_map_flag(p)
 
 
 def add_device_map_flag(p) -> None:

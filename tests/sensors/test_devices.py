@@ -681,3 +681,32 @@ def test_cli_csv_with_foreign_sensor_names_is_advised_a_device_map(tmp_path, kel
     export_csv(_with_sensors(rec, PRESETS["dip6"].sensor_names, list(range(6))), other)
     code, _, err = run(["synthesize", str(graph), str(other), "-o", str(tmp_path / "o.bvh")], capsys)
     assert code == 2 and "rebuild the graph or run `graphsvc relayout`" in err and "--device-map" not in err
+
+
+def test_cli_inspect_says_how_a_device_csv_was_read(tmp_path, capsys):
+    """The sensor frame, up axis and units, each with where it came from: a flag, the
+    file's header comment, or the default (MVNX: its format)."""
+    path = tmp_path / "d.csv"
+    path.write_text("# units=g\nt_s,LWrist_ax,LWrist_ay,LWrist_az\n0,0,0,1\n0.01,0,0,1\n")
+    code, out, _ = run(["inspect", str(path), "--up", "z"], capsys)
+    assert code == 0
+    assert out.splitlines()[-1] == "  read: sensor frame device (default), up z (--up), units g (file header)"
+    code, out, _ = run(["inspect", str(path), "--units", "m/s2", "--json"], capsys)
+    reading = json.loads(out)["recordings"][0]["reading"]
+    assert reading == {"sensor_frame": {"value": "device", "from": "default"}, "up": {"value": "y", "from": "default"},
+                       "units": {"value": "m/s2", "from": "argument"}}  # fmt: skip
+    path.write_text("# sensor_frame=layout\n# up=Z\nt_s,s_ax,s_ay,s_az\n0,0,0,1\n0.01,0,0,1\n")
+    code, out, _ = run(["inspect", str(path)], capsys)
+    assert out.splitlines()[-1] == "  read: sensor frame layout (file header), up z (file header), units m/s2 (default)"
+    mvnx = write_mvnx(tmp_path / "t.mvnx", ("Pelvis",), [normal(k, sensorAcceleration=[0, 0, G]) for k in range(3)])
+    code, out, _ = run(["inspect", str(mvnx)], capsys)
+    assert out.splitlines()[-1] == ("  read: sensor frame device (MVNX format), up z (MVNX format), "
+                                    "units m/s2 (MVNX format)")  # fmt: skip
+    rec = tmp_path / "r.rec"
+    from graphsvc.sensors.recording import save_recording
+
+    from dataclasses import replace
+
+    save_recording(replace(_device_recording(("a",)), meta={"simulated": True}), rec)  # (a layout's recording)
+    code, out, _ = run(["inspect", str(rec)], capsys)
+    assert code == 0 and "read:" not in out
