@@ -445,13 +445,19 @@ DEVICE_MAPS: dict[str, dict[str, dict[str, str]]] = {
 }  # fmt: skip
 
 
+def _short(names, most: int = 6) -> str:
+    names = list(names)
+    return ", ".join(names[:most]) + (" …" if len(names) > most else "") if names else "it has none"
+
+
 def device_map(name_or_path: str, layout_name: str | None, present=None) -> dict[str, str]:
     """A device map: a built-in device (DEVICES) for the layout preset `layout_name`, or
     a JSON map file (module docstring). present: the recording's sensor names, which
     choose among a device's namings (the one that maps more of them; xsens: MVN segment
     or skeleton names) and pick the generic naming's spelling; None: the first naming
     as DEVICE_MAPS has it. InputError for a built-in device and a layout that is not a
-    preset, or a name that is neither; FormatError for a malformed file."""
+    preset, a built-in map that names none of `present`, or a name that is neither;
+    FormatError for a malformed file."""
     if name_or_path in NAMINGS:
         if layout_name not in PLACES:
             raise InputError(f"no built-in {name_or_path} map for layout {layout_name!r} (it has maps for "
@@ -460,7 +466,12 @@ def device_map(name_or_path: str, layout_name: str | None, present=None) -> dict
             return dict(DEVICE_MAPS[name_or_path][layout_name])
         present = tuple(present)
         maps = [_naming_map(n, PLACES[layout_name], present, loose=n is GENERIC) for n in NAMINGS[name_or_path]]
-        return max(maps, key=len)  # (the first of equals)
+        best = max(maps, key=len)  # (the first of equals)
+        if not best:
+            raise InputError(f"the {name_or_path} device map names none of the recording's sensors "
+                             f"({_short(present)}) for layout {layout_name!r} (it takes "
+                             f"{_short(DEVICE_MAPS[name_or_path][layout_name])})")  # fmt: skip
+        return best
     path = Path(name_or_path)
     if not path.is_file():
         raise InputError(f"unknown device map {name_or_path!r}: not a built-in device ({', '.join(DEVICES)}) "

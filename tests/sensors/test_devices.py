@@ -329,6 +329,9 @@ def test_xsens_takes_the_naming_that_names_more_sensors():
     upper = ("Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm")
     assert device_map("xsens", "kelly6", upper) == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
                                                     "Hips": "lower_back", "Spine3": "chest"}  # fmt: skip
+    with pytest.raises(InputError, match=re.escape("the mvn device map names none of the recording's sensors (S1, S2) "
+                                                   "for layout 'right-wrist' (it takes RightForeArm)")):
+        device_map("mvn", "right-wrist", ("S1", "S2"))
     # mvn never reads segment names.
     assert device_map("mvn", "dip6", XSENS_SEGMENTS_ALL) == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist",
                                                              "Head": "head"}  # fmt: skip
