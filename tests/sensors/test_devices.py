@@ -374,6 +374,25 @@ def test_generic_map_on_a_device_csv(tmp_path):
                                           "r_shin": "right-knee", "lower_back": "Pelvis", "chest": "chest"}  # fmt: skip
 
 
+@pytest.mark.parametrize("device", ["xsens", "mvn"])
+def test_xsens_and_mvn_maps_on_a_device_csv_in_skeleton_names(tmp_path, device):
+    """A CSV named as MVN's skeleton (a BVH export's joints): both maps take dip6's six
+    from it, each column following its sensor."""
+    from graphsvc.pipeline import read_recording_file
+
+    names = ["Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm", "LeftLeg", "RightLeg", "LeftUpLeg"]
+    cols = ",".join(f"{n}_a{c}" for n in names for c in "xyz")
+    path = tmp_path / "mvn.csv"
+    path.write_text(f"t_s,{cols}\n" + "\n".join(",".join([f"{t / 10:g}"] + [str(k + 100 * t) for k in range(24)])
+                                                for t in range(3)) + "\n")  # fmt: skip
+    rec = read_recording_file(path, device_map=device, layout_name="dip6", sensor_names=PRESETS["dip6"].sensor_names)
+    assert rec.meta["device_sensors"] == {"l_wrist": "LeftForeArm", "r_wrist": "RightForeArm", "l_knee": "LeftLeg",
+                                          "r_knee": "RightLeg", "head": "Head", "pelvis": "Hips"}  # fmt: skip
+    assert rec.meta["unmapped_sensors"] == ["Spine3", "LeftUpLeg"]
+    # l_knee is LeftLeg, the 6th sensor: columns 15–17; at t = 0.2 s each value is k + 200
+    np.testing.assert_array_equal(rec.accelerations[2, 2], np.float32([215, 216, 217]))
+
+
 def test_one_note_names_the_layout_sensors_left_unmapped(tmp_path):
     from graphsvc.pipeline import read_recording_file
 

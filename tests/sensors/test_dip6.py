@@ -10,7 +10,7 @@ import pytest
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.pipeline import Options, reconstruct
-from graphsvc.sensors.layout import PRESETS, root_sensor
+from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.orientation import RELATIVE_WIDTH, relative_orientations
 from graphsvc.sensors.simulate import simulate_recording
@@ -52,4 +52,3 @@ def test_a_noise_free_dip6_clip_comes_back_as_itself(graph, kb):
     r = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1, 1)))
     first = graph.clips[1]["first_node"]
     np.testing.assert_array_equal(r.node_path, first + np.arange(rec.num_samples))
-    assert root_sensor(PRESETS["dip6"]) == 5
