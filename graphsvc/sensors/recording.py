@@ -698,7 +698,8 @@ def reading_settings(meta: dict) -> dict:
     fixes) or "default"; {} for a recording of another kind (a .rec, a marker file)."""
     if meta.get("imported_from") == "mvnx":
         return {k: {"value": v, "from": "format"} for k, v in _MVNX_SETTINGS.items()}
-    if meta.get("imported_from") != "csv" or "sensor_frame" not in meta:
+    read_from = meta.get("read_from")
+    if meta.get("imported_from") != "csv" or not isinstance(read_from, dict):  # (or read before it was kept)
         return {}
-    read_from = meta.get("read_from", {})
-    return {k: {"value": meta[k], "from": read_from.get(k, "file")} for k in ("sensor_frame", "up", "units") if k in meta}
+    return {k: {"value": meta[k], "from": read_from[k]} for k in ("sensor_frame", "up", "units")
+            if k in meta and read_from.get(k) in ("argument", "file", "default")}  # fmt: skip

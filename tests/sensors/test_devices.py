@@ -729,6 +729,8 @@ def test_cli_inspect_says_how_a_device_csv_was_read(tmp_path, capsys):
 
     from dataclasses import replace
 
-    save_recording(replace(_device_recording(("a",)), meta={"simulated": True}), rec)  # (a layout's recording)
-    code, out, _ = run(["inspect", str(rec)], capsys)
-    assert code == 0 and "read:" not in out
+    for meta in ({"simulated": True},  # a layout's recording
+                 {"imported_from": "csv", "units": "g", "up": "y", "sensor_frame": "device"}):  # not saying whence
+        save_recording(replace(_device_recording(("a",)), meta=meta), rec)
+        code, out, _ = run(["inspect", str(rec)], capsys)
+        assert code == 0 and "read:" not in out
