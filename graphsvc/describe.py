@@ -14,8 +14,10 @@ from graphsvc.sensors.files import RECORDING_SUFFIXES, read_recording
 from graphsvc.sensors.recording import describe_recording
 
 
-def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
-    """{"clips": [...], "folders": [...], "totals": {...}, "recordings": [...]}.
+def describe_paths(paths: list[str], progress: bool | None = None, up: str | None = None,
+                   units: str | None = None) -> dict:  # fmt: skip
+    """{"clips": [...], "folders": [...], "totals": {...}, "recordings": [...]}. up,
+    units: how to read a recording file where it does not say (`read_recording`).
 
     Motion files are fully parsed, so a file that would fail to load fails here too."""
     recordings = []
@@ -25,7 +27,7 @@ def describe_paths(paths: list[str], progress: bool | None = None) -> dict:
             raise InputError("an empty path is not a file or folder")
         path = Path(p)
         if path.suffix.lower() in RECORDING_SUFFIXES:
-            rec = read_recording(path)
+            rec = read_recording(path, up=up, units=units)
             info = describe_recording(rec)
             recordings.append({"path": str(path), **info})
         elif path.is_file() and path.suffix.lower() not in MOTION_SUFFIXES:
@@ -96,7 +98,15 @@ def format_description(info: dict) -> str:
         lines.append(f"{r['path']}: recording, {r['samples']} samples of {' and '.join(what) or 'nothing'} at "
                      f"{r['rate_hz']:g} Hz, {r['duration_s']:.2f} s")  # fmt: skip
         lines.append(f"  channels: {', '.join(r['channels'][:36])}{' …' if len(r['channels']) > 36 else ''}")
+        if r.get("reading"):
+            lines.append("  read: " + ", ".join(f"{_SETTING_NAMES[k]} {v['value']} ({_FROM[k][v['from']]})"
+                                               for k, v in r["reading"].items()))  # fmt: skip
     return "\n".join(lines)
+
+
+_SETTING_NAMES = {"sensor_frame": "sensor frame", "up": "up", "units": "units"}
+_FROM = {k: {"argument": f"--{k}", "file": "file header", "format": "MVNX format", "default": "default"}
+         for k in _SETTING_NAMES}
 
 
 def _total_line(label: str, t: dict) -> str:

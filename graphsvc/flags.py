@@ -23,6 +23,7 @@ import argparse
 import math
 import re
 
+from graphsvc.sensors.layout import preset_names
 from graphsvc.strategies import DEFAULT, available, get, names
 from graphsvc.strategies.options import (ORIENTATION_WEIGHT, Options, SharedOptions, from_values, load_constraints, option_specs, parse_weights)  # fmt: skip
 
@@ -69,6 +70,10 @@ def PATH(text: str) -> str:  # noqa: N802 (an argparse type, named as the others
 
 
 PATH.__name__ = "path"
+
+# What --layout takes, as every command's help says it: the presets from
+# `sensors.layout.PRESETS`, so a new preset shows everywhere.
+LAYOUT_HELP = f"preset ({preset_names()}) or layout file"
 
 SEED = ranged(int, 0, 2**63 - 1)
 RATE_HZ = ranged(float, 0.0, 100_000.0, low_open=True)  # (sensors.recording.MAX_RATE_HZ)
@@ -230,15 +235,29 @@ def add_marker_flags(p) -> None:
 def add_input_file_flags(p) -> None:
     """--up, --units and --device-map: how to read a recording file where it does not say,
     and how to name a device's sensors as the graph's layout does."""
+    add_reading_flags(p)
+    add_device_map_flag(p)
+
+
+def add_reading_flags(p) -> None:
+    """--up and --units: how to read a recording file where it does not say."""
     p.add_argument("--up", choices=("y", "z"),
                    help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
                         "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
     p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
                    help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
                         "unit (g, m/s2); default: what the file says")
-    p.add_argument("--device-map", metavar="xsens|FILE", type=PATH,
-                   help="rename a device's sensors to the graph layout's: xsens (Xsens segment names, the built-in map "
-                        "for the graph's layout) or a JSON map file; unmapped sensors are dropped")
+
+
+def add_device_map_flag(p) -> None:
+    """--device-map: how to name a device recording's sensors as the graph's layout does."""
+    from graphsvc.sensors.devices import DEVICES
+
+    p.add_argument("--device-map", metavar="|".join(DEVICES) + "|FILE", type=PATH,
+                   help="rename a device's sensors to the graph layout's: a built-in map for the graph's layout preset "
+                        "(xsens: Xsens MVN segment or skeleton names, whichever fits more; mvn: MVN skeleton names; "
+                        "generic: left_wrist, l_knee, pelvis, head and their spellings) or a JSON map file; unmapped "
+                        "sensors are dropped (default: none)")
 
 
 def add_calibration_flag(p) -> None:
@@ -262,7 +281,9 @@ def synthesize_inputs(args) -> list[tuple[str, str | None]]:
     `fileio.check_outputs`: no output may replace one of them."""
     from pathlib import Path
 
-    named = lambda v: None if v in (None, "xsens") else v  # noqa: E731 (a built-in name is no file)
+    from graphsvc.sensors.devices import DEVICES
+
+    named = lambda v: None if v is None or v in DEVICES else v  # noqa: E731 (a built-in name is no file)
     files = [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
              ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
              ("the device map", named(getattr(args, "device_map", None)))]  # fmt: skip

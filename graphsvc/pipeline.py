@@ -25,7 +25,7 @@ from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.bvh import bvh_document
 from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
 from graphsvc.sensors.calibration import apply_calibration, load_calibration
-from graphsvc.sensors.devices import apply_device_map
+from graphsvc.sensors.devices import DEVICES, apply_device_map, unmapped_note
 from graphsvc.sensors.devices import device_map as load_device_map
 from graphsvc.sensors.files import read_recording
 from graphsvc.sensors.grid import readings_at_rate
@@ -104,7 +104,7 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
                      calibration=None, threads: bool = True, notes=None) -> Reconstruction:  # fmt: skip
     """`graphsvc synthesize` as a function, for the CLI and a batch alike: read the
     recording (up, units: as the file does not say), name a device's sensors as the
-    graph's layout does (device_map: 'xsens' or a map file), turn a device's readings into
+    graph's layout does (device_map: a built-in device or a map file), turn a device's readings into
     the layout's frames (calibration: a `graphsvc calibrate` file), reconstruct, write the BVH
     (scale: units per metre) and, given report_path, the report JSON — each atomically, the
     report renamed into place before the BVH (a BVH is never without its report);
@@ -117,7 +117,7 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     or without threads."""
     check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
                   [("the graph", graph_path), ("the recording", recording_path),
-                   ("the calibration", calibration), ("the device map", None if device_map == "xsens" else device_map)])  # fmt: skip
+                   ("the calibration", calibration), ("the device map", None if device_map in DEVICES else device_map)])  # fmt: skip
     rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes)
     result = reconstruct(graph, rec, options, threads=threads)
     bvh = bvh_document(result.motion, scale)
@@ -148,14 +148,18 @@ def read_recording_file(recording_path, up=None, units=None, device_map=None, ca
                         layout_name=None, sensor_names=None) -> Recording:  # fmt: skip
     """A recording file as it is searched, here or sent to a server (`graphsvc client`):
     read (up, units: as the file does not say), a device's sensors named as the layout
-    `layout_name` does (device_map: 'xsens' or a map file), its readings turned into the
-    layout's frames (calibration: a `graphsvc calibrate` file). sensor_names: the
-    graph's sensors, the order a device map puts them in; an Xsens recording not named
-    so without a device map is refused (None: not checked). notes: a list that
-    collects remarks for the user, or None."""
+    `layout_name` does (device_map: a built-in device, `sensors.devices.DEVICES`, or a
+    map file), its readings turned into the layout's frames (calibration: a `graphsvc
+    calibrate` file). sensor_names: the graph's sensors, the order a device map puts
+    them in (a note names those it leaves without a device sensor); an Xsens recording
+    not named so without a device map is refused (None: not checked). notes: a list
+    that collects remarks for the user, or None."""
     rec = read_recording(recording_path, up=up, units=units)
     if device_map:
-        rec = apply_device_map(rec, load_device_map(device_map, layout_name), order=sensor_names)
+        rec = apply_device_map(rec, load_device_map(device_map, layout_name, rec.sensor_names), order=sensor_names)
+        note = unmapped_note(rec, sensor_names, device_map) if sensor_names is not None else None
+        if note is not None and notes is not None:
+            notes.append(note)
     elif (sensor_names is not None and rec.meta.get("imported_from") == "mvnx"
           and tuple(rec.sensor_names) != tuple(sensor_names)):  # fmt: skip
         raise InputError(f"{recording_path} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
@@ -171,7 +175,7 @@ def read_recording_file(recording_path, up=None, units=None, device_map=None, ca
 
 
 def _resolved_if_file(name) -> str:
-    """An absolute path for a file name, a preset name ('xsens') as it is."""
+    """An absolute path for a file name, a built-in name ('xsens') as it is."""
     from pathlib import Path
 
     return str(Path(name).resolve()) if Path(name).is_file() else str(name)

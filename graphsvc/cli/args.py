@@ -17,7 +17,9 @@ def command(sub, name: str, summary: str, description: str | None = None, **kwar
 def file_arg(value: str | None) -> str | None:
     """An argument that is a file or a built-in name (`--mapping guess`, `--device-map
     xsens`): the file, or None for a name."""
-    return None if value in (None, "guess", "xsens") else value
+    from graphsvc.sensors.devices import DEVICES
+
+    return None if value is None or value in ("guess", *DEVICES) else value
 
 
 def print_note(note: str) -> None:

@@ -13,7 +13,8 @@ from pathlib import Path
 from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
-from graphsvc.flags import PATH, add_calibration_flag, add_search_flags, options_from_flags, ranged, synthesize_inputs
+from graphsvc.flags import (PATH, add_calibration_flag, add_input_file_flags, add_search_flags, options_from_flags, ranged,
+                            synthesize_inputs)  # fmt: skip
 
 
 def _check_output(path: Path, inputs=()) -> None:
@@ -42,12 +43,19 @@ def _options(args, constraints=None, recording=None):
     return options_to_proto(options, constraints, recording)
 
 
-def _recording(args):
-    """The recording as the client sends it: read, in the layout's sensor frames with
-    --calibration (`pipeline.read_recording_file`)."""
+def _recording(args, info):
+    """The recording as the client sends it to the server's graph `info`: read (--up,
+    --units), a device's sensors named as the graph's layout does (--device-map), in
+    the layout's sensor frames with --calibration (`pipeline.read_recording_file`);
+    its notes printed."""
     from graphsvc.pipeline import read_recording_file
 
-    return read_recording_file(args.recording, calibration=args.calibration)
+    notes = []
+    try:
+        return read_recording_file(args.recording, args.up, args.units, args.device_map, args.calibration, notes,
+                                   layout_name=info.layout, sensor_names=tuple(info.sensor_names))  # fmt: skip
+    finally:
+        print_notes(notes)
 
 
 def _cmd_client_graphs(args) -> int:
@@ -78,10 +86,10 @@ def _cmd_client_synthesize(args) -> int:
 
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
-    rec = _recording(args)
-    options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
+        rec = _recording(args, info)
+        options = _options(args, rec.constraints, rec)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
                             skeleton=skeleton_from_proto(info.skeleton))  # fmt: skip
     with atomic_writer(out) as f:
@@ -147,9 +155,6 @@ def _cmd_client_stream(args) -> int:
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, synthesize_inputs(args))
-    rec = _recording(args)
-    options = _options(args, recording=rec)
-
     def on_frame(frame, latency_ms):
         if not args.quiet:
             print_flushed(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
@@ -157,6 +162,8 @@ def _cmd_client_stream(args) -> int:
 
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
+        rec = _recording(args, info)
+        options = _options(args, recording=rec)
         result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame)
     s = latency_summary(result.latencies_ms)
     lag = result.started.lag_frames if result.started else 0
@@ -281,9 +288,10 @@ def add_client(sub) -> None:
     c = client.add_parser("synthesize", parents=[connection], help=what, description=(
         "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
         "BVH; the recording's own constraint sets are sent unless --constraints replaces them."))  # fmt: skip
-    c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec or device CSV)")
+    c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec, device CSV or Xsens MVNX)")
     c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH, help="BVH file to write (required; cm)")
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
+    add_input_file_flags(c)
     add_calibration_flag(c)
     add_search_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
@@ -329,11 +337,12 @@ def add_client(sub) -> None:
         "Replay a recording live through StreamSynthesize, in real time or --speed times faster; print one line per "
         "frame with its latency (receipt minus sending of the sample that released it), then p50/p99/max beyond "
         "the stream's lag, which the summary states."))  # fmt: skip
-    c.add_argument("recording", metavar="REC", type=PATH, help="recording to replay (.rec or device CSV)")
+    c.add_argument("recording", metavar="REC", type=PATH, help="recording to replay (.rec, device CSV or Xsens MVNX)")
     c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X",
                    help="replay X times faster than real time (default 1: real time)")  # fmt: skip
     c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the streamed motion as BVH, cm (default: none)")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
+    add_input_file_flags(c)
     add_calibration_flag(c)
     add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from graphsvc.cli.args import command, print_note, print_notes
+from graphsvc.cli.args import command, file_arg, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, PATH, SEED, add_search_flags, options_from_flags, ranged
+from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, SEED, add_search_flags, options_from_flags, ranged
 
 
 def _cmd_evaluate(args) -> int:
@@ -41,9 +41,12 @@ def _cmd_report(args) -> int:
     from graphsvc.report.load import load_document
 
     out = Path(args.output)
-    check_outputs([("-o", out, (".html", ".htm"))], [("the result", args.result), ("the truth", args.truth)])
-    doc = load_document(args.result, truth=args.truth)
+    check_outputs([("-o", out, (".html", ".htm"))], [("the result", args.result), ("the truth", args.truth),
+                                                      ("the joint map", file_arg(args.mapping))])  # fmt: skip
+    notes = []
+    doc = load_document(args.result, truth=args.truth, truth_mapping=args.mapping, notes=notes)
     write_html(out, doc)
+    print_notes(notes)
     print(f"wrote {out}: {len(doc['clips'])} clip{'s' if len(doc['clips']) != 1 else ''}, "
           f"{out.stat().st_size / 1e6:.1f} MB")
     return 0
@@ -57,7 +60,7 @@ def add_evaluate(sub) -> None:
     p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="knowledge-base files, folders or globs (.bvh, .amc)")
     p.add_argument("--test", required=True, metavar="GLOB",
                    help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
-    p.add_argument("--layout", metavar="LAYOUT", help="sensor layout (default wrists-ankles, or the graph's with --graph)")
+    p.add_argument("--layout", metavar="LAYOUT", help=f"sensor layout: {LAYOUT_HELP} (default wrists-ankles, or the graph's with --graph)")
     p.add_argument("--graph", metavar="GRAPH", type=PATH,
                    help="a graph built from the same KB, instead of building one (default: build)")
     p.add_argument("--augment", metavar="KINDS",
@@ -110,4 +113,7 @@ def add_report(sub) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUT.html", type=PATH, help="the page to write (.html)")
     p.add_argument("--truth", metavar="MOTION", type=PATH,
                    help="the true motion (.bvh, .amc) of a synthesize report, shown beside it (default: none)")
+    p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
+                   help="joint map JSON of the --truth skeleton when graphsvc does not know it, or 'guess' (`graphsvc "
+                        "mapping`); without one its error charts are left out, with a note (default: a built-in map)")
     p.set_defaults(run=_cmd_report)

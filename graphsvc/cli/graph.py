@@ -8,7 +8,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, PATH, RATE_HZ
+from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, RATE_HZ
 
 
 def _cmd_build(args) -> int:
@@ -101,8 +101,7 @@ def add_build(sub) -> None:
     p.add_argument("-o", "--output", required=True, metavar="GRAPH", type=PATH, help="the graph file to write")
     p.add_argument("--rate", type=RATE_HZ, default=30.0, metavar="HZ", help="graph rate (default 30)")
     p.add_argument("--layout", default="wrists-ankles", metavar="LAYOUT",
-                   help="sensor layout of the edge metadata: preset (wrists-ankles, kelly6, right-wrist) or layout "
-                        "file (default wrists-ankles)")  # fmt: skip
+                   help=f"sensor layout of the edge metadata: {LAYOUT_HELP} (default wrists-ankles)")  # fmt: skip
     p.add_argument("--no-msv", action="store_true", help="no slow-down nodes or speed-up edges")
     p.add_argument("--no-interp", action="store_true", help="no interpolation nodes")
     p.add_argument("--no-bridges", action="store_true", help="no bridges between actions (blended transitions)")
@@ -128,7 +127,7 @@ def add_relayout(sub) -> None:
                 "Recompute a graph's per-edge sensor readings for another layout (or an older graph's for today's "
                 "sensor frames), without the knowledge base.")  # fmt: skip
     p.add_argument("graph", metavar="GRAPH", type=PATH, help="the graph file to read")
-    p.add_argument("--layout", required=True, metavar="LAYOUT", help="preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    p.add_argument("--layout", required=True, metavar="LAYOUT", help=LAYOUT_HELP)
     p.add_argument("-o", "--output", required=True, metavar="OUT", type=PATH,
                    help="the graph file to write (not the input)")
     p.set_defaults(run=_cmd_relayout)

@@ -8,13 +8,13 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import PATH, RATE_HZ, SEED, add_marker_flags, ranged
+from graphsvc.flags import LAYOUT_HELP, PATH, RATE_HZ, SEED, add_marker_flags, add_reading_flags, ranged
 
 
 def _cmd_inspect(args) -> int:
     from graphsvc.describe import describe_paths, format_description
 
-    info = describe_paths(args.paths, progress=False if args.json else None)
+    info = describe_paths(args.paths, progress=False if args.json else None, up=args.up, units=args.units)
     if args.json:
         print(json.dumps(info, indent=2, sort_keys=True))
     else:
@@ -103,6 +103,7 @@ def add_inspect(sub) -> None:
     p.add_argument("paths", nargs="+", metavar="PATH", type=PATH,
                    help="a motion file (.bvh, .amc), a folder of them, or a recording (.rec, .csv, .mvnx, .c3d)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    add_reading_flags(p)
     p.set_defaults(run=_cmd_inspect)
 
 
@@ -111,7 +112,7 @@ def add_simulate(sub) -> None:
                 "Simulate the readings a layout's accelerometers (--layout) or a marker set's optical markers "
                 "(--markers) would give for a motion clip, with noise, and write them as a recording.")  # fmt: skip
     p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc) to simulate")
-    p.add_argument("--layout", help="accelerometers: preset (wrists-ankles, kelly6, right-wrist) or layout file")
+    p.add_argument("--layout", help=f"accelerometers: {LAYOUT_HELP}")
     add_marker_flags(p)
     p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
     p.add_argument("--flicker", type=float, metavar="P",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
+from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
                             synthesize_inputs)  # fmt: skip
 
 
@@ -21,9 +21,12 @@ def _cmd_synthesize(args) -> int:
                   synthesize_inputs(args))  # fmt: skip
     options, notes = options_from_flags(args)
     graph = load_graph(args.graph)
-    result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report, scale=args.scale,
-                              up=args.up, units=args.units, device_map=args.device_map, calibration=args.calibration, notes=notes)  # fmt: skip
-    print_notes(notes)
+    try:
+        result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report,
+                                  scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
+                                  calibration=args.calibration, notes=notes)  # fmt: skip
+    finally:  # (a note may say why the recording did not fit)
+        print_notes(notes)
     r = result.report
     labels = " → ".join(f"{run['label']} {_seconds(run['frames'] / graph.rate_hz)}" for run in r["labels"][:12])
     more = f" … (+{len(r['labels']) - 12})" if len(r["labels"]) > 12 else ""
@@ -58,7 +61,7 @@ def _cmd_calibrate(args) -> int:
         from graphsvc.sensors.devices import apply_device_map, device_map
 
         layout_name = (graph.layout if graph is not None else rec.layout or {}).get("name")
-        rec = apply_device_map(rec, device_map(args.device_map, layout_name),
+        rec = apply_device_map(rec, device_map(args.device_map, layout_name, rec.sensor_names),
                                order=graph.sensor_names if graph is not None else None)  # fmt: skip
     cal = calibrate(rec, args.pose, graph, args.start, args.end)
     cal["source"] = str(Path(args.recording))
@@ -129,7 +132,7 @@ def add_demo(sub) -> None:
                    help="the folder to write (default graphsvc-demo)")
     p.add_argument("--seed", type=SEED, default=0, help="the knowledge base's and the noise's seed (default 0)")
     p.add_argument("--layout", default="kelly6", metavar="LAYOUT",
-                   help="sensor layout: preset (wrists-ankles, kelly6, right-wrist) or layout file (default kelly6)")
+                   help=f"sensor layout: {LAYOUT_HELP} (default kelly6)")
     p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=3.0,
                    help="knowledge-base length in minutes (default 3, at most 600)")
     p.set_defaults(run=_cmd_demo)

@@ -206,23 +206,29 @@ def constraint_arrays(constraints, labels, contacts: np.ndarray | None, rate_hz:
 
 def clip_view(name: str, motion: Motion, timeline: dict, rec=None, truth: Motion | None = None,
               per_frame: dict | None = None, constraints=None, labels=None, mapping=None,
-              info: dict | None = None, virtual: np.ndarray | None = None) -> dict:  # fmt: skip
+              info: dict | None = None, virtual: np.ndarray | None = None, truth_mapping=None,
+              notes: list | None = None) -> dict:  # fmt: skip
     """Everything the page shows of one reconstruction (module docstring). motion:
     the output; timeline: `strategies.sources.timeline_from_*`'s; rec: the input
     recording (or None); truth: the true motion at the same rate (or None); per_frame:
     its errors (`truth_errors`' per_frame; computed from `truth` when None);
     constraints: the sets the search was given; labels: the output's per-frame labels
     (default: from the timeline); info: a few lines shown above the viewer; virtual:
-    the path's virtual readings (`sensor_arrays`)."""
+    the path's virtual readings (`sensor_arrays`); truth_mapping: the truth's joint map
+    (a dict, a file or "guess"; None: a built-in one); notes: a list that collects a
+    line saying why the error charts are left out, or None."""
     T = motion.num_frames
     figures = [figure_arrays(motion, "reconstruction", mapping)]
     if truth is not None:
-        figures.append(figure_arrays(truth, "truth"))
+        figures.append(figure_arrays(truth, "truth", truth_mapping))
         if per_frame is None:
             try:
-                per_frame = truth_errors(motion, truth, pred_mapping=mapping)["per_frame"]
-            except Exception:  # (skeletons the metrics cannot compare: shown without errors)
+                per_frame = truth_errors(motion, truth, pred_mapping=mapping, true_mapping=truth_mapping)["per_frame"]
+            except GraphsvcError as exc:  # (skeletons the metrics cannot compare: shown without errors)
                 per_frame = None
+                if notes is not None:
+                    notes.append(f"{name}: the error charts are left out, the truth cannot be compared joint by joint: "
+                                 f"{exc}")  # fmt: skip
     if labels is None:
         labels = [""] * T
         for seg in timeline["segments"]:

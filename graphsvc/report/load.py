@@ -61,10 +61,12 @@ def _labels_from_runs(runs, T: int) -> list[str]:
     return labels
 
 
-def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
+def synthesize_view(report: dict, base: Path, truth=None, graph=None, truth_mapping=None, notes=None) -> dict:
     """The view of one synthesize report (its files resolved against `base` when
-    relative). truth: a Motion, or a path to one, or None. graph: the graph already
-    loaded, else read from the report's path when it is there (else no sources)."""
+    relative). truth: a Motion, or a path to one, or None; truth_mapping: its joint
+    map (a file, "guess" or None: a built-in one). graph: the graph already loaded,
+    else read from the report's path when it is there (else no sources). notes: a
+    list that collects remarks for the user (the error charts left out), or None."""
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
         raise InputError("the report names no output file (write it with `graphsvc synthesize --report`)")
@@ -105,7 +107,8 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None) -> dict:
         src = report["sources"]
         virtual = source_readings(graph, np.array(src["clip"]), np.array(src["frame"]), np.array(src["weight"]))
     return clip_view(Path(files["output"]).stem, motion, report_timeline(report, graph), rec, truth,
-                     constraints=constraints, labels=labels, mapping=mapping, info=info, virtual=virtual)  # fmt: skip
+                     constraints=constraints, labels=labels, mapping=mapping, info=info, virtual=virtual,
+                     truth_mapping=truth_mapping, notes=notes)  # fmt: skip
 
 
 # ---------------------------------------------------------------- evaluation
@@ -184,10 +187,14 @@ def batch_document(folder: Path) -> dict:
                       "clip": list(range(len(clips)))}}  # fmt: skip
 
 
-def load_document(result, truth=None) -> dict:
+def load_document(result, truth=None, truth_mapping=None, notes=None) -> dict:
     """The page's document for RESULT: a synthesize report, an evaluation JSON with
-    kept motions, or a batch folder. truth: a motion file (synthesize reports only)."""
+    kept motions, or a batch folder. truth: a motion file (synthesize reports only);
+    truth_mapping: its joint map (a file or "guess"; None: a built-in one); notes: a
+    list that collects remarks for the user, or None."""
     path = Path(result)
+    if truth_mapping is not None and truth is None:
+        raise InputError("--mapping is the joint map of --truth: give --truth too")
     if truth is not None and (path.is_dir() or path.is_file() and "mean" in (read_json_file(path) or {})):
         raise InputError("--truth applies to a synthesize report (an evaluation keeps its truths, a batch has none)")
     if path.is_dir():
@@ -198,6 +205,6 @@ def load_document(result, truth=None) -> dict:
     if isinstance(data, dict) and "clips" in data and "mean" in data:
         return evaluation_document(data, path.parent)
     if isinstance(data, dict) and isinstance(data.get("files"), dict):
-        view = synthesize_view(data, path.parent, truth)
+        view = synthesize_view(data, path.parent, truth, truth_mapping=truth_mapping, notes=notes)
         return {"title": f"graphsvc reconstruction: {view['name']}", "clips": [view], "table": None}
     raise FormatError(path, "not a synthesize report, an evaluation JSON or a batch folder")

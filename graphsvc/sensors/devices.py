@@ -49,8 +49,13 @@ Device maps (`device_map`, `apply_device_map`)
     wrapped: ``{"device": "xsens", "sensors": {"LeftForeArm": "l_forearm", …}}``.
     Applying a map renames the mapped sensors, drops the others (listed in
     meta["unmapped_sensors"]) and orders the result as the map does (or as `order`
-    says). Built-in maps, by device and layout preset, are in DEVICE_MAPS: "xsens"
-    maps Xsens segment names onto kelly6, wrists-ankles and right-wrist.
+    says). Built-in maps (DEVICES), for every layout preset, come from namings that
+    say which device sensor sits at each preset sensor's place (NAMINGS): "xsens"
+    takes Xsens MVN segment names (Pelvis, T8, LeftForeArm, LeftLowerLeg, …) or MVN
+    skeleton names (Hips, Spine3, LeftForeArm, LeftLeg, …), whichever names more of
+    the recording's sensors; "mvn" the skeleton names alone; "generic" the names of
+    a device CSV (left_wrist, l_knee, pelvis, head, … in the spellings `generic_key`
+    folds together). DEVICE_MAPS lists each device's first naming.
 """
 
 from __future__ import annotations
@@ -71,6 +76,7 @@ from graphsvc.fileio import read_input_text, require_file
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.axes import z_up_to_y_up
+from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.recording import Recording
 
 CALIBRATION_POSES = ("tpose", "tpose-isb", "npose")  # frames whose sensor orientations meta keeps
@@ -339,35 +345,149 @@ def _sensor_count(path: Path, labels: list[str], frames_attrib: dict) -> int:
 # ---------------------------------------------------------------- device maps
 
 
+def generic_key(name: str) -> str:
+    """A sensor name as the generic naming compares it: lower case, letters and digits
+    only, the side as a leading l or r (`left_wrist`, `LeftWrist`, `wrist_L`, `l-wrist`
+    → `lwrist`)."""
+    lowered = name.strip().lower()
+    m = re.fullmatch(r"(.*?)[\W_]+([lr])", lowered)  # a side after a separator: wrist_l
+    if m:
+        lowered = m.group(2) + m.group(1)
+    key = re.sub(r"[\W_]+", "", lowered)
+    for word, side in (("left", "l"), ("right", "r")):
+        if key.startswith(word):
+            return side + key[len(word):]
+        if key.endswith(word):
+            return side + key[: -len(word)]
+    return key
+
+
+def _names(entry) -> tuple[str, ...]:
+    return (entry,) if isinstance(entry, str) else tuple(entry)
+
+
+def _naming_map(naming: dict, places: dict[str, str], present, loose: bool = False) -> dict[str, str]:
+    """{device name: layout sensor} of one naming for a layout's `places`: each sensor
+    takes the first of its place's names among `present` (the recording's, compared by
+    `generic_key` when loose, else exactly; None: the first name), each device sensor
+    at most once."""
+    out: dict[str, str] = {}
+    if present is None:
+        by_key = None
+    else:
+        by_key = {}
+        for n in present:
+            by_key.setdefault(generic_key(n), n)
+    for sensor, place in places.items():
+        if place not in naming:
+            continue
+        for candidate in _names(naming[place]):
+            name = (candidate if by_key is None else by_key.get(generic_key(candidate)) if loose
+                    else candidate if candidate in present else None)  # fmt: skip
+            if name is not None and name not in out:
+                out[name] = sensor
+                break
+    return out
+
+
+# Built-in namings. A preset's sensors are named after where they sit (`l_wrist`: the
+# forearm near the wrist, `l_forearm`: its middle, `l_knee`, `l_shin`, `l_ankle`: the
+# shin below the knee, in its middle, above the ankle, `lower_back`, `pelvis`, `chest`,
+# `head`); a naming says which device sensor sits there. Xsens straps one sensor a
+# segment: its forearm sensor serves every forearm place, its lower-leg one every shin
+# place. Xsens names a sensor by its segment in MVN ("segments": Pelvis, L5, L3, T12,
+# T8, Neck, Head, RightShoulder, RightUpperArm, RightForeArm, RightHand, RightUpperLeg,
+# RightLowerLeg, RightFoot, …) or by the MVN skeleton's joint, as in its BVH exports
+# ("skeleton": Hips, Spine, Spine1, Spine2, Spine3, Neck, Head, RightShoulder,
+# RightArm, RightForeArm, RightHand, RightUpLeg, RightLeg, RightFoot, …).
+_XSENS_PLACES = {"wrist": "ForeArm", "forearm": "ForeArm", "knee": "LowerLeg", "shin": "LowerLeg", "ankle": "LowerLeg"}
+_MVN_PLACES = {"wrist": "ForeArm", "forearm": "ForeArm", "knee": "Leg", "shin": "Leg", "ankle": "Leg"}
+_SIDES = {"l_": "Left", "r_": "Right"}
+
+
+def _xsens_naming(places: dict[str, str], trunk: dict[str, str]) -> dict[str, str]:
+    """{place: device name} of an Xsens naming: the limbs' places on both sides, then the trunk's."""
+    limbs = {prefix + place: side + part for prefix, side in _SIDES.items() for place, part in places.items()}
+    return {**limbs, **trunk}
+
+
+XSENS_SEGMENTS = _xsens_naming(_XSENS_PLACES, {"pelvis": "Pelvis", "lower_back": "Pelvis", "chest": "T8", "head": "Head"})
+MVN_SKELETON = _xsens_naming(_MVN_PLACES, {"pelvis": "Hips", "lower_back": "Hips", "chest": "Spine3", "head": "Head"})
+
+# The generic naming: per place, the names a device CSV may give it, most specific
+# first, compared by `generic_key` (case, separators and the side's spelling aside:
+# left_wrist, LeftWrist, l-wrist, lwrist and wrist_l are one name).
+_GENERIC_LIMBS = {"wrist": ("wrist", "forearm", "lower_arm"), "forearm": ("forearm", "lower_arm", "wrist"),
+                  "knee": ("knee", "shin", "lower_leg"), "shin": ("shin", "lower_leg", "knee", "ankle"),
+                  "ankle": ("ankle", "shin", "lower_leg")}  # fmt: skip
+GENERIC = {
+    **{prefix + place: tuple(f"{side.lower()}_{n}" for n in names) for prefix, side in _SIDES.items()
+       for place, names in _GENERIC_LIMBS.items()},
+    "pelvis": ("pelvis", "hips", "hip", "waist", "sacrum", "root", "lower_back"),
+    "lower_back": ("lower_back", "pelvis", "hips", "waist", "sacrum", "back"),
+    "chest": ("chest", "sternum", "upper_back", "thorax", "torso"),
+    "head": ("head", "forehead"),
+}  # fmt: skip
+
+# device → its namings ({place: device name or names}, tried in turn).
+NAMINGS: dict[str, tuple[dict, ...]] = {"xsens": (XSENS_SEGMENTS, MVN_SKELETON), "mvn": (MVN_SKELETON,),
+                                        "generic": (GENERIC,)}  # fmt: skip
+DEVICES = tuple(NAMINGS)  # the built-in maps, as `--device-map` names them
+
+# The places of each preset's sensors (a preset's sensor names are places).
+PLACES: dict[str, dict[str, str]] = {name: {s: s for s in layout.sensor_names} for name, layout in PRESETS.items()}
+
 # Built-in maps: device → layout preset → {device sensor name: layout sensor name}, in
-# the layout's order. Xsens names its sensors by the segment they are strapped to; a
-# forearm sensor sits near the wrist, a lower-leg one on the shin near the ankle.
+# the layout's order, each device's first naming (generic: each place's first name).
 DEVICE_MAPS: dict[str, dict[str, dict[str, str]]] = {
-    "xsens": {
-        "kelly6": {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm", "LeftLowerLeg": "l_shin",
-                   "RightLowerLeg": "r_shin", "Pelvis": "lower_back", "T8": "chest"},
-        "wrists-ankles": {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist", "LeftLowerLeg": "l_ankle",
-                          "RightLowerLeg": "r_ankle"},
-        "right-wrist": {"RightForeArm": "r_wrist"},
-    },
+    device: {layout: _naming_map(namings[0], places, None) for layout, places in PLACES.items()}
+    for device, namings in NAMINGS.items()
 }  # fmt: skip
 
 
-def device_map(name_or_path: str, layout_name: str | None) -> dict[str, str]:
-    """A device map: a built-in device ("xsens") for the layout `layout_name`, or a
-    JSON map file (module docstring). InputError for a built-in device without a map
-    for that layout, or a name that is neither; FormatError for a malformed file."""
-    if name_or_path in DEVICE_MAPS:
-        maps = DEVICE_MAPS[name_or_path]
-        if layout_name not in maps:
+def _short(names, most: int = 6) -> str:
+    names = list(names)
+    return ", ".join(names[:most]) + (" …" if len(names) > most else "") if names else "it has none"
+
+
+def device_map(name_or_path: str, layout_name: str | None, present=None) -> dict[str, str]:
+    """A device map: a built-in device (DEVICES) for the layout preset `layout_name`, or
+    a JSON map file (module docstring). present: the recording's sensor names, which
+    choose among a device's namings (the one that maps more of them; xsens: MVN segment
+    or skeleton names) and pick the generic naming's spelling; None: the first naming
+    as DEVICE_MAPS has it. InputError for a built-in device and a layout that is not a
+    preset, a built-in map that names none of `present`, or a name that is neither;
+    FormatError for a malformed file."""
+    if name_or_path in NAMINGS:
+        if layout_name not in PLACES:
             raise InputError(f"no built-in {name_or_path} map for layout {layout_name!r} (it has maps for "
-                             f"{', '.join(maps)}); give a map file instead")  # fmt: skip
-        return dict(maps[layout_name])
+                             f"{', '.join(PLACES)}); give a map file instead")  # fmt: skip
+        if present is None:
+            return dict(DEVICE_MAPS[name_or_path][layout_name])
+        present = tuple(present)
+        maps = [_naming_map(n, PLACES[layout_name], present, loose=n is GENERIC) for n in NAMINGS[name_or_path]]
+        best = max(maps, key=len)  # (the first of equals)
+        if not best:
+            raise InputError(f"the {name_or_path} device map names none of the recording's sensors "
+                             f"({_short(present)}) for layout {layout_name!r} (it takes "
+                             f"{_short(DEVICE_MAPS[name_or_path][layout_name])})")  # fmt: skip
+        return best
     path = Path(name_or_path)
     if not path.is_file():
-        raise InputError(f"unknown device map {name_or_path!r}: not a built-in device ({', '.join(DEVICE_MAPS)}) "
+        raise InputError(f"unknown device map {name_or_path!r}: not a built-in device ({', '.join(DEVICES)}) "
                          "and no such file")  # fmt: skip
     return load_device_map(path)
+
+
+def unmapped_note(mapped: Recording, sensor_names, device: str) -> str | None:
+    """One line naming the layout's sensors (`sensor_names`) that the device map
+    `device` left without a device sensor, or None when it found them all."""
+    missing = [n for n in sensor_names if n not in mapped.sensor_names]
+    if not missing:
+        return None
+    device_names = mapped.meta.get("unmapped_sensors", [])
+    return (f"device map {device}: no sensor of the recording for {', '.join(missing)} (unmapped: "
+            f"{', '.join(device_names) or 'none'})")  # fmt: skip
 
 
 def load_device_map(path) -> dict[str, str]:

@@ -102,7 +102,20 @@ PRESETS: dict[str, Layout] = {
     ),
     # Kelly et al.'s single-sensor case on the racket hand.
     "right-wrist": Layout("right-wrist", (_sensor("r_wrist", "r_elbow", 0.9),)),
+    # DIP-IMU's six (Huang et al. 2018), in its order: both forearms near the wrists, both
+    # shins just below the knees, the head (on the head's segment, at its joint; X toward
+    # the neck, no joint lying above it) and the pelvis, the root sensor.
+    "dip6": Layout("dip6", (
+        _sensor("l_wrist", "l_elbow", 0.9), _sensor("r_wrist", "r_elbow", 0.9),
+        _sensor("l_knee", "l_knee", 0.1), _sensor("r_knee", "r_knee", 0.1),
+        _sensor("head", "head", 0.0, "neck"), _sensor("pelvis", "pelvis", 0.0),
+    )),  # fmt: skip
 }
+
+
+def preset_names() -> str:
+    """The presets, comma-separated, as help texts and messages list them."""
+    return ", ".join(PRESETS)
 
 
 ROOT_SEGMENT = "pelvis"
@@ -164,7 +177,7 @@ def load_layout(name_or_path: str) -> Layout:
     path = Path(name_or_path)
     if not path.exists():
         raise LayoutError(
-            f"unknown layout {name_or_path!r}: not a preset ({', '.join(PRESETS)}) and no such file"
+            f"unknown layout {name_or_path!r}: not a preset ({preset_names()}) and no such file"
         )
     try:
         text = path.read_text()

@@ -45,6 +45,10 @@ CSV format
           simulates), or ``device``, each device's own frame, to be calibrated onto
           the layout's. Without it: ``layout`` when the file starts with the
           ``# graphsvc recording v1`` line (written by graphsvc), else ``device``.
+
+      meta keeps the units, up and sensor_frame used and, in meta["read_from"], where
+      each came from: "argument" (import_csv's, a command's flag), "file" (the
+      comment) or "default".
     - ``t_s``: seconds, required, finite, strictly increasing.
     - ``<sensor>_ax, <sensor>_ay, <sensor>_az``: acceleration in the sensor's frame
       (gravity included: +9.81 "up" at rest), m/s² or g (``units``).
@@ -496,7 +500,7 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
                 out[:, k] = table[:, c]
         return out.reshape(len(t), -1, width)
 
-    units, up, sensor_frame = _device_comments(path, comments, comment_lines, units, up, ours)
+    units, up, sensor_frame, read_from = _device_comments(path, comments, comment_lines, units, up, ours)
     acc = gather(acc_cols, 3)
     if acc is not None and units == "g":
         acc = acc * GRAVITY
@@ -512,7 +516,7 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
         heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
         layout=layout,
         meta={"source": str(path), "imported_from": "csv", "units": units, "up": up, "sensor_frame": sensor_frame,
-              **_frames_comment(path, comments, comment_lines, ours and sensor_frame == "layout")},
+              "read_from": read_from, **_frames_comment(path, comments, comment_lines, ours and sensor_frame == "layout")},
         orientations=None if orientations is None else orientations.astype(np.float32),
         marker_names=marker_names,
         marker_positions=np.ascontiguousarray(table[:, marker_cols].reshape(len(t), -1, 3)) if marker_cols else None,
@@ -534,24 +538,31 @@ def _frames_comment(path, comments: dict, lines: dict, ours_in_layout: bool) -> 
 
 
 def _device_comments(path, comments: dict, lines: dict, units: str | None, up: str | None,
-                     ours: bool) -> tuple[str, str, str]:
-    """(units, up, sensor_frame) of a device CSV: the arguments where given, else its
-    `# units=`, `# up=`, `# sensor_frame=` comments, else the defaults (module
-    docstring). FormatError with the comment's line for a bad value."""
+                     ours: bool) -> tuple[str, str, str, dict]:
+    """(units, up, sensor_frame, read_from) of a device CSV: the arguments where given,
+    else its `# units=`, `# up=`, `# sensor_frame=` comments, else the defaults (module
+    docstring); read_from says which for each: "argument", "file" or "default".
+    FormatError with the comment's line for a bad value."""
+    read_from = {}
 
-    def comment(key: str, allowed: dict, default: str) -> str:
+    def setting(key: str, given: str | None, allowed: dict, default: str) -> str:
+        if given is not None:
+            read_from[key] = "argument"
+            return given
         if key not in comments:
+            read_from[key] = "default"
             return default
         value = comments[key].lower()
         if value not in allowed:
             expected = " or ".join(dict.fromkeys(allowed.values()))
             raise FormatError(path, f"bad {key} comment {comments[key]!r} (expected {expected})", line=lines[key])
+        read_from[key] = "file"
         return allowed[value]
 
-    units = units if units is not None else comment("units", _UNIT_NAMES, "m/s2")
-    up = up if up is not None else comment("up", {u: u for u in UPS}, "y")
-    sensor_frame = comment("sensor_frame", {f: f for f in SENSOR_FRAMES}, "layout" if ours else "device")
-    return units, up, sensor_frame
+    units = setting("units", units, _UNIT_NAMES, "m/s2")
+    up = setting("up", up, {u: u for u in UPS}, "y")
+    sensor_frame = setting("sensor_frame", None, {f: f for f in SENSOR_FRAMES}, "layout" if ours else "device")
+    return units, up, sensor_frame, read_from
 
 
 def sample_rate(path, rate_hz: float | None, comments: dict, t: np.ndarray) -> float:
@@ -646,8 +657,9 @@ def describe_recording(rec: Recording) -> dict:
     """What `graphsvc inspect` shows of a recording: {"samples", "sensors" (names),
     "channels" (e.g. "l_wrist.ax", ..., "ground_position.x", "ground_position.z",
     "heading"), "rate_hz", "duration_s", "has_ground_position", "has_heading",
-    "constraint_sets"} and, with markers, "markers" (names) and "markers_seen" (the
-    share of marker samples seen)."""
+    "constraint_sets"}; with markers, "markers" (names) and "markers_seen" (the
+    share of marker samples seen); for a device file (CSV, MVNX), "reading": how its
+    sensor frame, up axis and units were read (`reading_settings`)."""
     channels = [f"{n}.a{k}" for n in rec.sensor_names for k in _AXES] if rec.accelerations is not None else []
     if rec.orientations is not None:
         channels += [f"{n}.q{k}" for n in rec.sensor_names for k in _QUAT]
@@ -670,4 +682,24 @@ def describe_recording(rec: Recording) -> dict:
     if rec.marker_positions is not None:
         out["markers"] = list(rec.marker_names)
         out["markers_seen"] = round(float(np.isfinite(rec.marker_positions).all(axis=-1).mean()), 4)
+    reading = reading_settings(rec.meta)
+    if reading:
+        out["reading"] = reading
     return out
+
+
+# What an MVNX export fixes: readings in each device's frame, m/s², a Z-up world.
+_MVNX_SETTINGS = {"sensor_frame": "device", "up": "z", "units": "m/s2"}
+
+
+def reading_settings(meta: dict) -> dict:
+    """{setting: {"value", "from"}} for a device file's sensor_frame, up and units:
+    from "argument" (a flag), "file" (a CSV's header comment), "format" (what MVNX
+    fixes) or "default"; {} for a recording of another kind (a .rec, a marker file)."""
+    if meta.get("imported_from") == "mvnx":
+        return {k: {"value": v, "from": "format"} for k, v in _MVNX_SETTINGS.items()}
+    read_from = meta.get("read_from")
+    if meta.get("imported_from") != "csv" or not isinstance(read_from, dict):  # (or read before it was kept)
+        return {}
+    return {k: {"value": meta[k], "from": read_from[k]} for k in ("sensor_frame", "up", "units")
+            if k in meta and read_from.get(k) in ("argument", "file", "default")}  # fmt: skip

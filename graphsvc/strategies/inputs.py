@@ -3,7 +3,8 @@
 `prepare_input` checks what a recording carries against what the strategy needs and can
 use (`recording_inputs`, `check_inputs`: a missing input refused by name, the others
 listed as ignored), its sensors against the graph's layout (`check_layout`, one wording
-for the CLI and the service) and its constraints against the graph and the recording's
+for the CLI and the service; the graph's sensors in another order are put in the
+graph's, `in_sensor_order`) and its constraints against the graph and the recording's
 length, then resamples it to the graph's rate (`sensors.grid`): a `PreparedInput`, which
 is all a strategy's batch reconstruction reads.
 """
@@ -12,12 +13,13 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.sensors.layout import layout_from_dict, root_sensor
+from graphsvc.sensors.devices import DEVICES
+from graphsvc.sensors.layout import PRESETS, layout_from_dict, root_sensor
 from graphsvc.sensors.orientation import orientation_cue
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.anatomy import check_frames
@@ -95,12 +97,29 @@ def _names(names: list, most: int = 8) -> str:
 
 def layout_mismatch_message(layout_name: str, mine, theirs, order_matters: bool = True) -> str | None:
     """The line that refuses sensors `theirs` for a graph whose layout `layout_name`
-    has sensors `mine`, or None when they fit."""
+    has sensors `mine`, or None when they fit. Its advice: a device map where some of
+    `theirs` are no layout preset's sensors (a device's own names), else another graph."""
     what = layout_mismatch(mine, theirs, order_matters)
     if what is None:
         return None
-    return (f"the recording's sensors do not match the graph's layout {layout_name!r}: "
-            f"{what} (rebuild the graph or run `graphsvc relayout`)")  # fmt: skip
+    known = set(mine).union(*(p.sensor_names for p in PRESETS.values()))
+    if any(n not in known for n in theirs):
+        advice = f"give --device-map ({', '.join(DEVICES[:-1])}, {DEVICES[-1]} or a map file) to name them as the layout does"
+    else:
+        advice = "rebuild the graph or run `graphsvc relayout`"
+    return f"the recording's sensors do not match the graph's layout {layout_name!r}: {what} ({advice})"
+
+
+def in_sensor_order(rec: Recording, names) -> Recording:
+    """`rec` with its sensors in the order `names` gives, where they are the same
+    sensors in another order; else `rec` as it is (`check_layout` then says what does
+    not fit)."""
+    names = tuple(names)
+    if tuple(rec.sensor_names) == names or layout_mismatch(names, rec.sensor_names, order_matters=False) is not None:
+        return rec
+    cols = [rec.sensor_names.index(n) for n in names]
+    pick = lambda a: None if a is None else np.ascontiguousarray(a[:, cols])  # noqa: E731
+    return replace(rec, sensor_names=names, accelerations=pick(rec.accelerations), orientations=pick(rec.orientations))
 
 
 def check_layout(graph: MotionGraph, sensor_names) -> None:
@@ -158,6 +177,7 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
     have = recording_inputs(rec) | ({"constraints"} if constraints else set())
     ignored = check_inputs(strategy, have)
     if "accelerations" in strategy.uses:
+        rec = in_sensor_order(rec, graph.sensor_names)
         check_layout(graph, rec.sensor_names)
         check_frames(graph.params, rec.meta)
     constraints = check_constraints(constraints, graph) if "constraints" in strategy.uses else []

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from graphsvc.cli import main
+from graphsvc.motion.joints import CANONICAL
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.library import load_motion
 from graphsvc.pipeline import Options, Weights, synthesize_files
@@ -150,3 +151,43 @@ def test_evaluate_keeps_motions_and_writes_the_page(tmp_path, capsys):
     (tmp_path / "bare.json").write_text(json.dumps(result))
     assert main(["report", str(tmp_path / "bare.json"), "-o", str(tmp_path / "x.html")]) == 2
     assert "--keep-motions" in capsys.readouterr().err
+
+
+def test_a_truth_on_an_unknown_skeleton_takes_a_joint_map(files, tmp_path, capsys):
+    """A truth whose joints graphsvc does not know: its error charts are left out with
+    one note saying why; with --mapping they are there, and equal to those of the same
+    motion on the known skeleton."""
+    from dataclasses import replace
+
+    from graphsvc.motion.bvh import write_bvh
+
+    d, graph, truth = files
+    synthesize_files(graph, d / "kb.graph", d / "take.rec", tmp_path / "out.bvh", Options(weights=Weights(0.5, 1, 1)),
+                     report_path=tmp_path / "out.json")  # fmt: skip
+    sk = truth.skeleton
+    renamed = replace(truth, skeleton=replace(sk, names=tuple(f"Bone{i:02d}" for i in range(len(sk.names)))))
+    write_bvh(tmp_path / "odd.bvh", renamed, scale=100.0)
+    write_bvh(tmp_path / "known.bvh", truth, scale=100.0)
+    mapping = tmp_path / "odd.json"
+    mapping.write_text(json.dumps({n: f"Bone{i:02d}" for i, n in enumerate(sk.names) if n in CANONICAL}))
+
+    assert main(["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "a.html"), "--truth",
+                 str(tmp_path / "odd.bvh")]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("note: out: the error charts are left out")
+    assert "--mapping" in err
+    notes = []
+    without = load_document(tmp_path / "out.json", truth=tmp_path / "odd.bvh", notes=notes)
+    assert without["clips"][0]["errors"] is None and len(notes) == 1
+
+    assert main(["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "b.html"), "--truth",
+                 str(tmp_path / "odd.bvh"), "--mapping", str(mapping)]) == 0  # fmt: skip
+    assert capsys.readouterr().err == ""
+    mapped = load_document(tmp_path / "out.json", truth=tmp_path / "odd.bvh", truth_mapping=str(mapping))
+    known = load_document(tmp_path / "out.json", truth=tmp_path / "known.bvh")
+    errors = mapped["clips"][0]["errors"]
+    assert errors is not None and errors == known["clips"][0]["errors"]
+    assert len(errors["joint_err_cm"]) == mapped["clips"][0]["frames"]
+
+    assert main(["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "c.html"), "--mapping", str(mapping)]) == 2
+    assert "give --truth too" in capsys.readouterr().err

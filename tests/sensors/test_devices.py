@@ -14,7 +14,7 @@ import pytest
 from graphsvc.cli import main
 from graphsvc.errors import FormatError, InputError
 from graphsvc.motion import quat
-from graphsvc.sensors.devices import DEVICE_MAPS, apply_device_map, device_map, read_mvnx
+from graphsvc.sensors.devices import DEVICE_MAPS, apply_device_map, device_map, generic_key, read_mvnx
 from graphsvc.sensors.files import read_recording
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.recording import Recording, export_csv, import_csv
@@ -293,10 +293,117 @@ def test_builtin_xsens_maps_follow_the_presets():
     for layout, mapping in DEVICE_MAPS["xsens"].items():
         assert tuple(mapping.values()) == PRESETS[layout].sensor_names  # in the layout's order
         assert set(mapping) <= set(XSENS_FULL)
-    with pytest.raises(InputError, match="kelly6, wrists-ankles, right-wrist"):
+    with pytest.raises(InputError, match="wrists-ankles, kelly6, right-wrist, dip6"):
         device_map("xsens", "my-layout")
     with pytest.raises(InputError, match="not a built-in device"):
         device_map("vicon-imu", "kelly6")
+
+
+XSENS_SKELETON = ("Hips", "Spine", "Spine1", "Spine2", "Spine3", "Neck", "Head", "RightShoulder", "RightArm",
+                  "RightForeArm", "RightHand", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "RightUpLeg",
+                  "RightLeg", "RightFoot", "LeftUpLeg", "LeftLeg", "LeftFoot")  # fmt: skip
+XSENS_SEGMENTS_ALL = ("Pelvis", "L5", "L3", "T12", "T8", "Neck", "Head") + XSENS_FULL[3:]
+
+
+def test_builtin_maps_for_dip6():
+    assert device_map("xsens", "dip6") == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist", "LeftLowerLeg": "l_knee",
+                                           "RightLowerLeg": "r_knee", "Head": "head", "Pelvis": "pelvis"}  # fmt: skip
+    assert device_map("mvn", "dip6") == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist", "LeftLeg": "l_knee",
+                                         "RightLeg": "r_knee", "Head": "head", "Hips": "pelvis"}  # fmt: skip
+    assert device_map("generic", "dip6") == {"left_wrist": "l_wrist", "right_wrist": "r_wrist", "left_knee": "l_knee",
+                                             "right_knee": "r_knee", "head": "head", "pelvis": "pelvis"}  # fmt: skip
+    for device in DEVICE_MAPS:
+        for layout, mapping in DEVICE_MAPS[device].items():
+            assert tuple(mapping.values()) == PRESETS[layout].sensor_names
+
+
+def test_xsens_takes_the_naming_that_names_more_sensors():
+    # MVN segment names (an MVNX's sensors): Pelvis, T8, LowerLeg.
+    assert device_map("xsens", "kelly6", XSENS_SEGMENTS_ALL) == DEVICE_MAPS["xsens"]["kelly6"]
+    # MVN skeleton names (a BVH export's): Hips, Spine3, Leg; Head and LeftForeArm are in both.
+    assert device_map("xsens", "kelly6", XSENS_SKELETON) == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
+                                                             "LeftLeg": "l_shin", "RightLeg": "r_shin",
+                                                             "Hips": "lower_back", "Spine3": "chest"}  # fmt: skip
+    assert device_map("xsens", "dip6", XSENS_SKELETON) == device_map("mvn", "dip6")
+    # An upper-body take in skeleton names: the skeleton naming still names more (Hips, Spine3 against none).
+    upper = ("Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm")
+    assert device_map("xsens", "kelly6", upper) == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
+                                                    "Hips": "lower_back", "Spine3": "chest"}  # fmt: skip
+    with pytest.raises(InputError, match=re.escape("the mvn device map names none of the recording's sensors (S1, S2) "
+                                                   "for layout 'right-wrist' (it takes RightForeArm)")):
+        device_map("mvn", "right-wrist", ("S1", "S2"))
+    # mvn never reads segment names.
+    assert device_map("mvn", "dip6", XSENS_SEGMENTS_ALL) == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist",
+                                                             "Head": "head"}  # fmt: skip
+
+
+@pytest.mark.parametrize("name, key", [("left_wrist", "lwrist"), ("LeftWrist", "lwrist"), ("l-wrist", "lwrist"),
+                                       ("lwrist", "lwrist"), ("wrist_L", "lwrist"), ("wrist_left", "lwrist"),
+                                       ("Right Knee", "rknee"), ("RIGHT_LOWER_LEG", "rlowerleg"),
+                                       ("Lower-Back", "lowerback"), ("head", "head")])  # fmt: skip
+def test_generic_key(name, key):
+    assert generic_key(name) == key
+
+
+def test_generic_map_on_a_device_csv(tmp_path):
+    """A device CSV in everyday spellings through the generic map: each dip6 sensor takes
+    the first of its names the recording has (the knee sensor before a shin one), and a
+    sensor the layout has no place for stays unmapped."""
+    from graphsvc.pipeline import read_recording_file
+
+    names = ["Pelvis", "LWrist", "wrist_r", "left_shin", "Left_Knee", "right-knee", "HEAD", "chest"]
+    cols = ",".join(f"{n}_a{c}" for n in names for c in "xyz")
+    row = lambda t: ",".join([f"{t:g}"] + [f"{k + 0.5 * t:g}" for k in range(3 * len(names))])  # noqa: E731
+    path = tmp_path / "dev.csv"
+    path.write_text(f"# rate_hz=10\nt_s,{cols}\n" + "\n".join(row(t / 10) for t in range(4)) + "\n")
+    notes = []
+    rec = read_recording_file(path, device_map="generic", notes=notes, layout_name="dip6",
+                              sensor_names=PRESETS["dip6"].sensor_names)  # fmt: skip
+    assert rec.sensor_names == PRESETS["dip6"].sensor_names
+    assert rec.meta["device_sensors"] == {"l_wrist": "LWrist", "r_wrist": "wrist_r", "l_knee": "Left_Knee",
+                                          "r_knee": "right-knee", "head": "HEAD", "pelvis": "Pelvis"}  # fmt: skip
+    assert rec.meta["unmapped_sensors"] == ["left_shin", "chest"]
+    # columns follow their sensors: Left_Knee is the 5th device sensor, its x the 13th number
+    np.testing.assert_allclose(rec.accelerations[1, 2], [12.05, 13.05, 14.05], rtol=1e-6)
+    assert len(notes) == 1 and "own frame" in notes[0]  # all six found: no note of unmapped ones
+    # kelly6 from the same file: the shin sensor for l_shin, the knee for r_shin (no right shin), chest
+    notes = []
+    rec = read_recording_file(path, device_map="generic", notes=notes, layout_name="kelly6",
+                              sensor_names=PRESETS["kelly6"].sensor_names)  # fmt: skip
+    assert rec.meta["device_sensors"] == {"l_forearm": "LWrist", "r_forearm": "wrist_r", "l_shin": "left_shin",
+                                          "r_shin": "right-knee", "lower_back": "Pelvis", "chest": "chest"}  # fmt: skip
+
+
+@pytest.mark.parametrize("device", ["xsens", "mvn"])
+def test_xsens_and_mvn_maps_on_a_device_csv_in_skeleton_names(tmp_path, device):
+    """A CSV named as MVN's skeleton (a BVH export's joints): both maps take dip6's six
+    from it, each column following its sensor."""
+    from graphsvc.pipeline import read_recording_file
+
+    names = ["Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm", "LeftLeg", "RightLeg", "LeftUpLeg"]
+    cols = ",".join(f"{n}_a{c}" for n in names for c in "xyz")
+    path = tmp_path / "mvn.csv"
+    path.write_text(f"t_s,{cols}\n" + "\n".join(",".join([f"{t / 10:g}"] + [str(k + 100 * t) for k in range(24)])
+                                                for t in range(3)) + "\n")  # fmt: skip
+    rec = read_recording_file(path, device_map=device, layout_name="dip6", sensor_names=PRESETS["dip6"].sensor_names)
+    assert rec.meta["device_sensors"] == {"l_wrist": "LeftForeArm", "r_wrist": "RightForeArm", "l_knee": "LeftLeg",
+                                          "r_knee": "RightLeg", "head": "Head", "pelvis": "Hips"}  # fmt: skip
+    assert rec.meta["unmapped_sensors"] == ["Spine3", "LeftUpLeg"]
+    # l_knee is LeftLeg, the 6th sensor: columns 15–17; at t = 0.2 s each value is k + 200
+    np.testing.assert_array_equal(rec.accelerations[2, 2], np.float32([215, 216, 217]))
+
+
+def test_one_note_names_the_layout_sensors_left_unmapped(tmp_path):
+    from graphsvc.pipeline import read_recording_file
+
+    path = write_mvnx(tmp_path / "upper.mvnx", XSENS_UPPER, [normal(k, sensorAcceleration=np.zeros(33)) for k in range(3)])
+    notes = []
+    rec = read_recording_file(path, device_map="xsens", notes=notes, layout_name="dip6",
+                              sensor_names=PRESETS["dip6"].sensor_names)  # fmt: skip
+    assert rec.sensor_names == ("l_wrist", "r_wrist", "head", "pelvis")
+    mapped = [n for n in notes if n.startswith("device map")]
+    assert mapped == ["device map xsens: no sensor of the recording for l_knee, r_knee (unmapped: T8, RightShoulder, "
+                      "RightUpperArm, RightHand, LeftShoulder, LeftUpperArm, LeftHand)"]  # fmt: skip
 
 
 def test_map_files(tmp_path):
@@ -472,17 +579,22 @@ def test_cli_inspect_mvnx(tmp_path, capsys):
     assert code == 0 and info["samples"] == 6 and info["sensors"] == ["Pelvis", "RightForeArm"]
 
 
-@pytest.fixture
-def wrist_graph(tmp_path, capsys):
+def gliding_graph(folder, capsys, layout: str, *flags: str):
+    """A graph of the T-pose gliding 1 m over 60 frames, built for `layout`."""
     from graphsvc.motion.bvh import write_bvh
 
     m = still_motion(60)
     m.translations[:, 0, 2] = np.linspace(0, 1.0, 60)
-    write_bvh(tmp_path / "walk_demo_001.bvh", m, scale=100.0)
-    graph = tmp_path / "w.graph"
-    assert run(["build", str(tmp_path / "walk_demo_001.bvh"), "-o", str(graph), "--layout", "right-wrist",
-                "--quiet"], capsys)[0] == 0  # fmt: skip
+    write_bvh(folder / "walk_demo_001.bvh", m, scale=100.0)
+    graph = folder / f"{layout}.graph"
+    assert run(["build", str(folder / "walk_demo_001.bvh"), "-o", str(graph), "--layout", layout, "--quiet", *flags],
+               capsys)[0] == 0  # fmt: skip
     return graph
+
+
+@pytest.fixture
+def wrist_graph(tmp_path, capsys):
+    return gliding_graph(tmp_path, capsys, "right-wrist")
 
 
 def test_cli_synthesize_mvnx_with_device_map(tmp_path, wrist_graph, capsys):
@@ -504,6 +616,30 @@ def test_cli_synthesize_mvnx_with_device_map(tmp_path, wrist_graph, capsys):
     assert code == 2 and "unknown device map" in err and len(err.strip().splitlines()) == 1
 
 
+@pytest.fixture
+def dip6_graph(tmp_path, capsys):
+    return gliding_graph(tmp_path, capsys, "dip6", "--rate", "240")
+
+
+def test_real_mvnx_mapped_and_reconstructed_on_dip6(data_dir, dip6_graph, tmp_path, capsys):
+    """A real full-body MVNX take → the xsens map → dip6 → a reconstruction on a graph at
+    the take's 240 Hz: its 4 samples, at 0, 4, 8 and 12 ms (whole milliseconds), span
+    0.012 s, which holds the grid's 0, 1/240 and 2/240 s (3/240 s is past the end)."""
+    take = data_dir / "mvnx" / RAW_FILE
+    out, report = tmp_path / "take.bvh", tmp_path / "take.json"
+    code, stdout, err = run(["synthesize", str(dip6_graph), str(take), "--device-map", "xsens", "-o", str(out),
+                             "--report", str(report)], capsys)  # fmt: skip
+    assert code == 0, err
+    assert "from 3 samples (resampled from 240 Hz)" in stdout and "no sensor of the recording" not in err
+    r = json.loads(report.read_text())
+    assert r["samples"] == 3 and r["files"]["read"] == {"device_map": "xsens"}
+    rec = read_mvnx(take)
+    mapped = apply_device_map(rec, device_map("xsens", "dip6", rec.sensor_names))
+    assert mapped.sensor_names == PRESETS["dip6"].sensor_names
+    np.testing.assert_array_equal(mapped.accelerations[:, 2], rec.accelerations[:, rec.sensor_names.index("LeftLowerLeg")])
+    assert len(mapped.meta["unmapped_sensors"]) == 11
+
+
 def test_export_csv_keeps_a_device_recordings_frame(tmp_path):
     """A recording still in its devices' frames says so in the CSV it is exported to."""
     from graphsvc.sensors.recording import Recording, export_csv, import_csv
@@ -515,3 +651,86 @@ def test_export_csv_keeps_a_device_recordings_frame(tmp_path):
     export_csv(Recording(rate_hz=10.0, timestamps_s=np.arange(3) / 10.0, sensor_names=("a",),
                          accelerations=np.zeros((3, 1, 3), np.float32)), tmp_path / "l.csv")
     assert import_csv(tmp_path / "l.csv").meta["sensor_frame"] == "layout"
+
+
+@pytest.fixture
+def kelly6_csv(tmp_path, capsys):
+    """(a kelly6 graph of the gliding T-pose, a CSV of its clip's kelly6 readings)."""
+    graph = gliding_graph(tmp_path, capsys, "kelly6")
+    rec = tmp_path / "rec.csv"
+    assert run(["simulate", str(tmp_path / "walk_demo_001.bvh"), "--layout", "kelly6", "--noise", "default",
+                "-o", str(rec)], capsys)[0] == 0  # fmt: skip
+    return graph, rec
+
+
+def _with_sensors(rec: Recording, names, cols) -> Recording:
+    from dataclasses import replace
+
+    return replace(rec, sensor_names=tuple(names), accelerations=np.ascontiguousarray(rec.accelerations[:, cols]))
+
+
+def test_cli_csv_with_the_graphs_sensors_in_another_order(tmp_path, kelly6_csv, capsys):
+    """The same readings with their columns in another order reconstruct to the same
+    bytes: the recording is put in the graph's order."""
+    graph, ordered = kelly6_csv
+    rec = import_csv(ordered)
+    cols = [5, 3, 1, 0, 2, 4]
+    shuffled = tmp_path / "shuffled.csv"
+    export_csv(_with_sensors(rec, [rec.sensor_names[c] for c in cols], cols), shuffled)
+    assert import_csv(shuffled).sensor_names == ("chest", "r_shin", "r_forearm", "l_forearm", "l_shin", "lower_back")
+    outputs = []
+    for name, path in (("a", ordered), ("b", shuffled)):
+        out, report = tmp_path / f"{name}.bvh", tmp_path / f"{name}.json"
+        code, _, err = run(["synthesize", str(graph), str(path), "-o", str(out), "--report", str(report)], capsys)
+        assert code == 0, err
+        r = json.loads(report.read_text())
+        r.pop("files"), r.pop("timings_s"), r.pop("samples_per_s")
+        outputs.append((out.read_bytes(), r))
+    assert outputs[0][0] == outputs[1][0] and outputs[0][1] == outputs[1][1]
+
+
+def test_cli_csv_with_foreign_sensor_names_is_advised_a_device_map(tmp_path, kelly6_csv, capsys):
+    graph, ordered = kelly6_csv
+    rec = import_csv(ordered)
+    foreign = tmp_path / "foreign.csv"
+    export_csv(_with_sensors(rec, ["S1", "S2", "S3", "S4", "S5", "S6"], list(range(6))), foreign)
+    code, _, err = run(["synthesize", str(graph), str(foreign), "-o", str(tmp_path / "o.bvh")], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "not in the graph: S1, S2" in err and "--device-map (xsens, mvn, generic or a map file)" in err
+    assert "relayout" not in err
+    # A recording of another preset's sensors: another graph is the fix.
+    other = tmp_path / "other.csv"
+    export_csv(_with_sensors(rec, PRESETS["dip6"].sensor_names, list(range(6))), other)
+    code, _, err = run(["synthesize", str(graph), str(other), "-o", str(tmp_path / "o.bvh")], capsys)
+    assert code == 2 and "rebuild the graph or run `graphsvc relayout`" in err and "--device-map" not in err
+
+
+def test_cli_inspect_says_how_a_device_csv_was_read(tmp_path, capsys):
+    """The sensor frame, up axis and units, each with where it came from: a flag, the
+    file's header comment, or the default (MVNX: its format)."""
+    path = tmp_path / "d.csv"
+    path.write_text("# units=g\nt_s,LWrist_ax,LWrist_ay,LWrist_az\n0,0,0,1\n0.01,0,0,1\n")
+    code, out, _ = run(["inspect", str(path), "--up", "z"], capsys)
+    assert code == 0
+    assert out.splitlines()[-1] == "  read: sensor frame device (default), up z (--up), units g (file header)"
+    code, out, _ = run(["inspect", str(path), "--units", "m/s2", "--json"], capsys)
+    reading = json.loads(out)["recordings"][0]["reading"]
+    assert reading == {"sensor_frame": {"value": "device", "from": "default"}, "up": {"value": "y", "from": "default"},
+                       "units": {"value": "m/s2", "from": "argument"}}  # fmt: skip
+    path.write_text("# sensor_frame=layout\n# up=Z\nt_s,s_ax,s_ay,s_az\n0,0,0,1\n0.01,0,0,1\n")
+    code, out, _ = run(["inspect", str(path)], capsys)
+    assert out.splitlines()[-1] == "  read: sensor frame layout (file header), up z (file header), units m/s2 (default)"
+    mvnx = write_mvnx(tmp_path / "t.mvnx", ("Pelvis",), [normal(k, sensorAcceleration=[0, 0, G]) for k in range(3)])
+    code, out, _ = run(["inspect", str(mvnx)], capsys)
+    assert out.splitlines()[-1] == ("  read: sensor frame device (MVNX format), up z (MVNX format), "
+                                    "units m/s2 (MVNX format)")  # fmt: skip
+    rec = tmp_path / "r.rec"
+    from graphsvc.sensors.recording import save_recording
+
+    from dataclasses import replace
+
+    for meta in ({"simulated": True},  # a layout's recording
+                 {"imported_from": "csv", "units": "g", "up": "y", "sensor_frame": "device"}):  # not saying whence
+        save_recording(replace(_device_recording(("a",)), meta=meta), rec)
+        code, out, _ = run(["inspect", str(rec)], capsys)
+        assert code == 0 and "read:" not in out

@@ -69,3 +69,51 @@ def test_layout_on_skeleton_lacking_joints_is_refused(skeleton):
     small = Skeleton(names, np.array(parents), skeleton.offsets[keep], tuple(skeleton.channels[i] for i in keep), np.zeros(len(keep), bool))
     with pytest.raises(SkeletonError):
         place(PRESETS["right-wrist"], small)
+
+
+def test_dip6_places_six_sensors_on_the_tpose(skeleton):
+    """DIP-IMU's six: forearms near the wrists, shins just below the knees, head and
+    pelvis. Positions worked out from tests/conftest.py's T-pose offsets: the left
+    elbow at (0.46, 1.46, 0), wrist (0.71, 1.46, 0); the left knee at (0.10, 0.49, 0),
+    ankle (0.10, 0.07, 0); the head at (0, 1.61, 0); the pelvis at (0, 0.96, 0)."""
+    from graphsvc.motion.kinematics import forward_kinematics
+    from graphsvc.sensors.accelerometer import sensor_poses
+    from tests.conftest import still_motion
+
+    layout = PRESETS["dip6"]
+    assert layout.sensor_names == ("l_wrist", "r_wrist", "l_knee", "r_knee", "head", "pelvis")
+    assert load_layout("dip6") is layout
+    m = still_motion(1)
+    world_rot, world_pos = forward_kinematics(m.rotations, m.translations, skeleton.parents)
+    position, _ = sensor_poses(world_rot, world_pos, place(layout, skeleton))
+    expected = [(0.685, 1.46, 0.0), (-0.685, 1.46, 0.0), (0.10, 0.448, 0.0), (-0.10, 0.448, 0.0), (0.0, 1.61, 0.0),
+                (0.0, 0.96, 0.0)]  # fmt: skip
+    np.testing.assert_allclose(position[0], expected, atol=1e-12)
+    p = place(layout, skeleton)
+    assert [skeleton.names[j] for j in p.segment] == ["l_elbow", "r_elbow", "l_knee", "r_knee", "head", "pelvis"]
+    assert [skeleton.names[j] for j in p.toward] == ["l_wrist", "r_wrist", "l_ankle", "r_ankle", "neck", "spine"]
+
+
+def test_dip6_root_sensor_is_the_pelvis():
+    from graphsvc.sensors.layout import root_sensor
+
+    assert root_sensor(PRESETS["dip6"]) == 5 == PRESETS["dip6"].sensor_names.index("pelvis")
+
+
+def test_every_layout_help_lists_the_presets():
+    """--layout's help, wherever a command takes it, names every preset (from PRESETS)."""
+    import argparse
+
+    from graphsvc.cli import build_parser
+
+    def parsers(parser):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield sub
+                    yield from parsers(sub)
+
+    helps = [a.help for p in parsers(build_parser()) for a in p._actions if "--layout" in a.option_strings]
+    assert len(helps) >= 5  # build, simulate, evaluate, relayout, demo
+    for text in helps:
+        assert all(name in text for name in PRESETS), text

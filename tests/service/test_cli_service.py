@@ -302,3 +302,41 @@ def test_serve_answers_health_not_serving_while_its_graphs_load(graph_file, tmp_
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_client_commands_name_a_devices_sensors_with_a_device_map(served, graph, recording, tmp_path, capsys):
+    """A CSV whose sensors a device named (generic spellings, another order) is renamed
+    by --device-map before it is sent: the same motion as the recording named as the
+    layout does; without the map the server refuses it, advising one."""
+    from dataclasses import replace
+
+    from graphsvc.motion.bvh import bvh_text
+    from graphsvc.pipeline import reconstruct
+    from graphsvc.sensors.recording import export_csv, import_csv
+
+    _, address, token = served
+    common = ["--server", address, "--token-file", str(token)]
+    export_csv(recording, tmp_path / "named.csv")
+    device = {"l_forearm": "LeftForearm", "r_forearm": "forearm_r", "l_shin": "left-shin", "r_shin": "RShin",
+              "lower_back": "Lower_Back", "chest": "CHEST"}  # fmt: skip
+    cols = [5, 0, 3, 1, 4, 2]
+    renamed = replace(recording, sensor_names=tuple(device[recording.sensor_names[c]] for c in cols),
+                      accelerations=recording.accelerations[:, cols])  # fmt: skip
+    export_csv(renamed, tmp_path / "device.csv")
+    expected = bvh_text(reconstruct(graph, import_csv(tmp_path / "named.csv")).motion, scale=100.0)
+
+    out = tmp_path / "mapped.bvh"
+    assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common,
+                 "--device-map", "generic"]) == 0  # fmt: skip
+    assert f"wrote {out}: {recording.num_samples} frames" in capsys.readouterr().out
+    assert out.read_text() == expected
+    assert main(["client", "stream", str(tmp_path / "device.csv"), *common, "--speed", "30", "--quiet",
+                 "--device-map", "generic"]) == 0  # fmt: skip
+    assert f"{recording.num_samples} frames from {recording.num_samples} samples" in capsys.readouterr().out
+
+    assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common]) == 2
+    err = capsys.readouterr().err
+    assert "not in the graph: CHEST" in err and "--device-map (xsens, mvn, generic or a map file)" in err
+    assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common,
+                 "--device-map", "mvn"]) == 2  # (MVN names none of these)  # fmt: skip
+    assert "the mvn device map names none of the recording's sensors (CHEST, LeftForearm" in capsys.readouterr().err
