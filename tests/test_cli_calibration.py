@@ -107,3 +107,22 @@ def test_a_layout_frame_recording_is_not_calibrated(files, capsys):
     code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "free.rec"), "-o", str(d / "n.bvh"),
                         "--calibration", str(cal)], capsys)  # fmt: skip
     assert code == 2 and "already in the layout" in err
+
+
+def test_rest_times_count_from_the_recordings_first_sample(files, capsys):
+    """With --from the rest still reads in the recording's own seconds: it starts where
+    the span does (the pose is held from the first sample) and ends where the whole
+    take's rest ends."""
+    d = files
+    ends = []
+    for extra in ([], ["--from", "0.5"]):
+        cal = d / f"rest{len(extra)}.json"
+        code, out, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
+                              *extra, "-o", str(cal)], capsys)  # fmt: skip
+        assert code == 0, err
+        a, b = json.loads(cal.read_text())["rest_s"]
+        assert f"rest {a:.2f}–{b:.2f} s" in out
+        ends.append((a, b))
+    (a0, b0), (a1, b1) = ends
+    assert a0 == 0.0 and a1 == pytest.approx(0.5, abs=1e-6)
+    assert b1 == pytest.approx(b0, abs=0.05) and b0 > 1.4

@@ -333,7 +333,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     if unknown:
         raise InputError(f"pose {pose} does not say where gravity points for {', '.join(unknown)}")
     rate = float(reference.rate_hz) if reference is not None else float(rec.rate_hz)
+    t_first = float(rec.timestamps_s[0])
     rec = _span(rec, start_s, end_s)
+    offset = float(rec.timestamps_s[0]) - t_first  # (the span's start, from the recording's first sample)
     acc = np.asarray(readings_at_rate(rec, rate)[0], dtype=np.float64)
     orient = None
     if rec.orientations is not None:
@@ -421,7 +423,8 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
         # graph's, else the pose table's (anatomical).
         "sensor_frames": reference.sensor_frames if reference is not None else ANATOMICAL,
         "source": str(rec.meta.get("source", "")),
-        "rest_s": [round(rest[0] / rate, 4), round(rest[1] / rate, 4)],
+        # seconds from the recording's first sample (not from start_s)
+        "rest_s": [round(offset + rest[0] / rate, 4), round(offset + rest[1] / rate, 4)],
         "matched_samples": int(pairs),
         "sensors": {
             n: {"rotation_wxyz": [round(float(v), 9) for v in _canonical(quat.from_matrix(R[s]))],
