@@ -126,3 +126,33 @@ def test_rest_times_count_from_the_recordings_first_sample(files, capsys):
     (a0, b0), (a1, b1) = ends
     assert a0 == 0.0 and a1 == pytest.approx(0.5, abs=1e-6)
     assert b1 == pytest.approx(b0, abs=0.05) and b0 > 1.4
+
+
+def test_a_short_noisy_stand_after_other_motion_is_found(files, capsys, tmp_path):
+    """2.5 s of running, then a natural stance held 1.3 s (and eased into a punch) from
+    noisy devices (σ = 0.9 m/s² a axis: an RMS deviation of 1.56 m/s² at rest): with
+    `--from 2.5` the whole held stance is the rest, each window judged by its own
+    noise (a fixed bound of 1.5 m/s² refused it, or took a pause 7 s later)."""
+    from dataclasses import replace
+
+    from graphsvc.motion.calibration_pose import with_calibration_pose
+
+    kb = generate_knowledge_base(seed=3, minutes=1.0)
+    clip = lambda name: next(m for m in kb if m.name.startswith(name))  # noqa: E731
+    noise = parse_noise("real,sigma=0.9,mount=30")
+    before = simulate_recording(clip("run"), LAYOUT, noise, seed=0)
+    take = simulate_recording(with_calibration_pose(clip("punch"), "stand", 1.8), LAYOUT, noise, seed=0)
+    n = int(round(2.5 * before.rate_hz))
+    cat = lambda a, b: np.concatenate([a[:n], b])  # noqa: E731
+    rec = replace(take, timestamps_s=np.arange(n + take.timestamps_s.size) / take.rate_hz,
+                  accelerations=cat(before.accelerations, take.accelerations),
+                  orientations=cat(before.orientations, take.orientations),
+                  ground_position=cat(before.ground_position, take.ground_position),
+                  heading=cat(before.heading, take.heading))  # fmt: skip
+    save_recording(rec, tmp_path / "stand.rec")
+    cal = tmp_path / "stand.json"
+    code, out, err = run(["calibrate", str(tmp_path / "stand.rec"), "--graph", str(files / "g.graph"), "--pose", "stand",
+                          "--from", "2.5", "-o", str(cal)], capsys)  # fmt: skip
+    assert code == 0, err
+    a, b = json.loads(cal.read_text())["rest_s"]
+    assert a == pytest.approx(2.5, abs=1e-6) and b >= 2.5 + 1.3 - 0.05, (a, b)

@@ -6,9 +6,10 @@ A device frame is D(t) = S(t) ⊗ M (S the layout's sensor frame in the world, M
 mounting), so a device reads M⁻¹·(what the layout's sensor reads). Calibration
 estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device ⊗ R⁻¹.
 
-1. **Rest** (`find_rest`): the first stretch of ≥ 0.5 s where every sensor that is ever
-   still is (near-constant readings, |a| ≈ g); a sensor never still (an arm moving from
-   the first sample) gets its whole rotation from the motion. The mean reading (or,
+1. **Rest** (`find_rest`): the first stretch of ≥ 0.5 s where the most sensors are
+   still at once (readings within their own window's noise of their mean, |a| ≈ g); a
+   sensor not still there (an arm moving from the first sample) gets its whole rotation
+   from the motion. The mean reading (or,
    with orientation output, the mean of the device frame's view of the world's
    vertical, D(t)⁻¹·ŷ, which the yaw drift leaves alone and the accelerometer's bias
    does not touch) is gravity's direction in the device frame; `POSE_READINGS` gives it
@@ -65,8 +66,10 @@ VERSION = 1
 POSES = ("npose", "tpose", "stand")
 REST_MIN_S = 0.5
 REST_NORM_TOL = 1.0  # m/s²: | |mean| − g | at rest
+MEDIAN_ABS_NORMAL = 0.6744897501960817  # the median of |x| for x ~ N(0, 1)
+REST_NOISE_RATIO = 1.5  # a still window's RMS deviation from its mean, at most × its own noise
 REST_DEV_MIN = 0.3  # m/s²: RMS deviation from the window's mean always allowed at rest
-REST_DEV_MAX = 1.5  # m/s²: … and never more (per-axis noise σ up to about 0.85 m/s²)
+REST_DEV_MAX = 3.0  # m/s²: … and never more (per-axis noise σ up to about 1.2 m/s²)
 WINDOW_S = 1.0  # query window
 STRIDE_S = 0.5
 MAX_MOTION_S = 30.0  # of the take matched, from the rest's start
@@ -146,41 +149,55 @@ def wahba(device: np.ndarray, layout: np.ndarray, weight: np.ndarray) -> np.ndar
 # ------------------------------------------------------------------ rest
 
 
-def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> tuple[int, int, np.ndarray] | None:
-    """The first still stretch of ≥ min_s seconds in (T, S, 3) readings: (start, stop,
-    still (S,) bool). A sensor is still over a window when its RMS deviation from the
-    window's mean is within its tolerance (twice its stillest window's deviation — its
-    own noise — clamped to [REST_DEV_MIN, REST_DEV_MAX]) and its mean's norm within
-    REST_NORM_TOL of g. The stretch is the first run of windows where every sensor that
-    is ever still is; sensors never still (an arm moving from the first sample) are
-    False in `still`. None when no sensor is ever still."""
+def noise_variance(diffs: np.ndarray) -> np.ndarray:
+    """(...) the white noise's variance a axis, from its sample-to-sample differences
+    (..., 3, n): σ² = (median |d| / MEDIAN_ABS_NORMAL)² / 2 a axis, averaged over the
+    axes — a slow drift or a single step hardly moves it, as it would a deviation."""
+    return np.mean((np.median(np.abs(diffs), axis=-1) / MEDIAN_ABS_NORMAL) ** 2, axis=-1) / 2.0
+
+
+def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> np.ndarray | None:
+    """Each sensor's rest in (T, S, 3) readings: (S, 2) int [start, stop) samples, (−1,
+    −1) for a sensor without one; None when no sensor is ever still.
+
+    A sensor is still over a window of min_s seconds when its RMS deviation from the
+    window's mean is within REST_NOISE_RATIO × the window's own noise (`noise_variance`
+    of its sample-to-sample differences: smooth motion and a single step hardly raise
+    it), clamped to [REST_DEV_MIN, REST_DEV_MAX], and the mean's norm
+    within REST_NORM_TOL of g. The pose is the first window where the most sensors are
+    still at once, for as long as all of them are (each judged by its own windows'
+    noise); a sensor not still there has no rest (it moved during the pose, or never
+    stood still)."""
     T, S = acc.shape[:2]
-    W = max(2, int(round(min_s * rate_hz)))
+    W = max(3, int(round(min_s * rate_hz)))
+    out = np.full((S, 2), -1, dtype=np.int64)
     if T < W:
         return None
     a = np.asarray(acc, dtype=np.float64)
     bad = ~np.isfinite(a).all(axis=2)  # (T, S)
     a = np.where(np.isfinite(a), a, 0.0)
-    c1 = np.concatenate([np.zeros((1, S, 3)), np.cumsum(a, axis=0)])
-    c2 = np.concatenate([np.zeros((1, S)), np.cumsum(np.sum(a * a, axis=-1), axis=0)])
-    cb = np.concatenate([np.zeros((1, S)), np.cumsum(bad, axis=0)])
+    zero = lambda x: np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])  # noqa: E731
+    c1, c2, cb = zero(a), zero(np.sum(a * a, axis=-1)), zero(bad.astype(np.float64))
     mean = (c1[W:] - c1[:-W]) / W  # (K, S, 3)
     dev = np.sqrt(np.maximum((c2[W:] - c2[:-W]) / W - np.sum(mean * mean, axis=-1), 0.0))  # (K, S)
+    noise = np.empty_like(dev)
+    for s in range(S):  # each window's W − 1 differences
+        d = np.lib.stride_tricks.sliding_window_view(np.diff(a[:, s], axis=0), W - 1, axis=0)  # (K, 3, W−1)
+        noise[:, s] = np.sqrt(3.0 * noise_variance(d))
     usable = (np.abs(np.linalg.norm(mean, axis=-1) - GRAVITY) < REST_NORM_TOL) & (cb[W:] == cb[:-W])
-    floor = np.where(usable, dev, np.inf).min(axis=0)
-    tol = np.clip(2.0 * floor, REST_DEV_MIN, REST_DEV_MAX)
-    still = usable & (dev <= tol[None])
-    ever = still.any(axis=0)
-    if not ever.any():
+    still = usable & (dev <= np.clip(REST_NOISE_RATIO * noise, REST_DEV_MIN, REST_DEV_MAX))
+    count = still.sum(axis=1)
+    if count.max() == 0:
         return None
-    common = still[:, ever].all(axis=1)
-    if not common.any():
-        return None
-    i = int(np.argmax(common))
-    j = i
-    while j + 1 < common.size and common[j + 1]:
+    k = int(np.argmax(count))  # the pose: the first window where the most sensors are still at once
+    posed = still[k]
+    i = j = k
+    while i > 0 and still[i - 1, posed].all():
+        i -= 1
+    while j + 1 < still.shape[0] and still[j + 1, posed].all():
         j += 1
-    return i, j + W, ever
+    out[posed] = (i, j + W)
+    return out
 
 
 # ------------------------------------------------------------------ matching a reference's readings
@@ -276,12 +293,20 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
     return [seg[n] for n in names]
 
 
-def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rest: tuple[int, int]) -> tuple[np.ndarray, str]:
-    a, b = rest
-    if orient is not None and np.isfinite(orient[a:b]).all():
-        up = world_vertical(quat.normalize(np.asarray(orient[a:b], dtype=np.float64)))
-        return _unit(up.mean(axis=0)), "orientation"
-    return _unit(np.nanmean(np.asarray(acc[a:b], dtype=np.float64), axis=0)), "acceleration"
+def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(S, 3) gravity's direction in each device frame over its own rest (rests (S, 2);
+    a sensor without one: zero) and where it came from, per sensor."""
+    up, source = np.zeros((rests.shape[0], 3)), []
+    for s, (a, b) in enumerate(rests):
+        if a < 0:
+            source.append("")
+        elif orient is not None and np.isfinite(orient[a:b, s]).all():
+            up[s] = _unit(world_vertical(quat.normalize(np.asarray(orient[a:b, s], dtype=np.float64))).mean(axis=0))
+            source.append("orientation")
+        else:
+            up[s] = _unit(np.nanmean(np.asarray(acc[a:b, s], dtype=np.float64), axis=0))
+            source.append("acceleration")
+    return up, source
 
 
 @dataclass(frozen=True)
@@ -340,12 +365,13 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     orient = None
     if rec.orientations is not None:
         orient = _orientations_at(rec, rate)
-    rest = find_rest(acc, rate)
-    if rest is None:
+    rests = find_rest(acc, rate)
+    if rests is None:
         raise InputError(f"no still stretch of ≥ {REST_MIN_S:g} s (every sensor steady, |a| ≈ g) in the recording: "
                          "a calibration take starts with the performer standing still in the pose")  # fmt: skip
-    r0, r1, has_rest = rest
-    up_dev, rest_source = _rest_up_device(acc, orient, (r0, r1))
+    has_rest = rests[:, 0] >= 0
+    r0, r1 = (int(v) for v in rests[np.argmax(has_rest)])
+    up_dev, rest_source = _rest_up_device(acc, orient, rests)
     up_lay = _unit(np.array([table[s] for s in segments], dtype=np.float64))
     if reference is None:
         raise InputError(f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
@@ -353,8 +379,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     S = len(names)
     R0 = np.stack([_between(up_dev[s], up_lay[s]) if has_rest[s] else np.eye(3) for s in range(S)])
     R = R0.copy()
-    still = np.asarray(acc[r0:r1], dtype=np.float64)
-    noise_var = np.mean(np.sum((still - still.mean(axis=0)) ** 2, axis=-1), axis=0) / 3.0  # (S,) per axis
+    noise_var = np.zeros(S)  # per axis, over each sensor's own rest
+    for s in np.flatnonzero(has_rest):
+        noise_var[s] = noise_variance(np.diff(np.asarray(acc[rests[s, 0]:rests[s, 1], s], dtype=np.float64), axis=0).T)
     stream, runs = reference.readings, reference.runs
     cols = [list(reference.sensor_names).index(n) for n in names]
     stream = np.ascontiguousarray(stream[:, cols])
@@ -411,8 +438,8 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
             residual[s] = math.degrees(math.sqrt(np.average(np.arccos(np.clip(cosang, -1, 1)) ** 2, weights=w_s)))
         pairs = idx_q.size
     rest = (r0, r1)
-    method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source}) + graph") if seen[s]
-              else f"rest ({rest_source}) only: the motion hardly turned it, no rotation about gravity"
+    method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source[s]}) + graph") if seen[s]
+              else f"rest ({rest_source[s]}) only: the motion hardly turned it, no rotation about gravity"
               for s in range(S)]  # fmt: skip
     return {
         "format": FORMAT,

@@ -91,22 +91,45 @@ def test_the_pose_table_reads_plus_one_g_and_holds_every_canonical_segment():
     assert POSE_READINGS["tpose"]["l_knee"] == POSE_READINGS["npose"]["l_knee"]
 
 
-def test_find_rest_finds_the_first_still_stretch_and_the_sensors_never_still():
+def test_find_rest_finds_the_pose_and_the_sensors_not_still_in_it():
     rng = np.random.default_rng(0)
     rate, T = 30.0, 150
-    acc = np.zeros((T, 2, 3))
+    acc = np.zeros((T, 3, 3))
     acc[:] = (0.0, 9.81, 0.0)
     acc += rng.normal(0.0, 0.05, acc.shape)
     t = np.arange(T) / rate
     acc[:12, 0, 0] += 3.0  # moved off for 0.4 s
     acc[60:, 0, 0] += 4.0 * np.sin(7 * t[60:])  # still 0.4–2.0 s, then moving
     acc[:, 1, 2] += 5.0 * np.sin(12 * t)  # never still
-    start, stop, still = find_rest(acc, rate)
-    assert still.tolist() == [True, False]
-    assert 12 <= start <= 14 and 58 <= stop <= 61
-    assert find_rest(acc[:, 1:], rate) is None
+    acc[:30, 2, 0] += 4.0 * np.sin(7 * t[:30])  # still from 1.0 s on
+    # The pose: sensors 0 and 2 both still over samples 30–60 (0 alone is still before).
+    rests = find_rest(acc, rate)
+    assert rests[1].tolist() == [-1, -1]
+    assert rests[0].tolist() == rests[2].tolist() and 30 <= rests[0, 0] <= 32 and 58 <= rests[0, 1] <= 61
+    assert find_rest(acc[:, 1:2], rate) is None
+    late = acc[:, [0, 2]].copy()
+    late[:46, 1, 0] += 4.0 * np.sin(7 * t[:46])  # still from 46 on: never with sensor 0 for 0.5 s
+    rests = find_rest(late, rate)
+    assert 12 <= rests[0, 0] <= 14 and rests[1].tolist() == [-1, -1]  # (the first of the most still at once)
     acc[:, 0] *= 1.5  # not 1 g: not at rest
     assert find_rest(acc[:, :1], rate) is None
+
+
+def test_each_window_is_judged_by_its_own_noise():
+    """A sensor noisy while held still (σ = 0.9 m/s² a axis: RMS deviation 1.56 m/s²),
+    then moving, then holding one value (a device repeating its last reading): its rest
+    is the still start, not the frozen stretch — the frozen stretch's zero noise does not
+    set the tolerance elsewhere, nor does a fixed bound refuse the noisy rest."""
+    rng = np.random.default_rng(4)
+    rate, T = 30.0, 150
+    t = np.arange(T) / rate
+    acc = np.zeros((T, 1, 3))
+    acc[:] = (0.0, 9.81, 0.0)
+    acc[:90] += rng.normal(0.0, 0.9, (90, 1, 3))
+    acc[36:90, 0, 0] += 6.0 * np.sin(5 * t[36:90])
+    acc[90:] = (0.2, 9.8, 0.1)  # frozen from 3 s
+    rests = find_rest(acc, rate)
+    assert rests[0, 0] == 0 and 36 <= rests[0, 1] <= 45, rests  # (moving from sample 36)
 
 
 def test_wahba_matches_scipy_align_vectors():
