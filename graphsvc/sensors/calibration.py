@@ -27,7 +27,9 @@ estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device �
 3. **Refinement** (`wahba`): for `stand` and sensors without a rest, all three degrees
    of freedom fitted (SVD) over the matched sample pairs and the rest's gravity pair
    (weighted `REST_WEIGHT`); for `npose`/`tpose` only the rotation about gravity, in
-   closed form over every pair (the pose fixes the tilt). Steps 2–3 run `ITERATIONS`
+   closed form over every pair (the pose fixes the tilt) — but a T-pose fixes only that
+   an arm's bone is level, not its roll about the bone: arm sensors get all three (SVD)
+   with a light rest term keeping the bone level (`_level_fit`), and one more round. Steps 2–3 run `ITERATIONS`
    times, each from the last estimate. With orientation output the fits also pair the
    vertical each device frame saw, D(t)⁻¹·ŷ (free of the yaw drift and of linear
    acceleration), with the matched graph frames' (`Reference.verticals`, FK of the poses
@@ -84,6 +86,8 @@ ITERATIONS = 2
 SEEN_RATIO = 4.0
 MIN_NOISE_ENERGY = 0.25
 REST_WEIGHT = {"npose": 1.0, "tpose": 1.0, "stand": 0.05}  # × the matched pairs' total weight
+LEVEL_WEIGHT = 0.1  # a T-pose arm's level bone, × the matched pairs' total weight
+LEVEL_STEPS = 4
 
 # The reading at rest (m/s², the layout's sensor frame: X along the bone from the
 # segment's joint toward its `toward` joint; in the N-pose and T-pose Z points forward,
@@ -91,6 +95,7 @@ REST_WEIGHT = {"npose": 1.0, "tpose": 1.0, "stand": 0.05}  # × the matched pair
 _LIMBS = ("shoulder", "elbow", "wrist", "hip", "knee")
 _TRUNK = ("pelvis", "spine", "chest", "neck", "head")
 _FEET = ("ankle", "toe")
+_ARMS = ("shoulder", "elbow", "wrist")
 
 
 def _pose_table() -> dict[str, dict[str, tuple[float, float, float]]]:
@@ -379,6 +384,10 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     S = len(names)
     R0 = np.stack([_between(up_dev[s], up_lay[s]) if has_rest[s] else np.eye(3) for s in range(S)])
     R = R0.copy()
+    # A T-pose says only that an arm's bone (the sensor's X) is level; how far it is
+    # rolled about itself is the performer's: the table's Y-up is a first guess, the
+    # motion fixes the rest (`_level_fit`).
+    rolled = has_rest & np.array([pose == "tpose" and seg[2:] in _ARMS for seg in segments])
     noise_var = np.zeros(S)  # per axis, over each sensor's own rest
     for s in np.flatnonzero(has_rest):
         noise_var[s] = noise_variance(np.diff(np.asarray(acc[rests[s, 0]:rests[s, 1], s], dtype=np.float64), axis=0).T)
@@ -400,7 +409,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     seen = ~has_rest | (perp / np.maximum(2.0 * noise_var, MIN_NOISE_ENERGY) >= SEEN_RATIO)
     residual = np.zeros(S)
     pairs = 0
-    for _ in range(ITERATIONS):
+    for it in range(ITERATIONS + int(rolled.any())):
+        if it:  # (the rolled sensors' gravity as the last fit put it)
+            up_lay[rolled] = _unit(np.einsum("sij,sj->si", R[rolled], up_dev[rolled]))
         turned = np.einsum("sij,tsj->tsi", R, moving)
         matches = match_windows(turned, stream, runs, up_lay, window, stride)
         if not matches:
@@ -427,6 +438,8 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
             if not seen[s]:  # the motion barely turns it off gravity's axis: its twist is unseen,
                 # its tilt the pose's, or for a natural stance the matched graph poses' (shortest arcs)
                 R[s] = R0[s] if pose != "stand" else _between(w_s @ dev, w_s @ lay)
+            elif rolled[s]:
+                R[s] = _level_fit(R[s], dev, lay, w_s, up_dev[s], LEVEL_WEIGHT * w_s.sum())
             elif pose == "stand" or not has_rest[s]:
                 rest_w = REST_WEIGHT[pose] * w_s.sum() * has_rest[s]
                 R[s] = wahba(np.vstack([dev, up_dev[s] * GRAVITY]), np.vstack([lay, up_lay[s] * GRAVITY]),
@@ -474,6 +487,22 @@ def _robust_angle(sums: np.ndarray, weight: np.ndarray) -> np.ndarray:
     keep = np.abs(np.angle(np.exp(1j * (own - theta[None])))) <= math.radians(OUTLIER_DEG)
     kept = (sums * weight[:, None] * keep).sum(axis=0)
     return np.where(keep.any(axis=0), np.angle(kept), theta)
+
+
+def _level_fit(R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, up: np.ndarray,
+               rest_w: float) -> np.ndarray:  # fmt: skip
+    """All three degrees of freedom (Wahba) over the pairs, and a rest term of weight
+    rest_w pairing the device's gravity `up` with the nearest direction that keeps the
+    bone (the layout's X) level: alternately that direction from the last R, R from it,
+    LEVEL_STEPS times from R."""
+    bone = np.array([1.0, 0.0, 0.0])
+    for _ in range(LEVEL_STEPS):
+        target = R @ up
+        target = target - (target @ bone) * bone
+        if np.linalg.norm(target) < 1e-9:  # (gravity along the bone: no level direction is nearer)
+            break
+        R = wahba(np.vstack([dev, up * GRAVITY]), np.vstack([lay, _unit(target) * GRAVITY]), np.append(weight, rest_w))
+    return R
 
 
 def _about_only(R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, u: np.ndarray) -> np.ndarray:

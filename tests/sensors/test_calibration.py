@@ -208,8 +208,10 @@ def test_a_t_pose_take_calibrates_sensors_in_anatomical_frames(kb):
     rest = rec.accelerations[5].astype(float)  # (the T-pose's readings without the mounting:)
     np.testing.assert_allclose(quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
                                [POSE_READINGS["tpose"][s.segment] for s in layout.sensors], atol=1e-3)  # fmt: skip
+    # (The arms' roll about their bone comes from the motion, not the table, even here
+    # where the table's is the truth: 2.0° and 1.4°, the shins 0.03°.)
     err = _errors(calibrate(rec, "tpose", g), seed, layout.sensor_names, 90.0)
-    assert err.max() < 2.0, err
+    assert err.max() < 3.0 and err[2:].max() < 0.1, err
 
 
 def test_orientation_output_pairs_gravity_free_of_linear_acceleration(kb, graph):
@@ -324,3 +326,59 @@ def test_a_calibration_carries_its_graphs_sensor_frame_convention(kb, graph):
     check_frames(graph.params, out.meta)
     with pytest.raises(InputError, match="rest-pose"):
         check_frames({}, out.meta)  # a graph built before anatomical frames
+
+
+# ---------------------------------------------------------------- a calibration pose before a clip
+
+KELLY6 = load_layout("kelly6")
+
+
+@pytest.fixture(scope="module")
+def graph6(kb):
+    g, _ = build_graph(kb, BuildOptions(layout=KELLY6, progress=False))
+    return g
+
+
+def _arms_lowered(monkeypatch, degrees: float) -> None:
+    """`with_calibration_pose`'s T-pose with both upper arms turned `degrees` down about
+    the performer's forward axis (negative: up)."""
+    import graphsvc.motion.calibration_pose as cp
+    from graphsvc.motion.joints import joint_map
+    from graphsvc.motion.kinematics import forward_kinematics
+
+    made = cp.calibration_frame
+
+    def frame(motion, pose, mapping=None):
+        rot, trans = made(motion, pose, mapping)
+        table, parents = joint_map(motion.skeleton, mapping), motion.skeleton.parents
+        world = forward_kinematics(rot[None], trans[None], parents)
+        left = world[1][0, table["l_hip"]] - world[1][0, table["r_hip"]]
+        left[1] = 0.0
+        forward = np.cross(left / np.linalg.norm(left), [0.0, 1.0, 0.0])
+        for side, sign in (("l_", -1.0), ("r_", 1.0)):
+            j = table[side + "shoulder"]
+            turn = quat.from_axis_angle(forward, np.float64(np.radians(sign * degrees)))
+            rot[j] = quat.mul(quat.conjugate(world[0][0, parents[j]]), quat.mul(turn, world[0][0, j]))
+        return rot, trans
+
+    monkeypatch.setattr(cp, "calibration_frame", frame)
+
+
+@pytest.mark.parametrize("pose, lowered, bound", [("npose", 0.0, 2.0), ("tpose", 0.0, 3.0), ("tpose", 15.0, 3.0)])
+def test_a_pose_before_the_clip_calibrates_every_sensor(kb, graph6, monkeypatch, pose, lowered, bound):
+    """`with_calibration_pose` before the punch clip, every sensor mounted up to 30° off,
+    the default noise without its misalignment. A T-pose says only that the arms are
+    level: the forearms' roll about their bone is the first frame's (about 27° from the
+    table's Y-up here), which the motion fixes — as it does when the arms are 15° below
+    level (the table's assumption gave 27° and 30° of error; measured: 1.8° and 1.8° the
+    largest (the shins'; the forearms 0.9° and 1.5°), the N-pose 1.3°)."""
+    from graphsvc.motion.calibration_pose import with_calibration_pose
+
+    if lowered:
+        _arms_lowered(monkeypatch, lowered)
+    seed = 1
+    take = with_calibration_pose(_clip(kb, "punch"), pose, 2.0)
+    rec = simulate_recording(take, KELLY6, parse_noise("default,misalign=0,mount=30"), seed=seed)
+    cal = calibrate(rec, pose, graph6)
+    err = _errors(cal, seed, KELLY6.sensor_names, 30.0)
+    assert err.max() < bound, dict(zip(KELLY6.sensor_names, err.round(2)))
