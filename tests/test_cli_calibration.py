@@ -156,3 +156,20 @@ def test_a_short_noisy_stand_after_other_motion_is_found(files, capsys, tmp_path
     assert code == 0, err
     a, b = json.loads(cal.read_text())["rest_s"]
     assert a == pytest.approx(2.5, abs=1e-6) and b >= 2.5 + 1.3 - 0.05, (a, b)
+
+
+def test_an_untrustworthy_calibration_exits_2_unless_forced(files, capsys, tmp_path):
+    from graphsvc.sensors.files import read_recording
+    from tests.sensors.test_calibration import _wobbled
+
+    save_recording(_wobbled(read_recording(files / "take.rec"), 1), tmp_path / "wobbly.rec")
+    cal = tmp_path / "cal.json"
+    argv = ["calibrate", str(tmp_path / "wobbly.rec"), "--graph", str(files / "g.graph"), "--pose", "npose", "-o", str(cal)]
+    code, out, err = run(argv, capsys)
+    assert code == 2 and not cal.exists() and out == ""
+    assert err.strip().splitlines() == ["graphsvc: error: calibration not to be trusted: r_wrist (moved during the pose) "
+                                        "(--force writes it anyway)"]  # fmt: skip
+    code, out, err = run(argv + ["--force"], capsys)
+    assert code == 0 and json.loads(cal.read_text())["problems"] == ["r_wrist (moved during the pose)"]
+    assert err.strip().splitlines() == ["graphsvc: warning: calibration not to be trusted: r_wrist (moved during the pose)"]
+    assert "  r_wrist: mounting" in out and "residual" in out

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
@@ -41,6 +42,7 @@ def _cmd_synthesize(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
+    from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate
     from graphsvc.sensors.calibration import save_calibration
     from graphsvc.sensors.files import read_recording
@@ -60,7 +62,13 @@ def _cmd_calibrate(args) -> int:
         layout_name = (graph.layout if graph is not None else rec.layout or {}).get("name")
         rec = apply_device_map(rec, device_map(args.device_map, layout_name),
                                order=graph.sensor_names if graph is not None else None)  # fmt: skip
-    cal = calibrate(rec, args.pose, graph, args.start, args.end)
+    warning = None
+    try:
+        cal = calibrate(rec, args.pose, graph, args.start, args.end)
+    except CalibrationQualityError as exc:
+        if not args.force:
+            raise CalibrationQualityError(f"{exc} (--force writes it anyway)", exc.calibration) from None
+        cal, warning = exc.calibration, str(exc)
     cal["source"] = str(Path(args.recording))
     save_calibration(cal, out)
     a, b = cal["rest_s"]
@@ -69,6 +77,8 @@ def _cmd_calibrate(args) -> int:
     for name, item in cal["sensors"].items():
         angle = 2.0 * math.degrees(math.acos(min(1.0, abs(item["rotation_wxyz"][0]))))
         print(f"  {name}: mounting {angle:.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
+    if warning:
+        print(f"graphsvc: warning: {warning}", file=sys.stderr)
     return 0
 
 
@@ -116,6 +126,10 @@ def add_calibrate(sub) -> None:
                    help="use the recording from S seconds (default: its start)")
     p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds (default: its end)")
     add_input_file_flags(p)
+    p.add_argument("--force", action="store_true",
+                   help="write the calibration even when it names sensors not to be trusted (a residual over 25°, moved "
+                        "during the pose, gravity from acceleration and orientation over 10° apart), with a warning "
+                        "(default: refuse, exit 2)")  # fmt: skip
     p.add_argument("-o", "--output", required=True, metavar="CAL.json", type=PATH, help="the calibration to write (.json)")
     p.set_defaults(run=_cmd_calibrate)
 

@@ -56,7 +56,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import CalibrationQualityError, FormatError, InputError
 from graphsvc.fileio import read_json_file, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
@@ -88,6 +88,11 @@ MIN_NOISE_ENERGY = 0.25
 REST_WEIGHT = {"npose": 1.0, "tpose": 1.0, "stand": 0.05}  # × the matched pairs' total weight
 LEVEL_WEIGHT = 0.1  # a T-pose arm's level bone, × the matched pairs' total weight
 LEVEL_STEPS = 4
+# Quality (`quality_problems`): a sensor is named when its residual exceeds MAX_RESIDUAL_DEG,
+# it moved during the pose, or its gravity over the rest from the accelerometer and from
+# the orientation output are more than MAX_GRAVITY_GAP_DEG apart.
+MAX_RESIDUAL_DEG = 25.0
+MAX_GRAVITY_GAP_DEG = 10.0
 
 # The reading at rest (m/s², the layout's sensor frame: X along the bone from the
 # segment's joint toward its `toward` joint; in the N-pose and T-pose Z points forward,
@@ -298,6 +303,35 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
     return [seg[n] for n in names]
 
 
+def gravity_gap_deg(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> np.ndarray:
+    """(S,) degrees between gravity's direction over each sensor's rest from its mean
+    reading and from its orientation output (the mean of D(t)⁻¹·ŷ); NaN without a rest
+    or without orientations there."""
+    out = np.full(rests.shape[0], np.nan)
+    for s, (a, b) in enumerate(rests):
+        if a >= 0 and orient is not None and np.isfinite(orient[a:b, s]).all():
+            u = _unit(world_vertical(quat.normalize(np.asarray(orient[a:b, s], dtype=np.float64))).mean(axis=0))
+            v = _unit(np.nanmean(np.asarray(acc[a:b, s], dtype=np.float64), axis=0))
+            out[s] = math.degrees(math.acos(float(np.clip(u @ v, -1.0, 1.0))))
+    return out
+
+
+def quality_problems(names, residual_deg, has_rest, gap_deg) -> list[str]:
+    """What makes a calibration untrustworthy, one phrase a sensor (module constants)."""
+    out = []
+    for n, r, still, gap in zip(names, residual_deg, has_rest, gap_deg):
+        why = []
+        if not still:
+            why.append("moved during the pose")
+        if r > MAX_RESIDUAL_DEG:
+            why.append(f"residual {r:.1f}° > {MAX_RESIDUAL_DEG:g}°")
+        if np.isfinite(gap) and gap > MAX_GRAVITY_GAP_DEG:
+            why.append(f"gravity from acceleration and orientation {gap:.1f}° apart (> {MAX_GRAVITY_GAP_DEG:g}°)")
+        if why:
+            out.append(f"{n} ({', '.join(why)})")
+    return out
+
+
 def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """(S, 3) gravity's direction in each device frame over its own rest (rests (S, 2);
     a sensor without one: zero) and where it came from, per sensor."""
@@ -341,7 +375,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     """The calibration (the CAL.json document, `save_calibration`) of a recording's
     sensors from a calibration take in `pose` (POSES), against a reference's readings of
     similar motion (a graph's: `graph.calibration.calibrate`). InputError when it cannot
-    be done (module docstring)."""
+    be done (module docstring); CalibrationQualityError, carrying the document, when it
+    was done but names sensors not to be trusted (`quality_problems`; the document's
+    "problems" lists them)."""
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     if rec.accelerations is None or rec.num_sensors == 0:
@@ -451,10 +487,12 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
             residual[s] = math.degrees(math.sqrt(np.average(np.arccos(np.clip(cosang, -1, 1)) ** 2, weights=w_s)))
         pairs = idx_q.size
     rest = (r0, r1)
+    gap = gravity_gap_deg(acc, orient, rests)
+    problems = quality_problems(names, residual, has_rest, gap)
     method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source[s]}) + graph") if seen[s]
               else f"rest ({rest_source[s]}) only: the motion hardly turned it, no rotation about gravity"
               for s in range(S)]  # fmt: skip
-    return {
+    doc = {
         "format": FORMAT,
         "version": VERSION,
         "layout": (layout or {}).get("name"),
@@ -471,7 +509,11 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
                 "method": method[s], "residual_deg": round(float(residual[s]), 3)}
             for s, n in enumerate(names)
         },  # fmt: skip
+        "problems": problems,
     }
+    if problems:
+        raise CalibrationQualityError(f"calibration not to be trusted: {'; '.join(problems)}", doc)
+    return doc
 
 
 def _canonical(q: np.ndarray) -> np.ndarray:

@@ -382,3 +382,49 @@ def test_a_pose_before_the_clip_calibrates_every_sensor(kb, graph6, monkeypatch,
     cal = calibrate(rec, pose, graph6)
     err = _errors(cal, seed, KELLY6.sensor_names, 30.0)
     assert err.max() < bound, dict(zip(KELLY6.sensor_names, err.round(2)))
+
+
+# ---------------------------------------------------------------- quality
+
+
+def test_quality_problems_name_each_sensor_in_one_phrase():
+    got = cal_mod.quality_problems(("a", "b", "c", "d"), [25.5, 3.0, 24.9, 40.0], [True, False, True, True],
+                                   [np.nan, np.nan, 10.5, 9.9])  # fmt: skip
+    assert got == ["a (residual 25.5° > 25°)", "b (moved during the pose)",
+                   "c (gravity from acceleration and orientation 10.5° apart (> 10°))", "d (residual 40.0° > 25°)"]  # fmt: skip
+
+
+def _wobbled(rec, sensor: int):
+    """`rec` with one sensor shaken throughout (2 m/s² at 2 Hz along its X): never
+    still, so not in the pose the others hold."""
+    acc = rec.accelerations.astype(np.float64)
+    t = rec.timestamps_s - rec.timestamps_s[0]
+    acc[:, sensor, 0] += 2.0 * np.sin(2 * np.pi * 2.0 * t)
+    return replace(rec, accelerations=acc.astype(np.float32))
+
+
+def test_a_sensor_that_moved_during_the_pose_is_named(kb, graph):
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=3)
+    with pytest.raises(cal_mod.CalibrationQualityError) as info:
+        calibrate(_wobbled(rec, 1), "npose", graph)
+    assert isinstance(info.value, InputError)
+    assert str(info.value) == "calibration not to be trusted: r_wrist (moved during the pose)"
+    doc = info.value.calibration
+    assert doc["problems"] == ["r_wrist (moved during the pose)"] and set(doc["sensors"]) == set(LAYOUT.sensor_names)
+    assert doc["sensors"]["r_wrist"]["method"] == "graph (never still)"
+    assert calibrate(rec, "npose", graph)["problems"] == []
+
+
+def test_gravity_from_acceleration_and_orientation_that_disagree_is_named(kb, graph):
+    """The accelerometer's frame turned 15° off the orientation output's (about an axis
+    across gravity): the two views of gravity over the rest are 15° apart."""
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,orientations=1,mount=30"), seed=3)
+    acc = rec.accelerations.astype(np.float64)
+    down = acc[:10, 2].mean(axis=0)
+    axis = np.cross(down, [1.0, 0.0, 0.0])
+    turn = quat.from_axis_angle(axis / np.linalg.norm(axis), np.float64(np.radians(15.0)))
+    acc[:, 2] = quat.rotate(turn[None], acc[:, 2])
+    gap = cal_mod.gravity_gap_deg(acc, rec.orientations.astype(np.float64), np.array([[0, 30]] * 4))
+    assert gap[2] == pytest.approx(15.0, abs=1e-3) and np.abs(gap[[0, 1, 3]]).max() < 1e-3
+    with pytest.raises(cal_mod.CalibrationQualityError, match=r"l_ankle \(gravity from acceleration and orientation 15\.0°"):
+        calibrate(replace(rec, accelerations=acc.astype(np.float32)), "npose", graph)
