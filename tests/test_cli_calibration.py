@@ -173,3 +173,47 @@ def test_an_untrustworthy_calibration_exits_2_unless_forced(files, capsys, tmp_p
     assert code == 0 and json.loads(cal.read_text())["problems"] == ["r_wrist (moved during the pose)"]
     assert err.strip().splitlines() == ["graphsvc: warning: calibration not to be trusted: r_wrist (moved during the pose)"]
     assert "  r_wrist: mounting" in out and "residual" in out
+
+
+def test_calibrate_from_start_is_calibrate_then_synthesize(files, capsys):
+    """`synthesize --calibrate-from-start 5 --pose npose` on the calibration take gives
+    the same BVH, byte for byte, as `calibrate --to 5` and `synthesize --calibration`
+    (the calibrating seconds reconstructed too)."""
+    d = files
+    take, g = str(d / "take.rec"), str(d / "g.graph")
+    code, _, err = run(["calibrate", take, "--graph", g, "--pose", "npose", "--to", "5", "-o", str(d / "c5.json")], capsys)
+    assert code == 0, err
+    code, _, err = run(["synthesize", g, take, "--calibration", str(d / "c5.json"), "-o", str(d / "two.bvh")], capsys)
+    assert code == 0, err
+    code, out, err = run(["synthesize", g, take, "--calibrate-from-start", "5", "--pose", "npose", "-o", str(d / "one.bvh"),
+                          "--report", str(d / "one.json")], capsys)  # fmt: skip
+    assert code == 0 and "note:" not in err, err
+    assert (d / "one.bvh").read_bytes() == (d / "two.bvh").read_bytes()
+    assert json.loads((d / "one.json").read_text())["files"]["read"]["calibrate_from_start"] == {"seconds": 5.0,
+                                                                                                "pose": "npose"}  # fmt: skip
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--calibrate-from-start", "5", "--pose", "npose", "--calibration", "CAL"], "two ways to calibrate"),
+    (["--calibrate-from-start", "5"], "needs --pose"),
+    (["--pose", "tpose"], "--pose goes with --calibrate-from-start"),
+    (["--calibrate-from-start", "1", "--pose", "npose"], "calibration needs at least 2 s"),
+])  # fmt: skip
+def test_calibrate_from_start_refusals_one_line_exit_2(files, capsys, extra, needle):
+    d = files
+    cal = d / "ident.json"
+    cal.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
+        n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names}}))  # fmt: skip
+    out = d / "never.bvh"
+    extra = [str(cal) if a == "CAL" else a for a in extra]
+    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "take.rec"), "-o", str(out), *extra], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err, err
+    assert not out.exists()
+
+
+def test_calibrate_from_start_takes_positive_seconds(files, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["synthesize", str(files / "g.graph"), str(files / "take.rec"), "-o", str(files / "never.bvh"),
+              "--calibrate-from-start", "0", "--pose", "npose"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "--calibrate-from-start" in err and "> 0" in err

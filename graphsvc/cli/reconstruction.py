@@ -8,8 +8,8 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
-                            synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_pose_flag, add_synthesize_flags, calibration_choice,
+                            options_from_flags, ranged, synthesize_inputs)  # fmt: skip
 
 
 def _cmd_synthesize(args) -> int:
@@ -20,10 +20,12 @@ def _cmd_synthesize(args) -> int:
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))],
                   synthesize_inputs(args))  # fmt: skip
+    calibration, start_s, pose = calibration_choice(args)
     options, notes = options_from_flags(args)
     graph = load_graph(args.graph)
     result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report, scale=args.scale,
-                              up=args.up, units=args.units, device_map=args.device_map, calibration=args.calibration, notes=notes)  # fmt: skip
+                              up=args.up, units=args.units, device_map=args.device_map, calibration=calibration,
+                              calibrate_from_start=None if start_s is None else (start_s, pose), notes=notes)  # fmt: skip
     print_notes(notes)
     r = result.report
     labels = " → ".join(f"{run['label']} {_seconds(run['frames'] / graph.rate_hz)}" for run in r["labels"][:12])
@@ -120,8 +122,7 @@ def add_calibrate(sub) -> None:
     p.add_argument("--graph", metavar="GRAPH", type=PATH,
                    help="a graph whose readings of similar motion fix the rotation about gravity (default: none, the "
                         "rotation about gravity stays unknown)")  # fmt: skip
-    p.add_argument("--pose", required=True, choices=("npose", "tpose", "stand"),
-                   help="the pose held at the start (stand: a natural stance, only approximately an N-pose)")
+    add_pose_flag(p, required=True)
     p.add_argument("--from", dest="start", type=float, metavar="S",
                    help="use the recording from S seconds (default: its start)")
     p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds (default: its end)")

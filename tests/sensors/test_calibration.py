@@ -428,3 +428,31 @@ def test_gravity_from_acceleration_and_orientation_that_disagree_is_named(kb, gr
     assert gap[2] == pytest.approx(15.0, abs=1e-3) and np.abs(gap[[0, 1, 3]]).max() < 1e-3
     with pytest.raises(cal_mod.CalibrationQualityError, match=r"l_ankle \(gravity from acceleration and orientation 15\.0°"):
         calibrate(replace(rec, accelerations=acc.astype(np.float32)), "npose", graph)
+
+
+# ---------------------------------------------------------------- calibrating a take from its own start
+
+
+def test_hidden_clips_are_left_out_of_the_reference(kb, graph):
+    """An evaluation that hides a clip must not calibrate against it: its readings (and
+    only its) leave the reference, in the graph's clip order."""
+    from graphsvc.graph.calibration import calibrate_from_start, graph_reference, graph_stream
+
+    names = [c["name"] for c in graph.clips]
+    full, runs, nodes = graph_stream(graph)
+    ref = graph_reference(graph, hidden_clips=("stop_01", "not-a-clip"))
+    keep = graph.node_clip[nodes] != names.index("stop_01")
+    assert 0 < keep.sum() < keep.size
+    np.testing.assert_array_equal(ref.readings, full[keep])
+    np.testing.assert_array_equal(ref.runs, runs[keep])
+    np.testing.assert_array_equal(graph_reference(graph).readings, full)
+    # The verticals follow the kept rows: row k of the reference is row keep[k] of the whole.
+    rows = np.array([0, 7, int(keep.sum()) - 1])
+    np.testing.assert_allclose(ref.verticals(rows, LAYOUT.sensor_names),
+                               graph_reference(graph).verticals(np.flatnonzero(keep)[rows], LAYOUT.sensor_names))  # fmt: skip
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=2)
+    assert calibrate_from_start(rec, graph, 5.0, "npose") == calibrate(rec, "npose", graph, None, 5.0)
+    with pytest.raises(InputError, match="no window of the graph's readings"):
+        calibrate_from_start(rec, graph, 5.0, "npose", hidden_clips=names)
+    with pytest.raises(InputError, match="unknown pose"):
+        calibrate_from_start(rec, graph, 5.0, "sitting")
