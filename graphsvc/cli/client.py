@@ -150,6 +150,7 @@ def _cmd_client_stream(args) -> int:
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, synthesize_inputs(args))
+    _, start_s, pose = calibration_choice(args)
     rec = _recording(args)
     options = _options(args, recording=rec)
 
@@ -160,7 +161,8 @@ def _cmd_client_stream(args) -> int:
 
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
-        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame)
+        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame,
+                                  calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
     s = latency_summary(result.latencies_ms)
     lag = result.started.lag_frames if result.started else 0
     print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
@@ -339,6 +341,7 @@ def add_client(sub) -> None:
     c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the streamed motion as BVH, cm (default: none)")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_calibration_flag(c)
+    add_calibrate_from_start_flags(c)
     add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 

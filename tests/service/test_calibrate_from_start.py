@@ -62,3 +62,39 @@ def test_bad_calibrate_from_start_is_invalid_argument(conn, posed, seconds, pose
     request.calibrate_from_start.seconds, request.calibrate_from_start.pose = seconds, pose
     code, details = rpc_error(conn.stub.Synthesize, request, timeout=60)
     assert code == grpc.StatusCode.INVALID_ARGUMENT and details.startswith("calibrate_from_start: ") and needle in details
+
+
+def test_a_stream_calibrates_from_its_own_first_seconds(conn, graph, posed, capsys, server):
+    """The server holds the first 5 s, calibrates from them and then searches every
+    sample calibrated: the frames of a stream of the recording calibrated beforehand."""
+    from graphsvc.cli import main
+    from graphsvc.pipeline import Options, calibrated_from_start
+    from graphsvc.service import client as C
+    from tests.service.conftest import assert_frames_equal, live_frames
+
+    rec, path = posed
+    expected, _ = live_frames(graph, calibrated_from_start(rec, graph, 5.0, "npose"), Options())
+    plain, _ = live_frames(graph, rec, Options())
+    assert [f.node for f in plain] != [f.node for f in expected]  # (the calibration changes the outcome)
+    feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=(5.0, "npose")))
+    for sample in C.recording_samples(rec):
+        feed.put(sample)
+    feed.close()
+    result = C.run_stream(conn, feed)
+    assert_frames_equal(expected, result.frames)
+    assert result.finished.samples_received == rec.num_samples
+    # The client's stream command sends it; a stream shorter than its calibrating seconds
+    # is calibrated from what it sent (here too short for one: INVALID_ARGUMENT, named).
+    common = ["--server", f"127.0.0.1:{server.port}", "--speed", "1000", "--quiet"]
+    assert main(["client", "stream", str(path), *common, "--calibrate-from-start", "5", "--pose", "npose"]) == 0
+    assert f"{len(expected)} frames from {rec.num_samples} samples" in capsys.readouterr().out
+    feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=(5.0, "npose")))
+    for sample in list(C.recording_samples(rec))[:40]:
+        feed.put(sample)
+    feed.close()
+    with pytest.raises(C.ServiceError, match="INVALID_ARGUMENT: config.calibrate_from_start: .* needs at least 2 s"):
+        C.run_stream(conn, feed)
+    feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=(5.0, "sitting")))
+    feed.close()
+    with pytest.raises(C.ServiceError, match="INVALID_ARGUMENT: config.calibrate_from_start.pose: unknown pose"):
+        C.run_stream(conn, feed)

@@ -361,18 +361,20 @@ class StreamSynthesizeRequest(_message.Message):
     def __init__(self, config: _Optional[_Union[StreamConfig, _Mapping]] = ..., sample: _Optional[_Union[SensorSample, _Mapping]] = ...) -> None: ...
 
 class StreamConfig(_message.Message):
-    __slots__ = ("graph", "options", "sensor_names", "marker_names", "orientations")
+    __slots__ = ("graph", "options", "sensor_names", "marker_names", "orientations", "calibrate_from_start")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     SENSOR_NAMES_FIELD_NUMBER: _ClassVar[int]
     MARKER_NAMES_FIELD_NUMBER: _ClassVar[int]
     ORIENTATIONS_FIELD_NUMBER: _ClassVar[int]
+    CALIBRATE_FROM_START_FIELD_NUMBER: _ClassVar[int]
     graph: str
     options: SynthesisOptions
     sensor_names: _containers.RepeatedScalarFieldContainer[str]
     marker_names: _containers.RepeatedScalarFieldContainer[str]
     orientations: bool
-    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ..., orientations: _Optional[bool] = ...) -> None: ...
+    calibrate_from_start: CalibrateFromStart
+    def __init__(self, graph: _Optional[str] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., sensor_names: _Optional[_Iterable[str]] = ..., marker_names: _Optional[_Iterable[str]] = ..., orientations: _Optional[bool] = ..., calibrate_from_start: _Optional[_Union[CalibrateFromStart, _Mapping]] = ...) -> None: ...
 
 class SensorSample(_message.Message):
     __slots__ = ("time_s", "accelerations_m_s2", "ground_position", "heading_rad", "marker_positions_m", "orientations_wxyz")
