@@ -24,7 +24,7 @@ from graphsvc.fileio import check_outputs, write_texts_atomic
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.bvh import bvh_document
 from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
-from graphsvc.sensors.calibration import apply_calibration, check_calibration, load_calibration
+from graphsvc.sensors.calibration import apply_calibration, check_calibration, load_calibration, mounting_angle_deg
 from graphsvc.sensors.devices import apply_device_map
 from graphsvc.sensors.devices import device_map as load_device_map
 from graphsvc.sensors.files import read_recording
@@ -149,16 +149,24 @@ def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=N
     (`calibrated_from_start`)."""
     rec = read_recording_file(recording_path, up, units, device_map, calibration, None if calibrate_from_start else notes,
                               layout_name=graph.layout.get("name"), sensor_names=graph.sensor_names)  # fmt: skip
-    return rec if not calibrate_from_start else calibrated_from_start(rec, graph, *calibrate_from_start)
+    return rec if not calibrate_from_start else calibrated_from_start(rec, graph, *calibrate_from_start, notes=notes)
 
 
-def calibrated_from_start(rec: Recording, graph: MotionGraph, seconds: float, pose: str, hidden_clips=()) -> Recording:
+def calibrated_from_start(rec: Recording, graph: MotionGraph, seconds: float, pose: str, hidden_clips=(),
+                          notes=None) -> Recording:  # fmt: skip
     """A device-frame recording in the layout's frames, its mountings calibrated from its
     own first `seconds` in `pose` against `graph` (`graph.calibration.calibrate_from_start`);
-    meta "calibration" says so. The calibrating seconds stay in the recording."""
+    meta "calibration" says so. The calibrating seconds stay in the recording. notes: a
+    list that collects a line on the calibration (each sensor's mounting angle and
+    residual), or None."""
     from graphsvc.graph.calibration import calibrate_from_start
 
     cal = calibrate_from_start(rec, graph, seconds, pose, hidden_clips)
+    if notes is not None:
+        a, b = cal["rest_s"]
+        notes.append(f"calibrated from its first {seconds:g} s ({pose}, rest {a:.2f}–{b:.2f} s): " + ", ".join(
+            f"{n} {mounting_angle_deg(item):.1f}° (residual {item['residual_deg']:.1f}°)"
+            for n, item in cal["sensors"].items()))  # fmt: skip
     return apply_calibration(rec, check_calibration(cal, f"its first {seconds:g} s ({pose})"))
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -46,7 +45,7 @@ def _cmd_synthesize(args) -> int:
 def _cmd_calibrate(args) -> int:
     from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate
-    from graphsvc.sensors.calibration import save_calibration
+    from graphsvc.sensors.calibration import mounting_angle_deg, save_calibration
     from graphsvc.sensors.files import read_recording
 
     out = Path(args.output)
@@ -77,8 +76,7 @@ def _cmd_calibrate(args) -> int:
     print(f"wrote {out}: {len(cal['sensors'])} sensors, pose {args.pose}, rest {a:.2f}–{b:.2f} s, "
           f"{cal['matched_samples']} matched samples")  # fmt: skip
     for name, item in cal["sensors"].items():
-        angle = 2.0 * math.degrees(math.acos(min(1.0, abs(item["rotation_wxyz"][0]))))
-        print(f"  {name}: mounting {angle:.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
+        print(f"  {name}: mounting {mounting_angle_deg(item):.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
     if warning:
         print(f"graphsvc: warning: {warning}", file=sys.stderr)
     return 0

@@ -516,6 +516,11 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     return doc
 
 
+def mounting_angle_deg(item: dict) -> float:
+    """A CAL document sensor's mounting angle (degrees) from its rotation_wxyz."""
+    return 2.0 * math.degrees(math.acos(min(1.0, abs(float(item["rotation_wxyz"][0])))))
+
+
 def _canonical(q: np.ndarray) -> np.ndarray:
     return -q if q[0] < 0 else q
 
