@@ -260,7 +260,7 @@ def add_pose_flag(p, required: bool = False, what: str = "the pose held at the s
 def add_calibrate_from_start_flags(p) -> None:
     """--calibrate-from-start S and --pose: calibrate a device-frame recording from its own
     first S seconds against the graph, then use it (`calibration_choice`)."""
-    p.add_argument("--calibrate-from-start", type=ranged(float, 0.0, 3600.0, low_open=True), metavar="S",
+    p.add_argument("--calibrate-from-start", type=ranged(float, 0.0, 3600.0, low_open=True), metavar="S",  # (graph.calibration.MAX_FROM_START_S)
                    help="calibrate the devices' mountings from the recording's own first S seconds (the performer "
                         "holds --pose, then moves) against the graph, then reconstruct the whole recording, those "
                         "seconds included; not with --calibration (default: none)")  # fmt: skip

@@ -27,6 +27,9 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     return calibrate_against(rec, pose, None if graph is None else graph_reference(graph), start_s, end_s)
 
 
+MAX_FROM_START_S = 3600.0  # (a stream holds its samples until then: bounded; `flags.add_calibrate_from_start_flags`)
+
+
 def calibrate_from_start(rec, graph, seconds: float, pose: str, hidden_clips=()) -> dict:
     """The calibration (the CAL.json document) of a recording from its own first `seconds`
     — the performer holds `pose` at the start of the take, then moves — against `graph`,
@@ -36,8 +39,9 @@ def calibrate_from_start(rec, graph, seconds: float, pose: str, hidden_clips=())
     clips left out of the readings matched (an evaluation that hides clips must not
     calibrate against them). InputError (CalibrationQualityError among them) as
     `calibrate`."""
-    if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
-        raise InputError(f"--calibrate-from-start must be a finite number of seconds > 0, got {seconds}")
+    if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and 0 < seconds <= MAX_FROM_START_S):
+        raise InputError(f"--calibrate-from-start must be a finite number of seconds > 0 and at most "
+                         f"{MAX_FROM_START_S:g}, got {seconds}")  # fmt: skip
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     return calibrate_against(rec, pose, graph_reference(graph, hidden_clips), None, float(seconds))

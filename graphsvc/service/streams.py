@@ -127,10 +127,12 @@ class StartCalibration:
     FIELD = "config.calibrate_from_start"
 
     def __init__(self, graph, names: tuple[str, ...], seconds: float, pose: str):
+        from graphsvc.graph.calibration import MAX_FROM_START_S
         from graphsvc.sensors.calibration import POSES
 
-        if not (np.isfinite(seconds) and seconds > 0):
-            raise FieldError(f"{self.FIELD}.seconds", f"must be a finite number of seconds > 0, got {seconds}")
+        if not (np.isfinite(seconds) and 0 < seconds <= MAX_FROM_START_S):
+            raise FieldError(f"{self.FIELD}.seconds", f"must be a finite number of seconds > 0 and at most "
+                             f"{MAX_FROM_START_S:g}, got {seconds}")  # fmt: skip
         if pose not in POSES:
             raise FieldError(f"{self.FIELD}.pose", f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
         self.graph, self.names, self.seconds, self.pose = graph, tuple(names), float(seconds), pose

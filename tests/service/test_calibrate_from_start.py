@@ -52,6 +52,7 @@ def test_the_server_calibrates_from_the_start_as_synthesize_does(server, conn, g
 
 
 @pytest.mark.parametrize("seconds, pose, needle", [(0.0, "npose", "finite number of seconds > 0"),
+                                                   (4000.0, "npose", "at most 3600"),
                                                    (5.0, "sitting", "unknown pose"),
                                                    (1.0, "npose", "calibration needs at least 2 s")])  # fmt: skip
 def test_bad_calibrate_from_start_is_invalid_argument(conn, posed, seconds, pose, needle):
@@ -94,7 +95,8 @@ def test_a_stream_calibrates_from_its_own_first_seconds(conn, graph, posed, caps
     feed.close()
     with pytest.raises(C.ServiceError, match="INVALID_ARGUMENT: config.calibrate_from_start: .* needs at least 2 s"):
         C.run_stream(conn, feed)
-    feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=(5.0, "sitting")))
-    feed.close()
-    with pytest.raises(C.ServiceError, match="INVALID_ARGUMENT: config.calibrate_from_start.pose: unknown pose"):
-        C.run_stream(conn, feed)
+    for value, needle in (((5.0, "sitting"), "pose: unknown pose"), ((4000.0, "npose"), "seconds: must be .* at most 3600")):
+        feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=value))
+        feed.close()
+        with pytest.raises(C.ServiceError, match=f"INVALID_ARGUMENT: config.calibrate_from_start.{needle}"):
+            C.run_stream(conn, feed)
