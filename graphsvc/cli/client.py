@@ -13,8 +13,8 @@ from pathlib import Path
 from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
-from graphsvc.flags import (PATH, add_calibration_flag, add_input_file_flags, add_search_flags, options_from_flags, ranged,
-                            synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (PATH, add_calibrate_from_start_flags, add_calibration_flag, add_input_file_flags,
+                            add_search_flags, calibration_choice, options_from_flags, ranged, synthesize_inputs)  # fmt: skip
 
 
 def _check_output(path: Path, inputs=()) -> None:
@@ -86,12 +86,14 @@ def _cmd_client_synthesize(args) -> int:
 
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
+    _, start_s, pose = calibration_choice(args)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         rec = _recording(args, info)
         options = _options(args, rec.constraints, rec)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
-                            skeleton=skeleton_from_proto(info.skeleton))  # fmt: skip
+                            skeleton=skeleton_from_proto(info.skeleton),
+                            calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
     with atomic_writer(out) as f:
         f.write(result.bvh)
     if args.report:
@@ -155,6 +157,8 @@ def _cmd_client_stream(args) -> int:
     out = Path(args.output) if args.output else None
     if out is not None:
         _check_output(out, synthesize_inputs(args))
+    _, start_s, pose = calibration_choice(args)
+
     def on_frame(frame, latency_ms):
         if not args.quiet:
             print_flushed(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
@@ -164,7 +168,8 @@ def _cmd_client_stream(args) -> int:
         info = resolve_graph(conn, args.graph, args.timeout)
         rec = _recording(args, info)
         options = _options(args, recording=rec)
-        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame)
+        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame,
+                                  calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
     s = latency_summary(result.latencies_ms)
     lag = result.started.lag_frames if result.started else 0
     print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
@@ -293,6 +298,7 @@ def add_client(sub) -> None:
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_input_file_flags(c)
     add_calibration_flag(c)
+    add_calibrate_from_start_flags(c)
     add_search_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
@@ -344,6 +350,7 @@ def add_client(sub) -> None:
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_input_file_flags(c)
     add_calibration_flag(c)
+    add_calibrate_from_start_flags(c)
     add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 

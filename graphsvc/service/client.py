@@ -133,12 +133,17 @@ class BatchResult:
 
 
 def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
-               timeout_s: float | None = None, skeleton: Skeleton | None = None) -> BatchResult:  # fmt: skip
-    """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None)."""
+               timeout_s: float | None = None, skeleton: Skeleton | None = None,
+               calibrate_from_start: tuple[float, str] | None = None) -> BatchResult:  # fmt: skip
+    """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None);
+    calibrate_from_start: (seconds, pose), the server calibrates the device-frame
+    recording from its own start against the graph first."""
     if skeleton is None:
         skeleton = skeleton_from_proto(get_graph(conn, graph).skeleton)
     request = pb.SynthesizeRequest(graph=graph, recording=recording_to_proto(rec),
                                    options=options or pb.SynthesisOptions())  # fmt: skip
+    if calibrate_from_start is not None:
+        request.calibrate_from_start.seconds, request.calibrate_from_start.pose = calibrate_from_start
     try:
         response = conn.stub.Synthesize(request, timeout=timeout_s, metadata=conn.metadata)
     except grpc.RpcError as exc:
@@ -230,11 +235,17 @@ def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = N
 
 
 def stream_config(graph: str, options: pb.SynthesisOptions | None = None, sensor_names=(),
-                  marker_names=(), orientations: bool = False) -> pb.StreamConfig:  # fmt: skip
+                  marker_names=(), orientations: bool = False,
+                  calibrate_from_start: tuple[float, str] | None = None) -> pb.StreamConfig:  # fmt: skip
     """marker_names: the markers each sample carries (`recording_samples` sends a
-    recording's), in order; orientations: whether each carries the sensors' orientations."""
-    return pb.StreamConfig(graph=graph, options=options or pb.SynthesisOptions(), sensor_names=list(sensor_names),
-                           marker_names=list(marker_names), orientations=bool(orientations))  # fmt: skip
+    recording's), in order; orientations: whether each carries the sensors' orientations;
+    calibrate_from_start: (seconds, pose), the server calibrates the devices' mountings
+    from the stream's first seconds."""
+    config = pb.StreamConfig(graph=graph, options=options or pb.SynthesisOptions(), sensor_names=list(sensor_names),
+                             marker_names=list(marker_names), orientations=bool(orientations))  # fmt: skip
+    if calibrate_from_start is not None:
+        config.calibrate_from_start.seconds, config.calibrate_from_start.pose = calibrate_from_start
+    return config
 
 
 def recording_samples(rec: Recording) -> Iterator[pb.SensorSample]:
@@ -269,11 +280,13 @@ def replay(rec: Recording, feed: SampleFeed, speed: float = 1.0, stop: threading
 
 
 def stream_recording(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
-                     speed: float = 1.0, on_frame: Callable | None = None, timeout_s: float | None = None) -> StreamResult:  # fmt: skip
+                     speed: float = 1.0, on_frame: Callable | None = None, timeout_s: float | None = None,
+                     calibrate_from_start: tuple[float, str] | None = None) -> StreamResult:  # fmt: skip
     """Replay `rec` in real time (÷ speed) through StreamSynthesize (its markers too,
-    when it has them)."""
+    when it has them); calibrate_from_start as `stream_config`."""
     marker_names = rec.marker_names if rec.marker_positions is not None else ()
-    feed = SampleFeed(stream_config(graph, options, rec.sensor_names, marker_names, rec.orientations is not None))
+    feed = SampleFeed(stream_config(graph, options, rec.sensor_names, marker_names, rec.orientations is not None,
+                                    calibrate_from_start))  # fmt: skip
     stop = threading.Event()
     sender = threading.Thread(target=replay, args=(rec, feed, speed, stop), name="graphsvc-replay", daemon=True)
     sender.start()

@@ -26,7 +26,7 @@ from graphsvc.service.graphs import LoadedGraph
 from graphsvc.service.live_workers import LiveWorkers
 from graphsvc.service.options_proto import options_from_proto
 from graphsvc.service.status import RpcStatus, abort_for
-from graphsvc.service.streams import CONFIG_TIMEOUT_S, StreamInput, StreamSlots, first_message
+from graphsvc.service.streams import CONFIG_TIMEOUT_S, StartCalibration, StreamInput, StreamSlots, first_message
 from graphsvc.strategies import check_options, get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 
@@ -85,6 +85,12 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
             rec = recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
                                        graph.layout.get("name", "?"))
+            if request.HasField("calibrate_from_start"):  # (device frames: calibrated here, against the graph)
+                c = request.calibrate_from_start
+                try:
+                    rec = pipeline.calibrated_from_start(rec, graph, c.seconds, c.pose)
+                except InputError as exc:
+                    raise FieldError("calibrate_from_start", str(exc)) from None
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
             # Serial kernels: many calls share the machine (and while this one runs, a
@@ -167,6 +173,7 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         options = options_from_proto(config.options, "config.options")
         strategy = get_strategy(options.strategy)
         stream = StreamInput.of(config, graph, strategy)
+        calibration = StartCalibration.of(config, graph, stream.names)
         session = self._open_session(loaded, options, strategy, stream)
         try:
             yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
@@ -186,20 +193,18 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 if kind is None:
                     raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
                 sample_index += 1
-                t, acc, position, heading, markers, orientations = stream.sample(request.sample, previous_t,
-                                                                                 f"sample[{sample_index}]")  # fmt: skip
-                previous_t = t
-                try:
-                    with self.threads.step() as threaded:  # the threads while this stream runs alone
-                        session.threads = threaded
-                        frames = session.push(t, acc, position, heading, markers=markers, orientations=orientations)
-                except InputError as exc:
-                    raise FieldError(f"sample[{sample_index}]", str(exc)) from None
-                for frame in frames:
+                sample = stream.sample(request.sample, previous_t, f"sample[{sample_index}]")
+                previous_t = sample[0]
+                for frame in self._push(session, [sample] if calibration is None else calibration.add(sample),
+                                        sample_index):  # fmt: skip
                     yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, sample_index))
-                frames_out += len(frames)
+                    frames_out += 1
             if not context.is_active():
                 return
+            if calibration is not None:  # (a stream that ended within its calibrating seconds)
+                for frame in self._push(session, calibration.finish(), sample_index):
+                    yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, sample_index))
+                    frames_out += 1
             try:
                 with self.threads.step() as threaded:
                     session.threads = threaded
@@ -215,6 +220,19 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         finally:
             if self.live_workers is not None:  # (an in-process session is freed with this frame)
                 session.close()
+
+    def _push(self, session, samples, sample_index: int) -> list:
+        """The frames `samples` (`StreamInput.sample`'s tuples) make, pushed in order; a
+        refusal names sample[sample_index], the one that arrived last."""
+        frames = []
+        for t, acc, position, heading, markers, orientations in samples:
+            try:
+                with self.threads.step() as threaded:  # the threads while this stream runs alone
+                    session.threads = threaded
+                    frames += session.push(t, acc, position, heading, markers=markers, orientations=orientations)
+            except InputError as exc:
+                raise FieldError(f"sample[{sample_index}]", str(exc)) from None
+        return frames
 
     def _open_session(self, loaded: LoadedGraph, options, strategy, stream: StreamInput):
         """The stream's live session, in a live worker process or in this one, once the
