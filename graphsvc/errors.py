@@ -50,6 +50,16 @@ class FieldError(InputError):
         super().__init__(f"{field}: {message}")
 
 
+class CalibrationQualityError(InputError):
+    """A mounting calibration was made but is not to be trusted (a sensor that matched
+    the motion badly, moved during the pose, or whose two views of gravity disagree):
+    the message names them in one line; calibration: the CAL document all the same."""
+
+    def __init__(self, message: str, calibration: dict):
+        self.calibration = calibration
+        super().__init__(message)
+
+
 class SkeletonError(GraphsvcError):
     """A skeleton lacks joints a layout, mapping or operation needs."""
 

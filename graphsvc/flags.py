@@ -248,12 +248,47 @@ def add_calibration_flag(p) -> None:
                         "(`graphsvc calibrate`; default: none)")
 
 
+CALIBRATION_POSES = ("npose", "tpose", "stand")  # (`sensors.calibration.POSES`, not imported here: numba)
+
+
+def add_pose_flag(p, required: bool = False, what: str = "the pose held at the start") -> None:
+    """--pose: the calibration pose (`graphsvc calibrate`, --calibrate-from-start)."""
+    p.add_argument("--pose", required=required, choices=CALIBRATION_POSES,
+                   help=f"{what} (stand: a natural stance, only approximately an N-pose)")
+
+
+def add_calibrate_from_start_flags(p) -> None:
+    """--calibrate-from-start S and --pose: calibrate a device-frame recording from its own
+    first S seconds against the graph, then use it (`calibration_choice`)."""
+    p.add_argument("--calibrate-from-start", type=ranged(float, 0.0, 3600.0, low_open=True), metavar="S",
+                   help="calibrate the devices' mountings from the recording's own first S seconds (the performer "
+                        "holds --pose, then moves) against the graph, then reconstruct the whole recording, those "
+                        "seconds included; not with --calibration (default: none)")  # fmt: skip
+    add_pose_flag(p, what="with --calibrate-from-start: the pose held at the recording's start")
+
+
+def calibration_choice(args) -> tuple[str | None, float | None, str | None]:
+    """(--calibration, --calibrate-from-start, --pose) checked together: GraphsvcError for
+    both ways at once, or one without the other's pose."""
+    from graphsvc.errors import InputError
+
+    cal, start, pose = getattr(args, "calibration", None), getattr(args, "calibrate_from_start", None), getattr(args, "pose", None)
+    if cal and start is not None:
+        raise InputError("--calibration and --calibrate-from-start are two ways to calibrate: give one")
+    if start is not None and pose is None:
+        raise InputError("--calibrate-from-start needs --pose npose|tpose|stand (the pose held at the start)")
+    if pose is not None and start is None:
+        raise InputError("--pose goes with --calibrate-from-start S")
+    return cal, start, pose
+
+
 def add_synthesize_flags(p) -> None:
     """Every flag of `synthesize` but its files: the search flags, how to read the
     recording, the BVH scale (a batch manifest's `options` column takes the same)."""
     add_search_flags(p)
     add_input_file_flags(p)
     add_calibration_flag(p)
+    add_calibrate_from_start_flags(p)
     p.add_argument("--scale", type=float, default=100.0, help="BVH units per metre (default 100: centimetres)")
 
 

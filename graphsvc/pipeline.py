@@ -24,7 +24,7 @@ from graphsvc.fileio import check_outputs, write_texts_atomic
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.bvh import bvh_document
 from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
-from graphsvc.sensors.calibration import apply_calibration, load_calibration
+from graphsvc.sensors.calibration import apply_calibration, check_calibration, load_calibration
 from graphsvc.sensors.devices import apply_device_map
 from graphsvc.sensors.devices import device_map as load_device_map
 from graphsvc.sensors.files import read_recording
@@ -101,11 +101,13 @@ def warm_up(graph: MotionGraph, threads: bool = False, strategies=None) -> float
 
 def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, options: Options = Options(),
                      report_path=None, scale: float = 100.0, up=None, units=None, device_map=None,
-                     calibration=None, threads: bool = True, notes=None) -> Reconstruction:  # fmt: skip
+                     calibration=None, threads: bool = True, notes=None, calibrate_from_start=None) -> Reconstruction:  # fmt: skip
     """`graphsvc synthesize` as a function, for the CLI and a batch alike: read the
     recording (up, units: as the file does not say), name a device's sensors as the
     graph's layout does (device_map: 'xsens' or a map file), turn a device's readings into
-    the layout's frames (calibration: a `graphsvc calibrate` file), reconstruct, write the BVH
+    the layout's frames (calibration: a `graphsvc calibrate` file; or calibrate_from_start:
+    (seconds, pose), calibrated from the recording's own start against the graph,
+    `graph.calibration.calibrate_from_start`), reconstruct, write the BVH
     (scale: units per metre) and, given report_path, the report JSON — each atomically, the
     report renamed into place before the BVH (a BVH is never without its report);
     InputError, before anything is read, when an output would replace an input or the
@@ -118,13 +120,16 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
                   [("the graph", graph_path), ("the recording", recording_path),
                    ("the calibration", calibration), ("the device map", None if device_map == "xsens" else device_map)])  # fmt: skip
-    rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes)
+    rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes,
+                                  calibrate_from_start)  # fmt: skip
     result = reconstruct(graph, rec, options, threads=threads)
     bvh = bvh_document(result.motion, scale)
     result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
                               "recording": str(Path(recording_path).resolve())}  # fmt: skip
     read = {k: v for k, v in (("up", up), ("units", units), ("device_map", device_map and _resolved_if_file(device_map)),
-                              ("calibration", calibration and _resolved_if_file(calibration))) if v}  # fmt: skip
+                              ("calibration", calibration and _resolved_if_file(calibration)),
+                              ("calibrate_from_start", calibrate_from_start and {"seconds": calibrate_from_start[0],
+                                                                                 "pose": calibrate_from_start[1]})) if v}  # fmt: skip
     if read:  # (how the recording was read, for `graphsvc report`)
         result.report["files"]["read"] = read
     if result.node_path is None and result.provenance is not None:
@@ -137,11 +142,24 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
 
 
 def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,
-                            notes=None) -> Recording:  # fmt: skip
+                            notes=None, calibrate_from_start=None) -> Recording:  # fmt: skip
     """A recording as `synthesize_files` searches it on `graph`: `read_recording_file`
-    for the graph's layout and sensors."""
-    return read_recording_file(recording_path, up, units, device_map, calibration, notes,
-                               layout_name=graph.layout.get("name"), sensor_names=graph.sensor_names)  # fmt: skip
+    for the graph's layout and sensors; calibrate_from_start (seconds, pose): its
+    mountings calibrated from its own first seconds against `graph` and applied
+    (`calibrated_from_start`)."""
+    rec = read_recording_file(recording_path, up, units, device_map, calibration, None if calibrate_from_start else notes,
+                              layout_name=graph.layout.get("name"), sensor_names=graph.sensor_names)  # fmt: skip
+    return rec if not calibrate_from_start else calibrated_from_start(rec, graph, *calibrate_from_start)
+
+
+def calibrated_from_start(rec: Recording, graph: MotionGraph, seconds: float, pose: str, hidden_clips=()) -> Recording:
+    """A device-frame recording in the layout's frames, its mountings calibrated from its
+    own first `seconds` in `pose` against `graph` (`graph.calibration.calibrate_from_start`);
+    meta "calibration" says so. The calibrating seconds stay in the recording."""
+    from graphsvc.graph.calibration import calibrate_from_start
+
+    cal = calibrate_from_start(rec, graph, seconds, pose, hidden_clips)
+    return apply_calibration(rec, check_calibration(cal, f"its first {seconds:g} s ({pose})"))
 
 
 def read_recording_file(recording_path, up=None, units=None, device_map=None, calibration=None, notes=None,

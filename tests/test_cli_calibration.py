@@ -107,3 +107,113 @@ def test_a_layout_frame_recording_is_not_calibrated(files, capsys):
     code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "free.rec"), "-o", str(d / "n.bvh"),
                         "--calibration", str(cal)], capsys)  # fmt: skip
     assert code == 2 and "already in the layout" in err
+
+
+def test_rest_times_count_from_the_recordings_first_sample(files, capsys):
+    """With --from the rest still reads in the recording's own seconds: it starts where
+    the span does (the pose is held from the first sample) and ends where the whole
+    take's rest ends."""
+    d = files
+    ends = []
+    for extra in ([], ["--from", "0.5"]):
+        cal = d / f"rest{len(extra)}.json"
+        code, out, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
+                              *extra, "-o", str(cal)], capsys)  # fmt: skip
+        assert code == 0, err
+        a, b = json.loads(cal.read_text())["rest_s"]
+        assert f"rest {a:.2f}–{b:.2f} s" in out
+        ends.append((a, b))
+    (a0, b0), (a1, b1) = ends
+    assert a0 == 0.0 and a1 == pytest.approx(0.5, abs=1e-6)
+    assert b1 == pytest.approx(b0, abs=0.05) and b0 > 1.4
+
+
+def test_a_short_noisy_stand_after_other_motion_is_found(files, capsys, tmp_path):
+    """2.5 s of running, then a natural stance held 1.3 s (and eased into a punch) from
+    noisy devices (σ = 0.9 m/s² a axis: an RMS deviation of 1.56 m/s² at rest): with
+    `--from 2.5` the whole held stance is the rest, each window judged by its own
+    noise (a fixed bound of 1.5 m/s² refused it, or took a pause 7 s later)."""
+    from dataclasses import replace
+
+    from graphsvc.motion.calibration_pose import with_calibration_pose
+
+    kb = generate_knowledge_base(seed=3, minutes=1.0)
+    clip = lambda name: next(m for m in kb if m.name.startswith(name))  # noqa: E731
+    noise = parse_noise("real,sigma=0.9,mount=30")
+    before = simulate_recording(clip("run"), LAYOUT, noise, seed=0)
+    take = simulate_recording(with_calibration_pose(clip("punch"), "stand", 1.8), LAYOUT, noise, seed=0)
+    n = int(round(2.5 * before.rate_hz))
+    cat = lambda a, b: np.concatenate([a[:n], b])  # noqa: E731
+    rec = replace(take, timestamps_s=np.arange(n + take.timestamps_s.size) / take.rate_hz,
+                  accelerations=cat(before.accelerations, take.accelerations),
+                  orientations=cat(before.orientations, take.orientations),
+                  ground_position=cat(before.ground_position, take.ground_position),
+                  heading=cat(before.heading, take.heading))  # fmt: skip
+    save_recording(rec, tmp_path / "stand.rec")
+    cal = tmp_path / "stand.json"
+    code, out, err = run(["calibrate", str(tmp_path / "stand.rec"), "--graph", str(files / "g.graph"), "--pose", "stand",
+                          "--from", "2.5", "-o", str(cal)], capsys)  # fmt: skip
+    assert code == 0, err
+    a, b = json.loads(cal.read_text())["rest_s"]
+    assert a == pytest.approx(2.5, abs=1e-6) and b >= 2.5 + 1.3 - 0.05, (a, b)
+
+
+def test_an_untrustworthy_calibration_exits_2_unless_forced(files, capsys, tmp_path):
+    from graphsvc.sensors.files import read_recording
+    from tests.sensors.test_calibration import _wobbled
+
+    save_recording(_wobbled(read_recording(files / "take.rec"), 1), tmp_path / "wobbly.rec")
+    cal = tmp_path / "cal.json"
+    argv = ["calibrate", str(tmp_path / "wobbly.rec"), "--graph", str(files / "g.graph"), "--pose", "npose", "-o", str(cal)]
+    code, out, err = run(argv, capsys)
+    assert code == 2 and not cal.exists() and out == ""
+    assert err.strip().splitlines() == ["graphsvc: error: calibration not to be trusted: r_wrist (moved during the pose) "
+                                        "(--force writes it anyway)"]  # fmt: skip
+    code, out, err = run(argv + ["--force"], capsys)
+    assert code == 0 and json.loads(cal.read_text())["problems"] == ["r_wrist (moved during the pose)"]
+    assert err.strip().splitlines() == ["graphsvc: warning: calibration not to be trusted: r_wrist (moved during the pose)"]
+    assert "  r_wrist: mounting" in out and "residual" in out
+
+
+def test_calibrate_from_start_is_calibrate_then_synthesize(files, capsys):
+    """`synthesize --calibrate-from-start 5 --pose npose` on the calibration take gives
+    the same BVH, byte for byte, as `calibrate --to 5` and `synthesize --calibration`
+    (the calibrating seconds reconstructed too)."""
+    d = files
+    take, g = str(d / "take.rec"), str(d / "g.graph")
+    code, _, err = run(["calibrate", take, "--graph", g, "--pose", "npose", "--to", "5", "-o", str(d / "c5.json")], capsys)
+    assert code == 0, err
+    code, _, err = run(["synthesize", g, take, "--calibration", str(d / "c5.json"), "-o", str(d / "two.bvh")], capsys)
+    assert code == 0, err
+    code, out, err = run(["synthesize", g, take, "--calibrate-from-start", "5", "--pose", "npose", "-o", str(d / "one.bvh"),
+                          "--report", str(d / "one.json")], capsys)  # fmt: skip
+    assert code == 0 and "note:" not in err, err
+    assert (d / "one.bvh").read_bytes() == (d / "two.bvh").read_bytes()
+    assert json.loads((d / "one.json").read_text())["files"]["read"]["calibrate_from_start"] == {"seconds": 5.0,
+                                                                                                "pose": "npose"}  # fmt: skip
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--calibrate-from-start", "5", "--pose", "npose", "--calibration", "CAL"], "two ways to calibrate"),
+    (["--calibrate-from-start", "5"], "needs --pose"),
+    (["--pose", "tpose"], "--pose goes with --calibrate-from-start"),
+    (["--calibrate-from-start", "1", "--pose", "npose"], "calibration needs at least 2 s"),
+])  # fmt: skip
+def test_calibrate_from_start_refusals_one_line_exit_2(files, capsys, extra, needle):
+    d = files
+    cal = d / "ident.json"
+    cal.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
+        n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names}}))  # fmt: skip
+    out = d / "never.bvh"
+    extra = [str(cal) if a == "CAL" else a for a in extra]
+    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "take.rec"), "-o", str(out), *extra], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err, err
+    assert not out.exists()
+
+
+def test_calibrate_from_start_takes_positive_seconds(files, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["synthesize", str(files / "g.graph"), str(files / "take.rec"), "-o", str(files / "never.bvh"),
+              "--calibrate-from-start", "0", "--pose", "npose"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "--calibrate-from-start" in err and "> 0" in err

@@ -39,6 +39,7 @@ import numpy as np  # noqa: E402
 def main() -> int:
     from graphsvc.evaluate.loo import _global_signals, place_start
     from graphsvc.evaluate.metrics import joint_err_cm, root_err_cm
+    from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate
     from graphsvc.graph.file import load_graph
     from graphsvc.motion import quat
@@ -73,7 +74,11 @@ def main() -> int:
     match_motion = resample(load_motion(Path(args.data) / args.match_take), graph.rate_hz)
     take = simulate_recording(calib_motion, layout, noise, seed=args.seed)
     t0 = time.perf_counter()
-    cal = calibration.check_calibration(calibrate(take, args.pose, graph))
+    try:
+        doc = calibrate(take, args.pose, graph)
+    except CalibrationQualityError as exc:  # (reported under "problems" all the same)
+        doc = exc.calibration
+    cal = calibration.check_calibration(doc)
     calib_s = time.perf_counter() - t0
     true = mounting(args.seed, names, noise.mount)
     # The calibration take's own misalignment (drawn as simulate_recording draws it).
@@ -117,6 +122,7 @@ def main() -> int:
         "match_inputs": "accelerations" if args.accelerations_only else "accelerations, tracker positions and heading",
         "rest_s": cal["rest_s"],
         "matched_samples": cal["matched_samples"],
+        "problems": cal["problems"],
         "calibrate_s": round(calib_s, 3),
         "sensors": sensors,
         "match": {

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import file_sha256, read_input_text, require_file
-from graphsvc.flags import add_synthesize_flags, options_from_flags, os_message
+from graphsvc.flags import add_synthesize_flags, calibration_choice, options_from_flags, os_message
 from graphsvc.graph.file import graph_file_meta
 from graphsvc.store import file_checksum
 from graphsvc.strategies import check_options
@@ -244,6 +244,7 @@ def parse_item_options(argv: list[str]):
     """(Options, the parsed flags) of an item's flags, checked as `synthesize` checks
     them: InputError or FormatError for what it would refuse."""
     args = _ItemParser.get().parse_args(argv)
+    calibration_choice(args)
     options, _ = options_from_flags(args)  # (another strategy's options: kept, listed as ignored in its report)
     return check_options(options), args
 

@@ -74,7 +74,9 @@ def run_item(task: dict) -> dict:
         warm_s = warm(graph, (task["graph"], task["graph_checksum"]), options.strategy)
         result = synthesize_files(graph, task["graph"], task["recording"], bvh, options, report_path=report_path,
                                   scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
-                                  calibration=args.calibration, threads=False)  # fmt: skip
+                                  calibration=args.calibration, threads=False,
+                                  calibrate_from_start=None if args.calibrate_from_start is None
+                                  else (args.calibrate_from_start, args.pose))  # fmt: skip
     except GraphsvcError as exc:
         return {"error": str(exc)}
     r = result.report

@@ -13,7 +13,8 @@ from pathlib import Path
 from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
-from graphsvc.flags import PATH, add_calibration_flag, add_search_flags, options_from_flags, ranged, synthesize_inputs
+from graphsvc.flags import (PATH, add_calibrate_from_start_flags, add_calibration_flag, add_search_flags, calibration_choice,
+                            options_from_flags, ranged, synthesize_inputs)  # fmt: skip
 
 
 def _check_output(path: Path, inputs=()) -> None:
@@ -78,12 +79,14 @@ def _cmd_client_synthesize(args) -> int:
 
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
+    _, start_s, pose = calibration_choice(args)
     rec = _recording(args)
     options = _options(args, rec.constraints, rec)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
-                            skeleton=skeleton_from_proto(info.skeleton))  # fmt: skip
+                            skeleton=skeleton_from_proto(info.skeleton),
+                            calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
     with atomic_writer(out) as f:
         f.write(result.bvh)
     if args.report:
@@ -285,6 +288,7 @@ def add_client(sub) -> None:
     c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH, help="BVH file to write (required; cm)")
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_calibration_flag(c)
+    add_calibrate_from_start_flags(c)
     add_search_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
 

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_synthesize_flags, options_from_flags, ranged,
-                            synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (PATH, SEED, add_input_file_flags, add_pose_flag, add_synthesize_flags, calibration_choice,
+                            options_from_flags, ranged, synthesize_inputs)  # fmt: skip
 
 
 def _cmd_synthesize(args) -> int:
@@ -19,10 +20,12 @@ def _cmd_synthesize(args) -> int:
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))],
                   synthesize_inputs(args))  # fmt: skip
+    calibration, start_s, pose = calibration_choice(args)
     options, notes = options_from_flags(args)
     graph = load_graph(args.graph)
     result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report, scale=args.scale,
-                              up=args.up, units=args.units, device_map=args.device_map, calibration=args.calibration, notes=notes)  # fmt: skip
+                              up=args.up, units=args.units, device_map=args.device_map, calibration=calibration,
+                              calibrate_from_start=None if start_s is None else (start_s, pose), notes=notes)  # fmt: skip
     print_notes(notes)
     r = result.report
     labels = " → ".join(f"{run['label']} {_seconds(run['frames'] / graph.rate_hz)}" for run in r["labels"][:12])
@@ -41,6 +44,7 @@ def _cmd_synthesize(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
+    from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate
     from graphsvc.sensors.calibration import save_calibration
     from graphsvc.sensors.files import read_recording
@@ -60,7 +64,13 @@ def _cmd_calibrate(args) -> int:
         layout_name = (graph.layout if graph is not None else rec.layout or {}).get("name")
         rec = apply_device_map(rec, device_map(args.device_map, layout_name),
                                order=graph.sensor_names if graph is not None else None)  # fmt: skip
-    cal = calibrate(rec, args.pose, graph, args.start, args.end)
+    warning = None
+    try:
+        cal = calibrate(rec, args.pose, graph, args.start, args.end)
+    except CalibrationQualityError as exc:
+        if not args.force:
+            raise CalibrationQualityError(f"{exc} (--force writes it anyway)", exc.calibration) from None
+        cal, warning = exc.calibration, str(exc)
     cal["source"] = str(Path(args.recording))
     save_calibration(cal, out)
     a, b = cal["rest_s"]
@@ -69,6 +79,8 @@ def _cmd_calibrate(args) -> int:
     for name, item in cal["sensors"].items():
         angle = 2.0 * math.degrees(math.acos(min(1.0, abs(item["rotation_wxyz"][0]))))
         print(f"  {name}: mounting {angle:.1f}° ({item['method']}), residual {item['residual_deg']:.1f}°")
+    if warning:
+        print(f"graphsvc: warning: {warning}", file=sys.stderr)
     return 0
 
 
@@ -110,12 +122,15 @@ def add_calibrate(sub) -> None:
     p.add_argument("--graph", metavar="GRAPH", type=PATH,
                    help="a graph whose readings of similar motion fix the rotation about gravity (default: none, the "
                         "rotation about gravity stays unknown)")  # fmt: skip
-    p.add_argument("--pose", required=True, choices=("npose", "tpose", "stand"),
-                   help="the pose held at the start (stand: a natural stance, only approximately an N-pose)")
+    add_pose_flag(p, required=True)
     p.add_argument("--from", dest="start", type=float, metavar="S",
                    help="use the recording from S seconds (default: its start)")
     p.add_argument("--to", dest="end", type=float, metavar="S", help="use the recording up to S seconds (default: its end)")
     add_input_file_flags(p)
+    p.add_argument("--force", action="store_true",
+                   help="write the calibration even when it names sensors not to be trusted (a residual over 25°, moved "
+                        "during the pose, gravity from acceleration and orientation over 10° apart), with a warning "
+                        "(default: refuse, exit 2)")  # fmt: skip
     p.add_argument("-o", "--output", required=True, metavar="CAL.json", type=PATH, help="the calibration to write (.json)")
     p.set_defaults(run=_cmd_calibrate)
 

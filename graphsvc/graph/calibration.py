@@ -5,14 +5,17 @@ matched against; the method is `sensors.calibration`'s (module docstring there).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.graph.metadata import clip_placement
 from graphsvc.graph.model import EDGE_ORIGINAL
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.sensors.accelerometer import sensor_poses
 from graphsvc.sensors.anatomy import REST_POSE
-from graphsvc.sensors.calibration import Reference, calibrate_against, world_vertical
+from graphsvc.sensors.calibration import POSES, Reference, calibrate_against, world_vertical
 from graphsvc.sensors.layout import layout_from_dict
 
 
@@ -24,11 +27,32 @@ def calibrate(rec, pose: str, graph=None, start_s: float | None = None, end_s: f
     return calibrate_against(rec, pose, None if graph is None else graph_reference(graph), start_s, end_s)
 
 
-def graph_reference(graph) -> Reference:
+def calibrate_from_start(rec, graph, seconds: float, pose: str, hidden_clips=()) -> dict:
+    """The calibration (the CAL.json document) of a recording from its own first `seconds`
+    — the performer holds `pose` at the start of the take, then moves — against `graph`,
+    so that a take needs no separate calibration take (`synthesize
+    --calibrate-from-start`). The samples in [0, seconds] stay part of the take: the
+    caller reconstructs them unless it cuts them. hidden_clips: names of the graph's
+    clips left out of the readings matched (an evaluation that hides clips must not
+    calibrate against them). InputError (CalibrationQualityError among them) as
+    `calibrate`."""
+    if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+        raise InputError(f"--calibrate-from-start must be a finite number of seconds > 0, got {seconds}")
+    if pose not in POSES:
+        raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
+    return calibrate_against(rec, pose, graph_reference(graph, hidden_clips), None, float(seconds))
+
+
+def graph_reference(graph, hidden_clips=()) -> Reference:
     """The graph as a calibration's reference: its layout, sensors, rate and sensor-frame
-    convention, its readings in clip order (`graph_stream`) and the verticals of the
-    poses it stores (`graph_verticals`)."""
+    convention, its readings in clip order (`graph_stream`, without the clips named in
+    hidden_clips) and the verticals of the poses it stores (`graph_verticals`)."""
     stream, runs, stream_nodes = graph_stream(graph)
+    hidden = {str(n) for n in hidden_clips}
+    if hidden:
+        names = np.array([str(c.get("name", "")) for c in graph.clips] + [""])
+        keep = ~np.isin(names[np.minimum(graph.node_clip[stream_nodes], len(graph.clips))], list(hidden))
+        stream, runs, stream_nodes = stream[keep], runs[keep], stream_nodes[keep]
     return Reference(layout=graph.layout, sensor_names=graph.sensor_names, rate_hz=graph.rate_hz,
                      sensor_frames=graph.params.get("sensor_frames", REST_POSE), readings=stream, runs=runs,
                      verticals=lambda rows, names: graph_verticals(graph, stream_nodes[rows], names))  # fmt: skip

@@ -6,9 +6,10 @@ A device frame is D(t) = S(t) ⊗ M (S the layout's sensor frame in the world, M
 mounting), so a device reads M⁻¹·(what the layout's sensor reads). Calibration
 estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device ⊗ R⁻¹.
 
-1. **Rest** (`find_rest`): the first stretch of ≥ 0.5 s where every sensor that is ever
-   still is (near-constant readings, |a| ≈ g); a sensor never still (an arm moving from
-   the first sample) gets its whole rotation from the motion. The mean reading (or,
+1. **Rest** (`find_rest`): the first stretch of ≥ 0.5 s where the most sensors are
+   still at once (readings within their own window's noise of their mean, |a| ≈ g); a
+   sensor not still there (an arm moving from the first sample) gets its whole rotation
+   from the motion. The mean reading (or,
    with orientation output, the mean of the device frame's view of the world's
    vertical, D(t)⁻¹·ŷ, which the yaw drift leaves alone and the accelerometer's bias
    does not touch) is gravity's direction in the device frame; `POSE_READINGS` gives it
@@ -26,7 +27,9 @@ estimates R = M: a_layout = R·a_device, and orientations q_layout = q_device �
 3. **Refinement** (`wahba`): for `stand` and sensors without a rest, all three degrees
    of freedom fitted (SVD) over the matched sample pairs and the rest's gravity pair
    (weighted `REST_WEIGHT`); for `npose`/`tpose` only the rotation about gravity, in
-   closed form over every pair (the pose fixes the tilt). Steps 2–3 run `ITERATIONS`
+   closed form over every pair (the pose fixes the tilt) — but a T-pose fixes only that
+   an arm's bone is level, not its roll about the bone: arm sensors get all three (SVD)
+   with a light rest term keeping the bone level (`_level_fit`), and one more round. Steps 2–3 run `ITERATIONS`
    times, each from the last estimate. With orientation output the fits also pair the
    vertical each device frame saw, D(t)⁻¹·ŷ (free of the yaw drift and of linear
    acceleration), with the matched graph frames' (`Reference.verticals`, FK of the poses
@@ -53,7 +56,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import CalibrationQualityError, FormatError, InputError
 from graphsvc.fileio import read_json_file, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
@@ -65,8 +68,10 @@ VERSION = 1
 POSES = ("npose", "tpose", "stand")
 REST_MIN_S = 0.5
 REST_NORM_TOL = 1.0  # m/s²: | |mean| − g | at rest
+MEDIAN_ABS_NORMAL = 0.6744897501960817  # the median of |x| for x ~ N(0, 1)
+REST_NOISE_RATIO = 1.5  # a still window's RMS deviation from its mean, at most × its own noise
 REST_DEV_MIN = 0.3  # m/s²: RMS deviation from the window's mean always allowed at rest
-REST_DEV_MAX = 1.5  # m/s²: … and never more (per-axis noise σ up to about 0.85 m/s²)
+REST_DEV_MAX = 3.0  # m/s²: … and never more (per-axis noise σ up to about 1.2 m/s²)
 WINDOW_S = 1.0  # query window
 STRIDE_S = 0.5
 MAX_MOTION_S = 30.0  # of the take matched, from the rest's start
@@ -81,6 +86,13 @@ ITERATIONS = 2
 SEEN_RATIO = 4.0
 MIN_NOISE_ENERGY = 0.25
 REST_WEIGHT = {"npose": 1.0, "tpose": 1.0, "stand": 0.05}  # × the matched pairs' total weight
+LEVEL_WEIGHT = 0.1  # a T-pose arm's level bone, × the matched pairs' total weight
+LEVEL_STEPS = 4
+# Quality (`quality_problems`): a sensor is named when its residual exceeds MAX_RESIDUAL_DEG,
+# it moved during the pose, or its gravity over the rest from the accelerometer and from
+# the orientation output are more than MAX_GRAVITY_GAP_DEG apart.
+MAX_RESIDUAL_DEG = 25.0
+MAX_GRAVITY_GAP_DEG = 10.0
 
 # The reading at rest (m/s², the layout's sensor frame: X along the bone from the
 # segment's joint toward its `toward` joint; in the N-pose and T-pose Z points forward,
@@ -88,6 +100,7 @@ REST_WEIGHT = {"npose": 1.0, "tpose": 1.0, "stand": 0.05}  # × the matched pair
 _LIMBS = ("shoulder", "elbow", "wrist", "hip", "knee")
 _TRUNK = ("pelvis", "spine", "chest", "neck", "head")
 _FEET = ("ankle", "toe")
+_ARMS = ("shoulder", "elbow", "wrist")
 
 
 def _pose_table() -> dict[str, dict[str, tuple[float, float, float]]]:
@@ -146,41 +159,55 @@ def wahba(device: np.ndarray, layout: np.ndarray, weight: np.ndarray) -> np.ndar
 # ------------------------------------------------------------------ rest
 
 
-def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> tuple[int, int, np.ndarray] | None:
-    """The first still stretch of ≥ min_s seconds in (T, S, 3) readings: (start, stop,
-    still (S,) bool). A sensor is still over a window when its RMS deviation from the
-    window's mean is within its tolerance (twice its stillest window's deviation — its
-    own noise — clamped to [REST_DEV_MIN, REST_DEV_MAX]) and its mean's norm within
-    REST_NORM_TOL of g. The stretch is the first run of windows where every sensor that
-    is ever still is; sensors never still (an arm moving from the first sample) are
-    False in `still`. None when no sensor is ever still."""
+def noise_variance(diffs: np.ndarray) -> np.ndarray:
+    """(...) the white noise's variance a axis, from its sample-to-sample differences
+    (..., 3, n): σ² = (median |d| / MEDIAN_ABS_NORMAL)² / 2 a axis, averaged over the
+    axes — a slow drift or a single step hardly moves it, as it would a deviation."""
+    return np.mean((np.median(np.abs(diffs), axis=-1) / MEDIAN_ABS_NORMAL) ** 2, axis=-1) / 2.0
+
+
+def find_rest(acc: np.ndarray, rate_hz: float, min_s: float = REST_MIN_S) -> np.ndarray | None:
+    """Each sensor's rest in (T, S, 3) readings: (S, 2) int [start, stop) samples, (−1,
+    −1) for a sensor without one; None when no sensor is ever still.
+
+    A sensor is still over a window of min_s seconds when its RMS deviation from the
+    window's mean is within REST_NOISE_RATIO × the window's own noise (`noise_variance`
+    of its sample-to-sample differences: smooth motion and a single step hardly raise
+    it), clamped to [REST_DEV_MIN, REST_DEV_MAX], and the mean's norm
+    within REST_NORM_TOL of g. The pose is the first window where the most sensors are
+    still at once, for as long as all of them are (each judged by its own windows'
+    noise); a sensor not still there has no rest (it moved during the pose, or never
+    stood still)."""
     T, S = acc.shape[:2]
-    W = max(2, int(round(min_s * rate_hz)))
+    W = max(3, int(round(min_s * rate_hz)))
+    out = np.full((S, 2), -1, dtype=np.int64)
     if T < W:
         return None
     a = np.asarray(acc, dtype=np.float64)
     bad = ~np.isfinite(a).all(axis=2)  # (T, S)
     a = np.where(np.isfinite(a), a, 0.0)
-    c1 = np.concatenate([np.zeros((1, S, 3)), np.cumsum(a, axis=0)])
-    c2 = np.concatenate([np.zeros((1, S)), np.cumsum(np.sum(a * a, axis=-1), axis=0)])
-    cb = np.concatenate([np.zeros((1, S)), np.cumsum(bad, axis=0)])
+    zero = lambda x: np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])  # noqa: E731
+    c1, c2, cb = zero(a), zero(np.sum(a * a, axis=-1)), zero(bad.astype(np.float64))
     mean = (c1[W:] - c1[:-W]) / W  # (K, S, 3)
     dev = np.sqrt(np.maximum((c2[W:] - c2[:-W]) / W - np.sum(mean * mean, axis=-1), 0.0))  # (K, S)
+    noise = np.empty_like(dev)
+    for s in range(S):  # each window's W − 1 differences
+        d = np.lib.stride_tricks.sliding_window_view(np.diff(a[:, s], axis=0), W - 1, axis=0)  # (K, 3, W−1)
+        noise[:, s] = np.sqrt(3.0 * noise_variance(d))
     usable = (np.abs(np.linalg.norm(mean, axis=-1) - GRAVITY) < REST_NORM_TOL) & (cb[W:] == cb[:-W])
-    floor = np.where(usable, dev, np.inf).min(axis=0)
-    tol = np.clip(2.0 * floor, REST_DEV_MIN, REST_DEV_MAX)
-    still = usable & (dev <= tol[None])
-    ever = still.any(axis=0)
-    if not ever.any():
+    still = usable & (dev <= np.clip(REST_NOISE_RATIO * noise, REST_DEV_MIN, REST_DEV_MAX))
+    count = still.sum(axis=1)
+    if count.max() == 0:
         return None
-    common = still[:, ever].all(axis=1)
-    if not common.any():
-        return None
-    i = int(np.argmax(common))
-    j = i
-    while j + 1 < common.size and common[j + 1]:
+    k = int(np.argmax(count))  # the pose: the first window where the most sensors are still at once
+    posed = still[k]
+    i = j = k
+    while i > 0 and still[i - 1, posed].all():
+        i -= 1
+    while j + 1 < still.shape[0] and still[j + 1, posed].all():
         j += 1
-    return i, j + W, ever
+    out[posed] = (i, j + W)
+    return out
 
 
 # ------------------------------------------------------------------ matching a reference's readings
@@ -276,12 +303,49 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
     return [seg[n] for n in names]
 
 
-def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rest: tuple[int, int]) -> tuple[np.ndarray, str]:
-    a, b = rest
-    if orient is not None and np.isfinite(orient[a:b]).all():
-        up = world_vertical(quat.normalize(np.asarray(orient[a:b], dtype=np.float64)))
-        return _unit(up.mean(axis=0)), "orientation"
-    return _unit(np.nanmean(np.asarray(acc[a:b], dtype=np.float64), axis=0)), "acceleration"
+def gravity_gap_deg(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> np.ndarray:
+    """(S,) degrees between gravity's direction over each sensor's rest from its mean
+    reading and from its orientation output (the mean of D(t)⁻¹·ŷ); NaN without a rest
+    or without orientations there."""
+    out = np.full(rests.shape[0], np.nan)
+    for s, (a, b) in enumerate(rests):
+        if a >= 0 and orient is not None and np.isfinite(orient[a:b, s]).all():
+            u = _unit(world_vertical(quat.normalize(np.asarray(orient[a:b, s], dtype=np.float64))).mean(axis=0))
+            v = _unit(np.nanmean(np.asarray(acc[a:b, s], dtype=np.float64), axis=0))
+            out[s] = math.degrees(math.acos(float(np.clip(u @ v, -1.0, 1.0))))
+    return out
+
+
+def quality_problems(names, residual_deg, has_rest, gap_deg) -> list[str]:
+    """What makes a calibration untrustworthy, one phrase a sensor (module constants)."""
+    out = []
+    for n, r, still, gap in zip(names, residual_deg, has_rest, gap_deg):
+        why = []
+        if not still:
+            why.append("moved during the pose")
+        if r > MAX_RESIDUAL_DEG:
+            why.append(f"residual {r:.1f}° > {MAX_RESIDUAL_DEG:g}°")
+        if np.isfinite(gap) and gap > MAX_GRAVITY_GAP_DEG:
+            why.append(f"gravity from acceleration and orientation {gap:.1f}° apart (> {MAX_GRAVITY_GAP_DEG:g}°)")
+        if why:
+            out.append(f"{n} ({', '.join(why)})")
+    return out
+
+
+def _rest_up_device(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(S, 3) gravity's direction in each device frame over its own rest (rests (S, 2);
+    a sensor without one: zero) and where it came from, per sensor."""
+    up, source = np.zeros((rests.shape[0], 3)), []
+    for s, (a, b) in enumerate(rests):
+        if a < 0:
+            source.append("")
+        elif orient is not None and np.isfinite(orient[a:b, s]).all():
+            up[s] = _unit(world_vertical(quat.normalize(np.asarray(orient[a:b, s], dtype=np.float64))).mean(axis=0))
+            source.append("orientation")
+        else:
+            up[s] = _unit(np.nanmean(np.asarray(acc[a:b, s], dtype=np.float64), axis=0))
+            source.append("acceleration")
+    return up, source
 
 
 @dataclass(frozen=True)
@@ -311,7 +375,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     """The calibration (the CAL.json document, `save_calibration`) of a recording's
     sensors from a calibration take in `pose` (POSES), against a reference's readings of
     similar motion (a graph's: `graph.calibration.calibrate`). InputError when it cannot
-    be done (module docstring)."""
+    be done (module docstring); CalibrationQualityError, carrying the document, when it
+    was done but names sensors not to be trusted (`quality_problems`; the document's
+    "problems" lists them)."""
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     if rec.accelerations is None or rec.num_sensors == 0:
@@ -333,17 +399,20 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     if unknown:
         raise InputError(f"pose {pose} does not say where gravity points for {', '.join(unknown)}")
     rate = float(reference.rate_hz) if reference is not None else float(rec.rate_hz)
+    t_first = float(rec.timestamps_s[0])
     rec = _span(rec, start_s, end_s)
+    offset = float(rec.timestamps_s[0]) - t_first  # (the span's start, from the recording's first sample)
     acc = np.asarray(readings_at_rate(rec, rate)[0], dtype=np.float64)
     orient = None
     if rec.orientations is not None:
         orient = _orientations_at(rec, rate)
-    rest = find_rest(acc, rate)
-    if rest is None:
+    rests = find_rest(acc, rate)
+    if rests is None:
         raise InputError(f"no still stretch of ≥ {REST_MIN_S:g} s (every sensor steady, |a| ≈ g) in the recording: "
                          "a calibration take starts with the performer standing still in the pose")  # fmt: skip
-    r0, r1, has_rest = rest
-    up_dev, rest_source = _rest_up_device(acc, orient, (r0, r1))
+    has_rest = rests[:, 0] >= 0
+    r0, r1 = (int(v) for v in rests[np.argmax(has_rest)])
+    up_dev, rest_source = _rest_up_device(acc, orient, rests)
     up_lay = _unit(np.array([table[s] for s in segments], dtype=np.float64))
     if reference is None:
         raise InputError(f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
@@ -351,8 +420,13 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     S = len(names)
     R0 = np.stack([_between(up_dev[s], up_lay[s]) if has_rest[s] else np.eye(3) for s in range(S)])
     R = R0.copy()
-    still = np.asarray(acc[r0:r1], dtype=np.float64)
-    noise_var = np.mean(np.sum((still - still.mean(axis=0)) ** 2, axis=-1), axis=0) / 3.0  # (S,) per axis
+    # A T-pose says only that an arm's bone (the sensor's X) is level; how far it is
+    # rolled about itself is the performer's: the table's Y-up is a first guess, the
+    # motion fixes the rest (`_level_fit`).
+    rolled = has_rest & np.array([pose == "tpose" and seg[2:] in _ARMS for seg in segments])
+    noise_var = np.zeros(S)  # per axis, over each sensor's own rest
+    for s in np.flatnonzero(has_rest):
+        noise_var[s] = noise_variance(np.diff(np.asarray(acc[rests[s, 0]:rests[s, 1], s], dtype=np.float64), axis=0).T)
     stream, runs = reference.readings, reference.runs
     cols = [list(reference.sensor_names).index(n) for n in names]
     stream = np.ascontiguousarray(stream[:, cols])
@@ -371,7 +445,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     seen = ~has_rest | (perp / np.maximum(2.0 * noise_var, MIN_NOISE_ENERGY) >= SEEN_RATIO)
     residual = np.zeros(S)
     pairs = 0
-    for _ in range(ITERATIONS):
+    for it in range(ITERATIONS + int(rolled.any())):
+        if it:  # (the rolled sensors' gravity as the last fit put it)
+            up_lay[rolled] = _unit(np.einsum("sij,sj->si", R[rolled], up_dev[rolled]))
         turned = np.einsum("sij,tsj->tsi", R, moving)
         matches = match_windows(turned, stream, runs, up_lay, window, stride)
         if not matches:
@@ -398,6 +474,8 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
             if not seen[s]:  # the motion barely turns it off gravity's axis: its twist is unseen,
                 # its tilt the pose's, or for a natural stance the matched graph poses' (shortest arcs)
                 R[s] = R0[s] if pose != "stand" else _between(w_s @ dev, w_s @ lay)
+            elif rolled[s]:
+                R[s] = _level_fit(R[s], dev, lay, w_s, up_dev[s], LEVEL_WEIGHT * w_s.sum())
             elif pose == "stand" or not has_rest[s]:
                 rest_w = REST_WEIGHT[pose] * w_s.sum() * has_rest[s]
                 R[s] = wahba(np.vstack([dev, up_dev[s] * GRAVITY]), np.vstack([lay, up_lay[s] * GRAVITY]),
@@ -409,10 +487,12 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
             residual[s] = math.degrees(math.sqrt(np.average(np.arccos(np.clip(cosang, -1, 1)) ** 2, weights=w_s)))
         pairs = idx_q.size
     rest = (r0, r1)
-    method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source}) + graph") if seen[s]
-              else f"rest ({rest_source}) only: the motion hardly turned it, no rotation about gravity"
+    gap = gravity_gap_deg(acc, orient, rests)
+    problems = quality_problems(names, residual, has_rest, gap)
+    method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source[s]}) + graph") if seen[s]
+              else f"rest ({rest_source[s]}) only: the motion hardly turned it, no rotation about gravity"
               for s in range(S)]  # fmt: skip
-    return {
+    doc = {
         "format": FORMAT,
         "version": VERSION,
         "layout": (layout or {}).get("name"),
@@ -421,14 +501,19 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
         # graph's, else the pose table's (anatomical).
         "sensor_frames": reference.sensor_frames if reference is not None else ANATOMICAL,
         "source": str(rec.meta.get("source", "")),
-        "rest_s": [round(rest[0] / rate, 4), round(rest[1] / rate, 4)],
+        # seconds from the recording's first sample (not from start_s)
+        "rest_s": [round(offset + rest[0] / rate, 4), round(offset + rest[1] / rate, 4)],
         "matched_samples": int(pairs),
         "sensors": {
             n: {"rotation_wxyz": [round(float(v), 9) for v in _canonical(quat.from_matrix(R[s]))],
                 "method": method[s], "residual_deg": round(float(residual[s]), 3)}
             for s, n in enumerate(names)
         },  # fmt: skip
+        "problems": problems,
     }
+    if problems:
+        raise CalibrationQualityError(f"calibration not to be trusted: {'; '.join(problems)}", doc)
+    return doc
 
 
 def _canonical(q: np.ndarray) -> np.ndarray:
@@ -444,6 +529,22 @@ def _robust_angle(sums: np.ndarray, weight: np.ndarray) -> np.ndarray:
     keep = np.abs(np.angle(np.exp(1j * (own - theta[None])))) <= math.radians(OUTLIER_DEG)
     kept = (sums * weight[:, None] * keep).sum(axis=0)
     return np.where(keep.any(axis=0), np.angle(kept), theta)
+
+
+def _level_fit(R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, up: np.ndarray,
+               rest_w: float) -> np.ndarray:  # fmt: skip
+    """All three degrees of freedom (Wahba) over the pairs, and a rest term of weight
+    rest_w pairing the device's gravity `up` with the nearest direction that keeps the
+    bone (the layout's X) level: alternately that direction from the last R, R from it,
+    LEVEL_STEPS times from R."""
+    bone = np.array([1.0, 0.0, 0.0])
+    for _ in range(LEVEL_STEPS):
+        target = R @ up
+        target = target - (target @ bone) * bone
+        if np.linalg.norm(target) < 1e-9:  # (gravity along the bone: no level direction is nearer)
+            break
+        R = wahba(np.vstack([dev, up * GRAVITY]), np.vstack([lay, _unit(target) * GRAVITY]), np.append(weight, rest_w))
+    return R
 
 
 def _about_only(R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -133,12 +133,17 @@ class BatchResult:
 
 
 def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
-               timeout_s: float | None = None, skeleton: Skeleton | None = None) -> BatchResult:  # fmt: skip
-    """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None)."""
+               timeout_s: float | None = None, skeleton: Skeleton | None = None,
+               calibrate_from_start: tuple[float, str] | None = None) -> BatchResult:  # fmt: skip
+    """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None);
+    calibrate_from_start: (seconds, pose), the server calibrates the device-frame
+    recording from its own start against the graph first."""
     if skeleton is None:
         skeleton = skeleton_from_proto(get_graph(conn, graph).skeleton)
     request = pb.SynthesizeRequest(graph=graph, recording=recording_to_proto(rec),
                                    options=options or pb.SynthesisOptions())  # fmt: skip
+    if calibrate_from_start is not None:
+        request.calibrate_from_start.seconds, request.calibrate_from_start.pose = calibrate_from_start
     try:
         response = conn.stub.Synthesize(request, timeout=timeout_s, metadata=conn.metadata)
     except grpc.RpcError as exc:

@@ -85,6 +85,12 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
             rec = recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
                                        graph.layout.get("name", "?"))
+            if request.HasField("calibrate_from_start"):  # (device frames: calibrated here, against the graph)
+                c = request.calibrate_from_start
+                try:
+                    rec = pipeline.calibrated_from_start(rec, graph, c.seconds, c.pose)
+                except InputError as exc:
+                    raise FieldError("calibrate_from_start", str(exc)) from None
             if not context.is_active():  # the deadline passed while waiting for a worker
                 return pb.SynthesizeResponse()
             # Serial kernels: many calls share the machine (and while this one runs, a

@@ -127,3 +127,19 @@ def test_store_skips_done_items_and_requeues_the_rest(tmp_path):
     with store.folder_lock(tmp_path), pytest.raises(InputError, match="another batch is running"):
         with store.folder_lock(tmp_path):
             pass
+
+
+def test_an_item_calibrates_from_its_own_start_through_its_options(tmp_path):
+    (item,) = read_manifest(_one(tmp_path, {"calibrate-from-start": 6, "pose": "tpose"}))
+    argv = option_argv(item, tmp_path)
+    assert argv == ["--strategy", "viterbi", "--calibrate-from-start", "6", "--pose", "tpose"]
+    _, args = parse_item_options(argv)
+    assert (args.calibrate_from_start, args.pose, args.calibration) == (6.0, "tpose", None)
+    (tmp_path / "cal.json").write_text("{}")
+    path = tmp_path / "both.json"
+    path.write_text(json.dumps([{"recording": "r.rec", "graph": "g", "strategy": "viterbi", "output": "o",
+                                 "calibration": "cal.json", "options": {"calibrate-from-start": 6, "pose": "npose"}}]))  # fmt: skip
+    with pytest.raises(InputError, match="two ways to calibrate"):
+        parse_item_options(option_argv(read_manifest(path)[0], tmp_path))
+    with pytest.raises(InputError, match="needs --pose"):
+        parse_item_options(option_argv(read_manifest(_one(tmp_path, {"calibrate-from-start": 6}))[0], tmp_path))

@@ -91,22 +91,45 @@ def test_the_pose_table_reads_plus_one_g_and_holds_every_canonical_segment():
     assert POSE_READINGS["tpose"]["l_knee"] == POSE_READINGS["npose"]["l_knee"]
 
 
-def test_find_rest_finds_the_first_still_stretch_and_the_sensors_never_still():
+def test_find_rest_finds_the_pose_and_the_sensors_not_still_in_it():
     rng = np.random.default_rng(0)
     rate, T = 30.0, 150
-    acc = np.zeros((T, 2, 3))
+    acc = np.zeros((T, 3, 3))
     acc[:] = (0.0, 9.81, 0.0)
     acc += rng.normal(0.0, 0.05, acc.shape)
     t = np.arange(T) / rate
     acc[:12, 0, 0] += 3.0  # moved off for 0.4 s
     acc[60:, 0, 0] += 4.0 * np.sin(7 * t[60:])  # still 0.4–2.0 s, then moving
     acc[:, 1, 2] += 5.0 * np.sin(12 * t)  # never still
-    start, stop, still = find_rest(acc, rate)
-    assert still.tolist() == [True, False]
-    assert 12 <= start <= 14 and 58 <= stop <= 61
-    assert find_rest(acc[:, 1:], rate) is None
+    acc[:30, 2, 0] += 4.0 * np.sin(7 * t[:30])  # still from 1.0 s on
+    # The pose: sensors 0 and 2 both still over samples 30–60 (0 alone is still before).
+    rests = find_rest(acc, rate)
+    assert rests[1].tolist() == [-1, -1]
+    assert rests[0].tolist() == rests[2].tolist() and 30 <= rests[0, 0] <= 32 and 58 <= rests[0, 1] <= 61
+    assert find_rest(acc[:, 1:2], rate) is None
+    late = acc[:, [0, 2]].copy()
+    late[:46, 1, 0] += 4.0 * np.sin(7 * t[:46])  # still from 46 on: never with sensor 0 for 0.5 s
+    rests = find_rest(late, rate)
+    assert 12 <= rests[0, 0] <= 14 and rests[1].tolist() == [-1, -1]  # (the first of the most still at once)
     acc[:, 0] *= 1.5  # not 1 g: not at rest
     assert find_rest(acc[:, :1], rate) is None
+
+
+def test_each_window_is_judged_by_its_own_noise():
+    """A sensor noisy while held still (σ = 0.9 m/s² a axis: RMS deviation 1.56 m/s²),
+    then moving, then holding one value (a device repeating its last reading): its rest
+    is the still start, not the frozen stretch — the frozen stretch's zero noise does not
+    set the tolerance elsewhere, nor does a fixed bound refuse the noisy rest."""
+    rng = np.random.default_rng(4)
+    rate, T = 30.0, 150
+    t = np.arange(T) / rate
+    acc = np.zeros((T, 1, 3))
+    acc[:] = (0.0, 9.81, 0.0)
+    acc[:90] += rng.normal(0.0, 0.9, (90, 1, 3))
+    acc[36:90, 0, 0] += 6.0 * np.sin(5 * t[36:90])
+    acc[90:] = (0.2, 9.8, 0.1)  # frozen from 3 s
+    rests = find_rest(acc, rate)
+    assert rests[0, 0] == 0 and 36 <= rests[0, 1] <= 45, rests  # (moving from sample 36)
 
 
 def test_wahba_matches_scipy_align_vectors():
@@ -185,8 +208,10 @@ def test_a_t_pose_take_calibrates_sensors_in_anatomical_frames(kb):
     rest = rec.accelerations[5].astype(float)  # (the T-pose's readings without the mounting:)
     np.testing.assert_allclose(quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
                                [POSE_READINGS["tpose"][s.segment] for s in layout.sensors], atol=1e-3)  # fmt: skip
+    # (The arms' roll about their bone comes from the motion, not the table, even here
+    # where the table's is the truth: 2.0° and 1.4°, the shins 0.03°.)
     err = _errors(calibrate(rec, "tpose", g), seed, layout.sensor_names, 90.0)
-    assert err.max() < 2.0, err
+    assert err.max() < 3.0 and err[2:].max() < 0.1, err
 
 
 def test_orientation_output_pairs_gravity_free_of_linear_acceleration(kb, graph):
@@ -301,3 +326,133 @@ def test_a_calibration_carries_its_graphs_sensor_frame_convention(kb, graph):
     check_frames(graph.params, out.meta)
     with pytest.raises(InputError, match="rest-pose"):
         check_frames({}, out.meta)  # a graph built before anatomical frames
+
+
+# ---------------------------------------------------------------- a calibration pose before a clip
+
+KELLY6 = load_layout("kelly6")
+
+
+@pytest.fixture(scope="module")
+def graph6(kb):
+    g, _ = build_graph(kb, BuildOptions(layout=KELLY6, progress=False))
+    return g
+
+
+def _arms_lowered(monkeypatch, degrees: float) -> None:
+    """`with_calibration_pose`'s T-pose with both upper arms turned `degrees` down about
+    the performer's forward axis (negative: up)."""
+    import graphsvc.motion.calibration_pose as cp
+    from graphsvc.motion.joints import joint_map
+    from graphsvc.motion.kinematics import forward_kinematics
+
+    made = cp.calibration_frame
+
+    def frame(motion, pose, mapping=None):
+        rot, trans = made(motion, pose, mapping)
+        table, parents = joint_map(motion.skeleton, mapping), motion.skeleton.parents
+        world = forward_kinematics(rot[None], trans[None], parents)
+        left = world[1][0, table["l_hip"]] - world[1][0, table["r_hip"]]
+        left[1] = 0.0
+        forward = np.cross(left / np.linalg.norm(left), [0.0, 1.0, 0.0])
+        for side, sign in (("l_", -1.0), ("r_", 1.0)):
+            j = table[side + "shoulder"]
+            turn = quat.from_axis_angle(forward, np.float64(np.radians(sign * degrees)))
+            rot[j] = quat.mul(quat.conjugate(world[0][0, parents[j]]), quat.mul(turn, world[0][0, j]))
+        return rot, trans
+
+    monkeypatch.setattr(cp, "calibration_frame", frame)
+
+
+@pytest.mark.parametrize("pose, lowered, bound", [("npose", 0.0, 2.0), ("tpose", 0.0, 3.0), ("tpose", 15.0, 3.0)])
+def test_a_pose_before_the_clip_calibrates_every_sensor(kb, graph6, monkeypatch, pose, lowered, bound):
+    """`with_calibration_pose` before the punch clip, every sensor mounted up to 30° off,
+    the default noise without its misalignment. A T-pose says only that the arms are
+    level: the forearms' roll about their bone is the first frame's (about 27° from the
+    table's Y-up here), which the motion fixes — as it does when the arms are 15° below
+    level (the table's assumption gave 27° and 30° of error; measured: 1.8° and 1.8° the
+    largest (the shins'; the forearms 0.9° and 1.5°), the N-pose 1.3°)."""
+    from graphsvc.motion.calibration_pose import with_calibration_pose
+
+    if lowered:
+        _arms_lowered(monkeypatch, lowered)
+    seed = 1
+    take = with_calibration_pose(_clip(kb, "punch"), pose, 2.0)
+    rec = simulate_recording(take, KELLY6, parse_noise("default,misalign=0,mount=30"), seed=seed)
+    cal = calibrate(rec, pose, graph6)
+    err = _errors(cal, seed, KELLY6.sensor_names, 30.0)
+    assert err.max() < bound, dict(zip(KELLY6.sensor_names, err.round(2)))
+
+
+# ---------------------------------------------------------------- quality
+
+
+def test_quality_problems_name_each_sensor_in_one_phrase():
+    got = cal_mod.quality_problems(("a", "b", "c", "d"), [25.5, 3.0, 24.9, 40.0], [True, False, True, True],
+                                   [np.nan, np.nan, 10.5, 9.9])  # fmt: skip
+    assert got == ["a (residual 25.5° > 25°)", "b (moved during the pose)",
+                   "c (gravity from acceleration and orientation 10.5° apart (> 10°))", "d (residual 40.0° > 25°)"]  # fmt: skip
+
+
+def _wobbled(rec, sensor: int):
+    """`rec` with one sensor shaken throughout (2 m/s² at 2 Hz along its X): never
+    still, so not in the pose the others hold."""
+    acc = rec.accelerations.astype(np.float64)
+    t = rec.timestamps_s - rec.timestamps_s[0]
+    acc[:, sensor, 0] += 2.0 * np.sin(2 * np.pi * 2.0 * t)
+    return replace(rec, accelerations=acc.astype(np.float32))
+
+
+def test_a_sensor_that_moved_during_the_pose_is_named(kb, graph):
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=3)
+    with pytest.raises(cal_mod.CalibrationQualityError) as info:
+        calibrate(_wobbled(rec, 1), "npose", graph)
+    assert isinstance(info.value, InputError)
+    assert str(info.value) == "calibration not to be trusted: r_wrist (moved during the pose)"
+    doc = info.value.calibration
+    assert doc["problems"] == ["r_wrist (moved during the pose)"] and set(doc["sensors"]) == set(LAYOUT.sensor_names)
+    assert doc["sensors"]["r_wrist"]["method"] == "graph (never still)"
+    assert calibrate(rec, "npose", graph)["problems"] == []
+
+
+def test_gravity_from_acceleration_and_orientation_that_disagree_is_named(kb, graph):
+    """The accelerometer's frame turned 15° off the orientation output's (about an axis
+    across gravity): the two views of gravity over the rest are 15° apart."""
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,orientations=1,mount=30"), seed=3)
+    acc = rec.accelerations.astype(np.float64)
+    down = acc[:10, 2].mean(axis=0)
+    axis = np.cross(down, [1.0, 0.0, 0.0])
+    turn = quat.from_axis_angle(axis / np.linalg.norm(axis), np.float64(np.radians(15.0)))
+    acc[:, 2] = quat.rotate(turn[None], acc[:, 2])
+    gap = cal_mod.gravity_gap_deg(acc, rec.orientations.astype(np.float64), np.array([[0, 30]] * 4))
+    assert gap[2] == pytest.approx(15.0, abs=1e-3) and np.abs(gap[[0, 1, 3]]).max() < 1e-3
+    with pytest.raises(cal_mod.CalibrationQualityError, match=r"l_ankle \(gravity from acceleration and orientation 15\.0°"):
+        calibrate(replace(rec, accelerations=acc.astype(np.float32)), "npose", graph)
+
+
+# ---------------------------------------------------------------- calibrating a take from its own start
+
+
+def test_hidden_clips_are_left_out_of_the_reference(kb, graph):
+    """An evaluation that hides a clip must not calibrate against it: its readings (and
+    only its) leave the reference, in the graph's clip order."""
+    from graphsvc.graph.calibration import calibrate_from_start, graph_reference, graph_stream
+
+    names = [c["name"] for c in graph.clips]
+    full, runs, nodes = graph_stream(graph)
+    ref = graph_reference(graph, hidden_clips=("stop_01", "not-a-clip"))
+    keep = graph.node_clip[nodes] != names.index("stop_01")
+    assert 0 < keep.sum() < keep.size
+    np.testing.assert_array_equal(ref.readings, full[keep])
+    np.testing.assert_array_equal(ref.runs, runs[keep])
+    np.testing.assert_array_equal(graph_reference(graph).readings, full)
+    # The verticals follow the kept rows: row k of the reference is row keep[k] of the whole.
+    rows = np.array([0, 7, int(keep.sum()) - 1])
+    np.testing.assert_allclose(ref.verticals(rows, LAYOUT.sensor_names),
+                               graph_reference(graph).verticals(np.flatnonzero(keep)[rows], LAYOUT.sensor_names))  # fmt: skip
+    rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=2)
+    assert calibrate_from_start(rec, graph, 5.0, "npose") == calibrate(rec, "npose", graph, None, 5.0)
+    with pytest.raises(InputError, match="no window of the graph's readings"):
+        calibrate_from_start(rec, graph, 5.0, "npose", hidden_clips=names)
+    with pytest.raises(InputError, match="unknown pose"):
+        calibrate_from_start(rec, graph, 5.0, "sitting")

@@ -303,14 +303,24 @@ class Recording(_message.Message):
     def __init__(self, rate_hz: _Optional[float] = ..., sensor_names: _Optional[_Iterable[str]] = ..., timestamps_s: _Optional[_Iterable[float]] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_positions_m: _Optional[_Iterable[float]] = ..., headings_rad: _Optional[_Iterable[float]] = ..., orientations_wxyz: _Optional[_Iterable[float]] = ..., marker_names: _Optional[_Iterable[str]] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class SynthesizeRequest(_message.Message):
-    __slots__ = ("graph", "recording", "options")
+    __slots__ = ("graph", "recording", "options", "calibrate_from_start")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     RECORDING_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
+    CALIBRATE_FROM_START_FIELD_NUMBER: _ClassVar[int]
     graph: str
     recording: Recording
     options: SynthesisOptions
-    def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ...) -> None: ...
+    calibrate_from_start: CalibrateFromStart
+    def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., calibrate_from_start: _Optional[_Union[CalibrateFromStart, _Mapping]] = ...) -> None: ...
+
+class CalibrateFromStart(_message.Message):
+    __slots__ = ("seconds", "pose")
+    SECONDS_FIELD_NUMBER: _ClassVar[int]
+    POSE_FIELD_NUMBER: _ClassVar[int]
+    seconds: float
+    pose: str
+    def __init__(self, seconds: _Optional[float] = ..., pose: _Optional[str] = ...) -> None: ...
 
 class SynthesizeResponse(_message.Message):
     __slots__ = ("motion", "node_path", "bvh", "report", "provenance", "report_json")
