@@ -32,8 +32,9 @@ reports it.
 (more white noise, the legs' soft tissue, foot-strike jolts, the devices' orientation
 output with yaw drift and a common heading drift; docs/sensors.md) in place of `default`,
 each device strapped on turned by up to 30° (`mount=30`), and a 2 s N-pose put before
-every test clip, from which the devices are calibrated (`evaluate --calibrate-from-start
-2 --pose npose`; the pose is not scored). `--calibration-pose tpose|stand` calibrates
+every test clip; the devices are calibrated from the recording's first 10 s, the pose
+fixing each sensor's tilt and the 8 s of motion after it the rotation about gravity
+(`evaluate --calibrate-from-start 10 --pose npose`; the pose is not scored). `--calibration-pose tpose|stand` calibrates
 from another pose; `--mount 0 --no-calibration` runs the rows with the layout's own
 mounting. `--inputs acc-no-orientation` and `pos+heading-no-orientation` run its rows
 with the orientations weighed 0.
@@ -151,7 +152,7 @@ def main() -> None:
                 calibrate = None
                 if args.preset == "real":
                     noise += f",mount={args.mount:g}" if args.mount else ""
-                    calibrate = None if args.no_calibration else 2.0
+                    calibrate = None if args.no_calibration else 10.0
                 for strategy in args.strategies.split(","):
                     tag = "" if args.preset == "default" else f".{args.preset}"
                     if args.preset == "real":

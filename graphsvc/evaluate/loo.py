@@ -129,8 +129,9 @@ class EvalSetup:
     # Score the pose-oracle floor too (`evaluate.oracle`): per frame the usable node
     # closest in pose to the truth, as `oracle_joint_err_cm`.
     pose_oracle: bool = False
-    # Devices worn as in the field: this many seconds of `calibration_pose` put before
-    # each clip, the devices calibrated from them and the clip's part reconstructed
+    # Devices worn as in the field: CALIBRATION_POSE_S of `calibration_pose` put before
+    # each clip, the devices calibrated from the recording's first this many seconds
+    # (the pose and the motion after it) and the clip's part reconstructed
     # (`calibrated_test_input`); None: the recording is read as simulated.
     calibrate_from_start: float | None = None
     calibration_pose: str = "npose"
@@ -171,35 +172,46 @@ def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_h
     return rec
 
 
+# How long the pose put before a test clip is held (the issue of devices worn as in the
+# field: a wearer stands in it for about two seconds before moving).
+CALIBRATION_POSE_S = 2.0
+
+
 def calibrated_test_input(graph: MotionGraph, truth: Motion, layout: Layout, setup: EvalSetup, mapping,
                           hidden: list[str]) -> tuple[Recording, dict]:  # fmt: skip
     """The simulated input of a test clip (at the graph's rate) worn as devices are
-    worn: `setup.calibrate_from_start` seconds of `setup.calibration_pose` put before the
-    clip (`motion.calibration_pose.with_calibration_pose`), the devices simulated over
-    both (their mountings, noise and drift running on), calibrated from that start
-    against the graph's readings without the `hidden` clips (a calibration against a
-    hidden clip's own readings would be a leak; `graph.calibration.calibrate_from_start`),
-    and the calibrated stream from the clip's first frame on, its clock restarted at 0.
+    worn: CALIBRATION_POSE_S of `setup.calibration_pose` put before the clip
+    (`motion.calibration_pose.with_calibration_pose`), the devices simulated over both
+    (their mountings, noise and drift running on), calibrated from the recording's first
+    `setup.calibrate_from_start` seconds — the pose fixes each sensor's tilt, the motion
+    after it the rotation about gravity — against the graph's readings without the
+    `hidden` clips (a calibration against a hidden clip's own readings would be a leak;
+    `graph.calibration.calibrate_from_start`), and the calibrated stream from the clip's
+    first frame on, its clock restarted at 0.
 
     Returns the recording and what the calibration did: `calibration_error_deg`, the mean
     over sensors of the angle between each estimated mounting and the simulated one
     (`sensors.device_model.mounting`), `calibration_residual_deg` (the mean of the
-    calibration's residuals) and `calibration_flagged` (the sensors its quality check
-    named; the evaluation goes on with the calibration, as `--force` would)."""
+    calibration's residuals) and `calibration_flagged` (its quality check's line naming
+    the sensors not to be trusted, or nothing; the evaluation goes on with the
+    calibration, as `--force` would)."""
     from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate_from_start
     from graphsvc.motion.calibration_pose import with_calibration_pose
-    from graphsvc.sensors.calibration import apply_calibration, calibration_rotations
+    from graphsvc.sensors.calibration import apply_calibration, calibration_rotations, check_calibration
     from graphsvc.sensors.device_model import mounting
 
     seconds = float(setup.calibrate_from_start)
-    posed = with_calibration_pose(truth, setup.calibration_pose, seconds, mapping)
+    posed = with_calibration_pose(truth, setup.calibration_pose, CALIBRATION_POSE_S, mapping)
     full = simulate_test_input(posed, layout, setup, float(graph.rate_hz), mapping)
+    # (devices strapped on straight still read in their own frames: calibrated all the same)
+    full = replace(full, meta={**full.meta, "sensor_frame": "device"})
     flagged: list[str] = []
     try:
         cal = calibrate_from_start(full, graph, seconds, setup.calibration_pose, hidden_clips=hidden)
     except CalibrationQualityError as exc:
-        cal, flagged = exc.calibration, list(exc.sensors)
+        cal, flagged = exc.calibration, [str(exc)]
+    cal = check_calibration(cal, "the calibration from the start")
     full = apply_calibration(full, cal)
     cut = posed.num_frames - truth.num_frames
     pick = lambda a: None if a is None else a[cut:]  # noqa: E731

@@ -55,7 +55,11 @@ class EvalConfig:
     flicker, gap_fraction: how simulated optical markers are lost. json: the summary's
     file; keep_motions: a folder for each clip's files; report_html: the page (with the
     `write_page` of `run`). pose_oracle: score the pose-oracle floor too
-    (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean). progress: progress bars (None: on a terminal; False: none)."""
+    (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean).
+    calibrate_from_start, calibration_pose: put 2 s of the pose before each test clip
+    and calibrate the devices from the recording's first this many seconds, the pose and
+    the motion after it (`loo.calibrated_test_input`; None: no calibration). progress:
+    progress bars (None: on a terminal; False: none)."""
 
     kb: tuple[str, ...]
     test: str
@@ -126,8 +130,10 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     if config.calibrate_from_start is not None:
         from graphsvc.motion.calibration_pose import POSES
 
-        if not (math.isfinite(config.calibrate_from_start) and config.calibrate_from_start > 0):
-            raise InputError(f"--calibrate-from-start must be a finite number of seconds > 0, "
+        least = loo.CALIBRATION_POSE_S + 2.0  # (the pose, then 2 s of motion: `sensors.calibration`)
+        if not (math.isfinite(config.calibrate_from_start) and config.calibrate_from_start >= least):
+            raise InputError(f"--calibrate-from-start must be a finite number of seconds ≥ {least:g} (the "
+                             f"{loo.CALIBRATION_POSE_S:g} s pose put before each clip, then motion), "
                              f"got {config.calibrate_from_start}")  # fmt: skip
         if config.calibration_pose not in POSES:
             raise InputError(f"unknown calibration pose {config.calibration_pose!r} (one of {', '.join(POSES)})")
@@ -251,8 +257,9 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
     mean = summary["mean"]
     if cfg.get("calibrate_from_start"):
         flagged = mean.get("calibration_flagged_clips", 0)
-        lines.append(f"devices calibrated from {cfg['calibrate_from_start']:g} s of {cfg['calibration_pose']} before each"
-                     f" clip: mounting error {mean['calibration_error_deg']:.1f}° (mean over sensors and clips)"
+        lines.append(f"devices calibrated from their first {cfg['calibrate_from_start']:g} s ({loo.CALIBRATION_POSE_S:g} s"
+                     f" of {cfg['calibration_pose']} put before each clip, then its motion): mounting error "
+                     f"{mean['calibration_error_deg']:.1f}° (mean over sensors and clips)"
                      + (f"; {flagged} clips with a sensor the quality check named" if flagged else ""))  # fmt: skip
     lines.append(f"{what} on {searched}; graph {cfg['build_s']:.1f} s, evaluation {cfg['evaluate_s']:.1f} s, "
                  f"peak memory {summary['mean']['peak_rss_mb']:,.0f} MB"
