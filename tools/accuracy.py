@@ -28,14 +28,20 @@ reports it.
 
 `--only clip` runs the clip hold-out (the test clip alone hidden) on the takes' tests.
 
-`--preset real` runs the same rows with the `real` sensor noise (real IMUs: more white
-noise, the legs' soft tissue, foot-strike jolts, the devices' orientation output;
-docs/sensors.md) in place of `default`; `--inputs acc-no-orientation` and
-`pos+heading-no-orientation` run its rows with the orientations weighed 0.
+`--preset real` runs the same rows as real devices are worn: the `real` sensor noise
+(more white noise, the legs' soft tissue, foot-strike jolts, the devices' orientation
+output with yaw drift and a common heading drift; docs/sensors.md) in place of `default`,
+each device strapped on turned by up to 30° (`mount=30`), and a 2 s N-pose put before
+every test clip; the devices are calibrated from the recording's first 10 s, the pose
+fixing each sensor's tilt and the 8 s of motion after it the rotation about gravity
+(`evaluate --calibrate-from-start 10 --pose npose`; the pose is not scored). `--calibration-pose tpose|stand` calibrates
+from another pose; `--mount 0 --no-calibration` runs the rows with the layout's own
+mounting. `--inputs acc-no-orientation` and `pos+heading-no-orientation` run its rows
+with the orientations weighed 0.
 
 Usage: tools/accuracy.py DATA [--jobs 2] [--work DIR] [--only takes|actor|clip] [--layouts L,...]
                          [--inputs acc,pos,pos+heading] [--strategies viterbi,nearest] [--preset real]
-                         [--reuse]
+                         [--mount DEG] [--calibration-pose npose|tpose|stand] [--no-calibration] [--reuse]
 DATA: the Bandai-Namco folder (../shared/data/bandai).
 """
 
@@ -113,6 +119,12 @@ def main() -> None:
     parser.add_argument("--strategies", default=",".join(accelerometer_strategies))
     parser.add_argument("--preset", default="default",
                         help="the sensors' noise preset (default; real: tools/fit_real_noise.py's devices)")
+    parser.add_argument("--mount", type=float, default=30.0,
+                        help="with --preset real: each device turned by up to this many degrees (default 30)")
+    parser.add_argument("--calibration-pose", default="npose", choices=("npose", "tpose", "stand"),
+                        help="with --preset real: the pose put before each clip and calibrated from (default npose)")
+    parser.add_argument("--no-calibration", action="store_true",
+                        help="with --preset real: no calibration pose, the recordings read as simulated")
     parser.add_argument("--reuse", action="store_true",
                         help="keep a run already in --work that the same command wrote (after a change that cannot"
                              " move it, e.g. one to how positions are used, for the accelerometer-only rows)")
@@ -137,19 +149,28 @@ def main() -> None:
             for key in args.inputs.split(","):
                 what, noise, weights = {**INPUTS, **EXTRA_INPUTS}[key]
                 noise = noise.replace("default", args.preset, 1)
+                calibrate = None
+                if args.preset == "real":
+                    noise += f",mount={args.mount:g}" if args.mount else ""
+                    calibrate = None if args.no_calibration else 10.0
                 for strategy in args.strategies.split(","):
                     tag = "" if args.preset == "default" else f".{args.preset}"
+                    if args.preset == "real":
+                        tag += f".mount{args.mount:g}" + ("" if calibrate is None else f".{args.calibration_pose}")
                     out = work / f"{protocol}.{layout}.{key}.{strategy}{tag}.json"
                     config = EvalConfig(kb=(str(kb),), graph=str(graph), test=PROTOCOLS[protocol], hold_out=protocol,
                                         noise=noise, options=Options(strategy=strategy,
                                                                      weights=parse_weights(weights or "1,1,1")),
                                         jobs=args.jobs, json=str(out), pose_oracle=strategy == "nearest",
+                                        calibrate_from_start=calibrate, calibration_pose=args.calibration_pose,
                                         progress=False)  # fmt: skip
                     command = shlex.join(["graphsvc", "evaluate", str(kb), "--graph", str(graph), "--test",
                                           PROTOCOLS[protocol], "--hold-out", protocol, "--noise", noise,
                                           *(["--weights", weights] if weights else []), "--strategy", strategy,
                                           "--jobs", str(args.jobs), "--json", str(out), "--quiet",
-                                          *(["--pose-oracle"] if strategy == "nearest" else [])])  # fmt: skip
+                                          *(["--pose-oracle"] if strategy == "nearest" else []),
+                                          *(["--calibrate-from-start", f"{calibrate:g}", "--pose",
+                                             args.calibration_pose] if calibrate else [])])  # fmt: skip
                     t0 = time.perf_counter()
                     stamp = out.with_suffix(".cmd")  # the command that wrote `out`
                     if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == command):
@@ -163,6 +184,7 @@ def main() -> None:
                            "root_err_cm": m["root_err_cm"], "heading_err_deg": m["heading_err_deg"],
                            "label_acc": m["label_acc"], "samples_per_s": m.get("samples_per_s"),
                            "oracle_joint_err_cm": m.get("oracle_joint_err_cm"),
+                           "calibration_error_deg": m.get("calibration_error_deg"),
                            **{k: m.get(k) for k in ("jitter_km_s3", "skate_cm_s", "penetration_cm",
                                                     "truth_jitter_km_s3", "truth_skate_cm_s", "truth_penetration_cm")},
                            "groups": {g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}

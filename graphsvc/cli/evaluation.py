@@ -6,13 +6,17 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, SEED, add_search_flags, options_from_flags, ranged
+from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, SEED, add_pose_flag, add_search_flags, options_from_flags, ranged
 
 
 def _cmd_evaluate(args) -> int:
     from graphsvc.evaluate.run import EvalConfig, run, summary_lines
     from graphsvc.strategies import check_options
 
+    if args.pose is not None and args.calibrate_from_start is None:
+        from graphsvc.errors import InputError
+
+        raise InputError("--pose goes with --calibrate-from-start S")
     options, notes = options_from_flags(args)
     options = check_options(options)
     print_notes(notes)
@@ -21,7 +25,8 @@ def _cmd_evaluate(args) -> int:
                         jobs=args.jobs, mixed=args.mixed, hold_out=args.hold_out, actors=args.actors,
                         mapping=args.mapping, flicker=args.flicker, gap_fraction=args.gap_fraction, json=args.json,
                         keep_motions=args.keep_motions, report_html=args.report_html,
-                        pose_oracle=args.pose_oracle, progress=False if args.quiet else None)  # fmt: skip
+                        pose_oracle=args.pose_oracle, calibrate_from_start=args.calibrate_from_start,
+                        calibration_pose=args.pose or "npose", progress=False if args.quiet else None)  # fmt: skip
     summary = run(config, note=print_note, write_page=_write_page)
     for line in summary_lines(summary, config):
         print(line)
@@ -100,6 +105,11 @@ def add_evaluate(sub) -> None:
     p.add_argument("--pose-oracle", action="store_true",
                    help="also score the pose-oracle floor: per frame the usable graph pose closest to the truth"
                         " (oracle_joint_err_cm), the bound any strategy that retrieves poses faces")
+    p.add_argument("--calibrate-from-start", type=ranged(float, 0.0, 3600.0, low_open=True), metavar="S",
+                   help="devices worn as in the field: put 2 s of --pose before each test clip, calibrate the "
+                        "devices' mountings (noise mount=D) from the recording's first S seconds, the pose and the "
+                        "motion after it, without the hidden clips, and score the clip's part (S ≥ 4; default: none)")
+    add_pose_flag(p, what="with --calibrate-from-start: the pose put before each test clip (default npose)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
 

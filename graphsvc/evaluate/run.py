@@ -14,6 +14,7 @@ asks for a page passes the function that writes it (`write_page`).
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -54,7 +55,11 @@ class EvalConfig:
     flicker, gap_fraction: how simulated optical markers are lost. json: the summary's
     file; keep_motions: a folder for each clip's files; report_html: the page (with the
     `write_page` of `run`). pose_oracle: score the pose-oracle floor too
-    (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean). progress: progress bars (None: on a terminal; False: none)."""
+    (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean).
+    calibrate_from_start, calibration_pose: put 2 s of the pose before each test clip
+    and calibrate the devices from the recording's first this many seconds, the pose and
+    the motion after it (`loo.calibrated_test_input`; None: no calibration). progress:
+    progress bars (None: on a terminal; False: none)."""
 
     kb: tuple[str, ...]
     test: str
@@ -76,6 +81,8 @@ class EvalConfig:
     keep_motions: str | None = None
     report_html: str | None = None
     pose_oracle: bool = False
+    calibrate_from_start: float | None = None
+    calibration_pose: str = "npose"
     progress: bool | None = None
 
 
@@ -120,6 +127,21 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
         raise InputError("--augment applies when building the graph; a --graph file keeps its own copies")
     actor_map = protocols.load_actor_map(config.actors) if config.actors else None
     setup = replace(setup, protocol=config.hold_out, pose_oracle=bool(config.pose_oracle))
+    if config.calibrate_from_start is not None:
+        from graphsvc.motion.calibration_pose import POSES
+
+        least = loo.CALIBRATION_POSE_S + 2.0  # (the pose, then 2 s of motion: `sensors.calibration`)
+        if not (math.isfinite(config.calibrate_from_start) and config.calibrate_from_start >= least):
+            raise InputError(f"--calibrate-from-start must be a finite number of seconds ≥ {least:g} (the "
+                             f"{loo.CALIBRATION_POSE_S:g} s pose put before each clip, then motion), "
+                             f"got {config.calibrate_from_start}")  # fmt: skip
+        if config.calibration_pose not in POSES:
+            raise InputError(f"unknown calibration pose {config.calibration_pose!r} (one of {', '.join(POSES)})")
+        if loo.reads_markers(setup) or config.mixed is not None:
+            raise InputError("--calibrate-from-start applies to a strategy reading body-worn devices, one clip at a "
+                             "time (not --mixed)")  # fmt: skip
+        setup = replace(setup, calibrate_from_start=float(config.calibrate_from_start),
+                        calibration_pose=config.calibration_pose)  # fmt: skip
     check_outputs([("--json", config.json, (".json",)), ("--report-html", config.report_html, (".html", ".htm"))],
                   [("a knowledge-base file", k) for k in config.kb] + [("the graph", config.graph),
                    ("the actor map", config.actors),
@@ -197,6 +219,8 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
             "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": config.seed,
             "jobs": config.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": config.mixed,
             "hold_out": config.hold_out, "actors": config.actors,
+            **({"calibrate_from_start": setup.calibrate_from_start, "calibration_pose": setup.calibration_pose}
+               if setup.calibrate_from_start else {}),
             **({"keep_motions": setup.keep_dir} if config.keep_motions else {}),
         }  # fmt: skip
         # Without --keep-motions the clips' files live only until the page is written:
@@ -230,6 +254,13 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
                 f"{cfg['graph_nodes']:,} nodes ({cfg['layout']}), {cfg['inputs']}, "
                 f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}"
                 + "".join(f", {k} {v}" for k, v in values_of(options.own, changed_only=True).items()))  # fmt: skip
+    mean = summary["mean"]
+    if cfg.get("calibrate_from_start"):
+        flagged = mean.get("calibration_flagged_clips", 0)
+        lines.append(f"devices calibrated from their first {cfg['calibrate_from_start']:g} s ({loo.CALIBRATION_POSE_S:g} s"
+                     f" of {cfg['calibration_pose']} put before each clip, then its motion): mounting error "
+                     f"{mean['calibration_error_deg']:.1f}° (mean over sensors and clips)"
+                     + (f"; {flagged} clips with a sensor the quality check named" if flagged else ""))  # fmt: skip
     lines.append(f"{what} on {searched}; graph {cfg['build_s']:.1f} s, evaluation {cfg['evaluate_s']:.1f} s, "
                  f"peak memory {summary['mean']['peak_rss_mb']:,.0f} MB"
                  + (f"; wrote {config.json}" if config.json else ""))  # fmt: skip
