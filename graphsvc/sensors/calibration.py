@@ -96,7 +96,8 @@ MAX_GRAVITY_GAP_DEG = 10.0
 
 # The reading at rest (m/s², the layout's sensor frame: X along the bone from the
 # segment's joint toward its `toward` joint; in the N-pose and T-pose Z points forward,
-# Y = Z × X) of a sensor on each canonical segment, per pose.
+# Y = Z × X) of a sensor on each canonical segment, per pose, for a sensor whose X points
+# toward the segment's canonical child (`sensor_reversed`: X and Y turn over otherwise).
 _LIMBS = ("shoulder", "elbow", "wrist", "hip", "knee")
 _TRUNK = ("pelvis", "spine", "chest", "neck", "head")
 _FEET = ("ankle", "toe")
@@ -303,6 +304,17 @@ def sensor_segments(layout: dict | None, names) -> list[str]:
     return [seg[n] for n in names]
 
 
+def sensor_reversed(layout: dict, names) -> np.ndarray:
+    """(S,) bool: each named sensor's X points from its segment's joint toward another
+    joint than the segment's canonical child (dip6's head sensor, toward the neck): the
+    pose table's X and Y turn over for it (Z, forward, stays)."""
+    from graphsvc.motion.joints import CANONICAL_CHILD
+
+    spec = {s.get("name"): s for s in layout["sensors"] if isinstance(s, dict)}
+    return np.array([spec[n].get("toward") not in (None, CANONICAL_CHILD.get(spec[n].get("segment")))
+                     for n in names], dtype=bool)  # fmt: skip
+
+
 def gravity_gap_deg(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> np.ndarray:
     """(S,) degrees between gravity's direction over each sensor's rest from its mean
     reading and from its orientation output (the mean of D(t)⁻¹·ŷ); NaN without a rest
@@ -414,6 +426,7 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     r0, r1 = (int(v) for v in rests[np.argmax(has_rest)])
     up_dev, rest_source = _rest_up_device(acc, orient, rests)
     up_lay = _unit(np.array([table[s] for s in segments], dtype=np.float64))
+    up_lay[sensor_reversed(layout, names)] *= np.array([-1.0, -1.0, 1.0])
     if reference is None:
         raise InputError(f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
                          "(the motion after the rest, matched against the graph's readings, fixes it)")  # fmt: skip
