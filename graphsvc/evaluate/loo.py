@@ -34,7 +34,7 @@ import numpy as np
 
 from graphsvc.evaluate import oracle
 from graphsvc.evaluate.keep import keep_clip, kept_name
-from graphsvc.evaluate.metrics import evaluate_frames, plausibility, summarize
+from graphsvc.evaluate.metrics import canonical_parents, evaluate_frames, plausibility, summarize
 from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.build import content_digest
 from graphsvc.graph.file import load_graph, save_graph
@@ -224,7 +224,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     performance (`mixed.join_clips`) with its (F,) per-frame `true_labels` at the
     graph rate. clip_index: its index in graph.clips, a list of them (a joined
     performance's clips), or None (not in the graph, nothing to hide). Returns
-    `evaluate_frames`'s dict (name, frames, the four metrics, per_frame arrays) plus
+    `evaluate_frames`'s dict (name, frames, the four metrics and the joint error on the
+    truth's bone lengths, per_frame arrays) plus
     file, label, samples_per_s, search_s, hidden_nodes, in_graph, start_placed, and
     `node_path` / `pred_labels` ((T,) arrays, for plots; not in the JSON)."""
     mapping = graph.params.get("mapping")
@@ -255,7 +256,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     true_label = motion.labels[0] if motion.labels else motion.name
     scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
-                          pred_labels=pred_labels, true_label=scored, name=motion.name)  # fmt: skip
+                          pred_labels=pred_labels, true_label=scored, name=motion.name,
+                          parents=canonical_parents(compared))  # fmt: skip
     # What a viewer sees, of the output and of the truth (each over its own frames).
     feet = [compared.index(f) for f in ("l_ankle", "r_ankle")]
     seen, seen_per_frame = plausibility(pred_canon, rate, feet)

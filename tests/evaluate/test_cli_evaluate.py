@@ -62,9 +62,13 @@ def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp
     out = tmp_path / "E.json"
     assert main(["evaluate", str(kb), "--test", ",".join(clips), "--layout", "kelly6", "--hold-out", "clip", "--quiet",
                  "--strategy", "nearest", "--json", str(out)]) == 0  # fmt: skip
-    assert "jitter out/truth" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "jitter out/truth" in printed and "scaled cm" in printed
     e = json.loads(out.read_text())
     for row in e["clips"]:
+        # the graph's skeleton is the test clip's: its bones already have the truth's
+        # lengths, so the pose error on them is the joint error
+        assert row["joint_err_scaled_cm"] == pytest.approx(row["joint_err_cm"], abs=1e-6)
         for key in PLAUSIBILITY:
             assert row[key] >= 0 and row[f"truth_{key}"] >= 0
         # the truth's figures, computed here from the clip itself (30 Hz, the graph's rate)
@@ -75,7 +79,7 @@ def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp
         feet = [CANONICAL.index("l_ankle"), CANONICAL.index("r_ankle")]
         assert row["truth_skate_cm_s"] == pytest.approx(skate_cm_s(pos, 30.0, feet)[1], rel=1e-9)
     frames = np.array([r["frames"] for r in e["clips"]], dtype=float)
-    for key in ("jitter_km_s3", "truth_skate_cm_s"):  # the summary: frame-weighted means over the clips
+    for key in ("jitter_km_s3", "truth_skate_cm_s", "joint_err_scaled_cm"):  # the summary: frame-weighted means
         want = float(np.sum(frames * [r[key] for r in e["clips"]]) / frames.sum())
         assert e["mean"][key] == pytest.approx(want)
 
