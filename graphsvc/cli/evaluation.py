@@ -6,7 +6,7 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, PATH, SEED, add_search_flags, options_from_flags, ranged
+from graphsvc.flags import COUNT, PATH, SEED, add_performer_flags, add_search_flags, options_from_flags, ranged
 
 
 def _cmd_evaluate(args) -> int:
@@ -21,7 +21,8 @@ def _cmd_evaluate(args) -> int:
                         jobs=args.jobs, mixed=args.mixed, hold_out=args.hold_out, actors=args.actors,
                         mapping=args.mapping, flicker=args.flicker, gap_fraction=args.gap_fraction, json=args.json,
                         keep_motions=args.keep_motions, report_html=args.report_html,
-                        pose_oracle=args.pose_oracle, progress=False if args.quiet else None)  # fmt: skip
+                        pose_oracle=args.pose_oracle, performer=args.performer, height=args.height,
+                        performer_mapping=args.performer_mapping, progress=False if args.quiet else None)  # fmt: skip
     summary = run(config, note=print_note, write_page=_write_page)
     for line in summary_lines(summary, config):
         print(line)
@@ -97,6 +98,7 @@ def add_evaluate(sub) -> None:
     p.add_argument("--pose-oracle", action="store_true",
                    help="also score the pose-oracle floor: per frame the usable graph pose closest to the truth"
                         " (oracle_joint_err_cm), the bound any strategy that retrieves poses faces")
+    add_performer_flags(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
 

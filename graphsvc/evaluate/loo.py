@@ -34,7 +34,7 @@ import numpy as np
 
 from graphsvc.evaluate import oracle
 from graphsvc.evaluate.keep import keep_clip, kept_name
-from graphsvc.evaluate.metrics import canonical_parents, evaluate_frames, plausibility, summarize
+from graphsvc.evaluate.metrics import evaluate_frames, plausibility, summarize
 from graphsvc.evaluate.protocols import activity
 from graphsvc.graph.build import content_digest
 from graphsvc.graph.file import load_graph, save_graph
@@ -45,7 +45,7 @@ from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
-from graphsvc.pipeline import Options, reconstruct
+from graphsvc.pipeline import Options, put_on_performer, reconstruct
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
@@ -129,6 +129,9 @@ class EvalSetup:
     # Score the pose-oracle floor too (`evaluate.oracle`): per frame the usable node
     # closest in pose to the truth, as `oracle_joint_err_cm`.
     pose_oracle: bool = False
+    # A performer's segment lengths every reconstruction is put on before it is scored
+    # (`pipeline.put_on_performer`); None: the graph skeleton's.
+    performer: dict | None = None
 
 
 def reads_markers(setup: EvalSetup) -> bool:
@@ -238,6 +241,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     strategy = get_strategy(setup.options.strategy)
     allowed = strategy.allowed_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
     result = reconstruct(graph, rec, setup.options, allowed=allowed)
+    if setup.performer is not None:
+        result = put_on_performer(graph, result, setup.performer)
 
     true_table, pred_table = joint_map(truth.skeleton, test_mapping), joint_map(graph.skeleton, mapping)
     compared = common_joints(true_table, pred_table)  # (what both skeletons have)
@@ -257,7 +262,7 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
                           pred_labels=pred_labels, true_label=scored, name=motion.name,
-                          parents=canonical_parents(compared))  # fmt: skip
+                          joints=compared)  # fmt: skip
     # What a viewer sees, of the output and of the truth (each over its own frames).
     feet = [compared.index(f) for f in ("l_ankle", "r_ankle")]
     seen, seen_per_frame = plausibility(pred_canon, rate, feet)

@@ -98,6 +98,8 @@ def joint_err_cm(pred_pos, true_pos, pred_ground, pred_heading, true_ground, tru
 
 # Each canonical joint's parent in the canonical tree (the segments' proximal joints).
 _CANONICAL_PARENT = {b: a for a, b in SEGMENTS.values()}
+# The joints whose bones (from their parents) make the legs: pelvis → hip → knee → ankle.
+LEG_JOINTS = ("l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
 
 
 def canonical_parents(names) -> np.ndarray:
@@ -162,17 +164,29 @@ def bone_scaled_positions(pos, lengths, parents) -> np.ndarray:
     return out
 
 
-def joint_err_scaled_cm(pred_pos, true_pos, parents, pred_ground, pred_heading, true_ground, true_heading):
+def joint_err_scaled_cm(pred_pos, true_pos, parents, pred_ground, pred_heading, true_ground, true_heading,
+                        legs=None):  # fmt: skip
     """`joint_err_cm` of the prediction on the truth's bone lengths: ((T,) per-frame,
     mean) in centimetres. The predicted pose keeps its root and bone directions, each
     bone the truth's length in that frame (`bone_scaled_positions` with `bone_lengths`
-    of true_pos); parents as there. Shapes as in `joint_err_cm`."""
+    of true_pos); parents as there. legs: the indices of the joints whose bones make the
+    legs (hips, knees, ankles: `LEG_JOINTS`); given, the root's height is scaled by the
+    ratio of the truth's legs to the prediction's in each frame, as a performer's longer
+    legs lift the pelvis (`motion.proportions.on_performer`). Shapes as in `joint_err_cm`."""
     pred_pos = _finite("pred_pos", pred_pos, (None, 3))
     true_pos = _finite("true_pos", true_pos, (None, 3))
     if pred_pos.shape[1] != true_pos.shape[1]:
         raise InputError(f"joint counts disagree: predicted {pred_pos.shape[1]}, true {true_pos.shape[1]}")
     _same_frames(pred_pos=pred_pos, true_pos=true_pos)
-    scaled = bone_scaled_positions(pred_pos, bone_lengths(true_pos, parents), parents)
+    true_lengths = bone_lengths(true_pos, parents)
+    scaled = bone_scaled_positions(pred_pos, true_lengths, parents)
+    if legs is not None and len(legs) > 0:
+        legs = list(legs)
+        have = bone_lengths(pred_pos, parents)[:, legs].sum(axis=1)
+        want = true_lengths[:, legs].sum(axis=1)
+        k = np.divide(want, have, out=np.ones_like(want), where=have > 0)
+        root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
+        scaled[..., 1] += ((k - 1.0) * pred_pos[:, root, 1])[:, None]
     return joint_err_cm(scaled, true_pos, pred_ground, pred_heading, true_ground, true_heading)
 
 
@@ -303,13 +317,14 @@ def evaluate_frames(
     pred_labels=None,
     true_label=None,
     name: str | None = None,
-    parents=None,
+    joints=None,
 ) -> dict:
     """All §9 metrics for one clip.
 
     Shapes as in `joint_err_cm`; pred_labels (Tp,) and true_label as in `label_acc`
-    (one label, or (Tt,) per-frame labels). parents: the joints' parents
-    (`canonical_parents`), which adds `joint_err_scaled_cm` (None: not scored).
+    (one label, or (Tt,) per-frame labels). joints: the P joints' canonical names, which
+    adds `joint_err_scaled_cm` (their `canonical_parents` and `LEG_JOINTS`; None: not
+    scored).
     Within each side the arrays must agree on frame count (pred_*: Tp, true_*: Tt),
     else InputError. Length rule: when Tp ≠ Tt both sides are aligned at frame 0 and
     truncated to T = min(Tp, Tt); the dropped count is reported as `frames_dropped`.
@@ -317,7 +332,7 @@ def evaluate_frames(
 
     Returns {"name", "frames": T, "frames_dropped", "joint_err_cm", "root_err_cm",
     "heading_err_deg", "label_acc", "per_frame": {metric: (T,) array}} (and
-    "joint_err_scaled_cm" with parents) with Python floats for the scalars."""
+    "joint_err_scaled_cm" with joints) with Python floats for the scalars."""
     pred_pos = np.asarray(pred_pos, dtype=np.float64)
     true_pos = np.asarray(true_pos, dtype=np.float64)
     if pred_pos.ndim != 3 or true_pos.ndim != 3:
@@ -350,10 +365,13 @@ def evaluate_frames(
             true_label = true_label[:n]
         per_frame["label_acc"], acc_mean = label_acc(pred["pred_labels"], true_label)
     scaled = {}
-    if parents is not None:
+    if joints is not None:
+        joints = list(joints)
+        if len(joints) != pred_pos.shape[1]:
+            raise InputError(f"joints: {len(joints)} names for {pred_pos.shape[1]} joints")
         per_frame["joint_err_scaled_cm"], scaled["joint_err_scaled_cm"] = joint_err_scaled_cm(
-            pred["pred_pos"], true["true_pos"], parents, pred["pred_ground"], pred["pred_heading"], true["true_ground"],
-            true["true_heading"])  # fmt: skip
+            pred["pred_pos"], true["true_pos"], canonical_parents(joints), pred["pred_ground"], pred["pred_heading"],
+            true["true_ground"], true["true_heading"], legs=[joints.index(n) for n in LEG_JOINTS if n in joints])  # fmt: skip
     return {
         "name": name,
         "frames": int(n),
@@ -411,7 +429,7 @@ def truth_errors(predicted: Motion, truth: Motion, pred_labels=None, true_labels
         pw[:, [pt[c] for c in names]], tw[:, [tt[c] for c in names]],
         signals.ground_position(pw, pt["pelvis"]), signals.heading(pw, pt),
         signals.ground_position(tw, tt["pelvis"]), signals.heading(tw, tt),
-        pred_labels=pred_labels, true_label=true_labels, name=predicted.name, parents=canonical_parents(names),
+        pred_labels=pred_labels, true_label=true_labels, name=predicted.name, joints=names,
     )  # fmt: skip
 
 

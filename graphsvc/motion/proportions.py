@@ -173,6 +173,18 @@ def load_performer_file(path) -> dict[str, float]:
     return {name: float(v) for name, v in segments.items()}
 
 
+def performer_segments(performer, mapping=None) -> dict[str, float]:
+    """The segments a performer file gives: a .json performer file's `segments_m`
+    (`load_performer_file`), or every segment of a .bvh/.amc motion's skeleton
+    (`segment_lengths`, through its joint map or `mapping`)."""
+    path = Path(performer)
+    if path.suffix.lower() == ".json":
+        return load_performer_file(path)
+    from graphsvc.motion.library import load_motion
+
+    return segment_lengths(load_motion(path).skeleton, mapping)
+
+
 def performer_lengths(kb_skeleton: Skeleton, performer=None, height=None, mapping=None,
                       kb_mapping=None) -> dict[str, float]:  # fmt: skip
     """Every segment's length in metres for a performer given as a file (`performer`: a
@@ -185,13 +197,7 @@ def performer_lengths(kb_skeleton: Skeleton, performer=None, height=None, mappin
     kb = segment_lengths(kb_skeleton, kb_mapping)
     if height is not None:
         return lengths_for_height(kb, height)
-    path = Path(performer)
-    if path.suffix.lower() == ".json":
-        return complete_lengths(kb, load_performer_file(path), str(path))
-    from graphsvc.motion.library import load_motion
-
-    skeleton = load_motion(path).skeleton
-    return complete_lengths(kb, segment_lengths(skeleton, mapping), str(path))
+    return complete_lengths(kb, performer_segments(performer, mapping), str(performer))
 
 
 def _segment_paths(skeleton: Skeleton, table) -> dict[str, list[int] | None]:

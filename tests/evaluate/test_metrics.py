@@ -184,6 +184,21 @@ def test_joint_err_scaled_scores_the_pose_not_the_proportions():
     assert per_frame.shape == (1,)
 
 
+def test_joint_err_scaled_lifts_the_root_with_the_truth_s_legs():
+    # a leg standing straight: root → knee → ankle, the prediction's bones 0.5 m, the
+    # truth's 0.6 m (its root 1.2 m up)
+    pred = _chain([(0.0, 1.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 0.0)])
+    truth = _chain([(0.0, 1.2, 0.0), (0.0, 0.6, 0.0), (0.0, 0.0, 0.0)])
+    ground, heading = np.array([[0.0, 0.0]]), np.zeros(1)
+    args = (ground, heading, ground, heading)
+    # the root kept where it is: every joint 0.2 m low
+    _, kept = joint_err_scaled_cm(pred, truth, CHAIN_PARENTS, *args)
+    assert kept == pytest.approx(20.0, abs=1e-9)
+    # the root lifted by the legs' ratio 1.2 / 1.0: on the truth
+    _, lifted = joint_err_scaled_cm(pred, truth, CHAIN_PARENTS, *args, legs=[1, 2])
+    assert lifted == pytest.approx(0.0, abs=1e-9)
+
+
 def test_canonical_parents_skip_a_missing_joint():
     assert list(canonical_parents(["pelvis", "spine", "chest", "l_shoulder", "l_elbow"])) == [-1, 0, 1, 2, 3]
     # no spine: the chest hangs from the pelvis; no chest either: the shoulder does too
@@ -191,14 +206,16 @@ def test_canonical_parents_skip_a_missing_joint():
     assert list(canonical_parents(["pelvis", "l_shoulder", "l_hip"])) == [-1, 0, 0]
 
 
-def test_evaluate_frames_adds_the_scaled_error_with_parents(skeleton):
+def test_evaluate_frames_adds_the_scaled_error_with_joint_names(skeleton):
     frames = 4
     ground = np.zeros((frames, 2))
     pos, g, h = _walk(frames, np.zeros(frames), ground, skeleton)
     names = list(CANONICAL)
-    # the same pose with every bone 1.2 × as long (about the pelvis): proportions only
-    bigger = pos[:, :1] + 1.2 * (pos - pos[:, :1])
-    row = evaluate_frames(bigger, pos, g, h, g, h, parents=canonical_parents(names))
+    # the same pose with every bone 1.2 × as long, standing on the floor below the pelvis
+    # (its pelvis 1.2 × as high): proportions only
+    floor = pos[:, :1] * np.array([1.0, 0.0, 1.0])
+    bigger = floor + 1.2 * (pos - floor)
+    row = evaluate_frames(bigger, pos, g, h, g, h, joints=names)
     assert row["joint_err_cm"] > 1.0
     assert row["joint_err_scaled_cm"] == pytest.approx(0.0, abs=1e-9)
     assert "joint_err_scaled_cm" not in evaluate_frames(bigger, pos, g, h, g, h)
