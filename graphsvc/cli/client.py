@@ -13,7 +13,8 @@ from pathlib import Path
 from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
-from graphsvc.flags import PATH, add_calibration_flag, add_search_flags, options_from_flags, ranged, synthesize_inputs
+from graphsvc.flags import (PATH, add_calibration_flag, add_performer_flags, add_search_flags, options_from_flags,
+                            ranged, synthesize_inputs)  # fmt: skip
 
 
 def _check_output(path: Path, inputs=()) -> None:
@@ -80,10 +81,11 @@ def _cmd_client_synthesize(args) -> int:
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
     rec = _recording(args)
     options = _options(args, rec.constraints, rec)
+    performer = _performer(args)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
-                            skeleton=skeleton_from_proto(info.skeleton))  # fmt: skip
+                            skeleton=skeleton_from_proto(info.skeleton), performer=performer)  # fmt: skip
     with atomic_writer(out) as f:
         f.write(result.bvh)
     if args.report:
@@ -94,6 +96,22 @@ def _cmd_client_synthesize(args) -> int:
           f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
           f"search {timings.get('search', float('nan')):.2f} s)")  # fmt: skip
     return 0
+
+
+def _performer(args):
+    """The `Performer` of --height or --performer (a performer file's segments, read
+    here: the server reads no files), or None."""
+    from graphsvc.errors import InputError
+    from graphsvc.motion.proportions import check_height, performer_segments
+    from graphsvc.service.convert import performer_to_proto
+
+    if args.height is not None:
+        return performer_to_proto(height_m=check_height(args.height))
+    if args.performer is not None:
+        return performer_to_proto(segments_m=performer_segments(args.performer, args.performer_mapping))
+    if args.performer_mapping is not None:
+        raise InputError("--performer-mapping applies to a --performer motion file")
+    return None
 
 
 def _batch_line(b) -> str:
@@ -286,6 +304,7 @@ def add_client(sub) -> None:
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_calibration_flag(c)
     add_search_flags(c)
+    add_performer_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
     what = "batches on the server: submit, status, list, cancel"
