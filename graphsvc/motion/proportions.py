@@ -128,19 +128,26 @@ def lengths_for_height(kb_lengths: dict, height: float) -> dict[str, float]:
     return {name: v * k for name, v in kb_lengths.items()}
 
 
+def _length_ok(v) -> bool:
+    """A segment length: a number of metres, finite, ≥ 0 and at most MAX_HEIGHT_M (no
+    segment is longer than a body is tall: more is a unit mistake)."""
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and 0.0 <= v <= MAX_HEIGHT_M
+
+
 def complete_lengths(kb_lengths: dict, given: dict, where: str = "segment lengths") -> dict[str, float]:
     """Every segment of `kb_lengths` (the knowledge base's): those `given` as given, the
     others the knowledge base's times the mean ratio given / knowledge base of the given
     segments the knowledge base has (a zero one it lacks, `segment_lengths`). InputError
-    naming `where` for an unknown segment, a length that is not a finite number ≥ 0, or
-    nothing given."""
+    naming `where` for an unknown segment, a length that is not a number of metres in
+    [0, MAX_HEIGHT_M], or nothing given."""
     unknown = sorted(set(given) - set(SEGMENTS))
     if unknown:
         raise InputError(f"{where}: unknown segments: {', '.join(unknown)} (known: {', '.join(SEGMENTS)})")
     values = {}
     for name, v in given.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0.0):
-            raise InputError(f"{where}: segment {name} must be a finite number of metres ≥ 0, got {v!r}")
+        if not _length_ok(v):
+            raise InputError(f"{where}: segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, "
+                             f"got {v!r}")
         values[name] = float(v)
     ratios = [values[n] / kb_lengths[n] for n in values if kb_lengths.get(n, 0.0) > 0.0]
     if not ratios:
@@ -152,7 +159,8 @@ def complete_lengths(kb_lengths: dict, given: dict, where: str = "segment length
 def load_performer_file(path) -> dict[str, float]:
     """The `segments_m` of a performer JSON file (module docstring), checked: FormatError
     naming the file for a document of another format or version, unknown segment names
-    (listed) or lengths that are not finite numbers ≥ 0; MissingFileError when absent."""
+    (listed) or lengths that are not numbers of metres in [0, MAX_HEIGHT_M];
+    MissingFileError when absent."""
     data = read_json_file(path, "performer")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise FormatError(path, f'expected a JSON object with "format": "{FORMAT}"')
@@ -168,8 +176,9 @@ def load_performer_file(path) -> dict[str, float]:
     if unknown:
         raise FormatError(path, f"unknown segments: {', '.join(unknown)} (known: {', '.join(SEGMENTS)})")
     for name, v in segments.items():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0.0):
-            raise FormatError(path, f"segment {name} must be a finite number of metres ≥ 0, got {v!r}")
+        if not _length_ok(v):
+            raise FormatError(path, f"segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, "
+                                    f"got {v!r}")
     return {name: float(v) for name, v in segments.items()}
 
 

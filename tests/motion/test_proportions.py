@@ -188,6 +188,8 @@ def test_a_json_performer_fills_the_segments_it_leaves_out(tmp_path):
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {}}', "non-empty"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": -0.4}}', "l_thigh must be"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": "long"}}', "l_thigh must be"),
+        ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": 46}}', "at most 3"),
+        ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": 1e308}}', "at most 3"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 0.3, "l_thig": 0.4, "l_shin": 0.4}}',
          "unknown segments: l_thig, tail"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_shin": 0.4}, "mass": 70}', "unknown keys: mass"),
@@ -214,8 +216,10 @@ def test_complete_lengths_refuses_what_it_cannot_use():
     kb = segment_lengths(standard_skeleton())
     with pytest.raises(InputError, match="unknown segments: wing"):
         complete_lengths(kb, {"wing": 0.3})
-    with pytest.raises(InputError, match="must be a finite number"):
+    with pytest.raises(InputError, match="must be a number of metres"):
         complete_lengths(kb, {"l_shin": float("nan")})
+    with pytest.raises(InputError, match="at most 3"):
+        complete_lengths(kb, {"l_shin": 42.0})
     with pytest.raises(InputError, match="no segment given"):
         complete_lengths({**kb, "l_shin": 0.0}, {"l_shin": 0.4})
 
