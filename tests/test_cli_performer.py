@@ -147,3 +147,17 @@ def test_the_output_may_not_replace_the_performer_file(files, capsys):
                         str(target)], capsys)  # fmt: skip
     assert code == 2 and len(err.strip().splitlines()) == 1 and "performer" in err, err
     assert target.read_bytes() == before
+
+
+def test_a_performer_motion_of_an_unknown_skeleton_names_the_performer_mapping(files, capsys):
+    d = files
+    odd = d / "odd.bvh"
+    odd.write_text("HIERARCHY\nROOT Torso\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
+                   "Xrotation Yrotation\n JOINT Noggin\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
+                   "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.0333333\n"
+                   "0 90 0 0 0 0 0 0 0\n")  # fmt: skip
+    out = d / "never.bvh"
+    code, _, err = _synthesize(d, out, ["--performer", str(odd)], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"performer {odd}: unknown skeleton" in err and "--performer-mapping guess" in err
+    assert not out.exists()

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graphsvc.errors import FormatError, InputError
+from graphsvc.errors import FormatError, InputError, SkeletonError
 from graphsvc.fileio import read_json_file
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.skeleton import POSITION_CHANNELS, Motion, Skeleton
@@ -185,13 +185,18 @@ def load_performer_file(path) -> dict[str, float]:
 def performer_segments(performer, mapping=None) -> dict[str, float]:
     """The segments a performer file gives: a .json performer file's `segments_m`
     (`load_performer_file`), or every segment of a .bvh/.amc motion's skeleton
-    (`segment_lengths`, through its joint map or `mapping`)."""
+    (`segment_lengths`, through its joint map or `mapping`); SkeletonError naming the
+    file and --performer-mapping for a skeleton without one."""
     path = Path(performer)
     if path.suffix.lower() == ".json":
         return load_performer_file(path)
     from graphsvc.motion.library import load_motion
 
-    return segment_lengths(load_motion(path).skeleton, mapping)
+    skeleton = load_motion(path).skeleton
+    try:
+        return segment_lengths(skeleton, mapping)
+    except SkeletonError as exc:  # (its joint map is the performer's flag's)
+        raise SkeletonError(f"performer {path}: " + str(exc).replace("--mapping", "--performer-mapping")) from None
 
 
 def performer_lengths(kb_skeleton: Skeleton, performer=None, height=None, mapping=None,
