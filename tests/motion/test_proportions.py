@@ -248,3 +248,17 @@ def test_a_bandai_skeleton_s_height_and_proportions_on_the_procedural_skeleton()
     back = segment_lengths(performer_skeleton(bandai, PROCEDURAL))
     for name in SEGMENTS:
         assert back[name] == pytest.approx(PROCEDURAL[name], abs=1e-9), name
+
+
+def test_a_foreign_skeleton_s_segments_through_a_guessed_mapping():
+    from graphsvc.errors import SkeletonError
+    from tests.motion.test_joints import SCHEMES, _skeleton
+
+    sk = _skeleton(**SCHEMES["LeftForeArm"])  # Hips, Spine, Spine2, LeftShoulder → LeftArm → LeftForeArm, LeftUpLeg …
+    sk = Skeleton(sk.names, sk.parents, np.tile([0.0, 0.1, 0.0], (sk.num_joints, 1)), sk.channels, sk.end_site)
+    with pytest.raises(SkeletonError, match="unknown skeleton"):
+        segment_lengths(sk)
+    got = segment_lengths(sk, "guess")
+    # every segment one bone of 0.1 m but the clavicles: Spine2 → LeftShoulder → LeftArm
+    for name in SEGMENTS:
+        assert got[name] == pytest.approx(0.2 if name.endswith("clavicle") else 0.1, abs=1e-12), name
