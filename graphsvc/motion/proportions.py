@@ -107,6 +107,11 @@ def leg_length(lengths: dict) -> float:
     return 0.5 * sum(lengths[f"{s}_pelvis"] + lengths[f"{s}_thigh"] + lengths[f"{s}_shin"] for s in "lr")
 
 
+def _ratio(new: float, old: float) -> float:
+    """new / old, 1 for an old length of 0 (nothing to scale)."""
+    return new / old if old > 0.0 else 1.0
+
+
 def check_height(height: float) -> float:
     """A performer's height in metres as a float; InputError unless finite, > 0 and at
     most MAX_HEIGHT_M."""
@@ -124,8 +129,10 @@ def lengths_for_height(kb_lengths: dict, height: float) -> dict[str, float]:
     metres tall (`skeleton_height`). InputError for a height that is not a positive
     number of metres (`check_height`)."""
     h = check_height(height)
-    k = h / skeleton_height(kb_lengths)
-    return {name: v * k for name, v in kb_lengths.items()}
+    kb_height = skeleton_height(kb_lengths)
+    if not kb_height > 0.0:
+        raise InputError("the knowledge base's skeleton has no height (its legs and trunk have no length)")
+    return {name: v * (h / kb_height) for name, v in kb_lengths.items()}
 
 
 def _length_ok(v) -> bool:
@@ -238,7 +245,7 @@ def performer_skeleton(kb_skeleton: Skeleton, lengths: dict, mapping=None) -> Sk
     kb = segment_lengths(kb_skeleton, mapping)
     want = complete_lengths(kb, dict(lengths))
     ratio = {n: (want[n] / kb[n] if kb[n] > 0.0 else 1.0) for n in SEGMENTS}
-    legs = leg_length(want) / leg_length(kb)
+    legs = _ratio(leg_length(want), leg_length(kb))
     factor = np.full(kb_skeleton.num_joints, np.nan)
     for name, path in _segment_paths(kb_skeleton, table).items():
         if path:
@@ -262,7 +269,7 @@ def on_performer(motion: Motion, skeleton: Skeleton, mapping=None) -> Motion:
     when the topologies differ."""
     if not motion.skeleton.same_topology(skeleton):
         raise InputError("the performer's skeleton is not the motion's (other joints or channels)")
-    k = leg_length(segment_lengths(skeleton, mapping)) / leg_length(segment_lengths(motion.skeleton, mapping))
+    k = _ratio(leg_length(segment_lengths(skeleton, mapping)), leg_length(segment_lengths(motion.skeleton, mapping)))
     moving = np.array([any(c in POSITION_CHANNELS for c in ch) for ch in skeleton.channels])
     translations = np.where(moving[None, :, None], motion.translations * k, skeleton.offsets[None])
     return motion.copy(skeleton=skeleton, translations=translations)

@@ -262,3 +262,21 @@ def test_a_foreign_skeleton_s_segments_through_a_guessed_mapping():
     # every segment one bone of 0.1 m but the clavicles: Spine2 → LeftShoulder → LeftArm
     for name in SEGMENTS:
         assert got[name] == pytest.approx(0.2 if name.endswith("clavicle") else 0.1, abs=1e-12), name
+
+
+def test_a_skeleton_without_length_is_refused_not_divided_by():
+    sk = standard_skeleton()
+    flat = Skeleton(sk.names, sk.parents, np.zeros_like(sk.offsets), sk.channels, sk.end_site)
+    with pytest.raises(InputError, match="no height"):
+        performer_lengths(flat, height=1.8)
+    with pytest.raises(InputError, match="no segment given that the knowledge base's skeleton has"):
+        performer_skeleton(flat, PROCEDURAL)
+    # legs of no length: a motion put on them stands at the floor (its translations × 0);
+    # put back from them, nothing scales its translations (not a division by zero)
+    walk = _walk()
+    legless = dict(PROCEDURAL, l_pelvis=0.0, r_pelvis=0.0, l_thigh=0.0, r_thigh=0.0, l_shin=0.0, r_shin=0.0)
+    on_legless = on_performer(walk, performer_skeleton(walk.skeleton, legless))
+    np.testing.assert_array_equal(on_legless.translations[:, 0], 0.0)
+    back = on_performer(on_legless, walk.skeleton)
+    np.testing.assert_array_equal(back.translations[:, 0], 0.0)
+    np.testing.assert_array_equal(back.translations[:, 1:], walk.translations[:, 1:])
