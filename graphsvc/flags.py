@@ -23,6 +23,7 @@ import argparse
 import math
 import re
 
+from graphsvc.motion.proportions import MAX_HEIGHT_M
 from graphsvc.sensors.layout import preset_names
 from graphsvc.strategies import DEFAULT, available, get, names
 from graphsvc.strategies.options import (ORIENTATION_WEIGHT, Options, SharedOptions, from_values, load_constraints, option_specs, parse_weights)  # fmt: skip
@@ -299,6 +300,37 @@ def calibration_choice(args) -> tuple[str | None, float | None, str | None]:
     if pose is not None and start is None:
         raise InputError("--pose goes with --calibrate-from-start S")
     return cal, start, pose
+def add_performer_flags(p) -> None:
+    """--performer and --height (one or the other, `add_mutually_exclusive_group`) and
+    --performer-mapping: the proportions a reconstruction is put on
+    (`motion.proportions`)."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--performer", metavar="FILE", type=PATH,
+                   help="put the output on this performer's proportions: a BVH or ASF/AMC of the performer (its "
+                        "skeleton's segment lengths) or a graphsvc-performer JSON of segment lengths (default: the "
+                        "knowledge base's)")  # fmt: skip
+    g.add_argument("--height", type=ranged(float, 0.0, MAX_HEIGHT_M, low_open=True), metavar="M",
+                   help="put the output on the knowledge base's proportions scaled to a performer this many metres "
+                        "tall (default: the knowledge base's)")  # fmt: skip
+    p.add_argument("--performer-mapping", metavar="FILE|guess", type=PATH,
+                   help="the joint map of a --performer motion whose skeleton has no built-in one (JSON, or 'guess')")
+
+
+def performer_from_flags(args, kb_skeleton, kb_mapping=None) -> dict | None:
+    """The segment lengths `add_performer_flags`' flags ask for on the knowledge base's
+    skeleton (`proportions.performer_lengths`), or None when neither was given.
+    InputError for --performer-mapping without --performer; FormatError /
+    MissingFileError for a bad or absent file."""
+    from graphsvc.errors import InputError
+    from graphsvc.motion.proportions import performer_lengths
+
+    performer, height = getattr(args, "performer", None), getattr(args, "height", None)
+    mapping = getattr(args, "performer_mapping", None)
+    if performer is None and height is None:
+        if mapping is not None:
+            raise InputError("--performer-mapping applies to a --performer motion file")
+        return None
+    return performer_lengths(kb_skeleton, performer=performer, height=height, mapping=mapping, kb_mapping=kb_mapping)
 
 
 def add_synthesize_flags(p) -> None:
@@ -321,7 +353,10 @@ def synthesize_inputs(args) -> list[tuple[str, str | None]]:
     named = lambda v: None if v is None or v in DEVICES else v  # noqa: E731 (a built-in name is no file)
     files = [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
              ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
-             ("the device map", named(getattr(args, "device_map", None)))]  # fmt: skip
+             ("the device map", named(getattr(args, "device_map", None))),
+             ("the performer", getattr(args, "performer", None)),
+             ("the performer's joint map", None if getattr(args, "performer_mapping", None) == "guess"
+              else getattr(args, "performer_mapping", None))]  # fmt: skip
     # a strategy's option that names a file (a marker set file, say)
     files += [(f"the file of --{k.split('__')[1]}-{k.split('__')[2]}", v) for k, v in sorted(vars(args).items())
               if k.startswith("option__") and isinstance(v, str) and Path(v).is_file()]  # fmt: skip

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from graphsvc.fileio import check_outputs, write_texts_atomic
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.bvh import bvh_document
 from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+from graphsvc.motion.proportions import on_performer, performer_skeleton, skeleton_height
 from graphsvc.sensors.calibration import apply_calibration, check_calibration, load_calibration, mounting_angle_deg
 from graphsvc.sensors.devices import DEVICES, apply_device_map, unmapped_note
 from graphsvc.sensors.devices import device_map as load_device_map
@@ -101,7 +103,8 @@ def warm_up(graph: MotionGraph, threads: bool = False, strategies=None) -> float
 
 def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, options: Options = Options(),
                      report_path=None, scale: float = 100.0, up=None, units=None, device_map=None,
-                     calibration=None, threads: bool = True, notes=None, calibrate_from_start=None) -> Reconstruction:  # fmt: skip
+                     calibration=None, threads: bool = True, notes=None, calibrate_from_start=None,
+                     performer=None) -> Reconstruction:  # fmt: skip
     """`graphsvc synthesize` as a function, for the CLI and a batch alike: read the
     recording (up, units: as the file does not say), name a device's sensors as the
     graph's layout does (device_map: a built-in device or a map file), turn a device's readings into
@@ -114,7 +117,10 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     other output or has a suffix other than .bvh (output) and .json (report).
     The report's 'files' names the output, graph and recording (and how the recording
     was read); a strategy without a node path adds each frame's heaviest `sources`
-    (`strategies.sources.compact_sources`). notes: a list that
+    (`strategies.sources.compact_sources`). performer: segment lengths
+    (`motion.proportions.performer_lengths`) the output is put on (`on_performer`: the
+    returned motion and the BVH; the report's `performer` says which), None: the graph
+    skeleton's. notes: a list that
     collects remarks for the user (None: dropped). Same inputs, same output bytes, with
     or without threads."""
     check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
@@ -123,6 +129,8 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes,
                                   calibrate_from_start)  # fmt: skip
     result = reconstruct(graph, rec, options, threads=threads)
+    if performer is not None:
+        result = put_on_performer(graph, result, performer)
     bvh = bvh_document(result.motion, scale)
     result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
                               "recording": str(Path(recording_path).resolve())}  # fmt: skip
@@ -139,6 +147,18 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     report = [(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")] if report_path else []
     write_texts_atomic(report + [(output, bvh)])
     return result
+
+
+def put_on_performer(graph: MotionGraph, result: Reconstruction, lengths: dict) -> Reconstruction:
+    """`result` with its motion on a performer's segment lengths (`motion.proportions`:
+    the graph skeleton rescaled, the same local rotations, translations scaled with the
+    legs) and the report's `performer`: the segment lengths and the height they stand
+    for, in metres."""
+    mapping = graph.params.get("mapping")
+    skeleton = performer_skeleton(result.motion.skeleton, lengths, mapping)
+    report = {**result.report, "performer": {"segments_m": {k: round(float(v), 6) for k, v in lengths.items()},
+                                             "height_m": round(skeleton_height(lengths), 4)}}  # fmt: skip
+    return replace(result, motion=on_performer(result.motion, skeleton, mapping), report=report)
 
 
 def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,

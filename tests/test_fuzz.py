@@ -29,7 +29,8 @@ SUITE = [name for name, t in TARGETS.items() if t.in_process]
 
 def test_every_reader_has_a_target():
     assert set(TARGETS) >= {"bvh", "asf", "amc", "c3d", "csv", "marker-csv", "mvnx", "rec", "graph", "layout",
-                            "constraints", "calibration", "manifest", "grpc-synthesize", "grpc-stream"}  # fmt: skip
+                            "constraints", "calibration", "performer", "manifest", "grpc-synthesize",
+                            "grpc-stream"}  # fmt: skip
     for target in TARGETS.values():
         assert target.allowed == (GraphsvcError,) and target.doc
 

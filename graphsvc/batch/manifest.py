@@ -4,8 +4,8 @@ list of objects, or {"items": [...]}).
 Columns: `recording`, `graph` (a name given with `--graph NAME=PATH`, or a path),
 `strategy` and `output` (a name, no extension) are required; `weights`, `constraints`,
 `calibration` and `options` (a JSON object of `synthesize` flags without their
-dashes, e.g. {"beam": 10, "olng-k": 64, "device-map": "xsens"}) are optional. Relative
-paths are taken from the manifest's folder.
+dashes, e.g. {"beam": 10, "olng-k": 64, "device-map": "xsens", "height": 1.82}) are
+optional. Relative paths are taken from the manifest's folder.
 
 What does not parse — a row, a column, a duplicate output — fails the whole manifest
 (FormatError naming the line) before anything runs. What parses but cannot run — a
@@ -26,8 +26,10 @@ from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import file_sha256, read_input_text, require_file
-from graphsvc.flags import add_synthesize_flags, calibration_choice, options_from_flags, os_message
+from graphsvc.flags import (add_performer_flags, add_synthesize_flags, calibration_choice, options_from_flags,
+                            os_message)  # fmt: skip
 from graphsvc.graph.file import graph_file_meta
+from graphsvc.motion.proportions import performer_segments
 from graphsvc.store import file_checksum
 from graphsvc.strategies import check_options
 
@@ -37,7 +39,7 @@ COLUMNS = REQUIRED + OPTIONAL
 # Flags an item's options may not give: they are columns, or the batch decides them.
 RESERVED_FLAGS = {"strategy", "weights", "constraints", "calibration", "report", "output", "o", "help", "h"}
 # Option values that name a file: taken from the manifest's folder when one is there.
-PATH_FLAGS = ("device-map", "markers")
+PATH_FLAGS = ("device-map", "markers", "performer", "performer-mapping")
 OUTPUT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@=-]*$")
 
 
@@ -169,7 +171,11 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
     Plan with `error` (the item fails, the batch goes on)."""
     try:
         argv = option_argv(item, folder)
-        parse_item_options(argv)  # refused here as synthesize would refuse it
+        _, args = parse_item_options(argv)  # refused here as synthesize would refuse it
+        if args.performer is not None:  # (a bad performer file: this item's failure)
+            performer_segments(require_file(args.performer, "performer"), args.performer_mapping)
+        elif args.performer_mapping is not None:
+            raise InputError("options: performer-mapping applies to a performer motion file")
         graph_path = _graph_path(item.graph, folder, graphs)
         recording = _existing(folder, item.recording, "recording")
         meta = graph_file_meta(graph_path)
@@ -180,7 +186,8 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
                  "constraints": file_sha256(Path(item.constraints if Path(item.constraints).is_absolute()
                                              else folder / item.constraints)) if item.constraints else None,
                  "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
-                 if item.calibration else None}  # fmt: skip
+                 if item.calibration else None,
+                 **({"performer": file_sha256(args.performer)} if args.performer is not None else {})}  # fmt: skip
     except (GraphsvcError, OSError) as exc:
         reason = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
@@ -236,6 +243,7 @@ class _ItemParser:
 
             p = Raising(prog="options", add_help=False, allow_abbrev=False)
             add_synthesize_flags(p)
+            add_performer_flags(p)
             cls._parser = p
         return cls._parser
 

@@ -22,6 +22,7 @@ from graphsvc.batch.manifest import parse_item_options
 from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.evaluate.metrics import motion_plausibility
 from graphsvc.fileio import file_sha256
+from graphsvc.flags import performer_from_flags
 from graphsvc.graph.file import load_graph
 from graphsvc.pipeline import synthesize_files, warm_up
 
@@ -72,11 +73,12 @@ def run_item(task: dict) -> dict:
         options, args = parse_item_options(task["argv"])
         graph = worker_graph(task["graph"], task["graph_checksum"])
         warm_s = warm(graph, (task["graph"], task["graph_checksum"]), options.strategy)
+        performer = performer_from_flags(args, graph.skeleton, graph.params.get("mapping"))
         result = synthesize_files(graph, task["graph"], task["recording"], bvh, options, report_path=report_path,
                                   scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
                                   calibration=args.calibration, threads=False,
                                   calibrate_from_start=None if args.calibrate_from_start is None
-                                  else (args.calibrate_from_start, args.pose))  # fmt: skip
+                                  else (args.calibrate_from_start, args.pose), performer=performer)  # fmt: skip
     except GraphsvcError as exc:
         return {"error": str(exc)}
     r = result.report

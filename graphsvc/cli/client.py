@@ -14,7 +14,8 @@ from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
 from graphsvc.flags import (PATH, add_calibrate_from_start_flags, add_calibration_flag, add_input_file_flags,
-                            add_search_flags, calibration_choice, options_from_flags, ranged, synthesize_inputs)  # fmt: skip
+                            add_performer_flags, add_search_flags, calibration_choice, options_from_flags, ranged,
+                            synthesize_inputs)  # fmt: skip
 
 
 def _check_output(path: Path, inputs=()) -> None:
@@ -87,13 +88,14 @@ def _cmd_client_synthesize(args) -> int:
     out = Path(args.output)
     check_outputs([("-o", out, MOTION_OUTPUT_SUFFIXES), ("--report", args.report, (".json",))], synthesize_inputs(args))
     _, start_s, pose = calibration_choice(args)
+    performer = _performer(args)
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         rec = _recording(args, info)
         options = _options(args, rec.constraints, rec)
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
                             skeleton=skeleton_from_proto(info.skeleton),
-                            calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
+                            calibrate_from_start=None if start_s is None else (start_s, pose), performer=performer)  # fmt: skip
     with atomic_writer(out) as f:
         f.write(result.bvh)
     if args.report:
@@ -104,6 +106,22 @@ def _cmd_client_synthesize(args) -> int:
           f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
           f"search {timings.get('search', float('nan')):.2f} s)")  # fmt: skip
     return 0
+
+
+def _performer(args):
+    """The `Performer` of --height or --performer (a performer file's segments, read
+    here: the server reads no files), or None."""
+    from graphsvc.errors import InputError
+    from graphsvc.motion.proportions import check_height, performer_segments
+    from graphsvc.service.convert import performer_to_proto
+
+    if args.height is not None:
+        return performer_to_proto(height_m=check_height(args.height))
+    if args.performer is not None:
+        return performer_to_proto(segments_m=performer_segments(args.performer, args.performer_mapping))
+    if args.performer_mapping is not None:
+        raise InputError("--performer-mapping applies to a --performer motion file")
+    return None
 
 
 def _batch_line(b) -> str:
@@ -300,6 +318,7 @@ def add_client(sub) -> None:
     add_calibration_flag(c)
     add_calibrate_from_start_flags(c)
     add_search_flags(c)
+    add_performer_flags(c)
     c.set_defaults(run=_cmd_client_synthesize)
 
     what = "batches on the server: submit, status, list, cancel"

@@ -6,7 +6,8 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, SEED, add_pose_flag, add_search_flags, options_from_flags, ranged
+from graphsvc.flags import (COUNT, LAYOUT_HELP, PATH, SEED, add_performer_flags, add_pose_flag, add_search_flags,
+                            options_from_flags, ranged)  # fmt: skip
 
 
 def _cmd_evaluate(args) -> int:
@@ -26,7 +27,8 @@ def _cmd_evaluate(args) -> int:
                         mapping=args.mapping, flicker=args.flicker, gap_fraction=args.gap_fraction, json=args.json,
                         keep_motions=args.keep_motions, report_html=args.report_html,
                         pose_oracle=args.pose_oracle, calibrate_from_start=args.calibrate_from_start,
-                        calibration_pose=args.pose or "npose", progress=False if args.quiet else None)  # fmt: skip
+                        calibration_pose=args.pose or "npose", performer=args.performer, height=args.height,
+                        performer_mapping=args.performer_mapping, progress=False if args.quiet else None)  # fmt: skip
     summary = run(config, note=print_note, write_page=_write_page)
     for line in summary_lines(summary, config):
         print(line)
@@ -110,6 +112,7 @@ def add_evaluate(sub) -> None:
                         "devices' mountings (noise mount=D) from the recording's first S seconds, the pose and the "
                         "motion after it, without the hidden clips, and score the clip's part (S ≥ 4; default: none)")
     add_pose_flag(p, what="with --calibrate-from-start: the pose put before each test clip (default npose)")
+    add_performer_flags(p)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_evaluate)
 

@@ -7,8 +7,9 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_pose_flag, add_synthesize_flags,
-                            calibration_choice, options_from_flags, ranged, synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_performer_flags, add_pose_flag,
+                            add_synthesize_flags, calibration_choice, options_from_flags, performer_from_flags, ranged,
+                            synthesize_inputs)  # fmt: skip
 
 
 def _cmd_synthesize(args) -> int:
@@ -22,18 +23,20 @@ def _cmd_synthesize(args) -> int:
     calibration, start_s, pose = calibration_choice(args)
     options, notes = options_from_flags(args)
     graph = load_graph(args.graph)
+    performer = performer_from_flags(args, graph.skeleton, graph.params.get("mapping"))
     try:
         result = synthesize_files(graph, args.graph, args.recording, out, options, report_path=args.report,
                                   scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
                                   calibration=calibration, calibrate_from_start=None if start_s is None else (start_s, pose),
-                                  notes=notes)  # fmt: skip
+                                  notes=notes, performer=performer)  # fmt: skip
     finally:  # (a note may say why the recording did not fit)
         print_notes(notes)
     r = result.report
     labels = " → ".join(f"{run['label']} {_seconds(run['frames'] / graph.rate_hz)}" for run in r["labels"][:12])
     more = f" … (+{len(r['labels']) - 12})" if len(r["labels"]) > 12 else ""
     print(f"wrote {out}: {result.motion.num_frames} frames at {graph.rate_hz:g} Hz from {r['samples']} samples"
-          + (f" (resampled from {r['input_rate_hz']:g} Hz)" if r["resampled"] else ""))  # fmt: skip
+          + (f" (resampled from {r['input_rate_hz']:g} Hz)" if r["resampled"] else "")
+          + (f", on a performer {r['performer']['height_m']:.2f} m tall" if "performer" in r else ""))  # fmt: skip
     print(f"path: {labels}{more}")
     print(f"warm-up {r['timings_s']['warm_up']:.2f} s, search {r['timings_s']['search']:.2f} s "
           f"({r['samples_per_s']:,.0f} samples/s), "
@@ -109,6 +112,7 @@ def add_synthesize(sub) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
                    help="the motion to write (.bvh; not an input)")
     add_synthesize_flags(p)
+    add_performer_flags(p)
     p.add_argument("--report", metavar="OUT.json", type=PATH,
                    help="also write a JSON report: node path, labels, per-term costs, compression, timings")
     p.set_defaults(run=_cmd_synthesize)

@@ -45,7 +45,7 @@ from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
-from graphsvc.pipeline import Options, reconstruct
+from graphsvc.pipeline import Options, put_on_performer, reconstruct
 from graphsvc.sensors.layout import Layout, layout_from_dict
 from graphsvc.sensors.noise import NoiseModel
 from graphsvc.sensors.recording import Recording
@@ -135,6 +135,9 @@ class EvalSetup:
     # (`calibrated_test_input`); None: the recording is read as simulated.
     calibrate_from_start: float | None = None
     calibration_pose: str = "npose"
+    # A performer's segment lengths every reconstruction is put on before it is scored
+    # (`pipeline.put_on_performer`); None: the graph skeleton's.
+    performer: dict | None = None
 
 
 def reads_markers(setup: EvalSetup) -> bool:
@@ -286,7 +289,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     performance (`mixed.join_clips`) with its (F,) per-frame `true_labels` at the
     graph rate. clip_index: its index in graph.clips, a list of them (a joined
     performance's clips), or None (not in the graph, nothing to hide). Returns
-    `evaluate_frames`'s dict (name, frames, the four metrics, per_frame arrays) plus
+    `evaluate_frames`'s dict (name, frames, the four metrics and the joint error on the
+    truth's bone lengths, per_frame arrays) plus
     file, label, samples_per_s, search_s, hidden_nodes, in_graph, start_placed, and
     `node_path` / `pred_labels` ((T,) arrays, for plots; not in the JSON)."""
     mapping = graph.params.get("mapping")
@@ -304,6 +308,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     strategy = get_strategy(setup.options.strategy)
     allowed = strategy.allowed_mask(graph, clip_index) if in_graph else np.ones(graph.num_nodes, dtype=bool)
     result = reconstruct(graph, rec, setup.options, allowed=allowed)
+    if setup.performer is not None:
+        result = put_on_performer(graph, result, setup.performer)
 
     true_table, pred_table = joint_map(truth.skeleton, test_mapping), joint_map(graph.skeleton, mapping)
     compared = common_joints(true_table, pred_table)  # (what both skeletons have)
@@ -322,7 +328,8 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     true_label = motion.labels[0] if motion.labels else motion.name
     scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
     row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
-                          pred_labels=pred_labels, true_label=scored, name=motion.name)  # fmt: skip
+                          pred_labels=pred_labels, true_label=scored, name=motion.name,
+                          joints=compared)  # fmt: skip
     # What a viewer sees, of the output and of the truth (each over its own frames).
     feet = [compared.index(f) for f in ("l_ankle", "r_ankle")]
     seen, seen_per_frame = plausibility(pred_canon, rate, feet)

@@ -27,11 +27,13 @@ from graphsvc.errors import InputError
 from graphsvc.motion import signals
 from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
+from graphsvc.motion.proportions import SEGMENTS
 from graphsvc.motion.quat import wrap_angle
 from graphsvc.motion.skeleton import Motion
 
 METRICS = ("joint_err_cm", "root_err_cm", "heading_err_deg", "label_acc")
 FLOORS = ("oracle_joint_err_cm",)  # (a row's bound, where asked for: `evaluate.oracle`)
+SCALED = ("joint_err_scaled_cm",)  # (the pose error on the truth's bone lengths, where scored)
 
 
 def _finite(name: str, a, shape_tail: tuple) -> np.ndarray:
@@ -92,6 +94,100 @@ def joint_err_cm(pred_pos, true_pos, pred_ground, pred_heading, true_ground, tru
     aligned = align_frames(pred_pos, pg, ph, tg, th)
     per_frame = 100.0 * np.linalg.norm(aligned - true_pos, axis=-1).mean(axis=1)
     return per_frame, float(per_frame.mean())
+
+
+# Each canonical joint's parent in the canonical tree (the segments' proximal joints).
+_CANONICAL_PARENT = {b: a for a, b in SEGMENTS.values()}
+# The joints whose bones (from their parents) make the legs: pelvis → hip → knee → ankle.
+LEG_JOINTS = ("l_hip", "l_knee", "l_ankle", "r_hip", "r_knee", "r_ankle")
+
+
+def canonical_parents(names) -> np.ndarray:
+    """(P,) the index in `names` (canonical joints, in CANONICAL's order) of each joint's
+    nearest ancestor among them in the canonical tree, -1 for one without (the pelvis):
+    a skeleton without a spine joint hangs its chest from the pelvis."""
+    names = list(names)
+    out = []
+    for n in names:
+        p = _CANONICAL_PARENT.get(n)
+        while p is not None and p not in names:
+            p = _CANONICAL_PARENT.get(p)
+        out.append(-1 if p is None else names.index(p))
+    return np.array(out, dtype=np.int64)
+
+
+def bone_lengths(pos, parents) -> np.ndarray:
+    """(T, P) each joint's distance from its parent (`parents`: (P,) indices, -1 for a
+    root, whose length is 0) in every frame of (T, P, 3) positions."""
+    p = _finite("pos", pos, (None, 3))
+    parents = np.asarray(parents, dtype=np.int64)
+    if parents.shape != (p.shape[1],):
+        raise InputError(f"parents: expected {p.shape[1]} entries, got {parents.shape}")
+    out = np.linalg.norm(p - p[:, np.maximum(parents, 0)], axis=-1)
+    out[:, parents < 0] = 0.0
+    return out
+
+
+def bone_scaled_positions(pos, lengths, parents) -> np.ndarray:
+    """(T, P, 3) metres: the pose of `pos` (T, P, 3) with the bone lengths `lengths`
+    ((T, P) per frame, or (P,): each joint's distance from its parent, as `bone_lengths`
+    gives a truth's): every root where it is, every other joint its parent's scaled
+    position plus the unit direction from its parent in `pos` times its length. A bone
+    of zero length in `pos` has no direction and stays zero. parents: (P,) indices, each
+    before its joint, -1 for a root (`canonical_parents` of the canonical joints).
+
+    What the pose error on the truth's proportions compares (`joint_err_scaled_cm`): a
+    knowledge base whose trunk is shorter than the performer's is scored on the
+    directions of its bones, not on their lengths."""
+    p = _finite("pos", pos, (None, 3))
+    parents = np.asarray(parents, dtype=np.int64)
+    T, P = p.shape[:2]
+    if parents.shape != (P,) or np.any(parents >= np.arange(P)):
+        raise InputError(f"parents: expected {P} entries, each before its joint or -1")
+    L = np.asarray(lengths, dtype=np.float64)
+    if L.shape == (P,):
+        L = np.broadcast_to(L, (T, P))
+    L = _finite("lengths", L, (P,))
+    if L.shape[0] != T:
+        raise InputError(f"frame counts disagree: pos={T}, lengths={L.shape[0]}")
+    if np.any(L < 0):
+        raise InputError("lengths: a bone length is negative")
+    out = p.copy()
+    for j in range(P):
+        a = parents[j]
+        if a < 0:
+            continue
+        d = p[:, j] - p[:, a]
+        n = np.linalg.norm(d, axis=-1, keepdims=True)
+        unit = np.divide(d, n, out=np.zeros_like(d), where=n > 0)
+        out[:, j] = out[:, a] + unit * L[:, j : j + 1]
+    return out
+
+
+def joint_err_scaled_cm(pred_pos, true_pos, parents, pred_ground, pred_heading, true_ground, true_heading,
+                        legs=None):  # fmt: skip
+    """`joint_err_cm` of the prediction on the truth's bone lengths: ((T,) per-frame,
+    mean) in centimetres. The predicted pose keeps its root and bone directions, each
+    bone the truth's length in that frame (`bone_scaled_positions` with `bone_lengths`
+    of true_pos); parents as there. legs: the indices of the joints whose bones make the
+    legs (hips, knees, ankles: `LEG_JOINTS`); given, the root's height is scaled by the
+    ratio of the truth's legs to the prediction's in each frame, as a performer's longer
+    legs lift the pelvis (`motion.proportions.on_performer`). Shapes as in `joint_err_cm`."""
+    pred_pos = _finite("pred_pos", pred_pos, (None, 3))
+    true_pos = _finite("true_pos", true_pos, (None, 3))
+    if pred_pos.shape[1] != true_pos.shape[1]:
+        raise InputError(f"joint counts disagree: predicted {pred_pos.shape[1]}, true {true_pos.shape[1]}")
+    _same_frames(pred_pos=pred_pos, true_pos=true_pos)
+    true_lengths = bone_lengths(true_pos, parents)
+    scaled = bone_scaled_positions(pred_pos, true_lengths, parents)
+    if legs is not None and len(legs) > 0:
+        legs = list(legs)
+        have = bone_lengths(pred_pos, parents)[:, legs].sum(axis=1)
+        want = true_lengths[:, legs].sum(axis=1)
+        k = np.divide(want, have, out=np.ones_like(want), where=have > 0)
+        root = int(np.flatnonzero(np.asarray(parents) < 0)[0])
+        scaled[..., 1] += ((k - 1.0) * pred_pos[:, root, 1])[:, None]
+    return joint_err_cm(scaled, true_pos, pred_ground, pred_heading, true_ground, true_heading)
 
 
 def root_err_cm(pred_ground, true_ground):
@@ -221,19 +317,22 @@ def evaluate_frames(
     pred_labels=None,
     true_label=None,
     name: str | None = None,
+    joints=None,
 ) -> dict:
     """All §9 metrics for one clip.
 
     Shapes as in `joint_err_cm`; pred_labels (Tp,) and true_label as in `label_acc`
-    (one label, or (Tt,) per-frame labels).
+    (one label, or (Tt,) per-frame labels). joints: the P joints' canonical names, which
+    adds `joint_err_scaled_cm` (their `canonical_parents` and `LEG_JOINTS`; None: not
+    scored).
     Within each side the arrays must agree on frame count (pred_*: Tp, true_*: Tt),
     else InputError. Length rule: when Tp ≠ Tt both sides are aligned at frame 0 and
     truncated to T = min(Tp, Tt); the dropped count is reported as `frames_dropped`.
     When pred_labels or true_label is None, `label_acc` is None (JSON null).
 
     Returns {"name", "frames": T, "frames_dropped", "joint_err_cm", "root_err_cm",
-    "heading_err_deg", "label_acc", "per_frame": {metric: (T,) array}} with Python
-    floats for the scalars."""
+    "heading_err_deg", "label_acc", "per_frame": {metric: (T,) array}} (and
+    "joint_err_scaled_cm" with joints) with Python floats for the scalars."""
     pred_pos = np.asarray(pred_pos, dtype=np.float64)
     true_pos = np.asarray(true_pos, dtype=np.float64)
     if pred_pos.ndim != 3 or true_pos.ndim != 3:
@@ -265,11 +364,20 @@ def evaluate_frames(
                 raise InputError(f"frame counts disagree: true_label={len(true_label)}, true_pos={tt}")
             true_label = true_label[:n]
         per_frame["label_acc"], acc_mean = label_acc(pred["pred_labels"], true_label)
+    scaled = {}
+    if joints is not None:
+        joints = list(joints)
+        if len(joints) != pred_pos.shape[1]:
+            raise InputError(f"joints: {len(joints)} names for {pred_pos.shape[1]} joints")
+        per_frame["joint_err_scaled_cm"], scaled["joint_err_scaled_cm"] = joint_err_scaled_cm(
+            pred["pred_pos"], true["true_pos"], canonical_parents(joints), pred["pred_ground"], pred["pred_heading"],
+            true["true_ground"], true["true_heading"], legs=[joints.index(n) for n in LEG_JOINTS if n in joints])  # fmt: skip
     return {
         "name": name,
         "frames": int(n),
         "frames_dropped": int(max(tp, tt) - n),
         "joint_err_cm": joint_mean,
+        **scaled,
         "root_err_cm": root_mean,
         "heading_err_deg": head_mean,
         "label_acc": acc_mean,
@@ -286,8 +394,9 @@ def summarize(results: list[dict]) -> dict:
     mean over clips, Σ frames_i·m_i / Σ frames_i, which equals the mean over all frames;
     label_acc is averaged only over clips that have it and is None when none do. The
     plausibility figures (`PLAUSIBILITY`, the output's and the truth's `truth_…`) are
-    averaged the same way where rows have them, and so is the pose-oracle floor
-    (`FLOORS`, `evaluate.oracle`)."""
+    averaged the same way where rows have them, and so are the pose-oracle floor
+    (`FLOORS`, `evaluate.oracle`) and the pose error on the truth's bone lengths
+    (`SCALED`)."""
     rows = []
     for r in results:
         row = {k: v for k, v in r.items() if k != "per_frame"}
@@ -296,7 +405,8 @@ def summarize(results: list[dict]) -> dict:
                 row[k] = float(row[k])
         rows.append(row)
     mean: dict = {"clips": len(rows), "frames": int(sum(int(r["frames"]) for r in rows))}
-    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY), *FLOORS) if any(k in r for r in rows)]
+    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY), *FLOORS, *SCALED)
+                 if any(k in r for r in rows)]  # fmt: skip
     for k in (*METRICS, *plausible):
         have = [r for r in rows if r.get(k) is not None]
         weight = sum(int(r["frames"]) for r in have)
@@ -319,7 +429,7 @@ def truth_errors(predicted: Motion, truth: Motion, pred_labels=None, true_labels
         pw[:, [pt[c] for c in names]], tw[:, [tt[c] for c in names]],
         signals.ground_position(pw, pt["pelvis"]), signals.heading(pw, pt),
         signals.ground_position(tw, tt["pelvis"]), signals.heading(tw, tt),
-        pred_labels=pred_labels, true_label=true_labels, name=predicted.name,
+        pred_labels=pred_labels, true_label=true_labels, name=predicted.name, joints=names,
     )  # fmt: skip
 
 

@@ -14,7 +14,8 @@ def _fmt(value, spec: str, scale: float = 1.0, none: str = "—") -> str:
 
 def format_table(summary: dict) -> str:
     """One row per clip and a mean row from `loo.summarize_run`'s dict: frames,
-    joint error (cm), root error (cm), heading error (°), jitter (km/s³) and foot skate
+    joint error (cm), the joint error on the truth's bone lengths (cm, where scored),
+    root error (cm), heading error (°), jitter (km/s³) and foot skate
     (cm/s) of the output and of the truth, label accuracy (%), search speed
     (samples/s), and the pose-oracle floor (cm) after the joint error when it was
     scored (`evaluate.oracle`); then, when both occur, the means of the locomotion and the gesture
@@ -25,12 +26,16 @@ def format_table(summary: dict) -> str:
     floor = "oracle_joint_err_cm" in summary["mean"]
     if floor:
         head = (*head[:3], "oracle cm", *head[3:])
+    scaled = "joint_err_scaled_cm" in summary["mean"]
+    if scaled:
+        head = (*head[:3], "scaled cm", *head[3:])
 
     def pair(r, key, spec):
         return f"{_fmt(r.get(key), spec)} / {_fmt(r.get('truth_' + key), spec)}" if key in r else "—"
 
     def cells(title, r):
         return (title, f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"),
+                *((_fmt(r.get("joint_err_scaled_cm"), ".2f"),) if scaled else ()),
                 *((_fmt(r.get("oracle_joint_err_cm"), ".2f"),) if floor else ()), _fmt(r["root_err_cm"], ".1f"),
                 _fmt(r["heading_err_deg"], ".1f"), pair(r, "jitter_km_s3", ".2f"), pair(r, "skate_cm_s", ".1f"),
                 _fmt(r["label_acc"], ".0f", 100.0, "n/a"), _fmt(r.get("samples_per_s"), ",.0f"))  # fmt: skip

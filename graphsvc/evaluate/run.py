@@ -29,6 +29,8 @@ from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
 from graphsvc.graph.file import load_graph
 from graphsvc.motion.joints import joint_map, load_mapping_file
 from graphsvc.motion.library import find_motion_files, load_motion
+from graphsvc.motion.proportions import (check_height, complete_lengths, lengths_for_height, performer_segments,
+                                         segment_lengths, skeleton_height)  # fmt: skip
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.simulate import MarkerPattern, check_pattern
@@ -58,8 +60,11 @@ class EvalConfig:
     (`evaluate.oracle`: `oracle_joint_err_cm` per clip and in the mean).
     calibrate_from_start, calibration_pose: put 2 s of the pose before each test clip
     and calibrate the devices from the recording's first this many seconds, the pose and
-    the motion after it (`loo.calibrated_test_input`; None: no calibration). progress:
-    progress bars (None: on a terminal; False: none)."""
+    the motion after it (`loo.calibrated_test_input`; None: no calibration). performer,
+    height: every reconstruction put on a performer's proportions before it is scored (a
+    performer file, or a height in metres: `motion.proportions`; performer_mapping: the
+    joint map of a performer motion file). progress: progress bars (None: on a terminal;
+    False: none)."""
 
     kb: tuple[str, ...]
     test: str
@@ -83,6 +88,9 @@ class EvalConfig:
     pose_oracle: bool = False
     calibrate_from_start: float | None = None
     calibration_pose: str = "npose"
+    performer: str | None = None
+    height: float | None = None
+    performer_mapping: str | None = None
     progress: bool | None = None
 
 
@@ -145,7 +153,11 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     check_outputs([("--json", config.json, (".json",)), ("--report-html", config.report_html, (".html", ".htm"))],
                   [("a knowledge-base file", k) for k in config.kb] + [("the graph", config.graph),
                    ("the actor map", config.actors),
-                   ("the joint map", None if config.mapping in (None, "guess") else config.mapping)])  # fmt: skip
+                   ("the joint map", None if config.mapping in (None, "guess") else config.mapping),
+                   ("the performer", config.performer),
+                   ("the performer's joint map", None if config.performer_mapping in (None, "guess")
+                    else config.performer_mapping)])  # fmt: skip
+    performer = _performer_given(config)
     keep_tmp = None
     if config.keep_motions:
         keep = Path(config.keep_motions)
@@ -196,6 +208,8 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
             check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
             offsets = {k: m.skeleton.offsets for k, m in enumerate(motions)}
             build_s = time.perf_counter() - t0
+        if performer is not None:
+            setup = replace(setup, performer=_performer_lengths(graph, config, performer))
         hides = protocols.hide_lists(graph, tests, config.hold_out, offsets, actor_map)
         if config.hold_out == "actor":
             for problem in protocols.check_actor_map(protocols.graph_clips(graph, offsets), actor_map):
@@ -222,6 +236,9 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
             **({"calibrate_from_start": setup.calibrate_from_start, "calibration_pose": setup.calibration_pose}
                if setup.calibrate_from_start else {}),
             **({"keep_motions": setup.keep_dir} if config.keep_motions else {}),
+            **({"performer": {"file": config.performer, "height_m": round(skeleton_height(setup.performer), 4),
+                              "segments_m": {k: round(v, 6) for k, v in setup.performer.items()}}}
+               if setup.performer is not None else {}),
         }  # fmt: skip
         # Without --keep-motions the clips' files live only until the page is written:
         # the summary does not point at them (`graphsvc report` of its JSON then says so).
@@ -265,6 +282,28 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
                  f"peak memory {summary['mean']['peak_rss_mb']:,.0f} MB"
                  + (f"; wrote {config.json}" if config.json else ""))  # fmt: skip
     return lines
+
+
+def _performer_given(config: EvalConfig):
+    """What --performer or --height gives, read and checked before any work: a performer
+    file's segments, a height in metres, or None."""
+    if config.performer is not None and config.height is not None:
+        raise InputError("--performer and --height: give one or the other")
+    if config.performer_mapping is not None and config.performer is None:
+        raise InputError("--performer-mapping applies to a --performer motion file")
+    if config.height is not None:
+        return check_height(config.height)
+    if config.performer is not None:
+        return performer_segments(config.performer, config.performer_mapping)
+    return None
+
+
+def _performer_lengths(graph, config: EvalConfig, given) -> dict:
+    """Every segment's length on the graph's skeleton for what `_performer_given` read."""
+    kb = segment_lengths(graph.skeleton, graph.params.get("mapping"))
+    if config.height is not None:
+        return lengths_for_height(kb, given)
+    return complete_lengths(kb, given, str(config.performer))
 
 
 def check_test_skeletons(tests, mapping) -> None:

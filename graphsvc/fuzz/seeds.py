@@ -256,6 +256,14 @@ def calibration_seeds() -> list[bytes]:
     return [json.dumps(doc, indent=1, sort_keys=True).encode()]
 
 
+def performer_seeds() -> list[bytes]:
+    from graphsvc.motion.proportions import FORMAT, VERSION
+
+    doc = {"format": FORMAT, "version": VERSION, "name": "actor", "height_m": 1.8,
+           "segments_m": {"l_thigh": 0.46, "r_thigh": 0.46, "neck": 0.11, "l_foot": 0.15}}  # fmt: skip
+    return [json.dumps(doc, indent=1, sort_keys=True).encode()]
+
+
 def manifest_seeds() -> list[bytes]:
     text = ("# a match\nrecording,graph,strategy,output,weights,options\n"
             'a.rec,g.graph,viterbi,p1,"0.5,1,1","{""beam"": 10, ""latency"": 2}"\n'
@@ -300,7 +308,10 @@ def grpc_synthesize_seeds() -> list[bytes]:
     m = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(sensor_recording(4, markers=True)),
                              options=options_to_proto(Options(strategy="ssg", ssg=SsgOptions(
                                  markers="hands-feet", keep=("LWRA",)))))  # fmt: skip
-    return [a.SerializeToString(deterministic=True), m.SerializeToString(deterministic=True)]
+    h = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec), performer=pb.Performer(height_m=1.8))
+    p = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec), performer=pb.Performer(
+        segments=pb.PerformerSegments(segments_m={"l_thigh": 0.46, "neck": 0.11})))  # fmt: skip
+    return [r.SerializeToString(deterministic=True) for r in (a, m, h, p)]
 
 
 def grpc_stream_seeds() -> list[bytes]:

@@ -147,6 +147,15 @@ def _calibration(data: bytes) -> None:
     load_calibration(as_file(data, "in.json"))
 
 
+def _performer(data: bytes) -> None:
+    from graphsvc.motion.procedural.body import standard_skeleton
+    from graphsvc.motion.proportions import complete_lengths, load_performer_file, performer_skeleton, segment_lengths
+
+    sk = standard_skeleton()
+    lengths = complete_lengths(segment_lengths(sk), load_performer_file(as_file(data, "in.json")))
+    performer_skeleton(sk, lengths)
+
+
 def _manifest(suffix: str) -> Callable[[bytes], None]:
     def run(data: bytes) -> None:
         from graphsvc.batch.manifest import option_argv, parse_item_options, read_manifest
@@ -210,7 +219,7 @@ def _each(*calls) -> str:
 
 def _grpc_synthesize(data: bytes) -> None:
     from graphsvc.service.convert_recording import recording_from_proto
-    from graphsvc.service.options_proto import options_from_proto
+    from graphsvc.service.options_proto import options_from_proto, performer_from_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies import get as get_strategy
 
@@ -223,7 +232,13 @@ def _grpc_synthesize(data: bytes) -> None:
         o = options_from_proto(msg.options, "options")
         reads_acc[0] = "accelerations" in get_strategy(o.strategy).uses
 
-    return _each(options, lambda: recording_from_proto(msg.recording, _LAYOUT, "recording", reads_acc[0]))
+    def performer():
+        if msg.HasField("performer"):
+            from graphsvc.motion.procedural.body import standard_skeleton
+
+            performer_from_proto(msg.performer, standard_skeleton())
+
+    return _each(options, lambda: recording_from_proto(msg.recording, _LAYOUT, "recording", reads_acc[0]), performer)
 
 
 def _grpc_stream(data: bytes) -> None:
@@ -295,13 +310,16 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("layout-toml", _layout(".toml"), seeds.layout_toml_seeds, doc="sensors.layout.load_layout (TOML)"),
     Target("constraints", _constraints, seeds.constraints_seeds, doc="strategies.options.load_constraints"),
     Target("calibration", _calibration, seeds.calibration_seeds, doc="sensors.calibration.load_calibration"),
+    Target("performer", _performer, seeds.performer_seeds,
+           doc="motion.proportions.load_performer_file, the lengths completed and a skeleton made of them"),
     Target("manifest", _manifest(".csv"), seeds.manifest_seeds, doc="batch.manifest.read_manifest + item flags"),
     Target("manifest-json", _manifest(".json"), seeds.manifest_json_seeds, doc="the same, a JSON manifest"),
     Target("mapping", _mapping, seeds.mapping_seeds, doc="motion.joints.load_mapping_file"),
     Target("marker-set", _marker_set, seeds.marker_set_seeds, doc="sensors.markers.load_marker_set"),
     Target("device-map", _device_map, seeds.device_map_seeds, doc="sensors.devices.load_device_map"),
     Target("grpc-synthesize", _grpc_synthesize, seeds.grpc_synthesize_seeds, structured=_proto_mutator(
-        "SynthesizeRequest"), doc="service.options_proto, convert_recording: a SynthesizeRequest's options and recording"),
+        "SynthesizeRequest"), doc="service.options_proto, convert_recording: a SynthesizeRequest's options, recording "
+                                  "and performer"),
     Target("grpc-stream", _grpc_stream, seeds.grpc_stream_seeds, structured=_proto_mutator(
         "StreamSynthesizeRequest"), doc="service.options_proto, convert_recording: a stream's config and samples"),
 )}  # fmt: skip

@@ -134,14 +134,17 @@ class BatchResult:
 
 def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
                timeout_s: float | None = None, skeleton: Skeleton | None = None,
-               calibrate_from_start: tuple[float, str] | None = None) -> BatchResult:  # fmt: skip
+               calibrate_from_start: tuple[float, str] | None = None,
+               performer: pb.Performer | None = None) -> BatchResult:  # fmt: skip
     """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None);
     calibrate_from_start: (seconds, pose), the server calibrates the device-frame
-    recording from its own start against the graph first."""
+    recording from its own start against the graph first. performer: the proportions to
+    put the output on (`convert.performer_to_proto`); the motion's skeleton then has the
+    bones the response's translations carry."""
     if skeleton is None:
         skeleton = skeleton_from_proto(get_graph(conn, graph).skeleton)
     request = pb.SynthesizeRequest(graph=graph, recording=recording_to_proto(rec),
-                                   options=options or pb.SynthesisOptions())  # fmt: skip
+                                   options=options or pb.SynthesisOptions(), performer=performer)  # fmt: skip
     if calibrate_from_start is not None:
         request.calibrate_from_start.seconds, request.calibrate_from_start.pose = calibrate_from_start
     try:
@@ -149,6 +152,12 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
     except grpc.RpcError as exc:
         raise service_error(exc, "Synthesize") from None
     motion = motion_from_proto(response.motion, skeleton)
+    if performer is not None and motion.num_frames > 0:
+        # (a joint without translation channels carries its bone's offset in every frame)
+        moving = np.array([any(c.endswith("position") for c in ch) for ch in skeleton.channels])
+        offsets = np.where(moving[:, None], skeleton.offsets, motion.translations[0])
+        motion = motion.copy(skeleton=Skeleton(skeleton.names, skeleton.parents, offsets, skeleton.channels,
+                                               skeleton.end_site))  # fmt: skip
     return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, report_from_proto(response))
 
 

@@ -7,7 +7,7 @@ convert_graph.py      Skeleton, GraphInfo (and its dict), the rest pose's readin
 convert_recording.py  Recording, a stream's samples and marker names, sensor order
 convert_motion.py     Motion, PoseFrame (and frames → Motion), Provenance
 convert_report.py     a SynthesizeResponse's report, BatchStatus, Struct values
-options_proto.py      SynthesisOptions and constraints
+options_proto.py      SynthesisOptions and constraints, a Performer
 
 Every `*_from_proto` checks what it reads and raises FieldError naming the field
 (its path in the request, e.g. "recording.timestamps_s[12]"), which the server turns
@@ -27,7 +27,8 @@ from graphsvc.service.convert_recording import (marker_names_from_proto, recordi
 from graphsvc.service.convert_report import (batch_status_to_proto, json_safe, report_from_proto, report_to_proto,
                                              struct_to_dict)  # fmt: skip
 from graphsvc.service.options_proto import (constraints_from_proto, constraints_to_proto, for_recording,
-                                            options_from_proto, options_to_proto)  # fmt: skip
+                                            options_from_proto, options_to_proto, performer_from_proto,
+                                            performer_to_proto)  # fmt: skip
 
 __all__ = [
     "FieldError",
@@ -42,4 +43,5 @@ __all__ = [
     "batch_status_to_proto", "json_safe", "report_from_proto", "report_to_proto", "struct_to_dict",
     # options_proto
     "constraints_from_proto", "constraints_to_proto", "for_recording", "options_from_proto", "options_to_proto",
+    "performer_from_proto", "performer_to_proto",
 ]  # fmt: skip

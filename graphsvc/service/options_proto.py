@@ -342,3 +342,35 @@ def _checked(cls, values: dict, where: str):
 def _field_error(exc: GraphsvcError, where: str) -> FieldError:
     name = getattr(exc, "field", None) or getattr(exc, "option_field", None)
     return FieldError(f"{where}.{name}" if name else where, str(exc))
+
+
+# ---------------------------------------------------------------- a performer's proportions
+
+
+def performer_to_proto(height_m: float | None = None, segments_m: dict | None = None) -> pb.Performer:
+    """A `Performer` of a height in metres or of segment lengths {name: metres} (one of
+    the two)."""
+    if (height_m is None) == (segments_m is None):
+        raise InputError("a performer is a height or segment lengths, one of the two")
+    if height_m is not None:
+        return pb.Performer(height_m=float(height_m))
+    return pb.Performer(segments=pb.PerformerSegments(segments_m={str(k): float(v) for k, v in segments_m.items()}))
+
+
+def performer_from_proto(msg: pb.Performer, skeleton, mapping=None, field: str = "performer") -> dict[str, float]:
+    """Every segment's length in metres on `skeleton` (the graph's, with its joint map or
+    `mapping`) for a `Performer` (`motion.proportions`); FieldError naming the field for
+    a height out of range, an unknown segment, a bad length or neither given."""
+    from graphsvc.motion.proportions import complete_lengths, lengths_for_height, segment_lengths
+
+    kind = msg.WhichOneof("proportions")
+    if kind is None:
+        raise FieldError(field, "give height_m or segments")
+    kb = segment_lengths(skeleton, mapping)
+    where = f"{field}.height_m" if kind == "height_m" else f"{field}.segments.segments_m"
+    try:
+        if kind == "height_m":
+            return lengths_for_height(kb, msg.height_m)
+        return complete_lengths(kb, dict(msg.segments.segments_m), "segments")
+    except InputError as exc:
+        raise FieldError(where, str(exc)) from None

@@ -24,7 +24,7 @@ from graphsvc.service.convert_recording import recording_from_proto
 from graphsvc.service.convert_report import batch_status_to_proto, report_to_proto
 from graphsvc.service.graphs import LoadedGraph
 from graphsvc.service.live_workers import LiveWorkers
-from graphsvc.service.options_proto import options_from_proto
+from graphsvc.service.options_proto import options_from_proto, performer_from_proto
 from graphsvc.service.status import RpcStatus, abort_for
 from graphsvc.service.streams import CONFIG_TIMEOUT_S, StartCalibration, StreamInput, StreamSlots, first_message
 from graphsvc.strategies import check_options, get as get_strategy
@@ -82,6 +82,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         try:
             graph = self._graph(request.graph).graph
             options = options_from_proto(request.options, "options")
+            performer = (performer_from_proto(request.performer, graph.skeleton, graph.params.get("mapping"))
+                         if request.HasField("performer") else None)  # fmt: skip
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
             rec = recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
                                        graph.layout.get("name", "?"))
@@ -99,6 +101,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             with self.threads.running():
                 result = pipeline.reconstruct(graph, rec, options, threads=False,
                                               should_stop=lambda: not context.is_active())  # fmt: skip
+            if performer is not None:
+                result = pipeline.put_on_performer(graph, result, performer)
             response = pb.SynthesizeResponse(motion=motion_to_proto(result.motion),
                                              node_path=[] if result.node_path is None else result.node_path.tolist(),
                                              bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip

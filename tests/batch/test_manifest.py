@@ -143,3 +143,53 @@ def test_an_item_calibrates_from_its_own_start_through_its_options(tmp_path):
         parse_item_options(option_argv(read_manifest(path)[0], tmp_path))
     with pytest.raises(InputError, match="needs --pose"):
         parse_item_options(option_argv(read_manifest(_one(tmp_path, {"calibrate-from-start": 6}))[0], tmp_path))
+
+
+def _performer_json(path: Path, l_thigh: float) -> Path:
+    path.write_text(json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": l_thigh}}))
+    return path
+
+
+def test_a_performer_or_a_height_is_an_item_option(tmp_path):
+    graph = tmp_path / "g.graph"
+    _small_graph(graph)
+    (tmp_path / "r.rec").write_bytes(b"not a recording yet")
+    _performer_json(tmp_path / "actor.json", 0.46)
+    items = lambda opts: read_manifest(_one(tmp_path, opts))[0]  # noqa: E731
+    plan = lambda opts: plan_item(items(opts), tmp_path, {"g": graph}, tmp_path, "v")  # noqa: E731
+    tall = plan({"height": 1.9})
+    assert tall.error is None and tall.task["argv"][-2:] == ["--height", "1.9"]
+    actor = plan({"performer": "actor.json"})  # (from the manifest's folder)
+    assert actor.error is None and actor.task["argv"][-2:] == ["--performer", str((tmp_path / "actor.json").resolve())]
+    assert len({plan({}).fingerprint, tall.fingerprint, actor.fingerprint}) == 3
+    _performer_json(tmp_path / "actor.json", 0.48)  # another performer in the same file: another fingerprint
+    assert plan({"performer": "actor.json"}).fingerprint != actor.fingerprint
+    for opts, needle in [({"height": 1.9, "performer": "actor.json"}, "not allowed with argument"),
+                         ({"height": -1}, "--height"), ({"performer": "nobody.json"}, "no such file"),
+                         ({"performer-mapping": "guess"}, "performer-mapping applies")]:  # fmt: skip
+        bad = plan(opts)
+        assert bad.task is None and needle in bad.error, (opts, bad.error)
+    (tmp_path / "bad.json").write_text('{"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 1}}')
+    bad = plan({"performer": "bad.json"})
+    assert bad.task is None and "unknown segments: tail" in bad.error
+
+
+def test_an_item_on_a_performer_writes_its_proportions(tmp_path, batch_files):
+    from graphsvc.batch.work import run_item
+    from graphsvc.motion.bvh import read_bvh
+    from graphsvc.motion.procedural.body import standard_skeleton
+    from graphsvc.motion.proportions import SEGMENTS, segment_lengths
+
+    (tmp_path / "m.json").write_text(json.dumps([{"recording": str(batch_files / "perf0.rec"), "graph": "g",
+                                                  "strategy": "nearest", "output": "tall",
+                                                  "options": {"height": 1.96}}]))  # fmt: skip
+    (item,) = read_manifest(tmp_path / "m.json")
+    p = plan_item(item, tmp_path, {"g": batch_files / "small.graph"}, tmp_path, "v")
+    assert p.error is None, p.error
+    done = run_item(p.task)
+    assert "error" not in done, done
+    got = segment_lengths(read_bvh(tmp_path / "tall.bvh").skeleton)
+    kb = segment_lengths(standard_skeleton())
+    for name in SEGMENTS:  # 1.96 / 1.75 = 1.12
+        assert got[name] == pytest.approx(1.12 * kb[name], abs=1e-6), name
+    assert json.loads((tmp_path / "tall.json").read_text())["performer"]["height_m"] == pytest.approx(1.96, abs=1e-4)

@@ -7,15 +7,18 @@ import pytest
 
 from graphsvc.errors import InputError
 from graphsvc.evaluate.metrics import (
+    bone_scaled_positions,
+    canonical_parents,
     evaluate_frames,
     heading_err_deg,
     joint_err_cm,
+    joint_err_scaled_cm,
     label_acc,
     root_err_cm,
     summarize,
 )
 from graphsvc.motion import quat, signals
-from graphsvc.motion.joints import canonical_indices, joint_map
+from graphsvc.motion.joints import CANONICAL, canonical_indices, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from tests.conftest import still_motion
 
@@ -138,3 +141,95 @@ def test_summarize_of_evaluated_clips_is_json(skeleton):
     assert set(out) == {"clips", "mean"}
     assert out["mean"]["root_err_cm"] == pytest.approx(np.sqrt(2))
     assert out["clips"][0]["label_acc"] == pytest.approx(2 / 3)
+
+
+# ---------------------------------------------------------------- on the truth's bone lengths
+
+
+def _chain(points):
+    """(1, 3, 3) a two-bone chain root → 1 → 2 in one frame."""
+    return np.array([points], dtype=np.float64)
+
+
+CHAIN_PARENTS = np.array([-1, 0, 1])
+
+
+def test_bone_scaled_positions_of_a_two_bone_chain():
+    # out along +X by 0.5, then down by 0.5; the truth's bones 1.0 and 2.0 long
+    pred = _chain([(0.0, 1.0, 0.0), (0.5, 1.0, 0.0), (0.5, 0.5, 0.0)])
+    got = bone_scaled_positions(pred, [0.0, 1.0, 2.0], CHAIN_PARENTS)
+    np.testing.assert_allclose(got, _chain([(0.0, 1.0, 0.0), (1.0, 1.0, 0.0), (1.0, -1.0, 0.0)]), atol=1e-15)
+    # per-frame lengths and a diagonal bone: (0.3, 0.4) scaled to 10 → (6, 8)
+    pred = _chain([(1.0, 0.0, 0.0), (1.3, 0.4, 0.0), (1.3, 0.4, 0.0)])
+    got = bone_scaled_positions(pred, [[0.0, 10.0, 3.0]], CHAIN_PARENTS)
+    # the second bone has zero length in the prediction: no direction, it stays zero
+    np.testing.assert_allclose(got, _chain([(1.0, 0.0, 0.0), (7.0, 8.0, 0.0), (7.0, 8.0, 0.0)]), atol=1e-12)
+
+
+def test_joint_err_scaled_scores_the_pose_not_the_proportions():
+    truth = _chain([(0.0, 1.0, 0.0), (1.0, 1.0, 0.0), (1.0, -1.0, 0.0)])
+    same_pose = _chain([(0.0, 1.0, 0.0), (0.5, 1.0, 0.0), (0.5, 0.5, 0.0)])  # bones half as long, and a quarter
+    ground, heading = np.array([[0.0, 0.0]]), np.zeros(1)
+    args = (ground, heading, ground, heading)
+    # unscaled: joints 0, 0.5 and √(0.5² + 1.5²) m apart
+    _, plain = joint_err_cm(same_pose, truth, *args)
+    assert plain == pytest.approx(100.0 * (0.0 + 0.5 + np.sqrt(2.5)) / 3.0, abs=1e-9)
+    _, scaled = joint_err_scaled_cm(same_pose, truth, CHAIN_PARENTS, *args)
+    assert scaled == pytest.approx(0.0, abs=1e-12)
+    # a bent elbow: the second bone along +X instead of down; on the truth's lengths the
+    # hand lands at (3, 1, 0), √(2² + 2²) from the truth's (1, −1, 0)
+    bent = _chain([(0.0, 1.0, 0.0), (0.5, 1.0, 0.0), (0.75, 1.0, 0.0)])
+    per_frame, scaled = joint_err_scaled_cm(bent, truth, CHAIN_PARENTS, *args)
+    assert scaled == pytest.approx(100.0 * np.sqrt(8.0) / 3.0, abs=1e-9)
+    assert per_frame.shape == (1,)
+
+
+def test_joint_err_scaled_lifts_the_root_with_the_truth_s_legs():
+    # a leg standing straight: root → knee → ankle, the prediction's bones 0.5 m, the
+    # truth's 0.6 m (its root 1.2 m up)
+    pred = _chain([(0.0, 1.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 0.0)])
+    truth = _chain([(0.0, 1.2, 0.0), (0.0, 0.6, 0.0), (0.0, 0.0, 0.0)])
+    ground, heading = np.array([[0.0, 0.0]]), np.zeros(1)
+    args = (ground, heading, ground, heading)
+    # the root kept where it is: every joint 0.2 m low
+    _, kept = joint_err_scaled_cm(pred, truth, CHAIN_PARENTS, *args)
+    assert kept == pytest.approx(20.0, abs=1e-9)
+    # the root lifted by the legs' ratio 1.2 / 1.0: on the truth
+    _, lifted = joint_err_scaled_cm(pred, truth, CHAIN_PARENTS, *args, legs=[1, 2])
+    assert lifted == pytest.approx(0.0, abs=1e-9)
+
+
+def test_canonical_parents_skip_a_missing_joint():
+    assert list(canonical_parents(["pelvis", "spine", "chest", "l_shoulder", "l_elbow"])) == [-1, 0, 1, 2, 3]
+    # no spine: the chest hangs from the pelvis; no chest either: the shoulder does too
+    assert list(canonical_parents(["pelvis", "chest", "neck"])) == [-1, 0, 1]
+    assert list(canonical_parents(["pelvis", "l_shoulder", "l_hip"])) == [-1, 0, 0]
+
+
+def test_evaluate_frames_adds_the_scaled_error_with_joint_names(skeleton):
+    frames = 4
+    ground = np.zeros((frames, 2))
+    pos, g, h = _walk(frames, np.zeros(frames), ground, skeleton)
+    names = list(CANONICAL)
+    # the same pose with every bone 1.2 × as long, standing on the floor below the pelvis
+    # (its pelvis 1.2 × as high): proportions only
+    floor = pos[:, :1] * np.array([1.0, 0.0, 1.0])
+    bigger = floor + 1.2 * (pos - floor)
+    row = evaluate_frames(bigger, pos, g, h, g, h, joints=names)
+    assert row["joint_err_cm"] > 1.0
+    assert row["joint_err_scaled_cm"] == pytest.approx(0.0, abs=1e-9)
+    assert "joint_err_scaled_cm" not in evaluate_frames(bigger, pos, g, h, g, h)
+    mean = summarize([row, {**row, "frames": 4, "joint_err_scaled_cm": 3.0}])["mean"]
+    assert mean["joint_err_scaled_cm"] == pytest.approx(1.5)
+
+
+def test_bone_scaled_inputs_are_checked():
+    pred = _chain([(0.0, 1.0, 0.0), (0.5, 1.0, 0.0), (0.5, 0.5, 0.0)])
+    with pytest.raises(InputError, match="parents"):
+        bone_scaled_positions(pred, [0.0, 1.0, 1.0], [-1, 2, 1])
+    with pytest.raises(InputError, match="negative"):
+        bone_scaled_positions(pred, [0.0, -1.0, 1.0], CHAIN_PARENTS)
+    with pytest.raises(InputError, match="NaN"):
+        bone_scaled_positions(pred, [0.0, np.nan, 1.0], CHAIN_PARENTS)
+    with pytest.raises(InputError, match="frame counts"):
+        bone_scaled_positions(pred, np.ones((2, 3)), CHAIN_PARENTS)

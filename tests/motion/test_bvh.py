@@ -125,6 +125,20 @@ def test_unit_auto_detection(tmp_path, factor, expected):
     np.testing.assert_allclose(m.skeleton.offsets[5], [0, -85 * factor * expected, 0], rtol=1e-9)
 
 
+def test_a_tall_figure_in_centimetres_is_read_in_centimetres(tmp_path):
+    from graphsvc.motion.procedural.body import standard_skeleton
+
+    sk = standard_skeleton()
+    # the procedural 1.75 m adult scaled to 2.3 m: its hand tip to the other side's toe
+    # tip spans 2.37 m × 2.3 / 1.75 = 3.1 m, 311 file units
+    tall = Skeleton(sk.names, sk.parents, sk.offsets * (2.3 / 1.75), sk.channels, sk.end_site)
+    rot = np.zeros((2, sk.num_joints, 4))
+    rot[..., 0] = 1.0
+    m = Motion(tall, rot, np.broadcast_to(tall.offsets, (2, sk.num_joints, 3)), 30.0)
+    write_bvh(tmp_path / "tall.bvh", m, scale=100.0)
+    np.testing.assert_allclose(read_bvh(tmp_path / "tall.bvh").skeleton.offsets, tall.offsets, atol=1e-9)
+
+
 def test_explicit_scale_and_rate(tmp_path):
     m = read_bvh(write(tmp_path, SIMPLE.replace("0.0333333", "0.01")), scale=1.0)
     assert m.rate_hz == 100.0

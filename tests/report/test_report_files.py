@@ -137,7 +137,9 @@ def test_evaluate_keeps_motions_and_writes_the_page(tmp_path, capsys):
         assert truth.num_frames == r["frames"]
     doc = load_document(tmp_path / "eval.json")
     assert [v["name"] for v in doc["clips"]] == [r["name"] for r in rows]
-    assert doc["table"]["columns"][:4] == ["clip", "label", "frames", "joint_err_cm"]
+    assert doc["table"]["columns"][:5] == ["clip", "label", "frames", "joint_err_cm", "joint_err_scaled_cm"]
+    for row, r in zip(doc["table"]["rows"], rows):
+        assert row[4] == pytest.approx(r["joint_err_scaled_cm"], abs=1e-4)
     for v, r in zip(doc["clips"], rows):
         assert [f["name"] for f in v["figures"]] == ["reconstruction", "truth"]
         # the page's errors are the evaluation's own per-frame errors

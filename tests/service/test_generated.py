@@ -49,3 +49,7 @@ def test_descriptor_names_the_proto_package():
     assert [(v.name, v.number) for v in pb.Strategy.DESCRIPTOR.values][:4] == [
         ("STRATEGY_UNSPECIFIED", 0), ("STRATEGY_VITERBI", 1), ("STRATEGY_OLNG", 2), ("STRATEGY_SSG", 3)]
     assert pb.Strategy.Value("STRATEGY_NEAREST") == 4
+    # A request's fields keep their numbers: calibrate_from_start (released first) is 4,
+    # performer (on a branch that also took 4) follows as 5.
+    assert {f.name: f.number for f in pb.SynthesizeRequest.DESCRIPTOR.fields} == {
+        "graph": 1, "recording": 2, "options": 3, "calibrate_from_start": 4, "performer": 5}

@@ -303,16 +303,18 @@ class Recording(_message.Message):
     def __init__(self, rate_hz: _Optional[float] = ..., sensor_names: _Optional[_Iterable[str]] = ..., timestamps_s: _Optional[_Iterable[float]] = ..., accelerations_m_s2: _Optional[_Iterable[float]] = ..., ground_positions_m: _Optional[_Iterable[float]] = ..., headings_rad: _Optional[_Iterable[float]] = ..., orientations_wxyz: _Optional[_Iterable[float]] = ..., marker_names: _Optional[_Iterable[str]] = ..., marker_positions_m: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class SynthesizeRequest(_message.Message):
-    __slots__ = ("graph", "recording", "options", "calibrate_from_start")
+    __slots__ = ("graph", "recording", "options", "calibrate_from_start", "performer")
     GRAPH_FIELD_NUMBER: _ClassVar[int]
     RECORDING_FIELD_NUMBER: _ClassVar[int]
     OPTIONS_FIELD_NUMBER: _ClassVar[int]
     CALIBRATE_FROM_START_FIELD_NUMBER: _ClassVar[int]
+    PERFORMER_FIELD_NUMBER: _ClassVar[int]
     graph: str
     recording: Recording
     options: SynthesisOptions
     calibrate_from_start: CalibrateFromStart
-    def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., calibrate_from_start: _Optional[_Union[CalibrateFromStart, _Mapping]] = ...) -> None: ...
+    performer: Performer
+    def __init__(self, graph: _Optional[str] = ..., recording: _Optional[_Union[Recording, _Mapping]] = ..., options: _Optional[_Union[SynthesisOptions, _Mapping]] = ..., calibrate_from_start: _Optional[_Union[CalibrateFromStart, _Mapping]] = ..., performer: _Optional[_Union[Performer, _Mapping]] = ...) -> None: ...
 
 class CalibrateFromStart(_message.Message):
     __slots__ = ("seconds", "pose")
@@ -321,6 +323,27 @@ class CalibrateFromStart(_message.Message):
     seconds: float
     pose: str
     def __init__(self, seconds: _Optional[float] = ..., pose: _Optional[str] = ...) -> None: ...
+
+class Performer(_message.Message):
+    __slots__ = ("height_m", "segments")
+    HEIGHT_M_FIELD_NUMBER: _ClassVar[int]
+    SEGMENTS_FIELD_NUMBER: _ClassVar[int]
+    height_m: float
+    segments: PerformerSegments
+    def __init__(self, height_m: _Optional[float] = ..., segments: _Optional[_Union[PerformerSegments, _Mapping]] = ...) -> None: ...
+
+class PerformerSegments(_message.Message):
+    __slots__ = ("segments_m",)
+    class SegmentsMEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    SEGMENTS_M_FIELD_NUMBER: _ClassVar[int]
+    segments_m: _containers.ScalarMap[str, float]
+    def __init__(self, segments_m: _Optional[_Mapping[str, float]] = ...) -> None: ...
 
 class SynthesizeResponse(_message.Message):
     __slots__ = ("motion", "node_path", "bvh", "report", "provenance", "report_json")
