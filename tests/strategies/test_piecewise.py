@@ -65,21 +65,74 @@ def test_the_model_gives_back_the_poses_it_learned(graph):
     assert m.K == 4 and arrays["centres"].shape[0] == arrays["centre_nodes"].size
 
 
+def test_the_optimised_pose_is_the_minimum_of_xies_objective(graph):
+    """Model.optimise's linear solve against scipy's minimiser of eq. 6.2–6.4 written
+    out term by term, with the cluster's prior and readings model taken from the
+    mixture's arrays directly. Without the smoothness term and with ω_c = 1 it is the
+    mixture component's own conditional mean E[r | c]."""
+    from scipy.optimize import minimize
+
+    data = prepared_index(get("piecewise"), graph)
+    arrays = learned_model(graph, data, PiecewiseOptions(dims=6, clusters="3"))
+    m = Model(arrays, 0.2, 0.8)
+    d = m.d
+    rng = np.random.default_rng(3)
+    c = np.asarray(data["readings"], np.float64)[100] + 0.05 * rng.standard_normal(m.read_mean.shape[1])
+    k = m.cluster(c)
+    mu, cov = arrays["mix_means"][k], arrays["mix_covariances"][k]
+    prior = np.linalg.inv(cov[:d, :d])
+    G = cov[d:, :d] @ prior
+    spread = np.linalg.inv(cov[d:, d:] - cov[d:, :d] @ prior @ cov[:d, d:])  # (the readings' about E[c | r])
+    r1, r2 = rng.standard_normal(d) * 0.1, rng.standard_normal(d) * 0.1
+
+    def objective(r, smooth):
+        miss = mu[d:] + G @ (r - mu[:d]) - c
+        e = (r - mu[:d]) @ prior @ (r - mu[:d]) + 0.8 * miss @ spread @ miss
+        return e + (0.2 * np.sum((r - 2 * r1 + r2) ** 2) if smooth else 0.0)
+
+    for smooth in (False, True):
+        want = minimize(objective, mu[:d], args=(smooth,), method="BFGS", options={"gtol": 1e-10}).x
+        got = m.optimise(k, c, r1 if smooth else None, r2 if smooth else None)
+        np.testing.assert_allclose(got, want, atol=1e-5)
+        assert objective(got, smooth) <= objective(want, smooth) + 1e-9
+    posterior = mu[:d] + cov[:d, d:] @ np.linalg.solve(cov[d:, d:], c - mu[d:])
+    np.testing.assert_allclose(Model(arrays, 0.2, 1.0).optimise(k, c, None, None), posterior, atol=1e-8)
+
+
 @pytest.mark.parametrize("method", ["rbf", "optimise"])
 def test_a_knowledge_base_clip_is_reconstructed(graph, kb, method):
     """Noise-free readings, positions and heading of knowledge-base clips. Not exact:
     40 of the 97 pose dimensions keep what PCA keeps, the RBF fit is regularised, and
     the pose filter and the root's predicted steps blur it (here 0.9–1.3 cm for rbf);
-    the optimisation weighs the readings (in g, ω_c = 0.8) against its cluster's
-    Gaussian prior (in standard deviations, over 40 dimensions), which pulls the pose
-    toward the cluster's mean: 7.3 cm here. With Xie's 7 dimensions PCA alone costs this
-    mixed knowledge base about 4 cm."""
-    bound = {"rbf": 2.0, "optimise": 9.0}[method]
+    the optimisation weighs the readings against its cluster's Gaussian prior, whose
+    linear readings model is coarser than the RBF map (1.3–1.4 cm here). With Xie's 7
+    dimensions PCA alone costs this mixed knowledge base about 4 cm."""
+    bound = {"rbf": 2.0, "optimise": 2.5}[method]
     for clip in (kb[0], kb[6]):
         options = Options(strategy="piecewise", piecewise=PiecewiseOptions(dims=40, method=method))
         row = evaluate_clip(graph, clip, None, EvalSetup(NOISE["none"], True, options))
         assert row["joint_err_cm"] < bound, (clip.name, row["joint_err_cm"])
         assert row["root_err_cm"] < 10.0, (clip.name, row["root_err_cm"])
+
+
+def test_lle_reduces_poses_and_gives_them_back_by_their_neighbours_weights(graph, kb):
+    """Landmark LLE: a landmark's own embedding comes back near its own pose — not to
+    it: the reconstruction weights from its nearest landmarks are regularised (LLE_REG),
+    so its neighbours in the embedding share in it, and an embedding may fold poses
+    apart onto each other (median largest quaternion component error 0.033 here); and
+    a knowledge-base clip from noise-free readings, punching (0.3–0.6 cm here with 7 or
+    20 dimensions)."""
+    data = prepared_index(get("piecewise"), graph)
+    arrays = learned_model(graph, data, PiecewiseOptions(reduce="lle", dims=7, clusters="4"))
+    assert "pca_mean" not in arrays and arrays["lle_embedding"].shape == (arrays["lle_poses"].shape[0], 7)
+    m = Model(arrays)
+    picks = np.arange(0, arrays["lle_poses"].shape[0], 97)
+    back = np.array([m.pose(arrays["lle_embedding"][i]) for i in picks])
+    err = np.abs(back - arrays["lle_poses"][picks]).max(axis=1)
+    assert np.median(err) < 0.05, np.median(err)
+    options = Options(strategy="piecewise", piecewise=PiecewiseOptions(reduce="lle", dims=7))
+    row = evaluate_clip(graph, kb[6], None, EvalSetup(NOISE["none"], True, options))
+    assert row["joint_err_cm"] < 1.5, row["joint_err_cm"]
 
 
 def test_a_hidden_clip_is_left_out_of_the_learning(graph, kb):
@@ -89,15 +142,15 @@ def test_a_hidden_clip_is_left_out_of_the_learning(graph, kb):
     allowed = strategy.allowed_mask(graph, [len(graph.clips) - 1])
     hidden = {graph.clips[int(c)]["name"] for c in performance_clips(graph, len(graph.clips) - 1)}
     assert hidden and len(hidden) < len(kb)
-    own = PiecewiseOptions(dims=10)
-    with_mask = learned_model(graph, prepared_index(strategy, graph), own, allowed)
     smaller, _ = build_graph([m for m in kb if m.name not in hidden], BuildOptions(layout=LAYOUT, progress=False))
-    without = learned_model(smaller, prepared_index(strategy, smaller), own)
-    everything = learned_model(graph, prepared_index(strategy, graph), own)
-    assert set(with_mask) == set(without)
-    for k in with_mask:
-        np.testing.assert_array_equal(with_mask[k], without[k], err_msg=k)
-    assert with_mask["centres"].shape != everything["centres"].shape  # (the hidden frames did count before)
+    for own in (PiecewiseOptions(), PiecewiseOptions(reduce="lle", clusters="3")):
+        with_mask = learned_model(graph, prepared_index(strategy, graph), own, allowed)
+        without = learned_model(smaller, prepared_index(strategy, smaller), own)
+        everything = learned_model(graph, prepared_index(strategy, graph), own)
+        assert set(with_mask) == set(without)
+        for k in with_mask:
+            np.testing.assert_array_equal(with_mask[k], without[k], err_msg=k)
+        assert with_mask["centres"].shape != everything["centres"].shape  # (the hidden frames did count before)
 
 
 def test_bic_picks_more_clusters_for_two_actions_than_for_one(kb):

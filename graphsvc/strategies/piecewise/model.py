@@ -10,14 +10,26 @@ of a hidden clip — a model learned with a hidden clip would carry it):
    with the frame's heading taken off, the pelvis height, the local rotation of every
    joint under the pelvis; unit quaternions on their w ≥ 0 side), D = 5 + 4·joints
    values, reduced to `dims` by PCA (r = (q − q̄)Aᵀ, Xie eq. 5.2). A pose comes back
-   as q̄ + rA with each quaternion normalised.
+   as q̄ + rA with each quaternion normalised. By default `dims` is Xie's criterion
+   rather than his number: the fewest components holding 99 % of the variance (7 did
+   for his capture; Bandai dataset 2 without its takes 004 needs 32 — 7 hold 83.5 %).
+1b. Or by LLE (`--piecewise-reduce lle`, Roweis & Saul 2000, "Nonlinear dimensionality
+   reduction by locally linear embedding"), as landmark LLE to stay small on a large
+   knowledge base: sklearn's LocallyLinearEmbedding (ARPACK, LLE_NEIGHBOURS
+   neighbours) over an even stride of at most LLE_LANDMARKS frames, every frame then
+   placed in the embedding by the standard out-of-sample reconstruction weights from
+   its nearest landmarks (sklearn's `transform`). A point of the embedding comes back
+   to a pose the same way round: the weights that rebuild it from its nearest
+   landmarks' embeddings, applied to their poses (`lle_pose`). The embedding is scaled
+   to the poses' total variance, so that its clusters and priors weigh as a PCA's do.
 2. Readings: the layout's accelerations on arriving at the frame, in g (S × 3, the
    graph's sensor-frame convention: the same features `nearest` matches).
 3. Clusters: a Gaussian mixture (full covariances) over [r, readings]; with
    clusters = auto, the count of the ladder CLUSTER_LADDER (up to one per
-   MIN_FRAMES_PER_CLUSTER frames) with the smallest BIC, each candidate fitted on at
-   most BIC_FRAMES frames (an even stride), the chosen count then on all of them.
-   Frames are grouped by the mixture's component of highest posterior.
+   MIN_FRAMES_PER_CLUSTER frames, and up the ladder only until the BIC has risen
+   twice running) with the smallest BIC, each candidate fitted on at most BIC_FRAMES
+   frames (an even stride), the chosen count then on at most GMM_FRAMES. Every frame
+   is grouped by the mixture's component of highest posterior.
 4. A sample is assigned to the component of highest posterior under the mixture's
    marginal over the readings (log πₖ + log N(c; μ_c,k, Σ_cc,k)).
 5. RBF, Xie eq. 5.9: per cluster y(c) = ȳ + Σᵢ wᵢ exp(−‖c − cᵢ‖² / σ²), y = [r, the
@@ -68,12 +80,17 @@ from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
 CLUSTER_LADDER = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64)
 MIN_FRAMES_PER_CLUSTER = 40
 BIC_FRAMES = 6000
-MAX_CENTRES = 1200
+GMM_FRAMES = 12000
+MAX_CENTRES = 800
 RIDGE = 1e-6
 WIDTH_NEIGHBOUR = 4
 RANDOM_STATE = 0
 REG_COVAR = 1e-5
 CHUNK = 32768
+VARIANCE_KEPT = 0.99
+LLE_LANDMARKS = 5000
+LLE_NEIGHBOURS = 12
+LLE_REG = 1e-3
 MODEL_VERSION = 1
 
 
@@ -109,9 +126,9 @@ def check_against(own, frames: int, pose_dims: int) -> None:
     below the pose's, more clusters than frames, no frames at all."""
     if frames == 0:
         raise InputError("piecewise: every knowledge-base frame is hidden: nothing to learn from")
-    if own.dims >= pose_dims:
+    if own.dims is not None and own.dims >= pose_dims:
         raise InputError(f"piecewise dims ({own.dims}) must be below the pose dimension ({pose_dims})")
-    if own.dims > frames:
+    if own.dims is not None and own.dims > frames:
         raise InputError(f"piecewise dims ({own.dims}) exceeds the knowledge base's {frames} frames")
     k = own.cluster_count()
     if k is not None and k > frames:
@@ -134,9 +151,14 @@ def learn(data: dict, rows: np.ndarray, own) -> dict[str, np.ndarray]:
     poses = np.asarray(data["poses"], dtype=np.float64)[rows]
     readings = np.asarray(data["readings"], dtype=np.float64)[rows]
     check_against(own, rows.size, poses.shape[1])
-    d = own.dims
-    pca = PCA(n_components=d, svd_solver="full", random_state=RANDOM_STATE).fit(poses)
-    reduced = pca.transform(poses)
+    d = own.dims if own.dims is not None else kept_dims(poses)
+    if own.reduce == "lle":
+        reduction = _lle(poses, d)
+        reduced = reduction.pop("reduced")
+    else:
+        pca = PCA(n_components=d, svd_solver="full", random_state=RANDOM_STATE).fit(poses)
+        reduced = pca.transform(poses)
+        reduction = {"pca_mean": pca.mean_, "pca_components": pca.components_}
     joint = np.concatenate([reduced, readings], axis=1)
     k = own.cluster_count()
     bic = {}
@@ -145,17 +167,64 @@ def learn(data: dict, rows: np.ndarray, own) -> dict[str, np.ndarray]:
         sample = joint[:: max(1, -(-rows.size // BIC_FRAMES))]
         for count in (c for c in CLUSTER_LADDER if c <= min(top, sample.shape[0])):
             bic[count] = _mixture(GaussianMixture, count).fit(sample).bic(sample)
+            values = list(bic.values())
+            if len(values) >= 3 and values[-1] > values[-2] > values[-3]:
+                break  # (rising twice: the larger counts only fit the sample's noise)
         k = min(bic, key=bic.get)
-    gmm = _mixture(GaussianMixture, k).fit(joint)
+    gmm = _mixture(GaussianMixture, k).fit(joint[:: max(1, -(-rows.size // GMM_FRAMES))])
     label = gmm.predict(joint)
     outputs = np.concatenate([reduced, np.asarray(data["steps"], np.float64)[rows],
                               np.asarray(data["contacts"], np.float64)[rows]], axis=1)  # fmt: skip
     rbf = _fit_rbfs(readings, outputs, label, k, gmm.means_[:, :d], own.width)
-    return {"pca_mean": pca.mean_, "pca_components": pca.components_, "mix_weights": gmm.weights_,
+    return {**reduction, "mix_weights": gmm.weights_,
             "mix_means": gmm.means_, "mix_covariances": gmm.covariances_,
             "bic_counts": np.array(list(bic), np.int64), "bic_values": np.array(list(bic.values()), np.float64),
             **rbf, "centre_nodes": np.asarray(data["nodes"])[rows][rbf["centre_rows"]].astype(np.int64),
             "template": np.asarray(data["nodes"])[rows[:1]].astype(np.int64)}  # fmt: skip
+
+
+def kept_dims(poses: np.ndarray) -> int:
+    """The fewest principal components holding VARIANCE_KEPT of the poses' variance
+    (Xie's criterion: 7 held 99 % of theirs), at most one below the pose dimension."""
+    from sklearn.decomposition import PCA
+
+    ratio = PCA(svd_solver="full").fit(poses).explained_variance_ratio_
+    d = int(np.searchsorted(np.cumsum(ratio), VARIANCE_KEPT - 1e-12) + 1)
+    return max(1, min(d, poses.shape[1] - 1, poses.shape[0]))
+
+
+def _lle(poses: np.ndarray, d: int) -> dict[str, np.ndarray]:
+    """Landmark LLE (module docstring, 1b): the embedding of an even stride of at most
+    LLE_LANDMARKS poses (sklearn's LocallyLinearEmbedding, ARPACK), every frame placed
+    by its reconstruction weights from its nearest landmarks (sklearn's out-of-sample
+    `transform`). Returns the landmarks' poses and embedding, and every frame's
+    embedding ("reduced")."""
+    from sklearn.manifold import LocallyLinearEmbedding
+
+    marks = poses[:: max(1, -(-poses.shape[0] // LLE_LANDMARKS))]
+    k = min(max(LLE_NEIGHBOURS, d + 1), marks.shape[0] - 1)
+    if k <= d:
+        raise InputError(f"piecewise: LLE into {d} dimensions needs more than {d + 1} frames")
+    lle = LocallyLinearEmbedding(n_neighbors=k, n_components=d, eigen_solver="arpack", random_state=RANDOM_STATE,
+                                 reg=LLE_REG)  # fmt: skip
+    embedding = lle.fit_transform(marks)
+    # (in the poses' units: its total variance theirs, as a PCA's nearly is; ARPACK's
+    # unit eigenvectors put every coordinate near 1/√landmarks)
+    scale = math.sqrt(float(marks.var(axis=0).sum()) / max(float(embedding.var(axis=0).sum()), 1e-300))
+    return {"lle_poses": marks, "lle_embedding": embedding * scale, "reduced": lle.transform(poses) * scale}
+
+
+def lle_pose(embedding: np.ndarray, poses: np.ndarray, tree, r: np.ndarray, k: int) -> np.ndarray:
+    """The pose (D,) at embedding point r: its k nearest landmarks' poses weighted by
+    the weights that rebuild r from their embeddings (sum 1, LLE's regularised local
+    Gram system)."""
+    _, near = tree.query(r, k)
+    near = np.atleast_1d(near)
+    Z = embedding[near] - r[None]
+    C = Z @ Z.T
+    C = C + np.eye(near.size) * LLE_REG * max(float(np.trace(C)), 1e-12)
+    w = np.linalg.solve(C, np.ones(near.size))
+    return (w / w.sum()) @ poses[near]
 
 
 def _mixture(cls, count: int):
@@ -219,8 +288,17 @@ class Model:
     def __init__(self, arrays: dict, w_smooth: float = 0.2, w_control: float = 0.8):
         self.arrays = arrays
         a = {k: np.asarray(v) for k, v in arrays.items()}
-        self.mean, self.components = a["pca_mean"], a["pca_components"]
-        d = self.d = self.components.shape[0]
+        self.lle = "lle_embedding" in a
+        if self.lle:
+            from scipy.spatial import cKDTree
+
+            self.embedding, self.landmarks = a["lle_embedding"], a["lle_poses"]
+            self.tree = cKDTree(self.embedding)
+            d = self.d = self.embedding.shape[1]
+            self.near = min(max(LLE_NEIGHBOURS, d + 1), self.embedding.shape[0])
+        else:
+            self.mean, self.components = a["pca_mean"], a["pca_components"]
+            d = self.d = self.components.shape[0]
         means, covs = a["mix_means"], a["mix_covariances"]
         self.K = means.shape[0]
         self.read_mean = np.ascontiguousarray(means[:, d:])
@@ -231,6 +309,7 @@ class Model:
         self.solve = np.empty((2, self.K, d, d))  # without / with the smoothness term
         self.rhs_prior = np.empty((self.K, d))
         self.G, self.g = np.empty((self.K, F, d)), np.empty((self.K, F))
+        self.control = np.empty((self.K, F, F))
         self.w_smooth, self.w_control = float(w_smooth), float(w_control)
         for k in range(self.K):
             srr, scc, scr = covs[k, :d, :d], covs[k, d:, d:], covs[k, d:, :d]
@@ -241,7 +320,9 @@ class Model:
             prec = np.linalg.inv(srr)
             self.G[k] = scr @ prec
             self.g[k] = self.read_mean[k] - self.G[k] @ self.prior_mean[k]
-            base = prec + self.w_control * self.G[k].T @ self.G[k]
+            residual = scc - self.G[k] @ scr.T  # the readings' spread about their model: Σ_cc − Σ_cr Σ_rr⁻¹ Σ_rc
+            self.control[k] = np.linalg.inv(0.5 * (residual + residual.T))
+            base = prec + self.w_control * self.G[k].T @ self.control[k] @ self.G[k]
             self.solve[0, k] = np.linalg.inv(base)
             self.solve[1, k] = np.linalg.inv(base + self.w_smooth * np.eye(d))
             self.rhs_prior[k] = prec @ self.prior_mean[k]
@@ -269,11 +350,13 @@ class Model:
     def optimise(self, k: int, c: np.ndarray, r1: np.ndarray | None, r2: np.ndarray | None) -> np.ndarray:
         """The reduced pose minimising eq. 6.2–6.4 in cluster k (module docstring, 6);
         r1, r2: the two previous frames' (None: not yet, no smoothness term)."""
-        b = self.rhs_prior[k] + self.w_control * self.G[k].T @ (c - self.g[k])
+        b = self.rhs_prior[k] + self.w_control * self.G[k].T @ (self.control[k] @ (c - self.g[k]))
         if r1 is None or r2 is None:
             return self.solve[0, k] @ b
         return self.solve[1, k] @ (b + self.w_smooth * (2.0 * r1 - r2))
 
     def pose(self, r: np.ndarray) -> np.ndarray:
         """The pose vector (D,) of reduced pose r (quaternions not yet normalised)."""
+        if self.lle:
+            return lle_pose(self.embedding, self.landmarks, self.tree, r, self.near)
         return self.mean + r @ self.components

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from graphsvc.strategies.options import OptionError, option
 
 METHODS = ("rbf", "optimise")
-REDUCTIONS = ("pca",)
+REDUCTIONS = ("pca", "lle")
 MAX_CLUSTERS = 4096
 
 
@@ -19,19 +19,21 @@ MAX_CLUSTERS = 4096
 class PiecewiseOptions:
     """method: a pose from the sample's cluster's RBF map (rbf, Xie eq. 5.9) or from the
     per-frame optimisation of eq. 6.2–6.4 (optimise); reduce: how poses are reduced
-    (pca); dims: the reduced dimension (7, Xie's); clusters: the GMM's components, a
-    count or "auto" (the fewest-BIC count of a ladder); width: the RBF kernel width σ
-    in g (None: each cluster's own, from the spacing of its readings); w_smooth,
-    w_control: the optimisation's smoothness and control weights (ω_s, ω_c: 0.2 and
-    0.8, Xie's)."""
+    (pca, or lle: landmark LLE); dims: the reduced dimension (None: the fewest PCA
+    components holding 99 % of the pose variance, Xie's criterion); clusters: the
+    GMM's components, a count or "auto" (the fewest-BIC count of a ladder); width: the
+    RBF kernel width σ in g (None: each cluster's own, from the spacing of its
+    readings); w_smooth, w_control: the optimisation's smoothness and control weights
+    (ω_s, ω_c: 0.2 and 0.8, Xie's)."""
 
     method: str = option("rbf", choices=METHODS, label="piecewise method",
                          help="pose from each cluster's RBF map (rbf, the default) or the per-frame optimisation "
                               "(optimise)")  # fmt: skip
     reduce: str = option("pca", choices=REDUCTIONS, label="piecewise reduce",
-                         help="how poses are reduced before clustering (pca, the default)")
-    dims: int = option(7, low=1, high=256, metavar="D", label="piecewise dims",
-                       help="reduced pose dimension (default 7, below the pose's own)")
+                         help="how poses are reduced before clustering: pca (the default) or lle (landmark LLE)")
+    dims: int | None = option(None, low=1, high=256, metavar="D", label="piecewise dims",
+                              help="reduced pose dimension, below the pose's own (default: the fewest holding 99 percent "
+                                   "of the pose variance, Xie's criterion)")  # fmt: skip
     clusters: str = option("auto", label="piecewise clusters", metavar="K|auto", noun="a whole number ≥ 1 or auto",
                            help="GMM clusters: a count, or auto to pick the count by BIC (default auto)")
     width: float | None = option(None, low=0.0, low_open=True, metavar="SIGMA", label="piecewise width",
