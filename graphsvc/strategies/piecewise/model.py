@@ -12,7 +12,7 @@ of a hidden clip — a model learned with a hidden clip would carry it):
    values, reduced to `dims` by PCA (r = (q − q̄)Aᵀ, Xie eq. 5.2). A pose comes back
    as q̄ + rA with each quaternion normalised. By default `dims` is Xie's criterion
    rather than his number: the fewest components holding 99 % of the variance (7 did
-   for his capture; Bandai dataset 2 without its takes 004 needs 32 — 7 hold 83.5 %).
+   for his capture; Bandai dataset 2 without its takes 004 needs 31 — 7 hold 83.5 %).
 1b. Or by LLE (`--piecewise-reduce lle`, Roweis & Saul 2000, "Nonlinear dimensionality
    reduction by locally linear embedding"), as landmark LLE to stay small on a large
    knowledge base: sklearn's LocallyLinearEmbedding (ARPACK, LLE_NEIGHBOURS
@@ -88,10 +88,10 @@ RANDOM_STATE = 0
 REG_COVAR = 1e-5
 CHUNK = 32768
 VARIANCE_KEPT = 0.99
-LLE_LANDMARKS = 5000
+LLE_LANDMARKS = 3000
 LLE_NEIGHBOURS = 12
 LLE_REG = 1e-3
-MODEL_VERSION = 1
+MODEL_VERSION = 2
 
 
 def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
