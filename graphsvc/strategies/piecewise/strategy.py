@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from graphsvc.errors import SearchCancelled
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.kinematics import forward_kinematics
@@ -167,8 +168,6 @@ class PiecewiseStrategy(Strategy):
         labels, clusters, incomplete = [], [], 0
         for t in range(T):
             if should_stop is not None and t % 256 == 0 and should_stop():
-                from graphsvc.errors import SearchCancelled
-
                 raise SearchCancelled("reconstruction cancelled")
             r, tr, where, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
                                                     None if heading is None else heading[t])  # fmt: skip
