@@ -10,6 +10,7 @@ reconstruction and its live session.
 | `nearest` | accelerations | (the track only to place the start) | nothing: per sample the nearest knowledge-base frame, the floor a search must beat |
 | `olng` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample the neighbourhood of frames moving as the readings do (Tautges et al. 2011) and a pose optimised from it |
 | `ssg` | labelled optical markers | | sparse, gappy markers: the knowledge base's subsequences that fit each window of the input, joined by a subsequence graph (Tautges 2012) |
+| `piecewise` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample its cluster's local model of the readings, an RBF map to a reduced pose or a small optimisation (Xie 2009) |
 
 A strategy is registered by `register(strategy)`: the built-in ones (BUILTIN, one line
 each: a module whose `STRATEGY` is the instance) on first lookup, and every strategy an
@@ -37,6 +38,7 @@ BUILTIN = (
     "graphsvc.strategies.nearest",
     "graphsvc.strategies.olng",
     "graphsvc.strategies.ssg",
+    "graphsvc.strategies.piecewise",
 )
 PLANNED: tuple[str, ...] = ()  # specified, not built: asked for, they answer "not implemented yet"
 _REGISTRY: dict[str, Strategy] = {}

@@ -31,6 +31,7 @@ and are not kept up (filterpy's last release is from 2018).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -38,6 +39,7 @@ import numpy as np
 
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
+from graphsvc.motion.quat import wrap_angle
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -281,6 +283,55 @@ def fused_track(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray
                                  graph.edge_offset[edge_path].astype(np.float64),
                                  graph.edge_heading[edge_path].astype(np.float64))  # fmt: skip
     return own + smooth_offsets(np.asarray(positions, dtype=np.float64).reshape(-1, 2) - own, model, free)
+
+
+def advance_own_track(state, step, turn: float, contacts, position, heading) -> None:
+    """One frame of a per-frame strategy's root, in place on `state` (a decoder with t
+    (this frame's number), own (2,) its own track, heading (rad), placed,
+    heading_placed, filter (a `FixedLagSmoother` of lag 0, or None), track_inputs (a
+    list or None), alpha (the heading's pull) and ground (2,)): after the first frame
+    the own track moves by its step (2,) m, taken in the previous heading's frame, and
+    turns by `turn`; it is snapped to the first measured position and heading; with a
+    filter, the offset to the measured positions is filtered (moving only where
+    `contacts` (2,) bool has a foot free) and `ground` is the own track plus it (each
+    frame's measurement, gate and filtered offset appended to track_inputs, for a
+    batch's `shift_to_smoothed`); the heading is pulled toward the measured one by
+    the share alpha."""
+    if state.t > 0:
+        state.own = state.own + meta.rotate_ground(np.asarray(step, dtype=np.float64)[None], np.array([state.heading]),
+                                                   np.zeros((1, 2)))[0]  # fmt: skip
+        state.heading = float(wrap_angle(state.heading + turn))
+    measured = position is not None and bool(np.all(np.isfinite(position)))
+    if measured and not state.placed:
+        state.own, state.placed = np.asarray(position, dtype=np.float64).copy(), True
+    state.ground = state.own
+    if state.filter is not None:
+        z = np.asarray(position, dtype=np.float64) - state.own if measured else np.full(2, np.nan)
+        free = float(free_steps(np.asarray(contacts)[None])[0])
+        state.filter.push(z, free)
+        offset = state.filter.take(state.t)
+        state.ground = state.own + offset
+        if state.track_inputs is not None:
+            state.track_inputs.append((z, free, offset))
+    if heading is not None and math.isfinite(heading):
+        if not state.heading_placed:
+            state.heading, state.heading_placed = float(heading), True
+        elif state.alpha > 0.0:
+            state.heading = float(wrap_angle(state.heading + state.alpha * float(wrap_angle(heading - state.heading))))
+
+
+def shift_to_smoothed(inputs: list | None, model: TrackModel | None, parents: np.ndarray, trans: np.ndarray) -> None:
+    """A batch run's root, in place on translations (T, J, 3): each frame shifted from
+    the filtered offset a live frame gets (`advance_own_track`'s track_inputs) to the
+    smoother's over the whole recording, the whole body at once."""
+    if not inputs or model is None:
+        return
+    z = np.array([i[0] for i in inputs])
+    free = np.array([i[1] for i in inputs])
+    shift = smooth_offsets(z, model, free) - np.array([i[2] for i in inputs])
+    for root in np.flatnonzero(np.asarray(parents) < 0):
+        trans[:, root, 0] += shift[:, 0]
+        trans[:, root, 2] += shift[:, 1]
 
 
 def warm_up_track() -> None:

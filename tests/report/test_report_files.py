@@ -45,7 +45,7 @@ def test_a_synthesize_report_of_every_strategy_becomes_a_page(files, strategy, c
     segments = view["timeline"]["segments"]
     assert sum(s["frames"] for s in segments) == T and segments[0]["start"] == 0
     assert {s["clip"] for s in segments} <= {c["name"] for c in graph.clips}
-    assert (view["timeline"]["neighbours"] is not None) == (strategy in ("olng", "ssg"))
+    assert (view["timeline"]["neighbours"] is not None) == (strategy in ("olng", "ssg", "piecewise"))
     if strategy == "ssg":
         assert view["sensors"] is None and view["markers"]["names"] == [m.name for m in MARKERS["hands-feet"].markers]
     else:

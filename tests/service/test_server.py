@@ -548,17 +548,14 @@ def test_nearest_through_synthesize_and_stream(conn, graph, recording):
         (live[0].sources[0][0], pytest.approx(live[0].sources[0][1]), 1.0)]
 
 
-def test_olng_through_synthesize_and_stream(conn, graph, recording):
-    from graphsvc.pipeline import Options, reconstruct
-    from graphsvc.strategies.olng.options import OlngOptions
+def _synthesized_and_streamed_as_the_library(conn, graph, recording, options, msg):
+    """The server's Synthesize and StreamSynthesize of `recording` with `msg`, checked
+    against the library's batch and live results for `options`; (synthesized, streamed)."""
+    from graphsvc.pipeline import reconstruct
 
-    options = Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False, w_contr=0.5))
-    msg = convert.options_to_proto(options)
-    assert convert.options_from_proto(msg).olng == options.olng  # every OLNG option crosses the wire
     expected = reconstruct(graph, recording, options)
     got = C.synthesize(conn, "small", recording, msg)
     np.testing.assert_array_equal(got.motion.rotations, expected.motion.rotations.astype(np.float32))
-    assert got.report["strategy"] == "olng" and got.report["olng"]["k"] == 24
     live, _ = live_frames(graph, recording, options)
     feed = C.SampleFeed(C.stream_config("small", msg))
     for sample in C.recording_samples(recording):
@@ -566,6 +563,18 @@ def test_olng_through_synthesize_and_stream(conn, graph, recording):
     feed.close()
     result = C.run_stream(conn, feed)
     assert_frames_equal(live, result.frames)
+    return got, result
+
+
+def test_olng_through_synthesize_and_stream(conn, graph, recording):
+    from graphsvc.pipeline import Options
+    from graphsvc.strategies.olng.options import OlngOptions
+
+    options = Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False, w_contr=0.5))
+    msg = convert.options_to_proto(options)
+    assert convert.options_from_proto(msg).olng == options.olng  # every OLNG option crosses the wire
+    got, result = _synthesized_and_streamed_as_the_library(conn, graph, recording, options, msg)
+    assert got.report["strategy"] == "olng" and got.report["olng"]["k"] == 24
     assert len(result.frames[0].sources) > 1  # (a neighbourhood: several frames, weighted)
     bad = pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG, olng=pb.OlngOptions(k=8, i=9))
     request = _recording_request(recording)
@@ -575,6 +584,24 @@ def test_olng_through_synthesize_and_stream(conn, graph, recording):
     request.options.CopyFrom(pb.SynthesisOptions(strategy=pb.STRATEGY_OLNG, olng=pb.OlngOptions(k=10**6)))
     code, details = _code(conn.stub.Synthesize, request, timeout=10)
     assert code == grpc.StatusCode.INVALID_ARGUMENT and "exceeds" in details, details
+
+
+def test_piecewise_through_synthesize_and_stream(conn, graph, recording):
+    from graphsvc.pipeline import Options
+    from graphsvc.strategies.piecewise import PiecewiseOptions
+
+    options = Options(strategy="piecewise", piecewise=PiecewiseOptions(method="optimise", dims=10, clusters="3"))
+    msg = convert.options_to_proto(options)
+    assert msg.strategy_name == "piecewise" and convert.options_from_proto(msg).piecewise == options.piecewise
+    got, _ = _synthesized_and_streamed_as_the_library(conn, graph, recording, options, msg)
+    assert got.report["strategy"] == "piecewise" and got.report["piecewise"]["clusters"] == 3
+    request = _recording_request(recording)
+    for settings, message in (({"width": float("nan")}, "width"), ({"clusters": "many"}, "clusters"),
+                              ({"clusters": "100000"}, "clusters"), ({"dims": 250}, "pose dimension")):  # fmt: skip
+        request.options.CopyFrom(pb.SynthesisOptions(strategy_name="piecewise"))
+        request.options.strategy_settings.update(settings)
+        code, details = _code(conn.stub.Synthesize, request, timeout=30)
+        assert code == grpc.StatusCode.INVALID_ARGUMENT and message in details and "\n" not in details, details
 
 
 def test_a_strategy_asked_for_an_input_it_lacks_answers_invalid_argument(conn, recording):

@@ -37,15 +37,13 @@ import time
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.graph.metadata import rotate_ground
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.synthesis.sensor_orientations import impose_at_nodes
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
-from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, free_steps
+from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track
 from graphsvc.motion import quat
-from graphsvc.motion.quat import wrap_angle
 from graphsvc.sensors.accelerometer import G_UP, GRAVITY
 from graphsvc.strategies.olng.index import OlngIndex
 from graphsvc.strategies.olng.lattice import Lattice, LatticeOptions
@@ -221,29 +219,9 @@ class OlngDecoder:
 
     def _root(self, best, w, position, heading, contacts):
         e = self.index.edges[best]
-        if self.t > 0:
-            step = w @ self.edge_offset[e]
-            turn = float(w @ self.edge_heading[e])
-            move = rotate_ground(step[None], np.array([self.heading]), np.zeros((1, 2)))[0]
-            self.own = self.own + move
-            self.heading = float(wrap_angle(self.heading + turn))
-        measured = position is not None and bool(np.all(np.isfinite(position)))
-        if measured and not self.placed:
-            self.own, self.placed = np.asarray(position, dtype=np.float64).copy(), True
-        self.ground = self.own
-        if self.filter is not None:
-            z = np.asarray(position, dtype=np.float64) - self.own if measured else np.full(2, np.nan)
-            free = float(free_steps(contacts[None])[0])
-            self.filter.push(z, free)
-            offset = self.filter.take(self.t)
-            self.ground = self.own + offset
-            if self.track_inputs is not None:
-                self.track_inputs.append((z, free, offset))
-        if heading is not None and math.isfinite(heading):
-            if not self.heading_placed:
-                self.heading, self.heading_placed = float(heading), True
-            elif self.alpha > 0.0:
-                self.heading = float(wrap_angle(self.heading + self.alpha * float(wrap_angle(heading - self.heading))))
+        step = w @ self.edge_offset[e] if self.t > 0 else np.zeros(2)
+        turn = float(w @ self.edge_heading[e]) if self.t > 0 else 0.0
+        advance_own_track(self, step, turn, contacts, position, heading)
 
     def _place(self, node_frame: int, p: np.ndarray):
         """Local rotations and translations (J, 4/3) of pose p at the current root."""

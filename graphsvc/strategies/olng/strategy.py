@@ -32,7 +32,7 @@ from graphsvc.strategies.olng.pose import pose_model
 from graphsvc.strategies.olng.options import OlngOptions
 from graphsvc.strategies.options import Options, track_pull
 from graphsvc.synthesis.smooth import smooth_poses
-from graphsvc.synthesis.track import TrackModel, smooth_offsets
+from graphsvc.synthesis.track import TrackModel, shift_to_smoothed
 
 
 def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
@@ -130,16 +130,7 @@ def smooth_root(decoder: OlngDecoder, trans: np.ndarray) -> None:
     """A batch run's root, in place on translations (T, J, 3): each frame shifted from the
     tracker's filtered offset, which a live frame gets, to the smoother's over the whole
     recording (`synthesis.track`), the whole body at once."""
-    inputs = decoder.track_inputs
-    if not inputs or decoder.track_model is None:
-        return
-    z = np.array([i[0] for i in inputs])
-    free = np.array([i[1] for i in inputs])
-    filtered = np.array([i[2] for i in inputs])
-    shift = smooth_offsets(z, decoder.track_model, free) - filtered
-    for root in np.flatnonzero(decoder.parents < 0):
-        trans[:, root, 0] += shift[:, 0]
-        trans[:, root, 2] += shift[:, 1]
+    shift_to_smoothed(decoder.track_inputs, decoder.track_model, decoder.parents, trans)
 
 
 def report(decoder: OlngDecoder, rows: list[dict], labels: list, warm_up_s: float, total_s: float) -> dict:
