@@ -184,8 +184,12 @@ class _Worker:
         except (OSError, EOFError, ValueError):  # ValueError: the pipe was closed here
             raise WorkerLost(self.lost_reason()) from None
 
-    def ending(self) -> str:
-        """How the process ended: "killed by signal 9", "exit code 1", …"""
+    def ending(self, wait_s: float = 0.5) -> str:
+        """How the process ended: "killed by signal 9", "exit code 1", … A pipe breaks a
+        moment before the dying process can be reaped: it is waited for up to wait_s
+        ("still running" after that)."""
+        if self.process.exitcode is None and wait_s > 0:
+            self.process.join(wait_s)
         code = self.process.exitcode
         return "still running" if code is None else (f"killed by signal {-code}" if code < 0 else f"exit code {code}")
 
