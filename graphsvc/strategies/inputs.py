@@ -30,6 +30,11 @@ from graphsvc.strategies.base import INPUTS, Strategy
 from graphsvc.strategies.options import Options, check_constraints
 
 
+def tracked_streams(options: Options, position, heading):
+    """The tracker streams the weights keep: (position or None, heading or None)."""
+    return (position if options.weights.position else None), (heading if options.weights.heading else None)
+
+
 def graph_cue(graph: MotionGraph, orientations) -> np.ndarray:
     """(..., S, W) the orientation cue the graph's edges carry (`graph.edge_up`: its width
     W says which, `sensors.orientation`) of orientations (..., S, 4); NaN where missing."""

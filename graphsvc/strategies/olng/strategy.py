@@ -23,7 +23,7 @@ from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.strategies.base import Strategy, prepared_index
-from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.inputs import PreparedInput, tracked_streams
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
@@ -56,11 +56,6 @@ def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options, own: Ol
     if decoder.impose:
         clip_sensor_placements(graph)  # (made now, not on the first sample)
     return decoder
-
-
-def _streams(options: Options, position, heading):
-    """The tracker streams the weights keep."""
-    return (position if options.weights.position else None), (heading if options.weights.heading else None)
 
 
 class OlngStrategy(Strategy):
@@ -100,7 +95,7 @@ class OlngStrategy(Strategy):
         warm_up(graph, index)
         warm_up_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        position, heading = _streams(options, inp.position, inp.heading)
+        position, heading = tracked_streams(options, inp.position, inp.heading)
         T = inp.num_samples
         J = graph.skeleton.num_joints
         rot, trans = np.empty((T, J, 4)), np.empty((T, J, 3))
@@ -196,7 +191,7 @@ class OlngSession(LiveSession):
         self.frame_index = 0
 
     def _decode(self, acc, position, heading, markers=None, up=None):
-        position, heading = _streams(self.options, position, heading)
+        position, heading = tracked_streams(self.options, position, heading)
         rot, trans, sources, label, _ = self.decoder.step(acc, position, heading, up)
         clip = np.full((1, SOURCES), -1, np.int64)
         frame, weight = np.zeros((1, SOURCES)), np.zeros((1, SOURCES))

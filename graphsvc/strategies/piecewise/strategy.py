@@ -34,7 +34,7 @@ from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.index import cached_arrays
-from graphsvc.strategies.inputs import PreparedInput
+from graphsvc.strategies.inputs import PreparedInput, tracked_streams
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.options import Options, track_pull
 from graphsvc.strategies.piecewise.model import Model, check_against, frame_data, learn, model_key, training_rows
@@ -159,8 +159,7 @@ class PiecewiseStrategy(Strategy):
             decoder.track_inputs = []
         learn_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        position = inp.position if options.weights.position else None
-        heading = inp.heading if options.weights.heading else None
+        position, heading = tracked_streams(options, inp.position, inp.heading)
         T = inp.num_samples
         J = graph.skeleton.num_joints
         rot, trans = np.empty((T, J, 4)), np.empty((T, J, 3))
@@ -211,8 +210,7 @@ class PiecewiseSession(LiveSession):
         self.frame_index = 0
 
     def _decode(self, acc, position, heading, markers=None, up=None):
-        position = position if self.options.weights.position else None
-        heading = heading if self.options.weights.heading else None
+        position, heading = tracked_streams(self.options, position, heading)
         rot, trans, where, label, _ = self.decoder.step(acc, position, heading)
         clip = np.array([[-1 if where is None else where[0]]], np.int64)
         frame = np.array([[0.0 if where is None else where[1]]])
