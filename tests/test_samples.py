@@ -23,7 +23,8 @@ def run(argv, capsys):
 
 def test_without_pybullet_the_commands_say_how_to_install_it(tmp_path, capsys, monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pybullet_data" else real(name, *a))
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "pybullet_data" else real(name, *a))
     for argv in (["samples", "-o", str(tmp_path / "s")], ["demo", "--kb", "pybullet", "-o", str(tmp_path / "d")]):
         code, _, err = run(argv, capsys)
         assert code == 2 and len(err.strip().splitlines()) == 1 and "pip install 'graphsvc[samples]'" in err, err
@@ -128,3 +129,16 @@ def test_samples_write_bvh_that_reads_back_as_the_clips(tmp_path, capsys):
         assert back.skeleton.same_topology(clip.skeleton) and back.labels == clip.labels
         assert back.rate_hz == clip.rate_hz and back.num_frames == clip.num_frames
         np.testing.assert_allclose(motion_fk(back)[1], motion_fk(clip)[1], atol=1e-5)
+
+
+@needs_pybullet
+def test_demo_knowledge_base_leaves_one_clip_out(tmp_path, capsys):
+    from graphsvc.demo import PYBULLET_RATE_HZ, pybullet_knowledge_base
+
+    kb, held, labels = pybullet_knowledge_base("turn_left_1")
+    assert len(kb) == 19 and "turn_left_1" not in {c.name for c in kb} and "turn_left_0" in {c.name for c in kb}
+    assert held.name == "turn_left_1" and held.rate_hz == PYBULLET_RATE_HZ
+    assert labels.shape == (held.num_frames,) and set(labels) == {"turn_left"}
+    code, _, err = run(["demo", "--kb", "pybullet", "--held-out", "moonwalk", "-o", str(tmp_path / "d")], capsys)
+    assert code == 2 and "no sample clip named 'moonwalk'" in err and "turn_right_1" in err
+    assert list(tmp_path.iterdir()) == []

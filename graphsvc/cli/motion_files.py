@@ -101,7 +101,8 @@ def add_inspect(sub) -> None:
                 "Describe motion files and folders (searched recursively: per clip frames, rate, joints, duration, "
                 "labels; per-folder and overall totals) or recordings (samples, sensors, channels).")  # fmt: skip
     p.add_argument("paths", nargs="+", metavar="PATH", type=PATH,
-                   help="a motion file (.bvh, .amc, DeepMimic .txt), a folder of them, or a recording (.rec, .csv, .mvnx, .c3d)")
+                   help="a motion file (.bvh, .amc, DeepMimic .txt), a folder of them, or a recording "
+                        "(.rec, .csv, .mvnx, .c3d)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     add_reading_flags(p)
     p.set_defaults(run=_cmd_inspect)
@@ -137,7 +138,8 @@ def add_mapping(sub) -> None:
     p = command(sub, "mapping", "propose a joint map for a skeleton graphsvc does not know",
                 "Propose a joint map (canonical joint → the skeleton's joint) for a skeleton graphsvc does not know, "
                 "for `--mapping FILE` elsewhere; exit 2 when a required joint is not found.")  # fmt: skip
-    p.add_argument("clip", metavar="CLIP", type=PATH, help="a motion file (.bvh, .amc, DeepMimic .txt) with that skeleton")
+    p.add_argument("clip", metavar="CLIP", type=PATH,
+                   help="a motion file (.bvh, .amc, DeepMimic .txt) with that skeleton")
     p.add_argument("-o", "--output", metavar="MAP.json", type=PATH, help="write the map here (default: print it)")
     p.set_defaults(run=_cmd_mapping)
 

@@ -89,9 +89,9 @@ RATE_SNAP = 1e-3  # a rate within this fraction of a whole number of Hz is that 
 class Character:
     """A DeepMimic character: names (J,), parents (J,) int (-1 for the root), kinds
     ("root", "spherical", "revolute", "fixed"), offsets (J, 3) from the parent in metres
-    and axes (J, 3) of the revolute joints (zero for the others), in the character's frame (Y up, facing +X),
-    in the order their values appear in a frame; sites: end sites (name, parent index,
-    offset in metres) added for the canonical joints."""
+    and axes (J, 3) of the revolute joints (zero for the others), in the character's
+    frame (Y up, facing +X), in the order their values appear in a frame; sites: end
+    sites (name, parent index, offset in metres) added for the canonical joints."""
 
     names: tuple[str, ...]
     parents: np.ndarray
@@ -273,6 +273,10 @@ def _columns(character: Character) -> list[str]:
     return cols
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def _frames(path: Path, data, character: Character) -> np.ndarray:
     """The frames as an (F, W) array, every shape and value checked."""
     if not isinstance(data, dict):
@@ -289,7 +293,7 @@ def _frames(path: Path, data, character: Character) -> np.ndarray:
     joints = len(character.names)
     for key in ("RightJoints", "LeftJoints"):
         items = data.get(key, [])
-        if not isinstance(items, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in items):
+        if not isinstance(items, list) or not all(_is_number(i) and isinstance(i, int) for i in items):
             raise FormatError(path, f'"{key}" is not a list of joint numbers')
         bad = [i for i in items if not 0 <= i < joints]
         if bad:
@@ -297,14 +301,14 @@ def _frames(path: Path, data, character: Character) -> np.ndarray:
     width = character.frame_width
     cols = _columns(character)
     for k, frame in enumerate(frames):
-        if not isinstance(frame, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in frame):
+        if not isinstance(frame, list) or not all(_is_number(v) for v in frame):
             raise FormatError(path, f"frame {k} is not a list of numbers")
         if len(frame) > width:
-            raise FormatError(path, f"frame {k} has {len(frame)} values, {len(frame) - width} more than the "
-                                    f"skeleton's {joints} joints take ({width}): values for a joint the skeleton lacks")  # fmt: skip
+            raise FormatError(path, f"frame {k} has {len(frame)} values, {len(frame) - width} more than the skeleton's "
+                                    f"{joints} joints take ({width}): values for a joint the skeleton lacks")
         if len(frame) < width:
             raise FormatError(path, f"frame {k} has {len(frame)} values; the skeleton's {joints} joints take {width} "
-                                    f"(from {cols[len(frame)]} on missing)")  # fmt: skip
+                                    f"(from {cols[len(frame)]} on missing)")
     values = np.array(frames, dtype=np.float64)
     bad = ~np.isfinite(values)
     if bad.any():
