@@ -1,11 +1,13 @@
-"""Finding and loading motion files of any supported format, with their labels.
+"""Finding and loading motion files of any supported format, with their labels:
+BVH, ASF/AMC and DeepMimic JSON (`.txt`, told from other text files by its content).
 
 Labels: the content label first, then user tags. The content label comes from a
 Bandai-style sidecar `<stem>.json` ({"content": id, ...}) whose id indexes the
 lines of `../cfg/content*.txt` (0-based, e.g. "dataset-1_walk" → "walk"); without
-them it is derived from the file name (`dataset-2_walk_normal_001` → "walk", any
-other name → its stem, e.g. CMU "02_01"). User tags are read from an optional
-sidecar `<stem>.tags`, one per line ('#' starts a comment).
+them it is derived from the file name (`dataset-2_walk_normal_001` → "walk", a
+DeepMimic `humanoid3d_walk.txt` → "walk", any other name → its stem, e.g. CMU
+"02_01"). User tags are read from an optional sidecar `<stem>.tags`, one per line
+('#' starts a comment).
 """
 
 from __future__ import annotations
