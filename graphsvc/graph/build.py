@@ -604,7 +604,7 @@ def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tupl
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
     files = find_motion_files(list(paths), exclude=list(exclude))
     if not files:
-        raise InputError("the knowledge base is empty: no .bvh or .amc files matched")
+        raise InputError("the knowledge base is empty: no .bvh, .amc or DeepMimic .txt files matched")
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
                             disable=None if progress is None else not progress))  # fmt: skip
