@@ -14,11 +14,14 @@ import fnmatch
 import functools
 import glob
 import json
+import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from graphsvc.errors import FormatError, InputError, MissingFileError, UnknownFormatError
-from graphsvc.fileio import read_input_text
+from graphsvc.fileio import StrPath, read_input_text
 from graphsvc.motion.asfamc import read_asf_amc
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.skeleton import Motion, check_finite
@@ -97,7 +100,7 @@ def user_tags(path) -> list[str]:
     return tags
 
 
-def load_motion(path, **options) -> Motion:
+def load_motion(path: StrPath, **options: Any) -> Motion:
     """Load one .bvh or .amc file (options go to read_bvh / read_asf_amc, e.g.
     scale=, asf_path=, rate_hz=), with name, source and labels filled in."""
     path = Path(path)
@@ -117,17 +120,17 @@ def _excluded(path: Path, exclude) -> bool:
     return any(fnmatch.fnmatch(path.name, pat) or fnmatch.fnmatch(text, pat) for pat in exclude)
 
 
-def find_motion_files(paths, exclude=()) -> list[Path]:
+def find_motion_files(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = ()) -> list[Path]:
     """Motion files named by `paths`: files, folders (searched recursively) or glob
     patterns ('**' recurses). Only .bvh/.amc files are collected from folders and
     patterns; a file named directly must be one. `exclude`: fnmatch patterns matched
     against the file name or the whole path. Sorted, without duplicates."""
-    if isinstance(paths, (str, Path)):
+    if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     exclude = [exclude] if isinstance(exclude, str) else list(exclude)
     found: set[Path] = set()
     for item in paths:
-        text = str(item)
+        text = os.fspath(item) if isinstance(item, os.PathLike) else str(item)
         if not text.strip():
             raise InputError("an empty path is not a file or folder")
         p = Path(text)
@@ -138,7 +141,7 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
             found.update(f for f in p.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
         elif _GLOB_CHARS.search(text):
             hits = [Path(h) for h in glob.glob(text, recursive=True)]
-            files = set()
+            files: set[Path] = set()
             for h in hits:
                 if h.is_dir():
                     files.update(f for f in h.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
@@ -152,6 +155,6 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
     return sorted((f for f in found if not _excluded(f, exclude)), key=lambda f: f.as_posix())
 
 
-def load_motions(paths, exclude=(), **options) -> list[Motion]:
+def load_motions(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = (), **options: Any) -> list[Motion]:
     """load_motion over find_motion_files(paths, exclude)."""
     return [load_motion(p, **options) for p in find_motion_files(paths, exclude)]
