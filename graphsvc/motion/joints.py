@@ -123,7 +123,11 @@ def _complete(skeleton: Skeleton, table: dict[str, str], family: str, allow_miss
     return JointTable({c: out[c] for c in CANONICAL}, absent, family)
 
 
-def joint_map(skeleton: Skeleton, mapping: dict[str, str] | str | Path | None = None) -> JointTable:
+# A joint map as the functions take it: canonical → skeleton joint names, a map file, "guess", or None (built in).
+JointMapping = dict[str, str] | str | Path | None
+
+
+def joint_map(skeleton: Skeleton, mapping: JointMapping = None) -> JointTable:
     """Canonical name → joint index in `skeleton` (a `JointTable`). With no mapping, the
     first built-in map whose joints all exist is used. A mapping (a dict, a file, or
     "guess" for `guess_mapping`'s proposal) is completed from the built-in map that

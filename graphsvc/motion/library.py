@@ -16,11 +16,14 @@ import fnmatch
 import functools
 import glob
 import json
+import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from graphsvc.errors import FormatError, InputError, MissingFileError, UnknownFormatError
-from graphsvc.fileio import read_input_text
+from graphsvc.fileio import StrPath, read_input_text
 from graphsvc.motion.asfamc import read_asf_amc
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.deepmimic import clip_label, is_deepmimic, may_be_deepmimic, read_deepmimic
@@ -109,7 +112,7 @@ def user_tags(path) -> list[str]:
 _READERS = {".bvh": read_bvh, ".amc": read_asf_amc, ".txt": read_deepmimic}
 
 
-def load_motion(path, **options) -> Motion:
+def load_motion(path: StrPath, **options: Any) -> Motion:
     """Load one .bvh, .amc or DeepMimic .txt file (options go to read_bvh /
     read_asf_amc / read_deepmimic, e.g. scale=, asf_path=, rate_hz=), with name, source
     and labels filled in."""
@@ -129,7 +132,7 @@ def _excluded(path: Path, exclude) -> bool:
     return any(fnmatch.fnmatch(path.name, pat) or fnmatch.fnmatch(text, pat) for pat in exclude)
 
 
-def is_motion_file(path) -> bool:
+def is_motion_file(path: StrPath) -> bool:
     """Whether a file named directly is read as motion: .bvh, .amc, or a .txt file
     that starts with a JSON object (DeepMimic)."""
     suffix = Path(path).suffix.lower()
@@ -144,18 +147,18 @@ def _collected(f: Path) -> bool:
     return suffix in MOTION_SUFFIXES and f.is_file() and (suffix != ".txt" or is_deepmimic(f))
 
 
-def find_motion_files(paths, exclude=()) -> list[Path]:
+def find_motion_files(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = ()) -> list[Path]:
     """Motion files named by `paths`: files, folders (searched recursively) or glob
     patterns ('**' recurses). Only .bvh/.amc files and DeepMimic .txt files are
     collected from folders and patterns; a file named directly must be one. `exclude`:
     fnmatch patterns matched against the file name or the whole path. Sorted, without
     duplicates."""
-    if isinstance(paths, (str, Path)):
+    if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     exclude = [exclude] if isinstance(exclude, str) else list(exclude)
     found: set[Path] = set()
     for item in paths:
-        text = str(item)
+        text = os.fspath(item) if isinstance(item, os.PathLike) else str(item)
         if not text.strip():
             raise InputError("an empty path is not a file or folder")
         p = Path(text)
@@ -166,7 +169,7 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
             found.update(f for f in p.rglob("*") if _collected(f))
         elif _GLOB_CHARS.search(text):
             hits = [Path(h) for h in glob.glob(text, recursive=True)]
-            files = set()
+            files: set[Path] = set()
             for h in hits:
                 if h.is_dir():
                     files.update(f for f in h.rglob("*") if _collected(f))
@@ -180,6 +183,6 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
     return sorted((f for f in found if not _excluded(f, exclude)), key=lambda f: f.as_posix())
 
 
-def load_motions(paths, exclude=(), **options) -> list[Motion]:
+def load_motions(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = (), **options: Any) -> list[Motion]:
     """load_motion over find_motion_files(paths, exclude)."""
     return [load_motion(p, **options) for p in find_motion_files(paths, exclude)]
