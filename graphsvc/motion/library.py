@@ -18,7 +18,7 @@ import glob
 import json
 import os
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -109,7 +109,8 @@ def user_tags(path) -> list[str]:
     return tags
 
 
-_READERS = {".bvh": read_bvh, ".amc": read_asf_amc, ".txt": read_deepmimic}
+_READERS: dict[str, Callable[..., Motion]] = {".bvh": read_bvh, ".amc": read_asf_amc,
+                                              ".txt": read_deepmimic}  # fmt: skip
 
 
 def load_motion(path: StrPath, **options: Any) -> Motion:
