@@ -24,7 +24,6 @@ from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.skeleton import Motion, check_finite
 
 MOTION_SUFFIXES = (".bvh", ".amc")
-MOTION_OUTPUT_SUFFIXES = (".bvh",)  # what a reconstruction is written as
 _BANDAI_NAME = re.compile(r"^dataset-\d+_(?P<content>[^_]+)_(?P<style>[^_]+)_\d+$")
 _GLOB_CHARS = re.compile(r"[*?\[]")
 
