@@ -274,6 +274,9 @@ def test_cli_synthesize_writes_glTF_with_the_bvh_s_motion(graph, rec, tmp_path, 
         assert json.loads((tmp_path / "r.json").read_text())["files"]["output"] == str(out.resolve())
         _, got = gltf_positions(out, graph.rate_hz, want.shape[0])
         assert np.abs(got - want).max() < TOLERANCE_M
+    # `graphsvc report` reads the glTF output back (motion.gltf_read) as it reads a BVH.
+    assert main(["report", str(tmp_path / "r.json"), "-o", str(tmp_path / "page.html")]) == 0
+    assert (tmp_path / "page.html").stat().st_size > 0
     assert all(r["errors"] == 0 for r in validate([tmp_path / "o.glb", tmp_path / "o.gltf"]))
 
 

@@ -1,7 +1,8 @@
 """A motion written as a file, its format chosen by the file's suffix: `.bvh`
 (`motion.bvh`, in `scale` units a metre) or `.glb` / `.gltf` (`motion.gltf`, a skinned
 skeleton with its animation, always in metres). The one entry for every command and
-service that writes a reconstruction: `synthesize`, a batch's items, the client."""
+service that writes a reconstruction: `synthesize`, a batch's items, the client; and
+what reads one back (`read_motion_output`: `graphsvc report`)."""
 
 from __future__ import annotations
 
@@ -36,6 +37,18 @@ def motion_file_bytes(path, motion: Motion, scale: float = 100.0) -> bytes:
     from graphsvc.motion.gltf import gltf_bytes
 
     return gltf_bytes(motion, binary=fmt == "glb")
+
+
+def read_motion_output(path) -> Motion:
+    """A written motion read back: .glb and .gltf by `motion.gltf_read.read_gltf`, any
+    other by `motion.library.load_motion` (BVH, ASF/AMC)."""
+    if Path(path).suffix.lower() in GLTF_SUFFIXES:
+        from graphsvc.motion.gltf_read import read_gltf
+
+        return read_gltf(path)
+    from graphsvc.motion.library import load_motion
+
+    return load_motion(path)
 
 
 def write_motion(path, motion: Motion, scale: float = 100.0) -> None:

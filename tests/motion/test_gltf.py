@@ -299,6 +299,72 @@ def test_a_motion_glTF_cannot_hold_is_refused_and_nothing_written(tmp_path, clip
         write_motion(tmp_path / "x.obj", clip)
 
 
+def test_read_back_the_same_motion(tmp_path, clip):
+    """`read_gltf` (what `graphsvc report` reads): the skeleton, rate and every joint's
+    world position of the motion written, the end sites where they were."""
+    from graphsvc.motion.gltf_read import read_gltf
+
+    far = _moved_far(clip)
+    for name, motion in (("a.glb", far), ("a.gltf", clip), ("one.glb", still_motion(1, rate_hz=24.0))):
+        write_motion(tmp_path / name, motion)
+        back = read_gltf(tmp_path / name)
+        sk = motion.skeleton
+        assert back.skeleton.names == sk.names and (back.skeleton.parents == sk.parents).all()
+        assert (back.skeleton.end_site == sk.end_site).all() and back.rate_hz == motion.rate_hz
+        assert back.num_frames == motion.num_frames
+        assert np.abs(motion_fk(back)[1] - motion_fk(motion)[1]).max() < TOLERANCE_M
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("not glTF", "not glTF JSON"),
+    ("truncated", "GLB version 2, length"),
+    ("external buffer", "external file"),
+    ("accessor past its view", "runs past its buffer view"),
+    ("nan", "non-finite"),
+    ("no animation", "no animation"),
+    ("uneven keyframes", "not at a uniform rate"),
+    ("bad index", "is not an index"),
+])  # fmt: skip
+def test_a_malformed_glTF_is_one_line_naming_the_file(tmp_path, clip, case, needle):
+    from graphsvc.errors import FormatError
+    from graphsvc.motion.gltf_read import read_gltf
+
+    path = tmp_path / "x.gltf"
+    write_motion(path, clip.slice(0, 4))
+    doc = json.loads(path.read_text())
+    if case == "not glTF":
+        path.write_text("{")
+    elif case == "truncated":
+        write_motion(tmp_path / "x.glb", clip.slice(0, 4))
+        path = tmp_path / "x.glb"
+        path.write_bytes(path.read_bytes()[:-8])
+    else:
+        if case == "external buffer":
+            doc["buffers"][0]["uri"] = "x.bin"
+        elif case == "accessor past its view":
+            doc["accessors"][-1]["count"] *= 50
+        elif case == "nan":
+            blob = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
+            a = doc["accessors"][doc["animations"][0]["samplers"][0]["output"]]
+            o = doc["bufferViews"][a["bufferView"]]["byteOffset"]
+            blob[o:o + 4] = struct.pack("<f", np.nan)
+            doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
+        elif case == "no animation":
+            del doc["animations"]
+        elif case == "uneven keyframes":
+            blob = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
+            a = doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]
+            o = doc["bufferViews"][a["bufferView"]]["byteOffset"] + 4
+            blob[o:o + 4] = struct.pack("<f", 0.01)
+            doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
+        elif case == "bad index":
+            doc["animations"][0]["samplers"][0]["input"] = -1
+        path.write_text(json.dumps(doc))
+    with pytest.raises(FormatError) as err:
+        read_gltf(path)
+    assert str(err.value).startswith(str(path)) and needle in str(err.value) and "\n" not in str(err.value)
+
+
 def test_real_bandai_clip(tmp_path, data_dir):
     """A Bandai BVH (its own skeleton, end sites, centimetres) through both writers."""
     path = sorted((data_dir / "bandai" / "dataset-2" / "data").glob("*walk*_001.bvh"))[0]
