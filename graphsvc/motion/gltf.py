@@ -7,7 +7,7 @@ with its frame-0 local translation and rotation; one animation whose samplers ho
 per frame at the motion's rate (LINEAR, time k / rate_hz), every joint's rotation and
 the root's translation (and any other joint whose translation changes); a skin over
 every joint, bound in the rest pose (identity rotations, frame 0's bone offsets, the
-root on the vertical axis); a mesh of one capsule a bone, each skinned rigidly to the
+root on the vertical axis); a mesh of one capsule a rigid bone, each skinned to the
 bone's parent joint, so that viewers show a body. glTF's own conventions hold: metres,
 Y up, right-handed — graphsvc's world — so no axis or unit is converted (a BVH's
 `scale` does not apply).
@@ -137,7 +137,7 @@ def _document(motion: Motion) -> tuple[dict, bytes]:
 
     bind = bind_pose(motion)
     meshes, ibm = [], None
-    pos, normal, joint, index = capsule_mesh(bind, sk.parents)
+    pos, normal, joint, index = capsule_mesh(bind, sk.parents, rigid=~moves)
     if index.size:
         inverse_bind = np.zeros((J, 4, 4), np.float32)
         inverse_bind[:, [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
@@ -204,10 +204,12 @@ def bind_pose(motion: Motion) -> np.ndarray:
     return world
 
 
-def capsule_mesh(bind: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def capsule_mesh(bind: np.ndarray, parents: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray, ...]:
     """One capsule a bone (parent joint → joint) of the bind pose, each vertex skinned to
     the parent: (positions (V, 3), normals (V, 3), joint (V,), triangle indices (3T,)),
-    counter-clockwise seen from outside."""
+    counter-clockwise seen from outside. rigid: (J,) bool, False for a joint whose
+    translation is animated: its bone changes length and gets no capsule (a Bandai-Namco
+    skeleton's hips, which carry the body's position under a root on the floor)."""
     S, H = CAPSULE_SIDES, CAPSULE_RINGS
     around = 2 * np.pi * np.arange(S) / S
     # rows from the start's pole to the end's: (which end, angle from the equator)
@@ -219,7 +221,7 @@ def capsule_mesh(bind: np.ndarray, parents: np.ndarray) -> tuple[np.ndarray, np.
         p = int(parents[j])
         a, b = bind[p], bind[j]
         length = float(np.linalg.norm(b - a))
-        if length < MIN_BONE_M:
+        if length < MIN_BONE_M or not rigid[j]:
             continue
         u = (b - a) / length
         e1 = np.cross(u, (1.0, 0.0, 0.0) if abs(u[0]) < 0.9 else (0.0, 1.0, 0.0))

@@ -152,9 +152,11 @@ def world_matrices(doc: dict, blob: bytes, t: float) -> dict[int, np.ndarray]:
 
 
 def gltf_positions(path: Path, rate_hz: float, frames: int) -> tuple[list[str], np.ndarray]:
-    """(joint names, (F, J, 3) world positions) at frame times k / rate_hz, the skin's joints."""
+    """(joint names, (F, J, 3) world positions) at frame times k / rate_hz of the nodes
+    that hold no mesh (the skin's joints, where there is a mesh)."""
     doc, blob = parse(path)
-    joints = doc["skins"][0]["joints"]
+    joints = [k for k, n in enumerate(doc["nodes"]) if "mesh" not in n]
+    assert "skins" not in doc or doc["skins"][0]["joints"] == joints
     out = np.empty((frames, len(joints), 3))
     for f in range(frames):
         world = world_matrices(doc, blob, f / rate_hz)
@@ -223,13 +225,17 @@ def test_a_wrong_rate_or_joint_would_be_caught(tmp_path, clip):
 
 
 def test_the_capsules_follow_their_bones(tmp_path, clip):
+    path = tmp_path / "walk.glb"
+    write_motion(path, clip)
+    check_capsules(path, clip)
+
+
+def check_capsules(path: Path, clip) -> None:
     """Every vertex, skinned (joint world matrix × inverse bind matrix), lies within the
     largest radius of a bone from its joint to one of the joint's children, in every
     frame looked at; and each triangle faces the way its vertices' normals do."""
     from graphsvc.motion.gltf import MAX_RADIUS_M
 
-    path = tmp_path / "walk.glb"
-    write_motion(path, clip)
     doc, blob = parse(path)
     prim = doc["meshes"][0]["primitives"][0]
     pos = accessor(doc, blob, prim["attributes"]["POSITION"])
@@ -269,6 +275,8 @@ def test_joints_whose_translations_change_are_animated(tmp_path, clip):
     doc, _ = parse(path)
     moved = {c["target"]["node"] for c in doc["animations"][0]["channels"] if c["target"]["path"] == "translation"}
     assert moved == set(range(m.skeleton.num_joints))
+    assert "meshes" not in doc and "skins" not in doc  # (no rigid bone: no capsule)
+    assert all(r["errors"] == 0 and r["warnings"] == 0 for r in validate([path]))
 
 
 def test_same_motion_same_bytes_and_the_layout(tmp_path, clip):
@@ -370,6 +378,7 @@ def test_real_bandai_clip(tmp_path, data_dir):
     path = sorted((data_dir / "bandai" / "dataset-2" / "data").glob("*walk*_001.bvh"))[0]
     motion = read_bvh(path).slice(0, 40)
     _check_same_positions(tmp_path, motion, "bandai")
+    check_capsules(tmp_path / "bandai.glb", motion)  # (its hips move under the root: no capsule between them)
     reports = validate(sorted(tmp_path.glob("*.gl*")))
     assert all(r["errors"] == 0 and r["warnings"] == 0 for r in reports), reports
 
