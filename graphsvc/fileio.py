@@ -147,16 +147,16 @@ def write_text_atomic(path, text: str) -> None:
 
 
 def write_texts_atomic(items) -> None:
-    """Write several files, given as (path, text) pairs, so that a crash never leaves a
-    later one without the earlier ones: every file is written and synced beside its
-    target first, then they are renamed into place in the order given (a reader who
+    """Write several files, given as (path, text or bytes) pairs, so that a crash never
+    leaves a later one without the earlier ones: every file is written and synced beside
+    its target first, then they are renamed into place in the order given (a reader who
     finds the last file finds them all, of the same run)."""
     items = [(Path(p), t) for p, t in items]
     with contextlib.ExitStack() as stack:
         # atomic_writer renames on leaving; the stack leaves in reverse: enter the last first
         files = [(stack.enter_context(atomic_writer(p)), t) for p, t in reversed(items)]
         for f, text in files:
-            f.write(text.encode("utf-8"))
+            f.write(text if isinstance(text, bytes) else text.encode("utf-8"))
 
 
 def require_file(path, what: str = "") -> Path:
@@ -250,6 +250,11 @@ def check_outputs(outputs, inputs=()) -> None:
             if same_file(path, other_path):
                 raise InputError(f"{path}: {opt} and {other} name the same file; give each its own")
     for opt, path, suffixes in given:
-        if suffixes is not None and path.suffix.lower() not in suffixes:
-            raise InputError(f"{path}: {opt} writes {' or '.join(suffixes)}, not "
-                             f"{path.suffix or 'a file without a suffix'}")  # fmt: skip
+        suffix = path.suffix.lower()
+        accepted = suffixes and " or ".join(filter(None, (", ".join(suffixes[:-1]), suffixes[-1])))
+        if suffix in (".glb", ".gltf") and (suffixes is None or suffix not in suffixes):  # (motion.output's glTF)
+            writes = "does not write" if suffixes is None else f"writes {accepted}, not"
+            raise InputError(f"{path}: {opt} {writes} glTF ({path.suffix}): only a reconstructed motion is written as "
+                             "glTF (synthesize, batch, the client)")  # fmt: skip
+        if suffixes is not None and suffix not in suffixes:
+            raise InputError(f"{path}: {opt} writes {accepted}, not {path.suffix or 'a file without a suffix'}")

@@ -24,8 +24,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.fileio import check_outputs, write_texts_atomic
 from graphsvc.graph.model import MotionGraph
-from graphsvc.motion.bvh import bvh_document
-from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES, motion_file_bytes
 from graphsvc.motion.proportions import on_performer, performer_skeleton, skeleton_height
 from graphsvc.sensors.calibration import apply_calibration, check_calibration, load_calibration, mounting_angle_deg
 from graphsvc.sensors.devices import DEVICES, apply_device_map, unmapped_note
@@ -111,11 +110,13 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     graph's layout does (device_map: a built-in device or a map file), turn a device's readings into
     the layout's frames (calibration: a `graphsvc calibrate` file; or calibrate_from_start:
     (seconds, pose), calibrated from the recording's own start against the graph,
-    `graph.calibration.calibrate_from_start`), reconstruct, write the BVH
-    (scale: units per metre) and, given report_path, the report JSON — each atomically, the
-    report renamed into place before the BVH (a BVH is never without its report);
-    InputError, before anything is read, when an output would replace an input or the
-    other output or has a suffix other than .bvh (output) and .json (report).
+    `graph.calibration.calibrate_from_start`), reconstruct, write the motion as its
+    suffix says (`motion.output`: .bvh in `scale` units a metre, .glb or .gltf) and, given
+    report_path, the report JSON — each atomically, the report renamed into place before
+    the motion (a motion is never without its report); InputError, before anything is
+    read, when an output would replace an input or the other output or has a suffix
+    other than .bvh, .glb, .gltf (output) and .json (report), and before anything is
+    written when the motion cannot be written in its format.
     The report's 'files' names the output, graph and recording (and how the recording
     was read); a strategy without a node path adds each frame's heaviest `sources`
     (`strategies.sources.compact_sources`). performer: segment lengths
@@ -132,7 +133,7 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     result = reconstruct(graph, rec, options, threads=threads)
     if performer is not None:
         result = put_on_performer(graph, result, performer)
-    bvh = bvh_document(result.motion, scale)
+    data = motion_file_bytes(output, result.motion, scale)
     result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
                               "recording": str(Path(recording_path).resolve())}  # fmt: skip
     read = {k: v for k, v in (("up", up), ("units", units), ("device_map", device_map and _resolved_if_file(device_map)),
@@ -143,10 +144,10 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
         result.report["files"]["read"] = read
     if result.node_path is None and result.provenance is not None:
         result.report["sources"] = compact_sources(result.provenance)
-    # The report lands first: a BVH is never found without its report, even when the
+    # The report lands first: a motion is never found without its report, even when the
     # process is killed between the two (a batch's outputs stay in pairs).
     report = [(report_path, json.dumps(result.report, indent=1, sort_keys=True) + "\n")] if report_path else []
-    write_texts_atomic(report + [(output, bvh)])
+    write_texts_atomic(report + [(output, data)])
     return result
 
 

@@ -59,7 +59,7 @@ def test_synthesize_refuses_outputs_that_would_lose_data(files, capsys, case):
         "--report input": (["synthesize", g, rec, "-o", d / "out.bvh", "--report", rec], "would overwrite the recording"),
         "-o equal to --report": (["synthesize", g, rec, "-o", d / "x.bvh", "--report", d / "x.bvh"], "name the same file"),
         "-o graph": (["synthesize", g, rec, "-o", g], "would overwrite the graph"),
-        "-o x.txt": (["synthesize", g, rec, "-o", d / "x.txt"], "writes .bvh, not .txt"),
+        "-o x.txt": (["synthesize", g, rec, "-o", d / "x.txt"], "writes .bvh, .glb or .gltf, not .txt"),
         "--report x.bvh": (["synthesize", g, rec, "-o", d / "y.bvh", "--report", d / "y.BVH"], "writes .json"),
         "-o empty": (["synthesize", g, rec, "-o", ""], "empty path"),
     }[case]

@@ -255,6 +255,31 @@ def test_cli_synthesize(graph, rec, tmp_path, capsys):
     assert json.loads(report.read_text())["options"]["beam"] == 2.0
 
 
+def test_cli_synthesize_writes_glTF_with_the_bvh_s_motion(graph, rec, tmp_path, capsys):
+    """`-o OUT.glb` / `.gltf`: the same reconstruction as `-o OUT.bvh`, its joints where
+    the BVH's are (within 0.1 mm), the report naming it; a file the validator accepts."""
+    from graphsvc.motion.kinematics import motion_fk
+    from tests.motion.test_gltf import TOLERANCE_M, gltf_positions, validate
+
+    gpath, rpath = tmp_path / "g.graph", tmp_path / "r.rec"
+    save_graph(graph, gpath)
+    save_recording(rec, rpath)
+    args = ["--strategy", "nearest", "--report"]
+    assert main(["synthesize", str(gpath), str(rpath), "-o", str(tmp_path / "o.bvh"), *args, str(tmp_path / "b.json")]) == 0
+    _, want = motion_fk(read_bvh(tmp_path / "o.bvh"))
+    for name in ("o.glb", "o.gltf"):
+        out = tmp_path / name
+        assert main(["synthesize", str(gpath), str(rpath), "-o", str(out), *args, str(tmp_path / "r.json")]) == 0
+        assert f"wrote {out}" in capsys.readouterr().out
+        assert json.loads((tmp_path / "r.json").read_text())["files"]["output"] == str(out.resolve())
+        _, got = gltf_positions(out, graph.rate_hz, want.shape[0])
+        assert np.abs(got - want).max() < TOLERANCE_M
+    # `graphsvc report` reads the glTF output back (motion.gltf_read) as it reads a BVH.
+    assert main(["report", str(tmp_path / "r.json"), "-o", str(tmp_path / "page.html")]) == 0
+    assert (tmp_path / "page.html").stat().st_size > 0
+    assert all(r["errors"] == 0 for r in validate([tmp_path / "o.glb", tmp_path / "o.gltf"]))
+
+
 def test_reconstruct_warms_up_the_search_once_per_graph_and_thread_mode(graph, rec):
     # The first reconstruction on a graph (in each thread mode) runs the search's
     # warm-up — numba compiles or loads the kernels — and times it apart from the

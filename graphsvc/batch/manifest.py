@@ -3,9 +3,10 @@ list of objects, or {"items": [...]}).
 
 Columns: `recording`, `graph` (a name given with `--graph NAME=PATH`, or a path),
 `strategy` and `output` (a name, no extension) are required; `weights`, `constraints`,
-`calibration` and `options` (a JSON object of `synthesize` flags without their
-dashes, e.g. {"beam": 10, "olng-k": 64, "device-map": "xsens", "height": 1.82}) are
-optional. Relative paths are taken from the manifest's folder.
+`calibration`, `format` (what the output is written as: bvh, the default, glb or gltf)
+and `options` (a JSON object of `synthesize` flags without their dashes, e.g.
+{"beam": 10, "olng-k": 64, "device-map": "xsens", "height": 1.82}) are optional.
+Relative paths are taken from the manifest's folder.
 
 What does not parse — a row, a column, a duplicate output — fails the whole manifest
 (FormatError naming the line) before anything runs. What parses but cannot run — a
@@ -29,18 +30,20 @@ from graphsvc.fileio import file_sha256, read_input_text, require_file
 from graphsvc.flags import (add_performer_flags, add_synthesize_flags, calibration_choice, options_from_flags,
                             os_message)  # fmt: skip
 from graphsvc.graph.file import graph_file_meta
+from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
 from graphsvc.motion.proportions import performer_segments
 from graphsvc.store import file_checksum
 from graphsvc.strategies import check_options
 
 REQUIRED = ("recording", "graph", "strategy", "output")
-OPTIONAL = ("weights", "constraints", "calibration", "options")
+OPTIONAL = ("weights", "constraints", "calibration", "format", "options")
 COLUMNS = REQUIRED + OPTIONAL
 # Flags an item's options may not give: they are columns, or the batch decides them.
-RESERVED_FLAGS = {"strategy", "weights", "constraints", "calibration", "report", "output", "o", "help", "h"}
+RESERVED_FLAGS = {"strategy", "weights", "constraints", "calibration", "format", "report", "output", "o", "help", "h"}
 # Option values that name a file: taken from the manifest's folder when one is there.
 PATH_FLAGS = ("device-map", "markers", "performer", "performer-mapping")
 OUTPUT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@=-]*$")
+FORMATS = tuple(s[1:] for s in MOTION_OUTPUT_SUFFIXES)  # an item's output: NAME.bvh (the default), .glb, .gltf
 
 
 @dataclass(frozen=True)
@@ -55,6 +58,7 @@ class Item:
     weights: str | None = None
     constraints: str | None = None
     calibration: str | None = None
+    format: str | None = None  # None: bvh
     options: dict = field(default_factory=dict)
 
 
@@ -138,9 +142,13 @@ def _item(path: Path, line: int, row: dict) -> Item:
         if c in REQUIRED and not v:
             raise FormatError(path, f"no {c} (required: {', '.join(REQUIRED)})", line)
         values[c] = v or None
-    if not OUTPUT_NAME.match(values["output"]) or values["output"].lower().endswith((".bvh", ".json")):
+    if not OUTPUT_NAME.match(values["output"]) or values["output"].lower().endswith((*MOTION_OUTPUT_SUFFIXES, ".json")):
         raise FormatError(path, f"output {values['output']!r} must be a plain name (letters, digits, . _ - +), no "
-                                "folder and no extension", line)  # fmt: skip
+                                "folder and no extension (the format column chooses .bvh, .glb or .gltf)", line)  # fmt: skip
+    if values["format"] is not None:
+        values["format"] = values["format"].lower().lstrip(".")
+        if values["format"] not in FORMATS:
+            raise FormatError(path, f"format {values['format']!r} is not one of {', '.join(FORMATS)}", line)
     options = values.pop("options") or {}
     if isinstance(options, str):
         try:
@@ -187,12 +195,13 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
                                              else folder / item.constraints)) if item.constraints else None,
                  "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
                  if item.calibration else None,
-                 **({"performer": file_sha256(args.performer)} if args.performer is not None else {})}  # fmt: skip
+                 **({"performer": file_sha256(args.performer)} if args.performer is not None else {}),
+                 **({"format": item.format} if item.format not in (None, "bvh") else {})}  # fmt: skip
     except (GraphsvcError, OSError) as exc:
         reason = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
     task = {"output": item.output, "out_dir": str(out_dir), "graph": str(graph_path), "graph_checksum": checksum,
-            "recording": str(recording), "argv": argv}  # fmt: skip
+            "recording": str(recording), "argv": argv, "format": item.format or "bvh"}  # fmt: skip
     return Plan(item, task, _digest(parts))
 
 

@@ -25,6 +25,7 @@ from graphsvc.batch.manifest import plan_item, read_manifest
 from graphsvc.batch.work import run_item
 from graphsvc.errors import InputError
 from graphsvc.fileio import file_sha256, require_file, write_text_atomic
+from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
 
 CONNECT_TIMEOUT_S = 10.0
 # The workers' numeric libraries single-threaded: the workers are the parallelism.
@@ -234,7 +235,7 @@ def _reason(exc: BaseException) -> str:
 def _remove_temporaries(out: Path, outputs) -> None:
     """Temporary files a killed worker left beside its outputs (fileio.atomic_writer's)."""
     for name in outputs:
-        for suffix in (".bvh", ".json"):
+        for suffix in (*MOTION_OUTPUT_SUFFIXES, ".json"):
             for tmp in out.glob(f".{name}{suffix}.*.tmp"):
                 with contextlib.suppress(OSError):
                     tmp.unlink()

@@ -64,17 +64,18 @@ def _seen(motion, mapping) -> dict:
 
 def run_item(task: dict) -> dict:
     """Reconstruct one planned item (`manifest.plan_item`'s task) into
-    out_dir/OUTPUT.bvh and OUTPUT.json. Returns its figures, or {"error": reason} for
-    a user error."""
+    out_dir/OUTPUT.bvh (or .glb, .gltf: the task's format) and OUTPUT.json. Returns its
+    figures, or {"error": reason} for a user error."""
     t0 = time.perf_counter()
     out_dir = Path(task["out_dir"])
-    bvh, report_path = out_dir / f"{task['output']}.bvh", out_dir / f"{task['output']}.json"
+    output = out_dir / f"{task['output']}.{task.get('format', 'bvh')}"
+    report_path = out_dir / f"{task['output']}.json"
     try:
         options, args = parse_item_options(task["argv"])
         graph = worker_graph(task["graph"], task["graph_checksum"])
         warm_s = warm(graph, (task["graph"], task["graph_checksum"]), options.strategy)
         performer = performer_from_flags(args, graph.skeleton, graph.params.get("mapping"))
-        result = synthesize_files(graph, task["graph"], task["recording"], bvh, options, report_path=report_path,
+        result = synthesize_files(graph, task["graph"], task["recording"], output, options, report_path=report_path,
                                   scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
                                   calibration=args.calibration, threads=False,
                                   calibrate_from_start=None if args.calibrate_from_start is None
@@ -90,8 +91,8 @@ def run_item(task: dict) -> dict:
         "samples_per_s": r.get("samples_per_s"),
         "cost": r.get("cost"),
         "terms": r.get("terms", {}),
-        "output": str(bvh),
-        "checksum": file_sha256(bvh),
+        "output": str(output),
+        "checksum": file_sha256(output),
         # what a viewer sees of the output (no truth here: `graphsvc evaluate` compares)
         **_seen(result.motion, graph.params.get("mapping")),
         "report": str(report_path),

@@ -19,8 +19,8 @@ from graphsvc.flags import (PATH, add_calibrate_from_start_flags, add_calibratio
 
 
 def _check_output(path: Path, inputs=()) -> None:
-    """A BVH output: its folder there, .bvh, none of the inputs (`fileio.check_outputs`)."""
-    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+    """A motion output: its folder there, .bvh, .glb or .gltf, none of the inputs (`fileio.check_outputs`)."""
+    from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
 
     check_outputs([("-o", path, MOTION_OUTPUT_SUFFIXES)], inputs)
 
@@ -80,8 +80,8 @@ def _cmd_client_graphs(args) -> int:
 
 
 def _cmd_client_synthesize(args) -> int:
-    from graphsvc.fileio import atomic_writer, write_text_atomic
-    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+    from graphsvc.fileio import write_texts_atomic
+    from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES, motion_file_bytes, output_format
     from graphsvc.service.client import resolve_graph, synthesize
     from graphsvc.service.convert import skeleton_from_proto
 
@@ -96,10 +96,10 @@ def _cmd_client_synthesize(args) -> int:
         result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
                             skeleton=skeleton_from_proto(info.skeleton),
                             calibrate_from_start=None if start_s is None else (start_s, pose), performer=performer)  # fmt: skip
-    with atomic_writer(out) as f:
-        f.write(result.bvh)
-    if args.report:
-        write_text_atomic(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")
+    # The server's BVH as it sent it (centimetres); glTF from the returned motion.
+    data = result.bvh if output_format(out) == "bvh" else motion_file_bytes(out, result.motion)
+    report = [(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")] if args.report else []
+    write_texts_atomic(report + [(out, data)])
     r = result.report
     timings = r.get("timings_s", {})
     print(f"wrote {out}: {result.motion.num_frames} frames at {info.rate_hz:g} Hz from {rec.num_samples} samples, "
@@ -169,7 +169,7 @@ def _cmd_client_batch(args) -> int:
 
 
 def _cmd_client_stream(args) -> int:
-    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.motion.output import write_motion
     from graphsvc.service.client import latency_summary, resolve_graph, stream_recording
 
     out = Path(args.output) if args.output else None
@@ -193,7 +193,7 @@ def _cmd_client_stream(args) -> int:
     print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
           f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms")  # fmt: skip
     if out is not None:
-        write_bvh(out, result.motion(), scale=100.0)
+        write_motion(out, result.motion(), scale=100.0)
         print(f"wrote {out}")
     return 0
 
@@ -201,7 +201,7 @@ def _cmd_client_stream(args) -> int:
 def _cmd_sensor_bridge(args) -> int:
     import serial
 
-    from graphsvc.motion.bvh import write_bvh
+    from graphsvc.motion.output import write_motion
     from graphsvc.service.bridge import run_bridge
     from graphsvc.service.client import resolve_graph
 
@@ -255,7 +255,7 @@ def _cmd_sensor_bridge(args) -> int:
     if out is not None:
         if not result.stream.frames:
             raise GraphsvcError(f"no frames came back; {out} not written")
-        write_bvh(out, result.stream.motion(), scale=100.0)
+        write_motion(out, result.stream.motion(), scale=100.0)
         print_flushed(f"wrote {out}: {len(result.stream.frames)} frames")
     return 0
 
@@ -312,7 +312,8 @@ def add_client(sub) -> None:
         "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
         "BVH; the recording's own constraint sets are sent unless --constraints replaces them."))  # fmt: skip
     c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec, device CSV or Xsens MVNX)")
-    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH, help="BVH file to write (required; cm)")
+    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
+                   help="the motion to write: .bvh (cm), .glb or .gltf (required)")
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_input_file_flags(c)
     add_calibration_flag(c)
@@ -365,7 +366,8 @@ def add_client(sub) -> None:
     c.add_argument("recording", metavar="REC", type=PATH, help="recording to replay (.rec, device CSV or Xsens MVNX)")
     c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X",
                    help="replay X times faster than real time (default 1: real time)")  # fmt: skip
-    c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the streamed motion as BVH, cm (default: none)")
+    c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH,
+                   help="write the streamed motion: .bvh (cm), .glb or .gltf (default: none)")
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_input_file_flags(c)
     add_calibration_flag(c)
@@ -388,7 +390,8 @@ def add_sensor_bridge(sub) -> None:
                    help="stand still in the rest pose for the first S seconds to estimate sensor biases (default 0: "
                         "no bias estimated)")  # fmt: skip
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
-    p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH, help="write the returned motion as BVH, cm (default: none)")
+    p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH,
+                   help="write the returned motion: .bvh (cm), .glb or .gltf (default: none)")
     add_calibration_flag(p)
     add_search_flags(p, latency_help=_live_latency_help())
     p.set_defaults(run=_cmd_sensor_bridge)

@@ -14,7 +14,7 @@ from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_p
 
 def _cmd_synthesize(args) -> int:
     from graphsvc.graph.file import load_graph
-    from graphsvc.motion.library import MOTION_OUTPUT_SUFFIXES
+    from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
     from graphsvc.pipeline import synthesize_files
 
     out = Path(args.output)
@@ -113,12 +113,13 @@ def _seconds(s: float) -> str:
 def add_synthesize(sub) -> None:
     p = command(sub, "synthesize", "reconstruct motion from a recording by searching a graph",
                 "Reconstruct full-body motion from a recording (accelerometers, tracker, orientations, annotations "
-                "or optical markers) with a strategy over a graph, and write it as BVH (and a report).")  # fmt: skip
+                "or optical markers) with a strategy over a graph, and write it as BVH or glTF (and a report).")  # fmt: skip
     p.add_argument("graph", metavar="GRAPH", type=PATH, help="a graph file (`graphsvc build`)")
     p.add_argument("recording", metavar="REC", type=PATH,
                    help="recording: .rec, device CSV, Xsens MVNX, C3D or marker CSV")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
-                   help="the motion to write (.bvh; not an input)")
+                   help="the motion to write: .bvh (--scale units a metre), or .glb / .gltf (a skinned skeleton "
+                        "with its animation, metres); not an input")
     add_synthesize_flags(p)
     add_performer_flags(p)
     p.add_argument("--report", metavar="OUT.json", type=PATH,

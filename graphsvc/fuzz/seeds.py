@@ -126,6 +126,13 @@ def deepmimic_seeds() -> list[bytes]:
     return [json.dumps({"Loop": "wrap", "Frames": frames}, indent=1).encode()]
 
 
+def gltf_seeds() -> list[bytes]:
+    """A binary glTF and a JSON one with its buffer embedded, as graphsvc writes them."""
+    from graphsvc.motion.gltf import gltf_bytes
+
+    return [gltf_bytes(small_motion()), gltf_bytes(small_motion(3, end_site=False), binary=False)]
+
+
 def sensor_recording(samples: int = 8, markers: bool = False, orientations: bool = True):
     """A kelly6 recording: accelerations with a missing reading, orientations, ground
     position, heading, a constraint set and the layout; or (markers) two markers."""

@@ -30,7 +30,6 @@ from graphsvc.motion.deepmimic import clip_label, is_deepmimic, may_be_deepmimic
 from graphsvc.motion.skeleton import Motion, check_finite
 
 MOTION_SUFFIXES = (".bvh", ".amc", ".txt")  # .txt: DeepMimic JSON (collected from folders when it looks like one)
-MOTION_OUTPUT_SUFFIXES = (".bvh",)  # what a reconstruction is written as
 _BANDAI_NAME = re.compile(r"^dataset-\d+_(?P<content>[^_]+)_(?P<style>[^_]+)_\d+$")
 _GLOB_CHARS = re.compile(r"[*?\[]")
 

@@ -2,8 +2,8 @@
 --json` output written with `--keep-motions`, or a batch folder; each becomes the
 page's document ({"title", "clips": [view...], "table"}).
 
-A synthesize report names its output BVH, graph and recording (`files`); the graph
-gives the timeline its clips and kinds (without it, the labels alone). A kept
+A synthesize report names its output (BVH or glTF), graph and recording (`files`); the
+graph gives the timeline its clips and kinds (without it, the labels alone). A kept
 evaluation clip (`evaluate.keep.keep_clip`) is a small JSON beside its BVH files that
 already holds its timeline, per-frame errors and labels, so the page needs no graph.
 """
@@ -19,6 +19,7 @@ from graphsvc.evaluate.metrics import motion_plausibility
 from graphsvc.fileio import read_json_file
 from graphsvc.graph.file import load_graph
 from graphsvc.motion.library import load_motion
+from graphsvc.motion.output import read_motion_output
 from graphsvc.motion.resample import resample
 from graphsvc.pipeline import read_searched_recording
 from graphsvc.report.gather import clip_view
@@ -71,7 +72,7 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None, truth_mapp
     files = report.get("files")
     if not isinstance(files, dict) or "output" not in files:
         raise InputError("the report names no output file (write it with `graphsvc synthesize --report`)")
-    motion = load_motion(_file(files["output"], "output", base))
+    motion = read_motion_output(_file(files["output"], "output", base))
     if graph is None and files.get("graph") and Path(files["graph"]).is_file():
         graph = load_graph(files["graph"], mmap=True, verify=False)
     rec = None

@@ -61,7 +61,7 @@ def write_manifest(path: Path, rows: list[dict]) -> Path:
     if path.suffix == ".json":
         path.write_text(json.dumps(rows))
         return path
-    columns = ["recording", "graph", "strategy", "output", "weights", "constraints", "options"]
+    columns = ["recording", "graph", "strategy", "output", "weights", "constraints", "format", "options"]
     with path.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(columns)

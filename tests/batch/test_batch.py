@@ -49,12 +49,16 @@ SIX = [  # every registered strategy, with the columns and options a manifest ta
      "options": {"heading-from-track": True, "track_pull": 0}},
     {"recording": "perf0.rec", "graph": "small", "strategy": "nearest", "output": "nearest"},
     {"recording": "perf1.rec", "graph": "small", "strategy": "olng", "output": "olng", "options": {"olng-k": 32}},
-    {"recording": "markers.rec", "graph": "small", "strategy": "ssg", "output": "ssg"},
+    {"recording": "markers.rec", "graph": "small", "strategy": "ssg", "output": "ssg", "format": "glb"},
 ]
 
 
+def output_name(row: dict) -> str:
+    return f"{row['output']}.{row.get('format', 'bvh')}"
+
+
 def synthesize_argv(row: dict, graph: Path, folder: Path, out: Path) -> list[str]:
-    argv = ["synthesize", str(graph), str(folder / row["recording"]), "-o", str(out / f"{row['output']}.bvh"),
+    argv = ["synthesize", str(graph), str(folder / row["recording"]), "-o", str(out / output_name(row)),
             "--report", str(out / f"{row['output']}.json"), "--strategy", row["strategy"]]  # fmt: skip
     if row.get("weights"):
         argv += ["--weights", row["weights"]]
@@ -82,9 +86,9 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
     for row in SIX:
         assert main(synthesize_argv(row, graph, tmp_path, ref)) == 0
         name = row["output"]
-        assert (out / f"{name}.bvh").read_bytes() == (ref / f"{name}.bvh").read_bytes(), name
+        assert (out / output_name(row)).read_bytes() == (ref / output_name(row)).read_bytes(), name
         got, want = (json.loads((d / f"{name}.json").read_text()) for d in (out, ref))
-        assert got["files"]["output"] == str((out / f"{name}.bvh").resolve())
+        assert got["files"]["output"] == str((out / output_name(row)).resolve())
         assert {k: v for k, v in got.items() if k not in VOLATILE} == {k: v for k, v in want.items() if k not in VOLATILE}
     capsys.readouterr()
     rows = store_rows(out)
@@ -95,11 +99,12 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
     # The table: per item its seconds, samples/s and per-term costs.
     assert "acc_g2" in printed and "total: 6 items, 6 done" in printed
     # Run again: nothing changed, nothing recomputed.
-    mtimes = {p.name: p.stat().st_mtime_ns for p in out.glob("*.bvh")}
+    mtimes = {p.name: p.stat().st_mtime_ns for p in [*out.glob("*.bvh"), *out.glob("*.glb")]}
+    assert len(mtimes) == 6 and (out / "ssg.glb").is_file()
     assert main(["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler_address,
                  "--graph", f"small={graph}", "--quiet"]) == 0  # fmt: skip
     assert "6 done (6 unchanged, skipped)" in capsys.readouterr().out
-    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.bvh")} == mtimes
+    assert {p.name: p.stat().st_mtime_ns for p in [*out.glob("*.bvh"), *out.glob("*.glb")]} == mtimes
     assert store_rows(out) == rows
     # A changed option is a changed item: only it runs again.
     changed = [dict(r, weights="1,1,1") if r["output"] == "v-weights" else r for r in SIX]

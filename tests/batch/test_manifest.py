@@ -80,6 +80,27 @@ def test_fingerprint_follows_the_recording_and_options(tmp_path):
     assert bad.task is None and "OLNG K must be ≥ 1" in bad.error
 
 
+def test_the_format_column_chooses_the_output_s_file(tmp_path):
+    """`format`: bvh (the default), glb or gltf, in the task and (when not bvh) the
+    fingerprint; another value, or an output name with the suffix, fails the manifest."""
+    graph = tmp_path / "g.graph"
+    _small_graph(graph)
+    (tmp_path / "r.rec").write_bytes(b"a recording")
+    rows = [{"recording": "r.rec", "graph": "g", "strategy": "viterbi", "output": f"o{k}", "format": fmt}
+            for k, fmt in enumerate(("bvh", "GLB", ".gltf", ""))]  # fmt: skip
+    (tmp_path / "m.json").write_text(json.dumps(rows))
+    plans = [plan_item(i, tmp_path, {"g": graph}, tmp_path, "v") for i in read_manifest(tmp_path / "m.json")]
+    assert [p.task["format"] for p in plans] == ["bvh", "glb", "gltf", "bvh"]
+    fingerprints = [p.fingerprint for p in plans]
+    same = plan_item(read_manifest(_one(tmp_path, {}))[0], tmp_path, {"g": graph}, tmp_path, "v").fingerprint
+    assert len(set(fingerprints[:3])) == 3 and same == fingerprints[0] == fingerprints[3]  # (a bvh item's unchanged)
+    for row, needle in (({"format": "fbx"}, "format 'fbx' is not one of bvh, glb, gltf"),
+                        ({"output": "o.glb"}, "no extension")):  # fmt: skip
+        (tmp_path / "m.json").write_text(json.dumps([{**rows[0], "output": "o", **row}]))
+        with pytest.raises(FormatError, match=needle):
+            read_manifest(tmp_path / "m.json")
+
+
 def _small_graph(path: Path) -> None:
     import numpy as np
 

@@ -48,6 +48,15 @@ def test_client_commands(served, rec_file, graph, recording, marker_rec_file, ma
     assert f"wrote {out}: {recording.num_samples} frames" in capsys.readouterr().out
     expected = reconstruct(graph, recording, Options(weights=Weights(0.5, 1, 1)))
     assert out.read_text() == bvh_text(expected.motion, scale=100.0)
+    # glTF: the returned motion as a skinned skeleton, its joints where the BVH's are.
+    from graphsvc.motion.kinematics import motion_fk
+    from tests.motion.test_gltf import TOLERANCE_M, gltf_positions
+
+    glb = tmp_path / "batch.glb"
+    assert main(["client", "synthesize", str(rec_file), "-o", str(glb), *common, "--weights", "0.5,1,1"]) == 0
+    assert f"wrote {glb}" in capsys.readouterr().out
+    _, got = gltf_positions(glb, graph.rate_hz, recording.num_samples)
+    assert abs(got - motion_fk(expected.motion)[1]).max() < TOLERANCE_M
 
     live = tmp_path / "live.bvh"
     assert main(["client", "stream", str(rec_file), "-o", str(live), *common, "--speed", "30", "--latency", "0.3"]) == 0
