@@ -12,28 +12,34 @@ from graphsvc.flags import COUNT, LAYOUT_HELP, PATH, RATE_HZ
 
 
 def _cmd_build(args) -> int:
+    from dataclasses import replace
+
     from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
     from graphsvc.graph.connectivity import connectivity, format_connectivity
     from graphsvc.graph.file import save_graph
     from graphsvc.graph.model import format_summary, summary
     from graphsvc.motion.joints import load_mapping_file
+    from graphsvc.motion.retarget import load_target_skeleton, skeleton_table
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
     check_outputs([("-o", out, None)], [("a knowledge-base file", k) for k in args.kb] +
-                  [("the joint map", file_arg(args.mapping))])  # fmt: skip
+                  [("the joint map", file_arg(args.mapping)), ("the target skeleton", args.skeleton)])  # fmt: skip
     progress = False if args.quiet else None
     augment = tuple(a for a in (args.augment or "").split(",") if a)
     mapping = load_mapping_file(args.mapping) if args.mapping and args.mapping != "guess" else None
+    target = load_target_skeleton(args.skeleton, mapping or args.mapping) if args.skeleton else None
     options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
                            interp=not args.no_interp, bridges=not args.no_bridges, augment=augment, mapping=mapping,
                            jobs=args.jobs, progress=progress)  # fmt: skip
     t0 = time.perf_counter()
-    motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
+    motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress,
+                                  skeleton=target, mapping=mapping or args.mapping)  # fmt: skip
     load_s = time.perf_counter() - t0
+    if mapping is not None and any(m.retargeted_from for m in motions):
+        # (the map given for a source retargeted onto a built-in family is not the graph's)
+        options = replace(options, mapping=skeleton_table(motions[0].skeleton, mapping)[1])
     if args.mapping == "guess" and motions:  # (one topology a knowledge base: its first clip's names)
-        from dataclasses import replace
-
         from graphsvc.motion.joints import guess_mapping
 
         mapping, missing = guess_mapping(motions[0].skeleton)
@@ -48,6 +54,10 @@ def _cmd_build(args) -> int:
     t0 = time.perf_counter()
     print(format_connectivity(connectivity(graph)))
     timings["connectivity_s"] = time.perf_counter() - t0
+    retargeted = sorted({m.retargeted_from for m in motions if m.retargeted_from})
+    if retargeted:
+        n = sum(1 for m in motions if m.retargeted_from)
+        print(f"{n} clips retargeted onto the graph's skeleton from {', '.join(retargeted)}")
     if report.still_clips:
         print(f"{len(report.still_clips)} clips without foot-contact changes get transition candidates every "
               f"{options.still_clip_step_s:g} s")  # fmt: skip
@@ -109,6 +119,9 @@ def add_build(sub) -> None:
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated; default none)")
     p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
                    help="joint map JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
+    p.add_argument("--skeleton", metavar="FILE", type=PATH,
+                   help="a .bvh/.amc whose skeleton every clip is retargeted onto (default: the first source's; "
+                        "clips of other skeletons are retargeted onto it)")  # fmt: skip
     p.add_argument("--jobs", type=COUNT, default=1, metavar="N", help="threads for loading and preparing clips (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)

@@ -30,6 +30,7 @@ from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.library import find_motion_files, load_motion
 from graphsvc.motion.resample import resample
+from graphsvc.motion.retarget import pool_skeletons
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.anatomy import ANATOMICAL
@@ -296,9 +297,7 @@ def build_graph(motions: list[Motion], options: BuildOptions,
         rate_hz=rate,
         skeleton=standard_skeleton([c.motion for c in clips]),
         layout=layout.to_dict(),
-        clips=[{"name": c.motion.name, "source": c.motion.source, "sha256": c.digest, "frames": int(lengths[k]),
-                "first_node": int(start[k]), "labels": list(c.motion.labels) or [c.motion.name]}
-               for k, c in enumerate(clips)],  # fmt: skip
+        clips=[_clip_record(c, int(lengths[k]), int(start[k])) for k, c in enumerate(clips)],
         labels=tuple(labels),
         params={k: v for k, v in _params(options, layout, window).items()},
         clip_offsets=np.stack([c.motion.skeleton.offsets for c in clips]),
@@ -327,6 +326,18 @@ def build_graph(motions: list[Motion], options: BuildOptions,
     graph.edge_up = meta.edge_up_vectors(graph, layout)  # (from the stored poses, as `relayout` computes it)
     report.timings["orientations_s"] = time.perf_counter() - t0
     return graph, report
+
+
+def _clip_record(clip: PreparedClip, frames: int, first_node: int) -> dict:
+    """A clip's entry in the graph (`MotionGraph.clips`): where it came from, its
+    content hash, frames and labels; `retargeted_from`, the skeleton family it was
+    captured on, when it was put on the graph's skeleton from another."""
+    m = clip.motion
+    out = {"name": m.name, "source": m.source, "sha256": clip.digest, "frames": frames, "first_node": first_node,
+           "labels": list(m.labels) or [m.name]}
+    if m.retargeted_from:
+        out["retargeted_from"] = m.retargeted_from
+    return out
 
 
 def _performance(motion: Motion) -> tuple[str, str]:
@@ -596,9 +607,12 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
 
 
 def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
-                        progress: bool | None = None) -> list[Motion]:  # fmt: skip
-    """Load KB files/folders/globs, then add the requested augmented copies
-    (`mirror`: left/right mirror images, `reverse`: time-reversed clips; OLNG paper)."""
+                        progress: bool | None = None, skeleton: Motion | None = None,
+                        mapping=None) -> list[Motion]:  # fmt: skip
+    """Load KB files/folders/globs, put every clip on one skeleton (`retarget.pool_skeletons`:
+    `skeleton`'s, else that of the first file of the first path), then add the requested
+    augmented copies (`mirror`: left/right mirror images, `reverse`: time-reversed clips;
+    OLNG paper). mapping: the joint map of a skeleton no built-in map fits."""
     unknown = sorted(set(augment) - {"mirror", "reverse"})
     if unknown:
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
@@ -608,6 +622,8 @@ def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tupl
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
                             disable=None if progress is None else not progress))  # fmt: skip
+    first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
+    motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first))
     if augment:
         extra = []
         if "mirror" in augment:
