@@ -13,7 +13,9 @@ import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -178,13 +180,32 @@ class _Edges:
         return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
 
 
-def build_graph(motions: list[Motion], options: BuildOptions,
-                frame_labels: dict | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
+def thread_map(jobs: int) -> Callable:
+    """A `ClipMap` over `jobs` threads of this process."""
+
+    def run(fn, items, desc: str = "", progress: bool | None = None) -> list:
+        with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+            return list(tqdm(pool.map(fn, items), total=len(items), desc=desc, unit="clip",
+                             disable=None if progress is None else not progress))  # fmt: skip
+
+    return run
+
+
+# ClipMap: (fn, items, desc, progress) → [fn(item) for item in items], in order, however
+# it runs them: `thread_map` here, Dask tasks on a cluster (`graphsvc build --scheduler`).
+# fn and items are picklable (module-level functions, `functools.partial` of them).
+ClipMap = Callable[..., list]
+
+
+def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict | None = None,
+                clip_map: ClipMap | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
     """Build the motion graph of a knowledge base (already loaded and augmented).
     frame_labels: clip name → (F,) per-frame content labels, for knowledge bases
     whose clips hold more than one action (the procedural one's stop clips walk first);
     a node then carries the label of the frame it comes from (`_node_labels`), else its
-    clip's. Mirrored and reversed copies take their original's, mirrored or reversed."""
+    clip's. Mirrored and reversed copies take their original's, mirrored or reversed.
+    clip_map: where the per-clip stage (resampling, kinematics, contacts, features,
+    readings) runs (`ClipMap`; default `options.jobs` threads): the graph is the same."""
     layout = options.layout or PRESETS["wrists-ankles"]
     rate = float(options.rate_hz)
     if not (np.isfinite(rate) and rate > 0):
@@ -197,9 +218,8 @@ def build_graph(motions: list[Motion], options: BuildOptions,
     bar = lambda it, **kw: tqdm(it, disable=None if options.progress is None else not options.progress, **kw)  # noqa: E731
 
     t0 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=max(1, options.jobs)) as pool:
-        clips = list(bar(pool.map(lambda m: prepare_clip(m, rate, layout, window, options.mapping), motions),
-                         total=len(motions), desc="clips", unit="clip"))  # fmt: skip
+    prepare = partial(prepare_clip, rate_hz=rate, layout=layout, window=window, mapping=options.mapping)
+    clips = (clip_map or thread_map(options.jobs))(prepare, motions, desc="clips", progress=options.progress)
     report.timings["prepare_s"] = time.perf_counter() - t0
 
     C = len(clips)
@@ -607,21 +627,20 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
 
 
 def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
-                        progress: bool | None = None, skeleton: Motion | None = None,
-                        mapping=None) -> list[Motion]:  # fmt: skip
+                        progress: bool | None = None, skeleton: Motion | None = None, mapping=None,
+                        clip_map: ClipMap | None = None) -> list[Motion]:  # fmt: skip
     """Load KB files/folders/globs, put every clip on one skeleton (`retarget.pool_skeletons`:
     `skeleton`'s, else that of the first file of the first path), then add the requested
     augmented copies (`mirror`: left/right mirror images, `reverse`: time-reversed clips;
-    OLNG paper). mapping: the joint map of a skeleton no built-in map fits."""
+    OLNG paper). mapping: the joint map of a skeleton no built-in map fits. clip_map:
+    where the files are read (`ClipMap`; default `jobs` threads)."""
     unknown = sorted(set(augment) - {"mirror", "reverse"})
     if unknown:
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
     files = find_motion_files(list(paths), exclude=list(exclude))
     if not files:
         raise InputError("the knowledge base is empty: no .bvh or .amc files matched")
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
-                            disable=None if progress is None else not progress))  # fmt: skip
+    motions = (clip_map or thread_map(jobs))(load_motion, files, desc="loading", progress=progress)
     first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
     motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first))
     if augment:

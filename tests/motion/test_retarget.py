@@ -175,7 +175,7 @@ def test_build_mixed_sources_and_skeleton_flag(tmp_path, capsys):
     (kb / "a").mkdir(parents=True)
     (kb / "b").mkdir()
     for kind in ("walk", "run"):
-        write_bvh(kb / "a" / f"{kind}_001.bvh", _walk(4.0, kind), scale=100.0)
+        write_bvh(kb / "a" / f"{kind}_001.bvh", _walk(2.5, kind), scale=100.0)
     stand = _other_skeleton()
     held = stand.copy(rotations=np.repeat(stand.rotations, 40, axis=0), translations=np.repeat(stand.translations, 40, axis=0))
     write_bvh(kb / "b" / "idle_001.bvh", held, scale=100.0)
