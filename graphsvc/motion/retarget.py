@@ -282,9 +282,8 @@ def retarget(motion: Motion, source: Side, target: Side) -> Motion:
     _, pos = forward_kinematics(local, _moved(translations, world, tsk, carrier, shift), tsk.parents)
     lift = float(np.mean(target.foot_rest - rest_heights(pos, target.table)))
     translations = _moved(translations, world, tsk, carrier, shift + np.array([0.0, lift, 0.0]))
-    out = Motion(tsk, local, translations, motion.rate_hz, name=motion.name, source=motion.source,
-                 labels=motion.labels, retargeted_from=source.table.family or "given")  # fmt: skip
-    return out
+    return Motion(tsk, local, translations, motion.rate_hz, name=motion.name, source=motion.source,
+                  labels=motion.labels, retargeted_from=source.table.family or "given")  # fmt: skip
 
 
 def _moved(translations: np.ndarray, world: np.ndarray, skeleton: Skeleton, carrier: int,
