@@ -145,11 +145,22 @@ def test_pool_skeletons_puts_a_mixed_knowledge_base_on_the_first_family():
     assert onto[0].skeleton is stand.skeleton and onto[0].retargeted_from == "procedural"
 
 
-def test_a_skeleton_without_canonical_joints_is_refused():
+def test_a_skeleton_without_canonical_joints_is_refused_or_mapped():
     sk = Skeleton(("a", "b"), np.array([-1, 0]), np.array([[0, 0, 0], [0, 1, 0]]), (ALL, ROT), np.zeros(2, bool))
     odd = Motion(sk, quat.identity((2, 2)), np.zeros((2, 2, 3)), 30.0)
     with pytest.raises(SkeletonError):
         pool_skeletons([_walk(1.0), odd])
+    # a family no built-in map fits, through a joint map: the procedural joints renamed
+    walk = _walk(1.0)
+    sk = walk.skeleton
+    renamed = Skeleton(tuple("p_" + n for n in sk.names), sk.parents, sk.offsets, sk.channels, sk.end_site)
+    foreign = walk.copy(skeleton=renamed)
+    with pytest.raises(SkeletonError, match="unknown skeleton"):
+        pool_skeletons([_other_skeleton(), foreign])
+    mapping = {c: "p_" + c for c in joint_map(walk.skeleton)}
+    stand, there = pool_skeletons([_other_skeleton(), foreign], mapping=mapping)
+    assert there.retargeted_from == "given" and np.array_equal(there.skeleton.offsets, stand.skeleton.offsets)
+    assert _worst_angle_deg(_directions(walk), _directions(there)) < 2.0
 
 
 def test_cmu_onto_bandai_and_back_within_2_degrees(data_dir):
