@@ -16,8 +16,10 @@ joint down the target's hierarchy, in world terms:
   twist. The twist is measured against each skeleton's reference pose (`reference_pose`:
   the mean local rotation of each joint over the clips of that skeleton): the source
   joint's world rotation compared with the shortest swing of its reference rotation
-  (under its actual parent) onto the bone's direction, and the same turn applied to
-  the target's shortest swing of its own reference rotation;
+  onto the bone's direction, and the same turn applied to the target's shortest swing
+  of its own reference rotation. Both reference rotations are taken under the joint's
+  nearest canonical ancestor as placed, the joints between at their reference
+  rotations (as the target's are), so the two swings start from corresponding poses;
 - the pelvis and the chest: their canonical child's direction exactly, the twist about
   it from the across-body direction (right → left hip, right → left shoulder), which
   fixes the facing without any reference;
