@@ -9,7 +9,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from graphsvc.errors import InputError, UnknownFormatError
-from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, load_motion
+from graphsvc.motion.library import MOTION_SUFFIXES, find_motion_files, is_motion_file, load_motion
 from graphsvc.sensors.files import RECORDING_SUFFIXES, read_recording
 from graphsvc.sensors.recording import describe_recording
 
@@ -30,7 +30,7 @@ def describe_paths(paths: list[str], progress: bool | None = None, up: str | Non
             rec = read_recording(path, up=up, units=units)
             info = describe_recording(rec)
             recordings.append({"path": str(path), **info})
-        elif path.is_file() and path.suffix.lower() not in MOTION_SUFFIXES:
+        elif path.is_file() and not is_motion_file(path):
             raise UnknownFormatError(
                 f"{path}: unknown format (motion: {', '.join(MOTION_SUFFIXES)}; recordings: {', '.join(RECORDING_SUFFIXES)})"
             )

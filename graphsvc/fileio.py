@@ -15,6 +15,8 @@ from typing import IO
 
 from graphsvc.errors import FormatError, InputError, MissingFileError
 
+StrPath = str | os.PathLike[str]  # a file's path as the functions take it
+
 
 @contextlib.contextmanager
 def atomic_writer(path) -> Iterator[IO[bytes]]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -50,7 +51,7 @@ __all__ = ["Frame", "LiveSession", "Options", "Provenance", "Reconstruction", "S
            "synthesize_files", "warm_up"]  # fmt: skip
 
 def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,
-                threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+                threads: bool = True, should_stop: Callable[[], bool] | None = None) -> Reconstruction:  # fmt: skip
     """The motion a recording's measurements describe, by `options.strategy`. allowed:
     (N,) bool node mask (leave-one-out evaluation) or None; threads: numba threads
     inside the strategy (False where many run side by side); should_stop: callable
@@ -162,7 +163,7 @@ def put_on_performer(graph: MotionGraph, result: Reconstruction, lengths: dict) 
 
 
 def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,
-                            notes=None, calibrate_from_start=None) -> Recording:  # fmt: skip
+                            notes=None, calibrate_from_start: tuple[float, str] | None = None) -> Recording:  # fmt: skip
     """A recording as `synthesize_files` searches it on `graph`: `read_recording_file`
     for the graph's layout and sensors; calibrate_from_start (seconds, pose): its
     mountings calibrated from its own first seconds against `graph` and applied

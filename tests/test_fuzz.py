@@ -23,7 +23,7 @@ CORPUS = Path(__file__).resolve().parent / "fuzz_corpus"
 
 # Executions of each target's mutation run: the whole file in about 30 s on 2 cores.
 # C3D starts a process a file; a graph input is half a megabyte hashed twice.
-EXECUTIONS = {"c3d": 25, "graph": 120, "graph-sealed": 250, "rec": 600, "rec-sealed": 600}
+EXECUTIONS = {"c3d": 25, "graph": 120, "graph-sealed": 250, "rec": 600, "rec-sealed": 600, "deepmimic": 600}
 SUITE = [name for name, t in TARGETS.items() if t.in_process]
 
 

@@ -1,7 +1,7 @@
 """The `graphsvc` command: parse arguments, call the library, print what it did.
 
 One module a group of commands, each adding its parsers (`add_…`) and holding its
-command functions: motion_files (inspect, simulate, mapping), graph (build, info,
+command functions: motion_files (inspect, simulate, mapping, samples), graph (build, info,
 relayout), reconstruction (synthesize, calibrate, demo), batch, evaluation (evaluate,
 report), service (serve), client (client …, sensor-bridge); args: what they share
 beyond graphsvc/flags.py.
@@ -33,7 +33,8 @@ DESCRIPTION = ("graphsvc reconstructs full-body human motion from sparse measure
 # The commands in the order `graphsvc --help` lists them.
 COMMANDS = (motion_files.add_inspect, motion_files.add_simulate, graph.add_build, graph.add_info, graph.add_relayout,
             reconstruction.add_synthesize, reconstruction.add_calibrate, batch.add_batch, evaluation.add_evaluate,
-            evaluation.add_report, motion_files.add_mapping, reconstruction.add_demo, service.add_serve,
+            evaluation.add_report, motion_files.add_mapping, reconstruction.add_demo, motion_files.add_samples,
+            service.add_serve,
             client.add_client, client.add_sensor_bridge)  # fmt: skip
 
 

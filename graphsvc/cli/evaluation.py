@@ -64,7 +64,8 @@ def add_evaluate(sub) -> None:
                 "Evaluate a strategy on a knowledge base: each test clip's sensors are simulated and reconstructed on "
                 "a graph that hides its takes (or its clip, actor or action), and scored against it; or joined "
                 "performances of several clips (--mixed). Metrics: docs/evaluation.md.")  # fmt: skip
-    p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="knowledge-base files, folders or globs (.bvh, .amc)")
+    p.add_argument("kb", nargs="+", metavar="KB", type=PATH,
+                   help="knowledge-base files, folders or globs (.bvh, .amc, DeepMimic .txt)")
     p.add_argument("--test", required=True, metavar="GLOB",
                    help="test the KB files whose name matches, e.g. '*_00[14].bvh' (several: comma-separated)")
     p.add_argument("--layout", metavar="LAYOUT", help=f"sensor layout: {LAYOUT_HELP} (default wrists-ankles, or the graph's with --graph)")
@@ -125,7 +126,8 @@ def add_report(sub) -> None:
                    help="a `synthesize --report` JSON, an `evaluate --json` output with --keep-motions, or a batch folder")
     p.add_argument("-o", "--output", required=True, metavar="OUT.html", type=PATH, help="the page to write (.html)")
     p.add_argument("--truth", metavar="MOTION", type=PATH,
-                   help="the true motion (.bvh, .amc) of a synthesize report, shown beside it (default: none)")
+                   help="the true motion (.bvh, .amc, DeepMimic .txt) of a synthesize report, shown beside it "
+                        "(default: none)")
     p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
                    help="joint map JSON of the --truth skeleton when graphsvc does not know it, or 'guess' (`graphsvc "
                         "mapping`); without one its error charts are left out, with a note (default: a built-in map)")

@@ -137,7 +137,8 @@ def add_build(sub) -> None:
                 "Build the motion graph of a knowledge base of motion clips: transitions at foot contacts, speed "
                 "variations, interpolated nodes, bridges between actions, and each edge's sensor readings for a "
                 "layout.")  # fmt: skip
-    p.add_argument("kb", nargs="+", metavar="KB", type=PATH, help="motion files, folders or globs (.bvh, .amc)")
+    p.add_argument("kb", nargs="+", metavar="KB", type=PATH,
+                   help="motion files, folders or globs (.bvh, .amc, DeepMimic .txt)")
     p.add_argument("-o", "--output", required=True, metavar="GRAPH", type=PATH, help="the graph file to write")
     p.add_argument("--rate", type=RATE_HZ, default=30.0, metavar="HZ", help="graph rate (default 30)")
     p.add_argument("--layout", default="wrists-ankles", metavar="LAYOUT",

@@ -1,4 +1,4 @@
-"""Commands on motion files and recordings: `inspect`, `simulate`, `mapping`."""
+"""Commands on motion files and recordings: `inspect`, `simulate`, `mapping`, `samples`."""
 
 from __future__ import annotations
 
@@ -101,7 +101,8 @@ def add_inspect(sub) -> None:
                 "Describe motion files and folders (searched recursively: per clip frames, rate, joints, duration, "
                 "labels; per-folder and overall totals) or recordings (samples, sensors, channels).")  # fmt: skip
     p.add_argument("paths", nargs="+", metavar="PATH", type=PATH,
-                   help="a motion file (.bvh, .amc), a folder of them, or a recording (.rec, .csv, .mvnx, .c3d)")
+                   help="a motion file (.bvh, .amc, DeepMimic .txt), a folder of them, or a recording "
+                        "(.rec, .csv, .mvnx, .c3d)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     add_reading_flags(p)
     p.set_defaults(run=_cmd_inspect)
@@ -111,7 +112,7 @@ def add_simulate(sub) -> None:
     p = command(sub, "simulate", "simulate sensor readings or optical markers of a clip into a recording",
                 "Simulate the readings a layout's accelerometers (--layout) or a marker set's optical markers "
                 "(--markers) would give for a motion clip, with noise, and write them as a recording.")  # fmt: skip
-    p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc) to simulate")
+    p.add_argument("clip", metavar="CLIP", type=PATH, help="the motion file (.bvh, .amc, DeepMimic .txt) to simulate")
     p.add_argument("--layout", help=f"accelerometers: {LAYOUT_HELP}")
     add_marker_flags(p)
     p.add_argument("--gaps", metavar="START:LEN,...", help="markers: every marker unseen over these frames of the clip")
@@ -137,6 +138,31 @@ def add_mapping(sub) -> None:
     p = command(sub, "mapping", "propose a joint map for a skeleton graphsvc does not know",
                 "Propose a joint map (canonical joint → the skeleton's joint) for a skeleton graphsvc does not know, "
                 "for `--mapping FILE` elsewhere; exit 2 when a required joint is not found.")  # fmt: skip
-    p.add_argument("clip", metavar="CLIP", type=PATH, help="a motion file (.bvh, .amc) with that skeleton")
+    p.add_argument("clip", metavar="CLIP", type=PATH,
+                   help="a motion file (.bvh, .amc, DeepMimic .txt) with that skeleton")
     p.add_argument("-o", "--output", metavar="MAP.json", type=PATH, help="write the map here (default: print it)")
     p.set_defaults(run=_cmd_mapping)
+
+
+def _cmd_samples(args) -> int:
+    from graphsvc.samples import LICENCE_FILE, load_samples, write_samples
+
+    out = Path(args.output)
+    motions = load_samples()
+    write_samples(out, motions)
+    rates = sorted({m.rate_hz for m in motions})
+    print(f"wrote {out}/: {len(motions)} clips as BVH ({sum(m.duration_s for m in motions):.1f} s at "
+          f"{', '.join(f'{r:g}' for r in rates)} Hz, {motions[0].skeleton.num_joints_excluding_end_sites} joints) "
+          f"and {LICENCE_FILE} (pybullet's licence)")
+    print("  " + ", ".join(m.name for m in motions))
+    return 0
+
+
+def add_samples(sub) -> None:
+    p = command(sub, "samples", "write the sample clips that install with pybullet as BVH",
+                "Write the DeepMimic humanoid's motion clips that pybullet installs (walk, run, turns, jump, kick, "
+                "punch, cartwheel, backflip, dances, crawl, roll, get-ups) as BVH, with pybullet's licence; needs "
+                "the optional extra: pip install 'graphsvc[samples]'.")
+    p.add_argument("-o", "--output", default="graphsvc-samples", metavar="DIR", type=PATH,
+                   help="the folder to write (default graphsvc-samples)")
+    p.set_defaults(run=_cmd_samples)

@@ -91,7 +91,15 @@ def _cmd_calibrate(args) -> int:
 def _cmd_demo(args) -> int:
     from graphsvc.demo import format_demo_summary, run_demo
 
-    summary = run_demo(Path(args.output), seed=args.seed, layout_name=args.layout, minutes=args.minutes)
+    from graphsvc.errors import InputError
+
+    if args.kb == "pybullet" and args.minutes is not None:
+        raise InputError("--minutes sets the procedural knowledge base's length; --kb pybullet has its own clips")
+    if args.kb != "pybullet" and args.held_out is not None:
+        raise InputError("--held-out names a pybullet clip: it applies to --kb pybullet")
+    summary = run_demo(Path(args.output), seed=args.seed, layout_name=args.layout,
+                       minutes=3.0 if args.minutes is None else args.minutes, kb_name=args.kb,
+                       **({} if args.held_out is None else {"held_out": args.held_out}))
     print(format_demo_summary(summary))
     return 0
 
@@ -141,15 +149,22 @@ def add_calibrate(sub) -> None:
 
 
 def add_demo(sub) -> None:
-    p = command(sub, "demo", "run the demo on a procedural knowledge base",
-                "Generate a procedural knowledge base and a held-out performance, simulate its sensors, build the "
-                "graph, reconstruct the performance and print the error, speed and path; writes the files, plots "
-                "and report.html into a folder.")  # fmt: skip
+    p = command(sub, "demo", "run the demo on a procedural knowledge base or pybullet's clips",
+                "Generate a procedural knowledge base and a held-out performance (or take pybullet's sample clips but "
+                "one, --kb pybullet), simulate the performance's sensors, build the graph, reconstruct the "
+                "performance and print the error, speed and path; writes the files, plots and report.html into a "
+                "folder.")  # fmt: skip
     p.add_argument("-o", "--output", default="graphsvc-demo", metavar="DIR", type=PATH,
                    help="the folder to write (default graphsvc-demo)")
     p.add_argument("--seed", type=SEED, default=0, help="the knowledge base's and the noise's seed (default 0)")
     p.add_argument("--layout", default="kelly6", metavar="LAYOUT",
                    help=f"sensor layout: {LAYOUT_HELP} (default kelly6)")
-    p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=3.0,
-                   help="knowledge-base length in minutes (default 3, at most 600)")
+    p.add_argument("--minutes", type=ranged(float, 0.0, 600.0, low_open=True), default=None,
+                   help="procedural knowledge-base length in minutes (default 3, at most 600)")
+    p.add_argument("--kb", choices=("procedural", "pybullet"), default="procedural",
+                   help="the knowledge base: generated (procedural, the default) or the DeepMimic clips that install "
+                        "with pybullet (pip install 'graphsvc[samples]'), one held out")
+    p.add_argument("--held-out", metavar="CLIP",
+                   help="with --kb pybullet: the clip to hold out and reconstruct, as `graphsvc samples` names it "
+                        "(default turn_left_1)")
     p.set_defaults(run=_cmd_demo)

@@ -32,16 +32,18 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from graphsvc.errors import InputError
 from graphsvc.evaluate import oracle
 from graphsvc.evaluate.keep import keep_clip, kept_name
 from graphsvc.evaluate.metrics import evaluate_frames, plausibility, summarize
 from graphsvc.evaluate.protocols import activity
+from graphsvc.fileio import StrPath
 from graphsvc.graph.build import content_digest
 from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.holdout import held_out_mask, is_augmented, performance_clips, performance_key  # noqa: F401
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion import quat, signals
-from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
+from graphsvc.motion.joints import CANONICAL, JointMapping, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion
@@ -72,15 +74,15 @@ def match_graph_clips(graph: MotionGraph, motions: list[Motion]) -> list[int | N
     """The graph clip index of each motion (None when the graph lacks it): by content
     hash (`sha256` in graph.clips) and name, else by resolved source path and name —
     the hash survives moving the knowledge base, the path a re-export."""
-    by_hash = {}
-    by_path = {}
+    by_hash: dict[tuple, int] = {}
+    by_path: dict[tuple, int] = {}
     for k, c in enumerate(graph.clips):
         by_hash.setdefault((c.get("sha256"), c["name"]), k)
         by_path.setdefault((_resolved(c.get("source")), c["name"]), k)
-    out = []
+    out: list[int | None] = []
     for m in motions:
-        k = by_hash.get((content_digest(m), m.name))
-        out.append(k if k is not None else by_path.get((_resolved(m.source), m.name)))
+        found = by_hash.get((content_digest(m), m.name))
+        out.append(found if found is not None else by_path.get((_resolved(m.source), m.name)))
     return out
 
 
@@ -122,7 +124,7 @@ class EvalSetup:
     pattern: MarkerPattern = MarkerPattern()
     # The test clips' joint map when their skeleton is not the graph's family (a file, a
     # dict or "guess"; None: the graph's).
-    mapping: object = None
+    mapping: JointMapping = None
     # A folder to keep each clip's reconstruction, truth, input and timeline in, for
     # `graphsvc report` (`report.load.keep_clip`); None: kept nowhere.
     keep_dir: str | None = None
@@ -204,6 +206,8 @@ def calibrated_test_input(graph: MotionGraph, truth: Motion, layout: Layout, set
     from graphsvc.sensors.calibration import apply_calibration, calibration_rotations, check_calibration
     from graphsvc.sensors.device_model import mounting
 
+    if setup.calibrate_from_start is None:
+        raise InputError("a calibrated test input needs the setup's calibrate_from_start seconds")
     seconds = float(setup.calibrate_from_start)
     posed = with_calibration_pose(truth, setup.calibration_pose, CALIBRATION_POSE_S, mapping)
     full = simulate_test_input(posed, layout, setup, float(graph.rate_hz), mapping)
@@ -299,7 +303,7 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     truth = resample(motion, rate)
     layout = layout_from_dict(graph.layout)
     in_graph = clip_index is not None and np.size(clip_index) > 0
-    calibrated = {}
+    calibrated: dict = {}
     if setup.calibrate_from_start:
         hidden = [graph.clips[int(k)]["name"] for k in np.atleast_1d(clip_index)] if in_graph else []
         rec, calibrated = calibrated_test_input(graph, truth, layout, setup, test_mapping, hidden)
@@ -350,7 +354,7 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     if setup.keep_dir:
-        row["kept"] = _keep(graph, setup, motion, truth, rec, result, pred_labels, row["per_frame"],
+        row["kept"] = _keep(graph, Path(setup.keep_dir), motion, truth, rec, result, pred_labels, row["per_frame"],
                             (fix_position, fix_heading), (true_ground[0], true_heading[0], pred_ground, pred_heading))  # fmt: skip
     report = result.report
     row.update({
@@ -385,9 +389,9 @@ def placed_motion(motion: Motion, d: float, g0, shift) -> Motion:
     return motion.copy(rotations=rot, translations=trans)
 
 
-def _keep(graph, setup: EvalSetup, motion, truth, rec, result, pred_labels, per_frame, fixes, starts) -> dict:
-    """Write the clip's files into setup.keep_dir (`report.load.keep_clip`), the
-    reconstruction placed as the metrics placed it."""
+def _keep(graph, folder: Path, motion, truth, rec, result, pred_labels, per_frame, fixes, starts) -> dict:
+    """Write the clip's files into `folder`, setup.keep_dir (`report.load.keep_clip`),
+    the reconstruction placed as the metrics placed it."""
     out = result.motion
     (fix_position, fix_heading), (true_g0, true_h0, pred_ground, pred_heading) = fixes, starts
     if fix_position or fix_heading:  # (the same rigid move as `place_start`)
@@ -403,7 +407,7 @@ def _keep(graph, setup: EvalSetup, motion, truth, rec, result, pred_labels, per_
         timeline = timeline_from_sources([str(c["name"]) for c in graph.clips], pred_labels, p.clip, p.frame, p.weight)
         virtual = source_readings(graph, p.clip, p.frame, p.weight)
     stem = kept_name(motion.name, hashlib.sha256(f"{motion.source}/{motion.name}".encode()).hexdigest()[:8])
-    return keep_clip(Path(setup.keep_dir), stem, out.copy(name=motion.name), truth, rec, timeline, per_frame,
+    return keep_clip(folder, stem, out.copy(name=motion.name), truth, rec, timeline, per_frame,
                      pred_labels, rec.constraints, virtual)  # fmt: skip
 
 
@@ -416,19 +420,24 @@ _worker: dict = {}
 def _init_worker(graph_path: str, setup: EvalSetup, threads: int) -> None:
     # The search kernels are numba-parallel: share the cores among workers rather
     # than letting every worker start a thread per core.
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]
     # The parent wrote (or verified) this file moments ago: skip re-hashing it.
     _worker["graph"] = load_graph(graph_path, mmap=True, verify=False)
     _worker["setup"] = setup
 
 
+def _evaluate_item(graph: MotionGraph, item: tuple, setup: EvalSetup) -> dict:
+    """`evaluate_clip` of one item of `run_leave_one_out`'s tests."""
+    return evaluate_clip(graph, item[0], item[1], setup, item[2] if len(item) > 2 else None)
+
+
 def _evaluate_in_worker(item: tuple) -> dict:
-    row = evaluate_clip(_worker["graph"], *item[:2], _worker["setup"], *item[2:])
+    row = _evaluate_item(_worker["graph"], item, _worker["setup"])
     return {k: v for k, v in row.items() if k not in ("node_path", "pred_labels")}
 
 
 def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, jobs: int = 1,
-                      graph_path=None, progress: bool | None = None) -> list[dict]:  # fmt: skip
+                      graph_path: StrPath | None = None, progress: bool | None = None) -> list[dict]:  # fmt: skip
     """`evaluate_clip` for each (motion, graph clip index) in `tests` — or (motion,
     clip indices, per-frame labels) for a joined performance; rows in the order of
     `tests` whatever `jobs`. jobs > 1: that many worker processes, each
@@ -439,7 +448,7 @@ def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, 
     bar = {"total": len(tests), "desc": "clips", "unit": "clip", "disable": None if progress is None else not progress}
     jobs = max(1, min(int(jobs), len(tests)))
     if jobs == 1:
-        return [evaluate_clip(graph, *item[:2], setup, *item[2:]) for item in tqdm(tests, **bar)]
+        return [_evaluate_item(graph, item, setup) for item in tqdm(tests, **bar)]
     with tempfile.TemporaryDirectory(prefix="graphsvc-eval-") as tmp:
         if graph_path is None:
             graph_path = Path(tmp) / "graph.mgraph"

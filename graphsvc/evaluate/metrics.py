@@ -22,10 +22,11 @@ errors for a JSON document (the report page, an evaluation's kept clips).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from graphsvc.errors import InputError
 from graphsvc.motion import signals
-from graphsvc.motion.joints import CANONICAL, common_joints, joint_map
+from graphsvc.motion.joints import CANONICAL, JointMapping, common_joints, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.proportions import SEGMENTS
 from graphsvc.motion.quat import wrap_angle
@@ -417,8 +418,9 @@ def summarize(results: list[dict]) -> dict:
 # ---------------------------------------------------------------- two motions, and for a JSON document
 
 
-def truth_errors(predicted: Motion, truth: Motion, pred_labels=None, true_labels=None,
-                 pred_mapping=None, true_mapping=None) -> dict:  # fmt: skip
+def truth_errors(predicted: Motion, truth: Motion, pred_labels: ArrayLike | None = None,
+                 true_labels: str | ArrayLike | None = None, pred_mapping: JointMapping = None,
+                 true_mapping: JointMapping = None) -> dict:  # fmt: skip
     """`evaluate_frames` of a reconstruction against its truth (both at one rate; the
     shorter length counts): the scalar metrics and `per_frame` arrays."""
     pt, tt = joint_map(predicted.skeleton, pred_mapping), joint_map(truth.skeleton, true_mapping)

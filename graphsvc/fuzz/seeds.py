@@ -108,6 +108,24 @@ def bvh_seeds() -> list[bytes]:
     return [bvh_text(small_motion()).encode(), bvh_text(small_motion(3, end_site=False), scale=1000.0).encode()]
 
 
+def deepmimic_seeds() -> list[bytes]:
+    """A DeepMimic humanoid file of three frames at uneven durations, every joint
+    turned a little, written as pybullet's files are (JSON, "Loop" first)."""
+    from graphsvc.motion import quat
+    from graphsvc.motion.deepmimic import WIDTH, humanoid_character
+
+    character = humanoid_character()
+    frames = []
+    for k, duration in enumerate((1 / 30, 1 / 60, 0.0)):
+        row = [duration, 0.1 * k, 0.85, 0.05 * k] + quat.about_y(0.2 * k).tolist()
+        for j, kind in enumerate(character.kinds[1:]):
+            if kind == "spherical":
+                row += quat.from_euler(np.array([0.1 * k, 0.02 * j, -0.03 * k]), "ZXY").tolist()
+            row += [-0.3 * k] * (WIDTH[kind] if kind == "revolute" else 0)
+        frames.append(row)
+    return [json.dumps({"Loop": "wrap", "Frames": frames}, indent=1).encode()]
+
+
 def sensor_recording(samples: int = 8, markers: bool = False, orientations: bool = True):
     """A kelly6 recording: accelerations with a missing reading, orientations, ground
     position, heading, a constraint set and the layout; or (markers) two markers."""

@@ -68,6 +68,12 @@ def _bvh(data: bytes) -> None:
     read_bvh(as_file(data, "in.bvh"))
 
 
+def _deepmimic(data: bytes) -> None:
+    from graphsvc.motion.deepmimic import read_deepmimic
+
+    read_deepmimic(as_file(data, "in.txt"))
+
+
 def _asf(data: bytes) -> None:
     from graphsvc.motion.asfamc import read_asf_amc
 
@@ -294,6 +300,7 @@ def _proto_mutator(message_name: str) -> Callable:
 
 TARGETS: dict[str, Target] = {t.name: t for t in (
     Target("bvh", _bvh, seeds.bvh_seeds, doc="motion.bvh.read_bvh"),
+    Target("deepmimic", _deepmimic, seeds.deepmimic_seeds, doc="motion.deepmimic.read_deepmimic"),
     Target("asf", _asf, lambda: [seeds.ASF.encode()], doc="motion.asfamc.read_asf_amc, the .asf"),
     Target("amc", _amc, lambda: [seeds.AMC.encode()], doc="motion.asfamc.read_asf_amc, the .amc"),
     Target("c3d", _reader(".c3d"), seeds.c3d_seeds, doc="sensors.optical.read_c3d (ezc3d)"),

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import re
 import time
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
@@ -275,7 +276,7 @@ def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict
     off, dh = meta.local_offsets(ground[i], heading[i], dst_ground, heading[j + 1] + trans.theta)
     edges.add(i, j + 1, EDGE_TRANSITION, normal[j + 1], off, dh)
 
-    node_parts = {"kind": [np.full(N0, NODE_ORIGINAL, np.uint8)], "clip": [clip_of_frame.astype(np.int32)],
+    node_parts: dict[str, list[np.ndarray]] = {"kind": [np.full(N0, NODE_ORIGINAL, np.uint8)], "clip": [clip_of_frame.astype(np.int32)],
                   "frame": [frame_in_clip.astype(np.float32)], "contacts": [contacts],
                   "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
                   "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
@@ -420,7 +421,7 @@ def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_
     never where a frame involved has both feet off the ground (gravity would play
     at half or double strength). Returns the next free node index."""
     F = clip.motion.num_frames
-    grounded = clip.contacts.any(axis=1)
+    grounded = np.asarray(clip.contacts.any(axis=1))
     r = clip.readings
     # Slow-down: o_f → s_f → o_{f+1}, along the half-speed timeline.
     f = np.nonzero(grounded[:-1] & grounded[1:])[0]
@@ -495,8 +496,8 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
         # matrix costs gigabytes on large KBs, computing one costs a millisecond.
         distance = distance_block(A.features, B.features)
         same = interp.same_contact_matrix(A.contacts, B.contacts)
-        for path in interp.aligned_segments(distance, same, options.interp_threshold_m, rate, options.interp_min_s):
-            path = interp.trim_to_reachable(path, (first_reached[a], last_grounded[a]),
+        for aligned in interp.aligned_segments(distance, same, options.interp_threshold_m, rate, options.interp_min_s):
+            path = interp.trim_to_reachable(aligned, (first_reached[a], last_grounded[a]),
                                             (first_reached[b], last_grounded[b]), rate, options.interp_min_s)  # fmt: skip
             if path is None:
                 continue
@@ -626,7 +627,7 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
     return rot, trans, ground, heading, contacts, coords_a, readings, theta, np.asarray(shift, dtype=np.float64)
 
 
-def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
+def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
                         progress: bool | None = None, skeleton: Motion | None = None, mapping=None,
                         clip_map: ClipMap | None = None) -> list[Motion]:  # fmt: skip
     """Load KB files/folders/globs, put every clip on one skeleton (`retarget.pool_skeletons`:
@@ -639,7 +640,7 @@ def load_knowledge_base(paths: list[str], exclude: list[str] = (), augment: tupl
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
     files = find_motion_files(list(paths), exclude=list(exclude))
     if not files:
-        raise InputError("the knowledge base is empty: no .bvh or .amc files matched")
+        raise InputError("the knowledge base is empty: no .bvh, .amc or DeepMimic .txt files matched")
     motions = (clip_map or thread_map(jobs))(load_motion, files, desc="loading", progress=progress)
     first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
     motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first))

@@ -6,10 +6,12 @@ on load so a large graph is not copied."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from graphsvc.errors import FormatError
+from graphsvc.fileio import StrPath
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Skeleton
 from graphsvc.sensors.layout import ROOT_SEGMENT
@@ -25,7 +27,7 @@ ARRAYS = ("clip_offsets", "node_kind", "node_clip", "node_frame", "node_contacts
 OPTIONAL = ("edge_up",)  # absent from files written before it (loaded as None)
 
 
-def save_graph(graph: MotionGraph, path) -> None:
+def save_graph(graph: MotionGraph, path: StrPath) -> None:
     """Write atomically; equal graphs give byte-identical files."""
     sk = graph.skeleton
     meta = {
@@ -45,7 +47,7 @@ def save_graph(graph: MotionGraph, path) -> None:
     write_container(path, KIND, meta, arrays, FORMAT_VERSION)
 
 
-def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
+def load_graph(path: StrPath, mmap: bool = True, verify: bool = True) -> MotionGraph:
     """Load a graph file; refuses truncated, corrupted or foreign files (FormatError)."""
     meta, arrays, version = read_container(path, kind=KIND, mmap=mmap, verify=verify)
     if version not in READABLE_VERSIONS:
@@ -58,11 +60,10 @@ def load_graph(path, mmap: bool = True, verify: bool = True) -> MotionGraph:
         s = meta["skeleton"]
         skeleton = Skeleton(tuple(s["names"]), np.array(s["parents"]), np.array(s["offsets"]),
                             tuple(tuple(c) for c in s["channels"]), np.array(s["end_site"]))  # fmt: skip
+        stored: dict[str, Any] = {name: arrays.get(name) for name in (*ARRAYS, *OPTIONAL)}  # (ARRAYS: all there)
         graph = MotionGraph(rate_hz=float(meta["rate_hz"]), skeleton=skeleton, layout=meta["layout"],
                             clips=meta["clips"], labels=tuple(meta["labels"]), params=meta["params"],
-                            segments=meta.get("segments", []), bridges=meta.get("bridges", []),
-                            **{name: arrays[name] for name in ARRAYS},
-                            **{name: arrays.get(name) for name in OPTIONAL})  # fmt: skip
+                            segments=meta.get("segments", []), bridges=meta.get("bridges", []), **stored)  # fmt: skip
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None
     N, E = graph.num_nodes, graph.num_edges

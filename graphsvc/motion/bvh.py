@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import NoReturn
 
 import numba
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.fileio import read_input_bytes, write_text_atomic
+from graphsvc.fileio import StrPath, read_input_bytes, write_text_atomic
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion, Skeleton
 
@@ -292,7 +293,7 @@ def _parse_hierarchy(path, header: str) -> _Joints:
     n = len(toks)
     end_line = header.count("\n") + 1
 
-    def fail(i: int, message: str):
+    def fail(i: int, message: str) -> NoReturn:
         raise FormatError(path, message, line=lines[i] if i < n else end_line)
 
     if n == 0 or toks[0].upper() != "HIERARCHY":
@@ -484,7 +485,7 @@ def guess_scale(size: float) -> float:
     return 1.0
 
 
-def read_bvh(path, scale: float | None = None) -> Motion:
+def read_bvh(path: StrPath, scale: float | None = None) -> Motion:
     """Read a BVH file into a Motion (local quaternions, translations in metres).
 
     scale: metres per file unit (0.01 for centimetres); None guesses it from the
@@ -499,9 +500,9 @@ def read_bvh(path, scale: float | None = None) -> Motion:
             raise FormatError(path, f"not UTF-8 text (byte {exc.start}); expected a BVH file") from None
         _parse_hierarchy(path, header)  # a hierarchy error is the more precise message
         raise FormatError(path, "expected a MOTION section after the hierarchy", line=header.count("\n") + 1)
-    header = data[: m.start()]
-    js = _cached_hierarchy(path, header)
-    motion_line = header.count(b"\n") + 1
+    head = data[: m.start()]
+    js = _cached_hierarchy(path, head)
+    motion_line = head.count(b"\n") + 1
 
     text, line, pos = _next_line(data, m.end() + 1, motion_line + 1)
     fm = _FRAMES.match(text)
@@ -596,7 +597,7 @@ def channel_values(motion: Motion, scale: float = 1.0) -> np.ndarray:
         if not ch:
             continue
         rot_order = "".join(c[0] for c in ch if c.endswith("rotation")).upper()
-        euler = quat.to_euler(motion.rotations[:, j], rot_order, degrees=True) if rot_order else None
+        euler = quat.to_euler(motion.rotations[:, j], rot_order, degrees=True) if rot_order else np.zeros((0, 0))
         r = 0
         for c in ch:
             if c.endswith("position"):
@@ -612,7 +613,7 @@ def channel_values(motion: Motion, scale: float = 1.0) -> np.ndarray:
 def bvh_text(motion: Motion, scale: float = 1.0) -> str:
     """The BVH file text of `motion` (scale: file units per metre)."""
     sk = motion.skeleton
-    children = [[] for _ in range(sk.num_joints)]
+    children: list[list[int]] = [[] for _ in range(sk.num_joints)]
     for j in range(1, sk.num_joints):
         children[sk.parents[j]].append(j)
     out: list[str] = ["HIERARCHY"]
@@ -645,7 +646,7 @@ def bvh_text(motion: Motion, scale: float = 1.0) -> str:
     return "\n".join(out) + "\n"
 
 
-def write_bvh(path, motion: Motion, scale: float = 1.0) -> None:
+def write_bvh(path: StrPath, motion: Motion, scale: float = 1.0) -> None:
     """Write `motion` as BVH, atomically (temp file beside `path`, then rename).
     scale: file units per metre (100 → centimetres). Channels keep the skeleton's
     order; a joint without rotation channels is written unrotated and a joint

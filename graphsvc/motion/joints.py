@@ -2,8 +2,8 @@
 
 Sensors and metrics address joints by canonical name; each skeleton family maps
 those names onto its own joints. Built-in maps cover the CMU ASF skeleton (a joint
-sits at the start of the ASF bone it is named after), the Bandai-Namco BVH skeleton
-and graphsvc's procedural skeleton; any other skeleton needs a JSON mapping file
+sits at the start of the ASF bone it is named after), the Bandai-Namco BVH skeleton,
+the DeepMimic humanoid (no spine) and graphsvc's procedural skeleton; any other skeleton needs a JSON mapping file
 `{"pelvis": "Hips", "l_wrist": "LeftHand", ...}`, or `--mapping guess`, which proposes
 one from the joint names (`guess_mapping`). A mapping may leave out the joints a
 skeleton lacks among spine, chest, neck and the toes (`OPTIONAL`): they map to a
@@ -55,6 +55,15 @@ BUILTIN_MAPS: dict[str, dict[str, str]] = {
         "l_elbow": "lradius", "r_elbow": "rradius", "l_wrist": "lwrist", "r_wrist": "rwrist",
         "l_hip": "lfemur", "r_hip": "rfemur", "l_knee": "ltibia", "r_knee": "rtibia",
         "l_ankle": "lfoot", "r_ankle": "rfoot", "l_toe": "ltoes", "r_toe": "rtoes",
+    },
+    # The DeepMimic humanoid (motion/deepmimic.py): one trunk joint, the chest, so no
+    # spine (the chest stands in); head and toes are end sites graphsvc adds.
+    "deepmimic": {
+        "pelvis": "root", "chest": "chest", "neck": "neck", "head": "head",
+        "l_shoulder": "left_shoulder", "r_shoulder": "right_shoulder",
+        "l_elbow": "left_elbow", "r_elbow": "right_elbow", "l_wrist": "left_wrist", "r_wrist": "right_wrist",
+        "l_hip": "left_hip", "r_hip": "right_hip", "l_knee": "left_knee", "r_knee": "right_knee",
+        "l_ankle": "left_ankle", "r_ankle": "right_ankle", "l_toe": "left_toe", "r_toe": "right_toe",
     },
 }  # fmt: skip
 
@@ -114,7 +123,11 @@ def _complete(skeleton: Skeleton, table: dict[str, str], family: str, allow_miss
     return JointTable({c: out[c] for c in CANONICAL}, absent, family)
 
 
-def joint_map(skeleton: Skeleton, mapping: dict[str, str] | str | Path | None = None) -> JointTable:
+# A joint map as the functions take it: canonical → skeleton joint names, a map file, "guess", or None (built in).
+JointMapping = dict[str, str] | str | Path | None
+
+
+def joint_map(skeleton: Skeleton, mapping: JointMapping = None) -> JointTable:
     """Canonical name → joint index in `skeleton` (a `JointTable`). With no mapping, the
     first built-in map whose joints all exist is used. A mapping (a dict, a file, or
     "guess" for `guess_mapping`'s proposal) is completed from the built-in map that
@@ -129,12 +142,13 @@ def joint_map(skeleton: Skeleton, mapping: dict[str, str] | str | Path | None = 
         mapping = load_mapping_file(mapping)
     if mapping is None:
         for name, table in BUILTIN_MAPS.items():
-            found = _complete(skeleton, table, name, allow_missing=False)
+            # (a built-in map that leaves out an optional joint says its skeleton lacks it)
+            found = _complete(skeleton, table, name, allow_missing=not set(CANONICAL) <= set(table))
             if found is not None:
                 return found
         guess, _ = guess_mapping(skeleton)
         raise SkeletonError(
-            "unknown skeleton (not CMU, Bandai-Namco or procedural): give a joint mapping file (--mapping FILE) or "
+            "unknown skeleton (not CMU, Bandai-Namco, DeepMimic or procedural): give a joint mapping file (--mapping FILE) or "
             f"--mapping guess (`graphsvc mapping CLIP` shows the guess: {_short(guess)}). "
             f"Skeleton joints: {', '.join(skeleton.names[:12])}..."
         )

@@ -1,11 +1,13 @@
-"""Finding and loading motion files of any supported format, with their labels.
+"""Finding and loading motion files of any supported format, with their labels:
+BVH, ASF/AMC and DeepMimic JSON (`.txt`, told from other text files by its content).
 
 Labels: the content label first, then user tags. The content label comes from a
 Bandai-style sidecar `<stem>.json` ({"content": id, ...}) whose id indexes the
 lines of `../cfg/content*.txt` (0-based, e.g. "dataset-1_walk" → "walk"); without
-them it is derived from the file name (`dataset-2_walk_normal_001` → "walk", any
-other name → its stem, e.g. CMU "02_01"). User tags are read from an optional
-sidecar `<stem>.tags`, one per line ('#' starts a comment).
+them it is derived from the file name (`dataset-2_walk_normal_001` → "walk", a
+DeepMimic `humanoid3d_walk.txt` → "walk", any other name → its stem, e.g. CMU
+"02_01"). User tags are read from an optional sidecar `<stem>.tags`, one per line
+('#' starts a comment).
 """
 
 from __future__ import annotations
@@ -14,16 +16,20 @@ import fnmatch
 import functools
 import glob
 import json
+import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from graphsvc.errors import FormatError, InputError, MissingFileError, UnknownFormatError
-from graphsvc.fileio import read_input_text
+from graphsvc.fileio import StrPath, read_input_text
 from graphsvc.motion.asfamc import read_asf_amc
 from graphsvc.motion.bvh import read_bvh
+from graphsvc.motion.deepmimic import clip_label, is_deepmimic, may_be_deepmimic, read_deepmimic
 from graphsvc.motion.skeleton import Motion, check_finite
 
-MOTION_SUFFIXES = (".bvh", ".amc")
+MOTION_SUFFIXES = (".bvh", ".amc", ".txt")  # .txt: DeepMimic JSON (collected from folders when it looks like one)
 MOTION_OUTPUT_SUFFIXES = (".bvh",)  # what a reconstruction is written as
 _BANDAI_NAME = re.compile(r"^dataset-\d+_(?P<content>[^_]+)_(?P<style>[^_]+)_\d+$")
 _GLOB_CHARS = re.compile(r"[*?\[]")
@@ -37,7 +43,11 @@ def _check_suffix(path: Path) -> str:
             "(the .asf beside it is found automatically)"
         )
     if suffix not in MOTION_SUFFIXES:
-        raise UnknownFormatError(f"{path}: unknown motion format {suffix or '(no extension)'!r}; expected .bvh or .amc")
+        raise UnknownFormatError(f"{path}: unknown motion format {suffix or '(no extension)'!r}; expected .bvh, .amc "
+                                 "or a DeepMimic .txt")
+    if suffix == ".txt" and path.is_file() and not may_be_deepmimic(path):
+        raise UnknownFormatError(f"{path}: unknown motion format: a .txt motion file is DeepMimic JSON "
+                                 '({"Frames": [...]}), and this file is not JSON')
     return suffix
 
 
@@ -75,6 +85,8 @@ def content_label(path) -> str:
             return re.sub(r"^dataset-\d+_", "", label)
         if isinstance(content, str) and content:
             return content
+    if path.suffix.lower() == ".txt":
+        return clip_label(path.stem)
     m = _BANDAI_NAME.match(path.stem)
     if m:
         return m.group("content")
@@ -97,12 +109,15 @@ def user_tags(path) -> list[str]:
     return tags
 
 
-def load_motion(path, **options) -> Motion:
-    """Load one .bvh or .amc file (options go to read_bvh / read_asf_amc, e.g.
-    scale=, asf_path=, rate_hz=), with name, source and labels filled in."""
+_READERS = {".bvh": read_bvh, ".amc": read_asf_amc, ".txt": read_deepmimic}
+
+
+def load_motion(path: StrPath, **options: Any) -> Motion:
+    """Load one .bvh, .amc or DeepMimic .txt file (options go to read_bvh /
+    read_asf_amc / read_deepmimic, e.g. scale=, asf_path=, rate_hz=), with name, source
+    and labels filled in."""
     path = Path(path)
-    suffix = _check_suffix(path)
-    motion = read_bvh(path, **options) if suffix == ".bvh" else read_asf_amc(path, **options)
+    motion = _READERS[_check_suffix(path)](path, **options)
     content = content_label(path)
     labels = [content] + [t for t in user_tags(path) if t != content]
     motion.name = path.stem
@@ -117,17 +132,33 @@ def _excluded(path: Path, exclude) -> bool:
     return any(fnmatch.fnmatch(path.name, pat) or fnmatch.fnmatch(text, pat) for pat in exclude)
 
 
-def find_motion_files(paths, exclude=()) -> list[Path]:
+def is_motion_file(path: StrPath) -> bool:
+    """Whether a file named directly is read as motion: .bvh, .amc, or a .txt file
+    that starts with a JSON object (DeepMimic)."""
+    suffix = Path(path).suffix.lower()
+    return suffix in MOTION_SUFFIXES and (suffix != ".txt" or may_be_deepmimic(path))
+
+
+def _collected(f: Path) -> bool:
+    """Whether a folder scan or a pattern collects `f`: a .bvh or .amc file, or a .txt
+    file that looks like a DeepMimic motion file (other .txt files, such as a
+    dataset's label tables, are passed over)."""
+    suffix = f.suffix.lower()
+    return suffix in MOTION_SUFFIXES and f.is_file() and (suffix != ".txt" or is_deepmimic(f))
+
+
+def find_motion_files(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = ()) -> list[Path]:
     """Motion files named by `paths`: files, folders (searched recursively) or glob
-    patterns ('**' recurses). Only .bvh/.amc files are collected from folders and
-    patterns; a file named directly must be one. `exclude`: fnmatch patterns matched
-    against the file name or the whole path. Sorted, without duplicates."""
-    if isinstance(paths, (str, Path)):
+    patterns ('**' recurses). Only .bvh/.amc files and DeepMimic .txt files are
+    collected from folders and patterns; a file named directly must be one. `exclude`:
+    fnmatch patterns matched against the file name or the whole path. Sorted, without
+    duplicates."""
+    if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     exclude = [exclude] if isinstance(exclude, str) else list(exclude)
     found: set[Path] = set()
     for item in paths:
-        text = str(item)
+        text = os.fspath(item) if isinstance(item, os.PathLike) else str(item)
         if not text.strip():
             raise InputError("an empty path is not a file or folder")
         p = Path(text)
@@ -135,23 +166,23 @@ def find_motion_files(paths, exclude=()) -> list[Path]:
             _check_suffix(p)
             found.add(p)
         elif p.is_dir():
-            found.update(f for f in p.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
+            found.update(f for f in p.rglob("*") if _collected(f))
         elif _GLOB_CHARS.search(text):
             hits = [Path(h) for h in glob.glob(text, recursive=True)]
-            files = set()
+            files: set[Path] = set()
             for h in hits:
                 if h.is_dir():
-                    files.update(f for f in h.rglob("*") if f.suffix.lower() in MOTION_SUFFIXES and f.is_file())
-                elif h.suffix.lower() in MOTION_SUFFIXES and h.is_file():
+                    files.update(f for f in h.rglob("*") if _collected(f))
+                elif _collected(h):
                     files.add(h)
             if not files:
-                raise FormatError(text, "no such file: the pattern matches no .bvh or .amc files")
+                raise FormatError(text, "no such file: the pattern matches no .bvh, .amc or DeepMimic .txt files")
             found.update(files)
         else:
             raise MissingFileError(text)
     return sorted((f for f in found if not _excluded(f, exclude)), key=lambda f: f.as_posix())
 
 
-def load_motions(paths, exclude=(), **options) -> list[Motion]:
+def load_motions(paths: StrPath | Iterable[StrPath], exclude: str | Iterable[str] = (), **options: Any) -> list[Motion]:
     """load_motion over find_motion_files(paths, exclude)."""
     return [load_motion(p, **options) for p in find_motion_files(paths, exclude)]

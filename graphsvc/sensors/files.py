@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from graphsvc.errors import InputError
+from graphsvc.fileio import StrPath
 from graphsvc.sensors.devices import read_mvnx
 from graphsvc.sensors.optical import read_c3d, read_marker_csv
 from graphsvc.sensors.recording import UNITS, Recording, import_csv, load_recording
@@ -29,7 +30,7 @@ def is_marker_csv(path) -> bool:
     return False
 
 
-def read_recording(path, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
+def read_recording(path: StrPath, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
     """A recording from a `.rec` file, a device CSV, an Xsens MVNX file, a C3D file or a
     marker CSV (by suffix, and a CSV by its first column: `time` for markers, `t_s` for
     devices). up, units: where the file does not say, for marker files the vertical axis

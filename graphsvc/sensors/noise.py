@@ -19,6 +19,7 @@ Spec strings: a preset name, optionally followed by overrides, or overrides alon
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 
@@ -106,7 +107,7 @@ def parse_noise(spec: str) -> NoiseModel:
         model = PRESETS[parts[0]]
         parts = parts[1:]
     names = {f.name: f.type for f in fields(NoiseModel)}
-    changes = {}
+    changes: dict[str, Any] = {}  # (heading: a mode, the others numbers)
     for part in parts:
         key, _, value = part.partition("=")
         key = key.strip().replace("-", "_")

@@ -79,11 +79,12 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from graphsvc.errors import FormatError, InputError
-from graphsvc.fileio import atomic_writer, read_input_text
+from graphsvc.fileio import StrPath, atomic_writer, read_input_text
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.anatomy import CONVENTIONS, REST_POSE
 from graphsvc.sensors.axes import z_up_to_y_up
@@ -125,7 +126,7 @@ class Recording:
     rate_hz: float
     timestamps_s: np.ndarray
     sensor_names: tuple[str, ...]
-    accelerations: np.ndarray
+    accelerations: np.ndarray | None
     ground_position: np.ndarray | None = None
     heading: np.ndarray | None = None
     constraints: list = field(default_factory=list)
@@ -280,7 +281,7 @@ def validate_constraints(constraints) -> None:
 # ---------------------------------------------------------------- native .rec
 
 
-def save_recording(rec: Recording, path) -> None:
+def save_recording(rec: Recording, path: StrPath) -> None:
     """Validate `rec` and write it atomically as a `.rec` container. Equal
     recordings give byte-identical files."""
     rec.validate()
@@ -307,7 +308,7 @@ def save_recording(rec: Recording, path) -> None:
     write_container(path, KIND, meta, arrays, FORMAT_VERSION)
 
 
-def load_recording(path) -> Recording:
+def load_recording(path: StrPath) -> Recording:
     """Read a `.rec` file. Arrays are read into memory (recordings are small), so
     the file is closed on return. FormatError for anything but an intact, valid
     recording file."""
@@ -410,7 +411,7 @@ class CsvTable:
     comment_lines: dict
     header: list
     header_line: int
-    parsed_header: object
+    parsed_header: Any  # (what `on_header` returned)
     table: np.ndarray
     row_lines: list
 
@@ -606,22 +607,23 @@ def _parse_header(path: Path, cols: list[str], lineno: int):
             raise FormatError(path, f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, <sensor>_qw…_qz, "
                               f"<marker>_px/_py/_pz, {', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})",
                               line=lineno)  # fmt: skip
-    acc_cols, quat_cols = [], []
+    acc_cols: list[int | None] = []
+    quat_cols: list[int | None] = []
     any_acc = any("a" in v for v in sensors.values())
     any_quat = any("q" in v for v in sensors.values())
     for name, kinds in sensors.items():
         if name != name.strip() or '"' in name:
             raise FormatError(path, f"bad sensor name {name!r}", line=lineno)
-        for key, parts, cols, wanted in (("a", _AXES, acc_cols, any_acc), ("q", _QUAT, quat_cols, any_quat)):
+        for key, parts, into, wanted in (("a", _AXES, acc_cols, any_acc), ("q", _QUAT, quat_cols, any_quat)):
             got = kinds.get(key)
             if got is not None:
                 absent = [f"{name}_{key}{a}" for a in parts if a not in got]
                 if absent:
                     raise FormatError(path, f"sensor {name!r} lacks column(s) {', '.join(absent)}", line=lineno)
-                cols += [got[a] for a in parts]
+                into += [got[a] for a in parts]
             elif wanted:
-                cols += [None] * len(parts)
-    marker_cols = []
+                into += [None] * len(parts)
+    marker_cols: list[int] = []
     for name, axes in markers.items():
         absent = [f"{name}_p{a}" for a in _AXES if a not in axes]
         if absent:

@@ -5,13 +5,15 @@ system would have tracked of a marker set, with its gaps and flicker
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.motion import quat, signals
-from graphsvc.motion.joints import joint_map
+from graphsvc.motion.joints import JointMapping, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.motion.skeleton import Motion, check_finite
@@ -19,7 +21,7 @@ from graphsvc.sensors.accelerometer import second_derivative, sensor_poses, to_s
 from graphsvc.sensors.anatomy import ANATOMICAL
 from graphsvc.sensors.device_model import TISSUE_SEGMENTS, impacts, mounting, orientation_output, soft_tissue
 from graphsvc.sensors.layout import Layout, anatomical_placement
-from graphsvc.sensors.markers import keep_markers, load_marker_set, marker_positions, place_markers
+from graphsvc.sensors.markers import MarkerSet, keep_markers, load_marker_set, marker_positions, place_markers
 from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_heading, corrupt_positions
 from graphsvc.sensors.recording import Recording
 
@@ -52,7 +54,7 @@ def simulate_recording(
     noise: NoiseModel,
     seed: int = 0,
     rate_hz: float | None = None,
-    mapping=None,
+    mapping: JointMapping = None,
 ) -> Recording:
     """A Recording of `motion` at `rate_hz` (default: the clip's rate) with the
     layout's accelerometers, ground position and heading, corrupted by `noise`
@@ -187,8 +189,9 @@ def marker_visibility(times_s: np.ndarray, num_markers: int, pattern: MarkerPatt
     return seen
 
 
-def simulate_marker_recording(motion: Motion, marker_set, noise: NoiseModel, seed: int = 0,
-                              rate_hz: float | None = None, mapping=None, keep=None,
+def simulate_marker_recording(motion: Motion, marker_set: str | Path | MarkerSet, noise: NoiseModel, seed: int = 0,
+                              rate_hz: float | None = None, mapping: JointMapping = None,
+                              keep: Iterable[str] | None = None,
                               pattern: MarkerPattern = MarkerPattern()) -> Recording:  # fmt: skip
     """A Recording of `motion`'s labelled optical markers (`sensors.markers`): the set's
     markers (those named in `keep`, or all) placed on the clip's own skeleton, at

@@ -23,13 +23,21 @@ CLI, batch workers and the service's live-worker processes alike (docs/code-layo
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from importlib import import_module
+from typing import TYPE_CHECKING
 
 from graphsvc.errors import InputError, StrategyNotImplementedError
 from graphsvc.strategies import options as _options
 from graphsvc.strategies.base import Strategy
 from graphsvc.strategies.options import Options, SharedOptions, check_common, option_specs
+
+if TYPE_CHECKING:  # (importing this package loads no strategy, nor what a session needs)
+    import numpy as np
+
+    from graphsvc.graph.model import MotionGraph
+    from graphsvc.strategies.live import LiveSession
 
 DEFAULT = "viterbi"
 ENTRY_POINTS = "graphsvc.strategies"
@@ -110,11 +118,14 @@ def check_options(options: Options) -> Options:
     check_common(options)
     for name, own in options.settings:
         get(name).check_own(own)
-    return options if options.own is not None else replace(options, own=strategy.options_class())
+    if options.own is not None:
+        return options
+    return replace(options, settings=(*options.settings, (options.strategy, strategy.options_class())))
 
 
-def open_session(graph, options: Options | None = None, sensor_names=None, allowed=None, threads: bool = False,
-                 keep_motion: bool = True, marker_names=None, orientations: bool = False):  # fmt: skip
+def open_session(graph: MotionGraph, options: Options | None = None, sensor_names: Sequence[str] | None = None,
+                 allowed: np.ndarray | None = None, threads: bool = False, keep_motion: bool = True,
+                 marker_names: Sequence[str] | None = None, orientations: bool = False) -> LiveSession:  # fmt: skip
     """The live session of `options.strategy` on `graph` (its `session_class`, a
     `strategies.live.LiveSession`): samples in by `push`, pose frames out as they become
     final, `flush` at the end. sensor_names: the stream's sensors, in the graph's order

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
@@ -73,7 +74,7 @@ class LiveSession:
             and options.weights.orientation > 0
         self.M = len(self.marker_names)
         self.lag_frames = 0
-        self.t0: float | None = None
+        self.t0 = 0.0  # the first sample's time (set by the first push)
         self.prev: tuple | None = None  # last raw sample (t, acc, position, heading)
         self.next_tick = 0  # index of the next graph-rate sample to produce
         self.samples_in = 0
@@ -136,8 +137,9 @@ class LiveSession:
                     up = graph_cue(self.graph, q)  # (a zero or NaN quaternion gives NaN: missing)
         return float(t_s), acc, position, heading, markers, up
 
-    def push(self, t_s: float, acc=None, position=None, heading=None, markers=None,
-             orientations=None) -> list[Frame]:  # fmt: skip
+    def push(self, t_s: float, acc: ArrayLike | None = None, position: ArrayLike | None = None,
+             heading: float | None = None, markers: ArrayLike | None = None,
+             orientations: ArrayLike | None = None) -> list[Frame]:  # fmt: skip
         """One sample at time t_s (s): acc (S, 3) m/s² (NaN = missing; None for a
         strategy that reads no accelerations), position (2,) m or None, heading rad or
         None, markers (M, 3) m for the session's marker names (NaN = not seen) or None,

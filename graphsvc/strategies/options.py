@@ -95,9 +95,13 @@ def _kind(hint) -> tuple[type, bool]:
     return hint, optional
 
 
-@lru_cache(maxsize=None)
-def option_specs(cls) -> tuple[OptionSpec, ...]:
+def option_specs(cls: typing.Any) -> tuple[OptionSpec, ...]:
     """The declared options of an options dataclass, in field order."""
+    return _declared(cls)
+
+
+@lru_cache(maxsize=None)
+def _declared(cls: type) -> tuple[OptionSpec, ...]:
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
@@ -124,7 +128,7 @@ class OptionError(InputError):
 def on_field(exc: Exception, name: str) -> Exception:
     """`exc` marked as caused by option `name` (`option_field`), for a conversion to say
     which field of a request it came from; its type and message unchanged."""
-    exc.option_field = name
+    exc.option_field = name  # type: ignore[attr-defined]  # (an attribute of our own on any exception)
     return exc
 
 
@@ -240,7 +244,7 @@ class Weights:
     acc: float = 1.0
     position: float = 1.0
     heading: float = 1.0
-    orientation: float = None  # type: ignore[assignment]  (None: ORIENTATION_WEIGHT)
+    orientation: float = None  # type: ignore[assignment]  # (None: ORIENTATION_WEIGHT)
 
     def __post_init__(self):
         if self.orientation is None:
@@ -321,7 +325,7 @@ class NoOptions:
 # always imported before this module): name → ("shared", field), ("strategy", name) or
 # ("option", strategy, field) — a shared option (track_pull_s), a strategy's own options
 # by its name (olng, ssg), a strategy option by its own flag (beam) — or None.
-LEGACY_NAMES = None
+LEGACY_NAMES: typing.Any = None  # (a function once the registry has loaded)
 
 
 @dataclass(frozen=True, init=False)
