@@ -634,7 +634,7 @@ def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augme
     `skeleton`'s, else that of the first file of the first path), then add the requested
     augmented copies (`mirror`: left/right mirror images, `reverse`: time-reversed clips;
     OLNG paper). mapping: the joint map of a skeleton no built-in map fits. clip_map:
-    where the files are read (`ClipMap`; default `jobs` threads)."""
+    where the files are read and clips retargeted (`ClipMap`; default `jobs` threads)."""
     unknown = sorted(set(augment) - {"mirror", "reverse"})
     if unknown:
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
@@ -643,7 +643,8 @@ def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augme
         raise InputError("the knowledge base is empty: no .bvh, .amc or DeepMimic .txt files matched")
     motions = (clip_map or thread_map(jobs))(load_motion, files, desc="loading", progress=progress)
     first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
-    motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first))
+    motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first),
+                             clip_map=clip_map or thread_map(jobs), progress=progress)  # fmt: skip
     if augment:
         extra = []
         if "mirror" in augment:

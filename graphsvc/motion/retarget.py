@@ -51,6 +51,7 @@ canonical joint map and flat arrays; the numpy below is the whole method.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -297,14 +298,16 @@ def _moved(translations: np.ndarray, world: np.ndarray, skeleton: Skeleton, carr
     return out
 
 
-def pool_skeletons(motions: list[Motion], skeleton: Motion | None = None, mapping=None,
-                   first: int = 0) -> list[Motion]:  # fmt: skip
+def pool_skeletons(motions: list[Motion], skeleton: Motion | None = None, mapping=None, first: int = 0,
+                   clip_map=None, progress: bool | None = None) -> list[Motion]:  # fmt: skip
     """Every clip on one skeleton: `skeleton`'s (a motion whose skeleton is the target;
     its frames join its family's clips in the reference pose), else that of the
     family of clip `first`, its bone offsets averaged over the family's clips. Clips
     of the target's family are returned as they are, the others retargeted (`retarget`),
     in the same order. A knowledge base of one family without `skeleton` is returned
-    unchanged. SkeletonError for a skeleton without canonical joints."""
+    unchanged. SkeletonError for a skeleton without canonical joints. clip_map: where
+    the clips are retargeted (`graph.build.ClipMap`: threads, Dask tasks; default here,
+    one after another)."""
     if not motions:
         return motions
     families: dict[tuple, list[Motion]] = {}
@@ -318,21 +321,26 @@ def pool_skeletons(motions: list[Motion], skeleton: Motion | None = None, mappin
     else:
         key = topology_key(motions[first].skeleton)
         refs = families[key]
-        first = refs[0].skeleton
+        base = refs[0].skeleton
         offsets = np.mean([m.skeleton.offsets for m in refs], axis=0)
-        target_sk = Skeleton(first.names, first.parents, offsets, first.channels, first.end_site)
+        target_sk = Skeleton(base.names, base.parents, offsets, base.channels, base.end_site)
     target = make_side(target_sk, refs, mapping)
     sides = {k: make_side(ms[0].skeleton, ms, mapping) for k, ms in families.items() if k != key}
-    out = []
-    for m in motions:
-        k = topology_key(m.skeleton)
-        if k == key:
-            out.append(m)
-        else:
-            base = sides[k]
-            src = Side(m.skeleton, base.table, base.mapping, base.reference, base.foot_rest)
-            out.append(retarget(m, src, target))
+    todo = [i for i, m in enumerate(motions) if topology_key(m.skeleton) != key]
+    run = clip_map or (lambda fn, items, **_: [fn(x) for x in items])
+    done = run(partial(_retarget_from, sides=sides, target=target), [motions[i] for i in todo],
+               desc="retargeting", progress=progress)  # fmt: skip
+    out = list(motions)
+    for i, m in zip(todo, done):
+        out[i] = m
     return out
+
+
+def _retarget_from(motion: Motion, sides: dict, target: Side) -> Motion:
+    """`retarget` of one clip from its family's side (`sides`, by `topology_key`), with
+    the clip's own bone lengths."""
+    base = sides[topology_key(motion.skeleton)]
+    return retarget(motion, Side(motion.skeleton, base.table, base.mapping, base.reference, base.foot_rest), target)
 
 
 def load_target_skeleton(path, mapping=None) -> Motion:
