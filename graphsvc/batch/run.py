@@ -110,6 +110,26 @@ def connect(scheduler: str | None, workers: int | None, timeout_s: float = CONNE
     return Client(cluster, set_as_default=False), cluster
 
 
+def cluster_map(client):
+    """A `graph.build.ClipMap` on a Dask client: each item a task (scattered to the
+    workers first: clips are megabytes, too big to ride in the task graph), results
+    gathered in the items' order; a progress bar as they finish."""
+    from distributed import as_completed
+
+    def run(fn, items, desc: str = "", progress: bool | None = None) -> list:
+        if not items:
+            return []
+        from tqdm import tqdm
+
+        futures = client.map(fn, client.scatter(list(items)), pure=False)
+        with tqdm(total=len(futures), desc=desc, unit="clip", disable=None if progress is None else not progress) as bar:
+            for _ in as_completed(futures, loop=client.loop):
+                bar.update(1)
+        return client.gather(futures)
+
+    return run
+
+
 def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | None = None, workers: int | None = None,
               retries: int = 2, progress: bool | None = None, should_stop=None, client=None,
               timeout_s: float = CONNECT_TIMEOUT_S, on_item=None, base=None) -> dict:  # fmt: skip

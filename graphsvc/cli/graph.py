@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -17,29 +18,27 @@ def _cmd_build(args) -> int:
     from graphsvc.graph.file import save_graph
     from graphsvc.graph.model import format_summary, summary
     from graphsvc.motion.joints import load_mapping_file
+    from graphsvc.motion.retarget import load_target_skeleton
     from graphsvc.sensors.layout import load_layout
 
     out = Path(args.output)
     check_outputs([("-o", out, None)], [("a knowledge-base file", k) for k in args.kb] +
-                  [("the joint map", file_arg(args.mapping))])  # fmt: skip
+                  [("the joint map", file_arg(args.mapping)), ("the target skeleton", args.skeleton)])  # fmt: skip
     progress = False if args.quiet else None
     augment = tuple(a for a in (args.augment or "").split(",") if a)
     mapping = load_mapping_file(args.mapping) if args.mapping and args.mapping != "guess" else None
+    target = load_target_skeleton(args.skeleton, mapping or args.mapping) if args.skeleton else None
     options = BuildOptions(rate_hz=args.rate, layout=load_layout(args.layout), msv=not args.no_msv,
                            interp=not args.no_interp, bridges=not args.no_bridges, augment=augment, mapping=mapping,
                            jobs=args.jobs, progress=progress)  # fmt: skip
-    t0 = time.perf_counter()
-    motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs, progress=progress)
-    load_s = time.perf_counter() - t0
-    if args.mapping == "guess" and motions:  # (one topology a knowledge base: its first clip's names)
-        from dataclasses import replace
-
-        from graphsvc.motion.joints import guess_mapping
-
-        mapping, missing = guess_mapping(motions[0].skeleton)
-        options = replace(options, mapping=mapping)
-        print(f"guessed joint map: {json.dumps(mapping)}" + (f" (missing: {', '.join(missing)})" if missing else ""))
-    graph, report = build_graph(motions, options)
+    with _clip_map(args) as clip_map:
+        t0 = time.perf_counter()
+        motions = load_knowledge_base(args.kb, exclude=args.exclude or [], augment=augment, jobs=args.jobs,
+                                      progress=progress, skeleton=target, mapping=mapping or args.mapping,
+                                      clip_map=clip_map)  # fmt: skip
+        load_s = time.perf_counter() - t0
+        options = _graph_mapping(options, motions, mapping, args.mapping)
+        graph, report = build_graph(motions, options, clip_map=clip_map)
     t0 = time.perf_counter()
     save_graph(graph, out)
     timings = {"load_s": load_s, **report.timings, "write_s": time.perf_counter() - t0}
@@ -48,11 +47,52 @@ def _cmd_build(args) -> int:
     t0 = time.perf_counter()
     print(format_connectivity(connectivity(graph)))
     timings["connectivity_s"] = time.perf_counter() - t0
+    retargeted = sorted({m.retargeted_from for m in motions if m.retargeted_from})
+    if retargeted:
+        n = sum(1 for m in motions if m.retargeted_from)
+        print(f"{n} clips retargeted onto the graph's skeleton from {', '.join(retargeted)}")
     if report.still_clips:
         print(f"{len(report.still_clips)} clips without foot-contact changes get transition candidates every "
               f"{options.still_clip_step_s:g} s")  # fmt: skip
     print("times: " + ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in timings.items()) + f" (total {sum(timings.values()):.2f} s)")
     return 0
+
+
+def _graph_mapping(options, motions, mapping, flag):
+    """The build options with the graph's joint map: a map given for a source retargeted
+    onto a built-in family is not the graph's; `--mapping guess` guesses from the
+    knowledge base's skeleton (one a graph: its first clip's) and prints the guess."""
+    from dataclasses import replace
+
+    from graphsvc.motion.joints import guess_mapping
+    from graphsvc.motion.retarget import skeleton_table
+
+    if mapping is not None and any(m.retargeted_from for m in motions):
+        options = replace(options, mapping=skeleton_table(motions[0].skeleton, mapping)[1])
+    if flag == "guess" and motions:
+        guessed, missing = guess_mapping(motions[0].skeleton)
+        options = replace(options, mapping=guessed)
+        print(f"guessed joint map: {json.dumps(guessed)}" + (f" (missing: {', '.join(missing)})" if missing else ""))
+    return options
+
+
+@contextlib.contextmanager
+def _clip_map(args):
+    """Where the per-clip stages run: None (the build's threads) without --scheduler or
+    --workers, else Dask tasks on that scheduler's cluster or on a local one of N
+    workers, closed on the way out."""
+    if args.scheduler is None and args.workers is None:
+        yield None
+        return
+    from graphsvc.batch.run import cluster_map, connect
+
+    client, cluster = connect(args.scheduler, args.workers, args.timeout)
+    try:
+        yield cluster_map(client)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _cmd_info(args) -> int:
@@ -110,7 +150,17 @@ def add_build(sub) -> None:
     p.add_argument("--augment", metavar="KINDS", help="add copies: mirror, reverse (comma-separated; default none)")
     p.add_argument("--mapping", metavar="FILE|guess", type=PATH,
                    help="joint map JSON for skeletons graphsvc does not know, or 'guess' (`graphsvc mapping`)")
+    p.add_argument("--skeleton", metavar="FILE", type=PATH,
+                   help="a .bvh/.amc whose skeleton every clip is retargeted onto (default: the first source's; "
+                        "clips of other skeletons are retargeted onto it)")  # fmt: skip
     p.add_argument("--jobs", type=COUNT, default=1, metavar="N", help="threads for loading and preparing clips (default 1)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="load and prepare clips as tasks on an existing Dask scheduler, e.g. tcp://host:8786 "
+                            "(the same graph as a local build)")  # fmt: skip
+    where.add_argument("--workers", type=COUNT, metavar="N", help="load and prepare clips on a local Dask cluster of N workers")
+    p.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                   help="wait this long for the --scheduler (default 10)")  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_build)
 

@@ -14,7 +14,9 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
@@ -31,6 +33,7 @@ from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.library import find_motion_files, load_motion
 from graphsvc.motion.resample import resample
+from graphsvc.motion.retarget import pool_skeletons
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.anatomy import ANATOMICAL
@@ -178,13 +181,32 @@ class _Edges:
         return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
 
 
-def build_graph(motions: list[Motion], options: BuildOptions,
-                frame_labels: dict | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
+def thread_map(jobs: int) -> Callable:
+    """A `ClipMap` over `jobs` threads of this process."""
+
+    def run(fn, items, desc: str = "", progress: bool | None = None) -> list:
+        with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+            return list(tqdm(pool.map(fn, items), total=len(items), desc=desc, unit="clip",
+                             disable=None if progress is None else not progress))  # fmt: skip
+
+    return run
+
+
+# ClipMap: (fn, items, desc, progress) → [fn(item) for item in items], in order, however
+# it runs them: `thread_map` here, Dask tasks on a cluster (`graphsvc build --scheduler`).
+# fn and items are picklable (module-level functions, `functools.partial` of them).
+ClipMap = Callable[..., list]
+
+
+def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict | None = None,
+                clip_map: ClipMap | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
     """Build the motion graph of a knowledge base (already loaded and augmented).
     frame_labels: clip name → (F,) per-frame content labels, for knowledge bases
     whose clips hold more than one action (the procedural one's stop clips walk first);
     a node then carries the label of the frame it comes from (`_node_labels`), else its
-    clip's. Mirrored and reversed copies take their original's, mirrored or reversed."""
+    clip's. Mirrored and reversed copies take their original's, mirrored or reversed.
+    clip_map: where the per-clip stage (resampling, kinematics, contacts, features,
+    readings) runs (`ClipMap`; default `options.jobs` threads): the graph is the same."""
     layout = options.layout or PRESETS["wrists-ankles"]
     rate = float(options.rate_hz)
     if not (np.isfinite(rate) and rate > 0):
@@ -197,9 +219,8 @@ def build_graph(motions: list[Motion], options: BuildOptions,
     bar = lambda it, **kw: tqdm(it, disable=None if options.progress is None else not options.progress, **kw)  # noqa: E731
 
     t0 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=max(1, options.jobs)) as pool:
-        clips = list(bar(pool.map(lambda m: prepare_clip(m, rate, layout, window, options.mapping), motions),
-                         total=len(motions), desc="clips", unit="clip"))  # fmt: skip
+    prepare = partial(prepare_clip, rate_hz=rate, layout=layout, window=window, mapping=options.mapping)
+    clips = (clip_map or thread_map(options.jobs))(prepare, motions, desc="clips", progress=options.progress)
     report.timings["prepare_s"] = time.perf_counter() - t0
 
     C = len(clips)
@@ -297,9 +318,7 @@ def build_graph(motions: list[Motion], options: BuildOptions,
         rate_hz=rate,
         skeleton=standard_skeleton([c.motion for c in clips]),
         layout=layout.to_dict(),
-        clips=[{"name": c.motion.name, "source": c.motion.source, "sha256": c.digest, "frames": int(lengths[k]),
-                "first_node": int(start[k]), "labels": list(c.motion.labels) or [c.motion.name]}
-               for k, c in enumerate(clips)],  # fmt: skip
+        clips=[_clip_record(c, int(lengths[k]), int(start[k])) for k, c in enumerate(clips)],
         labels=tuple(labels),
         params={k: v for k, v in _params(options, layout, window).items()},
         clip_offsets=np.stack([c.motion.skeleton.offsets for c in clips]),
@@ -328,6 +347,18 @@ def build_graph(motions: list[Motion], options: BuildOptions,
     graph.edge_up = meta.edge_up_vectors(graph, layout)  # (from the stored poses, as `relayout` computes it)
     report.timings["orientations_s"] = time.perf_counter() - t0
     return graph, report
+
+
+def _clip_record(clip: PreparedClip, frames: int, first_node: int) -> dict:
+    """A clip's entry in the graph (`MotionGraph.clips`): where it came from, its
+    content hash, frames and labels; `retargeted_from`, the skeleton family it was
+    captured on, when it was put on the graph's skeleton from another."""
+    m = clip.motion
+    out = {"name": m.name, "source": m.source, "sha256": clip.digest, "frames": frames, "first_node": first_node,
+           "labels": list(m.labels) or [m.name]}
+    if m.retargeted_from:
+        out["retargeted_from"] = m.retargeted_from
+    return out
 
 
 def _performance(motion: Motion) -> tuple[str, str]:
@@ -597,18 +628,23 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
 
 
 def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
-                        progress: bool | None = None) -> list[Motion]:  # fmt: skip
-    """Load KB files/folders/globs, then add the requested augmented copies
-    (`mirror`: left/right mirror images, `reverse`: time-reversed clips; OLNG paper)."""
+                        progress: bool | None = None, skeleton: Motion | None = None, mapping=None,
+                        clip_map: ClipMap | None = None) -> list[Motion]:  # fmt: skip
+    """Load KB files/folders/globs, put every clip on one skeleton (`retarget.pool_skeletons`:
+    `skeleton`'s, else that of the first file of the first path), then add the requested
+    augmented copies (`mirror`: left/right mirror images, `reverse`: time-reversed clips;
+    OLNG paper). mapping: the joint map of a skeleton no built-in map fits. clip_map:
+    where the files are read and clips retargeted (`ClipMap`; default `jobs` threads)."""
     unknown = sorted(set(augment) - {"mirror", "reverse"})
     if unknown:
         raise InputError(f"unknown augmentation {', '.join(unknown)} (choose from mirror, reverse)")
     files = find_motion_files(list(paths), exclude=list(exclude))
     if not files:
         raise InputError("the knowledge base is empty: no .bvh, .amc or DeepMimic .txt files matched")
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-        motions = list(tqdm(pool.map(load_motion, files), total=len(files), desc="loading", unit="clip",
-                            disable=None if progress is None else not progress))  # fmt: skip
+    motions = (clip_map or thread_map(jobs))(load_motion, files, desc="loading", progress=progress)
+    first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
+    motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first),
+                             clip_map=clip_map or thread_map(jobs), progress=progress)  # fmt: skip
     if augment:
         extra = []
         if "mirror" in augment:

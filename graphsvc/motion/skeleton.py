@@ -80,7 +80,9 @@ class Skeleton:
 class Motion:
     """rotations: (F, J, 4) local quaternions; translations: (F, J, 3) local
     translations in metres; rate_hz: frames per second. name/source/labels describe
-    where the clip came from (labels: content label first, then user tags)."""
+    where the clip came from (labels: content label first, then user tags);
+    retargeted_from: the skeleton family it was captured on when it was put on another
+    skeleton (`retarget`), else empty."""
 
     skeleton: Skeleton
     rotations: np.ndarray
@@ -89,6 +91,7 @@ class Motion:
     name: str = ""
     source: str = ""
     labels: tuple[str, ...] = field(default_factory=tuple)
+    retargeted_from: str = ""
 
     def __post_init__(self):
         J = self.skeleton.num_joints
