@@ -51,9 +51,9 @@ def test_the_model_gives_back_the_poses_it_learned(graph):
     data = prepared_index(get("piecewise"), graph)
     own = PiecewiseOptions(dims=12, clusters="4")
     arrays = learned_model(graph, data, own)
-    m = Model(arrays)
     rows = training_rows(data, None)
     readings = np.asarray(data["readings"], np.float64)
+    m = Model(arrays, readings[rows])
     poses = np.asarray(data["poses"], np.float64)
     truth = (poses - m.mean) @ m.components.T  # (the PCA's own projection: orthonormal components)
     picks = rows[:: 37]
@@ -74,7 +74,7 @@ def test_the_optimised_pose_is_the_minimum_of_xies_objective(graph):
 
     data = prepared_index(get("piecewise"), graph)
     arrays = learned_model(graph, data, PiecewiseOptions(dims=6, clusters="3"))
-    m = Model(arrays, 0.2, 0.8)
+    m = Model(arrays, np.asarray(data["readings"])[training_rows(data, None)], 0.2, 0.8)
     d = m.d
     rng = np.random.default_rng(3)
     c = np.asarray(data["readings"], np.float64)[100] + 0.05 * rng.standard_normal(m.read_mean.shape[1])
@@ -96,10 +96,44 @@ def test_the_optimised_pose_is_the_minimum_of_xies_objective(graph):
         np.testing.assert_allclose(got, want, atol=1e-5)
         assert objective(got, smooth) <= objective(want, smooth) + 1e-9
     posterior = mu[:d] + cov[:d, d:] @ np.linalg.solve(cov[d:, d:], c - mu[d:])
-    np.testing.assert_allclose(Model(arrays, 0.2, 1.0).optimise(k, c, None, None), posterior, atol=1e-8)
+    m1 = Model(arrays, np.asarray(data["readings"])[training_rows(data, None)], 0.2, 1.0)
+    np.testing.assert_allclose(m1.optimise(k, c, None, None), posterior, atol=1e-8)
+    # With its mean given, the prior is centred there: the same objective about it.
+    centre = mu[:d] + 0.1
+    want = minimize(lambda r: objective(r, False) - (r - mu[:d]) @ prior @ (r - mu[:d])
+                    + (r - centre) @ prior @ (r - centre), centre, method="BFGS", options={"gtol": 1e-10}).x  # fmt: skip
+    np.testing.assert_allclose(m.optimise(k, c, None, None, centre), want, atol=1e-5)
 
 
-@pytest.mark.parametrize("method", ["rbf", "optimise"])
+def test_a_sample_takes_the_cluster_of_its_nearest_frame_and_their_weighted_outputs(graph):
+    """assign = nearest: the cluster of the training frame with the nearest readings
+    (brute force here); method rbf: the normalised Gaussian weights of the cluster's
+    LOCAL_NEIGHBOURS frames nearest the readings, σ their median distance, applied to
+    their outputs — written out here from the model's stored rows."""
+    from graphsvc.strategies.piecewise.model import LOCAL_NEIGHBOURS
+
+    data = prepared_index(get("piecewise"), graph)
+    arrays = learned_model(graph, data, PiecewiseOptions(dims=8, clusters="4"))
+    rows = training_rows(data, None)
+    X = np.asarray(data["readings"], np.float64)[rows]
+    m = Model(arrays, X)
+    rng = np.random.default_rng(5)
+    for i in rng.choice(rows.size, 20, replace=False):
+        c = X[i] + 0.1 * rng.standard_normal(X.shape[1])
+        dist = np.linalg.norm(X - c, axis=1)
+        k = m.cluster(c)
+        assert k == arrays["row_labels"][np.argmin(dist)]
+        own = np.flatnonzero(arrays["row_labels"] == k)
+        near = own[np.argsort(dist[own])[:LOCAL_NEIGHBOURS]]
+        w = np.exp(-((dist[near] / np.median(dist[near])) ** 2))
+        want = (w / w.sum()) @ np.asarray(arrays["row_outputs"], np.float64)[near]
+        got, node = m.local(k, c)
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-9)
+        assert node == arrays["row_nodes"][near[0]]
+    assert Model(arrays, X, assign="mixture").tree is None
+
+
+@pytest.mark.parametrize("method", ["rbf", "rbf-fit", "optimise"])
 def test_a_knowledge_base_clip_is_reconstructed(graph, kb, method):
     """Noise-free readings, positions and heading of knowledge-base clips. Not exact:
     40 of the 97 pose dimensions keep what PCA keeps, the RBF fit is regularised, and
@@ -107,7 +141,7 @@ def test_a_knowledge_base_clip_is_reconstructed(graph, kb, method):
     the optimisation weighs the readings against its cluster's Gaussian prior, whose
     linear readings model is coarser than the RBF map (1.3–1.4 cm here). With Xie's 7
     dimensions PCA alone costs this mixed knowledge base about 4 cm."""
-    bound = {"rbf": 2.0, "optimise": 2.5}[method]
+    bound = {"rbf": 2.0, "rbf-fit": 2.0, "optimise": 2.5}[method]
     for clip in (kb[0], kb[6]):
         options = Options(strategy="piecewise", piecewise=PiecewiseOptions(dims=40, method=method))
         row = evaluate_clip(graph, clip, None, EvalSetup(NOISE["none"], True, options))
@@ -125,7 +159,7 @@ def test_lle_reduces_poses_and_gives_them_back_by_their_neighbours_weights(graph
     data = prepared_index(get("piecewise"), graph)
     arrays = learned_model(graph, data, PiecewiseOptions(reduce="lle", dims=7, clusters="4"))
     assert "pca_mean" not in arrays and arrays["lle_embedding"].shape == (arrays["lle_poses"].shape[0], 7)
-    m = Model(arrays)
+    m = Model(arrays, np.asarray(data["readings"])[training_rows(data, None)])
     picks = np.arange(0, arrays["lle_poses"].shape[0], 97)
     back = np.array([m.pose(arrays["lle_embedding"][i]) for i in picks])
     err = np.abs(back - arrays["lle_poses"][picks]).max(axis=1)
@@ -163,7 +197,7 @@ def test_bic_picks_more_clusters_for_two_actions_than_for_one(kb):
     assert counts[1] > counts[0], counts
 
 
-@pytest.mark.parametrize("method", ["rbf", "optimise"])
+@pytest.mark.parametrize("method", ["rbf", "rbf-fit", "optimise"])
 def test_live_equals_batch_frame_for_frame(graph, kb, method):
     rec = _rec(graph, kb[2], "default", seed=4)
     options = Options(strategy="piecewise", piecewise=PiecewiseOptions(method=method), latency_s=0.5)

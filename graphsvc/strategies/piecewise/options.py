@@ -10,32 +10,42 @@ from dataclasses import dataclass
 
 from graphsvc.strategies.options import OptionError, option
 
-METHODS = ("rbf", "optimise")
+METHODS = ("rbf", "rbf-fit", "optimise")
 REDUCTIONS = ("pca", "lle")
+ASSIGNMENTS = ("nearest", "mixture")
 MAX_CLUSTERS = 4096
 
 
 @dataclass(frozen=True)
 class PiecewiseOptions:
-    """method: a pose from the sample's cluster's RBF map (rbf, Xie eq. 5.9) or from the
-    per-frame optimisation of eq. 6.2–6.4 (optimise); reduce: how poses are reduced
+    """method: a pose from the sample's cluster's normalised RBF over its frames nearest
+    the readings (rbf), from the cluster's fitted RBF map of Xie eq. 5.9 (rbf-fit), or
+    from the per-frame optimisation of eq. 6.2–6.4 with its prior centred on the rbf
+    estimate (optimise); reduce: how poses are reduced
     (pca, or lle: landmark LLE); dims: the reduced dimension (None: the fewest PCA
-    components holding 99 % of the pose variance, Xie's criterion); clusters: the
-    GMM's components, a count or "auto" (the fewest-BIC count of a ladder); width: the
+    components holding 99.9 % of the pose variance); clusters: the GMM's components, a
+    count or "auto" (the fewest-BIC count of a ladder); assign: how a sample finds its
+    cluster (nearest: the cluster of the knowledge-base frame whose readings are
+    nearest; mixture: Xie's, the mixture's marginal over the readings); width: the
     RBF kernel width σ in g (None: each cluster's own, from the spacing of its
     readings); w_smooth, w_control: the optimisation's smoothness and control weights
     (ω_s, ω_c: 0.2 and 0.8, Xie's)."""
 
     method: str = option("rbf", choices=METHODS, label="piecewise method",
-                         help="pose from each cluster's RBF map (rbf, the default) or the per-frame optimisation "
+                         help="pose from the cluster's normalised RBF over its frames nearest the readings (rbf, the "
+                              "default), its fitted RBF map of Xie eq. 5.9 (rbf-fit) or the per-frame optimisation "
                               "(optimise)")  # fmt: skip
     reduce: str = option("pca", choices=REDUCTIONS, label="piecewise reduce",
                          help="how poses are reduced before clustering: pca (the default) or lle (landmark LLE)")
     dims: int | None = option(None, low=1, high=256, metavar="D", label="piecewise dims",
-                              help="reduced pose dimension, below the pose's own (default: the fewest holding 99 percent "
-                                   "of the pose variance, Xie's criterion)")  # fmt: skip
+                              help="reduced pose dimension, below the pose's own (default: the fewest holding 99.9 "
+                                   "percent of the pose variance)")  # fmt: skip
     clusters: str = option("auto", label="piecewise clusters", metavar="K|auto", noun="a whole number ≥ 1 or auto",
                            help="GMM clusters: a count, or auto to pick the count by BIC (default auto)")
+    assign: str = option("nearest", choices=ASSIGNMENTS, label="piecewise assign",
+                         help="how a sample finds its cluster: the cluster of the knowledge-base frame with the nearest "
+                              "readings (nearest, the default) or the mixture's marginal over the readings (mixture, "
+                              "Xie's)")  # fmt: skip
     width: float | None = option(None, low=0.0, low_open=True, metavar="SIGMA", label="piecewise width",
                                  noun="a finite width in g",
                                  help="RBF kernel width σ in g (default: each cluster's, from its readings' spacing)")

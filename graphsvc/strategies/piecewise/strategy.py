@@ -62,11 +62,11 @@ class PiecewiseDecoder:
     → (rotations (1, J, 4), translations (1, J, 3), (clip, frame) of the nearest centre
     or None, label, row)."""
 
-    def __init__(self, graph: MotionGraph, data: dict, arrays: dict, options: Options, own: PiecewiseOptions):
+    def __init__(self, graph: MotionGraph, data: dict, arrays: dict, options: Options, own: PiecewiseOptions,
+                 rows: np.ndarray):  # fmt: skip
         self.graph = graph
-        self.model = Model(arrays, own.w_smooth, own.w_control)
-        self.optimising = own.method == "optimise"
-        self.centre_nodes = np.asarray(arrays["centre_nodes"])
+        self.model = Model(arrays, np.asarray(data["readings"])[rows], own.w_smooth, own.w_control, own.assign)
+        self.method = own.method
         self.rate = float(graph.rate_hz)
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
         self.layout = pose_layout(graph.skeleton, graph.params.get("mapping"))
@@ -96,9 +96,9 @@ class PiecewiseDecoder:
         m = self.model
         if complete:
             k = m.cluster(c)
-            y, source = m.rbf(k, c)
-            if self.optimising:
-                y[: m.d] = m.optimise(k, c, self.r1, self.r2)
+            y, source = m.rbf(k, c) if self.method == "rbf-fit" else m.local(k, c)
+            if self.method == "optimise":  # (the prior centred on the cluster's local estimate)
+                y[: m.d] = m.optimise(k, c, self.r1, self.r2, y[: m.d].copy())
         elif self.last is not None:
             k, y, source = -1, self.last.copy(), self.last_source
         else:
@@ -113,7 +113,7 @@ class PiecewiseDecoder:
         for root in np.flatnonzero(self.parents < 0):  # onto the fused track, the whole body at once
             trans[0, root, 0] += self.ground[0] - self.own[0]
             trans[0, root, 2] += self.ground[1] - self.own[1]
-        node = -1 if source < 0 else int(self.centre_nodes[source])
+        node = source
         g = self.graph
         where = None if node < 0 else (int(g.node_clip[node]), float(g.node_frame[node]))
         label = g.labels[int(g.node_label[node])] if node >= 0 else ""
@@ -149,7 +149,8 @@ class PiecewiseStrategy(Strategy):
 
     def decoder(self, graph: MotionGraph, index: dict, options: Options, allowed=None) -> PiecewiseDecoder:
         own = self.own(options)
-        return PiecewiseDecoder(graph, index, learned_model(graph, index, own, allowed), options, own)
+        return PiecewiseDecoder(graph, index, learned_model(graph, index, own, allowed), options, own,
+                                training_rows(index, allowed))  # fmt: skip
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
@@ -186,7 +187,8 @@ class PiecewiseStrategy(Strategy):
         arrays = decoder.model.arrays
         report = {
             "cost": 0.0,
-            "piecewise": {"method": own.method, "reduce": own.reduce, "dims": model.d, "clusters": model.K,
+            "piecewise": {"method": own.method, "reduce": own.reduce, "assign": own.assign, "dims": model.d,
+                          "clusters": model.K,
                           "bic": dict(zip((int(k) for k in arrays["bic_counts"]),
                                           (round(float(v), 1) for v in arrays["bic_values"]))),
                           "centres": int(model.centres.shape[0])},  # fmt: skip
