@@ -4,8 +4,10 @@ against a `graphsvc serve` subprocess on loopback.
 
     .venv/bin/python tools/bench_service.py bandai.graph                 # 8, 16, 32, 64 streams × 20 s
     .venv/bin/python tools/bench_service.py small.graph --levels 1,2 --seconds 2
+    .venv/bin/python tools/bench_service.py G --recordings DIR --beam 10 --levels 8,16,24,32 --stagger 0,20
+                                                                   # at kick-off and staggered
 
-Prints one JSON object per level:
+Prints one JSON object per level (and per --stagger value, each level at each):
     streams        concurrent live streams
     p50_ms, p99_ms latency from sending a sample to receiving the pose it released,
                    i.e. beyond the configured decoder lag (PoseFrame.input_sample_index)
@@ -334,11 +336,15 @@ def main(argv=None) -> int:
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
     parser.add_argument("--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks")
-    parser.add_argument("--stagger", type=float, default=0.0, metavar="S",
-                        help="start the streams one after another over S seconds (default 0: all at once)")
+    parser.add_argument("--stagger", default="0", metavar="S[,S...]",
+                        help="start the streams one after another over S seconds (default 0: all at once, a "
+                             "kick-off); several: every level at each")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="the streams without the refinement (shared setting refine: false)")
     parser.add_argument("--live-workers", type=int, metavar="N", help="the server's --live-workers (default: its own)")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
+    staggers = [float(x) for x in args.stagger.split(",") if x]
     recordings = sorted(str(p) for p in Path(args.recordings).glob("*.rec")) if args.recordings else None
     if args.recordings and not recordings:
         raise SystemExit(f"{args.recordings}: no .rec recordings")
@@ -360,16 +366,20 @@ def main(argv=None) -> int:
         options.latency_s = args.latency
     if args.beam is not None:
         options.beam = args.beam
+    if args.no_refine:
+        options.shared_settings.update({"refine": False})
     options_bytes = options.SerializeToString()
     try:
         # Warm-up: the first stream loads the compiled search kernels.
         run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid,
                   recordings)  # fmt: skip
-        for streams in levels:
-            print(f"level {streams} streams × {args.seconds:g} s ...", file=sys.stderr, flush=True)
-            result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
-                               args.streams_per_process, server_pid, recordings, args.stagger)  # fmt: skip
-            print(json.dumps(dict(result, stagger_s=args.stagger)), flush=True)
+        for stagger in staggers:
+            for streams in levels:
+                print(f"level {streams} streams × {args.seconds:g} s, started over {stagger:g} s ...", file=sys.stderr,
+                      flush=True)  # fmt: skip
+                result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
+                                   args.streams_per_process, server_pid, recordings, stagger)  # fmt: skip
+                print(json.dumps(dict(result, stagger_s=stagger)), flush=True)
     finally:
         if proc is not None:
             proc.send_signal(signal.SIGTERM)

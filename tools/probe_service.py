@@ -3,6 +3,7 @@
 synthesis), the message conversions, and gRPC's own per-message cost.
 
     .venv/bin/python tools/probe_service.py GRAPH_FILE --recordings DIR [--streams 8] [--samples 600]
+                                            [--beam 10] [--live-paths PATHS] [--no-refine]
     .venv/bin/python tools/probe_service.py GRAPH_FILE --only grpc
 
 Prints one JSON object:
@@ -46,7 +47,8 @@ METHOD = "/probe.Echo/Stream"
 FRAME_FLOATS = 27 * 7  # a pose frame's rotations and translations on a 27-joint skeleton
 
 
-def session_costs(graph_path: str, recordings: list[str], streams: int, samples: int, beam: float) -> dict:
+def session_costs(graph_path: str, recordings: list[str], streams: int, samples: int, beam: float,
+                  live_paths: int | None = None, refine: bool = True) -> dict:  # fmt: skip
     import numpy as np
 
     from bench_service import joined_recordings
@@ -69,7 +71,13 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
 
     StreamingSynthesizer.add = timed_add
     graph = load_graphs([f"probe={graph_path}"])["probe"].graph
-    options = convert.options_from_proto(pb.SynthesisOptions(beam=beam), "options")
+    msg = pb.SynthesisOptions(beam=beam)
+    if live_paths is not None:
+        msg.strategy_name = "viterbi"
+        msg.strategy_settings.update({"live_paths": live_paths})
+    if not refine:
+        msg.shared_settings.update({"refine": False})
+    options = convert.options_from_proto(msg, "options")
     names = graph.sensor_names
     sessions = [open_session(graph, options, names, keep_motion=False) for _ in range(streams)]
     inputs = [joined_recordings(recordings, samples, seed) for seed in range(streams)]
@@ -103,7 +111,8 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
                 totals += (t1 - t0, t2 - t1, t3 - t2)
                 counted += 1
     ms = 1e3 * totals / max(1, counted)
-    return {"streams": streams, "samples": counted, "beam": beam, "decode_ms": round(float(ms[0]), 4),
+    return {"streams": streams, "samples": counted, "beam": beam, "live_paths": getattr(options.own, "live_paths", None),
+            "refine": options.shared.refine, "decode_ms": round(float(ms[0]), 4),
             "push_ms": round(float(ms[1]), 4), "synthesis_ms": round(1e3 * spent[0] / max(1, counted), 4),
             "encode_ms": round(float(ms[2]), 4), "warm_samples": warm,
             "start_push_ms": round(float(1e3 * first_pushes.max(axis=1).mean()), 2),
@@ -231,6 +240,9 @@ def main(argv=None) -> int:
     parser.add_argument("--samples", type=int, default=600, help="samples a stream (default 600)")
     parser.add_argument("--messages", type=int, default=2000, help="messages a stream for the gRPC probes (default 2000)")
     parser.add_argument("--beam", type=float, default=10.0, help="beam of the sessions (default 10)")
+    parser.add_argument("--live-paths", type=int, metavar="PATHS",
+                        help="the sessions' --viterbi-live-paths (default: the option's; 0: the beam alone)")
+    parser.add_argument("--no-refine", action="store_true", help="the sessions without the refinement")
     parser.add_argument("--only", choices=("session", "grpc"), help="one part only")
     args = parser.parse_args(argv)
     out = {}
@@ -240,7 +252,8 @@ def main(argv=None) -> int:
         recs = sorted(str(p) for p in Path(args.recordings).glob("*.rec"))
         if not recs:
             raise SystemExit(f"{args.recordings}: no .rec recordings")
-        out["session"] = session_costs(args.graph, recs, args.streams, args.samples, args.beam)
+        out["session"] = session_costs(args.graph, recs, args.streams, args.samples, args.beam, args.live_paths,
+                                       not args.no_refine)  # fmt: skip
     if args.only != "session":
         out["grpc_sync"] = grpc_sync(args.streams, args.messages)
         out["grpc_aio"] = grpc_aio(args.streams, args.messages)

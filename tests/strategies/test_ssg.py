@@ -244,3 +244,42 @@ def test_cli_simulate_and_synthesize_markers(graph, kb, tmp_path, capsys):
     native = tmp_path / "m.rec"
     save_recording(simulate_marker_recording(kb[2], "left-foot", NOISE["none"]), native)
     assert main(["synthesize", str(gpath), str(native), "--strategy", "ssg", "-o", str(tmp_path / "z.bvh")]) == 0
+
+
+def test_a_live_session_holds_constant_memory_and_the_frames_of_one_that_keeps_everything():
+    """Ten minutes of two markers (one-second windows: 750 of them) through a live
+    session: what its decoder holds stops growing after the first minute, while a
+    decoder that keeps every layer grows with the input; and over the first two
+    minutes (with ten prunings) the two sessions give the same frames, bit for bit."""
+    kb = generate_knowledge_base(seed=3, minutes=0.15)
+    graph, _ = build_graph(kb, BuildOptions(msv=False, interp=False, bridges=False, progress=False))
+    motion, _ = generate_performance(seed=11, seconds=20.0)
+    rec = simulate_marker_recording(motion, "hands-feet", NOISE["default"], seed=3,
+                                    pattern=MarkerPattern(gaps=((100, 25),), flicker=0.1))  # fmt: skip
+    options = Options(strategy="ssg", latency_s=1.0,
+                      ssg=SsgOptions(markers="hands-feet", keep=("l_hand", "r_foot"), window_s=1.0, overlap_s=0.2))
+    pruned = open_session(graph, options, marker_names=rec.marker_names, keep_motion=False)
+    whole = open_session(graph, options, marker_names=rec.marker_names, keep_motion=False)
+    whole.decoder.prune = False
+    assert pruned.decoder.prune
+    n, rate = rec.num_samples, graph.rate_hz
+    minute = int(60 * rate)
+    held, grown = [], []
+    for t in range(10 * minute):
+        m = rec.marker_positions[t % n]  # (the recording looped: its track jumps back every 20 s)
+        a = pruned.push(t / rate, markers=m)
+        if t < 2 * minute:
+            b = whole.push(t / rate, markers=m)
+            assert [f.index for f in a] == [f.index for f in b]
+            for f, g in zip(a, b):
+                np.testing.assert_array_equal(f.rotations, g.rotations)
+                np.testing.assert_array_equal(f.translations, g.translations)
+                assert f.sources == g.sources
+        if t % (minute // 6) == 0:  # every 10 s
+            held.append(pruned.decoder.retained_bytes)
+            if t < 2 * minute:
+                grown.append(whole.decoder.retained_bytes)
+    assert pruned.decoder.layers.base > 0 and pruned.decoder.base > 0  # (it did prune)
+    assert max(held[12:]) <= 1.25 * max(held[6:12])  # flat after the first minute
+    assert grown[-1] > 3 * grown[2]  # (what is measured does grow without pruning)
+    assert len(pruned.flush()) > 0

@@ -15,6 +15,15 @@ windows are in, and its frames are final then — so a live stream and a batch r
 the same lag agree frame for frame. A live decoder cannot see past a gap: chains are
 extended backward only into windows not yet committed, and windows before the first
 searchable one wait for it.
+
+Memory: a live decoder (`prune`) holds constant memory however long its stream. Once
+a window is committed nothing reads its layer again but the few windows after it (the
+cross-fade of `sources`, the entry edges of the next commit, the forward costs the
+next window's continuations start from), so all but the last KEEP_COMMITTED committed
+layers are dropped — their nodes, edges, forward costs and the anchors no kept layer
+refers to (a chain extended through a long gap keeps its anchor) — and the input
+frames before the oldest kept layer with them. Each list keeps absolute indices
+(`Tail`); the frames the decoder outputs are the same, pruned or not.
 """
 
 from __future__ import annotations
@@ -30,6 +39,52 @@ from graphsvc.strategies.ssg.graph import (BACKWARD, FORWARD, RETRIEVED, Anchor,
 from graphsvc.strategies.ssg.index import SsgIndex, WindowPoints
 
 COST_BLOCK = 64  # input frames whose local costs one matrix product computes (when they are in)
+KEEP_COMMITTED = 4  # committed layers a pruning decoder keeps (module docstring)
+PRUNE_EVERY = 16  # layers dropped at a time (each pruning walks the kept layers' anchors)
+
+
+class Tail:
+    """A list whose oldest items can be dropped (`drop_before`) while every index stays
+    absolute: `len` counts the dropped ones, and reading one is an IndexError."""
+
+    def __init__(self, items=()):
+        self.base = 0  # the index of items[0]
+        self.items = list(items)
+
+    def __len__(self) -> int:
+        return self.base + len(self.items)
+
+    def _at(self, i: int) -> int:
+        if i < 0:
+            return len(self.items) + i
+        if i < self.base:
+            raise IndexError(f"item {i} was dropped (kept from {self.base})")
+        return i - self.base
+
+    def __getitem__(self, i: int):
+        return self.items[self._at(i)]
+
+    def __setitem__(self, i: int, value) -> None:
+        self.items[self._at(i)] = value
+
+    def __iter__(self):
+        return iter(self.items)
+
+    def append(self, value) -> None:
+        self.items.append(value)
+
+    def extend(self, values) -> None:
+        self.items.extend(values)
+
+    def truncate(self, n: int) -> None:
+        """Drop the items from index n on."""
+        del self.items[max(0, n - self.base):]
+
+    def drop_before(self, n: int) -> None:
+        """Drop the items before index n."""
+        if n > self.base:
+            del self.items[: n - self.base]
+            self.base = n
 
 
 @dataclass(frozen=True)
@@ -86,10 +141,13 @@ def smooth_warp(frames: np.ndarray, width: int = WARP_SMOOTHING) -> np.ndarray:
 class SsgDecoder:
     """See the module docstring. index: the SSG index (hidden frames set); kb_markers
     (F, M, 3): its frames' markers; kb: their window clouds; windows: N, o, k, weight;
-    lag: windows a committed one waits for (None: the whole input at once)."""
+    lag: windows a committed one waits for (None: the whole input at once); prune: drop
+    what no window can still use (module docstring, *Memory*; needs a lag) — a live
+    session's, whose frames are read as they become final; a batch run reads its layers
+    and anchors at the end."""
 
     def __init__(self, index: SsgIndex, kb_markers: np.ndarray, kb: WindowPoints, windows: Windows,
-                 rate_hz: float, lag: int | None = None, expected_frames: int = 0):  # fmt: skip
+                 rate_hz: float, lag: int | None = None, expected_frames: int = 0, prune: bool = False):  # fmt: skip
         self.index = index
         self.kb_markers = kb_markers
         self.kb = kb
@@ -101,20 +159,25 @@ class SsgDecoder:
         self.chunks = dtw.run_chunks(index.run_start, 4 * numba.get_num_threads())
         M = kb_markers.shape[1]
         cap = max(expected_frames, 256)
-        self.points = np.zeros((cap, M, 3))
+        self.points = np.zeros((cap, M, 3))  # input frames base, base + 1, …, T − 1
         self.seen = np.zeros((cap, M), dtype=bool)
         self.T = 0
-        self.layers: list[Layer] = []
-        self.stops: list[int] = []  # each layer's stop, increasing (`sources` finds a frame's windows)
-        self.edges: list[np.ndarray] = []  # edges[a]: layer a → a + 1
-        self.anchors: list[Anchor] = []
-        self.path: list[int] = []  # committed node of each committed layer
+        self.base = 0  # the first input frame held (a pruning decoder drops those before)
+        self.prune = bool(prune) and lag is not None
+        self.back = max(0, -int(np.min(kb.taus))) if len(kb.taus) else 0  # frames a local cost looks back
+        self.layers = Tail()  # Layer
+        self.stops = Tail()  # each layer's stop, increasing (`sources` finds a frame's windows)
+        self.edges = Tail()  # edges[a]: layer a → a + 1
+        self.anchors: dict[int, Anchor] = {}  # by number, in order of retrieval
+        self.next_anchor = 0
+        self.retrieved = False  # whether any layer has retrieved nodes
+        self.path = Tail()  # committed node of each committed layer
         self.emitted = 0  # input frames final so far
         self.rows: dict[int, np.ndarray] = {}  # local cost rows by input frame
         self.finished = False
         self.searched = 0
         self.cells = 0
-        self.dp: list[np.ndarray] = []  # `_forward`'s costs, valid for layers below dp_valid
+        self.dp = Tail()  # `_forward`'s costs, valid for layers below dp_valid
         self.dp_valid = 0
 
     # ---------------------------------------------------------------- input
@@ -128,12 +191,10 @@ class SsgDecoder:
         points = np.asarray(points, dtype=np.float64).reshape(-1, *self.points.shape[1:])
         seen = np.asarray(seen, dtype=bool).reshape(-1, self.seen.shape[1])
         K = points.shape[0]
-        if self.T + K > len(self.points):
-            grow = max(self.T + K, 2 * len(self.points))
-            self.points = np.concatenate([self.points, np.zeros((grow - len(self.points),) + self.points.shape[1:])])
-            self.seen = np.concatenate([self.seen, np.zeros((grow - len(self.seen), self.seen.shape[1]), bool)])
-        self.points[self.T:self.T + K] = points
-        self.seen[self.T:self.T + K] = seen
+        if self.T + K - self.base > len(self.points):
+            self._make_room(K)
+        self.points[self.T - self.base:self.T + K - self.base] = points
+        self.seen[self.T - self.base:self.T + K - self.base] = seen
         self.T += K
         out = []
         while True:
@@ -161,7 +222,7 @@ class SsgDecoder:
         elif self.layers[-1].stop < self.T:
             floor = self.layers[-2].stop if len(self.layers) >= 2 else 0
             self._add_layer(max(self.T - self.w.n, floor), self.T)
-        if not any((layer.kind == RETRIEVED).any() for layer in self.layers):
+        if not self.retrieved:
             self._search_anyway()
         first = len(self.path)
         entry = self._entry(first)
@@ -169,10 +230,42 @@ class SsgDecoder:
         self.path.extend(int(v) for v in nodes)
         return out + self._emit(self.T)
 
+    def _make_room(self, K: int) -> None:
+        """Room for K more input frames: the frames a pruning decoder no longer needs
+        dropped (those before its oldest kept layer and what a local cost looks back),
+        then, if that is not enough, the buffers doubled."""
+        keep = max(self.base, min(self.layers[self.layers.base].start - self.back, self.T)) \
+            if self.prune and self.layers.base else self.base
+        if keep > self.base:
+            held = self.T - keep
+            self.points[:held] = self.points[keep - self.base:self.T - self.base]
+            self.seen[:held] = self.seen[keep - self.base:self.T - self.base]
+            self.base = keep
+        if self.T + K - self.base > len(self.points):
+            grow = max(self.T + K - self.base, 2 * len(self.points))
+            self.points = np.concatenate([self.points, np.zeros((grow - len(self.points),) + self.points.shape[1:])])
+            self.seen = np.concatenate([self.seen, np.zeros((grow - len(self.seen), self.seen.shape[1]), bool)])
+
+    def _input(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Input frames [start, stop): points (L, M, 3), seen (L, M)."""
+        if start < self.base:
+            raise IndexError(f"input frame {start} was dropped (kept from {self.base})")
+        return self.points[start - self.base:stop - self.base], self.seen[start - self.base:stop - self.base]
+
+    @property
+    def retained_bytes(self) -> int:
+        """Bytes of the arrays the decoder holds: input frames, layers, edges, forward
+        costs, anchors' frames and local cost rows (flat after a pruning decoder's first
+        minute; a growing one's grow with the input)."""
+        arrays = [self.points, self.seen, *self.edges, *self.dp, *self.rows.values()]
+        arrays += [a for layer in self.layers for a in (layer.kind, layer.anchor, layer.cost)]
+        arrays += [A.frames for A in self.anchors.values()]
+        return int(sum(a.nbytes for a in arrays))
+
     # ---------------------------------------------------------------- layers
 
     def _data_rows(self, start: int, stop: int) -> int:
-        return int(self.seen[start:stop].any(axis=1).sum())
+        return int(self._input(start, stop)[1].any(axis=1).sum())
 
     def _add_layer(self, start: int, stop: int, force: bool = False) -> None:
         blind = not force and 2 * self._data_rows(start, stop) <= stop - start
@@ -213,6 +306,7 @@ class SsgDecoder:
             anchors.append(a)
             costs.append(cost / N)
         layer.add(RETRIEVED, anchors, costs)
+        self.retrieved |= bool(anchors)
 
     def _continuations(self, z: int, D: np.ndarray, step: np.ndarray, ends: set) -> list:
         """The best subsequence ending where each of the k nodes of the window before with
@@ -240,7 +334,7 @@ class SsgDecoder:
     def _forward(self, z: int) -> np.ndarray:
         """(K,) the cost of the cheapest path from the first window to each node of layer
         z (kept per layer; recomputed from the first layer whose nodes or edges changed)."""
-        del self.dp[self.dp_valid:]
+        self.dp.truncate(self.dp_valid)
         while len(self.dp) <= z:
             a = len(self.dp)
             cost = self.layers[a].cost
@@ -255,12 +349,14 @@ class SsgDecoder:
     def _anchor(self, z: int, start: int, stop: int, frames: np.ndarray) -> int:
         frames = smooth_warp(frames)
         kb = self._kb_at(frames)  # (L, M, 3)
-        theta, tx, tz = align(self.points[start:stop], self.seen[start:stop], kb)
+        theta, tx, tz = align(*self._input(start, stop), kb)
         first = int(self.index.run_first[int(frames[-1])])
         last = int(self.index.run_last[int(frames[-1])])
         warp = float(frames[-1] - frames[0]) / max(1, len(frames) - 1)
-        self.anchors.append(Anchor(z, start, stop, np.asarray(frames, dtype=np.float64), theta, tx, tz, warp, first, last))
-        return len(self.anchors) - 1
+        a = self.next_anchor
+        self.anchors[a] = Anchor(z, start, stop, np.asarray(frames, dtype=np.float64), theta, tx, tz, warp, first, last)
+        self.next_anchor += 1
+        return a
 
     def _extend_backward(self, z: int) -> None:
         """Backward chains from layer z's retrieved nodes into the blind layers before it
@@ -282,8 +378,9 @@ class SsgDecoder:
         the most, and extend it through the others."""
         rows = [self._data_rows(layer.start, layer.stop) for layer in self.layers]
         best = int(np.argmax(rows))
-        spans = [(layer.start, layer.stop) for layer in self.layers]
-        self.layers, self.edges, self.anchors, self.dp, self.dp_valid, self.stops = [], [], [], [], 0, []
+        spans = [(layer.start, layer.stop) for layer in self.layers]  # (nothing committed: none dropped)
+        self.layers, self.edges, self.anchors, self.dp, self.dp_valid, self.stops = Tail(), Tail(), {}, Tail(), 0, Tail()
+        self.next_anchor = 0
         for z, (s, e) in enumerate(spans):
             self._add_layer(s, e, force=z == best)
 
@@ -303,7 +400,7 @@ class SsgDecoder:
         """Each chain's fixed-transform distance (m² an input frame) to the markers the
         layer's frames have."""
         n = np.arange(layer.start, layer.stop)
-        seen = self.seen[layer.start:layer.stop]
+        points, seen = self._input(layer.start, layer.stop)
         if not seen.any() or not len(anchors):
             return np.zeros(len(anchors))
         out = np.empty(len(anchors))
@@ -311,7 +408,7 @@ class SsgDecoder:
             A = self.anchors[a]
             kb = placed(self._kb_at(A.frames_at(n))[None], np.array([A.theta]), np.array([A.tx]),
                         np.array([A.tz]))[0]  # fmt: skip
-            d = ((kb - self.points[layer.start:layer.stop]) ** 2).sum(axis=-1)
+            d = ((kb - points) ** 2).sum(axis=-1)
             per_row = np.where(seen.any(axis=1), (d * seen).sum(axis=1) / np.maximum(seen.sum(axis=1), 1), 0.0)
             out[i] = per_row.sum() / n.size
         return out
@@ -329,7 +426,10 @@ class SsgDecoder:
             hi = min(ready, max(stop, need[0] + COST_BLOCK))
             need = list(range(need[0], max(hi, stop)))
             frames = np.asarray(need, dtype=np.int64)
-            C = dtw.local_costs(self.kb, self.points[:self.T], self.seen[:self.T], frames, self.index.allowed)
+            # (frames held from `base` on, which lies before every frame these look at:
+            # `_make_room`)
+            C = dtw.local_costs(self.kb, self.points[:self.T - self.base], self.seen[:self.T - self.base],
+                                frames - self.base, self.index.allowed)  # fmt: skip
             for i, n in enumerate(need):
                 self.rows[n] = C[i]
         for n in [n for n in self.rows if n < start]:
@@ -355,7 +455,24 @@ class SsgDecoder:
             nodes, _ = cheapest_path(self.layers, self.edges, self.w.weight, c, self._entry(c))
             self.path.append(int(nodes[0]))
             out += self._emit(self.layers[c + 1].start)
+        if self.prune and len(self.path) - KEEP_COMMITTED - self.layers.base >= PRUNE_EVERY:
+            self._drop_committed(len(self.path) - KEEP_COMMITTED)
         return out
+
+    def _drop_committed(self, first: int) -> None:
+        """Drop the layers before `first` (committed, and not among the last
+        KEEP_COMMITTED), their edges, stops and path entries, the forward costs before
+        them (computed first up to the newest committed layer, where they are final:
+        the next windows' continuations start from them, never from a dropped layer's)
+        and the anchors no kept layer refers to. The input frames before the kept
+        layers go when the buffer is next full (`_make_room`)."""
+        self._forward(len(self.path) - 1)
+        for tail in (self.layers, self.stops, self.edges, self.path, self.dp):
+            tail.drop_before(first)
+        used = set()
+        for layer in self.layers:
+            used.update(layer.anchor.tolist())
+        self.anchors = {a: A for a, A in self.anchors.items() if a in used}
 
     def _emit(self, upto_frame: int) -> list[tuple[int, int]]:
         if upto_frame <= self.emitted:
@@ -375,7 +492,7 @@ class SsgDecoder:
         weight = np.zeros((L, 2))
         # The committed windows reaching [a, b): their stops increase, so they start at the
         # first window ending after a (a live stream's frames cost the same an hour in).
-        for z in range(bisect.bisect_right(self.stops, a, 0, len(self.path)), len(self.path)):
+        for z in range(bisect.bisect_right(self.stops, a, self.stops.base, len(self.path)), len(self.path)):
             layer, node = self.layers[z], self.path[z]
             if layer.start >= b:
                 break

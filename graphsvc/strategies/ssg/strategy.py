@@ -361,7 +361,7 @@ class SsgSession(LiveSession):
         kb_markers, kb = _prepared_markers(graph, index, self.used, None)
         warm_up()
         self.index = index
-        self.decoder = SsgDecoder(index, kb_markers, kb, self.windows, self.rate, lag)
+        self.decoder = SsgDecoder(index, kb_markers, kb, self.windows, self.rate, lag, prune=True)
         self.lag_frames = lag_frames(lag, self.windows, self.decoder.ahead)
         self.any_seen = False
 

@@ -221,6 +221,53 @@ def _beam_prune(state, immortal, beam, arrivals, none, c32, live_out):
     return count, low
 
 
+@numba.njit(cache=True, nogil=True)
+def _bound_live(state, live, count, most, immortal, arrivals, none, c32):
+    """A bound on the live paths (after the beam's cut): of the live nodes
+    live[:count] (ascending; their costs in state (N, W)), keep the `most` cheapest —
+    ties at the `most`-th cost kept in ascending node order — and the cheapest node
+    that can go on forever (`_immortal`) when none of those can; the others get cost
+    inf, arrival `none` and, when c32 is the unplaced float32 pass's (N,) costs,
+    DEAD32. The kept ones stay listed ascending in live. Returns their number."""
+    if count <= most:
+        return count
+    costs = np.empty(count)
+    for i in range(count):
+        costs[i] = state[live[i], COST]
+    kth = np.partition(costs, most - 1)[most - 1]
+    below = 0
+    spare_immortal, spare_cost = -1, np.inf  # the cheapest immortal node
+    for i in range(count):
+        c = costs[i]
+        below += c < kth
+        if immortal[live[i]] and c < spare_cost:
+            spare_immortal, spare_cost = i, c
+    ties = most - below  # nodes at exactly kth kept, in ascending order
+    kept = 0
+    any_immortal = False
+    keep = np.zeros(count, np.uint8)
+    for i in range(count):
+        c = costs[i]
+        if c < kth or (c == kth and ties > 0):
+            if c == kth:
+                ties -= 1
+            keep[i] = 1
+            any_immortal |= immortal[live[i]]
+    if not any_immortal and spare_immortal >= 0:
+        keep[spare_immortal] = 1
+    for i in range(count):
+        n = live[i]
+        if keep[i]:
+            live[kept] = n
+            kept += 1
+        else:
+            state[n, COST] = np.inf
+            arrivals[n] = none
+            if c32.shape[0] == state.shape[0]:
+                c32[n] = DEAD32
+    return kept
+
+
 _beam_step, _beam_step_serial = _compile(_beam_step_py, True), _compile(_beam_step_py, False)
 
 

@@ -31,7 +31,7 @@ from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.threads import StepTimer
 from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
-                                              _immortal, _reset_costs)  # fmt: skip
+                                              _bound_live, _immortal, _reset_costs)  # fmt: skip
 from graphsvc.strategies.viterbi.costs import COS, COST, DEAD32, HEADING, PLACED_WIDTH, SIN, UNPLACED_WIDTH, X, Z
 from graphsvc.strategies.viterbi.costs import pull_row, track_pull
 from graphsvc.strategies.viterbi.costs import _reading_costs_batch, _reading_costs_batch_serial
@@ -189,6 +189,10 @@ class ViterbiSearch(SurvivorMemory):
             self._no_c32 = np.zeros(0, dtype=np.float32)
             self._step_seconds = (None, None)  # sparse steps' seconds a live node, dense steps' (see `narrow`)
         self._c32_stale = False  # (see `_rebase_c32`)
+        # A beam search's bound on its live paths after each step (None: the beam alone):
+        # the `max_live` cheapest survive the cut (`beam._bound_live`). May change between
+        # steps — a streaming decoder bounds its start (`stream.FixedLagDecoder`).
+        self.max_live: int | None = None
         self.incoming = tables["incoming"]
         self._best_edge = np.full(N, -1, dtype=np.int32)
         self._init_memory(N, window, ring)
@@ -237,39 +241,90 @@ class ViterbiSearch(SurvivorMemory):
         """Store rows in use (survivors plus garbage not yet collected)."""
         return self.size
 
-    def start(self, position=None, heading=None, kinds_t=None, values_t=None):
+    def start(self, position=None, heading=None, kinds_t=None, values_t=None, live=None):
         """Sample 0: every node starts a path at the measured position / heading; one
-        not measured yet is taken from the first sample that has it (see `_anchor`)."""
+        not measured yet is taken from the first sample that has it (see `_anchor`).
+        live: (N,) bool, the nodes whose paths start (allowed ones; None: every allowed
+        node), e.g. a beam search's `seed`."""
+        starts = self.allowed if live is None else np.asarray(live, dtype=bool) & self.allowed
+        if not starts.any():
+            raise InputError("no allowed node to start a path at")
         self.t = 0
         self.anchor_position = None  # every path's start, once measured: (2,) m
         self.anchor_heading = None  # rad
+        # Every path starts at the same placement: one row, anchored, then copied to the
+        # paths' rows (a seeded start's alone: no other row is read until it is written).
+        place = np.zeros((1, PLACED_WIDTH))
+        place[0, COS] = 1.0
+        self._anchor(position, heading, place)
         if self.placed:
-            self.state[:, X] = self.state[:, Z] = self.state[:, HEADING] = self.state[:, SIN] = 0.0
-            self.state[:, COS] = 1.0
-        self._anchor(position, heading)
-        self.state[:, COST] = np.where(self.allowed, 0.0, np.inf)
+            rows = slice(None) if live is None else starts
+            self.state[rows, X:SIN + 1] = place[0, X:SIN + 1]
+        self.state[:, COST] = np.where(starts, 0.0, np.inf)
         self.det[:] = 0
         if self.beam is not None:
-            live = np.flatnonzero(self.allowed)
+            live = np.flatnonzero(starts)
             self._live[: len(live)], self._n_live, self._n_live_before = live, len(live), 0
             self._state_new[:, COST] = np.inf
         self._c32_stale = False
         self.low = self.c32_base = 0.0
         self._chunks_t = -1
         if self.float32_pass and not self.placed:
-            self.c32[:] = np.where(self.allowed, np.float32(0.0), DEAD32)
+            self.c32[:] = np.where(starts, np.float32(0.0), DEAD32)
         if self.gamma:
             _satisfied(kinds_t, values_t, self.contact_code, self.label, self.ok)
             self.rank[:] = (~self.ok).T
-        self._start_memory(self.allowed)
+        self._start_memory(starts)
 
-    def _anchor(self, position, heading) -> None:
+    def seed(self, acc, most: int, up=None) -> np.ndarray:
+        """(N,) bool: where a search bounded to `most` live paths starts, from the
+        sample after its first (accelerations (S, 3) m/s², up as `step`'s): the sources
+        of the `most` edges between allowed nodes whose readings cost least against it
+        (C_A, and C_R when oriented; ties to the lower edge). Every path starts at the
+        same place, so the first step's costs differ by little but these; a beam search
+        so seeded visits the edges out of at most `most` nodes at its first step instead
+        of every node's (the same nodes survive a first step bounded to `most` but for
+        what the position and heading terms move). Every allowed source when fewer
+        edges are allowed."""
+        src = self.edge_src
+        usable = self.allowed[src] & self.allowed[self.graph.edge_dst]
+        cost = self.reading_costs(np.asarray(acc, dtype=np.float64)[None],
+                                  up=None if up is None else np.asarray(up)[None])[0][self.edge_reading]
+        cost = np.where(usable, cost, np.inf)
+        out = np.zeros(self.N, dtype=bool)
+        if int(usable.sum()) <= most:
+            out[src[usable]] = True
+            return out
+        cheapest = np.argpartition(cost, most - 1)[:most]
+        kth = cost[cheapest].max()
+        below = np.flatnonzero(cost < kth)  # (ties at the most-th cost: the lowest edges)
+        ties = np.flatnonzero(cost == kth)[: most - below.size]
+        out[src[below]] = True
+        out[src[ties]] = True
+        return out
+
+    def _anchor(self, position, heading, place=None) -> None:
         """Until a position (a heading) has been measured, paths run from the origin
         (facing +Z) and no position (heading) term has counted, so the first one
         measured can become every path's start: all placements are turned about the
         start by the heading and moved onto the position, rigidly — the same as if the
-        search had started there (as a batch search given them at sample 0 does)."""
-        place = self.state if self.placed else np.zeros((1, PLACED_WIDTH))  # (unplaced: only noted)
+        search had started there (as a batch search given them at sample 0 does).
+        place: the placement rows to move (default: the paths', a beam search's live
+        ones alone)."""
+        rows = None
+        if place is None and not self.placed:
+            place = np.zeros((1, PLACED_WIDTH))  # (unplaced: only noted)
+        elif place is None and self.beam is not None and self._n_live < self.N:
+            rows = self._live[: self._n_live]
+            place = self.state[rows]
+        elif place is None:
+            place = self.state
+        self._move_placements(place, position, heading)
+        if rows is not None:
+            self.state[rows] = place
+
+    def _move_placements(self, place, position, heading) -> None:
+        """`_anchor`'s move of the placement rows place (n, W), in place."""
         if self.anchor_heading is None and heading is not None and np.isfinite(heading):
             self.anchor_heading = h = float(heading)
             ax, az = (0.0, 0.0) if self.anchor_position is None else self.anchor_position
@@ -372,6 +427,8 @@ class ViterbiSearch(SurvivorMemory):
         if self.beam is not None:
             if not narrow and live:
                 live = self._cut(arrivals)
+            if self.max_live is not None and live > self.max_live:
+                live = self._bound(arrivals)
             self._time_beam_step(narrow, time.perf_counter() - started, live_before)
         if timed:
             self._timer.record(threaded, time.perf_counter() - step_started)
@@ -439,6 +496,15 @@ class ViterbiSearch(SurvivorMemory):
         self._n_live, self._n_live_before = live, self._n_live
         self.low = low
         return live
+
+    def _bound(self, arrivals) -> int:
+        """The live paths cut to the `max_live` cheapest (`beam._bound_live`); returns
+        their number."""
+        c32 = self.c32 if self.float32_pass else self._no_c32
+        none = arrivals.dtype.type(self.none)
+        self._n_live = _bound_live(self._state_new, self._live, self._n_live, int(self.max_live), self._immortal,
+                                   arrivals, none, c32)  # fmt: skip
+        return self._n_live
 
     def _rebase_c32(self) -> None:
         """The unplaced float32 pass's costs from the cost column, relative to the

@@ -111,7 +111,8 @@ class ViterbiStrategy(Strategy):
             decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
                                       needs_placement(w, use_pos, use_head), beam=beam,
                                       start_samples=start_samples(rate), pull_s=pull_s,
-                                      oriented=orientation_counts(graph, w, inp.up))  # fmt: skip
+                                      oriented=orientation_counts(graph, w, inp.up),
+                                      max_live=self.own(options).live_paths)  # fmt: skip
             synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
                                          track_model=track_model(options, rate) if use_pos is not None else None,
                                          smooth_frames=options.shared.smooth_s * rate,
@@ -202,7 +203,8 @@ class ViterbiSession(LiveSession):
         self.decoder = FixedLagDecoder(graph, options.weights, self.decoder_lag(self.rate, options.latency_s),
                                        constraints, allowed, self.rate, threads, beam=self.own.beam,
                                        start_samples=start_samples(self.rate),
-                                       pull_s=options.shared.track_pull_s, oriented=self.reads_up)  # fmt: skip
+                                       pull_s=options.shared.track_pull_s, oriented=self.reads_up,
+                                       max_live=self.own.live_paths)  # fmt: skip
         self.synth: StreamingSynthesizer | None = None
         self.counts_position = options.weights.position != 0
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized

@@ -67,7 +67,8 @@ class FixedLagDecoder:
     def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
                  allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
                  placed: bool | None = None, store: bool | None = None, beam: float | None = None,
-                 start_samples: int = 1, pull_s: float | None = None, oriented: bool = False):  # fmt: skip
+                 start_samples: int = 1, pull_s: float | None = None, oriented: bool = False,
+                 max_live: int | None = None):  # fmt: skip
         """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch). placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
@@ -77,7 +78,13 @@ class FixedLagDecoder:
         this many samples have arrived (or at flush), its paths placed where
         `strategies.base.start_placement` puts them from those samples' positions and
         headings, as a batch search given the same `start` does; 1: at the first
-        sample's measurements. No frame is emitted before. pull_s: see ViterbiSearch."""
+        sample's measurements. No frame is emitted before. pull_s: see ViterbiSearch.
+        max_live: a beam search bounded to this many live paths after each sample
+        (`ViterbiSearch.max_live`), which starts (with start_samples > 1) at the nodes
+        `ViterbiSearch.seed` picks for this many from the start's second sample: a
+        start's steps are then sparse ones where every node was live (the kick-off of
+        many streams at once), and no later step keeps more. None or 0: the beam alone,
+        every node starting a path, as in a batch search (an exact search always)."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
@@ -87,6 +94,9 @@ class FixedLagDecoder:
                                     window=None if store else self.lag + 1, beam=beam, pull_s=pull_s,
                                     oriented=oriented)  # fmt: skip
         self.start_samples = max(1, int(start_samples))
+        self.max_live = int(max_live) if max_live and beam is not None else None
+        self.search.max_live = self.max_live
+        self._seed = None  # where a bounded search's paths start (`_start_pending`)
         self._pending: list = []  # samples (acc, position, heading) that arrived before the search started
         self.emitted = 0  # frames emitted so far
         self.last_node = -1
@@ -115,7 +125,7 @@ class FixedLagDecoder:
         t = self.search.t + 1
         kinds, values = self.requirements.at(t)
         if t == 0:
-            self.search.start(position, heading, kinds, values)
+            self.search.start(position, heading, kinds, values, live=self._seed)
         else:
             self.search.step(acc, position, heading, kinds, values, up=up)
         final = max(self.search.converged_t, t - self.lag)
@@ -129,6 +139,8 @@ class FixedLagDecoder:
                              for _, p, _, _ in pending])  # fmt: skip
         heading = np.array([np.nan if h is None else float(h) for _, _, h, _ in pending])
         p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
+        if self.max_live and len(pending) > 1:
+            self._seed = self.search.seed(pending[1][0], self.max_live, pending[1][3])
         out = [self._advance(pending[0][0], p0, h0)]  # (sample 0 places the paths; its readings are not scored)
         out += [self._advance(acc, p, h, u) for acc, p, h, u in pending[1:]]
         return np.concatenate([n for n, _ in out]), np.concatenate([e for _, e in out])
