@@ -180,3 +180,15 @@ def stream_requests(config, samples):
     yield pb.StreamSynthesizeRequest(config=config)
     for s in samples:
         yield pb.StreamSynthesizeRequest(sample=s)
+
+
+def scrape(port: int) -> dict:
+    """The metrics endpoint on 127.0.0.1:port: (name, sorted label pairs) → value."""
+    import urllib.request
+
+    from prometheus_client.parser import text_string_to_metric_families
+
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as response:
+        text = response.read().decode()
+    return {(s.name, tuple(sorted(s.labels.items()))): s.value
+            for family in text_string_to_metric_families(text) for s in family.samples}  # fmt: skip
