@@ -51,16 +51,17 @@ class ServerList:
     host: str = ""
 
 
-def split_host_port(text: str) -> tuple[str, int]:
-    """"HOST:PORT" or "[V6]:PORT" → (host without brackets, port); InputError otherwise."""
-    text = text.strip()
-    host, sep, port = text.rpartition(":")
+def split_host_port(text: str, flag: str = "--server", example: str = "") -> tuple[str, int]:
+    """"HOST:PORT" or "[V6]:PORT" → (host without brackets, port); InputError naming
+    `flag` otherwise (with `example`, a valid address, in the message)."""
+    value = (text or "").strip()
+    host, sep, port = value.rpartition(":")
     if host.startswith("[") and host.endswith("]"):
         host = host[1:-1]
     elif ":" in host:
-        raise InputError(f"--server {text}: an IPv6 address goes in brackets, [ADDRESS]:PORT")
+        raise InputError(f"{flag} {text!r}: an IPv6 address goes in brackets, [ADDRESS]:PORT")
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise InputError(f"--server {text!r}: expected HOST:PORT with a port 1–65535")
+        raise InputError(f"{flag} {text!r}: expected HOST:PORT with a port 1–65535" + (f" ({example})" if example else ""))
     return host, int(port)
 
 

@@ -192,3 +192,12 @@ def scrape(port: int) -> dict:
         text = response.read().decode()
     return {(s.name, tuple(sorted(s.labels.items()))): s.value
             for family in text_string_to_metric_families(text) for s in family.samples}  # fmt: skip
+
+
+def nearest_options():
+    """SynthesisOptions of the `nearest` strategy: the cheapest live session, for tests
+    of what carries the streams rather than what they compute."""
+    from graphsvc.pipeline import Options
+    from graphsvc.service.convert import options_to_proto
+
+    return options_to_proto(Options(strategy="nearest"))

@@ -16,7 +16,7 @@ import pytest
 
 from graphsvc.service import client as C
 from graphsvc.service._generated import graphsvc_pb2 as pb
-from tests.service.conftest import ROOT, rpc_error, run_cli, scrape, start, wait_for
+from tests.service.conftest import nearest_options, ROOT, rpc_error, scrape, start, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def test_a_scrape_during_a_stream_sees_the_counters_move(metered, recording):
     assert next(iter(front.values())) > 0
     samples = list(C.recording_samples(recording))
     with C.connect(f"127.0.0.1:{metered.port}") as conn:
-        feed = C.SampleFeed(C.stream_config("small"))
+        feed = C.SampleFeed(C.stream_config("small", nearest_options()))
         out = {}
         thread = threading.Thread(target=lambda: out.setdefault("r", C.run_stream(conn, feed, timeout_s=60)))
         thread.start()
@@ -93,14 +93,19 @@ def test_the_dashboard_queries_only_metrics_the_server_has(metered):
     assert named and named <= served, named - served
 
 
-def test_a_bad_metrics_port_is_one_line(graph_file):
+def test_a_bad_metrics_port_is_one_line(graph_file, capsys):
+    from graphsvc.cli import main
+
+    serve = ["serve", "--graph", f"small={graph_file}", "--host", "127.0.0.1", "--port", "0", "--metrics-port"]
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        run = run_cli("serve", "--graph", f"small={graph_file}", "--host", "127.0.0.1", "--port", "0",
-                      "--metrics-port", port)  # fmt: skip
-    assert run.returncode == 2 and run.stdout == ""
-    assert run.stderr == f"graphsvc: error: cannot serve metrics on 127.0.0.1:{port}: Address already in use\n"
-    run = run_cli("serve", "--graph", f"small={graph_file}", "--metrics-port", "70000")
-    assert run.returncode == 2 and len(run.stderr.splitlines()) == 1 and "--metrics-port" in run.stderr, run.stderr
+        assert main([*serve, str(port)]) == 2  # (refused before any graph loads)
+    printed = capsys.readouterr()
+    assert printed.out == ""
+    assert printed.err == f"graphsvc: error: cannot serve metrics on 127.0.0.1:{port}: Address already in use\n"
+    with pytest.raises(SystemExit) as exit_:
+        main([*serve, "70000"])
+    printed = capsys.readouterr()
+    assert exit_.value.code == 2 and len(printed.err.splitlines()) == 1 and "--metrics-port" in printed.err, printed.err

@@ -15,17 +15,7 @@ import pytest
 
 from graphsvc.service import client as C
 from graphsvc.service.servers import NoServerAnswers, parse_servers
-from tests.service.conftest import popen_cli, run_cli, start, wait_for
-
-
-def _nearest():
-    from graphsvc.pipeline import Options
-    from graphsvc.service.convert import options_to_proto
-
-    return options_to_proto(Options(strategy="nearest"))  # (the cheapest live session: what is tested is the spread)
-
-
-NEAREST = _nearest()
+from tests.service.conftest import nearest_options, popen_cli, start, wait_for
 
 
 def _serve(graph_file):
@@ -66,7 +56,7 @@ class _Stream:
     """A live stream on its own thread: its feed, its call, and how it ended."""
 
     def __init__(self, conn):
-        self.feed = C.SampleFeed(C.stream_config("small", NEAREST))
+        self.feed = C.SampleFeed(C.stream_config("small", nearest_options()))
         self.call = None
         self.result = self.error = None
         self.thread = threading.Thread(target=self._run, args=(conn,), daemon=True)
@@ -84,7 +74,7 @@ class _Stream:
         return int(value.rsplit(" ", 1)[1])
 
 
-def test_streams_spread_and_survive_a_server(two_servers, recording):
+def test_streams_spread_and_survive_a_server(two_servers, recording, capsys):
     (proc, _), ports = two_servers
     pids = [proc.pid, os.getpid()]
     samples = list(C.recording_samples(recording))[:45]
@@ -123,14 +113,18 @@ def test_streams_spread_and_survive_a_server(two_servers, recording):
 
     # The command line: the dead address is named in a warning and the call goes on;
     # none answering is one line and exit 2.
+    from graphsvc.cli import main
+
     dead = f"127.0.0.1:{ports[0]}"
-    run = run_cli("client", "graphs", "--server", f"{dead},127.0.0.1:{ports[1]}")
-    assert run.returncode == 0 and run.stdout.startswith("small: "), run.stderr
+    assert main(["client", "graphs", "--server", f"{dead},127.0.0.1:{ports[1]}"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out.startswith("small: ")
     assert re.fullmatch(rf"graphsvc: warning: server {dead} does not answer \(UNAVAILABLE: .+\); carrying on with "
-                        rf"127\.0\.0\.1:{ports[1]}\n", run.stderr), run.stderr  # fmt: skip
-    run = run_cli("client", "graphs", "--server", f"{dead},127.0.0.1:{_free_port()}")
-    assert run.returncode == 2 and run.stdout == ""
-    assert re.fullmatch(rf"graphsvc: error: no server answers: {dead} \(UNAVAILABLE: .+\); .+\n", run.stderr), run.stderr
+                        rf"127\.0\.0\.1:{ports[1]}\n", printed.err), printed.err  # fmt: skip
+    assert main(["client", "graphs", "--server", f"{dead},127.0.0.1:{_free_port()}"]) == 2
+    printed = capsys.readouterr()
+    assert printed.out == ""
+    assert re.fullmatch(rf"graphsvc: error: no server answers: {dead} \(UNAVAILABLE: .+\); .+\n", printed.err), printed.err
 
 
 def test_server_lists_parse():

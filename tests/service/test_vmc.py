@@ -1,0 +1,129 @@
+"""Pose frames out over VMC (`--vmc`): received on loopback with python-osc's own
+server, the bones' local rotations and the skeleton's bone offsets (mirrored into
+Unity's left-handed axes here, by hand) rebuild every frame's joint positions within
+1 mm; a bad address is one line, exit 2."""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from graphsvc.service import client as C
+from tests.service.conftest import wait_for
+
+# Unity's humanoid bone of each of the procedural skeleton's joints, and its parent bone
+# (the procedural skeleton's own parent joint: it has no joint between two bones).
+BONES = {"pelvis": "Hips", "spine": "Spine", "chest": "Chest", "neck": "Neck", "head": "Head",
+         "l_shoulder": "LeftUpperArm", "l_elbow": "LeftLowerArm", "l_wrist": "LeftHand",
+         "r_shoulder": "RightUpperArm", "r_elbow": "RightLowerArm", "r_wrist": "RightHand",
+         "l_hip": "LeftUpperLeg", "l_knee": "LeftLowerLeg", "l_ankle": "LeftFoot", "l_toe": "LeftToes",
+         "r_hip": "RightUpperLeg", "r_knee": "RightLowerLeg", "r_ankle": "RightFoot", "r_toe": "RightToes"}  # fmt: skip
+
+
+class Receiver:
+    """A VMC receiver on 127.0.0.1 (python-osc's UDP server): the messages of each
+    frame, the frame ending at /VMC/Ext/T."""
+
+    def __init__(self):
+        from pythonosc.dispatcher import Dispatcher
+        from pythonosc.osc_server import ThreadingOSCUDPServer
+
+        self.frames: list[dict] = []
+        self._current: dict = {"bones": {}}
+        dispatcher = Dispatcher()
+        dispatcher.set_default_handler(self._message)
+        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+        self.server.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)  # (no frame dropped)
+        self.port = self.server.server_address[1]
+        self.lock = threading.Lock()
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def _message(self, address, *args):
+        with self.lock:
+            if address == "/VMC/Ext/Root/Pos":
+                self._current["root"] = (args[0], np.array(args[1:4]), np.array(args[4:8]))
+            elif address == "/VMC/Ext/Bone/Pos":
+                self._current["bones"][args[0]] = (np.array(args[1:4]), np.array(args[4:8]))
+            elif address == "/VMC/Ext/OK":
+                self._current["ok"] = args
+            elif address == "/VMC/Ext/T":
+                self._current["t"] = args[0]
+                self.frames.append(self._current)
+                self._current = {"bones": {}}
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def receiver():
+    r = Receiver()
+    yield r
+    r.close()
+
+
+def _rebuild(received: dict, skeleton) -> dict[str, np.ndarray]:
+    """Joint positions in graphsvc's axes from one received frame: the root, the Hips'
+    local position, every bone's local rotation, and the skeleton's own offsets with X
+    negated (graphsvc right-handed → Unity left-handed); then X negated back."""
+    name, root, root_q = received["root"]
+    assert name == "root" and np.allclose(root_q, [0, 0, 0, 1]) and root[1] == 0.0
+    world_pos, world_rot = {}, {}
+    for joint in BONES:  # (parents before children)
+        j = skeleton.index(joint)
+        position, rotation = received["bones"][BONES[joint]]
+        local = Rotation.from_quat(rotation)  # (x, y, z, w): Unity's order, scipy's too
+        if joint == "pelvis":
+            world_pos[joint], world_rot[joint] = root + position, local
+            continue
+        parent = skeleton.names[skeleton.parents[j]]
+        offset = skeleton.offsets[j] * [-1.0, 1.0, 1.0]
+        np.testing.assert_allclose(position, offset, atol=1e-6)  # a T-pose's offsets, as sent
+        world_pos[joint] = world_pos[parent] + world_rot[parent].apply(offset)
+        world_rot[joint] = world_rot[parent] * local
+    return {j: p * [-1.0, 1.0, 1.0] for j, p in world_pos.items()}
+
+
+def test_the_bones_rebuild_every_frame_within_a_millimetre(server, recording, receiver):
+    from graphsvc.motion.kinematics import motion_fk
+    from graphsvc.service.convert_graph import skeleton_from_proto
+    from graphsvc.service.vmc import VmcSender
+
+    with C.connect(f"127.0.0.1:{server.port}") as conn:
+        info = C.resolve_graph(conn, "small")
+        skeleton = skeleton_from_proto(info.skeleton)
+        sender = VmcSender(f"127.0.0.1:{receiver.port}", skeleton)
+        result = C.stream_recording(conn, "small", recording, speed=100.0, on_frame=sender.send)
+    wait_for(lambda: len(receiver.frames) == len(result.frames), timeout_s=10)
+    assert sender.sent == len(result.frames) > 30 and sender.failed == 0
+    _, truth = motion_fk(result.motion())
+    worst = 0.0
+    for k, (frame, received) in enumerate(zip(result.frames, receiver.frames)):
+        assert received["t"] == pytest.approx(frame.time_s, abs=1e-5) and received["ok"] == (1,)
+        assert sorted(received["bones"]) == sorted(BONES.values())
+        rebuilt = _rebuild(received, skeleton)
+        for joint, p in rebuilt.items():
+            worst = max(worst, float(np.abs(p - truth[k, skeleton.index(joint)]).max()))
+    assert worst < 1e-3, worst
+
+
+def test_client_stream_sends_vmc_and_refuses_a_bad_address(server, rec_file, receiver, capsys):
+    from graphsvc.cli import main
+
+    common = ["client", "stream", str(rec_file), "--server", f"127.0.0.1:{server.port}"]
+    assert main([*common, "--speed", "100", "--quiet", "--vmc", f"127.0.0.1:{receiver.port}", "--strategy", "nearest"]) == 0
+    out = capsys.readouterr().out
+    frames = int(out.split(" frames from", 1)[0])
+    assert f"vmc: {frames} frames sent to 127.0.0.1:{receiver.port}" in out
+    wait_for(lambda: len(receiver.frames) == frames, timeout_s=10)
+    for bad, said in [("127.0.0.1", "expected HOST:PORT"), ("127.0.0.1:0", "port 1–65535"),
+                      ("no-such-host.invalid:39539", "cannot resolve no-such-host.invalid")]:  # fmt: skip
+        assert main([*common, "--vmc", bad]) == 2
+        printed = capsys.readouterr()
+        assert printed.out == "" and len(printed.err.splitlines()) == 1, printed.err
+        assert printed.err.startswith("graphsvc: error: --vmc") and said in printed.err, printed.err
