@@ -30,7 +30,7 @@ from graphsvc.service.convert_graph import skeleton_from_proto
 from graphsvc.service.convert_motion import frames_to_motion, motion_from_proto
 from graphsvc.service.convert_recording import recording_to_proto, sample_to_proto
 from graphsvc.service.convert_report import report_from_proto
-from graphsvc.service.servers import SERVER_METADATA, SERVICE_CONFIG, parse_servers, probe_all
+from graphsvc.service.servers import PROBE_TIMEOUT_S, SERVER_METADATA, SERVICE_CONFIG, parse_servers, probe_all
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
@@ -100,13 +100,27 @@ def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None
         if name:
             options.append(("grpc.ssl_target_name_override", name))
         credentials = grpc.ssl_channel_credentials(root_certificates=read_input_bytes(tls_ca, "TLS CA"))
-    if len(servers.addresses) > 1:
-        probe_all(servers, credentials, options, warn or (lambda line: print(f"graphsvc: {line}", file=sys.stderr)))
     options.append(("grpc.service_config", SERVICE_CONFIG))
+    settle_s = None
+    if len(servers.addresses) > 1:
+        settle_s = probe_all(servers, credentials, options,
+                             warn or (lambda line: print(f"graphsvc: {line}", file=sys.stderr)))  # fmt: skip
     if credentials is not None:
         channel = grpc.secure_channel(servers.target, credentials, options=options)
     else:
         channel = grpc.insecure_channel(servers.target, options=options)
+    if settle_s is not None:
+        # round_robin connects to every server at once, and picks only among those
+        # connected: calls made as soon as the first is would all go to it (a bridge
+        # or `client stream` makes one, so every such client would pick the same
+        # server). Wait for the channel, then about as long again as the slowest probe
+        # took, so the others are connected too and the first pick is round_robin's
+        # own random one among them all.
+        try:
+            grpc.channel_ready_future(channel).result(timeout=PROBE_TIMEOUT_S)
+            time.sleep(min(settle_s, 1.0))
+        except grpc.FutureTimeoutError:
+            pass  # (the first call says why)
     metadata = (("authorization", f"Bearer {token}"),) if token else ()
     return Connection(channel, pb_grpc.MotionGraphServiceStub(channel), metadata, address)
 

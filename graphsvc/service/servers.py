@@ -24,6 +24,7 @@ import ipaddress
 import json
 import socket
 import threading
+import time
 from dataclasses import dataclass
 
 from graphsvc.errors import InputError
@@ -117,45 +118,47 @@ def _is_ip(host: str) -> bool:
         return False
 
 
-def probe(address: str, credentials=None, options=(), timeout_s: float = PROBE_TIMEOUT_S) -> str | None:
-    """None when a gRPC server answers a health check at `address` (whatever its
-    status: a server still loading its graphs answers NOT_SERVING, and takes calls a
-    moment later), else why not ("connection refused", "no answer within 3 s", …)."""
+def probe(address: str, credentials=None, options=(), timeout_s: float = PROBE_TIMEOUT_S) -> tuple[float, str | None]:
+    """(seconds it took, None) when a gRPC server answers a health check at `address`
+    (whatever its status: a server still loading its graphs answers NOT_SERVING, and
+    takes calls a moment later), else (seconds, why not: "UNAVAILABLE: …",
+    "DEADLINE_EXCEEDED: …")."""
     import grpc
     from grpc_health.v1 import health_pb2, health_pb2_grpc
 
+    start = time.monotonic()
     channel = (grpc.secure_channel(address, credentials, options=list(options)) if credentials is not None
                else grpc.insecure_channel(address, options=list(options)))  # fmt: skip
     try:
         health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=timeout_s)
-        return None
     except grpc.RpcError as exc:
         if exc.code() in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED):
-            return f"{exc.code().name}: {(exc.details() or '').strip() or 'no answer'}"
-        return None  # it answered (UNIMPLEMENTED: a gRPC server without health checking)
+            return time.monotonic() - start, f"{exc.code().name}: {(exc.details() or '').strip() or 'no answer'}"
+        # (it answered: UNIMPLEMENTED, a gRPC server without health checking)
     finally:
         channel.close()
+    return time.monotonic() - start, None
 
 
 def probe_all(servers: ServerList, credentials=None, options=(), warn=print,
-              timeout_s: float = PROBE_TIMEOUT_S) -> list[str]:  # fmt: skip
+              timeout_s: float = PROBE_TIMEOUT_S) -> float:  # fmt: skip
     """Probe every address at once; warn(line) for each that does not answer; the
-    addresses that do. NoServerAnswers when none does."""
-    reasons: dict[str, str | None] = {}
+    longest time one that answered took (connecting and answering), seconds.
+    NoServerAnswers when none does."""
+    answers: dict[str, tuple] = {}
 
     def one(address: str) -> None:
-        reasons[address] = probe(address, credentials, options, timeout_s)
+        answers[address] = probe(address, credentials, options, timeout_s)
 
     threads = [threading.Thread(target=one, args=(a,), daemon=True) for a in servers.addresses]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
-    answering = [a for a in servers.addresses if reasons.get(a) is None]
+    answering = [a for a in servers.addresses if answers[a][1] is None]
     if not answering:
-        raise NoServerAnswers("no server answers: " + "; ".join(f"{a} ({reasons[a]})" for a in servers.addresses))
+        raise NoServerAnswers("no server answers: " + "; ".join(f"{a} ({answers[a][1]})" for a in servers.addresses))
     for a in servers.addresses:
-        if reasons.get(a) is not None:
-            warn(f"warning: server {a} does not answer ({reasons[a]}); carrying on with "
-                 f"{', '.join(answering)}")  # fmt: skip
-    return answering
+        if answers[a][1] is not None:
+            warn(f"warning: server {a} does not answer ({answers[a][1]}); carrying on with {', '.join(answering)}")
+    return max(answers[a][0] for a in answering)

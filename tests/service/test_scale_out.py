@@ -146,3 +146,20 @@ def test_server_lists_parse():
 def test_no_server_answers_is_an_input_error():
     with pytest.raises(NoServerAnswers, match=r"no server answers: 127\.0\.0\.1:\d+ \(UNAVAILABLE"):
         C.connect(f"127.0.0.1:{_free_port()},127.0.0.1:{_free_port()}", warn=lambda line: None)
+
+
+def test_the_envoy_front_checks_the_servers_health_and_never_cuts_a_stream():
+    import yaml
+
+    from graphsvc.service.server import SERVICE_NAME
+    from tests.service.conftest import ROOT
+
+    config = yaml.safe_load((ROOT / "deploy" / "envoy.yaml").read_text())
+    (cluster,) = config["static_resources"]["clusters"]
+    assert cluster["health_checks"][0]["grpc_health_check"]["service_name"] == SERVICE_NAME
+    assert cluster["lb_policy"] in ("LEAST_REQUEST", "ROUND_ROBIN")
+    (listener,) = config["static_resources"]["listeners"]
+    manager = listener["filter_chains"][0]["filters"][0]["typed_config"]
+    assert manager["codec_type"] == "HTTP2" and manager["stream_idle_timeout"] == "0s"
+    (route,) = manager["route_config"]["virtual_hosts"][0]["routes"]
+    assert route["route"]["cluster"] == cluster["name"] and route["route"]["timeout"] == "0s"
