@@ -198,6 +198,8 @@ class VmcSender:
         self.client = UDPClient(host, port)
         self.sent = self.failed = 0
         self.error: str | None = None
+        # The kinematics kernel compiled or loaded now, not on the stream's first frame.
+        self.bundle(quat.identity((self.J,)), skeleton.offsets, 0.0)
 
     def bundle(self, rotations_wxyz, translations_m, time_s: float):
         """The OSC bundle of one frame."""

@@ -127,3 +127,42 @@ def test_client_stream_sends_vmc_and_refuses_a_bad_address(server, rec_file, rec
         printed = capsys.readouterr()
         assert printed.out == "" and len(printed.err.splitlines()) == 1, printed.err
         assert printed.err.startswith("graphsvc: error: --vmc") and said in printed.err, printed.err
+
+
+def test_a_rest_that_is_no_t_pose_is_sent_as_one():
+    """Arms hanging and the body turned a quarter (facing +X) at rest: the bones' offsets
+    are a T-pose's facing +Z all the same, and any pose still rebuilds exactly."""
+    from graphsvc.motion import quat
+    from graphsvc.motion.kinematics import forward_kinematics
+    from graphsvc.motion.procedural import generate_performance
+    from graphsvc.motion.skeleton import Skeleton
+    from graphsvc.service.vmc import pose_to_vmc, vmc_rig
+
+    sk = generate_performance(seed=1)[0].skeleton
+    offsets = sk.offsets.astype(np.float64).copy()
+    for side in "lr":
+        for joint, length in (("elbow", 0.29), ("wrist", 0.26), ("wrist_End", 0.18)):
+            offsets[sk.index(f"{side}_{joint}")] = (0.0, -length, 0.0)
+    offsets = quat.rotate(quat.about_y(np.full(len(offsets), np.pi / 2)), offsets)
+    hanging = Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
+    rig = vmc_rig(hanging)
+    sent = dict(zip(rig.names, rig.offsets))
+    for bone, expected in {"LeftLowerArm": (0.29, 0, 0), "LeftHand": (0.26, 0, 0), "RightLowerArm": (-0.29, 0, 0),
+                           "LeftUpperArm": (0.17, 0.19, 0), "LeftUpperLeg": (0.09, -0.07, 0), "Spine": (0, 0.1, 0),
+                           "LeftToes": (0, -0.06, 0.13)}.items():  # fmt: skip
+        np.testing.assert_allclose(sent[bone], expected, atol=1e-9, err_msg=bone)
+    rng = np.random.default_rng(3)
+    rotations = quat.normalize(rng.normal(size=(hanging.num_joints, 4)))
+    translations = offsets.copy()
+    translations[0] += (0.3, 0.1, -0.2)  # (the root somewhere else)
+    _, truth = forward_kinematics(rotations[None], translations[None], hanging.parents)
+    root, positions, local = pose_to_vmc(rig, rotations, translations)
+    world_pos, world_rot = {}, {}
+    for k, bone in enumerate(rig.names):
+        parent = rig.parent[k]
+        if parent < 0:
+            world_pos[k], world_rot[k] = root + positions[k], Rotation.from_quat(local[k])
+        else:
+            world_pos[k] = world_pos[parent] + world_rot[parent].apply(positions[k])
+            world_rot[k] = world_rot[parent] * Rotation.from_quat(local[k])
+        np.testing.assert_allclose(world_pos[k] * [-1, 1, 1], truth[0, rig.joints[k]], atol=1e-9, err_msg=bone)
