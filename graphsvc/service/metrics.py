@@ -2,20 +2,14 @@
 `prometheus_client` library: an HTTP endpoint `/metrics` in the text format, beside
 the gRPC port.
 
-| metric | kind | what |
-| --- | --- | --- |
-| `graphsvc_streams_open` | gauge | live streams holding a slot now |
-| `graphsvc_streams_started_total` | counter | live streams that sent their config and started |
-| `graphsvc_samples_total` | counter | samples received on live streams (`rate()`: samples/s) |
-| `graphsvc_frames_total` | counter | pose frames sent on live streams |
-| `graphsvc_push_seconds` | histogram | a sample's push into its live session (the search step and the streaming synthesis, in its worker process, the pipe there and back included) |
-| `graphsvc_sample_seconds` | histogram | a sample from its arrival in the handler to the last frame it released handed to gRPC: checking, push, encoding, sending |
-| `graphsvc_refusals_total{code}` | counter | calls the server ended with an error status, by code (`RESOURCE_EXHAUSTED`, `INVALID_ARGUMENT`, `UNAVAILABLE`, …) |
-| `graphsvc_live_worker_restarts_total` | counter | live-worker processes that died and were started again |
-| `graphsvc_process_cpu_seconds_total{role,worker,pid}` | counter | CPU time (user + system) of the server's own process (`role="front"`) and of each live worker (`role="worker"`, `worker` its slot 0…N−1) |
-| `graphsvc_process_resident_bytes{role,worker,pid}` | gauge | resident memory of each (the memory-mapped graph's pages count in each process that touched them) |
-| `graphsvc_graph_load_seconds{graph}` | gauge | loading a graph in the server's process: the file mapped and checked, every strategy's index and kernels warmed |
-| `graphsvc_start_seconds` | gauge | from the port bound to the server taking calls (graphs loaded, live workers ready) |
+Live streams: `graphsvc_streams_open`, `graphsvc_streams_started_total`,
+`graphsvc_samples_total`, `graphsvc_frames_total`; per sample, histograms of the push
+into its session (`graphsvc_push_seconds`) and of its arrival to its frames handed to
+gRPC (`graphsvc_sample_seconds`); `graphsvc_refusals_total{code}` (every call ended with
+an error status, whoever ended it: `StatusCounter`); `graphsvc_live_worker_restarts_total`;
+per process (the front, each live worker) `graphsvc_process_cpu_seconds_total` and
+`graphsvc_process_resident_bytes`; `graphsvc_graph_load_seconds{graph}`,
+`graphsvc_start_seconds`. What each means: docs/service.md, Metrics.
 
 The endpoint's own `python_*`/`process_*` metrics are prometheus_client's defaults for
 the scraping process, left out here: `graphsvc_process_*` cover every process of the

@@ -5,9 +5,6 @@ Unity's left-handed axes here, by hand) rebuild every frame's joint positions wi
 
 from __future__ import annotations
 
-import socket
-import threading
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -22,49 +19,6 @@ BONES = {"pelvis": "Hips", "spine": "Spine", "chest": "Chest", "neck": "Neck", "
          "r_shoulder": "RightUpperArm", "r_elbow": "RightLowerArm", "r_wrist": "RightHand",
          "l_hip": "LeftUpperLeg", "l_knee": "LeftLowerLeg", "l_ankle": "LeftFoot", "l_toe": "LeftToes",
          "r_hip": "RightUpperLeg", "r_knee": "RightLowerLeg", "r_ankle": "RightFoot", "r_toe": "RightToes"}  # fmt: skip
-
-
-class Receiver:
-    """A VMC receiver on 127.0.0.1 (python-osc's UDP server): the messages of each
-    frame, the frame ending at /VMC/Ext/T."""
-
-    def __init__(self):
-        from pythonosc.dispatcher import Dispatcher
-        from pythonosc.osc_server import ThreadingOSCUDPServer
-
-        self.frames: list[dict] = []
-        self._current: dict = {"bones": {}}
-        dispatcher = Dispatcher()
-        dispatcher.set_default_handler(self._message)
-        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
-        self.server.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)  # (no frame dropped)
-        self.port = self.server.server_address[1]
-        self.lock = threading.Lock()
-        threading.Thread(target=self.server.serve_forever, daemon=True).start()
-
-    def _message(self, address, *args):
-        with self.lock:
-            if address == "/VMC/Ext/Root/Pos":
-                self._current["root"] = (args[0], np.array(args[1:4]), np.array(args[4:8]))
-            elif address == "/VMC/Ext/Bone/Pos":
-                self._current["bones"][args[0]] = (np.array(args[1:4]), np.array(args[4:8]))
-            elif address == "/VMC/Ext/OK":
-                self._current["ok"] = args
-            elif address == "/VMC/Ext/T":
-                self._current["t"] = args[0]
-                self.frames.append(self._current)
-                self._current = {"bones": {}}
-
-    def close(self):
-        self.server.shutdown()
-        self.server.server_close()
-
-
-@pytest.fixture
-def receiver():
-    r = Receiver()
-    yield r
-    r.close()
 
 
 def _rebuild(received: dict, skeleton) -> dict[str, np.ndarray]:
@@ -89,7 +43,7 @@ def _rebuild(received: dict, skeleton) -> dict[str, np.ndarray]:
     return {j: p * [-1.0, 1.0, 1.0] for j, p in world_pos.items()}
 
 
-def test_the_bones_rebuild_every_frame_within_a_millimetre(server, recording, receiver):
+def test_the_bones_rebuild_every_frame_within_a_millimetre(server, recording, vmc_receiver):
     from graphsvc.motion.kinematics import motion_fk
     from graphsvc.service.convert_graph import skeleton_from_proto
     from graphsvc.service.vmc import VmcSender
@@ -97,13 +51,13 @@ def test_the_bones_rebuild_every_frame_within_a_millimetre(server, recording, re
     with C.connect(f"127.0.0.1:{server.port}") as conn:
         info = C.resolve_graph(conn, "small")
         skeleton = skeleton_from_proto(info.skeleton)
-        sender = VmcSender(f"127.0.0.1:{receiver.port}", skeleton)
+        sender = VmcSender(f"127.0.0.1:{vmc_receiver.port}", skeleton)
         result = C.stream_recording(conn, "small", recording, speed=100.0, on_frame=sender.send)
-    wait_for(lambda: len(receiver.frames) == len(result.frames), timeout_s=10)
+    wait_for(lambda: len(vmc_receiver.frames) == len(result.frames), timeout_s=10)
     assert sender.sent == len(result.frames) > 30 and sender.failed == 0
     _, truth = motion_fk(result.motion())
     worst = 0.0
-    for k, (frame, received) in enumerate(zip(result.frames, receiver.frames)):
+    for k, (frame, received) in enumerate(zip(result.frames, vmc_receiver.frames)):
         assert received["t"] == pytest.approx(frame.time_s, abs=1e-5) and received["ok"] == (1,)
         assert sorted(received["bones"]) == sorted(BONES.values())
         rebuilt = _rebuild(received, skeleton)
@@ -112,15 +66,16 @@ def test_the_bones_rebuild_every_frame_within_a_millimetre(server, recording, re
     assert worst < 1e-3, worst
 
 
-def test_client_stream_sends_vmc_and_refuses_a_bad_address(server, rec_file, receiver, capsys):
+def test_client_stream_sends_vmc_and_refuses_a_bad_address(server, rec_file, vmc_receiver, capsys):
     from graphsvc.cli import main
 
     common = ["client", "stream", str(rec_file), "--server", f"127.0.0.1:{server.port}"]
-    assert main([*common, "--speed", "100", "--quiet", "--vmc", f"127.0.0.1:{receiver.port}", "--strategy", "nearest"]) == 0
+    vmc = f"127.0.0.1:{vmc_receiver.port}"
+    assert main([*common, "--speed", "100", "--quiet", "--vmc", vmc, "--strategy", "nearest"]) == 0
     out = capsys.readouterr().out
     frames = int(out.split(" frames from", 1)[0])
-    assert f"vmc: {frames} frames sent to 127.0.0.1:{receiver.port}" in out
-    wait_for(lambda: len(receiver.frames) == frames, timeout_s=10)
+    assert f"vmc: {frames} frames sent to {vmc}" in out
+    wait_for(lambda: len(vmc_receiver.frames) == frames, timeout_s=10)
     for bad, said in [("127.0.0.1", "expected HOST:PORT"), ("127.0.0.1:0", "port 1–65535"),
                       ("no-such-host.invalid:39539", "cannot resolve no-such-host.invalid")]:  # fmt: skip
         assert main([*common, "--vmc", bad]) == 2
