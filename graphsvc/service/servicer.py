@@ -159,8 +159,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         # Released when the call ends for any reason: the handler returning, the
         # client cancelling, the deadline passing, the server stopping.
         context.add_callback(release)
-        context.send_initial_metadata(((SERVER_METADATA, self.identity),))
         try:
+            # Which server holds the stream (behind a balancer, for the client to tell).
+            context.send_initial_metadata(((SERVER_METADATA, self.identity),))
             with self.threads.running():
                 yield from self._stream(request_iterator, context)
         except grpc.RpcError as exc:  # the client went away while we waited for its next message
