@@ -176,14 +176,19 @@ def _cmd_client_stream(args) -> int:
     if out is not None:
         _check_output(out, synthesize_inputs(args))
     _, start_s, pose = calibration_choice(args)
+    _vmc_address(args)
+    vmc = None
 
     def on_frame(frame, latency_ms):
+        if vmc is not None:
+            vmc.send(frame)
         if not args.quiet:
             print_flushed(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
                           f"  latency {latency_ms:7.2f} ms")  # fmt: skip
 
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
+        vmc = _vmc_sender(args, info)
         rec = _recording(args, info)
         options = _options(args, recording=rec)
         result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame,
@@ -191,11 +196,38 @@ def _cmd_client_stream(args) -> int:
     s = latency_summary(result.latencies_ms)
     lag = result.started.lag_frames if result.started else 0
     print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
-          f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms")  # fmt: skip
+          f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms"
+          + (f"; server {result.server}" if result.server else ""))  # fmt: skip
+    if vmc is not None:
+        print(vmc.summary())
     if out is not None:
         write_motion(out, result.motion(), scale=100.0)
         print(f"wrote {out}")
     return 0
+
+
+def _vmc_address(args) -> None:
+    """--vmc checked before anything connects (one line, exit 2 when malformed)."""
+    if getattr(args, "vmc", None) is not None:
+        from graphsvc.service.vmc import parse_vmc_address
+
+        parse_vmc_address(args.vmc)
+
+
+def _vmc_sender(args, info):
+    """The VMC sender of --vmc for the server graph `info`'s skeleton, or None."""
+    if getattr(args, "vmc", None) is None:
+        return None
+    from graphsvc.service.convert_graph import skeleton_from_proto
+    from graphsvc.service.vmc import VmcSender
+
+    return VmcSender(args.vmc, skeleton_from_proto(info.skeleton))
+
+
+def _add_vmc_flag(p) -> None:
+    p.add_argument("--vmc", metavar="HOST:PORT",
+                   help="also send each pose frame as it arrives to a VMC receiver (OSC over UDP: VSeeFace, EVMC4U, "
+                        "VMC4UE, VMC4B; e.g. 127.0.0.1:39539), Unity humanoid bones (default: none; docs/service.md)")
 
 
 def _cmd_sensor_bridge(args) -> int:
@@ -210,6 +242,7 @@ def _cmd_sensor_bridge(args) -> int:
         _check_output(out, [("the calibration", args.calibration), ("the constraints", args.constraints)])
     if args.calibrate_seconds < 0:
         raise GraphsvcError(f"--calibrate-seconds must be ≥ 0, got {args.calibrate_seconds}")
+    _vmc_address(args)
     options = _options(args)
     cal = None
     if args.calibration:
@@ -220,6 +253,7 @@ def _cmd_sensor_bridge(args) -> int:
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         mounting = None if cal is None else calibration_rotations(cal, tuple(info.sensor_names))
+        vmc = _vmc_sender(args, info)
         try:
             port = serial.Serial(args.device, args.baud, timeout=0.1)
         except (serial.SerialException, ValueError) as exc:
@@ -234,7 +268,7 @@ def _cmd_sensor_bridge(args) -> int:
                           + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
                              if args.calibrate_seconds else ""))  # fmt: skip
             result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration,
-                                mounting=mounting)  # fmt: skip
+                                on_frame=None if vmc is None else vmc.send, mounting=mounting)  # fmt: skip
         finally:
             port.close()
             for s, handler in previous.items():
@@ -252,6 +286,8 @@ def _cmd_sensor_bridge(args) -> int:
         print_flushed(f"sensor-bridge: calibration bias m/s²: {bias}")
         for w in cal.warnings:
             print_flushed(f"sensor-bridge: warning: {w}")
+    if vmc is not None:
+        print_flushed(f"sensor-bridge: {vmc.summary()}")
     if out is not None:
         if not result.stream.frames:
             raise GraphsvcError(f"no frames came back; {out} not written")
@@ -265,7 +301,10 @@ def _cmd_sensor_bridge(args) -> int:
 
 def _connection_parent() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(add_help=False)
-    p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR", help="HOST:PORT (default 127.0.0.1:50051)")
+    p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR",
+                   help="HOST:PORT, or several as HOST:PORT,HOST:PORT,... (each call to the next server that answers, "
+                        "gRPC's round_robin; a stream stays on its server), or a gRPC target such as "
+                        "dns:///NAME:PORT (default 127.0.0.1:50051)")
     p.add_argument("--graph", metavar="NAME", help="graph name on the server (default: its only graph)")
     p.add_argument("--token-file", metavar="F", type=PATH, help="file holding the bearer token (default: send none)")
     p.add_argument("--tls-ca", metavar="F", type=PATH, help="PEM CA certificate of the server: use TLS (default: plaintext)")
@@ -372,6 +411,7 @@ def add_client(sub) -> None:
     add_input_file_flags(c)
     add_calibration_flag(c)
     add_calibrate_from_start_flags(c)
+    _add_vmc_flag(c)
     add_search_flags(c, latency_help=_live_latency_help(". The summary names the stream's lag"))
     c.set_defaults(run=_cmd_client_stream)
 
@@ -393,5 +433,6 @@ def add_sensor_bridge(sub) -> None:
     p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH,
                    help="write the returned motion: .bvh (cm), .glb or .gltf (default: none)")
     add_calibration_flag(p)
+    _add_vmc_flag(p)
     add_search_flags(p, latency_help=_live_latency_help())
     p.set_defaults(run=_cmd_sensor_bridge)

@@ -19,7 +19,7 @@ def _cmd_serve(args) -> int:
                           max_message_mb=args.max_message_mb, grace_s=args.grace_s,
                           config_timeout_s=args.config_timeout_s,
                           batch_dir=args.batch_dir and Path(args.batch_dir), batch_scheduler=args.batch_scheduler,
-                          batch_workers=args.batch_workers,
+                          batch_workers=args.batch_workers, metrics_port=args.metrics_port,
                           live_workers=default_count() if args.live_workers is None else args.live_workers)  # fmt: skip
     if config.batch_dir is None and (args.batch_scheduler or args.batch_workers):
         raise GraphsvcError("--batch-scheduler and --batch-workers need --batch-dir")
@@ -68,6 +68,9 @@ def add_serve(sub) -> None:
     p.add_argument("--live-workers", type=ranged(int, 0, 256), metavar="N",
                    help="run the live streams' sessions in N worker processes, each stream in one (default: one a "
                         "core, 0 on a single core; 0: in the server's process)")  # fmt: skip
+    p.add_argument("--metrics-port", type=ranged(int, 0, 65535), metavar="P",
+                   help="serve Prometheus metrics at http://HOST:P/metrics (0: any free port, printed; default: none; "
+                        "docs/service.md, Metrics)")  # fmt: skip
     p.add_argument("--batch-dir", metavar="DIR", type=PATH, help="take batches (SubmitBatch …): their folders go here, and a "
                                                       "manifest's relative paths are taken from here (default: "
                                                       "take no batches)")  # fmt: skip

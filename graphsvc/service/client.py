@@ -13,6 +13,7 @@ the command line prints one line and exits 2.
 from __future__ import annotations
 
 import queue
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -29,6 +30,7 @@ from graphsvc.service.convert_graph import skeleton_from_proto
 from graphsvc.service.convert_motion import frames_to_motion, motion_from_proto
 from graphsvc.service.convert_recording import recording_to_proto, sample_to_proto
 from graphsvc.service.convert_report import report_from_proto
+from graphsvc.service.servers import PROBE_TIMEOUT_S, SERVER_METADATA, SERVICE_CONFIG, parse_servers, probe_all
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
@@ -78,21 +80,47 @@ def read_token_file(path) -> str:
     raise InputError(f"{path}: no token in the token file")
 
 
-def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None, tls_server_name: str | None = None) -> Connection:
-    """A connection to `address` (HOST:PORT). tls_ca: PEM file of the CA that signed
-    the server's certificate (TLS on); None: plaintext. token: sent as
-    `authorization: Bearer <token>` on every call (in the clear without TLS).
-    tls_server_name: the name to check the certificate against, if not the host."""
+def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None, tls_server_name: str | None = None,
+            warn: Callable[[str], None] | None = None) -> Connection:  # fmt: skip
+    """A connection to `address`: HOST:PORT, several as HOST:PORT,HOST:PORT,… or a gRPC
+    target (`servers.parse_servers`), calls spread over them by gRPC's `round_robin`
+    (a stream stays on its server). With several, each is probed first: warn(line) (default:
+    to stderr) names one that does not answer; none answering is NoServerAnswers.
+    tls_ca: PEM file of the CA that signed the server's certificate (TLS on); None:
+    plaintext. token: sent as `authorization: Bearer <token>` on every call (in the
+    clear without TLS). tls_server_name: the name to check the certificate against, if
+    not the host."""
+    servers = parse_servers(address)
     # The server enforces its message limit; the client takes whatever it is sent
     # (a long recording's motion plus BVH easily exceeds gRPC's 4 MiB default).
     options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+    credentials = None
     if tls_ca is not None:
-        if tls_server_name:
-            options.append(("grpc.ssl_target_name_override", tls_server_name))
+        name = tls_server_name or servers.host
+        if name:
+            options.append(("grpc.ssl_target_name_override", name))
         credentials = grpc.ssl_channel_credentials(root_certificates=read_input_bytes(tls_ca, "TLS CA"))
-        channel = grpc.secure_channel(address, credentials, options=options)
+    options.append(("grpc.service_config", SERVICE_CONFIG))
+    settle_s = None
+    if len(servers.addresses) > 1:
+        settle_s = probe_all(servers, credentials, options,
+                             warn or (lambda line: print(f"graphsvc: {line}", file=sys.stderr)))  # fmt: skip
+    if credentials is not None:
+        channel = grpc.secure_channel(servers.target, credentials, options=options)
     else:
-        channel = grpc.insecure_channel(address, options=options)
+        channel = grpc.insecure_channel(servers.target, options=options)
+    if settle_s is not None:
+        # round_robin connects to every server at once, and picks only among those
+        # connected: calls made as soon as the first is would all go to it (a bridge
+        # or `client stream` makes one, so every such client would pick the same
+        # server). Wait for the channel, then about as long again as the slowest probe
+        # took, so the others are connected too and the first pick is round_robin's
+        # own random one among them all.
+        try:
+            grpc.channel_ready_future(channel).result(timeout=PROBE_TIMEOUT_S)
+            time.sleep(min(settle_s, 1.0))
+        except grpc.FutureTimeoutError:
+            pass  # (the first call says why)
     metadata = (("authorization", f"Bearer {token}"),) if token else ()
     return Connection(channel, pb_grpc.MotionGraphServiceStub(channel), metadata, address)
 
@@ -203,6 +231,7 @@ class StreamResult:
     frames: list = field(default_factory=list)
     latencies_ms: list = field(default_factory=list)
     finished: pb.StreamFinished | None = None
+    server: str = ""  # "HOST pid PID" of the server that held the stream (behind a balancer: which one)
 
     def motion(self) -> Motion:
         if self.started is None:
@@ -234,6 +263,7 @@ def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = N
                     on_frame(frame, latency)
             elif kind == "started":
                 result.started = response.started
+                result.server = dict(call.initial_metadata() or ()).get(SERVER_METADATA, "")
             elif kind == "finished":
                 result.finished = response.finished
     except grpc.RpcError as exc:

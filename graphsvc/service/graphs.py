@@ -6,6 +6,7 @@ by every call.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +25,7 @@ class LoadedGraph:
     path: Path
     graph: object  # graphsvc.graph.model.MotionGraph
     info: pb.GraphInfo
+    load_s: float = 0.0  # mapping, checking and warming it up in this process, seconds
 
 
 def parse_graph_spec(text: str) -> tuple[str, Path]:
@@ -44,10 +46,12 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
         name, path = parse_graph_spec(spec)
         if name in graphs:
             raise InputError(f"graph name {name!r} given twice")
+        start = time.perf_counter()
         graph = load_graph(path)
         # Every strategy's index, and its kernels compiled or loaded (serial, and
         # threaded for a stream running alone), now, not in the first client's call.
         warm_up(graph, threads=False)
         warm_up(graph, threads=True)
-        graphs[name] = LoadedGraph(name, path, graph, graph_info(name, graph, path.stat().st_size))
+        graphs[name] = LoadedGraph(name, path, graph, graph_info(name, graph, path.stat().st_size),
+                                   time.perf_counter() - start)
     return graphs

@@ -367,6 +367,10 @@ class LiveWorkers:
     def pids(self) -> list[int]:
         return [w.pid for w in self._workers if w is not None and w.alive]
 
+    def processes(self) -> list[tuple[int, int]]:
+        """(slot 0…count−1, pid) of each worker alive."""
+        return [(w.index, w.pid) for w in self._workers if w is not None and w.alive]
+
     # ------------------------------------------------------------ answers and deaths
 
     def _receive(self, worker: _Worker) -> None:

@@ -49,6 +49,7 @@ from graphsvc.service._generated import graphsvc_pb2 as pb, graphsvc_pb2_grpc as
 from graphsvc.service.graphs import LoadedGraph, load_graphs, parse_graph_spec
 from graphsvc.service.interceptors import BearerTokenInterceptor, CallGate, read_tokens
 from graphsvc.service.live_workers import LiveWorkers
+from graphsvc.service.metrics import Metrics, StatusCounter
 from graphsvc.service.servicer import MotionGraphServicer
 from graphsvc.service.streams import CONFIG_TIMEOUT_S
 
@@ -86,6 +87,8 @@ class ServerConfig:
     # Live sessions run in this many worker processes (`live_workers`); 0: in the
     # server's own process.
     live_workers: int = 0
+    # Prometheus metrics on this port (`metrics`; 0: any free one), on `host`; None: none.
+    metrics_port: int | None = None
 
 
 # ---------------------------------------------------------------- running
@@ -99,6 +102,7 @@ class RunningServer:
     servicer: MotionGraphServicer
     graphs: dict[str, LoadedGraph] = field(default_factory=dict)
     gate: CallGate = field(default_factory=CallGate)
+    metrics: Metrics | None = None  # with its endpoint's port, metrics.port
 
     def stop(self, grace_s: float | None = None, give_up_s: float = 10.0) -> None:
         """Health turns NOT_SERVING (and goes on answering), every other new call is
@@ -125,6 +129,8 @@ class RunningServer:
             self.servicer.batches.close()
         if self.servicer.live_workers is not None:
             self.servicer.live_workers.stop()
+        if self.metrics is not None:
+            self.metrics.close()
 
 
 def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None:
@@ -219,11 +225,15 @@ class BoundServer:
     health: health.HealthServicer
     servicer: MotionGraphServicer
     gate: CallGate
+    metrics: Metrics | None = None
+    bound_at: float = 0.0  # time.monotonic() when the port was bound
 
     def close(self, give_up_s: float = 5.0) -> None:
         """Stop at once (its graphs could not be served), waiting at most give_up_s for
         gRPC's shutdown (see RunningServer.stop)."""
         self.server.stop(0).wait(give_up_s)
+        if self.metrics is not None:
+            self.metrics.close()
 
 
 def bind_server(config: ServerConfig) -> BoundServer:
@@ -251,8 +261,12 @@ def bind_server(config: ServerConfig) -> BoundServer:
     options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
                ("grpc.so_reuseport", 0), ("grpc.keepalive_time_ms", 30_000), ("grpc.keepalive_timeout_ms", 10_000),
                ("grpc.http2.max_pings_without_data", 0)]  # fmt: skip
-    gate = CallGate()  # outermost: while loading or draining, nothing else runs
+    gate = CallGate()  # outermost but for the counter: while loading or draining, nothing else runs
     interceptors = [gate] + ([BearerTokenInterceptor(config.tokens)] if config.tokens else [])
+    metrics = None
+    if config.metrics_port is not None:
+        metrics = Metrics()
+        interceptors.insert(0, StatusCounter(metrics))  # (sees what the gate and the token check refuse)
     executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
     server = grpc.server(executor, interceptors=interceptors, options=options)
     address = f"{config.host}:{config.port}"
@@ -270,7 +284,10 @@ def bind_server(config: ServerConfig) -> BoundServer:
     if logged[0]:  # (nothing gRPC logged beside a bind that worked is lost)
         sys.stderr.write(logged[0])
     try:
-        servicer = MotionGraphServicer({}, config.max_streams, config_timeout_s=config.config_timeout_s)
+        if metrics is not None:  # (after the gRPC port: the same port for both is refused here, one line)
+            metrics.serve(config.host, config.metrics_port)
+        servicer = MotionGraphServicer({}, config.max_streams, config_timeout_s=config.config_timeout_s,
+                                       metrics=metrics)  # fmt: skip
         pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
         health_servicer = health.HealthServicer(experimental_non_blocking=True,
                                                 experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
@@ -281,8 +298,10 @@ def bind_server(config: ServerConfig) -> BoundServer:
         server.start()
     except BaseException:
         server.stop(0).wait(5.0)
+        if metrics is not None:
+            metrics.close()
         raise
-    return BoundServer(server, port, config.max_streams, health_servicer, servicer, gate)
+    return BoundServer(server, port, config.max_streams, health_servicer, servicer, gate, metrics, time.monotonic())
 
 
 def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None,
@@ -303,13 +322,18 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
         if workers is not None:
             workers.start()
         bound.servicer.take(graphs, batches, workers)
+        if bound.metrics is not None:
+            bound.metrics.attach(bound.servicer, workers)
+            for name, g in graphs.items():
+                bound.metrics.graph_load_seconds.labels(name).set(g.load_s)
+            bound.metrics.start_seconds.set(time.monotonic() - bound.bound_at)
     except BaseException:
         bound.close()
         raise
     bound.gate.open()  # (before SERVING: a client that sees SERVING gets through)
     for name in ("", SERVICE_NAME):
         bound.health.set(name, health_pb2.HealthCheckResponse.SERVING)
-    return RunningServer(bound.server, bound.port, bound.health, bound.servicer, graphs, bound.gate)
+    return RunningServer(bound.server, bound.port, bound.health, bound.servicer, graphs, bound.gate, bound.metrics)
 
 
 def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None,
@@ -325,7 +349,9 @@ def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, 
         auth = f"{len(config.tokens)} token(s)" if config.tokens else "no authentication"
         announce(f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "
                  + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values())
-                 + (f"; live sessions in {workers.count} worker process(es)" if workers is not None else ""))  # fmt: skip
+                 + (f"; live sessions in {workers.count} worker process(es)" if workers is not None else "")
+                 + (f"; metrics on http://{config.host}:{running.metrics.port}/metrics"
+                    if running.metrics is not None else ""))  # fmt: skip
         while not stop.wait(0.5):  # a timed wait keeps the main thread responsive to signals
             pass
         announce(f"graphsvc serve: stopping, {running.servicer.slots.active} stream(s) in flight, grace {config.grace_s:g} s")

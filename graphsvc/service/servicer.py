@@ -12,6 +12,10 @@ runs; its first message must be its StreamConfig.
 
 from __future__ import annotations
 
+import os
+import socket
+import time
+
 import grpc
 
 from graphsvc.batch.service import BatchNotFound
@@ -25,6 +29,7 @@ from graphsvc.service.convert_report import batch_status_to_proto, report_to_pro
 from graphsvc.service.graphs import LoadedGraph
 from graphsvc.service.live_workers import LiveWorkers
 from graphsvc.service.options_proto import options_from_proto, performer_from_proto
+from graphsvc.service.servers import SERVER_METADATA
 from graphsvc.service.status import RpcStatus, abort_for
 from graphsvc.service.streams import CONFIG_TIMEOUT_S, StartCalibration, StreamInput, StreamSlots, first_message
 from graphsvc.strategies import check_options, get as get_strategy
@@ -44,8 +49,12 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
 
     def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None,
                  config_timeout_s: float = CONFIG_TIMEOUT_S,
-                 live_workers: LiveWorkers | None = None):  # fmt: skip
+                 live_workers: LiveWorkers | None = None, metrics=None):  # fmt: skip
         self.graphs = graphs
+        self.metrics = metrics  # a metrics.Metrics, or None (no --metrics-port)
+        # Sent at the start of every stream (initial metadata SERVER_METADATA): which
+        # server behind a balancer holds it.
+        self.identity = f"{socket.gethostname()} pid {os.getpid()}"
         self.live_workers = live_workers  # live sessions in worker processes (None: in this process)
         self.config_timeout_s = config_timeout_s
         self.batches = batches  # a batch.service.BatchManager, or None
@@ -151,6 +160,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         # client cancelling, the deadline passing, the server stopping.
         context.add_callback(release)
         try:
+            # Which server holds the stream (behind a balancer, for the client to tell).
+            context.send_initial_metadata(((SERVER_METADATA, self.identity),))
             with self.threads.running():
                 yield from self._stream(request_iterator, context)
         except grpc.RpcError as exc:  # the client went away while we waited for its next message
@@ -179,6 +190,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         stream = StreamInput.of(config, graph, strategy)
         calibration = StartCalibration.of(config, graph, stream.names)
         session = self._open_session(loaded, options, strategy, stream)
+        metrics = self.metrics
+        if metrics is not None:
+            metrics.streams_started.inc()
         try:
             yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
                 graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames,
@@ -197,18 +211,26 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 if kind is None:
                     raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
                 sample_index += 1
+                arrived = time.perf_counter()
                 sample = stream.sample(request.sample, previous_t, f"sample[{sample_index}]")
                 previous_t = sample[0]
                 for frame in self._push(session, [sample] if calibration is None else calibration.add(sample),
                                         sample_index):  # fmt: skip
                     yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, sample_index))
                     frames_out += 1
+                    if metrics is not None:
+                        metrics.frames.inc()
+                if metrics is not None:
+                    metrics.samples.inc()
+                    metrics.sample_seconds.observe(time.perf_counter() - arrived)
             if not context.is_active():
                 return
             if calibration is not None:  # (a stream that ended within its calibrating seconds)
                 for frame in self._push(session, calibration.finish(), sample_index):
                     yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, sample_index))
                     frames_out += 1
+                    if metrics is not None:
+                        metrics.frames.inc()
             try:
                 with self.threads.step() as threaded:
                     session.threads = threaded
@@ -219,6 +241,8 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             for frame in frames:
                 yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, max(sample_index, 0)))
                 frames_out += 1
+            if metrics is not None:
+                metrics.frames.inc(len(frames))
             yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,
                                                                          frames_emitted=frames_out))  # fmt: skip
         finally:
@@ -231,9 +255,12 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         frames = []
         for t, acc, position, heading, markers, orientations in samples:
             try:
+                start = time.perf_counter()
                 with self.threads.step() as threaded:  # the threads while this stream runs alone
                     session.threads = threaded
                     frames += session.push(t, acc, position, heading, markers=markers, orientations=orientations)
+                if self.metrics is not None:
+                    self.metrics.push_seconds.observe(time.perf_counter() - start)
             except InputError as exc:
                 raise FieldError(f"sample[{sample_index}]", str(exc)) from None
         return frames

@@ -180,3 +180,77 @@ def stream_requests(config, samples):
     yield pb.StreamSynthesizeRequest(config=config)
     for s in samples:
         yield pb.StreamSynthesizeRequest(sample=s)
+
+
+def scrape(port: int) -> dict:
+    """The metrics endpoint on 127.0.0.1:port: (name, sorted label pairs) → value."""
+    import urllib.request
+
+    from prometheus_client.parser import text_string_to_metric_families
+
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as response:
+        text = response.read().decode()
+    return {(s.name, tuple(sorted(s.labels.items()))): s.value
+            for family in text_string_to_metric_families(text) for s in family.samples}  # fmt: skip
+
+
+def nearest_options():
+    """SynthesisOptions of the `nearest` strategy: the cheapest live session, for tests
+    of what carries the streams rather than what they compute."""
+    from graphsvc.pipeline import Options
+    from graphsvc.service.convert import options_to_proto
+
+    return options_to_proto(Options(strategy="nearest"))
+
+
+class VmcReceiver:
+    """A VMC receiver on 127.0.0.1 (python-osc's UDP server): the messages of each
+    frame, the frame ending at /VMC/Ext/T."""
+
+    def __init__(self):
+        import socket
+        import threading
+
+        from pythonosc.dispatcher import Dispatcher
+        from pythonosc.osc_server import ThreadingOSCUDPServer
+
+        self.frames: list[dict] = []
+        self._current: dict = {"bones": {}}
+        dispatcher = Dispatcher()
+        dispatcher.set_default_handler(self._message)
+        self.server = ThreadingOSCUDPServer(("127.0.0.1", 0), dispatcher)
+        self.server.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)  # (no frame dropped)
+        self.port = self.server.server_address[1]
+        self.lock = threading.Lock()
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def _message(self, address, *args):
+        with self.lock:
+            if address == "/VMC/Ext/Root/Pos":
+                self._current["root"] = (args[0], np.array(args[1:4]), np.array(args[4:8]))
+            elif address == "/VMC/Ext/Bone/Pos":
+                self._current["bones"][args[0]] = (np.array(args[1:4]), np.array(args[4:8]))
+            elif address == "/VMC/Ext/OK":
+                self._current["ok"] = args
+            elif address == "/VMC/Ext/T":
+                self._current["t"] = args[0]
+                self.frames.append(self._current)
+                self._current = {"bones": {}}
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def receiver():
+    r = Receiver()
+    yield r
+    r.close()
+
+
+@pytest.fixture
+def vmc_receiver():
+    r = VmcReceiver()
+    yield r
+    r.close()

@@ -188,12 +188,16 @@ CLI_CASES = {
     "serve token file empty": ["serve", "--graph", "g={graph}", "--port", "0", "--token-file", "{empty}"],
     "serve cert without key": ["serve", "--graph", "g={graph}", "--port", "0", "--tls-cert", "{txt}"],
     "serve batch dir missing": ["serve", "--graph", "g={graph}", "--port", "0", "--batch-dir", "{dir}/no"],
+    "serve metrics port out of range": ["serve", "--graph", "g={graph}", "--port", "0", "--metrics-port", "70000"],
+    "serve metrics port text": ["serve", "--graph", "g={graph}", "--port", "0", "--metrics-port", "http"],
     "serve batch workers zero": ["serve", "--graph", "g={graph}", "--port", "0", "--batch-dir", "{dir}",
                                  "--batch-workers", "0"],
     # client
     "client nothing": ["client"],
     "client graphs empty server": ["client", "graphs", "--server", ""],
     "client graphs bad address": ["client", "graphs", "--server", "no such host:::1", "--timeout", "2"],
+    "client graphs server list empty entry": ["client", "graphs", "--server", "{server},,{server}"],
+    "client graphs server list without port": ["client", "graphs", "--server", "{server},127.0.0.1"],
     "client graphs timeout nan": ["client", "graphs", "--server", "{server}", "--timeout", "nan"],
     "client graphs timeout negative": ["client", "graphs", "--server", "{server}", "--timeout", "-1"],
     "client graphs timeout inf": ["client", "graphs", "--server", "{server}", "--timeout", BIG],
@@ -212,6 +216,9 @@ CLI_CASES = {
     "client stream speed zero": [*C_STREAM, "--speed", "0"],
     "client stream speed inf": [*C_STREAM, "--speed", BIG],
     "client stream latency negative": [*C_STREAM, "--latency", "-1"],
+    "client stream vmc without port": [*C_STREAM, "--vmc", "127.0.0.1"],
+    "client stream vmc port zero": [*C_STREAM, "--vmc", "127.0.0.1:0"],
+    "client stream vmc unresolvable": [*C_STREAM, "--vmc", "no-such-host.invalid:39539"],
     "client stream garbage recording": ["client", "stream", "{txt}", *CLIENT],
     "client batch nothing": ["client", "batch"],
     "client batch submit missing manifest": ["client", "batch", "submit", "{dir}/m.csv", *CLIENT],
@@ -227,6 +234,7 @@ CLI_CASES = {
     "bridge duration negative": [*BRIDGE, "--duration", "-1"],
     "bridge calibrate seconds inf": [*BRIDGE, "--calibrate-seconds", BIG],
     "bridge weights nan": [*BRIDGE, "--weights", "nan,1,1"],
+    "bridge vmc bad port": [*BRIDGE, "--vmc", "127.0.0.1:99999"],
 }
 
 

@@ -121,18 +121,19 @@ def _unread(fd) -> int:
     return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
 
 
-def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path):
+def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path, vmc_receiver):
     from graphsvc.motion.bvh import read_bvh
     from graphsvc.pipeline import open_session, Options
     from graphsvc.service.convert import rest_pose_readings
-    from tests.service.conftest import popen_cli
+    from tests.service.conftest import popen_cli, wait_for
 
     master, slave = os.openpty()
     tty.setraw(slave)  # as pyserial will: no echo, no line editing, before the bridge opens it
     out = tmp_path / "bridge.bvh"
     proc = popen_cli("sensor-bridge", "--device", os.ttyname(slave), "--baud", "115200",
                      "--server", f"127.0.0.1:{server.port}", "--graph", "small", "--units", "g",
-                     "--calibrate-seconds", "0.5", "--latency", "0.3", "-o", out)  # fmt: skip
+                     "--calibrate-seconds", "0.5", "--latency", "0.3", "-o", out,
+                     "--vmc", f"127.0.0.1:{vmc_receiver.port}")  # fmt: skip
     try:
         first = proc.stdout.readline()
         assert first.startswith("sensor-bridge: reading"), first + proc.stderr.read()
@@ -166,6 +167,8 @@ def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path):
             proc.kill()
     assert proc.returncode == 0, stdout + stderr
     assert "3 corrupt skipped (3 wrong field count)" in stdout
+    assert f"sensor-bridge: vmc: {recording.num_samples} frames sent to 127.0.0.1:{vmc_receiver.port}" in stdout
+    wait_for(lambda: len(vmc_receiver.frames) == recording.num_samples)  # (each frame out as it came)
     assert f"→ {recording.num_samples} samples at 30 Hz" in stdout
     got_bias = np.array([float(v) for v in re.findall(r"[+-]\d+\.\d+", stdout.split("calibration bias m/s²:")[1].splitlines()[0])])
     np.testing.assert_allclose(got_bias.reshape(S, 3), bias, atol=0.006)

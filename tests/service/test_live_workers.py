@@ -17,12 +17,12 @@ from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
 from tests.service.conftest import assert_frames_equal, live_frames, start
 from tests.service.conftest import rpc_error
-from tests.service.conftest import wait_for
+from tests.service.conftest import scrape, wait_for
 
 
 @pytest.fixture(scope="module")
 def worker_server(loaded_graphs):
-    running = start(loaded_graphs, max_streams=6, live_workers=2)
+    running = start(loaded_graphs, max_streams=6, live_workers=2, metrics_port=0)
     running.servicer.live_workers.restart_delay_s = 0.2
     yield running
     pids = running.servicer.live_workers.pids()
@@ -172,6 +172,15 @@ def test_a_killed_worker_ends_its_streams_unavailable_and_is_replaced(worker_ser
     assert f"live worker process {victim.pid}" in str(error) and "killed by signal 9" in str(error)
     wait_for(lambda: workers.replaced == replaced + 1 and len(workers.pids()) == 2, timeout_s=120)
     assert victim.pid not in workers.pids()
+    # What an operator sees: the restart, the refusal, each worker's CPU and memory by its slot.
+    seen = scrape(worker_server.metrics.port)
+    assert seen[("graphsvc_live_worker_restarts_total", ())] == workers.replaced == replaced + 1
+    assert seen[("graphsvc_refusals_total", (("code", "UNAVAILABLE"),))] >= 1
+    for kind in ("graphsvc_process_cpu_seconds_total", "graphsvc_process_resident_bytes"):
+        series = {dict(labels)["pid"]: (dict(labels)["worker"], v) for (name, labels), v in seen.items()
+                  if name == kind and dict(labels)["role"] == "worker"}  # fmt: skip
+        assert {int(p): w for p, (w, _) in series.items()} == {w.pid: str(w.index) for w in workers._workers}
+        assert all(v > 0 for _, v in series.values())
     expected, _ = live_frames(graph, recording, Options())
     assert_frames_equal(expected, C.run_stream(wconn, _whole_feed(recording), timeout_s=60).frames)
 
