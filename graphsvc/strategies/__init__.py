@@ -39,6 +39,7 @@ BUILTIN = (
     "graphsvc.strategies.olng",
     "graphsvc.strategies.ssg",
     "graphsvc.strategies.piecewise",
+    "graphsvc.strategies.multilinear",
 )
 PLANNED: tuple[str, ...] = ()  # specified, not built: asked for, they answer "not implemented yet"
 _REGISTRY: dict[str, Strategy] = {}
