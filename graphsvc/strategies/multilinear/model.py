@@ -235,14 +235,20 @@ def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, 
         X[:, :, k // R, k % R] = warp_values(v, times, d).T
         row_frame[k] = a + times
         row_readings[k] = tn.sample(np.asarray(data["readings"], np.float64)[start[c] + a: start[c] + b], times)
+    return {**decompose(X, variance), "row_clip": np.array([c for c, _, _ in rows], np.int64), "row_frame": row_frame,
+            "row_readings": row_readings}  # fmt: skip
+
+
+def decompose(X: np.ndarray, variance: float) -> dict[str, np.ndarray]:
+    """A tensor X (V, F, S, R) centred and decomposed (module docstring, 5): its mean
+    unit (V, F), Φ_t (V, F, kS, kR), the full U_S, U_R, each mode's singular values,
+    the kept counts (2,) and the centred tensor."""
     mean = X.mean(axis=(2, 3))
     X = X - mean[:, :, None, None]
     core, Us, ss = tn.hosvd(X, {2: variance, 3: variance})
     return {"mean": mean, "core_t": tn.natural_core(X, Us[2], Us[3]), "u_style": tn.mode_svd(X, 2)[0],
             "u_rep": tn.mode_svd(X, 3)[0], "sv_style": ss[2], "sv_rep": ss[3], "sv_values": ss[0], "sv_frames": ss[1],
-            "kept": np.array([Us[2].shape[1], Us[3].shape[1]], np.int64),
-            "row_clip": np.array([c for c, _, _ in rows], np.int64), "row_frame": row_frame,
-            "row_readings": row_readings, "tensor": X}  # fmt: skip
+            "kept": np.array([Us[2].shape[1], Us[3].shape[1]], np.int64), "tensor": X}  # fmt: skip
 
 
 def usable_clips(graph: MotionGraph, allowed: np.ndarray | None) -> np.ndarray:
@@ -313,17 +319,22 @@ class Tensor:
     def row_weights(self, x_s: np.ndarray, x_r: np.ndarray) -> np.ndarray:
         """(S·R,) how much of each original row a motion of coefficients x_S, x_R holds."""
         kS, kR = self.kept
-        rows = self.u_style.shape[0] * self.u_rep.shape[0]
-        return 1.0 / rows + np.outer(self.u_style[:, :kS] @ x_s, self.u_rep[:, :kR] @ x_r).reshape(-1)
+        ab = np.outer(self.u_style[:, :kS] @ x_s, self.u_rep[:, :kR] @ x_r).reshape(-1)
+        # (M + Σ ab·(X_sr − M), M the rows' mean: each row's weight ab + (1 − Σ ab) / rows, summing to 1)
+        return ab + (1.0 - ab.sum()) / ab.size
 
     def values(self, x_s: np.ndarray, x_r: np.ndarray) -> np.ndarray:
         """(F, V) the unit M + m(x_S, x_R) on the reference frames."""
         return (self.mean + tn.synthesize(self.core_t, x_s, x_r)).T
 
 
+def tensor_of(t: dict, label: int = 0, foot: int = -1) -> Tensor:
+    """A Tensor from one tensor's arrays (`decompose`'s, with the rows' clip, frames and readings)."""
+    return Tensor(label, foot, int(np.asarray(t["core_t"]).shape[1]), *(np.asarray(t[k]) for k in (
+        "mean", "core_t", "u_style", "u_rep", "row_clip", "row_frame", "row_readings")))  # fmt: skip
+
+
 def tensors_of(arrays: dict) -> list[Tensor]:
     table = np.asarray(arrays["tensors"])
-    return [Tensor(int(row[0]), int(row[1]), int(row[2]), np.asarray(arrays[f"t{i}.mean"]), np.asarray(arrays[f"t{i}.core_t"]),
-                   np.asarray(arrays[f"t{i}.u_style"]), np.asarray(arrays[f"t{i}.u_rep"]),
-                   np.asarray(arrays[f"t{i}.row_clip"]), np.asarray(arrays[f"t{i}.row_frame"]),
-                   np.asarray(arrays[f"t{i}.row_readings"])) for i, row in enumerate(table)]  # fmt: skip
+    return [tensor_of({k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith(f"t{i}.")}, int(row[0]),
+                      int(row[1])) for i, row in enumerate(table)]  # fmt: skip
