@@ -31,7 +31,7 @@ from graphsvc.strategies.multilinear.strategy import learned_model
 LAYOUT = PRESETS["wrists-ankles"]
 
 
-def _clips(seed=3, seconds=4.0):
+def _clips(seed=3, seconds=3.0):
     """Walks and punches in two styles, three takes each, and one take of standing."""
     rng = np.random.default_rng(seed)
     sk = standard_skeleton()
@@ -67,7 +67,7 @@ def test_hosvd_keeps_the_stated_variance_and_gives_back_its_rows():
             energy = np.cumsum(s ** 2) / np.sum(s ** 2)
             kept = int(t["kept"][k])
             assert energy[kept - 1] >= share - 1e-12 and (kept == 1 or energy[kept - 2] < share), (share, mode)
-            np.testing.assert_allclose(t["sv_style" if mode == 2 else "sv_rep"], s, rtol=1e-12)
+            np.testing.assert_allclose(t["sv_style" if mode == 2 else "sv_rep"], s, rtol=0, atol=1e-9 * s[0])
     # every row back from its own rows of the untruncated matrices, up to float error
     full = tensor_of({**decompose(X, 1.0), "row_clip": np.zeros(24), "row_frame": np.zeros((24, 5)),
                       "row_readings": np.zeros((24, 5, 3))})  # fmt: skip

@@ -18,7 +18,8 @@ a run may use (a hidden clip — every node of it disallowed — is left out):
    classes' units are their whole clips.
 3. A frame of a unit is V values: the local pose (`synthesis.local_pose`: the pelvis
    rotation without the heading, its height, every joint's local rotation under the
-   pelvis), the root's step into the frame (2, m, in the previous frame's heading
+   pelvis; each quaternion on the side of its joint's principal direction over the
+   knowledge base, `align_hemispheres`, not w ≥ 0), the root's step into the frame (2, m, in the previous frame's heading
    frame) and turn (rad), and the two feet's contacts (0/1).
 4. Rows: per style its units in take and time order, R = the most any style has, at
    most `max_reps` (an even choice among them); a style with fewer repeats its own
@@ -65,7 +66,7 @@ from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
 LOCOMOTION_SPEED = 0.4  # m/s, a class's median clip ground speed
 MIN_STEP_S = 0.15
 MAX_STEP_S = 1.2
-MODEL_VERSION = 1
+MODEL_VERSION = 2
 DTW_SIGMA = 0.25  # the DTW time map's smoothing, a share of the reference's frames
 _TAKE = re.compile(r"^(?P<stem>.*[A-Za-z].*)_(?P<take>\d{3,})$")
 EXTRA = 5  # values after the pose: step x, step z, turn, left contact, right contact
@@ -98,6 +99,8 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
         values[start[c]: start[c + 1], : layout.dims] = pose_vectors(
             graph.node_rotations[n].astype(np.float64), graph.node_translations[n].astype(np.float64), parents, layout,
             graph.node_heading[n].astype(np.float64))  # fmt: skip
+    refs = hemisphere_refs(values[:, : layout.dims], layout.slot)
+    align_hemispheres(values, refs, layout.slot)
     e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
     into = np.full(graph.num_nodes, -1, np.int64)
     into[np.asarray(graph.edge_dst)[e]] = e
@@ -120,7 +123,27 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
         if g.shape[0] > 1:
             speed[c] = float(np.linalg.norm(np.diff(g, axis=0), axis=1).sum()) * graph.rate_hz / (g.shape[0] - 1)
     return {"clip_start": start, "nodes": nodes, "values": values, "readings": readings, "speed": speed,
-            "pose_dims": np.array([d], np.int64)}  # fmt: skip
+            "pose_dims": np.array([d], np.int64), "hemispheres": refs}  # fmt: skip
+
+
+def hemisphere_refs(poses: np.ndarray, slot: np.ndarray) -> np.ndarray:
+    """(K, 4) per quaternion of the pose vectors (F, D) its principal direction: the top
+    eigenvector of Σ q qᵀ over the frames."""
+    refs = np.empty((slot.size, 4))
+    for k, s in enumerate(slot):
+        q = np.asarray(poses[:, s: s + 4], dtype=np.float64)
+        refs[k] = np.linalg.eigh(q.T @ q)[1][:, -1]
+    return refs
+
+
+def align_hemispheres(values: np.ndarray, refs: np.ndarray, slot: np.ndarray) -> None:
+    """Each quaternion of values (F, ≥ D) onto the side of its slot's principal
+    direction, in place. (The local pose's w ≥ 0 side is discontinuous for a joint
+    whose rotation stays near 180°: Bandai's skeleton has two such, whose w is within
+    0.3 of zero in every frame, and a mix of units across the flip is no rotation.)"""
+    for k, s in enumerate(slot):
+        flip = values[:, s: s + 4] @ refs[k] < 0.0
+        values[flip, s: s + 4] *= -1.0
 
 
 def touchdowns(contacts: np.ndarray, min_gap: int) -> list[tuple[int, int]]:
@@ -245,10 +268,11 @@ def decompose(X: np.ndarray, variance: float) -> dict[str, np.ndarray]:
     the kept counts (2,) and the centred tensor."""
     mean = X.mean(axis=(2, 3))
     X = X - mean[:, :, None, None]
-    core, Us, ss = tn.hosvd(X, {2: variance, 3: variance})
-    return {"mean": mean, "core_t": tn.natural_core(X, Us[2], Us[3]), "u_style": tn.mode_svd(X, 2)[0],
-            "u_rep": tn.mode_svd(X, 3)[0], "sv_style": ss[2], "sv_rep": ss[3], "sv_values": ss[0], "sv_frames": ss[1],
-            "kept": np.array([Us[2].shape[1], Us[3].shape[1]], np.int64), "tensor": X}  # fmt: skip
+    Us, ss = zip(*(tn.mode_svd(X, mode) for mode in range(4)))
+    kS, kR = tn.kept_count(ss[2], variance), tn.kept_count(ss[3], variance)
+    return {"mean": mean, "core_t": tn.natural_core(X, Us[2][:, :kS], Us[3][:, :kR]), "u_style": Us[2],
+            "u_rep": Us[3], "sv_style": ss[2], "sv_rep": ss[3], "sv_values": ss[0], "sv_frames": ss[1],
+            "kept": np.array([kS, kR], np.int64), "tensor": X}  # fmt: skip
 
 
 def usable_clips(graph: MotionGraph, allowed: np.ndarray | None) -> np.ndarray:

@@ -17,9 +17,9 @@ class MultilinearOptions:
     warp: optimise each unit's time warp too; evaluations: the most residual
     evaluations a unit's least squares may make."""
 
-    variance: float = option(0.9, low=0.0, high=1.0, low_open=True, label="multilinear variance",
+    variance: float = option(0.99, low=0.0, high=1.0, low_open=True, label="multilinear variance",
                              noun="a share above 0 and at most 1",
-                             help="share of each natural mode's variance its truncation keeps (default 0.9)")  # fmt: skip
+                             help="share of each natural mode's variance its truncation keeps (default 0.99)")  # fmt: skip
     align: str = option("linear", choices=("linear", "dtw"), label="multilinear align",
                         help="how a class's units are put on its reference's frames: linear (uniform time scaling, "
                              "the default) or dtw")  # fmt: skip

@@ -44,7 +44,7 @@ from graphsvc.strategies.index import cached_arrays
 from graphsvc.strategies.inputs import PreparedInput, tracked_streams
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.multilinear.fit import Body, fit_unit, graph_body, local_frames, placed, unit_times
-from graphsvc.strategies.multilinear.model import (MIN_STEP_S, Tensor, frame_data, learn, model_key, tensors_of,
+from graphsvc.strategies.multilinear.model import (MIN_STEP_S, Tensor, align_hemispheres, frame_data, learn, model_key, tensors_of,
                                                    touchdowns, usable_clips)  # fmt: skip
 from graphsvc.strategies.multilinear.options import MultilinearOptions
 from graphsvc.strategies.options import Options, track_pull
@@ -55,7 +55,7 @@ from graphsvc.synthesis.path import blend_cuts, path_tables
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track, shift_to_smoothed
 
-INDEX_VERSION = 1
+INDEX_VERSION = 2
 MIN_RUN_S = 0.3
 BLEND_S = 0.15  # half the blending window at a cut between units
 SOURCES = 3  # the heaviest original units a frame's provenance names
@@ -179,6 +179,7 @@ class MultilinearStrategy(Strategy):
         body = graph_body(graph)
         d = body.layout.dims
         values = self._search_values(graph, found.motion, nodes, edges, body)
+        align_hemispheres(values, np.asarray(index["hemispheres"]), body.layout.slot)
         trans_of = np.asarray(graph.node_translations)[nodes].astype(np.float64)
         acc = np.asarray(inp.acc, dtype=np.float64) / GRAVITY
         S = acc.shape[1]
