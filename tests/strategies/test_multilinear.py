@@ -131,6 +131,23 @@ def test_a_held_out_take_is_reconstructed(graph, kb):
     assert r.provenance.weight.sum(axis=1) == pytest.approx(1.0)
 
 
+def test_its_report_becomes_a_page(graph, kb, tmp_path):
+    from graphsvc.pipeline import synthesize_files
+    from graphsvc.report.html import write_html
+    from graphsvc.report.load import load_document
+
+    g, r = tmp_path / "g.graph", tmp_path / "r.rec"
+    save_graph(graph, g)
+    save_recording(simulate_recording(kb[1], LAYOUT, NOISE["none"], seed=0, rate_hz=graph.rate_hz), r)
+    synthesize_files(graph, g, r, tmp_path / "o.bvh", Options(strategy="multilinear"), report_path=tmp_path / "o.json")
+    (view,) = load_document(tmp_path / "o.json")["clips"]
+    segments = view["timeline"]["segments"]
+    assert sum(s["frames"] for s in segments) == view["frames"] and {s["clip"] for s in segments} <= {
+        c["name"] for c in graph.clips}
+    write_html(tmp_path / "page.html", load_document(tmp_path / "o.json"))
+    assert (tmp_path / "page.html").read_text().startswith("<!DOCTYPE html>")
+
+
 def test_bad_input_gives_one_line_and_exit_2(graph, kb, tmp_path, capsys):
     g, r, short = tmp_path / "g.graph", tmp_path / "r.rec", tmp_path / "s.rec"
     save_graph(graph, g)

@@ -199,9 +199,8 @@ class MultilinearStrategy(Strategy):
             inside = (frames >= max(u.lo, 0)) & (frames < min(u.hi, T))
             measured = np.full((L, S, 3), np.nan)
             measured[inside] = acc[frames[inside]]
-            row_clip = int(t.row_clip[0])
-            unit_body = replace(body, trans=np.asarray(graph.node_translations[int(graph.clips[row_clip]["first_node"])],
-                                                       np.float64))  # fmt: skip
+            # (on the bone lengths of the clip the search played at the unit's first frame)
+            unit_body = replace(body, trans=np.asarray(graph.node_translations[int(nodes[u.lo])], np.float64))
             fit = fit_unit(t, measured, inside, unit_body, own.prior, own.warp, own.evaluations)
             k = u.lo - u.start
             values[u.lo: u.hi] = fit.values[k: k + u.hi - u.lo]
@@ -239,7 +238,6 @@ class MultilinearStrategy(Strategy):
                             "search_labels": found.report.get("labels", []),
                             "class": None if forced is None else graph.labels[forced]},  # fmt: skip
             "labels": label_runs(list(frame_labels)),
-            "node_path": nodes.tolist(),
             "timings_s": {"warm_up": round(learn_s, 4), "search": round(search_s, 4), "synthesis": round(fit_s, 4)},
             "samples_per_s": round(T / max(search_s + fit_s, 1e-9), 1),
         }
