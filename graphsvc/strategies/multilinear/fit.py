@@ -2,9 +2,11 @@
 coefficients fitted to measured readings (Tautges 2012, eq. 2.3–2.4 and 2.8).
 
 A unit of L frames: M + m(x_S, x_R) (`model.Tensor.values`, on the tensor's F reference frames)
-played at the times u_k·(F − 1), u_k = s + b·s(1 − s) for s = k/(L − 1) — a uniform
-time warp onto the unit's frames, bent by b ∈ (−BEND, BEND) (b = 0: uniform) —
-(`model.warp_values`); its poses put on the tensor's template skeleton at the track
+played at the times τ(s_k)·(F − 1), s_k = k/(L − 1), where τ is the normalised integral
+of the rate exp(Σ_j w_j cos(jπs)), j = 1 … J — a smooth, monotone time warp onto the
+unit's frames, uniform at w = 0, with J = 1 term for a step and WHOLE_TERMS for a whole
+clip (a gesture's repeats need not keep the reference's pace), each |w_j| ≤ WARP_LIMIT
+— (`model.warp_values`); its poses put on the tensor's template skeleton at the track
 its own steps and turns integrate from the origin; the layout's accelerometers
 simulated on it (`sensors.accelerometer.simulate_accelerations`, g). Accelerations in
 each sensor's own frame do not change when the unit is turned about the vertical or
@@ -12,17 +14,18 @@ moved, so the fit needs no alignment of the unit to the recording (the thesis al
 world accelerations by a rotation about the vertical, eq. 2.10).
 
 The fit (`fit_unit`): scipy's `least_squares` (trust-region reflective, a numeric
-Jacobian: 2 + kS + kR coefficients, a few dozen residual evaluations of well under a
+Jacobian: kS + kR coefficients and the J warp weights, a few dozen residual evaluations of well under a
 millisecond) of the simulated readings against the measured ones over the unit's
 frames inside the recording (the first and last frame left out: their second
 derivative is one-sided), plus `prior`·(x − x₀) pulling toward the starting row's
-coefficients x₀. The starting row is the original unit (s, r) whose own readings, put
-on the unit's frames, are closest to the measured ones.
+coefficients x₀ (and the warp toward uniform). The fit starts from each of the
+STARTS original units (s, r) whose own readings, put on the unit's frames, are closest
+to the measured ones, and keeps the cheapest result.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -36,7 +39,9 @@ from graphsvc.strategies.multilinear import tensor as tn
 from graphsvc.strategies.multilinear.model import Tensor, warp_values
 from graphsvc.synthesis.local_pose import PoseLayout, pose_layout
 
-BEND = 0.6
+WARP_LIMIT = 1.5
+WHOLE_TERMS = 4
+STARTS = 3
 
 
 @dataclass
@@ -60,17 +65,23 @@ def graph_body(graph: MotionGraph, node: int = 0) -> Body:
                 meta.graph_placement(graph), float(graph.rate_hz))  # fmt: skip
 
 
-def unit_times(frames: int, length: int, bend: float = 0.0) -> np.ndarray:
-    """(length,) reference-frame times of a unit of `length` frames (module docstring)."""
+def unit_times(frames: int, length: int, warp=()) -> np.ndarray:
+    """(length,) reference-frame times of a unit of `length` frames under the warp
+    weights `warp` (J,) (module docstring)."""
     if length == 1:
         return np.zeros(1)
     s = np.linspace(0.0, 1.0, length)
-    return (s + bend * s * (1.0 - s)) * (frames - 1)
+    w = np.asarray(warp, dtype=np.float64)
+    if w.size == 0 or not w.any():
+        return s * (frames - 1)
+    rate = np.exp(np.cos(np.pi * np.outer(s, np.arange(1, w.size + 1))) @ w)
+    tau = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]))])
+    return tau / tau[-1] * (frames - 1)
 
 
-def unit_values(t: Tensor, x_s: np.ndarray, x_r: np.ndarray, length: int, bend: float, pose_dims: int) -> np.ndarray:
-    """(length, V) the values of the unit m(x_S, x_R) on `length` frames."""
-    return warp_values(t.values(x_s, x_r), unit_times(t.frames, length, bend), pose_dims)
+def unit_values(t: Tensor, x_s: np.ndarray, x_r: np.ndarray, length: int, warp, pose_dims: int) -> np.ndarray:
+    """(length, V) the values of the unit M + m(x_S, x_R) on `length` frames."""
+    return warp_values(t.values(x_s, x_r), unit_times(t.frames, length, warp), pose_dims)
 
 
 def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -107,64 +118,66 @@ def simulate_unit(values: np.ndarray, body: Body) -> np.ndarray:
 class UnitFit:
     x_s: np.ndarray
     x_r: np.ndarray
-    bend: float
+    warp: np.ndarray  # (J,)
     values: np.ndarray  # (L, V)
     cost: float  # mean squared reading residual, g²
-    start_cost: float
+    start_cost: float  # the best starting row's
     start_row: int
     evaluations: int
 
 
-def start_row(t: Tensor, measured: np.ndarray, inside: np.ndarray) -> tuple[int, float]:
-    """The original row whose readings on the unit's frames are nearest the measured
-    (L, 3S) g on frames `inside` (bool (L,)), and its mean squared distance."""
+def start_rows(t: Tensor, measured: np.ndarray, inside: np.ndarray, count: int) -> list[tuple[int, float]]:
+    """The `count` original rows whose readings on the unit's frames are nearest the
+    measured (L, 3S) g on frames `inside` (bool (L,)), with their mean squared distances."""
     times = unit_times(t.frames, measured.shape[0])
-    best, cost = 0, np.inf
+    costs = []
     for k in range(t.row_readings.shape[0]):
-        r = tn.sample(np.asarray(t.row_readings[k], np.float64), times)
-        e = r[inside] - measured[inside]
-        c = float(np.nanmean(e * e))
-        if c < cost:
-            best, cost = k, c
-    return best, cost
+        e = tn.sample(np.asarray(t.row_readings[k], np.float64), times)[inside] - measured[inside]
+        costs.append(float(np.mean(e * e)) if e.size else 0.0)
+    order = np.argsort(costs, kind="stable")[:count]
+    return [(int(k), costs[int(k)]) for k in order]
 
 
 def fit_unit(t: Tensor, measured: np.ndarray, inside: np.ndarray, body: Body, prior: float, warp: bool,
              evaluations: int) -> UnitFit:  # fmt: skip
-    """The coefficients (and bend) of tensor t's unit best explaining `measured` (L, S, 3)
+    """The coefficients (and warp) of tensor t's unit best explaining `measured` (L, S, 3)
     g on frames `inside` (L,) bool (module docstring)."""
     L = measured.shape[0]
     m = measured.reshape(L, -1)
-    use = inside.copy()
+    finite = np.all(np.isfinite(m), axis=1)
+    use = inside & finite
     if L > 2:  # (one-sided second derivatives at the ends)
         use[0] = use[-1] = False
-    use &= np.all(np.isfinite(m), axis=1)
-    row, _ = start_row(t, m, inside & np.all(np.isfinite(m), axis=1))
-    R = t.u_rep.shape[0]
-    xs0, xr0 = t.row_coefficients(row // R, row % R)
     kS, kR = t.kept
+    J = (1 if t.foot >= 0 else WHOLE_TERMS) if warp else 0
     d = body.layout.dims
-    p0 = np.concatenate([xs0, xr0, [0.0] if warp else []])
-    n = max(int(use.sum()), 1)
-    scale = 1.0 / np.sqrt(n * m.shape[1])
-    pull = np.full(p0.size, prior)
-
-    def values_of(p):
-        return unit_values(t, p[:kS], p[kS: kS + kR], L, p[kS + kR] if warp else 0.0, d)
-
-    def residual(p):
-        sim = simulate_unit(values_of(p), body).reshape(L, -1)
-        return np.concatenate([(sim[use] - m[use]).reshape(-1) * scale, pull * (p - p0)])
-
-    if not use.any():
-        return UnitFit(xs0, xr0, 0.0, values_of(p0), 0.0, 0.0, row, 0)
-    lo, hi = np.full(p0.size, -np.inf), np.full(p0.size, np.inf)
-    if warp:
-        lo[-1], hi[-1] = -BEND, BEND
-    start = residual(p0)
-    sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", max_nfev=evaluations)
-    p = sol.x
     count = int(use.sum()) * m.shape[1]
-    fit_res, start_res = sol.fun[:count] / scale, start[:count] / scale
-    return UnitFit(p[:kS].copy(), p[kS: kS + kR].copy(), float(p[kS + kR]) if warp else 0.0, values_of(p),
-                   float(np.mean(fit_res ** 2)), float(np.mean(start_res ** 2)), row, int(sol.nfev))  # fmt: skip
+    scale = 1.0 / np.sqrt(max(count, 1))
+    R = t.u_rep.shape[0]
+    best = None
+    for row, _ in start_rows(t, m, inside & finite, STARTS):
+        p0 = np.concatenate([*t.row_coefficients(row // R, row % R), np.zeros(J)])
+
+        def values_of(p):
+            return unit_values(t, p[:kS], p[kS: kS + kR], L, p[kS + kR:], d)
+
+        def residual(p, p0=p0, values_of=values_of):
+            sim = simulate_unit(values_of(p), body).reshape(L, -1)
+            return np.concatenate([(sim[use] - m[use]).reshape(-1) * scale, prior * (p - p0)])
+
+        if count == 0:
+            return UnitFit(p0[:kS], p0[kS: kS + kR], np.zeros(J), values_of(p0), 0.0, 0.0, row, 0)
+        start = residual(p0)
+        lo, hi = np.full(p0.size, -np.inf), np.full(p0.size, np.inf)
+        lo[kS + kR:], hi[kS + kR:] = -WARP_LIMIT, WARP_LIMIT
+        sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", max_nfev=evaluations)
+        p = sol.x
+        fit = UnitFit(p[:kS].copy(), p[kS: kS + kR].copy(), p[kS + kR:].copy(), values_of(p),
+                      float(np.mean((sol.fun[:count] / scale) ** 2)), float(np.mean((start[:count] / scale) ** 2)), row,
+                      int(sol.nfev))  # fmt: skip
+        if best is None or fit.cost < best.cost:
+            best = replace(fit, evaluations=fit.evaluations + (best.evaluations if best else 0),
+                           start_cost=min(fit.start_cost, best.start_cost) if best else fit.start_cost)
+        else:
+            best = replace(best, evaluations=best.evaluations + fit.evaluations)
+    return best

@@ -24,9 +24,10 @@ a run may use (a hidden clip — every node of it disallowed — is left out):
 4. Rows: per style its units in take and time order, R = the most any style has, at
    most `max_reps` (an even choice among them); a style with fewer repeats its own
    units in turn. The tensor's reference is the unit of median length (F frames);
-   every unit is put on its F frames by a uniform time scaling (`align` linear, the
-   default: a step runs touchdown to touchdown, so its phases already agree), or by
-   DTW on the pose values (`tensor.dtw_path`, `align` dtw; the time map smoothed over
+   every unit is put on its F frames by a uniform time scaling (`align` linear; by
+   default for steps: a step runs touchdown to touchdown, so its phases already
+   agree), or by DTW on the pose values (`tensor.dtw_path`, `align` dtw, by default
+   for whole clips, whose repeats keep no common pace; the time map smoothed over
    DTW_SIGMA·F frames) — poses resampled linearly, the root's steps as differences of
    the resampled cumulative track (`warp_values`). The fit compares accelerations,
    and a warp's curvature adds its own (the joint's velocity times the warp's second
@@ -224,7 +225,7 @@ def warp_values(values: np.ndarray, times: np.ndarray, pose_dims: int) -> np.nda
     return out
 
 
-def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, align: str = "linear") -> dict[str, np.ndarray] | None:
+def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, align: str = "auto") -> dict[str, np.ndarray] | None:
     """One class's (and foot's) tensor and its truncated HOSVD (module docstring, 4–5),
     or None with fewer than two units."""
     styles = sorted(s for s, u in group.units.items() if u)
@@ -250,7 +251,7 @@ def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, 
     start = np.asarray(data["clip_start"])
     for k, (c, a, b) in enumerate(rows):
         v = unit_values(data, c, a, b)
-        if align == "dtw":
+        if align == "dtw" or (align == "auto" and group.foot < 0):
             ia, ib, _ = tn.dtw_path(reference[:, :d], v[:, :d])
             times = tn.warp_onto(ia, ib, F, b - a, DTW_SIGMA * F)
         else:

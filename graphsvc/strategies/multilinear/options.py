@@ -10,8 +10,8 @@ from graphsvc.strategies.options import option
 @dataclass(frozen=True)
 class MultilinearOptions:
     """variance: the share of each natural mode's (style, repetition) variance its
-    truncation keeps; align: how units are put on their reference's frames (linear
-    or dtw); max_reps: the most units a style gives a step tensor; label: the
+    truncation keeps; align: how units are put on their reference's frames (linear,
+    dtw, or auto: steps linear, whole clips dtw); max_reps: the most units a style gives a step tensor; label: the
     class of the whole recording (None: each stretch's from the Viterbi search);
     prior: the weight pulling a unit's coefficients toward its starting row's;
     warp: optimise each unit's time warp too; evaluations: the most residual
@@ -20,9 +20,9 @@ class MultilinearOptions:
     variance: float = option(0.99, low=0.0, high=1.0, low_open=True, label="multilinear variance",
                              noun="a share above 0 and at most 1",
                              help="share of each natural mode's variance its truncation keeps (default 0.99)")  # fmt: skip
-    align: str = option("linear", choices=("linear", "dtw"), label="multilinear align",
-                        help="how a class's units are put on its reference's frames: linear (uniform time scaling, "
-                             "the default) or dtw")  # fmt: skip
+    align: str = option("auto", choices=("auto", "linear", "dtw"), label="multilinear align",
+                        help="how a class's units are put on its reference's frames: linear (uniform time scaling), "
+                             "dtw, or auto (the default: steps linear, whole clips dtw)")  # fmt: skip
     max_reps: int = option(8, low=1, high=64, metavar="R", label="multilinear repetitions",
                            help="most step units a style gives a tensor (default 8)")
     label: str | None = option(None, metavar="CLASS", label="multilinear label",

@@ -209,14 +209,14 @@ class MultilinearStrategy(Strategy):
             w = t.row_weights(fit.x_s, fit.x_r)
             order = np.argsort(-np.abs(w), kind="stable")[:SOURCES]
             share = np.abs(w[order]) / max(float(np.abs(w[order]).sum()), 1e-12)
-            times = unit_times(t.frames, L, fit.bend)
+            times = unit_times(t.frames, L, fit.warp)
             for f in range(u.lo, u.hi):
                 ref = times[f - u.start]
                 sources[f] = [(int(t.row_clip[r]), float(np.interp(ref, np.arange(t.frames), t.row_frame[r])),
                                float(s)) for r, s in zip(order, share)]  # fmt: skip
             rows.append({"class": graph.labels[u.label], "foot": ("left", "right", "whole")[t.foot], "start_frame": u.lo,
                          "frames": u.hi - u.lo, "unit_frames": L, "x_style": [round(float(x), 5) for x in fit.x_s],
-                         "x_repetition": [round(float(x), 5) for x in fit.x_r], "bend": round(fit.bend, 4),
+                         "x_repetition": [round(float(x), 5) for x in fit.x_r], "warp": [round(float(w), 4) for w in fit.warp],
                          "cost": round(fit.cost, 6), "start_cost": round(fit.start_cost, 6),
                          "start_row": fit.start_row, "evaluations": fit.evaluations})  # fmt: skip
         motion = self._assemble(graph, body, values, trans_of, entered, units, inp, options)
