@@ -129,6 +129,10 @@ def test_a_held_out_take_is_reconstructed(graph, kb):
     e = truth_errors(r.motion, truth)
     assert e["joint_err_cm"] < 3.0 and r.motion.num_frames == rec.num_samples
     assert r.provenance.weight.sum(axis=1) == pytest.approx(1.0)
+    held = reconstruct(graph, rec, Options(strategy="multilinear", settings={"multilinear": MultilinearOptions(
+        hold_feet=True)}))  # fmt: skip
+    assert np.abs(held.motion.rotations - r.motion.rotations).max() > 1e-6  # (the legs turned to hold the feet)
+    np.testing.assert_array_equal(held.motion.translations, r.motion.translations)
 
 
 def test_its_report_becomes_a_page(graph, kb, tmp_path):

@@ -14,7 +14,8 @@ class MultilinearOptions:
     dtw, or auto: steps linear, whole clips dtw); max_reps: the most units a style gives a step tensor; label: the
     class of the whole recording (None: each stretch's from the Viterbi search);
     prior: the weight pulling a unit's coefficients toward its starting row's;
-    warp: optimise each unit's time warp too; evaluations: the most residual
+    warp: optimise each unit's time warp too; hold_feet: hold the feet the units
+    plant (`synthesis.foot_hold`); evaluations: the most residual
     evaluations a unit's least squares may make."""
 
     variance: float = option(0.99, low=0.0, high=1.0, low_open=True, label="multilinear variance",
@@ -32,5 +33,7 @@ class MultilinearOptions:
                           help="weight pulling a unit's coefficients toward its starting row's (default 0.05)")
     warp: bool = option(True, negated=("--multilinear-no-warp",), label="multilinear warp",
                         help="optimise each unit's time warp (default on; --multilinear-no-warp: a uniform one)")
+    hold_feet: bool = option(False, label="multilinear hold feet",
+                             help="hold the feet the units plant (less skate, a little more joint error; default off)")
     evaluations: int = option(60, low=4, high=10000, metavar="N", label="multilinear evaluations",
                               help="most residual evaluations of a unit's least squares (default 60)")

@@ -16,7 +16,8 @@ of each cut) and put on the root's own track: their steps and turns integrated f
 the first measured position and heading, with a tracker the offset to its positions
 filtered and smoothed over the recording, the heading pulled toward the measured one
 (`synthesis.track`, as the per-frame strategies do), then the poses filtered
-(`smooth_s`).
+(`smooth_s`); with `--multilinear-hold-feet` the feet the units plant are held
+(`synthesis.foot_hold`, against the search's own planted feet).
 
 A live stream is refused: a unit is fitted once the search has placed its end, which
 the fixed-lag search settles only a second or more later, and then the whole unit at
@@ -51,6 +52,7 @@ from graphsvc.strategies.options import Options, track_pull
 from graphsvc.strategies.results import Provenance, Reconstruction, label_runs
 from graphsvc.strategies.start import start_state
 from graphsvc.synthesis.local_pose import pose_vectors
+from graphsvc.synthesis.foot_hold import FootHold
 from graphsvc.synthesis.path import blend_cuts, path_tables
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track, shift_to_smoothed
@@ -219,7 +221,8 @@ class MultilinearStrategy(Strategy):
                          "x_repetition": [round(float(x), 5) for x in fit.x_r], "warp": [round(float(w), 4) for w in fit.warp],
                          "cost": round(fit.cost, 6), "start_cost": round(fit.start_cost, 6),
                          "start_row": fit.start_row, "evaluations": fit.evaluations})  # fmt: skip
-        motion = self._assemble(graph, body, values, trans_of, entered, units, inp, options)
+        motion = self._assemble(graph, body, values, trans_of, entered, units, inp, options,
+                                found.motion if own.hold_feet else None)  # fmt: skip
         fit_s = time.perf_counter() - t0
         frame_labels = np.asarray(graph.labels, dtype=object)[labels]
         K = SOURCES
@@ -270,8 +273,10 @@ class MultilinearStrategy(Strategy):
 
     @staticmethod
     def _assemble(graph: MotionGraph, body: Body, values, trans_of, entered, units, inp: PreparedInput,
-                  options: Options) -> Motion:  # fmt: skip
-        """The units' values blended at their cuts and put on the root's track."""
+                  options: Options, searched: Motion | None) -> Motion:  # fmt: skip
+        """The units' values blended at their cuts and put on the root's track; with the
+        search's motion, the feet held while the units say they are planted (moving as
+        the search's planted feet move: `synthesis.foot_hold`)."""
         rate = float(graph.rate_hz)
         d = body.layout.dims
         T = values.shape[0]
@@ -293,6 +298,9 @@ class MultilinearStrategy(Strategy):
         rot, trans = placed(rot, trans, rel, height, ground, turning, body)
         shift_to_smoothed(state.track_inputs, state.track_model, body.parents, trans)
         rot, trans = smooth_poses(rot, trans, options.shared.smooth_s * rate)
+        if searched is not None:
+            hold = FootHold(graph.skeleton, rate, graph.params.get("mapping"))
+            rot = hold.apply(rot, trans, searched.rotations, searched.translations, values[:, d + 3: d + 5] > 0.5)
         return Motion(graph.skeleton, rot, trans, rate, name="synthesized", source="multilinear")
 
 
