@@ -11,6 +11,7 @@ reconstruction and its live session.
 | `olng` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample the neighbourhood of frames moving as the readings do (Tautges et al. 2011) and a pose optimised from it |
 | `ssg` | labelled optical markers | | sparse, gappy markers: the knowledge base's subsequences that fit each window of the input, joined by a subsequence graph (Tautges 2012) |
 | `piecewise` | accelerations | ground position, heading | frame by frame, poses no clip holds: per sample its cluster's local model of the readings, an RBF map to a reduced pose or a small optimisation (Xie 2009) |
+| `multilinear` | accelerations | ground position, heading | whole recordings, poses no clip holds: per motion unit of the search's segmentation the mix of its class's takes whose simulated readings fit (Tautges 2012, ch. 2); no live streams |
 
 A strategy is registered by `register(strategy)`: the built-in ones (BUILTIN, one line
 each: a module whose `STRATEGY` is the instance) on first lookup, and every strategy an
@@ -47,6 +48,7 @@ BUILTIN = (
     "graphsvc.strategies.olng",
     "graphsvc.strategies.ssg",
     "graphsvc.strategies.piecewise",
+    "graphsvc.strategies.multilinear",
 )
 PLANNED: tuple[str, ...] = ()  # specified, not built: asked for, they answer "not implemented yet"
 _REGISTRY: dict[str, Strategy] = {}

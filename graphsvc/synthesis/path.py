@@ -289,6 +289,22 @@ def _blend(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, ent
         height[t] += off_height[t]
 
 
+def blend_cuts(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, entered_rel, entered_height,
+               half_s: float, rate_hz: float) -> None:  # fmt: skip
+    """The offset blending of step 3 (module docstring) on frames that are not a graph
+    path's, in place: rot (T, J, 4), trans (T, J, 3) local, rel (T, 4), height (T,);
+    cuts (C,) the frames right after each jump; entered_* the entered sequence's own
+    frame before each cut (C, ...); a window of half-width half_s seconds."""
+    cuts = np.ascontiguousarray(cuts, dtype=np.int64)
+    if cuts.size == 0 or half_s <= 0:
+        return
+    half = np.full(cuts.size, half_s * rate_hz)
+    _blend(rot, trans, rel, height, np.ascontiguousarray(below, dtype=np.bool_), cuts,
+           np.ascontiguousarray(entered_rot, dtype=np.float64), np.ascontiguousarray(entered_trans, dtype=np.float64),
+           np.ascontiguousarray(entered_rel, dtype=np.float64), np.ascontiguousarray(entered_height, dtype=np.float64),
+           half, half)  # fmt: skip
+
+
 @_jit
 def _foot_targets(world_pos, intended, flags, blend_frames, target, weight):
     """Skate-free targets (T, 3) (m) of one joint and their weights (T,), in place.

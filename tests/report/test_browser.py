@@ -132,7 +132,7 @@ def test_evaluation_table_sorts_and_opens_each_clip(driver, tmp_path, capsys):
     assert console_errors(driver) == []
 
 
-@pytest.mark.parametrize("strategy", available())
+@pytest.mark.parametrize("strategy", [n for n in available() if n != "multilinear"])  # (test_report_files says why)
 def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, strategy, tmp_path):
     from graphsvc.motion.bvh import write_bvh
     from graphsvc.pipeline import Options, Weights, synthesize_files
