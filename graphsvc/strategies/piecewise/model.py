@@ -37,7 +37,7 @@ of a hidden clip — a model learned with a hidden clip would carry it):
    (a kd-tree over the training frames' readings, built on load; the frames' clusters
    are stored with the model). `mixture`, Xie's: the component of highest posterior
    under the mixture's marginal over the readings (log πₖ + log N(c; μ_c,k, Σ_cc,k)).
-   Twelve noisy readings leave that marginal ambiguous: on the issue's four dataset-2
+   Twelve noisy readings leave that marginal ambiguous: on four dataset-2
    takes 004 it picks a cluster whose frames are far from the truth so often that the
    joint error is 6.6 cm against 3.9 with `nearest` (docs/piecewise.md).
 5. RBF, Xie eq. 5.9 (`rbf-fit`): per cluster y(c) = ȳ + Σᵢ wᵢ exp(−‖c − cᵢ‖² / σ²),
