@@ -50,11 +50,25 @@ INDEX_VERSION = 1
 def learned_model(graph: MotionGraph, data: dict, own: PiecewiseOptions, allowed=None) -> dict:
     """The model's arrays for these options and allowed nodes: from the cache beside the
     graph (learned and written there the first time), held for the graph object."""
+    return _learned(graph, data, own, training_rows(data, allowed))[0]
+
+
+def shared_model(graph: MotionGraph, data: dict, own: PiecewiseOptions, allowed=None) -> Model:
+    """The Model of `learned_model` with what a sample reads of it made (its kd-trees,
+    the optimisation's inverses), once a graph, options and hold-out: it keeps no
+    stream's state, so every decoder of this process shares it."""
     rows = training_rows(data, allowed)
+    arrays, key = _learned(graph, data, own, rows)
+    return derived(graph, ("piecewise decoder model", key, own.w_smooth, own.w_control, own.assign),
+                   lambda: Model(arrays, np.asarray(data["readings"])[rows], own.w_smooth, own.w_control, own.assign))
+
+
+def _learned(graph: MotionGraph, data: dict, own: PiecewiseOptions, rows: np.ndarray) -> tuple[dict, str]:
     check_against(own, rows.size, np.asarray(data["poses"]).shape[1])
     key = model_key(own, data, rows)
-    return derived(graph, ("piecewise model", key),
-                   lambda: cached_arrays(graph, f"piecewise-{key}", INDEX_VERSION, lambda: learn(data, rows, own)))
+    arrays = derived(graph, ("piecewise model", key),
+                     lambda: cached_arrays(graph, f"piecewise-{key}", INDEX_VERSION, lambda: learn(data, rows, own)))
+    return arrays, key
 
 
 class PiecewiseDecoder:
@@ -62,10 +76,10 @@ class PiecewiseDecoder:
     → (rotations (1, J, 4), translations (1, J, 3), (clip, frame) of the nearest centre
     or None, label, row)."""
 
-    def __init__(self, graph: MotionGraph, data: dict, arrays: dict, options: Options, own: PiecewiseOptions,
-                 rows: np.ndarray):  # fmt: skip
+    def __init__(self, graph: MotionGraph, model: Model, options: Options, own: PiecewiseOptions):
         self.graph = graph
-        self.model = Model(arrays, np.asarray(data["readings"])[rows], own.w_smooth, own.w_control, own.assign)
+        self.model = model
+        arrays = model.arrays
         self.method = own.method
         self.rate = float(graph.rate_hz)
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
@@ -149,8 +163,7 @@ class PiecewiseStrategy(Strategy):
 
     def decoder(self, graph: MotionGraph, index: dict, options: Options, allowed=None) -> PiecewiseDecoder:
         own = self.own(options)
-        return PiecewiseDecoder(graph, index, learned_model(graph, index, own, allowed), options, own,
-                                training_rows(index, allowed))  # fmt: skip
+        return PiecewiseDecoder(graph, shared_model(graph, index, own, allowed), options, own)
 
     def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
                     allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
