@@ -23,7 +23,6 @@ import argparse
 import os
 import json
 import re
-import signal
 import subprocess
 import sys
 import threading
@@ -145,13 +144,7 @@ def main(argv=None) -> int:
                                args.streams_per_process, recordings, args.stagger)  # fmt: skip
             print(json.dumps(dict(result, stagger_s=args.stagger)), flush=True)
     finally:
-        for proc, _, _ in servers:
-            proc.send_signal(signal.SIGTERM)
-        for proc, _, _ in servers:
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        B.stop_servers([proc for proc, _, _ in servers])
     return 0
 
 

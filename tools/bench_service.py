@@ -309,6 +309,17 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
     }
 
 
+def stop_servers(procs) -> None:
+    """SIGTERM every server process, then wait up to 15 s for each (killed after)."""
+    for proc in procs:
+        proc.send_signal(signal.SIGTERM)
+    for proc in procs:
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
 def start_server(graph_path: str, max_streams: int, *extra: str) -> tuple[subprocess.Popen, str]:
     """A `graphsvc serve` subprocess on a free loopback port serving graph_path as
     "bench" (extra: more serve flags); (process, address)."""
@@ -382,11 +393,7 @@ def main(argv=None) -> int:
                 print(json.dumps(dict(result, stagger_s=stagger)), flush=True)
     finally:
         if proc is not None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            stop_servers([proc])
     return 0
 
 
