@@ -30,15 +30,15 @@ from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.pipeline import Options, reconstruct
 from graphsvc.report.gather import clip_view
 from graphsvc.report.html import write_html
-from graphsvc.strategies.options import Weights
-from graphsvc.strategies.sources import path_readings, timeline_from_nodes
-from graphsvc.strategies.viterbi.batch import warm_up_search
-from graphsvc.synthesis.path import warm_up_synthesis
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS
 from graphsvc.sensors.plot import plot_recording
 from graphsvc.sensors.recording import export_csv, save_recording
 from graphsvc.sensors.simulate import simulate_recording
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.sources import path_readings, timeline_from_nodes
+from graphsvc.strategies.viterbi.batch import warm_up_search
+from graphsvc.synthesis.path import warm_up_synthesis
 
 BVH_UNITS_PER_M = 100.0  # centimetres, what most BVH viewers expect
 SIDE_BY_SIDE_M = 1.5  # x distance between the two figures of side_by_side.bvh

@@ -26,7 +26,15 @@ import re
 from graphsvc.motion.proportions import MAX_HEIGHT_M
 from graphsvc.sensors.layout import preset_names
 from graphsvc.strategies import DEFAULT, available, get, names
-from graphsvc.strategies.options import (ORIENTATION_WEIGHT, Options, SharedOptions, from_values, load_constraints, option_specs, parse_weights)  # fmt: skip
+from graphsvc.strategies.options import (  # fmt: skip
+    ORIENTATION_WEIGHT,
+    Options,
+    SharedOptions,
+    from_values,
+    load_constraints,
+    option_specs,
+    parse_weights,
+)
 
 
 class Parser(argparse.ArgumentParser):

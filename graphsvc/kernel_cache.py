@@ -51,7 +51,7 @@ def _imports(path: Path, top: Path) -> set[Path]:
     return _imports_of(path, st.st_mtime_ns, st.st_size, top)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _imports_of(path: Path, mtime_ns: int, size: int, top: Path) -> frozenset[Path]:
     tree = ast.parse(path.read_bytes(), str(path))
     here = ".".join((top.name, *path.relative_to(top).with_suffix("").parts))
@@ -109,7 +109,7 @@ def source_stamp(path: Path) -> str:
     return _digest(tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size) for f in files))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _digest(files: tuple) -> str:
     h = hashlib.sha256()
     for name, _, _ in files:

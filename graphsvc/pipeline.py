@@ -37,8 +37,14 @@ from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.base import prepared_index
 from graphsvc.strategies.inputs import check_layout, prepare_input
 from graphsvc.strategies.live import LiveSession
-from graphsvc.strategies.options import (Options, SharedOptions, Weights, check_constraints, load_constraints,
-                                        parse_weights)  # fmt: skip
+from graphsvc.strategies.options import (
+    Options,
+    SharedOptions,
+    Weights,
+    check_constraints,
+    load_constraints,
+    parse_weights,  # fmt: skip
+)
 from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels
 from graphsvc.strategies.sources import compact_sources
 from graphsvc.strategies.start import start_state

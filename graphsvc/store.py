@@ -51,8 +51,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from graphsvc.fileio import atomic_writer
 from graphsvc.errors import FormatError, InputError, MissingFileError
+from graphsvc.fileio import atomic_writer
 
 MAGIC = b"GRAPHSVC"
 END_MAGIC = b"GSVC-END"

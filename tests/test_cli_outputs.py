@@ -10,11 +10,11 @@ from graphsvc.cli import main
 from graphsvc.errors import InputError
 from graphsvc.fileio import check_outputs
 from graphsvc.motion.bvh import write_bvh
+from graphsvc.motion.library import load_motion
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.recording import save_recording
 from graphsvc.sensors.simulate import simulate_recording
-from graphsvc.motion.library import load_motion
 from tests.conftest import still_motion, write_gliding_clip
 
 

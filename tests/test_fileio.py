@@ -22,7 +22,7 @@ def _readers():
     from graphsvc.sensors.optical import read_c3d, read_marker_csv
     from graphsvc.sensors.recording import load_recording
     from graphsvc.service.client import read_token_file
-    from graphsvc.service.server import read_tokens
+    from graphsvc.service.interceptors import read_tokens
     from graphsvc.strategies.options import load_constraints
 
     return {

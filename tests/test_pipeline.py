@@ -13,12 +13,12 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.motion.bvh import read_bvh
 from graphsvc.motion.procedural import generate_knowledge_base
-from graphsvc.pipeline import open_session, Options, parse_weights, readings_at_rate, reconstruct
-from graphsvc.strategies.options import Weights
+from graphsvc.pipeline import Options, open_session, parse_weights, readings_at_rate, reconstruct
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
 from graphsvc.sensors.simulate import simulate_recording
+from graphsvc.strategies.options import Weights
 
 
 @pytest.fixture(scope="module")

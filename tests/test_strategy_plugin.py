@@ -117,11 +117,10 @@ def test_synthesize_in_process_and_as_a_command_then_the_report(files, capsys):
 
 
 def test_evaluate_hides_the_test_clip_from_the_mean(files, capsys):
+    from graphsvc_meanpose import STRATEGY, mean_pose_node
+
     from graphsvc.evaluate.loo import held_out_mask
     from graphsvc.graph.file import load_graph
-    from graphsvc_meanpose import mean_pose_node
-
-    from graphsvc_meanpose import STRATEGY
 
     graph = load_graph(files["graph"])
     whole = graph.clips[int(graph.node_clip[mean_pose_node(graph, None, None)])]["name"]
@@ -155,12 +154,14 @@ def test_batch_runs_it_on_dask_workers(files, capsys):
 
 
 def test_the_service_takes_it_unary_and_streaming_in_live_workers(files):
+    from graphsvc_meanpose import MeanPoseOptions
+
     from graphsvc.pipeline import Options, reconstruct
     from graphsvc.sensors.files import read_recording
     from graphsvc.service import client as C
     from graphsvc.service import convert
-    from graphsvc.service.server import ServerConfig, load_graphs, start_server
-    from graphsvc_meanpose import MeanPoseOptions
+    from graphsvc.service.graphs import load_graphs
+    from graphsvc.service.server import ServerConfig, start_server
 
     graphs = load_graphs([f"kb={files['graph']}"])
     running = start_server(graphs, ServerConfig(host="127.0.0.1", port=0, live_workers=1))

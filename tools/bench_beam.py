@@ -77,9 +77,9 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
         gap_all: bool = False) -> tuple[dict, np.ndarray]:
     """One search's row and node path. gap: that many samples from the middle on have no
     accelerometer reading (a sensor dropout; gap_all: no position and heading either)."""
-    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
     from graphsvc.strategies.options import Weights
     from graphsvc.strategies.viterbi.batch import viterbi_search
+    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 
     _, acc, position, heading = graph_walk(graph, samples)
     if mode == "A":

@@ -34,10 +34,11 @@ VARIANTS = {"plain": (False, False, False), "msv": (True, False, False), "interp
 
 
 def run_one(data: str, variant: str, max_frames: int | None, jobs: int) -> dict:
+    import numpy as np
+
     from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
     from graphsvc.graph.file import save_graph
     from graphsvc.motion.library import find_motion_files
-    import numpy as np
 
     files = find_motion_files([data])
     if max_frames:

@@ -41,8 +41,8 @@ def _hog(stop) -> None:
 def child(args) -> list[dict]:
     import numba
     import numpy as np
-
     from bench_viterbi import problem
+
     from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 
     g, acc, position, heading, weights, sets = problem("APO", args.nodes, args.edges, args.samples)

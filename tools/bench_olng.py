@@ -41,8 +41,8 @@ def main() -> None:
     from graphsvc.strategies.olng.decoder import OlngDecoder
     from graphsvc.strategies.olng.index import OlngIndex, build_arrays
     from graphsvc.strategies.olng.lattice import LatticeOptions
-    from graphsvc.strategies.olng.pose import pose_model
     from graphsvc.strategies.olng.options import OlngOptions
+    from graphsvc.strategies.olng.pose import pose_model
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("data", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared/data/bandai"))

@@ -19,9 +19,9 @@ import time
 import numpy as np
 
 from graphsvc.graph.file import load_graph
-from graphsvc.sensors.recording import load_recording
-from graphsvc.sensors.orientation import sensor_up
 from graphsvc.sensors.grid import readings_at_rate, values_at_rate
+from graphsvc.sensors.orientation import sensor_up
+from graphsvc.sensors.recording import load_recording
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 from graphsvc.strategies.viterbi.tables import search_index

@@ -28,7 +28,10 @@ from graphsvc.sensors.layout import load_layout  # noqa: E402
 from graphsvc.sensors.noise import PRESETS  # noqa: E402
 from graphsvc.sensors.simulate import simulate_recording  # noqa: E402
 from graphsvc.strategies.sources import (  # noqa: E402
-    path_readings, source_readings, timeline_from_nodes, timeline_from_sources,
+    path_readings,
+    source_readings,
+    timeline_from_nodes,
+    timeline_from_sources,
 )  # fmt: skip
 
 

@@ -20,8 +20,8 @@ late sends; the server keys left null), and
 from __future__ import annotations
 
 import argparse
-import os
 import json
+import os
 import re
 import subprocess
 import sys

@@ -79,14 +79,15 @@ import subprocess
 import sys
 import tempfile
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import graphsvc  # noqa: E402,F401  (first: it sets OpenBLAS's and OpenMP's waits before numpy loads)
 import numpy as np  # noqa: E402
+
+import graphsvc  # noqa: E402,F401  (first: it sets OpenBLAS's and OpenMP's waits before numpy loads)
 
 RATE_HZ = 30.0
 KERNEL_SET = "hands-feet"
@@ -288,8 +289,8 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
     from graphsvc.strategies.ssg import dtw
     from graphsvc.strategies.ssg.decoder import COST_BLOCK
     from graphsvc.strategies.ssg.index import point_window, window_points
-    from graphsvc.strategies.ssg.strategy import MAX_POINTS, warm_up, windows_for
     from graphsvc.strategies.ssg.options import SsgOptions
+    from graphsvc.strategies.ssg.strategy import MAX_POINTS, warm_up, windows_for
 
     marker_set = load_marker_set(KERNEL_SET)
     names = [c["name"] for c in graph.clips]
@@ -700,7 +701,7 @@ def main() -> None:
     result: dict = {
         "benchmark": "ssg",
         "command": shlex.join(getattr(sys, "orig_argv", [sys.executable] + sys.argv)),
-        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
         "machine": {**machine(), "load_average_at_start": [round(x, 2) for x in os.getloadavg()]},
         "data": str(bandai),
     }

@@ -63,6 +63,7 @@ def problem(mode: str, nodes: int, edges: int, samples: int, graph_path: str | N
 
     if graph_path:
         from bench_service import random_walk_readings
+
         from graphsvc.graph.file import load_graph
 
         g = load_graph(graph_path)
@@ -105,9 +106,9 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
 
 
 def run_reference(nodes: int, edges: int, samples: int) -> dict:
-    from graphsvc.strategies.viterbi.reference import reference_viterbi
     from graphsvc.strategies.options import Weights
     from graphsvc.strategies.viterbi.batch import viterbi_search
+    from graphsvc.strategies.viterbi.reference import reference_viterbi
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
@@ -130,9 +131,9 @@ def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> d
     """The fixed-lag decoder (1 s lag, APO) as a live server runs it: serial kernels,
     one push per sample; per-push latency percentiles. threads: numba threads per step
     instead (one stream with the whole machine)."""
-    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
     from graphsvc.strategies.options import Weights
     from graphsvc.strategies.viterbi.batch import warm_up_search
+    from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 
     g = generated_graph(nodes, edges)
     acc, position, heading = inputs(samples, 6)
@@ -182,7 +183,6 @@ def run_beam_hour(beam: float, samples: int) -> dict:
     import bench_beam
 
     from graphsvc.strategies.options import Weights
-
     from graphsvc.strategies.viterbi.batch import viterbi_search, warm_up_search
 
     g = generated_graph(100_686, 317_600)

@@ -34,8 +34,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import graphsvc  # noqa: E402,F401
 import numpy as np  # noqa: E402
+
+import graphsvc  # noqa: E402,F401
 
 TARGETS = {"forearm_rms": 0.9, "shin_rms": 5.5, "forearm_corr": 0.99, "shin_corr": 0.65}
 RATE = 30.0

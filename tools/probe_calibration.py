@@ -32,14 +32,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import graphsvc  # noqa: E402,F401
 import numpy as np  # noqa: E402
+
+import graphsvc  # noqa: E402,F401
 
 
 def main() -> int:
+    from graphsvc.errors import CalibrationQualityError
     from graphsvc.evaluate.loo import _global_signals, place_start
     from graphsvc.evaluate.metrics import joint_err_cm, root_err_cm
-    from graphsvc.errors import CalibrationQualityError
     from graphsvc.graph.calibration import calibrate
     from graphsvc.graph.file import load_graph
     from graphsvc.motion import quat

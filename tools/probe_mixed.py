@@ -42,9 +42,9 @@ from graphsvc.graph.file import load_graph  # noqa: E402
 from graphsvc.motion.library import load_motion  # noqa: E402
 from graphsvc.motion.resample import resample  # noqa: E402
 from graphsvc.pipeline import Options, reconstruct  # noqa: E402
-from graphsvc.strategies.options import Weights  # noqa: E402
 from graphsvc.sensors.layout import layout_from_dict  # noqa: E402
 from graphsvc.sensors.noise import PRESETS  # noqa: E402
+from graphsvc.strategies.options import Weights  # noqa: E402
 
 SIX = ("walk_normal", "run_normal", "wave-left-hand_normal", "walk-turn-left_normal", "raise-up-both-hands_normal",
        "walk_masculine")  # fmt: skip

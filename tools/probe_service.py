@@ -50,13 +50,12 @@ FRAME_FLOATS = 27 * 7  # a pose frame's rotations and translations on a 27-joint
 def session_costs(graph_path: str, recordings: list[str], streams: int, samples: int, beam: float,
                   live_paths: int | None = None, refine: bool = True) -> dict:  # fmt: skip
     import numpy as np
-
     from bench_service import joined_recordings
+
     from graphsvc.pipeline import open_session
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
-    from graphsvc.service.server import load_graphs
-
+    from graphsvc.service.graphs import load_graphs
     from graphsvc.synthesis.stream import StreamingSynthesizer
 
     spent = [0.0]  # seconds inside the streaming synthesis (a part of push_ms)

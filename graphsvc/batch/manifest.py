@@ -27,8 +27,13 @@ from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import file_sha256, read_input_text, require_file
-from graphsvc.flags import (add_performer_flags, add_synthesize_flags, calibration_choice, options_from_flags,
-                            os_message)  # fmt: skip
+from graphsvc.flags import (
+    add_performer_flags,
+    add_synthesize_flags,
+    calibration_choice,
+    options_from_flags,
+    os_message,  # fmt: skip
+)
 from graphsvc.graph.file import graph_file_meta
 from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
 from graphsvc.motion.proportions import performer_segments

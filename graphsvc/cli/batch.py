@@ -11,7 +11,7 @@ from graphsvc.flags import COUNT, PATH
 
 def _cmd_batch(args) -> int:
     from graphsvc.batch.run import format_summary, run_batch
-    from graphsvc.service.server import parse_graph_spec
+    from graphsvc.service.graphs import parse_graph_spec
 
     graphs = dict(parse_graph_spec(spec) for spec in args.graph or [])
     summary = run_batch(args.manifest, args.out, graphs=graphs, scheduler=args.scheduler, workers=args.workers,

@@ -13,9 +13,18 @@ from pathlib import Path
 from graphsvc.cli.args import command, print_flushed, print_notes
 from graphsvc.errors import GraphsvcError
 from graphsvc.fileio import check_outputs, read_input_text
-from graphsvc.flags import (PATH, add_calibrate_from_start_flags, add_calibration_flag, add_input_file_flags,
-                            add_performer_flags, add_search_flags, calibration_choice, options_from_flags, ranged,
-                            synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (
+    PATH,
+    add_calibrate_from_start_flags,
+    add_calibration_flag,
+    add_input_file_flags,
+    add_performer_flags,
+    add_search_flags,
+    calibration_choice,
+    options_from_flags,
+    ranged,
+    synthesize_inputs,  # fmt: skip
+)
 
 
 def _check_output(path: Path, inputs=()) -> None:

@@ -6,8 +6,17 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_note, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (COUNT, LAYOUT_HELP, PATH, SEED, add_performer_flags, add_pose_flag, add_search_flags,
-                            options_from_flags, ranged)  # fmt: skip
+from graphsvc.flags import (
+    COUNT,
+    LAYOUT_HELP,
+    PATH,
+    SEED,
+    add_performer_flags,
+    add_pose_flag,
+    add_search_flags,
+    options_from_flags,  # fmt: skip
+    ranged,
+)
 
 
 def _cmd_evaluate(args) -> int:

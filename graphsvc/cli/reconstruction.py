@@ -7,9 +7,20 @@ from pathlib import Path
 
 from graphsvc.cli.args import command, file_arg, print_notes
 from graphsvc.fileio import check_outputs
-from graphsvc.flags import (LAYOUT_HELP, PATH, SEED, add_input_file_flags, add_performer_flags, add_pose_flag,
-                            add_synthesize_flags, calibration_choice, options_from_flags, performer_from_flags, ranged,
-                            synthesize_inputs)  # fmt: skip
+from graphsvc.flags import (
+    LAYOUT_HELP,
+    PATH,
+    SEED,
+    add_input_file_flags,
+    add_performer_flags,
+    add_pose_flag,
+    add_synthesize_flags,
+    calibration_choice,
+    options_from_flags,
+    performer_from_flags,
+    ranged,
+    synthesize_inputs,  # fmt: skip
+)
 
 
 def _cmd_synthesize(args) -> int:
@@ -90,7 +101,6 @@ def _cmd_calibrate(args) -> int:
 
 def _cmd_demo(args) -> int:
     from graphsvc.demo import format_demo_summary, run_demo
-
     from graphsvc.errors import InputError
 
     if args.kb == "pybullet" and args.minutes is not None:

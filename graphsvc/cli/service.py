@@ -10,8 +10,10 @@ from graphsvc.flags import COUNT, PATH, ranged
 
 
 def _cmd_serve(args) -> int:
+    from graphsvc.service.graphs import load_graphs, parse_graph_spec
+    from graphsvc.service.interceptors import read_tokens
     from graphsvc.service.live_workers import LiveWorkers, default_count
-    from graphsvc.service.server import ServerConfig, bind_server, load_graphs, parse_graph_spec, read_tokens, serve
+    from graphsvc.service.server import ServerConfig, bind_server, serve
 
     tokens = read_tokens(args.token_file) if args.token_file else ()
     config = ServerConfig(host=args.host, port=args.port, tls_cert=args.tls_cert and Path(args.tls_cert),

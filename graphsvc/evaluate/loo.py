@@ -55,6 +55,7 @@ from graphsvc.sensors.simulate import MarkerPattern
 from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.sources import path_readings, source_readings, timeline_from_nodes, timeline_from_sources
 
+
 def clip_file_name(source: str, name: str) -> str:
     """What `--test GLOB` is matched against: the source file's name (`walk_001.bvh`),
     or the clip name for clips without a file (procedural ones)."""

@@ -45,7 +45,7 @@ def join_clips(motions: list[Motion], rate_hz: float, mapping=None, name: str | 
         raise InputError("no clips to join")
     first = motions[0]
     rot, trans, labels = [], [], []
-    end = None
+    end, end_heading = None, 0.0
     for m in motions:
         if not m.skeleton.same_topology(first.skeleton):
             raise InputError(f"{m.name}: its skeleton differs from {first.name}'s; a performance has one skeleton topology")

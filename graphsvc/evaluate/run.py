@@ -29,8 +29,14 @@ from graphsvc.graph.build import BuildOptions, build_graph, load_knowledge_base
 from graphsvc.graph.file import load_graph
 from graphsvc.motion.joints import joint_map, load_mapping_file
 from graphsvc.motion.library import find_motion_files, load_motion
-from graphsvc.motion.proportions import (check_height, complete_lengths, lengths_for_height, performer_segments,
-                                         segment_lengths, skeleton_height)  # fmt: skip
+from graphsvc.motion.proportions import (
+    check_height,
+    complete_lengths,
+    lengths_for_height,
+    performer_segments,
+    segment_lengths,  # fmt: skip
+    skeleton_height,
+)
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.simulate import MarkerPattern, check_pattern

@@ -320,9 +320,9 @@ def device_map_seeds() -> list[bytes]:
 
 
 def grpc_synthesize_seeds() -> list[bytes]:
+    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.convert_recording import recording_to_proto
     from graphsvc.service.options_proto import options_to_proto
-    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies.options import Options
     from graphsvc.strategies.ssg.options import SsgOptions
 
@@ -340,9 +340,9 @@ def grpc_synthesize_seeds() -> list[bytes]:
 
 
 def grpc_stream_seeds() -> list[bytes]:
+    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.convert_recording import sample_to_proto
     from graphsvc.service.options_proto import options_to_proto
-    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies.olng.options import OlngOptions
     from graphsvc.strategies.options import Options
 

@@ -17,9 +17,9 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from graphsvc.errors import GraphsvcError
 from graphsvc.fuzz import seeds
@@ -230,9 +230,9 @@ def _each(*calls) -> str:
 
 
 def _grpc_synthesize(data: bytes) -> None:
+    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.convert_recording import recording_from_proto
     from graphsvc.service.options_proto import options_from_proto, performer_from_proto
-    from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.strategies import get as get_strategy
 
     msg = _decode(pb.SynthesizeRequest, data)
@@ -254,11 +254,15 @@ def _grpc_synthesize(data: bytes) -> None:
 
 
 def _grpc_stream(data: bytes) -> None:
-    from graphsvc.service.convert_recording import (marker_names_from_proto, sample_from_proto,
-                                                    sample_markers_from_proto, sample_orientations_from_proto,
-                                                    sensor_order)  # fmt: skip
-    from graphsvc.service.options_proto import options_from_proto
     from graphsvc.service._generated import graphsvc_pb2 as pb
+    from graphsvc.service.convert_recording import (
+        marker_names_from_proto,
+        sample_from_proto,
+        sample_markers_from_proto,
+        sample_orientations_from_proto,
+        sensor_order,  # fmt: skip
+    )
+    from graphsvc.service.options_proto import options_from_proto
 
     msg = _decode(pb.StreamSynthesizeRequest, data)
     if msg is None:

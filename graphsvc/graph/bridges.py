@@ -69,9 +69,7 @@ import numpy as np
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.distance import PoseFeatures, concat_features, pose_features
 from graphsvc.graph.transitions import _pair_distances, _state_code
-from graphsvc.motion import quat
 from graphsvc.motion.kinematics import forward_kinematics
-from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.motion.placement import joint_tables, place_poses, relative_pose
 
 DEFAULT_THRESHOLD_M = 0.25  # loosest D a bridge between labels may span

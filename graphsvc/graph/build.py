@@ -11,23 +11,46 @@ from __future__ import annotations
 import hashlib
 import re
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
 
 from graphsvc.errors import InputError, SkeletonError
-from graphsvc.graph import bridges as br, interpolation as interp, metadata as meta
+from graphsvc.graph import bridges as br
+from graphsvc.graph import interpolation as interp
+from graphsvc.graph import metadata as meta
 from graphsvc.graph.connectivity import label_hops, typical_times
-from graphsvc.graph.distance import (DEFAULT_WINDOW_S, PoseFeatures, concat_features, distance_block, pose_features, take, window_frames)  # fmt: skip
-from graphsvc.graph.model import (EDGE_BRIDGE, EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, MotionGraph, NODE_BRIDGE, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW, incoming_offsets)  # fmt: skip
+from graphsvc.graph.distance import (  # fmt: skip
+    DEFAULT_WINDOW_S,
+    PoseFeatures,
+    concat_features,
+    distance_block,
+    pose_features,
+    take,
+    window_frames,
+)
+from graphsvc.graph.model import (  # fmt: skip
+    EDGE_BRIDGE,
+    EDGE_INTERP,
+    EDGE_ORIGINAL,
+    EDGE_SLOW,
+    EDGE_SPEEDUP,
+    EDGE_TRANSITION,
+    NODE_BRIDGE,
+    NODE_INTERP,
+    NODE_ORIGINAL,
+    NODE_SLOW,
+    MotionGraph,
+    incoming_offsets,
+)
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
-from graphsvc.motion import augment as aug, quat, signals
+from graphsvc.motion import augment as aug
+from graphsvc.motion import quat, signals
 from graphsvc.motion.augment import mirror_label
 from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
@@ -37,8 +60,7 @@ from graphsvc.motion.retarget import pool_skeletons
 from graphsvc.motion.skeleton import Motion, Skeleton, check_finite
 from graphsvc.sensors.accelerometer import simulate_accelerations
 from graphsvc.sensors.anatomy import ANATOMICAL
-from graphsvc.sensors.layout import Layout, PRESETS, Placement, anatomical_placement, place
-
+from graphsvc.sensors.layout import PRESETS, Layout, Placement, anatomical_placement, place
 
 
 @dataclass(frozen=True)

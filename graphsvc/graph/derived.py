@@ -15,7 +15,7 @@ from typing import TypeVar
 
 T = TypeVar("T")
 
-_HELD: "weakref.WeakKeyDictionary[object, dict]" = weakref.WeakKeyDictionary()
+_HELD: weakref.WeakKeyDictionary[object, dict] = weakref.WeakKeyDictionary()
 _LOCK = threading.RLock()  # (re-entrant: a value's make may derive another value)
 
 

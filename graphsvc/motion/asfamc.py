@@ -24,7 +24,7 @@ import numpy as np
 from graphsvc.errors import FormatError, InputError
 from graphsvc.fileio import require_file
 from graphsvc.motion import quat
-from graphsvc.motion.bvh import ERR_COUNT, ERR_NUMBER, OK, _POW10, _channels_to_pose, parse_rows, read_file_bytes
+from graphsvc.motion.bvh import _POW10, ERR_COUNT, ERR_NUMBER, OK, _channels_to_pose, parse_rows, read_file_bytes
 from graphsvc.motion.skeleton import Motion, Skeleton
 
 INCH = 0.0254  # metres

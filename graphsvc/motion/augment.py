@@ -27,7 +27,6 @@ reorders quaternion components: mirroring twice returns the original exactly
 from __future__ import annotations
 
 import re
-
 from collections.abc import Sequence
 
 import numpy as np

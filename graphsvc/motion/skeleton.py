@@ -69,7 +69,7 @@ class Skeleton:
         """What two skeletons must share to be one topology (bone lengths may differ)."""
         return (self.names, tuple(int(p) for p in self.parents), self.channels)
 
-    def same_topology(self, other: "Skeleton") -> bool:
+    def same_topology(self, other: Skeleton) -> bool:
         return self.topology() == other.topology()
 
     def bone_lengths(self) -> np.ndarray:
@@ -114,7 +114,7 @@ class Motion:
     def duration_s(self) -> float:
         return self.num_frames / self.rate_hz
 
-    def copy(self, **changes) -> "Motion":
+    def copy(self, **changes) -> Motion:
         out = replace(self, **changes)
         if "rotations" not in changes:
             out.rotations = self.rotations.copy()
@@ -122,7 +122,7 @@ class Motion:
             out.translations = self.translations.copy()
         return out
 
-    def slice(self, start: int, stop: int) -> "Motion":
+    def slice(self, start: int, stop: int) -> Motion:
         return replace(
             self,
             rotations=self.rotations[start:stop].copy(),

@@ -24,8 +24,13 @@ from graphsvc.motion.resample import resample
 from graphsvc.pipeline import read_searched_recording
 from graphsvc.report.gather import clip_view
 from graphsvc.sensors.files import read_recording
-from graphsvc.strategies.sources import (path_readings, source_readings, timeline_from_labels, timeline_from_nodes,
-                                         timeline_from_sources)  # fmt: skip
+from graphsvc.strategies.sources import (
+    path_readings,
+    source_readings,
+    timeline_from_labels,
+    timeline_from_nodes,
+    timeline_from_sources,  # fmt: skip
+)
 
 TABLE_COLUMNS = ("clip", "label", "frames", "joint_err_cm", "joint_err_scaled_cm", "root_err_cm", "heading_err_deg",
                  "label_acc", "samples_per_s", "jitter_km_s3", "truth_jitter_km_s3", "skate_cm_s",

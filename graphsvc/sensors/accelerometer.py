@@ -15,7 +15,7 @@ import numpy as np
 from graphsvc.motion.kinematics import qmul, qrot
 from graphsvc.sensors.layout import Placement
 
-GRAVITY = 9.81  # m/s², the unit "g" of all costs 
+GRAVITY = 9.81  # m/s², the unit "g" of all costs
 G_UP = np.array([0.0, GRAVITY, 0.0])
 
 _CENTRAL = np.array([-1.0, 16.0, -30.0, 16.0, -1.0]) / 12.0

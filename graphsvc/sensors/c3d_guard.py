@@ -32,7 +32,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import resource
 import struct
 import subprocess
 import sys

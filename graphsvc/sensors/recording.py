@@ -390,7 +390,7 @@ def export_csv(rec: Recording, path) -> None:
 
 def csv_rows(table: np.ndarray) -> list[str]:
     """A CSV's rows of numbers: '%.9g', NaN as an empty cell."""
-    return [",".join("" if v != v else "%.9g" % v for v in row) for row in table.tolist()]  # (v != v ⇔ NaN)
+    return [",".join("" if v != v else f"{v:.9g}" for v in row) for row in table.tolist()]  # (v != v ⇔ NaN)
 
 
 def _shortest(x: float) -> str:

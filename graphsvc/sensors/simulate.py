@@ -26,7 +26,6 @@ from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_he
 from graphsvc.sensors.recording import Recording
 
 
-
 def device_readings(world_rot: np.ndarray, world_pos: np.ndarray, placement, table, rate_hz: float,
                     noise: NoiseModel, seed: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The readings (F, S, 3) m/s² of the layout's sensors as mounted devices, before

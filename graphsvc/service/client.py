@@ -26,13 +26,13 @@ from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.fileio import read_input_bytes, read_input_text
 from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.sensors.recording import Recording
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 from graphsvc.service.convert_graph import skeleton_from_proto
 from graphsvc.service.convert_motion import frames_to_motion, motion_from_proto
 from graphsvc.service.convert_recording import recording_to_proto, sample_to_proto
 from graphsvc.service.convert_report import report_from_proto
 from graphsvc.service.servers import PROBE_TIMEOUT_S, SERVER_METADATA, SERVICE_CONFIG, parse_servers, probe_all
-from graphsvc.service._generated import graphsvc_pb2 as pb
-from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 
 DEFAULT_SERVER = "127.0.0.1:50051"
 

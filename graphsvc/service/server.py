@@ -45,9 +45,10 @@ from grpc_reflection.v1alpha import reflection
 from graphsvc.batch.service import BatchManager
 from graphsvc.errors import GraphsvcError, InputError
 from graphsvc.fileio import read_input_bytes
-from graphsvc.service._generated import graphsvc_pb2 as pb, graphsvc_pb2_grpc as pb_grpc
-from graphsvc.service.graphs import LoadedGraph, load_graphs, parse_graph_spec
-from graphsvc.service.interceptors import BearerTokenInterceptor, CallGate, read_tokens
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
+from graphsvc.service.graphs import LoadedGraph
+from graphsvc.service.interceptors import BearerTokenInterceptor, CallGate
 from graphsvc.service.live_workers import LiveWorkers
 from graphsvc.service.metrics import Metrics, StatusCounter
 from graphsvc.service.servicer import MotionGraphServicer

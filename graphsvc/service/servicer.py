@@ -18,11 +18,12 @@ import time
 
 import grpc
 
+from graphsvc import pipeline
 from graphsvc.batch.service import BatchNotFound
 from graphsvc.errors import FieldError, InputError
 from graphsvc.motion.bvh import bvh_text
-from graphsvc import pipeline
-from graphsvc.service._generated import graphsvc_pb2 as pb, graphsvc_pb2_grpc as pb_grpc
+from graphsvc.service._generated import graphsvc_pb2 as pb
+from graphsvc.service._generated import graphsvc_pb2_grpc as pb_grpc
 from graphsvc.service.convert_motion import frame_to_proto, motion_to_proto, provenance_to_proto
 from graphsvc.service.convert_recording import recording_from_proto
 from graphsvc.service.convert_report import batch_status_to_proto, report_to_proto
@@ -32,7 +33,8 @@ from graphsvc.service.options_proto import options_from_proto, performer_from_pr
 from graphsvc.service.servers import SERVER_METADATA
 from graphsvc.service.status import RpcStatus, abort_for
 from graphsvc.service.streams import CONFIG_TIMEOUT_S, StartCalibration, StreamInput, StreamSlots, first_message
-from graphsvc.strategies import check_options, get as get_strategy
+from graphsvc.strategies import check_options
+from graphsvc.strategies import get as get_strategy
 from graphsvc.strategies.threads import ThreadShare
 
 

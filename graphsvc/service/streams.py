@@ -14,9 +14,14 @@ from dataclasses import dataclass
 import grpc
 import numpy as np
 
-from graphsvc.service.convert_recording import (marker_names_from_proto, sample_from_proto, sample_markers_from_proto,
-                                                sample_orientations_from_proto, sensor_order)  # fmt: skip
 from graphsvc.errors import FieldError, InputError
+from graphsvc.service.convert_recording import (
+    marker_names_from_proto,
+    sample_from_proto,
+    sample_markers_from_proto,
+    sample_orientations_from_proto,  # fmt: skip
+    sensor_order,
+)
 from graphsvc.service.status import RpcStatus
 
 # A stream that sends no StreamConfig within this many seconds of connecting is ended

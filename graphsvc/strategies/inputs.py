@@ -18,13 +18,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.sensors.devices import DEVICES
-from graphsvc.sensors.layout import PRESETS, layout_from_dict, root_sensor
-from graphsvc.sensors.orientation import orientation_cue
 from graphsvc.graph.model import MotionGraph
 from graphsvc.sensors.anatomy import check_frames
+from graphsvc.sensors.devices import DEVICES
 from graphsvc.sensors.grid import markers_at_rate, readings_at_rate, values_at_rate
+from graphsvc.sensors.layout import PRESETS, layout_from_dict, root_sensor
 from graphsvc.sensors.noise import CausalTrackHeading, heading_from_track
+from graphsvc.sensors.orientation import orientation_cue
 from graphsvc.sensors.recording import Recording
 from graphsvc.strategies.base import INPUTS, Strategy
 from graphsvc.strategies.options import Options, check_constraints

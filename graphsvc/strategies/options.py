@@ -24,7 +24,7 @@ import dataclasses
 import math
 import typing
 from dataclasses import asdict, dataclass, field
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from graphsvc.errors import FormatError, InputError
@@ -100,7 +100,7 @@ def option_specs(cls: typing.Any) -> tuple[OptionSpec, ...]:
     return _declared(cls)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _declared(cls: type) -> tuple[OptionSpec, ...]:
     hints = typing.get_type_hints(cls)
     out = []

@@ -75,13 +75,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
+from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.orientation import normalised_rows
-from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, impose_at_nodes, imposes
 from graphsvc.strategies.index import cached_arrays, frame_readings
-from graphsvc.motion.skeleton import Motion
 from graphsvc.synthesis.foot_hold import FootHold
-from graphsvc.synthesis.local_pose import node_pose_vectors, place_local_poses, pose_layout, pose_vectors, PoseLayout
+from graphsvc.synthesis.local_pose import PoseLayout, node_pose_vectors, place_local_poses, pose_layout, pose_vectors
+from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, impose_at_nodes, imposes
 from graphsvc.synthesis.smooth import gaussian_taps, smooth_poses
 
 INDEX_VERSION = 2

@@ -25,7 +25,7 @@ class Provenance:
     label: np.ndarray
 
     @staticmethod
-    def of_nodes(graph: MotionGraph, nodes: np.ndarray) -> "Provenance":
+    def of_nodes(graph: MotionGraph, nodes: np.ndarray) -> Provenance:
         """One source a frame: each node's clip and frame (a blended node's dominant one)."""
         nodes = np.asarray(nodes, dtype=np.int64)
         return Provenance(np.asarray(graph.node_clip)[nodes][:, None].astype(np.int64),

@@ -13,8 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.graph.model import (
-    EDGE_BRIDGE, EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_BRIDGE, NODE_INTERP,
-    NODE_ORIGINAL, NODE_SLOW,
+    EDGE_BRIDGE,
+    EDGE_INTERP,
+    EDGE_ORIGINAL,
+    EDGE_SLOW,
+    EDGE_SPEEDUP,
+    EDGE_TRANSITION,
+    NODE_BRIDGE,
+    NODE_INTERP,
+    NODE_ORIGINAL,
+    NODE_SLOW,
 )  # fmt: skip
 from graphsvc.strategies.results import label_runs
 

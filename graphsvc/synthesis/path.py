@@ -51,8 +51,8 @@ from graphsvc.graph.model import (
     MotionGraph,
 )
 from graphsvc.motion.joints import joint_map
-from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.kinematics import diff3 as _diff3
+from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.kinematics import qmul4 as _qmul
 from graphsvc.motion.kinematics import qrot3 as _qrot
 from graphsvc.motion.placement import joint_tables as _joint_tables

@@ -10,9 +10,9 @@ from graphsvc.graph.model import NODE_BRIDGE, NODE_INTERP, NODE_ORIGINAL, NODE_S
 from graphsvc.motion.augment import mirror_motion, reverse_motion
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.pipeline import Options
-from graphsvc.strategies.options import Weights
 from graphsvc.sensors.layout import layout_from_dict
 from graphsvc.sensors.noise import PRESETS as NOISE
+from graphsvc.strategies.options import Weights
 
 # No noise and no poses' filter (a low-pass also blurs a noise-free run by about a
 # centimetre): what is left is the search's own error.

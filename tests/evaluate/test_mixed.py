@@ -13,10 +13,9 @@ from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.resample import resample
 from graphsvc.pipeline import Options
-from graphsvc.strategies.options import Weights
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
-
+from graphsvc.strategies.options import Weights
 from tests.graph.test_connectivity import mixed_kb
 
 

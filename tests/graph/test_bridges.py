@@ -11,11 +11,10 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.metadata import recompute_accelerations
 from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE, NODE_ORIGINAL
-from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.joints import joint_map
+from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.synthesis.path import synthesize_motion
-
 from tests.graph.test_connectivity import mixed_kb
 
 

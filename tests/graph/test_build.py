@@ -8,7 +8,15 @@ from graphsvc.graph import metadata as meta
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.model import (
-    EDGE_INTERP, EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, NODE_INTERP, NODE_ORIGINAL, NODE_SLOW, summary,
+    EDGE_INTERP,
+    EDGE_ORIGINAL,
+    EDGE_SLOW,
+    EDGE_SPEEDUP,
+    EDGE_TRANSITION,
+    NODE_INTERP,
+    NODE_ORIGINAL,
+    NODE_SLOW,
+    summary,
 )
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.sensors.layout import PRESETS

@@ -2,7 +2,12 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from graphsvc.graph.distance import (
-    alignment, distance_block, distance_pairs, pose_features, window_frames, window_weights,
+    alignment,
+    distance_block,
+    distance_pairs,
+    pose_features,
+    window_frames,
+    window_weights,
 )
 
 

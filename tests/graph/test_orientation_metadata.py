@@ -14,7 +14,6 @@ from graphsvc.sensors.layout import PRESETS, root_sensor
 from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.orientation import relative_orientations, sensor_up
 from graphsvc.sensors.simulate import simulate_recording
-
 from tests.graph.test_connectivity import mixed_kb
 
 

@@ -15,9 +15,18 @@ from graphsvc.motion.bvh import read_bvh, write_bvh
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import make_clip
 from graphsvc.motion.procedural.body import standard_skeleton
-from graphsvc.motion.proportions import (SEGMENTS, complete_lengths, leg_length, lengths_for_height,
-                                         load_performer_file, on_performer, performer_lengths, performer_skeleton,
-                                         segment_lengths, skeleton_height)  # fmt: skip
+from graphsvc.motion.proportions import (
+    SEGMENTS,
+    complete_lengths,
+    leg_length,
+    lengths_for_height,
+    load_performer_file,
+    on_performer,
+    performer_lengths,
+    performer_skeleton,
+    segment_lengths,  # fmt: skip
+    skeleton_height,
+)
 from graphsvc.motion.skeleton import Skeleton
 
 BANDAI = Path("/work/shared/data/bandai/dataset-1/data")

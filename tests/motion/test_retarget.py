@@ -4,8 +4,6 @@ families; `graphsvc build` with mixed sources and `--skeleton`."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 

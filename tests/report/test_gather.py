@@ -15,7 +15,12 @@ from graphsvc.report.gather import centre_joint, constraint_arrays, drawn_joints
 from graphsvc.report.html import data_json, render_html, three_script
 from graphsvc.strategies.results import Provenance
 from graphsvc.strategies.sources import (
-    compact_sources, path_edges, path_readings, source_readings, timeline_from_nodes, timeline_from_sources,
+    compact_sources,
+    path_edges,
+    path_readings,
+    source_readings,
+    timeline_from_nodes,
+    timeline_from_sources,
 )  # fmt: skip
 from tests.conftest import tpose_skeleton
 

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 from graphsvc.errors import InputError
-from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search
 from graphsvc.strategies.viterbi.beam import _immortal
 from graphsvc.strategies.viterbi.costs import COST
 from graphsvc.strategies.viterbi.search import ViterbiSearch
-from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 from tests.search.problems import random_graph, tiny_graph
 
 PLACED, UNPLACED = Weights(0.5, 1, 1), Weights(1, 0, 0)

@@ -9,11 +9,11 @@ from graphsvc.motion import signals
 from graphsvc.motion.joints import canonical_indices, joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base
-from graphsvc.strategies.options import Weights
-from graphsvc.strategies.viterbi.batch import viterbi_search
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.simulate import simulate_recording
+from graphsvc.strategies.options import Weights
+from graphsvc.strategies.viterbi.batch import viterbi_search
 from graphsvc.synthesis.path import synthesize_motion
 
 

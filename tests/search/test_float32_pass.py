@@ -204,9 +204,9 @@ def test_float32_pass_eight_wide_equals_float64_search_on_a_built_like_graph(see
 def _keep_two_scalar_and_eight_wide(placed):
     """Two kernels over one run of slot entries: `_keep_two` one entry at a time with
     pass 1's float32 arithmetic, and the eight-wide intrinsic."""
-    from graphsvc.strategies.viterbi.intrinsics import keep_two_gathered8, keep_two_placed8
     from graphsvc.strategies.viterbi.costs import RC32, _place_terms
     from graphsvc.strategies.viterbi.dense import _keep_two
+    from graphsvc.strategies.viterbi.intrinsics import keep_two_gathered8, keep_two_placed8
     from graphsvc.strategies.viterbi.intrinsics import tag as _tag
 
     @numba.njit

@@ -276,7 +276,7 @@ def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_e
 def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, built6, strategy, layout):
     from dataclasses import replace
 
-    from graphsvc.pipeline import open_session, Options, reconstruct
+    from graphsvc.pipeline import Options, open_session, reconstruct
     from graphsvc.sensors.layout import layout_from_dict
     from graphsvc.sensors.noise import PRESETS as NOISE
     from graphsvc.sensors.simulate import simulate_recording

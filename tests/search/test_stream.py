@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from graphsvc.errors import InputError
-from graphsvc.strategies.viterbi.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search
 from graphsvc.strategies.viterbi.search import ViterbiSearch
+from graphsvc.strategies.viterbi.stream import FixedLagDecoder, SlidingWindowDecoder, decode_stream
 from tests.search.problems import random_walk_problem
 
 

@@ -3,8 +3,8 @@ import threading
 import numpy as np
 import pytest
 
-from graphsvc.strategies.threads import ThreadShare
 from graphsvc.strategies.options import Weights
+from graphsvc.strategies.threads import ThreadShare
 from graphsvc.strategies.viterbi.search import ViterbiSearch
 from tests.search.problems import random_walk_problem
 

@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from graphsvc.errors import InputError
-from graphsvc.strategies.viterbi.reference import reference_viterbi
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import viterbi_search
+from graphsvc.strategies.viterbi.reference import reference_viterbi
 from graphsvc.strategies.viterbi.search import ViterbiSearch
 from tests.search.problems import path_cost, random_graph, random_up, random_walk_problem, tiny_graph
 

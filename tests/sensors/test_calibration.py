@@ -17,8 +17,17 @@ from graphsvc.motion import quat
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors import calibration as cal_mod
-from graphsvc.sensors.calibration import (POSE_READINGS, angle_deg, apply_calibration, calibrate_sample,
-                                          check_calibration, find_rest, load_calibration, match_windows, wahba)  # fmt: skip
+from graphsvc.sensors.calibration import (
+    POSE_READINGS,
+    angle_deg,
+    apply_calibration,
+    calibrate_sample,
+    check_calibration,  # fmt: skip
+    find_rest,
+    load_calibration,
+    match_windows,
+    wahba,
+)
 from graphsvc.sensors.device_model import mounting
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import corrupt_accelerations, parse_noise

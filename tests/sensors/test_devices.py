@@ -725,9 +725,9 @@ def test_cli_inspect_says_how_a_device_csv_was_read(tmp_path, capsys):
     assert out.splitlines()[-1] == ("  read: sensor frame device (MVNX format), up z (MVNX format), "
                                     "units m/s2 (MVNX format)")  # fmt: skip
     rec = tmp_path / "r.rec"
-    from graphsvc.sensors.recording import save_recording
-
     from dataclasses import replace
+
+    from graphsvc.sensors.recording import save_recording
 
     for meta in ({"simulated": True},  # a layout's recording
                  {"imported_from": "csv", "units": "g", "up": "y", "sensor_frame": "device"}):  # not saying whence

@@ -4,7 +4,12 @@ import pytest
 from graphsvc.errors import InputError
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.noise import (
-    PRESETS, NoiseModel, corrupt_accelerations, corrupt_positions, heading_from_track, parse_noise,
+    PRESETS,
+    NoiseModel,
+    corrupt_accelerations,
+    corrupt_positions,
+    heading_from_track,
+    parse_noise,
 )
 
 

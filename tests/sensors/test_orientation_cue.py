@@ -6,8 +6,13 @@ import pytest
 
 from graphsvc.motion import quat
 from graphsvc.sensors.layout import PRESETS, root_sensor
-from graphsvc.sensors.orientation import (heading_twist, normalised_rows, orientation_cue, relative_orientations,
-                                          sensor_up)  # fmt: skip
+from graphsvc.sensors.orientation import (
+    heading_twist,
+    normalised_rows,
+    orientation_cue,
+    relative_orientations,
+    sensor_up,  # fmt: skip
+)
 
 
 def _random(rng, shape):

@@ -3,7 +3,8 @@ import numpy as np
 from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.layout import PRESETS
-from graphsvc.sensors.noise import PRESETS as NOISE, parse_noise
+from graphsvc.sensors.noise import PRESETS as NOISE
+from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.recording import load_recording, save_recording
 from graphsvc.sensors.simulate import simulate_recording
 from tests.conftest import still_motion

@@ -31,7 +31,7 @@ def graph_file(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def loaded_graphs(graph_file):
-    from graphsvc.service.server import load_graphs
+    from graphsvc.service.graphs import load_graphs
 
     return load_graphs([f"small={graph_file}"])
 
@@ -240,13 +240,6 @@ class VmcReceiver:
     def close(self):
         self.server.shutdown()
         self.server.server_close()
-
-
-@pytest.fixture
-def receiver():
-    r = Receiver()
-    yield r
-    r.close()
 
 
 @pytest.fixture

@@ -123,7 +123,7 @@ def _unread(fd) -> int:
 
 def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path, vmc_receiver):
     from graphsvc.motion.bvh import read_bvh
-    from graphsvc.pipeline import open_session, Options
+    from graphsvc.pipeline import Options, open_session
     from graphsvc.service.convert import rest_pose_readings
     from tests.service.conftest import popen_cli, wait_for
 

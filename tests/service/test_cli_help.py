@@ -79,7 +79,7 @@ def test_live_help_states_the_lag_a_stream_has(command, capsys):
 
 
 def test_a_default_session_reports_the_lag_the_help_states(graph):
-    from graphsvc.pipeline import open_session, Options
+    from graphsvc.pipeline import Options, open_session
 
     assert graph.rate_hz == 30.0
     # the search's latency, the blend's half window, the root's step, the poses' filter's half width (3σ)

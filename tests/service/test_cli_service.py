@@ -11,8 +11,8 @@ import time
 import grpc
 import pytest
 
-from graphsvc.service import client as C
 from graphsvc.cli import main
+from graphsvc.service import client as C
 from tests.service.conftest import popen_cli, run_cli
 
 

@@ -15,9 +15,7 @@ import pytest
 from graphsvc.service import client as C
 from graphsvc.service import convert
 from graphsvc.service._generated import graphsvc_pb2 as pb
-from tests.service.conftest import assert_frames_equal, live_frames, start
-from tests.service.conftest import rpc_error
-from tests.service.conftest import scrape, wait_for
+from tests.service.conftest import assert_frames_equal, live_frames, rpc_error, scrape, start, wait_for
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import pytest
 
 from graphsvc.service import client as C
 from graphsvc.service._generated import graphsvc_pb2 as pb
-from tests.service.conftest import nearest_options, ROOT, rpc_error, scrape, start, wait_for
+from tests.service.conftest import ROOT, nearest_options, rpc_error, scrape, start, wait_for
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,6 @@ from tests.service.conftest import rpc_error as _code
 from tests.service.conftest import stream_requests as _requests
 from tests.service.conftest import wait_for as _wait_for
 
-
 # ---------------------------------------------------------------- graphs
 
 

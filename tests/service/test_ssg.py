@@ -208,8 +208,9 @@ def test_bad_ssg_stream_requests_are_invalid_argument(conn, server, marker_recor
     short = [pb.SensorSample(time_s=0.0, marker_positions_m=[0.0] * 11)]
     inf = [pb.SensorSample(time_s=0.0, marker_positions_m=[0.0] * 5 + [float("inf")] + [0.0] * 6)]
     blind = [pb.SensorSample(time_s=s.time_s, marker_positions_m=[float("nan")] * 12) for s in samples[:40]]
-    ssg = lambda **kw: C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG,  # noqa: E731
-                                                                    ssg=pb.SsgOptions(**kw)), marker_names=names)
+    def ssg(**kw):
+        return C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG, ssg=pb.SsgOptions(**kw)),
+                               marker_names=names)
     cases = {  # name: (config, samples, what the message names)
         "marker count": (config, short, "sample[0].marker_positions_m"),
         "inf marker": (config, inf, "sample[0].marker_positions_m[5]"),

@@ -8,8 +8,8 @@ import pytest
 
 from graphsvc.cli import main
 from graphsvc.errors import InputError
-from graphsvc.evaluate.protocols import PROTOCOLS, hide_lists
 from graphsvc.evaluate.metrics import truth_errors
+from graphsvc.evaluate.protocols import PROTOCOLS, hide_lists
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.graph.holdout import held_out_mask

@@ -13,7 +13,7 @@ from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.model import EDGE_ORIGINAL
 from graphsvc.motion.bvh import write_bvh
 from graphsvc.motion.procedural import make_clip, standard_skeleton
-from graphsvc.pipeline import open_session, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
@@ -23,7 +23,6 @@ from graphsvc.strategies import get
 from graphsvc.strategies.base import prepared_index
 from graphsvc.strategies.index import index_path
 from graphsvc.strategies.nearest.strategy import _index, choose
-
 from tests.graph.test_connectivity import mixed_kb
 
 

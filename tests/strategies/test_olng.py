@@ -15,12 +15,13 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import save_graph
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.resample import resample
-from graphsvc.pipeline import open_session, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.layout import layout_from_dict
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
 from graphsvc.sensors.simulate import simulate_recording
 from graphsvc.strategies.olng.index import load_index
+from graphsvc.strategies.olng.options import OlngOptions
 from graphsvc.strategies.olng.pose import (
     EnergyTerms,
     energy,
@@ -28,7 +29,6 @@ from graphsvc.strategies.olng.pose import (
     pose_positions,
     weighted_pca,
 )
-from graphsvc.strategies.olng.options import OlngOptions
 
 
 @pytest.fixture(scope="module")

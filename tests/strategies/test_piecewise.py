@@ -11,7 +11,7 @@ from graphsvc.evaluate.loo import EvalSetup, evaluate_clip
 from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.holdout import performance_clips
-from graphsvc.pipeline import open_session, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.recording import save_recording
@@ -22,7 +22,6 @@ from graphsvc.strategies.index import index_path
 from graphsvc.strategies.piecewise import PiecewiseOptions
 from graphsvc.strategies.piecewise.model import Model, learn, training_rows
 from graphsvc.strategies.piecewise.strategy import learned_model
-
 from tests.graph.test_connectivity import mixed_kb
 
 LAYOUT = PRESETS["kelly6"]

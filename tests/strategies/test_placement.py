@@ -15,12 +15,12 @@ from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.motion.skeleton import Motion
-from graphsvc.pipeline import open_session, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.layout import load_layout
 from graphsvc.sensors.noise import PRESETS as NOISE
 from graphsvc.sensors.simulate import simulate_recording
-from graphsvc.strategies.start import start_placement, start_samples, START_TRAVEL_M
 from graphsvc.strategies.options import Weights
+from graphsvc.strategies.start import START_TRAVEL_M, start_placement, start_samples
 
 RATE = 30.0
 

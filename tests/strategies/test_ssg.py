@@ -18,7 +18,7 @@ from graphsvc.graph.file import save_graph
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import motion_fk
 from graphsvc.motion.procedural import generate_knowledge_base, generate_performance
-from graphsvc.pipeline import open_session, Options, reconstruct
+from graphsvc.pipeline import Options, open_session, reconstruct
 from graphsvc.sensors.markers import PRESETS as MARKERS
 from graphsvc.sensors.markers import MarkerSet
 from graphsvc.sensors.noise import PRESETS as NOISE

@@ -11,8 +11,14 @@ import numpy as np
 import pytest
 from scipy.linalg import lstsq
 
-from graphsvc.synthesis.track import (PRIOR_OFFSET_M, PRIOR_RATE_M_S, FixedLagSmoother, TrackModel, free_steps,
-                                      smooth_offsets)  # fmt: skip
+from graphsvc.synthesis.track import (
+    PRIOR_OFFSET_M,
+    PRIOR_RATE_M_S,
+    FixedLagSmoother,
+    TrackModel,
+    free_steps,
+    smooth_offsets,  # fmt: skip
+)
 
 
 def _least_squares(z: np.ndarray, model: TrackModel) -> np.ndarray:

@@ -32,10 +32,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from graphsvc.motion.skeleton import Motion, Skeleton
 from graphsvc.motion.procedural.body import CONTENT_LABELS, standard_skeleton
-from graphsvc.motion.procedural.plan import _Plan, _idle, _locomote, _new_plan, _punches, _smooth_curve, _swing
+from graphsvc.motion.procedural.plan import _idle, _locomote, _new_plan, _Plan, _punches, _smooth_curve, _swing
 from graphsvc.motion.procedural.render import _render
+from graphsvc.motion.skeleton import Motion, Skeleton
 
 
 def _motion(

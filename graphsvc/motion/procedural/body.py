@@ -3,7 +3,6 @@ planner and renderer share, and analytic two-bone IK."""
 
 from __future__ import annotations
 
-
 import numba
 import numpy as np
 

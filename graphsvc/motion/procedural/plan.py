@@ -9,8 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from graphsvc.motion.procedural.body import G, STAND_H, STAND_W, _fwd, _left
-
+from graphsvc.motion.procedural.body import STAND_H, STAND_W, G, _fwd, _left
 
 # --------------------------------------------------------------------------- plan
 

@@ -3,17 +3,29 @@ arcs, the pelvis lowered until both ankles reach, leg and arm IK."""
 
 from __future__ import annotations
 
-
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from graphsvc.motion import quat
-from graphsvc.motion.skeleton import Skeleton
-from graphsvc.motion.procedural.body import (ANKLE_H, FOREARM, SHIN, THIGH, TOE_FROM_ANKLE, TOE_H, UPPER_ARM, _IDX, _OFF,
-                                             _bump, _min_jerk, _rot_x, _rot_z, two_bone_ik)
+from graphsvc.motion.procedural.body import (
+    _IDX,
+    _OFF,
+    ANKLE_H,
+    FOREARM,
+    SHIN,
+    THIGH,
+    TOE_FROM_ANKLE,
+    TOE_H,
+    UPPER_ARM,
+    _bump,
+    _min_jerk,
+    _rot_x,
+    _rot_z,
+    two_bone_ik,
+)
 from graphsvc.motion.procedural.plan import _Plan
-
+from graphsvc.motion.skeleton import Skeleton
 
 # --------------------------------------------------------------------------- rendering
 

@@ -45,14 +45,23 @@ from graphsvc.strategies.index import cached_arrays
 from graphsvc.strategies.inputs import PreparedInput, tracked_streams
 from graphsvc.strategies.live import LiveSession
 from graphsvc.strategies.multilinear.fit import Body, fit_unit, graph_body, local_frames, placed, unit_times
-from graphsvc.strategies.multilinear.model import (MIN_STEP_S, Tensor, align_hemispheres, frame_data, learn, model_key, tensors_of,
-                                                   touchdowns, usable_clips)  # fmt: skip
+from graphsvc.strategies.multilinear.model import (
+    MIN_STEP_S,
+    Tensor,
+    align_hemispheres,
+    frame_data,
+    learn,
+    model_key,
+    tensors_of,
+    touchdowns,  # fmt: skip
+    usable_clips,
+)
 from graphsvc.strategies.multilinear.options import MultilinearOptions
 from graphsvc.strategies.options import Options, track_pull
 from graphsvc.strategies.results import Provenance, Reconstruction, label_runs
 from graphsvc.strategies.start import start_state
-from graphsvc.synthesis.local_pose import pose_vectors
 from graphsvc.synthesis.foot_hold import FootHold
+from graphsvc.synthesis.local_pose import pose_vectors
 from graphsvc.synthesis.path import blend_cuts, path_tables
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track, shift_to_smoothed
@@ -179,7 +188,6 @@ class MultilinearStrategy(Strategy):
         units = plan_units(labels, contacts, lookup, set(int(x) for x in np.asarray(arrays["locomotion"])), rate,
                            {k: t.frames for k, t in enumerate(tensors)})  # fmt: skip
         body = graph_body(graph)
-        d = body.layout.dims
         values = self._search_values(graph, found.motion, nodes, edges, body)
         align_hemispheres(values, np.asarray(index["hemispheres"]), body.layout.slot)
         trans_of = np.asarray(graph.node_translations)[nodes].astype(np.float64)

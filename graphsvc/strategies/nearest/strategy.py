@@ -30,12 +30,12 @@ from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.base import Strategy, frame_by_frame_ignored, prepared_index
+from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
-from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
-from graphsvc.strategies.start import first_measured
-from graphsvc.strategies.index import cached_arrays, frame_readings
 from graphsvc.strategies.options import Options
+from graphsvc.strategies.results import Provenance, Reconstruction, path_labels
+from graphsvc.strategies.start import first_measured
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
 from graphsvc.synthesis.stream import StreamingSynthesizer
 

@@ -38,19 +38,25 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
-from graphsvc.sensors.orientation import normalised_rows
-from graphsvc.synthesis.sensor_orientations import impose_at_nodes
+from graphsvc.motion import quat
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
-from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track
-from graphsvc.motion import quat
 from graphsvc.sensors.accelerometer import G_UP, GRAVITY
+from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.olng.index import OlngIndex
 from graphsvc.strategies.olng.lattice import Lattice, LatticeOptions
-from graphsvc.strategies.olng.pose import (EnergyTerms, PoseModel, optimise, pose_positions, sensor_orientations,
-                                           weighted_pca)  # fmt: skip
 from graphsvc.strategies.olng.options import OlngOptions
+from graphsvc.strategies.olng.pose import (
+    EnergyTerms,
+    PoseModel,
+    optimise,
+    pose_positions,
+    sensor_orientations,
+    weighted_pca,  # fmt: skip
+)
 from graphsvc.synthesis.path import FOOT_BLEND_S, _two_bone_ik, path_tables
+from graphsvc.synthesis.sensor_orientations import impose_at_nodes
+from graphsvc.synthesis.track import FixedLagSmoother, TrackModel, advance_own_track
 
 SOURCES = 8  # provenance: the heaviest neighbours a frame lists
 

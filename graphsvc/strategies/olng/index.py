@@ -53,7 +53,7 @@ def build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
     return {**arrays, "run_of": np.cumsum(new_run) - 1, "poses": poses, "positions": positions}
 
 
-def load_index(graph: MotionGraph, allowed: np.ndarray | None = None) -> "OlngIndex":
+def load_index(graph: MotionGraph, allowed: np.ndarray | None = None) -> OlngIndex:
     """The graph's OLNG index: its arrays from the cache beside the graph file (built and
     written there the first time), the tree built on them."""
     return OlngIndex(graph, cached_arrays(graph, "olng", INDEX_VERSION, lambda: build_arrays(graph)), allowed)

@@ -50,7 +50,7 @@ class OlngOptions:
         if self.w_prior * (self.w_pose + self.w_motion + self.w_smooth) + self.w_contr <= 0:
             raise OptionError("w_prior", "OLNG weights are all zero: the pose would be undetermined")
 
-    def resolved(self, frames: int) -> "OlngOptions":
+    def resolved(self, frames: int) -> OlngOptions:
         """K and I filled in for a knowledge base of `frames` frames."""
         k = self.k if self.k is not None else min(frames, 4096, max(16, round(frames / 150)))
         i = self.i if self.i is not None else min(k, 256, max(4, k // 16))

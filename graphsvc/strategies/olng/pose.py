@@ -53,7 +53,8 @@ from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.joints import joint_map
-from graphsvc.motion.kinematics import qmul4 as _qmul, qrot3 as _qrot
+from graphsvc.motion.kinematics import qmul4 as _qmul
+from graphsvc.motion.kinematics import qrot3 as _qrot
 from graphsvc.motion.placement import joint_tables
 from graphsvc.sensors.accelerometer import carried_frame
 from graphsvc.synthesis.local_pose import pose_layout, pose_vectors

@@ -18,19 +18,19 @@ import time
 
 import numpy as np
 
-from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, imposes
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput, tracked_streams
 from graphsvc.strategies.live import LiveSession
-from graphsvc.strategies.results import label_runs, Provenance, Reconstruction
 from graphsvc.strategies.olng.decoder import SOURCES, OlngDecoder
 from graphsvc.strategies.olng.index import OlngIndex, load_index
-from graphsvc.strategies.olng.pose import pose_model
 from graphsvc.strategies.olng.options import OlngOptions
+from graphsvc.strategies.olng.pose import pose_model
 from graphsvc.strategies.options import Options, track_pull
+from graphsvc.strategies.results import Provenance, Reconstruction, label_runs
+from graphsvc.synthesis.sensor_orientations import clip_sensor_placements, imposes
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.track import TrackModel, shift_to_smoothed
 

@@ -34,8 +34,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from graphsvc.strategies.ssg import dtw
-from graphsvc.strategies.ssg.graph import (BACKWARD, FORWARD, RETRIEVED, Anchor, Layer, cheapest_path, edge_costs,
-                                           placed, weighted)  # fmt: skip
+from graphsvc.strategies.ssg.graph import (
+    BACKWARD,
+    FORWARD,
+    RETRIEVED,
+    Anchor,
+    Layer,
+    cheapest_path,
+    edge_costs,
+    placed,  # fmt: skip
+    weighted,
+)
 from graphsvc.strategies.ssg.index import SsgIndex, WindowPoints
 
 COST_BLOCK = 64  # input frames whose local costs one matrix product computes (when they are in)

@@ -89,7 +89,7 @@ class SsgIndex:
     def searchable(self) -> int:
         return int(self.allowed.sum())
 
-    def with_allowed(self, allowed: np.ndarray | None) -> "SsgIndex":
+    def with_allowed(self, allowed: np.ndarray | None) -> SsgIndex:
         other = object.__new__(SsgIndex)
         other.__dict__.update(self.__dict__)
         other.allowed = np.ones(self.nodes.size, dtype=bool) if allowed is None else \

@@ -78,7 +78,7 @@ class SsgOptions:
             except GraphsvcError as exc:
                 raise on_field(exc, "keep") from None
 
-    def resolved(self, trunk_only: bool) -> "SsgOptions":
+    def resolved(self, trunk_only: bool) -> SsgOptions:
         """The defaults filled in for a set whose kept markers are (not) all on the head
         and trunk."""
         d = (0.25, 0.1, 16, 4.0) if trunk_only else (1.0 / 3.0, 1.0 / 6.0, 8, 1.0)

@@ -29,7 +29,14 @@ from graphsvc.errors import GraphsvcError, InputError, SearchCancelled
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.sensors.markers import (MarkerSet, PRESETS as MARKER_PRESETS, TRUNK_SEGMENTS, keep_markers, load_marker_set, marker_set_from_dict)  # fmt: skip
+from graphsvc.sensors.markers import PRESETS as MARKER_PRESETS
+from graphsvc.sensors.markers import (  # fmt: skip
+    TRUNK_SEGMENTS,
+    MarkerSet,
+    keep_markers,
+    load_marker_set,
+    marker_set_from_dict,
+)
 from graphsvc.sensors.simulate import simulate_marker_recording
 from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput

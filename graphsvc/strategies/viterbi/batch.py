@@ -17,7 +17,6 @@ from graphsvc.strategies.viterbi.costs import _path_terms
 from graphsvc.strategies.viterbi.search import ViterbiSearch
 from graphsvc.strategies.viterbi.tables import search_index
 
-
 REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
 CONTACT_CODES = {"none": 0, "left": 1, "right": 2, "both": 3}  # bit 0 left, bit 1 right
 

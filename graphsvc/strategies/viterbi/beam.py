@@ -14,13 +14,11 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graphsvc.strategies.viterbi.costs import COST, DEAD32, _carry_placement, _exact_choice
+from graphsvc.strategies.viterbi.costs import COST, DEAD32, TIE, _carry_placement, _exact_choice
 from graphsvc.strategies.viterbi.dense import _ranked
 from graphsvc.strategies.viterbi.intrinsics import compile_kernel as _compile
 from graphsvc.strategies.viterbi.intrinsics import fmin as _fmin
 from graphsvc.strategies.viterbi.intrinsics import pick as _pick
-from graphsvc.strategies.viterbi.costs import TIE
-
 
 # ----------------------------------------------------------------------------------
 # Beam search (opt-in): only the paths within `beam` of the best survive a step, and a

@@ -20,10 +20,28 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graphsvc.strategies.viterbi.costs import (COST, DEAD32, DEAD_BELOW, TIE, _carry_placement, _cost_at,
-                                               _exact_choice, _place_terms, _reading_costs, _reading_costs_serial,
-                                               _relative, _relative_serial, _row_total, _set_cost, _state_total,
-                                               _tie_better, QX, QZ, RC32, RH)  # fmt: skip
+from graphsvc.strategies.viterbi.costs import (
+    COST,
+    DEAD32,
+    DEAD_BELOW,
+    QX,
+    QZ,
+    RC32,
+    RH,
+    TIE,
+    _carry_placement,
+    _cost_at,
+    _exact_choice,
+    _place_terms,
+    _reading_costs,
+    _reading_costs_serial,
+    _relative,
+    _relative_serial,
+    _row_total,
+    _set_cost,
+    _state_total,
+    _tie_better,  # fmt: skip
+)
 from graphsvc.strategies.viterbi.intrinsics import compile_kernel as _compile
 from graphsvc.strategies.viterbi.intrinsics import fmax as _fmax
 from graphsvc.strategies.viterbi.intrinsics import fmin as _fmin
@@ -32,7 +50,6 @@ from graphsvc.strategies.viterbi.intrinsics import keep_two_placed8 as _keep_two
 from graphsvc.strategies.viterbi.intrinsics import pick as _pick
 from graphsvc.strategies.viterbi.intrinsics import prefetch as _prefetch
 from graphsvc.strategies.viterbi.intrinsics import tag as _tag
-
 
 # One step (Kelly et al. 2013, eq. 3, for every node) in two passes over float32 approximations and
 # exact float64 fix-ups, because a pass over the 317,600 edges is bound by its

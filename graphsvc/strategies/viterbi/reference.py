@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.graph.model import MotionGraph
+from graphsvc.sensors.accelerometer import GRAVITY
+from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.viterbi.batch import compile_constraints, orientation_counts
 from graphsvc.strategies.viterbi.costs import track_pull
-from graphsvc.sensors.accelerometer import GRAVITY
-from graphsvc.sensors.orientation import normalised_rows
 
 
 def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),

@@ -30,11 +30,31 @@ from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.orientation import normalised_rows
 from graphsvc.strategies.options import Weights
 from graphsvc.strategies.threads import StepTimer
-from graphsvc.strategies.viterbi.beam import (BEAM_CHUNKS, _beam_prune, _beam_step, _beam_step_serial, _best_in_list,
-                                              _bound_live, _immortal, _reset_costs)  # fmt: skip
-from graphsvc.strategies.viterbi.costs import COS, COST, DEAD32, HEADING, PLACED_WIDTH, SIN, UNPLACED_WIDTH, X, Z
-from graphsvc.strategies.viterbi.costs import pull_row, track_pull
-from graphsvc.strategies.viterbi.costs import _reading_costs_batch, _reading_costs_batch_serial
+from graphsvc.strategies.viterbi.beam import (
+    BEAM_CHUNKS,
+    _beam_prune,
+    _beam_step,
+    _beam_step_serial,
+    _best_in_list,
+    _bound_live,  # fmt: skip
+    _immortal,
+    _reset_costs,
+)
+from graphsvc.strategies.viterbi.costs import (
+    COS,
+    COST,
+    DEAD32,
+    HEADING,
+    PLACED_WIDTH,
+    SIN,
+    UNPLACED_WIDTH,
+    X,
+    Z,
+    _reading_costs_batch,
+    _reading_costs_batch_serial,
+    pull_row,
+    track_pull,
+)
 from graphsvc.strategies.viterbi.dense import _SERIAL, _THREADED, _best_in_chunks, _best_node, _satisfied
 from graphsvc.strategies.viterbi.survivors import SurvivorMemory
 from graphsvc.strategies.viterbi.tables import search_index

@@ -18,7 +18,6 @@ import numpy as np
 
 from graphsvc.strategies.viterbi.costs import COST
 
-
 # Survivor store: rows of one (capacity, 4) int32 array — node, edge used to arrive,
 # parent row, sample. Rows are appended a block at a time in sample order, so a parent
 # always precedes its children and garbage collection is one backward sweep.

@@ -18,20 +18,25 @@ import numpy as np
 from graphsvc.errors import SearchCancelled
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
-from graphsvc.strategies.viterbi.stream import FixedLagDecoder
-from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
-from graphsvc.strategies.viterbi.batch import (needs_placement, orientation_counts, viterbi_search, warm_up_search,
-                                               warm_up_search_once)  # fmt: skip
 from graphsvc.sensors.noise import CausalTrackHeading
 from graphsvc.strategies.base import Strategy
 from graphsvc.strategies.inputs import PreparedInput
 from graphsvc.strategies.live import LiveSession
-from graphsvc.strategies.results import path_labels, Provenance, Reconstruction
-from graphsvc.strategies.start import start_placement, start_samples, start_state
 from graphsvc.strategies.options import SMOOTH_S, Options, Weights, check_constraints
+from graphsvc.strategies.refine import Refiner, refine_index, refine_motion, warm_up_refine
+from graphsvc.strategies.results import Provenance, Reconstruction, path_labels
+from graphsvc.strategies.start import start_placement, start_samples, start_state
+from graphsvc.strategies.viterbi.batch import (
+    needs_placement,
+    orientation_counts,
+    viterbi_search,
+    warm_up_search,
+    warm_up_search_once,  # fmt: skip
+)
 from graphsvc.strategies.viterbi.options import ViterbiOptions
+from graphsvc.strategies.viterbi.stream import FixedLagDecoder
+from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
 from graphsvc.synthesis.path import synthesize_motion, warm_up_synthesis
-from graphsvc.strategies.refine import refine_index, refine_motion, Refiner, warm_up_refine
 from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.stream import StreamingSynthesizer
 from graphsvc.synthesis.track import TrackModel, fused_track

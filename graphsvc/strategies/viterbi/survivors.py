@@ -18,8 +18,18 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.errors import InputError
-from graphsvc.strategies.viterbi.store import (EDGE, NODE, PARENT, TIME, _append_block, _block_levels, _collect,
-                                               _converged_row, _converged_until, _trace)  # fmt: skip
+from graphsvc.strategies.viterbi.store import (
+    EDGE,
+    NODE,
+    PARENT,
+    TIME,
+    _append_block,
+    _block_levels,
+    _collect,
+    _converged_row,  # fmt: skip
+    _converged_until,
+    _trace,
+)
 
 
 class SurvivorMemory:
