@@ -14,8 +14,9 @@ from graphsvc.sensors.files import RECORDING_SUFFIXES, read_recording
 from graphsvc.sensors.recording import describe_recording
 
 
-def describe_paths(paths: list[str], progress: bool | None = None, up: str | None = None,
-                   units: str | None = None) -> dict:  # fmt: skip
+def describe_paths(
+    paths: list[str], progress: bool | None = None, up: str | None = None, units: str | None = None
+) -> dict:
     """{"clips": [...], "folders": [...], "totals": {...}, "recordings": [...]}. up,
     units: how to read a recording file where it does not say (`read_recording`).
 
@@ -53,8 +54,10 @@ def describe_paths(paths: list[str], progress: bool | None = None, up: str | Non
                 }
             )
     if not clips and not recordings:
-        raise InputError(f"no motion files or recordings found in {', '.join(map(str, paths))} (motion: "
-                         f"{', '.join(MOTION_SUFFIXES)}; recordings: {', '.join(RECORDING_SUFFIXES)})")  # fmt: skip
+        raise InputError(
+            f"no motion files or recordings found in {', '.join(map(str, paths))} (motion: "
+            f"{', '.join(MOTION_SUFFIXES)}; recordings: {', '.join(RECORDING_SUFFIXES)})"
+        )
     folders = defaultdict(list)
     for c in clips:
         folders[str(Path(c["path"]).parent)].append(c)
@@ -93,25 +96,32 @@ def format_description(info: dict) -> str:
     for r in info["recordings"]:
         what = [f"{len(r['sensors'])} sensors ({', '.join(r['sensors'])})"] if r["sensors"] else []
         if r.get("markers"):
-            what.append(f"{len(r['markers'])} markers ({', '.join(r['markers'][:12])}"
-                        f"{' …' if len(r['markers']) > 12 else ''}), seen {100 * r['markers_seen']:.0f} %")  # fmt: skip
-        lines.append(f"{r['path']}: recording, {r['samples']} samples of {' and '.join(what) or 'nothing'} at "
-                     f"{r['rate_hz']:g} Hz, {r['duration_s']:.2f} s")  # fmt: skip
+            what.append(
+                f"{len(r['markers'])} markers ({', '.join(r['markers'][:12])}"
+                f"{' …' if len(r['markers']) > 12 else ''}), seen {100 * r['markers_seen']:.0f} %"
+            )
+        lines.append(
+            f"{r['path']}: recording, {r['samples']} samples of {' and '.join(what) or 'nothing'} at "
+            f"{r['rate_hz']:g} Hz, {r['duration_s']:.2f} s"
+        )
         lines.append(f"  channels: {', '.join(r['channels'][:36])}{' …' if len(r['channels']) > 36 else ''}")
         if r.get("reading"):
-            lines.append("  read: " + ", ".join(f"{_SETTING_NAMES[k]} {v['value']} ({_FROM[k][v['from']]})"
-                                               for k, v in r["reading"].items()))  # fmt: skip
+            lines.append(
+                "  read: "
+                + ", ".join(
+                    f"{_SETTING_NAMES[k]} {v['value']} ({_FROM[k][v['from']]})" for k, v in r["reading"].items()
+                )
+            )
     return "\n".join(lines)
 
 
 _SETTING_NAMES = {"sensor_frame": "sensor frame", "up": "up", "units": "units"}
-_FROM = {k: {"argument": f"--{k}", "file": "file header", "format": "MVNX format", "default": "default"}
-         for k in _SETTING_NAMES}
+_FROM = {
+    k: {"argument": f"--{k}", "file": "file header", "format": "MVNX format", "default": "default"}
+    for k in _SETTING_NAMES
+}
 
 
 def _total_line(label: str, t: dict) -> str:
     rates = "/".join(f"{r:g}" for r in t["rates_hz"])
-    return (
-        f"{label}: {t['clips']} clips, {t['frames']:,} frames at {rates} Hz, "
-        f"{t['duration_s'] / 60:.1f} min"
-    )
+    return f"{label}: {t['clips']} clips, {t['frames']:,} frames at {rates} Hz, {t['duration_s'] / 60:.1f} min"

@@ -72,7 +72,7 @@ def stale_temporary(tmp: Path, name: str) -> bool:
     """Whether `tmp`, a temporary of `name` (`.NAME.HOST-PID.XXXX.tmp`, a file or a
     folder), was left by a process of this host that no longer runs. Another host's,
     a live process's and names of another shape are not."""
-    middle = tmp.name[len(name) + 2: -len(".tmp")]
+    middle = tmp.name[len(name) + 2 : -len(".tmp")]
     owner = middle.rsplit(".", 1)[0]
     host, _, pid = owner.rpartition("-")
     if not tmp.name.startswith(f".{name}.") or not pid.isdigit():
@@ -254,7 +254,9 @@ def check_outputs(outputs, inputs=()) -> None:
         accepted = suffixes and " or ".join(filter(None, (", ".join(suffixes[:-1]), suffixes[-1])))
         if suffix in (".glb", ".gltf") and (suffixes is None or suffix not in suffixes):  # (motion.output's glTF)
             writes = "does not write" if suffixes is None else f"writes {accepted}, not"
-            raise InputError(f"{path}: {opt} {writes} glTF ({path.suffix}): only a reconstructed motion is written as "
-                             "glTF (synthesize, batch, the client)")  # fmt: skip
+            raise InputError(
+                f"{path}: {opt} {writes} glTF ({path.suffix}): only a reconstructed motion is written as "
+                "glTF (synthesize, batch, the client)"
+            )
         if suffixes is not None and suffix not in suffixes:
             raise InputError(f"{path}: {opt} writes {accepted}, not {path.suffix or 'a file without a suffix'}")

@@ -26,7 +26,7 @@ import re
 from graphsvc.motion.proportions import MAX_HEIGHT_M
 from graphsvc.sensors.layout import preset_names
 from graphsvc.strategies import DEFAULT, available, get, names
-from graphsvc.strategies.options import (  # fmt: skip
+from graphsvc.strategies.options import (
     ORIENTATION_WEIGHT,
     Options,
     SharedOptions,
@@ -148,15 +148,29 @@ def _add_declared(g, owner: str | None, cls) -> None:
         if spec.kind is bool:
             g.add_argument(*flags, dest=dest, action=argparse.BooleanOptionalAction, default=None, help=spec.help)
             for neg in spec.negated:
-                g.add_argument(neg, dest=dest, action="store_const", const=False,
-                               help=f"the same as --no-{flags[0][2:]}")  # fmt: skip
+                g.add_argument(
+                    neg, dest=dest, action="store_const", const=False, help=f"the same as --no-{flags[0][2:]}"
+                )
             continue
-        g.add_argument(*flags, dest=dest, type=_PARSE[spec.kind], default=None, choices=spec.choices,
-                       metavar=None if spec.choices else (spec.metavar or stem.upper()), help=spec.help)  # fmt: skip
+        g.add_argument(
+            *flags,
+            dest=dest,
+            type=_PARSE[spec.kind],
+            default=None,
+            choices=spec.choices,
+            metavar=None if spec.choices else (spec.metavar or stem.upper()),
+            help=spec.help,
+        )
     for group, fields in getattr(cls, "flag_groups", {}).items():
         metavar = ",".join(f.split("_", 1)[-1].upper() for f in fields)
-        g.add_argument(f"--{owner}-{group}", dest=_dest(owner, f"group:{group}"), type=_numbers(len(fields), metavar),
-                       default=None, metavar=metavar, help=f"{', '.join(fields)} at once")  # fmt: skip
+        g.add_argument(
+            f"--{owner}-{group}",
+            dest=_dest(owner, f"group:{group}"),
+            type=_numbers(len(fields), metavar),
+            default=None,
+            metavar=metavar,
+            help=f"{', '.join(fields)} at once",
+        )
 
 
 def _given(args, owner: str, cls) -> dict:
@@ -180,27 +194,56 @@ def _given(args, owner: str, cls) -> dict:
 def add_search_flags(p, constraints: bool = True, latency_help: str | None = None) -> None:
     """The flags of a reconstruction (module docstring). latency_help: --latency's help
     where the command streams (a live session's lag is its default there)."""
-    p.add_argument("--strategy", default=DEFAULT, choices=names(),
-                   help=f"reconstruction strategy (default {DEFAULT}): "
-                        + "; ".join(f"{n}: {get(n).summary}" for n in available()))  # fmt: skip
-    p.add_argument("--weights", default="1,1,1", metavar="A,P,O[,R]",
-                   help="cost weights: accelerometers (per g²), position (per m), heading (per rad), sensor"
-                        " orientation (per chord², where the recording has orientations); default 1,1,1,"
-                        f"{ORIENTATION_WEIGHT:g}")
+    p.add_argument(
+        "--strategy",
+        default=DEFAULT,
+        choices=names(),
+        help=f"reconstruction strategy (default {DEFAULT}): "
+        + "; ".join(f"{n}: {get(n).summary}" for n in available()),
+    )
+    p.add_argument(
+        "--weights",
+        default="1,1,1",
+        metavar="A,P,O[,R]",
+        help="cost weights: accelerometers (per g²), position (per m), heading (per rad), sensor"
+        " orientation (per chord², where the recording has orientations); default 1,1,1,"
+        f"{ORIENTATION_WEIGHT:g}",
+    )
     if constraints:
-        p.add_argument("--constraints", metavar="FILE", type=PATH,
-                       help="annotation constraint sets (JSON), replacing the recording's (default: the recording's)")
-    p.add_argument("--latency", type=float, metavar="S",
-                   help=latency_help or "fixed-lag decoding with this lag in seconds, as a live stream would (default: "
-                                        "whole input)")  # fmt: skip
-    p.add_argument("--heading-from-track", action="store_true",
-                   help="derive heading from the ground positions: direction of travel above --speed-threshold "
-                        "(default: the recording's heading)")
-    p.add_argument("--rest-heading-deg", type=float, default=0.0, metavar="D",
-                   help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)")
-    p.add_argument("--speed-threshold", type=float, default=2.0, metavar="M/S",
-                   help="with --heading-from-track: the speed above which heading is the direction of travel (default "
-                        "2 m/s, Kelly et al.)")
+        p.add_argument(
+            "--constraints",
+            metavar="FILE",
+            type=PATH,
+            help="annotation constraint sets (JSON), replacing the recording's (default: the recording's)",
+        )
+    p.add_argument(
+        "--latency",
+        type=float,
+        metavar="S",
+        help=latency_help
+        or "fixed-lag decoding with this lag in seconds, as a live stream would (default: whole input)",
+    )
+    p.add_argument(
+        "--heading-from-track",
+        action="store_true",
+        help="derive heading from the ground positions: direction of travel above --speed-threshold "
+        "(default: the recording's heading)",
+    )
+    p.add_argument(
+        "--rest-heading-deg",
+        type=float,
+        default=0.0,
+        metavar="D",
+        help="heading when slower than the threshold, degrees about +Y (default 0: facing +Z)",
+    )
+    p.add_argument(
+        "--speed-threshold",
+        type=float,
+        default=2.0,
+        metavar="M/S",
+        help="with --heading-from-track: the speed above which heading is the direction of travel (default "
+        "2 m/s, Kelly et al.)",
+    )
     _add_declared(p.add_argument_group("shared by the strategies that use them"), None, SharedOptions)
     for name in available():
         s = get(name)
@@ -222,12 +265,21 @@ def options_from_flags(args) -> tuple[Options, list[str]]:
         if given:
             settings[name] = from_values(cls, given)
             if name != args.strategy:
-                notes.append(f"--{name}-… options apply to --strategy {name}; ignored with --strategy {args.strategy} "
-                             f"({', '.join(sorted(given))})")  # fmt: skip
-    options = Options(strategy=args.strategy, weights=parse_weights(args.weights), latency_s=args.latency,
-                      heading_from_track=args.heading_from_track, rest_heading_deg=args.rest_heading_deg,
-                      speed_threshold=args.speed_threshold, constraints=constraints, shared=shared,
-                      settings=settings)  # fmt: skip
+                notes.append(
+                    f"--{name}-… options apply to --strategy {name}; ignored with --strategy {args.strategy} "
+                    f"({', '.join(sorted(given))})"
+                )
+    options = Options(
+        strategy=args.strategy,
+        weights=parse_weights(args.weights),
+        latency_s=args.latency,
+        heading_from_track=args.heading_from_track,
+        rest_heading_deg=args.rest_heading_deg,
+        speed_threshold=args.speed_threshold,
+        constraints=constraints,
+        shared=shared,
+        settings=settings,
+    )
     return options, notes
 
 
@@ -236,8 +288,12 @@ def options_from_flags(args) -> tuple[Options, list[str]]:
 
 def add_marker_flags(p) -> None:
     """--markers and --keep of `simulate`: the marker set to simulate and the markers kept."""
-    p.add_argument("--markers", metavar="SET", type=PATH,
-                   help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file (JSON/TOML)")
+    p.add_argument(
+        "--markers",
+        metavar="SET",
+        type=PATH,
+        help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file (JSON/TOML)",
+    )
     p.add_argument("--keep", metavar="NAMES", help="use only these markers of the set (comma-separated; default: all)")
 
 
@@ -250,30 +306,44 @@ def add_input_file_flags(p) -> None:
 
 def add_reading_flags(p) -> None:
     """--up and --units: how to read a recording file where it does not say."""
-    p.add_argument("--up", choices=("y", "z"),
-                   help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
-                        "Z) or of a device CSV's orientations (default: its # up= comment, else Y)")
-    p.add_argument("--units", choices=("m", "cm", "mm", "g", "m/s2"),
-                   help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
-                        "unit (g, m/s2); default: what the file says")
+    p.add_argument(
+        "--up",
+        choices=("y", "z"),
+        help="the vertical axis: of a marker file (default: the file's; C3D: from the markers' spread, else "
+        "Z) or of a device CSV's orientations (default: its # up= comment, else Y)",
+    )
+    p.add_argument(
+        "--units",
+        choices=("m", "cm", "mm", "g", "m/s2"),
+        help="overriding the file's: a marker file's length unit (m, cm, mm) or a device CSV's acceleration "
+        "unit (g, m/s2); default: what the file says",
+    )
 
 
 def add_device_map_flag(p) -> None:
     """--device-map: how to name a device recording's sensors as the graph's layout does."""
     from graphsvc.sensors.devices import DEVICES
 
-    p.add_argument("--device-map", metavar="|".join(DEVICES) + "|FILE", type=PATH,
-                   help="rename a device's sensors to the graph layout's: a built-in map for the graph's layout preset "
-                        "(xsens: Xsens MVN segment or skeleton names, whichever fits more; mvn: MVN skeleton names; "
-                        "generic: left_wrist, l_knee, pelvis, head and their spellings) or a JSON map file; unmapped "
-                        "sensors are dropped (default: none)")
+    p.add_argument(
+        "--device-map",
+        metavar="|".join(DEVICES) + "|FILE",
+        type=PATH,
+        help="rename a device's sensors to the graph layout's: a built-in map for the graph's layout preset "
+        "(xsens: Xsens MVN segment or skeleton names, whichever fits more; mvn: MVN skeleton names; "
+        "generic: left_wrist, l_knee, pelvis, head and their spellings) or a JSON map file; unmapped "
+        "sensors are dropped (default: none)",
+    )
 
 
 def add_calibration_flag(p) -> None:
     """--calibration: a device-frame recording's mounting calibration (`graphsvc calibrate`)."""
-    p.add_argument("--calibration", metavar="CAL.json", type=PATH,
-                   help="turn a device-frame recording into the layout's sensor frames with this calibration "
-                        "(`graphsvc calibrate`; default: none)")
+    p.add_argument(
+        "--calibration",
+        metavar="CAL.json",
+        type=PATH,
+        help="turn a device-frame recording into the layout's sensor frames with this calibration "
+        "(`graphsvc calibrate`; default: none)",
+    )
 
 
 CALIBRATION_POSES = ("npose", "tpose", "stand")  # (`sensors.calibration.POSES`, not imported here: numba)
@@ -281,17 +351,25 @@ CALIBRATION_POSES = ("npose", "tpose", "stand")  # (`sensors.calibration.POSES`,
 
 def add_pose_flag(p, required: bool = False, what: str = "the pose held at the start") -> None:
     """--pose: the calibration pose (`graphsvc calibrate`, --calibrate-from-start)."""
-    p.add_argument("--pose", required=required, choices=CALIBRATION_POSES,
-                   help=f"{what} (stand: a natural stance, only approximately an N-pose)")
+    p.add_argument(
+        "--pose",
+        required=required,
+        choices=CALIBRATION_POSES,
+        help=f"{what} (stand: a natural stance, only approximately an N-pose)",
+    )
 
 
 def add_calibrate_from_start_flags(p) -> None:
     """--calibrate-from-start S and --pose: calibrate a device-frame recording from its own
     first S seconds against the graph, then use it (`calibration_choice`)."""
-    p.add_argument("--calibrate-from-start", type=ranged(float, 0.0, 3600.0, low_open=True), metavar="S",  # (graph.calibration.MAX_FROM_START_S)
-                   help="calibrate the devices' mountings from the recording's own first S seconds (the performer "
-                        "holds --pose, then moves) against the graph, then reconstruct the whole recording, those "
-                        "seconds included; not with --calibration (default: none)")  # fmt: skip
+    p.add_argument(
+        "--calibrate-from-start",
+        type=ranged(float, 0.0, 3600.0, low_open=True),
+        metavar="S",  # (graph.calibration.MAX_FROM_START_S)
+        help="calibrate the devices' mountings from the recording's own first S seconds (the performer "
+        "holds --pose, then moves) against the graph, then reconstruct the whole recording, those "
+        "seconds included; not with --calibration (default: none)",
+    )
     add_pose_flag(p, what="with --calibrate-from-start: the pose held at the recording's start")
 
 
@@ -300,7 +378,11 @@ def calibration_choice(args) -> tuple[str | None, float | None, str | None]:
     both ways at once, or one without the other's pose."""
     from graphsvc.errors import InputError
 
-    cal, start, pose = getattr(args, "calibration", None), getattr(args, "calibrate_from_start", None), getattr(args, "pose", None)
+    cal, start, pose = (
+        getattr(args, "calibration", None),
+        getattr(args, "calibrate_from_start", None),
+        getattr(args, "pose", None),
+    )
     if cal and start is not None:
         raise InputError("--calibration and --calibrate-from-start are two ways to calibrate: give one")
     if start is not None and pose is None:
@@ -308,20 +390,34 @@ def calibration_choice(args) -> tuple[str | None, float | None, str | None]:
     if pose is not None and start is None:
         raise InputError("--pose goes with --calibrate-from-start S")
     return cal, start, pose
+
+
 def add_performer_flags(p) -> None:
     """--performer and --height (one or the other, `add_mutually_exclusive_group`) and
     --performer-mapping: the proportions a reconstruction is put on
     (`motion.proportions`)."""
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--performer", metavar="FILE", type=PATH,
-                   help="put the output on this performer's proportions: a BVH or ASF/AMC of the performer (its "
-                        "skeleton's segment lengths) or a graphsvc-performer JSON of segment lengths (default: the "
-                        "knowledge base's)")  # fmt: skip
-    g.add_argument("--height", type=ranged(float, 0.0, MAX_HEIGHT_M, low_open=True), metavar="M",
-                   help="put the output on the knowledge base's proportions scaled to a performer this many metres "
-                        "tall (default: the knowledge base's)")  # fmt: skip
-    p.add_argument("--performer-mapping", metavar="FILE|guess", type=PATH,
-                   help="the joint map of a --performer motion whose skeleton has no built-in one (JSON, or 'guess')")
+    g.add_argument(
+        "--performer",
+        metavar="FILE",
+        type=PATH,
+        help="put the output on this performer's proportions: a BVH or ASF/AMC of the performer (its "
+        "skeleton's segment lengths) or a graphsvc-performer JSON of segment lengths (default: the "
+        "knowledge base's)",
+    )
+    g.add_argument(
+        "--height",
+        type=ranged(float, 0.0, MAX_HEIGHT_M, low_open=True),
+        metavar="M",
+        help="put the output on the knowledge base's proportions scaled to a performer this many metres "
+        "tall (default: the knowledge base's)",
+    )
+    p.add_argument(
+        "--performer-mapping",
+        metavar="FILE|guess",
+        type=PATH,
+        help="the joint map of a --performer motion whose skeleton has no built-in one (JSON, or 'guess')",
+    )
 
 
 def performer_from_flags(args, kb_skeleton, kb_mapping=None) -> dict | None:
@@ -359,13 +455,22 @@ def synthesize_inputs(args) -> list[tuple[str, str | None]]:
     from graphsvc.sensors.devices import DEVICES
 
     named = lambda v: None if v is None or v in DEVICES else v  # noqa: E731 (a built-in name is no file)
-    files = [("the graph", getattr(args, "graph", None)), ("the recording", args.recording),
-             ("the constraints", getattr(args, "constraints", None)), ("the calibration", getattr(args, "calibration", None)),
-             ("the device map", named(getattr(args, "device_map", None))),
-             ("the performer", getattr(args, "performer", None)),
-             ("the performer's joint map", None if getattr(args, "performer_mapping", None) == "guess"
-              else getattr(args, "performer_mapping", None))]  # fmt: skip
+    files = [
+        ("the graph", getattr(args, "graph", None)),
+        ("the recording", args.recording),
+        ("the constraints", getattr(args, "constraints", None)),
+        ("the calibration", getattr(args, "calibration", None)),
+        ("the device map", named(getattr(args, "device_map", None))),
+        ("the performer", getattr(args, "performer", None)),
+        (
+            "the performer's joint map",
+            None if getattr(args, "performer_mapping", None) == "guess" else getattr(args, "performer_mapping", None),
+        ),
+    ]
     # a strategy's option that names a file (a marker set file, say)
-    files += [(f"the file of --{k.split('__')[1]}-{k.split('__')[2]}", v) for k, v in sorted(vars(args).items())
-              if k.startswith("option__") and isinstance(v, str) and Path(v).is_file()]  # fmt: skip
+    files += [
+        (f"the file of --{k.split('__')[1]}-{k.split('__')[2]}", v)
+        for k, v in sorted(vars(args).items())
+        if k.startswith("option__") and isinstance(v, str) and Path(v).is_file()
+    ]
     return files

@@ -43,20 +43,46 @@ from graphsvc.strategies.options import (
     Weights,
     check_constraints,
     load_constraints,
-    parse_weights,  # fmt: skip
+    parse_weights,
 )
 from graphsvc.strategies.results import Frame, Provenance, Reconstruction, path_labels
 from graphsvc.strategies.sources import compact_sources
 from graphsvc.strategies.start import start_state
 
 # The library's face for a reconstruction: what callers import from here.
-__all__ = ["Frame", "LiveSession", "Options", "Provenance", "Reconstruction", "SharedOptions", "Weights",
-           "check_constraints", "check_layout", "check_options", "load_constraints", "open_session", "parse_weights",
-           "path_labels", "read_recording_file", "read_searched_recording", "readings_at_rate", "reconstruct", "start_state",
-           "synthesize_files", "warm_up"]  # fmt: skip
+__all__ = [
+    "Frame",
+    "LiveSession",
+    "Options",
+    "Provenance",
+    "Reconstruction",
+    "SharedOptions",
+    "Weights",
+    "check_constraints",
+    "check_layout",
+    "check_options",
+    "load_constraints",
+    "open_session",
+    "parse_weights",
+    "path_labels",
+    "read_recording_file",
+    "read_searched_recording",
+    "readings_at_rate",
+    "reconstruct",
+    "start_state",
+    "synthesize_files",
+    "warm_up",
+]
 
-def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options(), allowed: np.ndarray | None = None,
-                threads: bool = True, should_stop: Callable[[], bool] | None = None) -> Reconstruction:  # fmt: skip
+
+def reconstruct(
+    graph: MotionGraph,
+    rec: Recording,
+    options: Options = Options(),
+    allowed: np.ndarray | None = None,
+    threads: bool = True,
+    should_stop: Callable[[], bool] | None = None,
+) -> Reconstruction:
     """The motion a recording's measurements describe, by `options.strategy`. allowed:
     (N,) bool node mask (leave-one-out evaluation) or None; threads: numba threads
     inside the strategy (False where many run side by side); should_stop: callable
@@ -73,8 +99,12 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
     report = {
         "strategy": options.strategy,
         "options": options.to_dict(),
-        "graph": {"nodes": graph.num_nodes, "edges": graph.num_edges, "rate_hz": float(graph.rate_hz),
-                  "layout": graph.layout.get("name")},  # fmt: skip
+        "graph": {
+            "nodes": graph.num_nodes,
+            "edges": graph.num_edges,
+            "rate_hz": float(graph.rate_hz),
+            "layout": graph.layout.get("name"),
+        },
         "samples": inp.num_samples,
         "input_rate_hz": inp.input_rate_hz,
         "resampled": inp.resampled,
@@ -82,9 +112,13 @@ def reconstruct(graph: MotionGraph, rec: Recording, options: Options = Options()
         "constraint_sets": len(inp.constraints),
         **own,
         # (every report has these four, a strategy's own after them)
-        "timings_s": {"warm_up": timings.get("warm_up", 0.0), "prepare": round(prepare_s, 4),
-                      "search": timings.get("search", 0.0), "synthesis": timings.get("synthesis", 0.0),
-                      **{k: v for k, v in timings.items() if k not in ("warm_up", "search", "synthesis")}},  # fmt: skip
+        "timings_s": {
+            "warm_up": timings.get("warm_up", 0.0),
+            "prepare": round(prepare_s, 4),
+            "search": timings.get("search", 0.0),
+            "synthesis": timings.get("synthesis", 0.0),
+            **{k: v for k, v in timings.items() if k not in ("warm_up", "search", "synthesis")},
+        },
     }
     report["samples_per_s"] = report.pop("samples_per_s", None)
     ignored_options = strategy.ignored_options(options)
@@ -107,10 +141,23 @@ def warm_up(graph: MotionGraph, threads: bool = False, strategies=None) -> float
     return time.perf_counter() - t0
 
 
-def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, options: Options = Options(),
-                     report_path=None, scale: float = 100.0, up=None, units=None, device_map=None,
-                     calibration=None, threads: bool = True, notes=None, calibrate_from_start=None,
-                     performer=None) -> Reconstruction:  # fmt: skip
+def synthesize_files(
+    graph: MotionGraph,
+    graph_path,
+    recording_path,
+    output,
+    options: Options = Options(),
+    report_path=None,
+    scale: float = 100.0,
+    up=None,
+    units=None,
+    device_map=None,
+    calibration=None,
+    threads: bool = True,
+    notes=None,
+    calibrate_from_start=None,
+    performer=None,
+) -> Reconstruction:
     """`graphsvc synthesize` as a function, for the CLI and a batch alike: read the
     recording (up, units: as the file does not say), name a device's sensors as the
     graph's layout does (device_map: a built-in device or a map file), turn a device's readings into
@@ -131,21 +178,41 @@ def synthesize_files(graph: MotionGraph, graph_path, recording_path, output, opt
     skeleton's. notes: a list that
     collects remarks for the user (None: dropped). Same inputs, same output bytes, with
     or without threads."""
-    check_outputs([("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
-                  [("the graph", graph_path), ("the recording", recording_path),
-                   ("the calibration", calibration), ("the device map", None if device_map in DEVICES else device_map)])  # fmt: skip
-    rec = read_searched_recording(graph, recording_path, up, units, device_map, calibration, notes,
-                                  calibrate_from_start)  # fmt: skip
+    check_outputs(
+        [("the output", output, MOTION_OUTPUT_SUFFIXES), ("the report", report_path, (".json",))],
+        [
+            ("the graph", graph_path),
+            ("the recording", recording_path),
+            ("the calibration", calibration),
+            ("the device map", None if device_map in DEVICES else device_map),
+        ],
+    )
+    rec = read_searched_recording(
+        graph, recording_path, up, units, device_map, calibration, notes, calibrate_from_start
+    )
     result = reconstruct(graph, rec, options, threads=threads)
     if performer is not None:
         result = put_on_performer(graph, result, performer)
     data = motion_file_bytes(output, result.motion, scale)
-    result.report["files"] = {"output": str(Path(output).resolve()), "graph": str(Path(graph_path).resolve()),
-                              "recording": str(Path(recording_path).resolve())}  # fmt: skip
-    read = {k: v for k, v in (("up", up), ("units", units), ("device_map", device_map and _resolved_if_file(device_map)),
-                              ("calibration", calibration and _resolved_if_file(calibration)),
-                              ("calibrate_from_start", calibrate_from_start and {"seconds": calibrate_from_start[0],
-                                                                                 "pose": calibrate_from_start[1]})) if v}  # fmt: skip
+    result.report["files"] = {
+        "output": str(Path(output).resolve()),
+        "graph": str(Path(graph_path).resolve()),
+        "recording": str(Path(recording_path).resolve()),
+    }
+    read = {
+        k: v
+        for k, v in (
+            ("up", up),
+            ("units", units),
+            ("device_map", device_map and _resolved_if_file(device_map)),
+            ("calibration", calibration and _resolved_if_file(calibration)),
+            (
+                "calibrate_from_start",
+                calibrate_from_start and {"seconds": calibrate_from_start[0], "pose": calibrate_from_start[1]},
+            ),
+        )
+        if v
+    }
     if read:  # (how the recording was read, for `graphsvc report`)
         result.report["files"]["read"] = read
     if result.node_path is None and result.provenance is not None:
@@ -164,24 +231,46 @@ def put_on_performer(graph: MotionGraph, result: Reconstruction, lengths: dict) 
     for, in metres."""
     mapping = graph.params.get("mapping")
     skeleton = performer_skeleton(result.motion.skeleton, lengths, mapping)
-    report = {**result.report, "performer": {"segments_m": {k: round(float(v), 6) for k, v in lengths.items()},
-                                             "height_m": round(skeleton_height(lengths), 4)}}  # fmt: skip
+    report = {
+        **result.report,
+        "performer": {
+            "segments_m": {k: round(float(v), 6) for k, v in lengths.items()},
+            "height_m": round(skeleton_height(lengths), 4),
+        },
+    }
     return replace(result, motion=on_performer(result.motion, skeleton, mapping), report=report)
 
 
-def read_searched_recording(graph: MotionGraph, recording_path, up=None, units=None, device_map=None, calibration=None,
-                            notes=None, calibrate_from_start: tuple[float, str] | None = None) -> Recording:  # fmt: skip
+def read_searched_recording(
+    graph: MotionGraph,
+    recording_path,
+    up=None,
+    units=None,
+    device_map=None,
+    calibration=None,
+    notes=None,
+    calibrate_from_start: tuple[float, str] | None = None,
+) -> Recording:
     """A recording as `synthesize_files` searches it on `graph`: `read_recording_file`
     for the graph's layout and sensors; calibrate_from_start (seconds, pose): its
     mountings calibrated from its own first seconds against `graph` and applied
     (`calibrated_from_start`)."""
-    rec = read_recording_file(recording_path, up, units, device_map, calibration, None if calibrate_from_start else notes,
-                              layout_name=graph.layout.get("name"), sensor_names=graph.sensor_names)  # fmt: skip
+    rec = read_recording_file(
+        recording_path,
+        up,
+        units,
+        device_map,
+        calibration,
+        None if calibrate_from_start else notes,
+        layout_name=graph.layout.get("name"),
+        sensor_names=graph.sensor_names,
+    )
     return rec if not calibrate_from_start else calibrated_from_start(rec, graph, *calibrate_from_start, notes=notes)
 
 
-def calibrated_from_start(rec: Recording, graph: MotionGraph, seconds: float, pose: str, hidden_clips=(),
-                          notes=None) -> Recording:  # fmt: skip
+def calibrated_from_start(
+    rec: Recording, graph: MotionGraph, seconds: float, pose: str, hidden_clips=(), notes=None
+) -> Recording:
     """A device-frame recording in the layout's frames, its mountings calibrated from its
     own first `seconds` in `pose` against `graph` (`graph.calibration.calibrate_from_start`);
     meta "calibration" says so. The calibrating seconds stay in the recording. notes: a
@@ -192,14 +281,26 @@ def calibrated_from_start(rec: Recording, graph: MotionGraph, seconds: float, po
     cal = calibrate_from_start(rec, graph, seconds, pose, hidden_clips)
     if notes is not None:
         a, b = cal["rest_s"]
-        notes.append(f"calibrated from its first {seconds:g} s ({pose}, rest {a:.2f}–{b:.2f} s): " + ", ".join(
-            f"{n} {mounting_angle_deg(item):.1f}° (residual {item['residual_deg']:.1f}°)"
-            for n, item in cal["sensors"].items()))  # fmt: skip
+        notes.append(
+            f"calibrated from its first {seconds:g} s ({pose}, rest {a:.2f}–{b:.2f} s): "
+            + ", ".join(
+                f"{n} {mounting_angle_deg(item):.1f}° (residual {item['residual_deg']:.1f}°)"
+                for n, item in cal["sensors"].items()
+            )
+        )
     return apply_calibration(rec, check_calibration(cal, f"its first {seconds:g} s ({pose})"))
 
 
-def read_recording_file(recording_path, up=None, units=None, device_map=None, calibration=None, notes=None,
-                        layout_name=None, sensor_names=None) -> Recording:  # fmt: skip
+def read_recording_file(
+    recording_path,
+    up=None,
+    units=None,
+    device_map=None,
+    calibration=None,
+    notes=None,
+    layout_name=None,
+    sensor_names=None,
+) -> Recording:
     """A recording file as it is searched, here or sent to a server (`graphsvc client`):
     read (up, units: as the file does not say), a device's sensors named as the layout
     `layout_name` does (device_map: a built-in device, `sensors.devices.DEVICES`, or a
@@ -214,17 +315,24 @@ def read_recording_file(recording_path, up=None, units=None, device_map=None, ca
         note = unmapped_note(rec, sensor_names, device_map) if sensor_names is not None else None
         if note is not None and notes is not None:
             notes.append(note)
-    elif (sensor_names is not None and rec.meta.get("imported_from") == "mvnx"
-          and tuple(rec.sensor_names) != tuple(sensor_names)):  # fmt: skip
-        raise InputError(f"{recording_path} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
-                         f"{' …' if rec.num_sensors > 4 else ''}): "
-                         f"give --device-map xsens (or a map file) to name them as layout "
-                         f"{layout_name!r} does ({', '.join(sensor_names)})")  # fmt: skip
+    elif (
+        sensor_names is not None
+        and rec.meta.get("imported_from") == "mvnx"
+        and tuple(rec.sensor_names) != tuple(sensor_names)
+    ):
+        raise InputError(
+            f"{recording_path} names its sensors as Xsens does ({', '.join(rec.sensor_names[:4])}"
+            f"{' …' if rec.num_sensors > 4 else ''}): "
+            f"give --device-map xsens (or a map file) to name them as layout "
+            f"{layout_name!r} does ({', '.join(sensor_names)})"
+        )
     if calibration:
         rec = apply_calibration(rec, load_calibration(calibration))
     elif rec.meta.get("sensor_frame") == "device" and rec.accelerations is not None and notes is not None:
-        notes.append(f"{recording_path}'s readings are in each device's own frame; they are used as if in the "
-                     "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)")  # fmt: skip
+        notes.append(
+            f"{recording_path}'s readings are in each device's own frame; they are used as if in the "
+            "layout's sensor frames (give --calibration CAL.json from `graphsvc calibrate`)"
+        )
     return rec
 
 

@@ -22,8 +22,12 @@ import sys
 def start() -> subprocess.Popen | None:
     """Start the process (None if it cannot be started)."""
     try:
-        return subprocess.Popen([sys.executable, "-m", "graphsvc.precompile"], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+        return subprocess.Popen(
+            [sys.executable, "-m", "graphsvc.precompile"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
     except OSError:
         return None
 
@@ -51,8 +55,13 @@ def warm_threaded_kernels() -> None:
     nodes = 300
     src = np.repeat(np.arange(nodes), 3)
     dst = rng.integers(0, nodes, src.size)
-    graph = graph_from_edges(src, dst, rng.normal(0.0, 9.81, (src.size, 2, 3)), offsets=rng.normal(0.0, 0.05, (src.size, 2)),
-                             dheading=rng.normal(0.0, 0.05, src.size))  # fmt: skip
+    graph = graph_from_edges(
+        src,
+        dst,
+        rng.normal(0.0, 9.81, (src.size, 2, 3)),
+        offsets=rng.normal(0.0, 0.05, (src.size, 2)),
+        dheading=rng.normal(0.0, 0.05, src.size),
+    )
     warm_up_search(graph, threads=True)
 
 

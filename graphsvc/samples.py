@@ -80,25 +80,27 @@ def licence_text() -> str:
         text = dist.read_text(name) or dist.read_text(f"licenses/{name}")
         return text.strip() if text else f"({name} is not in this pybullet installation)"
 
-    return "\n".join([
-        f"These BVH files are the DeepMimic humanoid's motion files that pybullet {meta['Version']} installs",
-        "in pybullet_data/data/motions (its DeepMimic environment, pybullet_envs.deep_mimic, reads them",
-        "as motion capture data), converted by graphsvc (`graphsvc samples`): resampled to a uniform",
-        "rate, turned to face +Z, in centimetres.",
-        "",
-        f"pybullet: {meta['Summary']}",
-        f"Home page: {meta['Home-page']}",
-        f"Licence: {meta['License']}",
-        "",
-        "pybullet's LICENSE.txt:",
-        "",
-        read("LICENSE.txt"),
-        "",
-        "pybullet's AUTHORS.txt:",
-        "",
-        read("AUTHORS.txt"),
-        "",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            f"These BVH files are the DeepMimic humanoid's motion files that pybullet {meta['Version']} installs",
+            "in pybullet_data/data/motions (its DeepMimic environment, pybullet_envs.deep_mimic, reads them",
+            "as motion capture data), converted by graphsvc (`graphsvc samples`): resampled to a uniform",
+            "rate, turned to face +Z, in centimetres.",
+            "",
+            f"pybullet: {meta['Summary']}",
+            f"Home page: {meta['Home-page']}",
+            f"Licence: {meta['License']}",
+            "",
+            "pybullet's LICENSE.txt:",
+            "",
+            read("LICENSE.txt"),
+            "",
+            "pybullet's AUTHORS.txt:",
+            "",
+            read("AUTHORS.txt"),
+            "",
+        ]
+    )
 
 
 def write_samples(out_dir, motions: list[Motion] | None = None) -> list[Path]:

@@ -106,8 +106,9 @@ def write_container(path, kind: str, meta: dict, arrays: dict[str, np.ndarray], 
         "data_size": data_size,
     }
     try:
-        text = json.dumps(header, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
-                          allow_nan=False, default=_json_default)  # fmt: skip
+        text = json.dumps(
+            header, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False, default=_json_default
+        )
     except (TypeError, ValueError) as e:
         raise InputError(f"{path}: container meta is not JSON-serialisable: {e}") from None
     raw = text.encode("utf-8")
@@ -208,8 +209,10 @@ def _prepare_arrays(path, arrays: dict) -> list[tuple[str, np.ndarray]]:
         arr = np.asarray(arrays[name])
         dt = arr.dtype
         if dt.kind not in _ALLOWED_KINDS or dt.fields is not None or dt.subdtype is not None:
-            raise InputError(f"{path}: array {name!r} has dtype {dt}, which cannot be stored "
-                             "(numeric, fixed-width bytes or unicode only)")  # fmt: skip
+            raise InputError(
+                f"{path}: array {name!r} has dtype {dt}, which cannot be stored "
+                "(numeric, fixed-width bytes or unicode only)"
+            )
         if dt.itemsize == 0:
             raise InputError(f"{path}: array {name!r} has zero-width dtype {dt}")
         # The file is little-endian whatever the machine; a no-op for native data here.

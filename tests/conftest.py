@@ -42,10 +42,11 @@ def tpose_skeleton() -> Skeleton:
     names = tuple(n for n, _, _ in _TPOSE)
     parents = [-1 if p is None else names.index(p) for _, p, _ in _TPOSE]
     channels = tuple(
-        ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation") if p is None
+        ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
+        if p is None
         else ("Zrotation", "Xrotation", "Yrotation")
         for _, p, _ in _TPOSE
-    )  # fmt: skip
+    )
     return Skeleton(names, np.array(parents), np.array([o for _, _, o in _TPOSE]), channels, np.zeros(len(names), bool))
 
 

@@ -24,7 +24,9 @@ def run(argv, capsys):
 
 def test_simulate_then_inspect_recording(tmp_path, clip, capsys):
     rec = tmp_path / "walk.rec"
-    code, out, _ = run(["simulate", str(clip), "--layout", "kelly6", "--noise", "default", "--seed", "2", "-o", str(rec)], capsys)
+    code, out, _ = run(
+        ["simulate", str(clip), "--layout", "kelly6", "--noise", "default", "--seed", "2", "-o", str(rec)], capsys
+    )
     assert code == 0 and "40 samples of 6 sensors" in out
     code, out, _ = run(["inspect", str(rec), "--json"], capsys)
     info = json.loads(out)["recordings"][0]
@@ -47,7 +49,8 @@ def test_inspect_and_mapping_count_joints_not_end_sites(tmp_path, capsys):
         "HIERARCHY\nROOT hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
         " JOINT spine\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
         "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n End Site\n {\n  OFFSET 0 -10 0\n }\n}\n"
-        "MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 90 0 0 0 0 0 0 0\n0 90 0 0 0 0 0 0 0\n")
+        "MOTION\nFrames: 2\nFrame Time: 0.0333333\n0 90 0 0 0 0 0 0 0\n0 90 0 0 0 0 0 0 0\n"
+    )
     code, out, _ = run(["inspect", str(tmp_path / "two.bvh"), "--json"], capsys)
     assert code == 0 and json.loads(out)["clips"][0]["joints"] == 2
     _, _, err = run(["mapping", str(tmp_path / "two.bvh")], capsys)  # (exit 2: no canonical joints found)
@@ -64,19 +67,22 @@ def test_simulate_csv_output(tmp_path, clip, capsys):
     assert code == 0 and "40 samples of 1 sensors (r_wrist)" in out
 
 
-@pytest.mark.parametrize("argv_tail, needle", [
-    (["inspect", "{tmp}/missing.bvh"], "missing.bvh: no such file"),
-    (["inspect", "{tmp}/notes.txt"], "unknown format"),
-    (["simulate", "{clip}", "--layout", "elbows", "-o", "{tmp}/x.rec"], "unknown layout"),
-    (["simulate", "{clip}", "--layout", "kelly6", "--noise", "loud", "-o", "{tmp}/x.rec"], "noise preset"),
-    (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/no/such/dir/x.rec"], "does not exist"),
-    (["simulate", "{bad}", "--layout", "kelly6", "-o", "{tmp}/x.rec"], "{bad}"),
-    (["simulate", "{clip}", "--layout", "kelly6"], "required"),
-    (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/s.txt"], ".rec (binary) or .csv"),
-    (["inspect", "{tmp}/empty"], "no motion files or recordings found"),
-    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "-1,1,1"], "≥ 0"),
-    (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "0,0,0"], "all 0"),
-])
+@pytest.mark.parametrize(
+    "argv_tail, needle",
+    [
+        (["inspect", "{tmp}/missing.bvh"], "missing.bvh: no such file"),
+        (["inspect", "{tmp}/notes.txt"], "unknown format"),
+        (["simulate", "{clip}", "--layout", "elbows", "-o", "{tmp}/x.rec"], "unknown layout"),
+        (["simulate", "{clip}", "--layout", "kelly6", "--noise", "loud", "-o", "{tmp}/x.rec"], "noise preset"),
+        (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/no/such/dir/x.rec"], "does not exist"),
+        (["simulate", "{bad}", "--layout", "kelly6", "-o", "{tmp}/x.rec"], "{bad}"),
+        (["simulate", "{clip}", "--layout", "kelly6"], "required"),
+        (["simulate", "{clip}", "--layout", "kelly6", "-o", "{tmp}/s.txt"], ".rec (binary) or .csv"),
+        (["inspect", "{tmp}/empty"], "no motion files or recordings found"),
+        (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "-1,1,1"], "≥ 0"),
+        (["synthesize", "{tmp}/g.graph", "{tmp}/x.rec", "-o", "{tmp}/o.bvh", "--weights", "0,0,0"], "all 0"),
+    ],
+)
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, clip, capsys, argv_tail, needle):
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "empty").mkdir()
@@ -105,8 +111,9 @@ class _noop:
 
 
 def test_console_script_exit_code_and_no_traceback(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "graphsvc.cli", "inspect", str(tmp_path / "nope.bvh")],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "graphsvc.cli", "inspect", str(tmp_path / "nope.bvh")], capture_output=True, text=True
+    )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
 
@@ -122,8 +129,22 @@ def procedural_kb(tmp_path_factory):
 
 def test_evaluate_writes_json_and_prints_a_table(tmp_path, procedural_kb, capsys):
     out_json = tmp_path / "eval.json"
-    code, out, err = run(["evaluate", str(procedural_kb), "--test", "idle_*.bvh", "--layout", "kelly6",
-                          "--weights", "0.5,1,1", "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+    code, out, err = run(
+        [
+            "evaluate",
+            str(procedural_kb),
+            "--test",
+            "idle_*.bvh",
+            "--layout",
+            "kelly6",
+            "--weights",
+            "0.5,1,1",
+            "--json",
+            str(out_json),
+            "--quiet",
+        ],
+        capsys,
+    )
     assert code == 0, err
     result = json.loads(out_json.read_text())
     assert {"clips", "mean"} <= set(result)
@@ -146,12 +167,16 @@ def test_evaluate_writes_json_and_prints_a_table(tmp_path, procedural_kb, capsys
 def test_evaluate_with_a_prebuilt_graph_matches_the_clips(tmp_path, procedural_kb, capsys):
     graph = tmp_path / "kb.graph"
     assert run(["build", str(procedural_kb), "-o", str(graph), "--quiet", "--layout", "kelly6"], capsys)[0] == 0
-    code, _, err = run(["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph),
-                        "--noise", "none", "--quiet"], capsys)  # fmt: skip
+    code, _, err = run(
+        ["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph), "--noise", "none", "--quiet"],
+        capsys,
+    )
     assert code == 0, err
     assert "note:" not in err  # matched by content hash, so the clip is hidden
-    code, _, err = run(["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph),
-                        "--layout", "wrists-ankles"], capsys)  # fmt: skip
+    code, _, err = run(
+        ["evaluate", str(procedural_kb), "--test", "idle_01.bvh", "--graph", str(graph), "--layout", "wrists-ankles"],
+        capsys,
+    )
     assert code == 2 and "kelly6" in err
 
 
@@ -159,8 +184,22 @@ def test_evaluate_hold_out_protocols(tmp_path, procedural_kb, capsys):
     out_json = tmp_path / "eval.json"
     rows = {}
     for protocol in ("clip", "content"):
-        code, out, err = run(["evaluate", str(procedural_kb), "--test", "*_01.bvh", "--noise", "none", "--hold-out",
-                              protocol, "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+        code, out, err = run(
+            [
+                "evaluate",
+                str(procedural_kb),
+                "--test",
+                "*_01.bvh",
+                "--noise",
+                "none",
+                "--hold-out",
+                protocol,
+                "--json",
+                str(out_json),
+                "--quiet",
+            ],
+            capsys,
+        )
         assert code == 0, err
         result = json.loads(out_json.read_text())
         assert result["config"]["hold_out"] == protocol and f"(hold-out {protocol})" in out.splitlines()[-1]
@@ -176,8 +215,22 @@ def test_evaluate_hold_out_protocols(tmp_path, procedural_kb, capsys):
 
 def test_evaluate_mixed_joins_the_test_clips(tmp_path, procedural_kb, capsys):
     out_json = tmp_path / "mixed.json"
-    code, out, err = run(["evaluate", str(procedural_kb), "--test", "*.bvh", "--mixed", "2", "--noise", "none",
-                          "--json", str(out_json), "--quiet"], capsys)  # fmt: skip
+    code, out, err = run(
+        [
+            "evaluate",
+            str(procedural_kb),
+            "--test",
+            "*.bvh",
+            "--mixed",
+            "2",
+            "--noise",
+            "none",
+            "--json",
+            str(out_json),
+            "--quiet",
+        ],
+        capsys,
+    )
     assert code == 0, err
     result = json.loads(out_json.read_text())
     rows = result["clips"]
@@ -190,24 +243,30 @@ def test_evaluate_mixed_joins_the_test_clips(tmp_path, procedural_kb, capsys):
     assert "2 joined performances of 2 actions" in out.splitlines()[-1]
 
 
-@pytest.mark.parametrize("extra, needle", [
-    (["--test", "*_009.bvh"], "matches none"),
-    (["--test", "idle_*.bvh", "--mixed", "2"], "--mixed 2"),
-    (["--test", "*.bvh", "--mixed", "1"], "at least 2"),
-    (["--test", "*.bvh", "--layout", "elbows"], "unknown layout"),
-    (["--test", "*.bvh", "--weights", "1,x,1"], "weights"),
-    (["--test", "*.bvh", "--weights", "1,1"], "weights"),
-    (["--test", "*.bvh", "--noise", "loud"], "noise preset"),
-    (["--test", "*.bvh", "--strategy", "ssg"], "give the set to simulate, --markers"),
-    (["--test", "*.bvh", "--strategy", "ssg", "--markers", "hands-feet", "--keep", "l_ear"], "defines no marker l_ear"),
-    (["--test", "*.bvh", "--strategy", "ssg", "--markers", "hands-feet", "--gap-fraction", "1.5"], "gap fraction"),
-    (["--test", "*.bvh", "--flicker", "0.1"], "apply to a strategy that reads optical markers"),
-    (["--test", "*.bvh", "--beam", "0"], "beam"),
-    (["--test", "*.bvh", "--beam", "nan"], "beam"),
-    (["--test", "*.bvh", "--json", "{tmp}/no/such/dir/x.json"], "does not exist"),
-    (["--test", "idle_*.bvh", "--hold-out", "actor"], "hides every clip"),  # (one procedural performer)
-    (["--test", "idle_*.bvh", "--hold-out", "actor", "--actors", "{tmp}/none.json"], "actor map: "),
-])
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--test", "*_009.bvh"], "matches none"),
+        (["--test", "idle_*.bvh", "--mixed", "2"], "--mixed 2"),
+        (["--test", "*.bvh", "--mixed", "1"], "at least 2"),
+        (["--test", "*.bvh", "--layout", "elbows"], "unknown layout"),
+        (["--test", "*.bvh", "--weights", "1,x,1"], "weights"),
+        (["--test", "*.bvh", "--weights", "1,1"], "weights"),
+        (["--test", "*.bvh", "--noise", "loud"], "noise preset"),
+        (["--test", "*.bvh", "--strategy", "ssg"], "give the set to simulate, --markers"),
+        (
+            ["--test", "*.bvh", "--strategy", "ssg", "--markers", "hands-feet", "--keep", "l_ear"],
+            "defines no marker l_ear",
+        ),
+        (["--test", "*.bvh", "--strategy", "ssg", "--markers", "hands-feet", "--gap-fraction", "1.5"], "gap fraction"),
+        (["--test", "*.bvh", "--flicker", "0.1"], "apply to a strategy that reads optical markers"),
+        (["--test", "*.bvh", "--beam", "0"], "beam"),
+        (["--test", "*.bvh", "--beam", "nan"], "beam"),
+        (["--test", "*.bvh", "--json", "{tmp}/no/such/dir/x.json"], "does not exist"),
+        (["--test", "idle_*.bvh", "--hold-out", "actor"], "hides every clip"),  # (one procedural performer)
+        (["--test", "idle_*.bvh", "--hold-out", "actor", "--actors", "{tmp}/none.json"], "actor map: "),
+    ],
+)
 def test_evaluate_bad_input_one_line_exit_2(tmp_path, procedural_kb, capsys, extra, needle):
     before = sorted(p.name for p in tmp_path.iterdir())
     argv = ["evaluate", str(procedural_kb)] + [a.replace("{tmp}", str(tmp_path)) for a in extra]

@@ -49,8 +49,9 @@ def run(argv, capsys):
 def test_calibrate_then_synthesize_matches_the_mount_free_recording(files, capsys):
     d = files
     cal = d / "cal.json"
-    code, out, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
-                          "-o", str(cal)], capsys)  # fmt: skip
+    code, out, err = run(
+        ["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose", "-o", str(cal)], capsys
+    )
     assert code == 0, err
     assert out.startswith(f"wrote {cal}: 4 sensors, pose npose") and "l_wrist: mounting" in out
     doc = json.loads(cal.read_text())
@@ -72,29 +73,79 @@ def test_calibrate_with_a_span_and_without_a_graph(files, capsys):
     code, _, err = run(["calibrate", str(d / "take.rec"), "--pose", "npose", "-o", str(d / "x.json")], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "rotation about gravity" in err
     assert not (d / "x.json").exists()
-    code, _, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
-                        "--from", "1.7", "--to", "2.2", "-o", str(d / "x.json")], capsys)  # fmt: skip
+    code, _, err = run(
+        [
+            "calibrate",
+            str(d / "take.rec"),
+            "--graph",
+            str(d / "g.graph"),
+            "--pose",
+            "npose",
+            "--from",
+            "1.7",
+            "--to",
+            "2.2",
+            "-o",
+            str(d / "x.json"),
+        ],
+        capsys,
+    )
     assert code == 2 and ("no still stretch" in err or "needs at least" in err), err
-    code, _, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
-                        "--from", "3", "--to", "1", "-o", str(d / "x.json")], capsys)  # fmt: skip
+    code, _, err = run(
+        [
+            "calibrate",
+            str(d / "take.rec"),
+            "--graph",
+            str(d / "g.graph"),
+            "--pose",
+            "npose",
+            "--from",
+            "3",
+            "--to",
+            "1",
+            "-o",
+            str(d / "x.json"),
+        ],
+        capsys,
+    )
     assert code == 2 and "--from" in err
 
 
-@pytest.mark.parametrize("content, needle", [
-    ("{", "not valid JSON"),
-    (json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {"l_wrist": {"rotation_wxyz": [2, 0, 0, 0]}}}),
-     "unit quaternion"),
-    (json.dumps({"format": "graphsvc-calibration", "version": 1,
-                 "sensors": {"l_wrist": {"rotation_wxyz": [1, 0, 0, 0]}}}), "not the recording's"),
-    (json.dumps({"version": 1}), "not a graphsvc calibration"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "content, needle",
+    [
+        ("{", "not valid JSON"),
+        (
+            json.dumps(
+                {
+                    "format": "graphsvc-calibration",
+                    "version": 1,
+                    "sensors": {"l_wrist": {"rotation_wxyz": [2, 0, 0, 0]}},
+                }
+            ),
+            "unit quaternion",
+        ),
+        (
+            json.dumps(
+                {
+                    "format": "graphsvc-calibration",
+                    "version": 1,
+                    "sensors": {"l_wrist": {"rotation_wxyz": [1, 0, 0, 0]}},
+                }
+            ),
+            "not the recording's",
+        ),
+        (json.dumps({"version": 1}), "not a graphsvc calibration"),
+    ],
+)
 def test_bad_calibration_files_one_line_exit_2(files, capsys, content, needle):
     d = files
     bad = d / "bad.json"
     bad.write_text(content)
     out = d / "never.bvh"
-    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "match.rec"), "-o", str(out),
-                        "--calibration", str(bad)], capsys)  # fmt: skip
+    code, _, err = run(
+        ["synthesize", str(d / "g.graph"), str(d / "match.rec"), "-o", str(out), "--calibration", str(bad)], capsys
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and needle in err, err
     assert not out.exists()
 
@@ -102,10 +153,19 @@ def test_bad_calibration_files_one_line_exit_2(files, capsys, content, needle):
 def test_a_layout_frame_recording_is_not_calibrated(files, capsys):
     d = files
     cal = d / "ident.json"
-    cal.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
-        n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names}}))  # fmt: skip
-    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "free.rec"), "-o", str(d / "n.bvh"),
-                        "--calibration", str(cal)], capsys)  # fmt: skip
+    cal.write_text(
+        json.dumps(
+            {
+                "format": "graphsvc-calibration",
+                "version": 1,
+                "sensors": {n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names},
+            }
+        )
+    )
+    code, _, err = run(
+        ["synthesize", str(d / "g.graph"), str(d / "free.rec"), "-o", str(d / "n.bvh"), "--calibration", str(cal)],
+        capsys,
+    )
     assert code == 2 and "already in the layout" in err
 
 
@@ -117,8 +177,20 @@ def test_rest_times_count_from_the_recordings_first_sample(files, capsys):
     ends = []
     for extra in ([], ["--from", "0.5"]):
         cal = d / f"rest{len(extra)}.json"
-        code, out, err = run(["calibrate", str(d / "take.rec"), "--graph", str(d / "g.graph"), "--pose", "npose",
-                              *extra, "-o", str(cal)], capsys)  # fmt: skip
+        code, out, err = run(
+            [
+                "calibrate",
+                str(d / "take.rec"),
+                "--graph",
+                str(d / "g.graph"),
+                "--pose",
+                "npose",
+                *extra,
+                "-o",
+                str(cal),
+            ],
+            capsys,
+        )
         assert code == 0, err
         a, b = json.loads(cal.read_text())["rest_s"]
         assert f"rest {a:.2f}–{b:.2f} s" in out
@@ -144,15 +216,31 @@ def test_a_short_noisy_stand_after_other_motion_is_found(files, capsys, tmp_path
     take = simulate_recording(with_calibration_pose(clip("punch"), "stand", 1.8), LAYOUT, noise, seed=0)
     n = int(round(2.5 * before.rate_hz))
     cat = lambda a, b: np.concatenate([a[:n], b])  # noqa: E731
-    rec = replace(take, timestamps_s=np.arange(n + take.timestamps_s.size) / take.rate_hz,
-                  accelerations=cat(before.accelerations, take.accelerations),
-                  orientations=cat(before.orientations, take.orientations),
-                  ground_position=cat(before.ground_position, take.ground_position),
-                  heading=cat(before.heading, take.heading))  # fmt: skip
+    rec = replace(
+        take,
+        timestamps_s=np.arange(n + take.timestamps_s.size) / take.rate_hz,
+        accelerations=cat(before.accelerations, take.accelerations),
+        orientations=cat(before.orientations, take.orientations),
+        ground_position=cat(before.ground_position, take.ground_position),
+        heading=cat(before.heading, take.heading),
+    )
     save_recording(rec, tmp_path / "stand.rec")
     cal = tmp_path / "stand.json"
-    code, out, err = run(["calibrate", str(tmp_path / "stand.rec"), "--graph", str(files / "g.graph"), "--pose", "stand",
-                          "--from", "2.5", "-o", str(cal)], capsys)  # fmt: skip
+    code, out, err = run(
+        [
+            "calibrate",
+            str(tmp_path / "stand.rec"),
+            "--graph",
+            str(files / "g.graph"),
+            "--pose",
+            "stand",
+            "--from",
+            "2.5",
+            "-o",
+            str(cal),
+        ],
+        capsys,
+    )
     assert code == 0, err
     a, b = json.loads(cal.read_text())["rest_s"]
     assert a == pytest.approx(2.5, abs=1e-6) and b >= 2.5 + 1.3 - 0.05, (a, b)
@@ -164,14 +252,26 @@ def test_an_untrustworthy_calibration_exits_2_unless_forced(files, capsys, tmp_p
 
     save_recording(_wobbled(read_recording(files / "take.rec"), 1), tmp_path / "wobbly.rec")
     cal = tmp_path / "cal.json"
-    argv = ["calibrate", str(tmp_path / "wobbly.rec"), "--graph", str(files / "g.graph"), "--pose", "npose", "-o", str(cal)]
+    argv = [
+        "calibrate",
+        str(tmp_path / "wobbly.rec"),
+        "--graph",
+        str(files / "g.graph"),
+        "--pose",
+        "npose",
+        "-o",
+        str(cal),
+    ]
     code, out, err = run(argv, capsys)
     assert code == 2 and not cal.exists() and out == ""
-    assert err.strip().splitlines() == ["graphsvc: error: calibration not to be trusted: r_wrist (moved during the pose) "
-                                        "(--force writes it anyway)"]  # fmt: skip
+    assert err.strip().splitlines() == [
+        "graphsvc: error: calibration not to be trusted: r_wrist (moved during the pose) (--force writes it anyway)"
+    ]
     code, out, err = run(argv + ["--force"], capsys)
     assert code == 0 and json.loads(cal.read_text())["problems"] == ["r_wrist (moved during the pose)"]
-    assert err.strip().splitlines() == ["graphsvc: warning: calibration not to be trusted: r_wrist (moved during the pose)"]
+    assert err.strip().splitlines() == [
+        "graphsvc: warning: calibration not to be trusted: r_wrist (moved during the pose)"
+    ]
     assert "  r_wrist: mounting" in out and "residual" in out
 
 
@@ -181,35 +281,66 @@ def test_calibrate_from_start_is_calibrate_then_synthesize(files, capsys):
     (the calibrating seconds reconstructed too)."""
     d = files
     take, g = str(d / "take.rec"), str(d / "g.graph")
-    code, _, err = run(["calibrate", take, "--graph", g, "--pose", "npose", "--to", "5", "-o", str(d / "c5.json")], capsys)
+    code, _, err = run(
+        ["calibrate", take, "--graph", g, "--pose", "npose", "--to", "5", "-o", str(d / "c5.json")], capsys
+    )
     assert code == 0, err
     code, _, err = run(["synthesize", g, take, "--calibration", str(d / "c5.json"), "-o", str(d / "two.bvh")], capsys)
     assert code == 0, err
-    code, out, err = run(["synthesize", g, take, "--calibrate-from-start", "5", "--pose", "npose", "-o", str(d / "one.bvh"),
-                          "--report", str(d / "one.json")], capsys)  # fmt: skip
+    code, out, err = run(
+        [
+            "synthesize",
+            g,
+            take,
+            "--calibrate-from-start",
+            "5",
+            "--pose",
+            "npose",
+            "-o",
+            str(d / "one.bvh"),
+            "--report",
+            str(d / "one.json"),
+        ],
+        capsys,
+    )
     assert code == 0, err
     # One note: the calibration's mountings and residuals, as `calibrate` prints them.
     doc = json.loads((d / "c5.json").read_text())
     angles = {n: 2 * np.degrees(np.arccos(min(1.0, abs(s["rotation_wxyz"][0])))) for n, s in doc["sensors"].items()}
     assert err.strip().splitlines() == [
-        f"note: calibrated from its first 5 s (npose, rest {doc['rest_s'][0]:.2f}–{doc['rest_s'][1]:.2f} s): " + ", ".join(
-            f"{n} {angles[n]:.1f}° (residual {doc['sensors'][n]['residual_deg']:.1f}°)" for n in LAYOUT.sensor_names)]  # fmt: skip
+        f"note: calibrated from its first 5 s (npose, rest {doc['rest_s'][0]:.2f}–{doc['rest_s'][1]:.2f} s): "
+        + ", ".join(
+            f"{n} {angles[n]:.1f}° (residual {doc['sensors'][n]['residual_deg']:.1f}°)" for n in LAYOUT.sensor_names
+        )
+    ]
     assert (d / "one.bvh").read_bytes() == (d / "two.bvh").read_bytes()
-    assert json.loads((d / "one.json").read_text())["files"]["read"]["calibrate_from_start"] == {"seconds": 5.0,
-                                                                                                "pose": "npose"}  # fmt: skip
+    assert json.loads((d / "one.json").read_text())["files"]["read"]["calibrate_from_start"] == {
+        "seconds": 5.0,
+        "pose": "npose",
+    }
 
 
-@pytest.mark.parametrize("extra, needle", [
-    (["--calibrate-from-start", "5", "--pose", "npose", "--calibration", "CAL"], "two ways to calibrate"),
-    (["--calibrate-from-start", "5"], "needs --pose"),
-    (["--pose", "tpose"], "--pose goes with --calibrate-from-start"),
-    (["--calibrate-from-start", "1", "--pose", "npose"], "calibration needs at least 2 s"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--calibrate-from-start", "5", "--pose", "npose", "--calibration", "CAL"], "two ways to calibrate"),
+        (["--calibrate-from-start", "5"], "needs --pose"),
+        (["--pose", "tpose"], "--pose goes with --calibrate-from-start"),
+        (["--calibrate-from-start", "1", "--pose", "npose"], "calibration needs at least 2 s"),
+    ],
+)
 def test_calibrate_from_start_refusals_one_line_exit_2(files, capsys, extra, needle):
     d = files
     cal = d / "ident.json"
-    cal.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
-        n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names}}))  # fmt: skip
+    cal.write_text(
+        json.dumps(
+            {
+                "format": "graphsvc-calibration",
+                "version": 1,
+                "sensors": {n: {"rotation_wxyz": [1, 0, 0, 0]} for n in LAYOUT.sensor_names},
+            }
+        )
+    )
     out = d / "never.bvh"
     extra = [str(cal) if a == "CAL" else a for a in extra]
     code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "take.rec"), "-o", str(out), *extra], capsys)
@@ -219,7 +350,18 @@ def test_calibrate_from_start_refusals_one_line_exit_2(files, capsys, extra, nee
 
 def test_calibrate_from_start_takes_positive_seconds(files, capsys):
     with pytest.raises(SystemExit) as info:
-        main(["synthesize", str(files / "g.graph"), str(files / "take.rec"), "-o", str(files / "never.bvh"),
-              "--calibrate-from-start", "0", "--pose", "npose"])  # fmt: skip
+        main(
+            [
+                "synthesize",
+                str(files / "g.graph"),
+                str(files / "take.rec"),
+                "-o",
+                str(files / "never.bvh"),
+                "--calibrate-from-start",
+                "0",
+                "--pose",
+                "npose",
+            ]
+        )
     err = capsys.readouterr().err
     assert info.value.code == 2 and "--calibrate-from-start" in err and "> 0" in err

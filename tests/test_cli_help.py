@@ -41,16 +41,22 @@ def test_the_top_level_help_describes_graphsvc_for_a_user(capsys):
 def test_every_command_and_argument_has_a_help_line(path):
     parser = dict((" ".join(p), sub) for p, sub in _main_commands())[path]
     assert parser.description and len(parser.description) > 20, f"{path}: no description"
-    missing = [a.dest for a in parser._actions if not isinstance(a, argparse._HelpAction) and not (a.help or "").strip()]
+    missing = [
+        a.dest for a in parser._actions if not isinstance(a, argparse._HelpAction) and not (a.help or "").strip()
+    ]
     assert missing == [], f"{path}: arguments without help: {missing}"
 
 
 @pytest.mark.parametrize("path", [" ".join(p) for p, _ in _main_commands()])
 def test_every_value_default_is_stated(path):
     parser = dict((" ".join(p), sub) for p, sub in _main_commands())[path]
-    unstated = [a.dest for a in parser._actions
-                if a.default not in (None, False, argparse.SUPPRESS) and not isinstance(a, argparse._HelpAction)
-                and "default" not in (a.help or "")]  # fmt: skip
+    unstated = [
+        a.dest
+        for a in parser._actions
+        if a.default not in (None, False, argparse.SUPPRESS)
+        and not isinstance(a, argparse._HelpAction)
+        and "default" not in (a.help or "")
+    ]
     assert unstated == [], f"{path}: defaults not named in the help: {unstated}"
 
 
@@ -60,10 +66,16 @@ def test_synthesize_help_has_no_argument_without_a_line(capsys):
     out = capsys.readouterr().out
     # argparse prints an argument with no help as its flags alone on a line
     lines = out.splitlines()
-    body = lines[lines.index("positional arguments:"):]
-    bare = [line for line in body if line.startswith("  ") and not line.startswith("   ")
-            and len(line.split("  ")) < 3 and (line.strip().startswith("-") or line.strip().isupper())
-            and not line.rstrip().endswith(":")]  # fmt: skip
+    body = lines[lines.index("positional arguments:") :]
+    bare = [
+        line
+        for line in body
+        if line.startswith("  ")
+        and not line.startswith("   ")
+        and len(line.split("  ")) < 3
+        and (line.strip().startswith("-") or line.strip().isupper())
+        and not line.rstrip().endswith(":")
+    ]
     # a flag whose help starts on the next line is followed by a deeper-indented line
     bare = [line for line in bare if not _continued(lines, line)]
     assert bare == [], bare

@@ -50,14 +50,21 @@ def _refused(argv, capsys, folder, needle: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("case", ["-o input", "--report input", "-o equal to --report", "-o graph", "-o x.txt",
-                                  "--report x.bvh", "-o empty"])  # fmt: skip
+@pytest.mark.parametrize(
+    "case", ["-o input", "--report input", "-o equal to --report", "-o graph", "-o x.txt", "--report x.bvh", "-o empty"]
+)
 def test_synthesize_refuses_outputs_that_would_lose_data(files, capsys, case):
     g, rec, d = files["graph"], files["rec"], files["dir"]
     argv, needle = {
         "-o input": (["synthesize", g, rec, "-o", rec], "would overwrite the recording"),
-        "--report input": (["synthesize", g, rec, "-o", d / "out.bvh", "--report", rec], "would overwrite the recording"),
-        "-o equal to --report": (["synthesize", g, rec, "-o", d / "x.bvh", "--report", d / "x.bvh"], "name the same file"),
+        "--report input": (
+            ["synthesize", g, rec, "-o", d / "out.bvh", "--report", rec],
+            "would overwrite the recording",
+        ),
+        "-o equal to --report": (
+            ["synthesize", g, rec, "-o", d / "x.bvh", "--report", d / "x.bvh"],
+            "name the same file",
+        ),
         "-o graph": (["synthesize", g, rec, "-o", g], "would overwrite the graph"),
         "-o x.txt": (["synthesize", g, rec, "-o", d / "x.txt"], "writes .bvh, .glb or .gltf, not .txt"),
         "--report x.bvh": (["synthesize", g, rec, "-o", d / "y.bvh", "--report", d / "y.BVH"], "writes .json"),
@@ -74,8 +81,12 @@ def test_an_output_that_is_an_input_under_another_name_is_refused(files, capsys)
     hard = d / "hard.rec"
     hard.hardlink_to(files["rec"])
     for alias in (link, hard, d / "sub" / ".." / "take.rec"):
-        _refused(["synthesize", files["graph"], files["rec"], "-o", d / "a.bvh", "--report", alias], capsys, d,
-                 "would overwrite the recording")  # fmt: skip
+        _refused(
+            ["synthesize", files["graph"], files["rec"], "-o", d / "a.bvh", "--report", alias],
+            capsys,
+            d,
+            "would overwrite the recording",
+        )
     with pytest.raises(InputError, match="would overwrite the recording"):
         check_outputs([("-o", link, (".bvh",))], [("the recording", files["rec"])])
 
@@ -86,9 +97,20 @@ def test_two_outputs_naming_one_file_through_dot_segments(tmp_path):
     check_outputs([("--json", tmp_path / "e.json", (".json",)), ("--report-html", tmp_path / "e.html", (".html",))])
 
 
-@pytest.mark.parametrize("case", ["simulate -o clip", "simulate -o txt", "mapping -o clip", "calibrate -o rec",
-                                  "report -o result", "relayout -o graph", "build -o kb file", "evaluate json = html",
-                                  "evaluate --json kb file"])  # fmt: skip
+@pytest.mark.parametrize(
+    "case",
+    [
+        "simulate -o clip",
+        "simulate -o txt",
+        "mapping -o clip",
+        "calibrate -o rec",
+        "report -o result",
+        "relayout -o graph",
+        "build -o kb file",
+        "evaluate json = html",
+        "evaluate --json kb file",
+    ],
+)
 def test_other_commands_refuse_outputs_over_inputs(files, capsys, case):
     c, rec, g, d = files["clip"], files["rec"], files["graph"], files["dir"]
     result = d / "r.json"
@@ -101,18 +123,33 @@ def test_other_commands_refuse_outputs_over_inputs(files, capsys, case):
         "report -o result": (["report", result, "-o", d / "R.JSON"], ".html"),
         "relayout -o graph": (["relayout", g, "--layout", "kelly6", "-o", g], "would overwrite the graph"),
         "build -o kb file": (["build", c, "-o", c], "would overwrite a knowledge-base file"),
-        "evaluate json = html": (["evaluate", d, "--test", "*", "--json", d / "e.json", "--report-html", d / "e.json"],
-                                 "name the same file"),
-        "evaluate --json kb file": (["evaluate", c, "--test", "*", "--json", result, "--graph", result],
-                                    "would overwrite the graph"),
+        "evaluate json = html": (
+            ["evaluate", d, "--test", "*", "--json", d / "e.json", "--report-html", d / "e.json"],
+            "name the same file",
+        ),
+        "evaluate --json kb file": (
+            ["evaluate", c, "--test", "*", "--json", result, "--graph", result],
+            "would overwrite the graph",
+        ),
     }[case]
     _refused(argv, capsys, d, needle)
 
 
-@pytest.mark.parametrize("argv", [["inspect", ""], ["inspect", " "], ["simulate", "", "--layout", "kelly6", "-o", "x.rec"],
-                                  ["build", "", "-o", "g"], ["info", ""], ["synthesize", "", "x.rec", "-o", "y.bvh"],
-                                  ["report", "", "-o", "r.html"], ["mapping", ""], ["demo", "-o", ""],
-                                  ["evaluate", "kb", "--test", "*", "--json", ""]])  # fmt: skip
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["inspect", ""],
+        ["inspect", " "],
+        ["simulate", "", "--layout", "kelly6", "-o", "x.rec"],
+        ["build", "", "-o", "g"],
+        ["info", ""],
+        ["synthesize", "", "x.rec", "-o", "y.bvh"],
+        ["report", "", "-o", "r.html"],
+        ["mapping", ""],
+        ["demo", "-o", ""],
+        ["evaluate", "kb", "--test", "*", "--json", ""],
+    ],
+)
 def test_an_empty_path_is_refused_wherever_it_is_given(argv, capsys, tmp_path, monkeypatch):
     # beside a demo's output, which an empty path once found as "the current folder"
     demo = tmp_path / "graphsvc-demo"
@@ -138,7 +175,11 @@ def test_synthesize_files_checks_its_outputs_before_reading(files):
 
     rec = files["rec"]
     before = rec.read_bytes()
-    for output, report in ((rec, None), (files["dir"] / "a.bvh", rec), (files["dir"] / "a.bvh", files["dir"] / "a.bvh")):
+    for output, report in (
+        (rec, None),
+        (files["dir"] / "a.bvh", rec),
+        (files["dir"] / "a.bvh", files["dir"] / "a.bvh"),
+    ):
         with pytest.raises(InputError):  # (the graph object is never touched: None would fail on use)
             synthesize_files(None, files["graph"], rec, output, report_path=report)
     assert rec.read_bytes() == before and not (files["dir"] / "a.bvh").exists()

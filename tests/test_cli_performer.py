@@ -49,8 +49,19 @@ def run(argv, capsys):
 
 
 def _synthesize(d, out, extra, capsys):
-    return run(["synthesize", str(d / "g.graph"), str(d / "walk.rec"), "-o", str(out), "--report",
-                str(out.with_suffix(".json")), *extra], capsys)  # fmt: skip
+    return run(
+        [
+            "synthesize",
+            str(d / "g.graph"),
+            str(d / "walk.rec"),
+            "-o",
+            str(out),
+            "--report",
+            str(out.with_suffix(".json")),
+            *extra,
+        ],
+        capsys,
+    )
 
 
 def _same_rotations(a, b):
@@ -79,8 +90,15 @@ def test_height_puts_the_output_on_proportions_scaled_by_height(files, capsys):
 def test_a_performer_json_gives_its_segments_and_scales_the_others(files, capsys):
     d = files
     spec = d / "spec.json"
-    spec.write_text(json.dumps({"format": "graphsvc-performer", "version": 1,
-                                "segments_m": {"l_thigh": 0.504, "r_thigh": 0.462, "chest": 0.253}}))  # fmt: skip
+    spec.write_text(
+        json.dumps(
+            {
+                "format": "graphsvc-performer",
+                "version": 1,
+                "segments_m": {"l_thigh": 0.504, "r_thigh": 0.462, "chest": 0.253},
+            }
+        )
+    )
     out = d / "actor.bvh"
     code, _, err = _synthesize(d, out, ["--performer", str(spec)], capsys)
     assert code == 0, err
@@ -105,13 +123,16 @@ def test_a_performer_bvh_gives_its_skeleton_s_proportions(files, capsys):
         assert got[name] == pytest.approx(want[name], abs=1e-6), name
 
 
-@pytest.mark.parametrize("extra, needle", [
-    (["--height", "1.8", "--performer", "p.json"], "not allowed with argument"),
-    (["--height", "-1.75"], "--height"),
-    (["--height", "175"], "at most 3"),
-    (["--height", "tall"], "not a number"),
-    (["--performer-mapping", "guess"], "--performer-mapping applies to a --performer"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--height", "1.8", "--performer", "p.json"], "not allowed with argument"),
+        (["--height", "-1.75"], "--height"),
+        (["--height", "175"], "at most 3"),
+        (["--height", "tall"], "not a number"),
+        (["--performer-mapping", "guess"], "--performer-mapping applies to a --performer"),
+    ],
+)
 def test_conflicting_or_bad_flags_one_line_exit_2(files, capsys, extra, needle):
     d = files
     out = d / "never.bvh"
@@ -120,12 +141,18 @@ def test_conflicting_or_bad_flags_one_line_exit_2(files, capsys, extra, needle):
     assert not out.exists()
 
 
-@pytest.mark.parametrize("content, needle", [
-    (None, "no such file"),
-    ("{", "not valid JSON"),
-    (json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 0.3}}), "unknown segments: tail"),
-    (json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"l_shin": -1}}), "l_shin must be"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "content, needle",
+    [
+        (None, "no such file"),
+        ("{", "not valid JSON"),
+        (
+            json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 0.3}}),
+            "unknown segments: tail",
+        ),
+        (json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"l_shin": -1}}), "l_shin must be"),
+    ],
+)
 def test_a_bad_or_missing_performer_file_one_line_exit_2(files, capsys, content, needle):
     d = files
     spec = d / "bad_performer.json"
@@ -143,8 +170,9 @@ def test_the_output_may_not_replace_the_performer_file(files, capsys):
     target = d / "me.bvh"
     write_bvh(target, read_bvh(d / "plain.bvh"), scale=100.0)
     before = target.read_bytes()
-    code, _, err = run(["synthesize", str(d / "g.graph"), str(d / "walk.rec"), "-o", str(target), "--performer",
-                        str(target)], capsys)  # fmt: skip
+    code, _, err = run(
+        ["synthesize", str(d / "g.graph"), str(d / "walk.rec"), "-o", str(target), "--performer", str(target)], capsys
+    )
     assert code == 2 and len(err.strip().splitlines()) == 1 and "performer" in err, err
     assert target.read_bytes() == before
 
@@ -152,10 +180,12 @@ def test_the_output_may_not_replace_the_performer_file(files, capsys):
 def test_a_performer_motion_of_an_unknown_skeleton_names_the_performer_mapping(files, capsys):
     d = files
     odd = d / "odd.bvh"
-    odd.write_text("HIERARCHY\nROOT Torso\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
-                   "Xrotation Yrotation\n JOINT Noggin\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
-                   "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.0333333\n"
-                   "0 90 0 0 0 0 0 0 0\n")  # fmt: skip
+    odd.write_text(
+        "HIERARCHY\nROOT Torso\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation "
+        "Xrotation Yrotation\n JOINT Noggin\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation Xrotation Yrotation\n"
+        "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.0333333\n"
+        "0 90 0 0 0 0 0 0 0\n"
+    )
     out = d / "never.bvh"
     code, _, err = _synthesize(d, out, ["--performer", str(odd)], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1, err

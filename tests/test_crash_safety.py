@@ -26,8 +26,15 @@ def graphsvc(*args, crash: str | None = None, timeout: float = 180) -> subproces
     env.pop("GRAPHSVC_CRASH_AT", None)
     if crash:
         env["GRAPHSVC_CRASH_AT"] = crash
-    return subprocess.run([sys.executable, "-m", "graphsvc.cli", *map(str, args)], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=timeout, check=False)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "graphsvc.cli", *map(str, args)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
 
 
 def temporaries(folder: Path) -> list[str]:
@@ -100,8 +107,17 @@ def test_synthesize_killed_anywhere_never_leaves_a_bvh_without_its_report(small_
     clip = sorted(kb.glob("*.bvh"))[0]
     rec = tmp_path / "in.rec"
     ok(graphsvc("simulate", clip, "--layout", "kelly6", "-o", rec))
-    args = ("synthesize", small_graph, rec, "-o", tmp_path / "out.bvh", "--report", tmp_path / "out.json",
-            "--strategy", "nearest")  # fmt: skip
+    args = (
+        "synthesize",
+        small_graph,
+        rec,
+        "-o",
+        tmp_path / "out.bvh",
+        "--report",
+        tmp_path / "out.json",
+        "--strategy",
+        "nearest",
+    )
     killed(graphsvc(*args, crash=point))
     bvh, report = (tmp_path / "out.bvh").exists(), (tmp_path / "out.json").exists()
     assert not bvh and report == (point == "rename:out.bvh")  # the report lands first, the BVH last
@@ -145,11 +161,21 @@ def test_server_killed_making_a_batch_leaves_none_and_its_next_start_cleans_up(s
     root = tmp_path / "batches"
     root.mkdir()
     text = "recording,graph,strategy,output\nin.rec,small,nearest,a\n"
-    env = dict(os.environ, GRAPHSVC_CRASH_AT="rename:manifest.*",
-               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))  # fmt: skip
+    env = dict(
+        os.environ,
+        GRAPHSVC_CRASH_AT="rename:manifest.*",
+        PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+    )
     for _ in range(2):
-        proc = subprocess.run([sys.executable, "-c", _SUBMIT.format(text=text), str(root), str(small_graph)],
-                              cwd=ROOT, env=env, capture_output=True, text=True, timeout=60, check=False)  # fmt: skip
+        proc = subprocess.run(
+            [sys.executable, "-c", _SUBMIT.format(text=text), str(root), str(small_graph)],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
         killed(proc)
     # No batch folder; the second start removed the first one's leftovers, its own remain.
     assert len(list(root.iterdir())) == 1 and temporaries(root) == [p.name for p in root.iterdir()]

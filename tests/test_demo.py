@@ -11,8 +11,16 @@ def test_demo_writes_readable_outputs_deterministically(tmp_path, demo_run):
     second = run_demo(tmp_path / "b", seed=0, minutes=0.6)
     b = tmp_path / "b"
     names = sorted(p.relative_to(a).as_posix() for p in a.rglob("*") if p.is_file())
-    assert {"performance.bvh", "performance.rec", "performance.csv", "sensors.png", "reconstruction.bvh",
-            "side_by_side.bvh", "error.png", "report.html"} <= set(names)
+    assert {
+        "performance.bvh",
+        "performance.rec",
+        "performance.csv",
+        "sensors.png",
+        "reconstruction.bvh",
+        "side_by_side.bvh",
+        "error.png",
+        "report.html",
+    } <= set(names)
     assert len([n for n in names if n.startswith("kb/")]) == first["kb_clips"]
     for n in names:  # same seed, same bytes, plot included
         assert (a / n).read_bytes() == (b / n).read_bytes(), n
@@ -55,8 +63,8 @@ def test_side_by_side_holds_both_figures_apart():
     _, world = motion_fk(both)
     _, wa = motion_fk(a)
     _, wb = motion_fk(b)
-    np.testing.assert_allclose(world[:, 1: J + 1], wa, atol=1e-9)
-    np.testing.assert_allclose(world[:, J + 1:], wb + [1.5, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(world[:, 1 : J + 1], wa, atol=1e-9)
+    np.testing.assert_allclose(world[:, J + 1 :], wb + [1.5, 0.0, 0.0], atol=1e-9)
 
 
 def test_the_threaded_kernels_compile_ahead_in_a_process_that_exits_cleanly():

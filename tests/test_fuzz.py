@@ -23,15 +23,37 @@ CORPUS = Path(__file__).resolve().parent / "fuzz_corpus"
 
 # Executions of each target's mutation run: the whole file in about 30 s on 2 cores.
 # C3D starts a process a file; a graph input is half a megabyte hashed twice.
-EXECUTIONS = {"c3d": 25, "graph": 120, "graph-sealed": 250, "rec": 600, "rec-sealed": 600, "deepmimic": 600,
-              "gltf": 400}
+EXECUTIONS = {
+    "c3d": 25,
+    "graph": 120,
+    "graph-sealed": 250,
+    "rec": 600,
+    "rec-sealed": 600,
+    "deepmimic": 600,
+    "gltf": 400,
+}
 SUITE = [name for name, t in TARGETS.items() if t.in_process]
 
 
 def test_every_reader_has_a_target():
-    assert set(TARGETS) >= {"bvh", "asf", "amc", "c3d", "csv", "marker-csv", "mvnx", "rec", "graph", "layout",
-                            "constraints", "calibration", "performer", "manifest", "grpc-synthesize",
-                            "grpc-stream"}  # fmt: skip
+    assert set(TARGETS) >= {
+        "bvh",
+        "asf",
+        "amc",
+        "c3d",
+        "csv",
+        "marker-csv",
+        "mvnx",
+        "rec",
+        "graph",
+        "layout",
+        "constraints",
+        "calibration",
+        "performer",
+        "manifest",
+        "grpc-synthesize",
+        "grpc-stream",
+    }
     for target in TARGETS.values():
         assert target.allowed == (GraphsvcError,) and target.doc
 
@@ -112,9 +134,11 @@ def test_forged_graph_indexes_refused():
     good = as_file(TARGETS["graph"].seeds()[0], "good.graph")
     meta, arrays, version = read_container(good, mmap=False)
     n = arrays["node_kind"].shape[0]
-    for name, edit, message in (("edge_dst", lambda a: a.__setitem__(0, n), "outside"),
-                                ("incoming", lambda a: a.__setitem__(-1, a[-1] + 5), "offsets"),
-                                ("node_label", lambda a: a.__setitem__(3, 10_000), "labels")):  # fmt: skip
+    for name, edit, message in (
+        ("edge_dst", lambda a: a.__setitem__(0, n), "outside"),
+        ("incoming", lambda a: a.__setitem__(-1, a[-1] + 5), "offsets"),
+        ("node_label", lambda a: a.__setitem__(3, 10_000), "labels"),
+    ):
         forged = {k: v.copy() for k, v in arrays.items()}
         edit(forged[name])
         path = good.with_name("forged.graph")
@@ -192,8 +216,13 @@ def test_mutation_loop_reproducible():
 
 
 def _tool(*args, timeout=120) -> dict:
-    run = subprocess.run([sys.executable, str(ROOT / "tools" / "fuzz.py"), *args], capture_output=True, text=True,
-                         timeout=timeout, cwd=ROOT)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "fuzz.py"), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
     assert run.returncode == 0, run.stderr
     return json.loads(run.stdout)
 
@@ -217,9 +246,26 @@ def test_tool_records_a_crash_in_cpp_code(tmp_path):
     import os
 
     env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"}
-    run = subprocess.run([sys.executable, str(ROOT / "tools" / "fuzz.py"), "c3d-ezc3d", "--seconds", "3",
-                          "--engine", "mutate", "--corpus", str(corpus), "--out", str(tmp_path / "found")],
-                         capture_output=True, text=True, timeout=120, cwd=ROOT, env=env)  # fmt: skip
+    run = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "tools" / "fuzz.py"),
+            "c3d-ezc3d",
+            "--seconds",
+            "3",
+            "--engine",
+            "mutate",
+            "--corpus",
+            str(corpus),
+            "--out",
+            str(tmp_path / "found"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env=env,
+    )
     assert run.returncode == 0, run.stderr
     out = json.loads(run.stdout)
     kinds = {f["kind"] for f in out["findings"]}

@@ -17,16 +17,19 @@ def _write(root, files):
 
 def test_dependencies_follow_imports_through_numba_modules_only(tmp_path):
     pkg = tmp_path / "pkg"
-    _write(pkg, {
-        "__init__.py": "",
-        "a.py": "import numba\nfrom pkg.b import f\nfrom pkg import c\nimport os\n",
-        "b.py": "import numba\nfrom . import d\n\ndef f():\n    from pkg.sub.g import h\n",
-        "c.py": "from pkg.e import E  # constants, no kernels\n",
-        "d.py": "D = 1\n",
-        "e.py": "E = 2\n",
-        "sub/__init__.py": "",
-        "sub/g.py": "h = 3\n",
-    })  # fmt: skip
+    _write(
+        pkg,
+        {
+            "__init__.py": "",
+            "a.py": "import numba\nfrom pkg.b import f\nfrom pkg import c\nimport os\n",
+            "b.py": "import numba\nfrom . import d\n\ndef f():\n    from pkg.sub.g import h\n",
+            "c.py": "from pkg.e import E  # constants, no kernels\n",
+            "d.py": "D = 1\n",
+            "e.py": "E = 2\n",
+            "sub/__init__.py": "",
+            "sub/g.py": "h = 3\n",
+        },
+    )
     got = {p.relative_to(pkg).as_posix() for p in kernel_cache.dependencies(pkg / "a.py", pkg)}
     # b uses numba: its imports (relative, and inside a function) count; c does not: e is not followed
     assert got == {"__init__.py", "a.py", "b.py", "c.py", "d.py", "sub/g.py"}  # (`from pkg import c` names pkg too)
@@ -35,10 +38,12 @@ def test_dependencies_follow_imports_through_numba_modules_only(tmp_path):
 def test_a_cached_kernel_recompiles_when_a_module_it_imports_changes(tmp_path):
     # numba alone stamps a cached kernel with its own file: after the constant it reads
     # from another module changed, a later process would load the old machine code.
-    _write(tmp_path / "pkg", {
-        "__init__.py": "",
-        "consts.py": "SCALE = 2.0\n",
-        "kern.py": """
+    _write(
+        tmp_path / "pkg",
+        {
+            "__init__.py": "",
+            "consts.py": "SCALE = 2.0\n",
+            "kern.py": """
             import numba
             from pkg.consts import SCALE
 
@@ -46,8 +51,9 @@ def test_a_cached_kernel_recompiles_when_a_module_it_imports_changes(tmp_path):
             def scaled(x):
                 return x * SCALE
             """,
-        "other.py": "UNRELATED = 1\n",
-    })  # fmt: skip
+            "other.py": "UNRELATED = 1\n",
+        },
+    )
     code = (
         "import sys\n"
         "from graphsvc import kernel_cache\n"

@@ -47,7 +47,10 @@ def test_the_package_sets_them_before_numpy_loads():
         "import graphsvc\n"
         "print(*seen['at numpy'])\n"
     )
-    env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_THREAD_TIMEOUT", "GOMP_SPINCOUNT",
-                                                                            "OMP_WAIT_POLICY")}  # fmt: skip
+    env = {
+        k: v
+        for k, v in __import__("os").environ.items()
+        if k not in ("OPENBLAS_THREAD_TIMEOUT", "GOMP_SPINCOUNT", "OMP_WAIT_POLICY")
+    }
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
     assert out.split() == [numba_env.BLAS_TIMEOUT, numba_env.SPIN_COUNT]

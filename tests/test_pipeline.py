@@ -64,8 +64,14 @@ def test_other_rates_are_resampled_to_the_graph_rate(graph, kb, rec):
     np.testing.assert_allclose(acc, fast.accelerations[::2][: acc.shape[0]], rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(position, fast.ground_position[::2][: acc.shape[0]], atol=1e-12)
     # 15 Hz → 30 Hz: half-way values, headings the short way round (3.1 → −3.1 via π).
-    slow = replace(fast, rate_hz=15.0, timestamps_s=np.array([0.0, 1 / 15]), accelerations=fast.accelerations[:2],
-                   ground_position=np.array([[0.0, 0.0], [1.0, np.nan]]), heading=np.array([3.1, -3.1]))  # fmt: skip
+    slow = replace(
+        fast,
+        rate_hz=15.0,
+        timestamps_s=np.array([0.0, 1 / 15]),
+        accelerations=fast.accelerations[:2],
+        ground_position=np.array([[0.0, 0.0], [1.0, np.nan]]),
+        heading=np.array([3.1, -3.1]),
+    )
     acc, position, heading, _ = readings_at_rate(slow, 30.0)
     np.testing.assert_allclose(acc[1], fast.accelerations[:2].astype(float).mean(axis=0), rtol=1e-6)
     assert position[1, 0] == pytest.approx(0.5) and np.isnan(position[1, 1])  # a gap stays a gap
@@ -82,16 +88,31 @@ def test_bad_options_and_constraints(graph, rec):
     with pytest.raises(InputError, match="weights"):
         parse_weights("1,-1,0")
     with pytest.raises(InputError, match="overlap"):
-        reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"contact": "left"}},
-                                                      {"start_s": 1, "end_s": 3, "require": {"contact": "both"}}],)))  # fmt: skip
+        reconstruct(
+            graph,
+            rec,
+            Options(
+                constraints=(
+                    [
+                        {"start_s": 0, "end_s": 2, "require": {"contact": "left"}},
+                        {"start_s": 1, "end_s": 3, "require": {"contact": "both"}},
+                    ],
+                )
+            ),
+        )
     with pytest.raises(InputError, match="start_s"):
         reconstruct(graph, rec, Options(constraints=([{"start_s": -1, "end_s": 2, "require": {"contact": "left"}}],)))
     with pytest.raises(InputError, match="unknown label"):
         reconstruct(graph, rec, Options(constraints=([{"start_s": 0, "end_s": 2, "require": {"label": "swim"}}],)))
     duration = rec.num_samples / rec.rate_hz
     with pytest.raises(InputError, match="starts after the recording ends"):
-        reconstruct(graph, rec, Options(constraints=([{"start_s": duration + 50, "end_s": duration + 60,
-                                                       "require": {"contact": "left"}}],)))  # fmt: skip
+        reconstruct(
+            graph,
+            rec,
+            Options(
+                constraints=([{"start_s": duration + 50, "end_s": duration + 60, "require": {"contact": "left"}}],)
+            ),
+        )
     with pytest.raises(InputError, match="all 0"):
         parse_weights("0,0,0")
     with pytest.raises(InputError, match="all 0"):
@@ -99,8 +120,9 @@ def test_bad_options_and_constraints(graph, rec):
     assert parse_weights("0,0,0,1") == Weights(0, 0, 0, 1)
     with pytest.raises(InputError, match="ground positions"):
         reconstruct(graph, replace(rec, ground_position=None), Options(heading_from_track=True))
-    empty = replace(rec, timestamps_s=np.zeros(0), accelerations=np.zeros((0, 6, 3), np.float32),
-                    ground_position=None, heading=None)  # fmt: skip
+    empty = replace(
+        rec, timestamps_s=np.zeros(0), accelerations=np.zeros((0, 6, 3), np.float32), ground_position=None, heading=None
+    )
     with pytest.raises(InputError, match="zero samples"):
         reconstruct(graph, empty, Options())
 
@@ -115,7 +137,9 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec, drift):
     opts = Options(weights=Weights(0.5, 1, 1), latency_s=0.5, track_drift=drift)
     # A tracker offset the path cannot follow by itself, speeding up: fused, the root
     # follows it; with a drift of 0 the offset's rate cannot change.
-    rec = replace(rec, ground_position=rec.ground_position + np.linspace(0, 1, rec.num_samples)[:, None] ** 2 * [0.6, 0])
+    rec = replace(
+        rec, ground_position=rec.ground_position + np.linspace(0, 1, rec.num_samples)[:, None] ** 2 * [0.6, 0]
+    )
     batch = reconstruct(graph, rec, opts)
     live = open_session(graph, opts, rec.sensor_names)
     frames = []
@@ -130,8 +154,10 @@ def test_live_session_equals_batch_with_the_same_lag(graph, rec, drift):
     np.testing.assert_array_equal(live.motion().translations, batch.motion.translations)
     if drift:
         constant = reconstruct(graph, rec, replace(opts, shared=replace(opts.shared, track_drift=0.0)))
-        gap = [np.linalg.norm(m.translations[-20:, 0, [0, 2]] - rec.ground_position[-20:], axis=1).mean()
-               for m in (batch.motion, constant.motion)]  # fmt: skip
+        gap = [
+            np.linalg.norm(m.translations[-20:, 0, [0, 2]] - rec.ground_position[-20:], axis=1).mean()
+            for m in (batch.motion, constant.motion)
+        ]
         assert gap[0] < 0.6 * gap[1], gap
 
 
@@ -228,8 +254,10 @@ def test_cli_synthesize(graph, rec, tmp_path, capsys):
     save_graph(graph, gpath)
     save_recording(rec, rpath)
     out, report = tmp_path / "out.bvh", tmp_path / "report.json"
-    assert main(["synthesize", str(gpath), str(rpath), "-o", str(out), "--weights", "0.5,1,1",
-                 "--report", str(report)]) == 0  # fmt: skip
+    assert (
+        main(["synthesize", str(gpath), str(rpath), "-o", str(out), "--weights", "0.5,1,1", "--report", str(report)])
+        == 0
+    )
     motion = read_bvh(out)
     assert motion.num_frames == rec.num_samples
     r = json.loads(report.read_text())
@@ -250,8 +278,24 @@ def test_cli_synthesize(graph, rec, tmp_path, capsys):
     assert "constraint sets" in err[-1]
     assert not bad.exists()
     # With a beam: the report names it.
-    assert main(["synthesize", str(gpath), str(rpath), "-o", str(out), "--weights", "0.5,1,1", "--beam", "2",
-                 "--report", str(report)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(gpath),
+                str(rpath),
+                "-o",
+                str(out),
+                "--weights",
+                "0.5,1,1",
+                "--beam",
+                "2",
+                "--report",
+                str(report),
+            ]
+        )
+        == 0
+    )
     assert json.loads(report.read_text())["options"]["beam"] == 2.0
 
 
@@ -265,7 +309,10 @@ def test_cli_synthesize_writes_glTF_with_the_bvh_s_motion(graph, rec, tmp_path, 
     save_graph(graph, gpath)
     save_recording(rec, rpath)
     args = ["--strategy", "nearest", "--report"]
-    assert main(["synthesize", str(gpath), str(rpath), "-o", str(tmp_path / "o.bvh"), *args, str(tmp_path / "b.json")]) == 0
+    assert (
+        main(["synthesize", str(gpath), str(rpath), "-o", str(tmp_path / "o.bvh"), *args, str(tmp_path / "b.json")])
+        == 0
+    )
     _, want = motion_fk(read_bvh(tmp_path / "o.bvh"))
     for name in ("o.glb", "o.gltf"):
         out = tmp_path / name
@@ -305,7 +352,9 @@ def test_a_graph_in_other_sensor_frames_is_refused_and_relayout_converts_it(grap
         reconstruct(old, rec, Options())
     save_graph(old, tmp_path / "old.graph")
     save_recording(rec, tmp_path / "r.rec")
-    assert main(["synthesize", str(tmp_path / "old.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 2
+    assert (
+        main(["synthesize", str(tmp_path / "old.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 2
+    )
     assert "relayout" in capsys.readouterr().err
     assert main(["relayout", str(tmp_path / "old.graph"), "--layout", "kelly6", "-o", str(tmp_path / "new.graph")]) == 0
     from graphsvc.graph.file import load_graph
@@ -313,7 +362,9 @@ def test_a_graph_in_other_sensor_frames_is_refused_and_relayout_converts_it(grap
     new = load_graph(tmp_path / "new.graph")
     assert new.params["sensor_frames"] == "anatomical"
     np.testing.assert_allclose(new.edge_acc, graph.edge_acc, atol=2e-2)  # (float32 poses, as test_build)
-    assert main(["synthesize", str(tmp_path / "new.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 0
+    assert (
+        main(["synthesize", str(tmp_path / "new.graph"), str(tmp_path / "r.rec"), "-o", str(tmp_path / "o.bvh")]) == 0
+    )
 
 
 def test_the_poses_filter_steadies_the_output_and_zero_turns_it_off(graph, rec):

@@ -44,8 +44,10 @@ def test_an_unknown_name_is_an_attribute_error():
 
 
 def test_importing_the_package_imports_none_of_the_api():
-    code = ("import sys, graphsvc; print(' '.join(sorted(m for m in sys.modules if m.startswith('graphsvc')))); "
-            "graphsvc.Options; print('graphsvc.strategies.options' in sys.modules)")  # fmt: skip
+    code = (
+        "import sys, graphsvc; print(' '.join(sorted(m for m in sys.modules if m.startswith('graphsvc')))); "
+        "graphsvc.Options; print('graphsvc.strategies.options' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
     assert out[0].split() == ["graphsvc", "graphsvc.kernel_cache", "graphsvc.numba_env"]
     assert out[1] == "True"  # (and a name, once used, brings its module)
@@ -57,5 +59,11 @@ def test_the_guide_uses_only_public_names():
     used = set(re.findall(r"\bgraphsvc\.(\w+)", code))
     used |= {n.strip() for names in re.findall(r"from graphsvc import ([\w, ]+)", code) for n in names.split(",")}
     assert used <= set(graphsvc.__all__), sorted(used - set(graphsvc.__all__))
-    assert {"load_motion", "build_graph", "simulate_recording", "reconstruct", "run_leave_one_out",
-            "open_session"} <= used  # fmt: skip
+    assert {
+        "load_motion",
+        "build_graph",
+        "simulate_recording",
+        "reconstruct",
+        "run_leave_one_out",
+        "open_session",
+    } <= used

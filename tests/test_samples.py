@@ -23,8 +23,9 @@ def run(argv, capsys):
 
 def test_without_pybullet_the_commands_say_how_to_install_it(tmp_path, capsys, monkeypatch):
     real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "pybullet_data" else real(name, *a))
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "pybullet_data" else real(name, *a)
+    )
     for argv in (["samples", "-o", str(tmp_path / "s")], ["demo", "--kb", "pybullet", "-o", str(tmp_path / "d")]):
         code, _, err = run(argv, capsys)
         assert code == 2 and len(err.strip().splitlines()) == 1 and "pip install 'graphsvc[samples]'" in err, err
@@ -32,8 +33,10 @@ def test_without_pybullet_the_commands_say_how_to_install_it(tmp_path, capsys, m
 
 
 def test_demo_flags_that_do_not_fit_the_knowledge_base(tmp_path, capsys):
-    for argv, needle in ((["demo", "--kb", "pybullet", "--minutes", "1"], "--minutes"),
-                         (["demo", "--held-out", "walk"], "--kb pybullet")):  # fmt: skip
+    for argv, needle in (
+        (["demo", "--kb", "pybullet", "--minutes", "1"], "--minutes"),
+        (["demo", "--held-out", "walk"], "--kb pybullet"),
+    ):
         code, _, err = run(argv + ["-o", str(tmp_path / "d")], capsys)
         assert code == 2 and needle in err
     assert list(tmp_path.iterdir()) == []
@@ -60,12 +63,15 @@ def test_urdf_humanoid_is_the_readers_and_pybullet_poses_it_alike():
     row = json.loads(open(path).read())["Frames"][20]
     client = pybullet.connect(pybullet.DIRECT)
     try:
-        body = pybullet.loadURDF(f"{data}/humanoid/humanoid.urdf", [0, 0, 0], globalScaling=0.25,
-                                 physicsClientId=client)  # fmt: skip
+        body = pybullet.loadURDF(
+            f"{data}/humanoid/humanoid.urdf", [0, 0, 0], globalScaling=0.25, physicsClientId=client
+        )
         w, x, y, z = row[4:8]
         pybullet.resetBasePositionAndOrientation(body, row[1:4], [x, y, z, w], physicsClientId=client)
-        index = {pybullet.getJointInfo(body, j, physicsClientId=client)[1].decode(): j
-                 for j in range(pybullet.getNumJoints(body, physicsClientId=client))}  # fmt: skip
+        index = {
+            pybullet.getJointInfo(body, j, physicsClientId=client)[1].decode(): j
+            for j in range(pybullet.getNumJoints(body, physicsClientId=client))
+        }
         c = 8
         for name, kind in zip(ours.names[1:], ours.kinds[1:]):
             if kind == "spherical":
@@ -75,8 +81,10 @@ def test_urdf_humanoid_is_the_readers_and_pybullet_poses_it_alike():
             elif kind == "revolute":
                 pybullet.resetJointState(body, index[name], row[c], physicsClientId=client)
                 c += 1
-        theirs = {n: pybullet.getLinkState(body, index[n], computeForwardKinematics=True, physicsClientId=client)[4]
-                  for n in ours.names[1:]}  # fmt: skip
+        theirs = {
+            n: pybullet.getLinkState(body, index[n], computeForwardKinematics=True, physicsClientId=client)[4]
+            for n in ours.names[1:]
+        }
     finally:
         pybullet.disconnect(client)
     m = read_deepmimic(path)

@@ -96,6 +96,7 @@ def test_mmap_is_zero_copy_and_read_only(written):
     assert not acc.flags.writeable and not acc.flags.owndata
     with pytest.raises(ValueError):
         acc[0, 0, 0] = 1.0
+
     # The base chain ends in the memory map: nothing was copied, and every array
     # is a view of the same single mapping.
     def root(a):
@@ -156,6 +157,7 @@ def test_failed_write_keeps_target(written, monkeypatch):
     with pytest.raises(InputError):
         write_container(written, "recording", {}, {"a": np.zeros(3), "o": np.array([None])}, 1)
     assert written.read_bytes() == before
+
     # ...and a failure midway (here: at fsync, after all bytes went out) removes
     # the temporary file and leaves the old target intact.
     def broken_fsync(fd):

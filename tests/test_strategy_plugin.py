@@ -42,7 +42,9 @@ def installed(tmp_path_factory):
     info.mkdir()
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
     points = project["entry-points"]["graphsvc.strategies"]
-    (info / "entry_points.txt").write_text("[graphsvc.strategies]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()))
+    (info / "entry_points.txt").write_text(
+        "[graphsvc.strategies]\n" + "".join(f"{k} = {v}\n" for k, v in points.items())
+    )
     saved = (list(sys.path), os.environ.get("PYTHONPATH"), dict(registry._REGISTRY), registry._loaded)
     sys.path.insert(0, str(site))
     os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(site), saved[1]) if p)
@@ -95,16 +97,32 @@ def test_the_installed_strategy_is_registered_with_its_flags(installed, capsys):
 def test_synthesize_in_process_and_as_a_command_then_the_report(files, capsys):
     d = files["dir"]
     out, report = d / "mean.bvh", d / "mean.json"
-    argv = ["synthesize", str(files["graph"]), str(files["rec"]), "-o", str(out), "--strategy", "meanpose",
-            "--meanpose-label", "idle", "--report", str(report)]  # fmt: skip
+    argv = [
+        "synthesize",
+        str(files["graph"]),
+        str(files["rec"]),
+        "-o",
+        str(out),
+        "--strategy",
+        "meanpose",
+        "--meanpose-label",
+        "idle",
+        "--report",
+        str(report),
+    ]
     assert main(argv) == 0, capsys.readouterr().err
     r = json.loads(report.read_text())
     assert r["strategy"] == "meanpose" and r["options"]["label"] == "idle" and r["meanpose"]["label"] == "idle"
     assert "accelerations" in r["ignored_inputs"]  # (a floor: it reads no sensor)
     # the same bytes from a process of its own, which finds the strategy by itself
     again = d / "again.bvh"
-    proc = subprocess.run([sys.executable, "-m", "graphsvc.cli", *argv[:4], str(again), *argv[5:9]],
-                          capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "graphsvc.cli", *argv[:4], str(again), *argv[5:9]],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr
     assert again.read_bytes() == out.read_bytes()
     assert main(["report", str(report), "-o", str(d / "mean.html")]) == 0
@@ -126,8 +144,26 @@ def test_evaluate_hides_the_test_clip_from_the_mean(files, capsys):
     whole = graph.clips[int(graph.node_clip[mean_pose_node(graph, None, None)])]["name"]
     clip = f"{whole}.bvh"  # the clip the mean pose comes from when nothing is hidden
     out = files["dir"] / "e.json"
-    assert main(["evaluate", str(files["kb"]), "--test", clip, "--graph", str(files["graph"]), "--strategy",
-                 "meanpose", "--hold-out", "clip", "--quiet", "--json", str(out)]) == 0, capsys.readouterr().err
+    assert (
+        main(
+            [
+                "evaluate",
+                str(files["kb"]),
+                "--test",
+                clip,
+                "--graph",
+                str(files["graph"]),
+                "--strategy",
+                "meanpose",
+                "--hold-out",
+                "clip",
+                "--quiet",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    ), capsys.readouterr().err
     e = json.loads(out.read_text())
     assert e["config"]["options"]["strategy"] == "meanpose" and len(e["clips"]) == 1
     assert np.isfinite(e["clips"][0]["joint_err_cm"])
@@ -142,14 +178,30 @@ def test_batch_runs_it_on_dask_workers(files, capsys):
 
     d = files["dir"]
     manifest = d / "m.csv"
-    manifest.write_text("recording,graph,strategy,output,options\n"
-                        f"{files['rec']},{files['graph']},meanpose,p1,\"{{\"\"meanpose-label\"\": \"\"idle\"\"}}\"\n")
+    manifest.write_text(
+        "recording,graph,strategy,output,options\n"
+        f'{files["rec"]},{files["graph"]},meanpose,p1,"{{""meanpose-label"": ""idle""}}"\n'
+    )
     out = d / "batch"
     assert main(["batch", str(manifest), "--out", str(out), "--workers", "1", "--quiet"]) == 0, capsys.readouterr()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["totals"]["done"] == 1
-    assert main(["synthesize", str(files["graph"]), str(files["rec"]), "-o", str(d / "ref.bvh"), "--strategy",
-                 "meanpose", "--meanpose-label", "idle"]) == 0
+    assert (
+        main(
+            [
+                "synthesize",
+                str(files["graph"]),
+                str(files["rec"]),
+                "-o",
+                str(d / "ref.bvh"),
+                "--strategy",
+                "meanpose",
+                "--meanpose-label",
+                "idle",
+            ]
+        )
+        == 0
+    )
     assert file_sha256(out / "p1.bvh") == file_sha256(d / "ref.bvh")
 
 

@@ -117,21 +117,40 @@ def main() -> None:
     # (`pip install -e examples/strategy-plugin` adds meanpose, the mean pose: a floor)
     accelerometer_strategies = [n for n in available() if "markers" not in get(n).needs]
     parser.add_argument("--strategies", default=",".join(accelerometer_strategies))
-    parser.add_argument("--preset", default="default",
-                        help="the sensors' noise preset (default; real: tools/fit_real_noise.py's devices)")
-    parser.add_argument("--mount", type=float, default=30.0,
-                        help="with --preset real: each device turned by up to this many degrees (default 30)")
-    parser.add_argument("--calibration-pose", default="npose", choices=("npose", "tpose", "stand"),
-                        help="with --preset real: the pose put before each clip and calibrated from (default npose)")
-    parser.add_argument("--no-calibration", action="store_true",
-                        help="with --preset real: no calibration pose, the recordings read as simulated")
-    parser.add_argument("--reuse", action="store_true",
-                        help="keep a run already in --work that the same command wrote (after a change that cannot"
-                             " move it, e.g. one to how positions are used, for the accelerometer-only rows)")
+    parser.add_argument(
+        "--preset",
+        default="default",
+        help="the sensors' noise preset (default; real: tools/fit_real_noise.py's devices)",
+    )
+    parser.add_argument(
+        "--mount",
+        type=float,
+        default=30.0,
+        help="with --preset real: each device turned by up to this many degrees (default 30)",
+    )
+    parser.add_argument(
+        "--calibration-pose",
+        default="npose",
+        choices=("npose", "tpose", "stand"),
+        help="with --preset real: the pose put before each clip and calibrated from (default npose)",
+    )
+    parser.add_argument(
+        "--no-calibration",
+        action="store_true",
+        help="with --preset real: no calibration pose, the recordings read as simulated",
+    )
+    parser.add_argument(
+        "--reuse",
+        action="store_true",
+        help="keep a run already in --work that the same command wrote (after a change that cannot"
+        " move it, e.g. one to how positions are used, for the accelerometer-only rows)",
+    )
     args = parser.parse_args()
     unknown = set(args.inputs.split(",")) - set(INPUTS) - set(EXTRA_INPUTS)
     if unknown:
-        raise SystemExit(f"unknown --inputs {', '.join(sorted(unknown))} (known: {', '.join([*INPUTS, *EXTRA_INPUTS])})")
+        raise SystemExit(
+            f"unknown --inputs {', '.join(sorted(unknown))} (known: {', '.join([*INPUTS, *EXTRA_INPUTS])})"
+        )
     kb = Path(args.data) / "dataset-2" / "data"
     if not kb.is_dir():
         raise SystemExit(f"{kb} not found (give the Bandai-Namco folder)")
@@ -158,19 +177,49 @@ def main() -> None:
                     if args.preset == "real":
                         tag += f".mount{args.mount:g}" + ("" if calibrate is None else f".{args.calibration_pose}")
                     out = work / f"{protocol}.{layout}.{key}.{strategy}{tag}.json"
-                    config = EvalConfig(kb=(str(kb),), graph=str(graph), test=PROTOCOLS[protocol], hold_out=protocol,
-                                        noise=noise, options=Options(strategy=strategy,
-                                                                     weights=parse_weights(weights or "1,1,1")),
-                                        jobs=args.jobs, json=str(out), pose_oracle=strategy == "nearest",
-                                        calibrate_from_start=calibrate, calibration_pose=args.calibration_pose,
-                                        progress=False)  # fmt: skip
-                    command = shlex.join(["graphsvc", "evaluate", str(kb), "--graph", str(graph), "--test",
-                                          PROTOCOLS[protocol], "--hold-out", protocol, "--noise", noise,
-                                          *(["--weights", weights] if weights else []), "--strategy", strategy,
-                                          "--jobs", str(args.jobs), "--json", str(out), "--quiet",
-                                          *(["--pose-oracle"] if strategy == "nearest" else []),
-                                          *(["--calibrate-from-start", f"{calibrate:g}", "--pose",
-                                             args.calibration_pose] if calibrate else [])])  # fmt: skip
+                    config = EvalConfig(
+                        kb=(str(kb),),
+                        graph=str(graph),
+                        test=PROTOCOLS[protocol],
+                        hold_out=protocol,
+                        noise=noise,
+                        options=Options(strategy=strategy, weights=parse_weights(weights or "1,1,1")),
+                        jobs=args.jobs,
+                        json=str(out),
+                        pose_oracle=strategy == "nearest",
+                        calibrate_from_start=calibrate,
+                        calibration_pose=args.calibration_pose,
+                        progress=False,
+                    )
+                    command = shlex.join(
+                        [
+                            "graphsvc",
+                            "evaluate",
+                            str(kb),
+                            "--graph",
+                            str(graph),
+                            "--test",
+                            PROTOCOLS[protocol],
+                            "--hold-out",
+                            protocol,
+                            "--noise",
+                            noise,
+                            *(["--weights", weights] if weights else []),
+                            "--strategy",
+                            strategy,
+                            "--jobs",
+                            str(args.jobs),
+                            "--json",
+                            str(out),
+                            "--quiet",
+                            *(["--pose-oracle"] if strategy == "nearest" else []),
+                            *(
+                                ["--calibrate-from-start", f"{calibrate:g}", "--pose", args.calibration_pose]
+                                if calibrate
+                                else []
+                            ),
+                        ]
+                    )
                     t0 = time.perf_counter()
                     stamp = out.with_suffix(".cmd")  # the command that wrote `out`
                     if not (args.reuse and out.exists() and stamp.exists() and stamp.read_text() == command):
@@ -178,19 +227,39 @@ def main() -> None:
                         stamp.write_text(command)
                     result = json.loads(out.read_text())
                     m, groups = result["mean"], result.get("groups", {})
-                    row = {"hold_out": protocol, "layout": layout, "inputs": what, "strategy": strategy,
-                           "noise": args.preset,
-                           "clips": m["clips"], "frames": m["frames"], "joint_err_cm": m["joint_err_cm"],
-                           "root_err_cm": m["root_err_cm"], "heading_err_deg": m["heading_err_deg"],
-                           "label_acc": m["label_acc"], "samples_per_s": m.get("samples_per_s"),
-                           "oracle_joint_err_cm": m.get("oracle_joint_err_cm"),
-                           "calibration_error_deg": m.get("calibration_error_deg"),
-                           **{k: m.get(k) for k in ("jitter_km_s3", "skate_cm_s", "penetration_cm",
-                                                    "truth_jitter_km_s3", "truth_skate_cm_s", "truth_penetration_cm")},
-                           "groups": {g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}
-                                      for g, v in groups.items()},
-                           "seconds": round(time.perf_counter() - t0, 1),
-                           "command": command}  # fmt: skip
+                    row = {
+                        "hold_out": protocol,
+                        "layout": layout,
+                        "inputs": what,
+                        "strategy": strategy,
+                        "noise": args.preset,
+                        "clips": m["clips"],
+                        "frames": m["frames"],
+                        "joint_err_cm": m["joint_err_cm"],
+                        "root_err_cm": m["root_err_cm"],
+                        "heading_err_deg": m["heading_err_deg"],
+                        "label_acc": m["label_acc"],
+                        "samples_per_s": m.get("samples_per_s"),
+                        "oracle_joint_err_cm": m.get("oracle_joint_err_cm"),
+                        "calibration_error_deg": m.get("calibration_error_deg"),
+                        **{
+                            k: m.get(k)
+                            for k in (
+                                "jitter_km_s3",
+                                "skate_cm_s",
+                                "penetration_cm",
+                                "truth_jitter_km_s3",
+                                "truth_skate_cm_s",
+                                "truth_penetration_cm",
+                            )
+                        },
+                        "groups": {
+                            g: {k: v[k] for k in ("clips", "joint_err_cm", "root_err_cm", "label_acc")}
+                            for g, v in groups.items()
+                        },
+                        "seconds": round(time.perf_counter() - t0, 1),
+                        "command": command,
+                    }
                     rows.append(row)
                     print(json.dumps(row), flush=True)
     print()
@@ -207,17 +276,41 @@ def _ratio(r: dict, key: str):
 
 
 def table(rows: list[dict]) -> str:
-    head = ("hold-out", "layout", "inputs", "strategy", "clips", "joint cm", "oracle cm", "root cm", "heading °", "label",
-            "jitter ×truth", "skate ×truth", "locomotion joint cm", "gestures joint cm")  # fmt: skip
+    head = (
+        "hold-out",
+        "layout",
+        "inputs",
+        "strategy",
+        "clips",
+        "joint cm",
+        "oracle cm",
+        "root cm",
+        "heading °",
+        "label",
+        "jitter ×truth",
+        "skate ×truth",
+        "locomotion joint cm",
+        "gestures joint cm",
+    )
     lines = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
     for r in rows:
         g = r["groups"]
-        cells = (r["hold_out"], f"`{r['layout']}`", r["inputs"], f"`{r['strategy']}`", str(r["clips"]),
-                 _f(r["joint_err_cm"], ".2f"), _f(r.get("oracle_joint_err_cm"), ".2f"), _f(r["root_err_cm"], ".1f"), _f(r["heading_err_deg"], ".1f"),
-                 (_f(r["label_acc"], ".0f", 100.0) + " %") if r["label_acc"] is not None else "n/a",
-                 _f(_ratio(r, "jitter_km_s3"), ".1f") + "×", _f(_ratio(r, "skate_cm_s"), ".2f") + "×",
-                 _f(g.get("locomotion", {}).get("joint_err_cm"), ".2f"),
-                 _f(g.get("gestures", {}).get("joint_err_cm"), ".2f"))  # fmt: skip
+        cells = (
+            r["hold_out"],
+            f"`{r['layout']}`",
+            r["inputs"],
+            f"`{r['strategy']}`",
+            str(r["clips"]),
+            _f(r["joint_err_cm"], ".2f"),
+            _f(r.get("oracle_joint_err_cm"), ".2f"),
+            _f(r["root_err_cm"], ".1f"),
+            _f(r["heading_err_deg"], ".1f"),
+            (_f(r["label_acc"], ".0f", 100.0) + " %") if r["label_acc"] is not None else "n/a",
+            _f(_ratio(r, "jitter_km_s3"), ".1f") + "×",
+            _f(_ratio(r, "skate_cm_s"), ".2f") + "×",
+            _f(g.get("locomotion", {}).get("joint_err_cm"), ".2f"),
+            _f(g.get("gestures", {}).get("joint_err_cm"), ".2f"),
+        )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -65,8 +65,9 @@ def build_inputs(data: Path, cache: Path, items: int, minutes: float) -> tuple[P
             if frames >= minutes * 60 * 30 + 30:
                 break
         motion, _ = join_clips(picked, 30.0)
-        rec = simulate_recording(motion.slice(0, int(round(minutes * 60 * 30))), layout, parse_noise("default"),
-                                 seed=k, rate_hz=30.0)  # fmt: skip
+        rec = simulate_recording(
+            motion.slice(0, int(round(minutes * 60 * 30))), layout, parse_noise("default"), seed=k, rate_hz=30.0
+        )
         save_recording(rec, path)
     return graph_path, recs
 
@@ -79,8 +80,9 @@ def write_manifest(folder: Path, graph: Path, recs: list[Path], beam: float | No
         w = csv.writer(f)
         w.writerow(["recording", "graph", "strategy", "output", "weights", "options"])
         for k, r in enumerate(recs):
-            w.writerow([str(r), str(graph), "viterbi", f"item{k:03d}", "0.5,1,1",
-                        json.dumps({"beam": beam} if beam else {})])  # fmt: skip
+            w.writerow(
+                [str(r), str(graph), "viterbi", f"item{k:03d}", "0.5,1,1", json.dumps({"beam": beam} if beam else {})]
+            )
     return path
 
 
@@ -115,10 +117,16 @@ def plain_loop(manifest: Path, out: Path) -> dict:
     wall = time.perf_counter() - t0
     assert all("error" not in r for r in results), [r for r in results if "error" in r][:1]
     input_s = sum(r["input_s"] for r in results)
-    return {"workers": 0, "items": len(results), "wall_s": round(wall, 3), "warm_up_s": round(warm_s, 2),
-            "items_per_s": round(len(results) / wall, 4), "input_hours_per_s": round(input_s / 3600 / wall, 5),
-            "item_s_mean": round(sum(r["seconds"] for r in results) / len(results), 4),
-            "peak_rss_mb": round(peak_rss_mb(), 1)}  # fmt: skip
+    return {
+        "workers": 0,
+        "items": len(results),
+        "wall_s": round(wall, 3),
+        "warm_up_s": round(warm_s, 2),
+        "items_per_s": round(len(results) / wall, 4),
+        "input_hours_per_s": round(input_s / 3600 / wall, 5),
+        "item_s_mean": round(sum(r["seconds"] for r in results) / len(results), 4),
+        "peak_rss_mb": round(peak_rss_mb(), 1),
+    }
 
 
 def dask_run(manifest: Path, out: Path, workers: int) -> dict:
@@ -143,12 +151,18 @@ def dask_run(manifest: Path, out: Path, workers: int) -> dict:
         cluster.close()
     t = summary["totals"]
     assert t["done"] == t["items"], summary["failures"][:1]
-    return {"workers": workers, "items": t["items"], "wall_s": round(wall, 3), "cluster_start_s": round(start_s, 2),
-            "warm_up_s": round(max(warm.values()), 2), "items_per_s": round(t["items"] / wall, 4),
-            "input_hours_per_s": round(t["input_hours"] / wall, 5),
-            "item_s_mean": round(t["item_seconds"] / t["items"], 4),
-            "overhead_per_item_s": round((wall * workers - t["item_seconds"]) / t["items"], 4),
-            "peak_rss_mb_per_worker": sorted(round(v, 1) for v in rss.values())}  # fmt: skip
+    return {
+        "workers": workers,
+        "items": t["items"],
+        "wall_s": round(wall, 3),
+        "cluster_start_s": round(start_s, 2),
+        "warm_up_s": round(max(warm.values()), 2),
+        "items_per_s": round(t["items"] / wall, 4),
+        "input_hours_per_s": round(t["input_hours"] / wall, 5),
+        "item_s_mean": round(t["item_seconds"] / t["items"], 4),
+        "overhead_per_item_s": round((wall * workers - t["item_seconds"]) / t["items"], 4),
+        "peak_rss_mb_per_worker": sorted(round(v, 1) for v in rss.values()),
+    }
 
 
 def main() -> int:
@@ -175,10 +189,14 @@ def main() -> int:
     by_w = {r["workers"]: r for r in runs}
     result = {
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": platform.processor()},
-        "graph": {"path": str(graph), **counts}, "items": args.items, "minutes_each": args.minutes,
-        "search": {"strategy": "viterbi", "weights": "0.5,1,1", "beam": args.beam or None}, "prepare_s": round(prep_s, 1),
-        "plain_loop": loop, "dask": runs,
-    }  # fmt: skip
+        "graph": {"path": str(graph), **counts},
+        "items": args.items,
+        "minutes_each": args.minutes,
+        "search": {"strategy": "viterbi", "weights": "0.5,1,1", "beam": args.beam or None},
+        "prepare_s": round(prep_s, 1),
+        "plain_loop": loop,
+        "dask": runs,
+    }
     if 1 in by_w:
         result["dask1_vs_loop"] = round(by_w[1]["items_per_s"] / loop["items_per_s"], 4)
     if 1 in by_w and 2 in by_w:

@@ -37,8 +37,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def graph_walk(graph, samples: int, seed: int = 0, noise: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                                np.ndarray]:  # fmt: skip
+def graph_walk(
+    graph, samples: int, seed: int = 0, noise: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(nodes (T,), acc (T, S, 3) m/s², ground position (T, 2) m, heading (T,) rad): a
     random walk through the graph's edges (`bench_service.random_walk`) with noisy
     readings and a noisy track (noise=False: the same walk, readings and track as they
@@ -73,8 +74,9 @@ def benchmark_graph(path: str | None):
     return generated_graph(100_686, 317_600)
 
 
-def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path=None, gap: int = 0,
-        gap_all: bool = False) -> tuple[dict, np.ndarray]:
+def run(
+    graph, mode: str, beam: float | None, samples: int, lag: int, exact_path=None, gap: int = 0, gap_all: bool = False
+) -> tuple[dict, np.ndarray]:
     """One search's row and node path. gap: that many samples from the middle on have no
     accelerometer reading (a sensor dropout; gap_all: no position and heading either)."""
     from graphsvc.strategies.options import Weights
@@ -92,8 +94,14 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
     if gap_all and position is not None:
         position[gap_span], heading[gap_span] = np.nan, np.nan
     # a shorter search first: the beam's tables, and the first touch of the ring's memory
-    viterbi_search(graph, acc[:300], None if position is None else position[:300],
-                   None if heading is None else heading[:300], weights, beam=beam)  # fmt: skip
+    viterbi_search(
+        graph,
+        acc[:300],
+        None if position is None else position[:300],
+        None if heading is None else heading[:300],
+        weights,
+        beam=beam,
+    )
     t0 = time.perf_counter()
     result = viterbi_search(graph, acc, position, heading, weights, beam=beam)
     batch_s = time.perf_counter() - t0
@@ -106,25 +114,37 @@ def run(graph, mode: str, beam: float | None, samples: int, lag: int, exact_path
         times[t] = time.perf_counter() - t0
         live[t] = decoder.search._n_live if beam is not None else np.isfinite(decoder.search.cost).sum()
     settled = np.arange(samples) >= 50
-    settled[gap_span.start:gap_span.stop + 30] = False  # (nothing without a gap)
+    settled[gap_span.start : gap_span.stop + 30] = False  # (nothing without a gap)
     steady = times[settled]
-    out = {"mode": f"{mode}, {'exact' if beam is None else f'beam {beam:g}'}", "beam": beam, "input": "graph walk",
-           "nodes": graph.num_nodes, "edges": graph.num_edges, "samples": samples,
-           "batch_seconds": round(batch_s, 3), "cost": result.cost,
-           "stream_ms_per_sample": round(1000 * float(steady.mean()), 3),
-           "stream_p50_ms": round(1000 * float(np.percentile(steady, 50)), 3),
-           "stream_p99_ms": round(1000 * float(np.percentile(steady, 99)), 3),
-           "stream_first10_ms": round(1000 * float(times[:10].mean()), 3),
-           "stream_all_ms_per_sample": round(1000 * float(times.mean()), 3),
-           "live_share_median": round(float(np.median(live[50:])) / graph.num_nodes, 5),
-           "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+    out = {
+        "mode": f"{mode}, {'exact' if beam is None else f'beam {beam:g}'}",
+        "beam": beam,
+        "input": "graph walk",
+        "nodes": graph.num_nodes,
+        "edges": graph.num_edges,
+        "samples": samples,
+        "batch_seconds": round(batch_s, 3),
+        "cost": result.cost,
+        "stream_ms_per_sample": round(1000 * float(steady.mean()), 3),
+        "stream_p50_ms": round(1000 * float(np.percentile(steady, 50)), 3),
+        "stream_p99_ms": round(1000 * float(np.percentile(steady, 99)), 3),
+        "stream_first10_ms": round(1000 * float(times[:10].mean()), 3),
+        "stream_all_ms_per_sample": round(1000 * float(times.mean()), 3),
+        "live_share_median": round(float(np.median(live[50:])) / graph.num_nodes, 5),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
     if gap:
         after = slice(gap_span.stop, gap_span.stop + 30)
-        out.update({"gap_samples": gap, "gap_channels": "all" if gap_all else "accelerometers",
-                    "gap_ms_per_sample": round(1000 * float(times[gap_span].mean()), 3),
-                    "gap_max_ms": round(1000 * float(times[gap_span].max()), 3),
-                    "gap_live_max": int(live[gap_span].max()),
-                    "after_gap_ms_per_sample": round(1000 * float(times[after].mean()), 3)})  # fmt: skip
+        out.update(
+            {
+                "gap_samples": gap,
+                "gap_channels": "all" if gap_all else "accelerometers",
+                "gap_ms_per_sample": round(1000 * float(times[gap_span].mean()), 3),
+                "gap_max_ms": round(1000 * float(times[gap_span].max()), 3),
+                "gap_live_max": int(live[gap_span].max()),
+                "after_gap_ms_per_sample": round(1000 * float(times[after].mean()), 3),
+            }
+        )
     if exact_path is not None:
         out["same_nodes_as_exact"] = round(float(np.mean(result.node_path == exact_path)), 4)
     return out, result.node_path
@@ -139,8 +159,12 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=720)
     parser.add_argument("--lag", type=int, default=30, help="the stream's fixed lag in samples (default 1 s)")
     parser.add_argument("--modes", default="A,APO")
-    parser.add_argument("--gap", type=int, default=0,
-                        help="samples without accelerometer readings from the input's middle on (a dropout)")
+    parser.add_argument(
+        "--gap",
+        type=int,
+        default=0,
+        help="samples without accelerometer readings from the input's middle on (a dropout)",
+    )
     parser.add_argument("--gap-all", action="store_true", help="the gap has no position and heading either")
     args = parser.parse_args()
     graph = benchmark_graph(args.graph)

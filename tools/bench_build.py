@@ -29,8 +29,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-VARIANTS = {"plain": (False, False, False), "msv": (True, False, False), "interp": (False, True, False),
-            "bridges": (False, False, True), "both": (True, True, False), "all": (True, True, True)}  # fmt: skip
+VARIANTS = {
+    "plain": (False, False, False),
+    "msv": (True, False, False),
+    "interp": (False, True, False),
+    "bridges": (False, False, True),
+    "both": (True, True, False),
+    "all": (True, True, True),
+}
 
 
 def run_one(data: str, variant: str, max_frames: int | None, jobs: int) -> dict:
@@ -56,8 +62,9 @@ def run_one(data: str, variant: str, max_frames: int | None, jobs: int) -> dict:
             keep.append(m)
             total += m.num_frames
         motions = keep
-    graph, report = build_graph(motions, BuildOptions(msv=msv, interp=interp, bridges=bridges, jobs=jobs,
-                                                      progress=False))  # fmt: skip
+    graph, report = build_graph(
+        motions, BuildOptions(msv=msv, interp=interp, bridges=bridges, jobs=jobs, progress=False)
+    )
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.graph"
         save_graph(graph, path)

@@ -38,10 +38,15 @@ def main() -> None:
     rows = []
     for name in args.files:
         data = Path(name).read_bytes()
-        rows.append({"file": Path(name).name, "bytes": len(data),
-                     "ezc3d_in_process_ms": best_ms(lambda: ezc3d.c3d(name), args.repeat),
-                     "check_ms": best_ms(lambda: check_c3d(name, data), args.repeat),
-                     "child_process_ms": best_ms(lambda: read_isolated(name, len(data)), args.repeat)})  # fmt: skip
+        rows.append(
+            {
+                "file": Path(name).name,
+                "bytes": len(data),
+                "ezc3d_in_process_ms": best_ms(lambda: ezc3d.c3d(name), args.repeat),
+                "check_ms": best_ms(lambda: check_c3d(name, data), args.repeat),
+                "child_process_ms": best_ms(lambda: read_isolated(name, len(data)), args.repeat),
+            }
+        )
     print(json.dumps({"files": rows}, indent=1))
 
 

@@ -56,8 +56,13 @@ def main() -> None:
     times: dict[str, list[float]] = {t: [] for t in trees}
     for _ in range(args.rounds):
         for tree in trees:
-            code = CHILD.format(tree=tree, tools=str(Path(__file__).resolve().parent), mode=args.mode,
-                                searches=args.searches, graph=args.graph and str(Path(args.graph).resolve()))
+            code = CHILD.format(
+                tree=tree,
+                tools=str(Path(__file__).resolve().parent),
+                mode=args.mode,
+                searches=args.searches,
+                graph=args.graph and str(Path(args.graph).resolve()),
+            )
             out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tree)
             if out.returncode != 0:
                 print(json.dumps({"tree": tree, "error": out.stderr[-400:]}), flush=True)
@@ -68,8 +73,17 @@ def main() -> None:
     for tree, seconds in times.items():
         if seconds:
             ordered = sorted(seconds)
-            print(json.dumps({"tree": tree, "mode": args.mode, "searches": len(ordered), "min_s": ordered[0],
-                              "median_s": ordered[len(ordered) // 2]}))  # fmt: skip
+            print(
+                json.dumps(
+                    {
+                        "tree": tree,
+                        "mode": args.mode,
+                        "searches": len(ordered),
+                        "min_s": ordered[0],
+                        "median_s": ordered[len(ordered) // 2],
+                    }
+                )
+            )
 
 
 if __name__ == "__main__":

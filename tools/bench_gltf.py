@@ -50,14 +50,21 @@ def main() -> None:
     args = p.parse_args()
     source = load_motion(args.motion) if args.motion else generate_performance(seed=0)[0]
     motion = looped(source, int(round(args.minutes * 60 * source.rate_hz)))
-    out = {"motion": args.motion or "procedural performance", "frames": motion.num_frames,
-           "rate_hz": motion.rate_hz, "joints": motion.skeleton.num_joints, "machine": platform.machine()}  # fmt: skip
+    out = {
+        "motion": args.motion or "procedural performance",
+        "frames": motion.num_frames,
+        "rate_hz": motion.rate_hz,
+        "joints": motion.skeleton.num_joints,
+        "machine": platform.machine(),
+    }
     with tempfile.TemporaryDirectory() as tmp:
         for suffix in (".bvh", ".glb", ".gltf"):
             path = Path(tmp) / f"m{suffix}"
             write_motion(path, motion)  # (warm-up: imports)
-            out[suffix[1:]] = {"bytes": path.stat().st_size,
-                               "write_s": round(best_of(lambda: write_motion(path, motion), args.repeat), 4)}  # fmt: skip
+            out[suffix[1:]] = {
+                "bytes": path.stat().st_size,
+                "write_s": round(best_of(lambda: write_motion(path, motion), args.repeat), 4),
+            }
         out["glb"]["read_s"] = round(best_of(lambda: read_gltf(Path(tmp) / "m.glb"), args.repeat), 4)
     print(json.dumps(out, indent=1))
 

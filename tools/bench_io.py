@@ -64,22 +64,26 @@ def main() -> None:
             frames += n
             stage = [a + b for a, b in zip(stage, times)]
     seconds = time.perf_counter() - start
-    print(json.dumps({
-        "benchmark": "io",
-        "data": str(args.data),
-        "files": len(files),
-        "frames": frames,
-        "layout": args.layout,
-        "jobs": args.jobs,
-        "seconds": round(seconds, 3),
-        "frames_per_s": round(frames / seconds),
-        # Per-stage times are summed over threads (CPU-side), not wall time.
-        "load_s": round(stage[0], 3),
-        "fk_s": round(stage[1], 3),
-        "sensors_contacts_s": round(stage[2], 3),
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-        "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
-    }))
+    print(
+        json.dumps(
+            {
+                "benchmark": "io",
+                "data": str(args.data),
+                "files": len(files),
+                "frames": frames,
+                "layout": args.layout,
+                "jobs": args.jobs,
+                "seconds": round(seconds, 3),
+                "frames_per_s": round(frames / seconds),
+                # Per-stage times are summed over threads (CPU-side), not wall time.
+                "load_s": round(stage[0], 3),
+                "fk_s": round(stage[1], 3),
+                "sensors_contacts_s": round(stage[2], 3),
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+                "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -70,11 +70,22 @@ def child(args) -> list[dict]:
             for h in hogs:
                 h.join(5)
     machine = f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}"
-    return [{"kernels": "threaded" if threads else "serial", "load": args.load, "hogs": len(hogs),
-             "nodes": g.num_nodes, "edges": g.num_edges, "samples": args.samples, "seconds": round(best[threads], 3),
-             "threading_layer": numba.threading_layer() if threads else "serial",
-             "spin_count": os.environ.get("GOMP_SPINCOUNT"), "wait_policy": os.environ.get("OMP_WAIT_POLICY"),
-             "machine": machine} for threads in (True, False)]  # fmt: skip
+    return [
+        {
+            "kernels": "threaded" if threads else "serial",
+            "load": args.load,
+            "hogs": len(hogs),
+            "nodes": g.num_nodes,
+            "edges": g.num_edges,
+            "samples": args.samples,
+            "seconds": round(best[threads], 3),
+            "threading_layer": numba.threading_layer() if threads else "serial",
+            "spin_count": os.environ.get("GOMP_SPINCOUNT"),
+            "wait_policy": os.environ.get("OMP_WAIT_POLICY"),
+            "machine": machine,
+        }
+        for threads in (True, False)
+    ]
 
 
 def main() -> None:
@@ -91,8 +102,20 @@ def main() -> None:
         return
     seconds = {}
     for load in ("idle", "hogs"):
-        cmd = [sys.executable, __file__, "--load", load, "--nodes", str(args.nodes), "--edges", str(args.edges),
-               "--samples", str(args.samples), "--repeats", str(args.repeats)]  # fmt: skip
+        cmd = [
+            sys.executable,
+            __file__,
+            "--load",
+            load,
+            "--nodes",
+            str(args.nodes),
+            "--edges",
+            str(args.edges),
+            "--samples",
+            str(args.samples),
+            "--repeats",
+            str(args.repeats),
+        ]
         out = subprocess.run(cmd, capture_output=True, text=True)
         if out.returncode != 0:
             print(json.dumps({"load": load, "error": out.stderr[-400:]}), flush=True)
@@ -102,11 +125,16 @@ def main() -> None:
             seconds[row["kernels"], load] = row["seconds"]
             print(json.dumps(row), flush=True)
     if len(seconds) == 4:
-        print(json.dumps({
-            "ratio": round(seconds["threaded", "hogs"] / seconds["threaded", "idle"], 2),
-            "threaded_vs_serial_loaded": round(seconds["threaded", "hogs"] / seconds["serial", "hogs"], 2),
-            "serial_ratio": round(seconds["serial", "hogs"] / seconds["serial", "idle"], 2),
-        }), flush=True)  # fmt: skip
+        print(
+            json.dumps(
+                {
+                    "ratio": round(seconds["threaded", "hogs"] / seconds["threaded", "idle"], 2),
+                    "threaded_vs_serial_loaded": round(seconds["threaded", "hogs"] / seconds["serial", "hogs"], 2),
+                    "serial_ratio": round(seconds["serial", "hogs"] / seconds["serial", "idle"], 2),
+                }
+            ),
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

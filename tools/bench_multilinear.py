@@ -59,24 +59,47 @@ def main() -> None:
     t0 = time.perf_counter()
     arrays = learn(graph, index, np.arange(len(graph.clips)), own)
     learn_s = time.perf_counter() - t0
-    tensors = [{"class": graph.labels[t.label], "foot": ("left", "right", "whole")[t.foot], "frames": t.frames,
-                "rows": f"{t.u_style.shape[0]}x{t.u_rep.shape[0]}", "kept": list(t.kept)} for t in tensors_of(arrays)]
+    tensors = [
+        {
+            "class": graph.labels[t.label],
+            "foot": ("left", "right", "whole")[t.foot],
+            "frames": t.frames,
+            "rows": f"{t.u_style.shape[0]}x{t.u_rep.shape[0]}",
+            "kept": list(t.kept),
+        }
+        for t in tensors_of(arrays)
+    ]
     motion = resample(load_motion(args.clip), float(graph.rate_hz))
     rec = simulate_recording(motion, layout_from_dict(graph.layout), parse_noise("default"), seed=7)
-    result = reconstruct(graph, rec, Options(strategy="multilinear", weights=parse_weights("0.5,1,1"),
-                                             settings={"multilinear": own}))  # fmt: skip
+    result = reconstruct(
+        graph, rec, Options(strategy="multilinear", weights=parse_weights("0.5,1,1"), settings={"multilinear": own})
+    )
     units = result.report["multilinear"]["units"]
     timings = result.report["timings_s"]
-    print(json.dumps({
-        "graph": str(args.graph), "nodes": int(graph.num_nodes), "clip": motion.name, "samples": rec.num_samples,
-        "variance": own.variance, "max_reps": own.max_reps, "align": own.align,
-        "index_s": round(index_s, 2), "learn_s": round(learn_s, 2),
-        "model_mb": round(sum(np.asarray(a).nbytes for a in arrays.values()) / 1e6, 1), "tensors": tensors,
-        "search_s": timings["search"], "fit_s": timings["synthesis"], "units": len(units),
-        "evaluations_mean": round(float(np.mean([u["evaluations"] for u in units])), 1) if units else 0,
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0),
-        "machine": platform.machine(), "date": time.strftime("%Y-%m-%d"),
-    }))
+    print(
+        json.dumps(
+            {
+                "graph": str(args.graph),
+                "nodes": int(graph.num_nodes),
+                "clip": motion.name,
+                "samples": rec.num_samples,
+                "variance": own.variance,
+                "max_reps": own.max_reps,
+                "align": own.align,
+                "index_s": round(index_s, 2),
+                "learn_s": round(learn_s, 2),
+                "model_mb": round(sum(np.asarray(a).nbytes for a in arrays.values()) / 1e6, 1),
+                "tensors": tensors,
+                "search_s": timings["search"],
+                "fit_s": timings["synthesis"],
+                "units": len(units),
+                "evaluations_mean": round(float(np.mean([u["evaluations"] for u in units])), 1) if units else 0,
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0),
+                "machine": platform.machine(),
+                "date": time.strftime("%Y-%m-%d"),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -59,8 +59,18 @@ def main() -> None:
     t0 = time.perf_counter()
     augment = ("mirror", "reverse")
     kb = load_knowledge_base([str(f) for f in files], augment=augment, jobs=args.jobs, progress=False)
-    graph, _ = build_graph(kb, BuildOptions(layout=load_layout(args.layout), msv=False, interp=False, bridges=False,
-                                            augment=augment, jobs=args.jobs, progress=False))  # fmt: skip
+    graph, _ = build_graph(
+        kb,
+        BuildOptions(
+            layout=load_layout(args.layout),
+            msv=False,
+            interp=False,
+            bridges=False,
+            augment=augment,
+            jobs=args.jobs,
+            progress=False,
+        ),
+    )
     build_s = time.perf_counter() - t0
     arrays = build_arrays(graph)
     t0 = time.perf_counter()
@@ -72,7 +82,9 @@ def main() -> None:
     rng = np.random.default_rng(0)
     run = np.flatnonzero(index.run_of == index.run_of[index.frames // 2])  # one clip's frames
     frames = run[np.arange(args.samples) % run.size]
-    readings = index.readings[frames].astype(np.float64) + rng.normal(0.0, 0.05, (args.samples, index.readings.shape[1]))
+    readings = index.readings[frames].astype(np.float64) + rng.normal(
+        0.0, 0.05, (args.samples, index.readings.shape[1])
+    )
     acc = readings.reshape(args.samples, -1, 3) * GRAVITY
     warm = OlngDecoder(graph, index, model, options, 0.0)
     for t in range(3):  # (numba's loading, outside the timings)
@@ -83,17 +95,30 @@ def main() -> None:
     olng_ms = np.array([r["olng_ms"] for r in rows])
     optimise_ms = np.array([r["optimise_ms"] for r in rows])
     total = nn_ms + olng_ms + optimise_ms
-    print(json.dumps({
-        "kb_frames": index.frames, "graph_build_s": round(build_s, 2), "index_build_s": round(index_build_s, 3),
-        "k": args.k, "m": args.m, "i": args.i, "samples": args.samples, "layout": args.layout,
-        "nn_ms": round(float(np.median(nn_ms)), 3), "olng_ms": round(float(np.median(olng_ms)), 3),
-        "optimise_ms": round(float(np.median(optimise_ms)), 3), "total_ms": round(float(np.median(total)), 3),
-        "total_p99_ms": round(float(np.percentile(total, 99)), 3),
-        "mean_path_length": round(float(np.mean([r["path_length"] for r in rows])), 2),
-        "subspace_dims": round(float(np.mean([r["subspace"] for r in rows])), 1),
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-        "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
-    }), flush=True)  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "kb_frames": index.frames,
+                "graph_build_s": round(build_s, 2),
+                "index_build_s": round(index_build_s, 3),
+                "k": args.k,
+                "m": args.m,
+                "i": args.i,
+                "samples": args.samples,
+                "layout": args.layout,
+                "nn_ms": round(float(np.median(nn_ms)), 3),
+                "olng_ms": round(float(np.median(olng_ms)), 3),
+                "optimise_ms": round(float(np.median(optimise_ms)), 3),
+                "total_ms": round(float(np.median(total)), 3),
+                "total_p99_ms": round(float(np.percentile(total, 99)), 3),
+                "mean_path_length": round(float(np.mean([r["path_length"] for r in rows])), 2),
+                "subspace_dims": round(float(np.mean([r["subspace"] for r in rows])), 1),
+                "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+                "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
+            }
+        ),
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

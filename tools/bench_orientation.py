@@ -48,8 +48,11 @@ def main() -> None:
     out = {"graph": args.graph, "samples": int(acc.shape[0]), "repeat": args.repeat, "modes": {}}
     for oriented in (False, True):
         t = search_index(graph, oriented).tables["readings_t"]
-        out["readings_oriented" if oriented else "readings"] = {"distinct": int(t.shape[1]), "rows": int(t.shape[0]),
-                                                               "bytes": int(t.nbytes)}  # fmt: skip
+        out["readings_oriented" if oriented else "readings"] = {
+            "distinct": int(t.shape[1]),
+            "rows": int(t.shape[0]),
+            "bytes": int(t.nbytes),
+        }
     # The C_A (+ C_R) pass alone, 16 samples a call as a batch search makes it: ms a sample
     from graphsvc.strategies.viterbi.search import ViterbiSearch
 
@@ -60,7 +63,7 @@ def main() -> None:
         for _ in range(args.repeat):
             t0 = time.perf_counter()
             for b in range(0, n, 16):
-                search.reading_costs(acc[b:b + 16], up=up[b:b + 16])
+                search.reading_costs(acc[b : b + 16], up=up[b : b + 16])
             best = min(best, time.perf_counter() - t0)
         out["reading_pass_ms_per_sample" + ("_oriented" if oriented else "")] = round(1e3 * best / n, 4)
     for mode, (a, p, o) in {"A": (1.0, 0.0, 0.0), "APO": (0.5, 1.0, 1.0)}.items():
@@ -71,8 +74,11 @@ def main() -> None:
                 t0 = time.perf_counter()
                 result = viterbi_search(graph, acc, position if p else None, heading if o else None, w, up=up)
                 best = min(best, time.perf_counter() - t0)
-            out["modes"][f"{mode} R={r:g}"] = {"search_s": round(best, 3), "samples_per_s": round(acc.shape[0] / best, 1),
-                                               "cost": result.cost}  # fmt: skip
+            out["modes"][f"{mode} R={r:g}"] = {
+                "search_s": round(best, 3),
+                "samples_per_s": round(acc.shape[0] / best, 1),
+                "cost": result.cost,
+            }
     # OLNG, recording by recording through the pipeline: its own samples/s (after warm-up and tree)
     from graphsvc.pipeline import reconstruct
     from graphsvc.strategies.options import Options

@@ -55,8 +55,14 @@ def main() -> None:
     motion = resample(load_motion(args.clip), float(graph.rate_hz))
     rec = simulate_recording(motion, layout_from_dict(graph.layout), parse_noise("default"), seed=7)
     n = min(rec.num_samples, int(args.seconds * graph.rate_hz))
-    out = {"graph": str(args.graph), "nodes": int(graph.num_nodes), "clip": motion.name, "samples": n,
-           "reduce": args.reduce, "methods": {}}  # fmt: skip
+    out = {
+        "graph": str(args.graph),
+        "nodes": int(graph.num_nodes),
+        "clip": motion.name,
+        "samples": n,
+        "reduce": args.reduce,
+        "methods": {},
+    }
     for method in args.methods.split(","):
         options = Options(strategy="piecewise", piecewise=PiecewiseOptions(method=method, reduce=args.reduce))
         t0 = time.perf_counter()
@@ -70,9 +76,12 @@ def main() -> None:
             times.append((time.perf_counter() - t1) * 1e3)
         live.flush()
         ms = np.asarray(times[WARM_SAMPLES:])
-        out["methods"][method] = {"learn_s": round(learn_s, 2), "frame_ms_p50": round(float(np.median(ms)), 3),
-                                  "frame_ms_p99": round(float(np.percentile(ms, 99)), 3),
-                                  "frame_ms_max": round(float(ms.max()), 3)}  # fmt: skip
+        out["methods"][method] = {
+            "learn_s": round(learn_s, 2),
+            "frame_ms_p50": round(float(np.median(ms)), 3),
+            "frame_ms_p99": round(float(np.percentile(ms, 99)), 3),
+            "frame_ms_max": round(float(ms.max()), 3),
+        }
     out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
     out["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()}
     print(json.dumps(out))

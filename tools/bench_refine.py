@@ -68,7 +68,9 @@ def main() -> None:
     edges = into[nodes[1:]]
     T = nodes.size
     rng = np.random.default_rng(1)
-    acc = np.asarray(graph.edge_acc, dtype=np.float64)[np.concatenate([edges[:1], edges])] + rng.normal(0, 0.3, (T, *graph.edge_acc.shape[1:]))
+    acc = np.asarray(graph.edge_acc, dtype=np.float64)[np.concatenate([edges[:1], edges])] + rng.normal(
+        0, 0.3, (T, *graph.edge_acc.shape[1:])
+    )
     motion = synthesize_motion(graph, nodes, edges, np.zeros(2), 0.0)
     up, weight = None, 0.0
     if args.orientations:
@@ -98,18 +100,35 @@ def main() -> None:
     for lo in range(0, T, 3):
         hi = min(lo + 3, T)
         t0 = time.perf_counter()
-        live.correct(lo, motion.rotations[lo:hi], motion.translations[lo:hi], lambda a, b: nodes[a:b],
-                     T - 1 if hi - 1 + live.h >= T - 1 else None)  # fmt: skip
+        live.correct(
+            lo,
+            motion.rotations[lo:hi],
+            motion.translations[lo:hi],
+            lambda a, b: nodes[a:b],
+            T - 1 if hi - 1 + live.h >= T - 1 else None,
+        )
         t_live += time.perf_counter() - t0
-    print(json.dumps({
-        "graph": args.graph, "nodes": graph.num_nodes, "index_frames": int(arrays["nodes"].size),
-        "window_dims": int(arrays["windows"].shape[1]), "pose_dims": int(arrays["poses"].shape[1]),
-        "orientations": bool(args.orientations), "imposed": bool(r.impose), "index_cached": cached, "index_s": round(arrays_s, 3), "tree_s": round(tree_s, 3), "frames": T,
-        "regress_ms_per_frame": round(1e3 * regress_s / T, 3),
-        "batch_ms_per_frame": round(1e3 * batch_s / T, 3),
-        "live_ms_per_frame": round(1e3 * t_live / T, 3),
-        "batch_frames_per_s": round(T / batch_s, 1),
-    }))
+    print(
+        json.dumps(
+            {
+                "graph": args.graph,
+                "nodes": graph.num_nodes,
+                "index_frames": int(arrays["nodes"].size),
+                "window_dims": int(arrays["windows"].shape[1]),
+                "pose_dims": int(arrays["poses"].shape[1]),
+                "orientations": bool(args.orientations),
+                "imposed": bool(r.impose),
+                "index_cached": cached,
+                "index_s": round(arrays_s, 3),
+                "tree_s": round(tree_s, 3),
+                "frames": T,
+                "regress_ms_per_frame": round(1e3 * regress_s / T, 3),
+                "batch_ms_per_frame": round(1e3 * batch_s / T, 3),
+                "live_ms_per_frame": round(1e3 * t_live / T, 3),
+                "batch_frames_per_s": round(T / batch_s, 1),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from graphsvc.strategies.sources import (  # noqa: E402
     source_readings,
     timeline_from_nodes,
     timeline_from_sources,
-)  # fmt: skip
+)
 
 
 def main() -> None:
@@ -61,12 +61,23 @@ def main() -> None:
         write_html(Path(tmp) / "report.html", doc)
         write_s = time.perf_counter() - t0
         page = (Path(tmp) / "report.html").stat().st_size
-    print(json.dumps({
-        "strategy": args.strategy, "seconds_of_motion": round(truth.num_frames / truth.rate_hz, 2),
-        "frames": truth.num_frames, "joints": truth.skeleton.num_joints, "sensors": len(rec.sensor_names),
-        "page_bytes": page, "data_bytes": len(data_json(doc).encode()), "three_js_bytes": len(three_script().encode()),
-        "gather_s": round(gather_s, 3), "write_s": round(write_s, 3),
-    }, indent=1))  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "strategy": args.strategy,
+                "seconds_of_motion": round(truth.num_frames / truth.rate_hz, 2),
+                "frames": truth.num_frames,
+                "joints": truth.skeleton.num_joints,
+                "sensors": len(rec.sensor_names),
+                "page_bytes": page,
+                "data_bytes": len(data_json(doc).encode()),
+                "three_js_bytes": len(three_script().encode()),
+                "gather_s": round(gather_s, 3),
+                "write_s": round(write_s, 3),
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -41,10 +41,32 @@ def start_servers(graph_path: str, count: int, max_streams: int, live_workers: i
     """`count` servers, started at once; [(process, address, metrics port)]."""
     extra = ["--metrics-port", "0"] + ([] if live_workers is None else ["--live-workers", str(live_workers)])
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    procs = [subprocess.Popen([sys.executable, "-m", "graphsvc.cli", "serve", "--graph", f"bench={graph_path}",
-                               "--host", "127.0.0.1", "--port", "0", "--max-streams", str(max_streams),
-                               "--grace-s", "2", *extra], cwd=ROOT, stdout=subprocess.PIPE, text=True, env=env)
-             for _ in range(count)]  # fmt: skip
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "graphsvc.cli",
+                "serve",
+                "--graph",
+                f"bench={graph_path}",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--max-streams",
+                str(max_streams),
+                "--grace-s",
+                "2",
+                *extra,
+            ],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for _ in range(count)
+    ]
     out = []
     for proc in procs:
         line = proc.stdout.readline()
@@ -67,8 +89,9 @@ def servers_cpu(servers) -> float:
     return sum(B.cpu_seconds(proc.pid) for proc, _, _ in servers)
 
 
-def run_level(servers, address, graph_path, streams, seconds, rate, options_bytes, per_process, recordings,
-              stagger_s) -> dict:  # fmt: skip
+def run_level(
+    servers, address, graph_path, streams, seconds, rate, options_bytes, per_process, recordings, stagger_s
+) -> dict:
     """bench_service.run_level over every server, with the servers' CPU measured from
     the first sample (run_level's start) to the level's end, and the spread."""
     before = [streams_started(port) for _, _, port in servers]
@@ -85,22 +108,25 @@ def run_level(servers, address, graph_path, streams, seconds, rate, options_byte
 
     probe = threading.Thread(target=sample_cpu, daemon=True)
     probe.start()
-    result = B.run_level(address, "bench", graph_path, streams, seconds, rate, options_bytes, per_process, None,
-                         recordings, stagger_s)  # fmt: skip
+    result = B.run_level(
+        address, "bench", graph_path, streams, seconds, rate, options_bytes, per_process, None, recordings, stagger_s
+    )
     end_cpu = servers_cpu(servers)
     probe.join(1.0)
     after = [streams_started(port) for _, _, port in servers]
     t0, c0, m0 = marks.get("start", (None, None, None))
     t1, c1, m1 = marks.get("sent", (None, None, None))
     sent = round(seconds * rate) * streams
-    result.update({
-        "servers": len(servers),
-        "streams_by_server": [int(a - b) for a, b in zip(after, before)],
-        "servers_cores": round((c1 - c0) / (t1 - t0), 2) if t1 else None,
-        "machine_cores": round((m1 - m0) / (t1 - t0), 2) if t1 else None,
-        "servers_cpu_ms_per_sample": round(1e3 * (end_cpu - c0) / max(1, sent), 3) if c0 is not None else None,
-        "servers_rss_mb": round(sum(B.rss_mb(proc.pid) for proc, _, _ in servers), 1),
-    })  # fmt: skip
+    result.update(
+        {
+            "servers": len(servers),
+            "streams_by_server": [int(a - b) for a, b in zip(after, before)],
+            "servers_cores": round((c1 - c0) / (t1 - t0), 2) if t1 else None,
+            "machine_cores": round((m1 - m0) / (t1 - t0), 2) if t1 else None,
+            "servers_cpu_ms_per_sample": round(1e3 * (end_cpu - c0) / max(1, sent), 3) if c0 is not None else None,
+            "servers_rss_mb": round(sum(B.rss_mb(proc.pid) for proc, _, _ in servers), 1),
+        }
+    )
     return result
 
 
@@ -113,9 +139,16 @@ def main(argv=None) -> int:
     parser.add_argument("--seconds", type=float, default=20.0, help="length of each level (default 20)")
     parser.add_argument("--beam", type=float, metavar="COST", help="beam search (default: the exact search)")
     parser.add_argument("--latency", type=float, help="decoder lag in seconds (default: the server's, 1 s)")
-    parser.add_argument("--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks")
-    parser.add_argument("--stagger", type=float, default=0.0, metavar="S",
-                        help="start the streams one after another over S seconds (default 0: all at once)")
+    parser.add_argument(
+        "--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks"
+    )
+    parser.add_argument(
+        "--stagger",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="start the streams one after another over S seconds (default 0: all at once)",
+    )
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
@@ -138,10 +171,23 @@ def main(argv=None) -> int:
         for _ in servers:  # warm-up: each server's first stream loads its kernels
             B.run_level(address, "bench", graph_path, len(servers), 2.0, rate, options_bytes, 8, None, recordings)
         for streams in levels:
-            print(f"level {streams} streams × {args.seconds:g} s over {len(servers)} servers ...", file=sys.stderr,
-                  flush=True)  # fmt: skip
-            result = run_level(servers, address, graph_path, streams, args.seconds, rate, options_bytes,
-                               args.streams_per_process, recordings, args.stagger)  # fmt: skip
+            print(
+                f"level {streams} streams × {args.seconds:g} s over {len(servers)} servers ...",
+                file=sys.stderr,
+                flush=True,
+            )
+            result = run_level(
+                servers,
+                address,
+                graph_path,
+                streams,
+                args.seconds,
+                rate,
+                options_bytes,
+                args.streams_per_process,
+                recordings,
+                args.stagger,
+            )
             print(json.dumps(dict(result, stagger_s=args.stagger)), flush=True)
     finally:
         B.stop_servers([proc for proc, _, _ in servers])

@@ -98,7 +98,9 @@ def random_walk_readings(graph_path: str, samples: int, seed: int) -> np.ndarray
     return out + rng.normal(0.0, 0.3, out.shape).astype(np.float32)
 
 
-def joined_recordings(paths: list[str], samples: int, seed: int) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+def joined_recordings(
+    paths: list[str], samples: int, seed: int
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """(acc (samples, S, 3) float32, ground position (samples, 2) or None, heading
     (samples,) or None): the recordings in a seeded random order, repeated as needed,
     joined end to end; each recording's track is moved to start where the previous
@@ -133,8 +135,20 @@ def _stream_inputs(graph_path: str, recordings: list[str] | None, samples: int, 
     return random_walk_readings(graph_path, samples, seed=seed), None, None
 
 
-def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_hz, options_bytes, start_at, results,
-                    recordings=None, stagger_s=0.0, streams=1):  # fmt: skip
+def _client_process(
+    address,
+    graph_name,
+    graph_path,
+    stream_ids,
+    seconds,
+    rate_hz,
+    options_bytes,
+    start_at,
+    results,
+    recordings=None,
+    stagger_s=0.0,
+    streams=1,
+):
     """Run len(stream_ids) paced streams in threads; put one result dict per stream.
     options_bytes: the streams' SynthesisOptions, serialized. Stream i of `streams`
     sends its first sample stagger_s · i / streams after start_at."""
@@ -164,8 +178,11 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
                             return
                     elif -delay > 1.0 / rate_hz:
                         late += 1
-                    feed.put(convert.sample_to_proto(k / rate_hz, acc[k], None if pos is None else pos[k],
-                                                     None if head is None else head[k]))  # fmt: skip
+                    feed.put(
+                        convert.sample_to_proto(
+                            k / rate_hz, acc[k], None if pos is None else pos[k], None if head is None else head[k]
+                        )
+                    )
             finally:
                 feed.close()
 
@@ -181,9 +198,18 @@ def _client_process(address, graph_name, graph_path, stream_ids, seconds, rate_h
             error = exc.code.name if exc.code is not None else "UNKNOWN"
         stop.set()
         sender.join()
-        results.put({"stream": i, "sent": len(feed.sent_at), "frames": frames, "latencies_ms": latencies,
-                     "released_by": released_by,
-                     "late_sends": late, "error": error, "expected": samples})  # fmt: skip
+        results.put(
+            {
+                "stream": i,
+                "sent": len(feed.sent_at),
+                "frames": frames,
+                "latencies_ms": latencies,
+                "released_by": released_by,
+                "late_sends": late,
+                "error": error,
+                "expected": samples,
+            }
+        )
 
     threads = [threading.Thread(target=run, args=(i,)) for i in stream_ids]
     for t in threads:
@@ -246,16 +272,43 @@ def rss_mb(pid: int) -> float:
     return total if found else float("nan")
 
 
-def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, options_bytes, per_process,
-              server_pid, recordings=None, stagger_s=0.0) -> dict:  # fmt: skip
+def run_level(
+    address,
+    graph_name,
+    graph_path,
+    streams,
+    seconds,
+    rate_hz,
+    options_bytes,
+    per_process,
+    server_pid,
+    recordings=None,
+    stagger_s=0.0,
+) -> dict:
     ctx = mp.get_context("spawn")  # no fork after gRPC is loaded
     results = ctx.Queue()
     start_at = time.time() + 3.0 + 0.05 * streams  # time for the client processes to load inputs
     ids = list(range(streams))
-    procs = [ctx.Process(target=_client_process, args=(address, graph_name, graph_path, ids[i:i + per_process], seconds,
-                                                       rate_hz, options_bytes, start_at, results, recordings,
-                                                       stagger_s, streams))
-             for i in range(0, streams, per_process)]  # fmt: skip
+    procs = [
+        ctx.Process(
+            target=_client_process,
+            args=(
+                address,
+                graph_name,
+                graph_path,
+                ids[i : i + per_process],
+                seconds,
+                rate_hz,
+                options_bytes,
+                start_at,
+                results,
+                recordings,
+                stagger_s,
+                streams,
+            ),
+        )
+        for i in range(0, streams, per_process)
+    ]
     for p in procs:
         p.start()
     peak = 0.0
@@ -280,9 +333,11 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
     released_by = np.concatenate([np.asarray(r["released_by"], float) for r in collected]) if collected else np.zeros(0)
     settled = latencies[np.isfinite(latencies) & (released_by >= SETTLE_S * rate_hz)]
     window = np.floor(released_by / (WINDOW_S * rate_hz))
-    by_window = [round(float(np.percentile(latencies[(window == w) & np.isfinite(latencies)], 99)), 1)
-                 for w in range(int(window.max()) + 1 if window.size else 0)
-                 if ((window == w) & np.isfinite(latencies)).any()]  # fmt: skip
+    by_window = [
+        round(float(np.percentile(latencies[(window == w) & np.isfinite(latencies)], 99)), 1)
+        for w in range(int(window.max()) + 1 if window.size else 0)
+        if ((window == w) & np.isfinite(latencies)).any()
+    ]
     latencies = latencies[np.isfinite(latencies)]
     errors: dict[str, int] = {}
     for r in collected:
@@ -303,7 +358,8 @@ def run_level(address, graph_name, graph_path, streams, seconds, rate_hz, option
         "machine_cores": round((cpu[1][2] - cpu[0][2]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "front_cores": round((cpu[1][3] - cpu[0][3]) / (cpu[1][0] - cpu[0][0]), 2) if len(cpu) == 2 else None,
         "server_cpu_ms_per_sample": round(1e3 * cpu_to_end / max(1, sum(r["sent"] for r in collected)), 3)
-                                    if cpu_to_end is not None else None,  # fmt: skip
+        if cpu_to_end is not None
+        else None,
         "seconds": seconds,
         "rate_hz": rate_hz,
     }
@@ -324,10 +380,29 @@ def start_server(graph_path: str, max_streams: int, *extra: str) -> tuple[subpro
     """A `graphsvc serve` subprocess on a free loopback port serving graph_path as
     "bench" (extra: more serve flags); (process, address)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    proc = subprocess.Popen([sys.executable, "-m", "graphsvc.cli", "serve", "--graph",
-                             f"bench={graph_path}", "--host", "127.0.0.1", "--port", "0", "--max-streams",
-                             str(max_streams), "--grace-s", "2", *extra], cwd=ROOT, stdout=subprocess.PIPE, text=True,
-                            env=env)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "graphsvc.cli",
+            "serve",
+            "--graph",
+            f"bench={graph_path}",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--max-streams",
+            str(max_streams),
+            "--grace-s",
+            "2",
+            *extra,
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     line = proc.stdout.readline()
     m = re.search(r"listening on (127\.0\.0\.1:\d+)", line)
     if not m:
@@ -346,12 +421,19 @@ def main(argv=None) -> int:
     parser.add_argument("--beam", type=float, metavar="COST", help="beam search (default: the exact search)")
     parser.add_argument("--streams-per-process", type=int, default=8, help="client streams per process (default 8)")
     parser.add_argument("--server", metavar="ADDR", help="benchmark a running server (graph name 'bench') instead")
-    parser.add_argument("--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks")
-    parser.add_argument("--stagger", default="0", metavar="S[,S...]",
-                        help="start the streams one after another over S seconds (default 0: all at once, a "
-                             "kick-off); several: every level at each")
-    parser.add_argument("--no-refine", action="store_true",
-                        help="the streams without the refinement (shared setting refine: false)")
+    parser.add_argument(
+        "--recordings", metavar="DIR", help="play these .rec recordings (joined) instead of random walks"
+    )
+    parser.add_argument(
+        "--stagger",
+        default="0",
+        metavar="S[,S...]",
+        help="start the streams one after another over S seconds (default 0: all at once, a "
+        "kick-off); several: every level at each",
+    )
+    parser.add_argument(
+        "--no-refine", action="store_true", help="the streams without the refinement (shared setting refine: false)"
+    )
     parser.add_argument("--live-workers", type=int, metavar="N", help="the server's --live-workers (default: its own)")
     args = parser.parse_args(argv)
     levels = [int(x) for x in args.levels.split(",") if x]
@@ -382,14 +464,29 @@ def main(argv=None) -> int:
     options_bytes = options.SerializeToString()
     try:
         # Warm-up: the first stream loads the compiled search kernels.
-        run_level(address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid,
-                  recordings)  # fmt: skip
+        run_level(
+            address, "bench", graph_path, 1, min(2.0, args.seconds), rate, options_bytes, 1, server_pid, recordings
+        )
         for stagger in staggers:
             for streams in levels:
-                print(f"level {streams} streams × {args.seconds:g} s, started over {stagger:g} s ...", file=sys.stderr,
-                      flush=True)  # fmt: skip
-                result = run_level(address, "bench", graph_path, streams, args.seconds, rate, options_bytes,
-                                   args.streams_per_process, server_pid, recordings, stagger)  # fmt: skip
+                print(
+                    f"level {streams} streams × {args.seconds:g} s, started over {stagger:g} s ...",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                result = run_level(
+                    address,
+                    "bench",
+                    graph_path,
+                    streams,
+                    args.seconds,
+                    rate,
+                    options_bytes,
+                    args.streams_per_process,
+                    server_pid,
+                    recordings,
+                    stagger,
+                )
                 print(json.dumps(dict(result, stagger_s=stagger)), flush=True)
     finally:
         if proc is not None:

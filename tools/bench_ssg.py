@@ -92,8 +92,9 @@ import graphsvc  # noqa: E402,F401  (first: it sets OpenBLAS's and OpenMP's wait
 RATE_HZ = 30.0
 KERNEL_SET = "hands-feet"
 HELD_OUT = "dataset-2_walk_normal_004"  # the kernel's query clip (left out of its series)
-RECON_CLIPS = tuple(f"dataset-2_{c}_normal_004" for c in ("walk", "run", "wave-both-hands", "raise-up-left-hand",
-                                                          "walk-turn-left"))  # fmt: skip
+RECON_CLIPS = tuple(
+    f"dataset-2_{c}_normal_004" for c in ("walk", "run", "wave-both-hands", "raise-up-left-hand", "walk-turn-left")
+)
 WARM_CLIP = "dataset-2_raise-up-right-hand_normal_004"
 RECON_SETS = ("hands-feet", "left-foot", "head-back")
 TARGET_INPUT_S_PER_S = 1.0
@@ -143,10 +144,13 @@ class Contention:
         busy, steal, own = self._read()
         wall = time.perf_counter() - self.t0
         cap = wall * (os.cpu_count() or 1)
-        return {"wall_s": round(wall, 2), "own_cpu_share": round((own - self.own0) / cap, 3),
-                "other_processes_cpu_share": round(max(0.0, (busy - self.busy0) - (own - self.own0)) / cap, 3),
-                "steal_share": round((steal - self.steal0) / cap, 3),
-                "load_average_1min_end": round(os.getloadavg()[0], 2)}  # fmt: skip
+        return {
+            "wall_s": round(wall, 2),
+            "own_cpu_share": round((own - self.own0) / cap, 3),
+            "other_processes_cpu_share": round(max(0.0, (busy - self.busy0) - (own - self.own0)) / cap, 3),
+            "steal_share": round((steal - self.steal0) / cap, 3),
+            "load_average_1min_end": round(os.getloadavg()[0], 2),
+        }
 
 
 def best_of(fns: dict, repeats: int) -> dict[str, list[float]]:
@@ -165,9 +169,14 @@ def best_of(fns: dict, repeats: int) -> dict[str, list[float]]:
 
 def rate(cells: int, times: list[float]) -> dict:
     best, med = min(times), float(np.median(times))
-    return {"best_s": round(best, 6), "median_s": round(med, 6), "cells": int(cells),
-            "cells_per_s": round(cells / best), "mcells_per_s": round(cells / best / 1e6, 1),
-            "mcells_per_s_median": round(cells / med / 1e6, 1)}  # fmt: skip
+    return {
+        "best_s": round(best, 6),
+        "median_s": round(med, 6),
+        "cells": int(cells),
+        "cells_per_s": round(cells / best),
+        "mcells_per_s": round(cells / best / 1e6, 1),
+        "mcells_per_s_median": round(cells / med / 1e6, 1),
+    }
 
 
 def machine() -> dict:
@@ -199,17 +208,40 @@ def machine() -> dict:
         mem = round(int(line.split()[1]) / 1024 / 1024, 1)
     except (OSError, StopIteration):
         pass
-    return {"arch": platform.machine(), "cores": os.cpu_count(), "usable_cores": len(os.sched_getaffinity(0)),
-            "cpu_model": model, "avx2": " avx2" in flags, "avx512f": " avx512f" in flags, "mem_gib": mem,
-            "python": platform.python_version(), "numpy": np.__version__, "numpy_blas": blas,
-            "numba": numba.__version__, "numba_threads": numba.get_num_threads()}  # fmt: skip
+    return {
+        "arch": platform.machine(),
+        "cores": os.cpu_count(),
+        "usable_cores": len(os.sched_getaffinity(0)),
+        "cpu_model": model,
+        "avx2": " avx2" in flags,
+        "avx512f": " avx512f" in flags,
+        "mem_gib": mem,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numpy_blas": blas,
+        "numba": numba.__version__,
+        "numba_threads": numba.get_num_threads(),
+    }
 
 
 def build_graph_file(bandai: Path, out: Path) -> float:
     t0 = time.perf_counter()
-    cmd = [sys.executable, "-m", "graphsvc.cli", "build", str(bandai / "dataset-1" / "data"),
-           str(bandai / "dataset-2" / "data"), "-o", str(out), "--no-msv", "--no-interp", "--no-bridges",
-           "--jobs", "2", "--quiet"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "graphsvc.cli",
+        "build",
+        str(bandai / "dataset-1" / "data"),
+        str(bandai / "dataset-2" / "data"),
+        "-o",
+        str(out),
+        "--no-msv",
+        "--no-interp",
+        "--no-bridges",
+        "--jobs",
+        "2",
+        "--quiet",
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if r.returncode != 0:
         raise SystemExit(f"graph build failed: {r.stderr[-800:]}")
@@ -236,8 +268,9 @@ def _row_costs(Q: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.stack([((S - q) ** 2).sum(axis=1) for q in Q])  # (N, F)
 
 
-def brute_unbounded(Q: np.ndarray, S: np.ndarray, diag: float, vert: float, horiz: float,
-                    vert0: float | None = None) -> np.ndarray:
+def brute_unbounded(
+    Q: np.ndarray, S: np.ndarray, diag: float, vert: float, horiz: float, vert0: float | None = None
+) -> np.ndarray:
     """Last row of unbounded subsequence DTW in numpy: D[0, m] = c; D[n, m] = min(
     D[n−1, m−1] + diag·c, D[n−1, m] + vert·c, D[n, m−1] + horiz·c) (column 0: the
     vertical step only, at weight vert0, default vert). The horizontal chain within a row is a running minimum over
@@ -301,7 +334,7 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
     markers_s = time.perf_counter() - t0
     series = centred(kb_markers[keep])
     if args.series_frames:
-        series = np.ascontiguousarray(series[:args.series_frames])
+        series = np.ascontiguousarray(series[: args.series_frames])
     F = series.shape[0]
     w, _ = windows_for(marker_set, SsgOptions(), float(graph.rate_hz))
     N = w.n
@@ -310,23 +343,34 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
     pts = np.asarray(rec.marker_positions, dtype=np.float64)
     T = pts.shape[0]
     a = max(0, T // 2 - N // 2)
-    query = centred(pts[a:a + N])
+    query = centred(pts[a : a + N])
     d = query.shape[1]
     cells = N * F
     out: dict = {
-        "series": {"frames": F, "dims": d, "marker_set": KERNEL_SET,
-                   "centring": "per frame: x and z minus the frame's marker centroid, y (height) raw; metres",
-                   "left_out_clip": HELD_OUT if held >= 0 else None,
-                   "capped": bool(args.series_frames)},
-        "query": {"clip": HELD_OUT, "frames": [a, a + N], "rows": N, "rate_hz": RATE_HZ,
-                  "input": "simulated markers, default noise, seed 0, centred as the series"},
+        "series": {
+            "frames": F,
+            "dims": d,
+            "marker_set": KERNEL_SET,
+            "centring": "per frame: x and z minus the frame's marker centroid, y (height) raw; metres",
+            "left_out_clip": HELD_OUT if held >= 0 else None,
+            "capped": bool(args.series_frames),
+        },
+        "query": {
+            "clip": HELD_OUT,
+            "frames": [a, a + N],
+            "rows": N,
+            "rate_hz": RATE_HZ,
+            "input": "simulated markers, default noise, seed 0, centred as the series",
+        },
         "repeats": args.repeats,
-    }  # fmt: skip
+    }
 
     last_c = np.empty(F)
     last_b = np.empty(F)
-    fns = {"classic_dtw": lambda: dtw.classic_dtw(query, series, last_c),
-           "bounded_dtw": lambda: dtw.bounded_dtw(query, series, last_b)}  # fmt: skip
+    fns = {
+        "classic_dtw": lambda: dtw.classic_dtw(query, series, last_c),
+        "bounded_dtw": lambda: dtw.bounded_dtw(query, series, last_b),
+    }
     dtai = None
     if args.skip_dtaidistance:
         out["dtaidistance"] = {"skipped": "--skip-dtaidistance"}
@@ -360,30 +404,44 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
             if i:  # (the first call: warm-up)
                 c_times.append(time.perf_counter() - t0)
         holder["c"] = m
-    out["classic_dtw"] = {**rate(cells, times["classic_dtw"]), "threads": 1,
-                          "what": "unbounded subsequence DTW, squared Euclidean cost in the loop, column by column"}
-    out["bounded_dtw"] = {**rate(cells, times["bounded_dtw"]), "threads": 1,
-                          "what": "eq. 4.2 slope bounds [1/2, 2], squared Euclidean cost in the loop, row by row"}
+    out["classic_dtw"] = {
+        **rate(cells, times["classic_dtw"]),
+        "threads": 1,
+        "what": "unbounded subsequence DTW, squared Euclidean cost in the loop, column by column",
+    }
+    out["bounded_dtw"] = {
+        **rate(cells, times["bounded_dtw"]),
+        "threads": 1,
+        "what": "eq. 4.2 slope bounds [1/2, 2], squared Euclidean cost in the loop, row by row",
+    }
     if dtai is not None:
         version, holder = dtai
         sa = holder["sa"]
         theirs_rate = rate(cells, times["dtaidistance_subsequence_alignment"])
         out["dtaidistance"] = {
             "version": version,
-            "subsequence_alignment": {**theirs_rate, "threads": 1,
-                                      "what": "subsequence_alignment(query, series, penalty=0, use_c=True): "
-                                              "allocate (N+1)x(F+1) float64, C warping paths (ndim, squared "
-                                              "Euclidean, free start/end in the series), sqrt(last row)/N"},
-            "c_kernel_only": {**rate(cells, c_times), "threads": 1,
-                              "what": "dtw_cc.warping_paths_ndim into a matrix allocated and filled outside the timer"},
-        }  # fmt: skip
+            "subsequence_alignment": {
+                **theirs_rate,
+                "threads": 1,
+                "what": "subsequence_alignment(query, series, penalty=0, use_c=True): "
+                "allocate (N+1)x(F+1) float64, C warping paths (ndim, squared "
+                "Euclidean, free start/end in the series), sqrt(last row)/N",
+            },
+            "c_kernel_only": {
+                **rate(cells, c_times),
+                "threads": 1,
+                "what": "dtw_cc.warping_paths_ndim into a matrix allocated and filled outside the timer",
+            },
+        }
         out["ratio_ours_over_theirs"] = {
-            "classic_dtw_vs_subsequence_alignment": round(out["classic_dtw"]["cells_per_s"] /
-                                                          theirs_rate["cells_per_s"], 2),
-            "classic_dtw_vs_c_kernel_only": round(out["classic_dtw"]["cells_per_s"] /
-                                                  out["dtaidistance"]["c_kernel_only"]["cells_per_s"], 2),
+            "classic_dtw_vs_subsequence_alignment": round(
+                out["classic_dtw"]["cells_per_s"] / theirs_rate["cells_per_s"], 2
+            ),
+            "classic_dtw_vs_c_kernel_only": round(
+                out["classic_dtw"]["cells_per_s"] / out["dtaidistance"]["c_kernel_only"]["cells_per_s"], 2
+            ),
             "note": "cells/s ours ÷ cells/s theirs on the same query and series; > 1: ours is faster",
-        }  # fmt: skip
+        }
 
     # The production path for one window: clouds, local costs, accumulated cost, k best.
     t0 = time.perf_counter()
@@ -422,9 +480,16 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
 
     lc()
     sdtw()
-    ptimes = best_of({"local_costs": lc, "local_costs_step": lc_step, "local_costs_block": lc_block,
-                      "subsequence_dtw": sdtw, "k_best": kb_},
-                     args.repeats)  # fmt: skip
+    ptimes = best_of(
+        {
+            "local_costs": lc,
+            "local_costs_step": lc_step,
+            "local_costs_block": lc_block,
+            "subsequence_dtw": sdtw,
+            "k_best": kb_,
+        },
+        args.repeats,
+    )
     import numba
 
     alone = []
@@ -442,43 +507,65 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
     pc = N * Fp
     per_window = {k: min(v) for k, v in ptimes.items()}
     window_s = per_window["local_costs_step"] + per_window["subsequence_dtw"] + per_window["k_best"]
-    batch_window_s = (per_window["local_costs_block"] / block.size * w.step + per_window["subsequence_dtw"]
-                      + per_window["k_best"])  # fmt: skip
+    batch_window_s = (
+        per_window["local_costs_block"] / block.size * w.step + per_window["subsequence_dtw"] + per_window["k_best"]
+    )
     med = {k: float(np.median(v)) for k, v in ptimes.items()}
     window_med = med["local_costs_step"] + med["subsequence_dtw"] + med["k_best"]
     out["production"] = {
-        "kb_frames": Fp, "rows": N, "window_step": w.step, "k": w.k, "points_per_cloud": int(kb.x.shape[1]),
-        "cloud_frames": int(kb.taus.size), "numba_threads": machine_threads(),
+        "kb_frames": Fp,
+        "rows": N,
+        "window_step": w.step,
+        "k": w.k,
+        "points_per_cloud": int(kb.x.shape[1]),
+        "cloud_frames": int(kb.taus.size),
+        "numba_threads": machine_threads(),
         "openblas_num_threads_env": os.environ.get("OPENBLAS_NUM_THREADS"),
         "timing": "local_costs (N rows, step rows, 64-row block), subsequence_dtw and k_best timed in turn, as "
-                  "the decoder alternates them; compare best with median, and with subsequence_dtw_alone",
-        "local_costs": {**rate(pc, ptimes["local_costs"]),
-                        "what": "N rows: the window clouds' BLAS products (float32) and the numba combine"},
-        "local_costs_step_rows": {**rate(w.step * Fp, ptimes["local_costs_step"]), "rows": w.step,
-                                  "what": "the window's new rows only (window − overlap): the call the decoder "
-                                          "makes per window when reconstruct pushes the input frame by frame"},
-        "local_costs_per_row_in_block": {**rate(block.size * Fp, ptimes["local_costs_block"]), "rows": int(block.size),
-                                         "what": "64 input rows in one product (decoder.COST_BLOCK; reconstruct's "
-                                                 "frame-by-frame pushes never reach it: the block stops at the "
-                                                 "frames pushed so far)"},
-        "subsequence_dtw": {**rate(pc, ptimes["subsequence_dtw"]),
-                            "what": "eq. 4.2 over precomputed float32 costs, runs, steps kept (int8), parallel "
-                                    "over frames within a row; includes allocating D and step"},
+        "the decoder alternates them; compare best with median, and with subsequence_dtw_alone",
+        "local_costs": {
+            **rate(pc, ptimes["local_costs"]),
+            "what": "N rows: the window clouds' BLAS products (float32) and the numba combine",
+        },
+        "local_costs_step_rows": {
+            **rate(w.step * Fp, ptimes["local_costs_step"]),
+            "rows": w.step,
+            "what": "the window's new rows only (window − overlap): the call the decoder "
+            "makes per window when reconstruct pushes the input frame by frame",
+        },
+        "local_costs_per_row_in_block": {
+            **rate(block.size * Fp, ptimes["local_costs_block"]),
+            "rows": int(block.size),
+            "what": "64 input rows in one product (decoder.COST_BLOCK; reconstruct's "
+            "frame-by-frame pushes never reach it: the block stops at the "
+            "frames pushed so far)",
+        },
+        "subsequence_dtw": {
+            **rate(pc, ptimes["subsequence_dtw"]),
+            "what": "eq. 4.2 over precomputed float32 costs, runs, steps kept (int8), parallel "
+            "over frames within a row; includes allocating D and step",
+        },
         "subsequence_dtw_alone": {**rate(pc, alone), "what": "the same, called back to back (no BLAS call between)"},
         "subsequence_dtw_1_thread": {**rate(pc, one), "what": "the same with numba.set_num_threads(1), back to back"},
-        "local_costs_1_numba_thread": {**rate(pc, one_lc), "what": "local_costs (N rows) with the numba combine "
-                                                                 "on 1 thread (BLAS threads unchanged)"},
+        "local_costs_1_numba_thread": {
+            **rate(pc, one_lc),
+            "what": "local_costs (N rows) with the numba combine on 1 thread (BLAS threads unchanged)",
+        },
         "k_best": {"best_s": round(per_window["k_best"], 6), "found": len(state["found"])},
-        "window_total": {"best_s": round(window_s, 6), "median_s": round(window_med, 6),
-                         "mcells_per_s": round(pc / window_s / 1e6, 1),
-                         "mcells_per_s_median": round(pc / window_med / 1e6, 1),
-                         "what": "as reconstruct runs a window: local_costs (step new rows) + subsequence_dtw "
-                                 "+ k_best"},
-        "window_total_if_blocked": {"best_s": round(batch_window_s, 6),
-                                    "mcells_per_s": round(pc / batch_window_s / 1e6, 1),
-                                    "what": "the same with the new rows' costs at the 64-row block's per-row cost"},
+        "window_total": {
+            "best_s": round(window_s, 6),
+            "median_s": round(window_med, 6),
+            "mcells_per_s": round(pc / window_s / 1e6, 1),
+            "mcells_per_s_median": round(pc / window_med / 1e6, 1),
+            "what": "as reconstruct runs a window: local_costs (step new rows) + subsequence_dtw + k_best",
+        },
+        "window_total_if_blocked": {
+            "best_s": round(batch_window_s, 6),
+            "mcells_per_s": round(pc / batch_window_s / 1e6, 1),
+            "what": "the same with the new rows' costs at the 64-row block's per-row cost",
+        },
         "one_time": {"kb_markers_s": round(markers_s, 3), "kb_clouds_s": round(clouds_s, 3)},
-    }  # fmt: skip
+    }
 
     # Agreement: each kernel against a brute force of its own recurrence, and the ends.
     t0 = time.perf_counter()
@@ -491,15 +578,17 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
         "brute_force": "numpy over the whole series, each kernel's own recurrence (row 0: any start, cost c)",
         "classic_dtw_vs_brute_as_coded_max_rel_diff": rel_diff(last_c, b_coded),
         "classic_dtw_vs_brute_docstring_max_rel_diff": rel_diff(last_c, b_ours),
-        "classic_dtw_columns_differing_from_docstring": {"count": int(differ.size),
-                                                         "first": [int(i) for i in differ[:10]]},
+        "classic_dtw_columns_differing_from_docstring": {
+            "count": int(differ.size),
+            "first": [int(i) for i in differ[:10]],
+        },
         "bounded_dtw_vs_brute_max_rel_diff": rel_diff(last_b, b_bounded),
         "classic_dtw_best_end": int(np.argmin(last_c)),
         "classic_dtw_best_cost": float(np.min(last_c)),
         "bounded_dtw_best_end": int(np.argmin(last_b)),
         "brute_weighted_best_end": int(np.argmin(b_ours)),
         "brute_unweighted_best_end": int(np.argmin(b_theirs)),
-    }  # fmt: skip
+    }
     if dtai is not None:
         sa = dtai[1]["sa"]
         paths_last = sa.paths[-1, 1:]
@@ -526,7 +615,7 @@ def kernel_section(graph, index, bandai: Path, args) -> dict:
         "docstring's recurrence only in the first few columns, whose best paths start in column 0 and step "
         "right (columns_differing_from_docstring); it matters only for an end near frame 0.",
         "relative differences of ~1e-10 are the brute force's cumulative-sum rounding.",
-    ]  # fmt: skip
+    ]
     out["agreement"] = agree
     out["peak_rss_mb"] = peak_rss_mb()
     return out
@@ -570,8 +659,9 @@ def recon_child(args) -> dict:
     motions = [load_motion(clip_file(bandai, c)) for c in RECON_CLIPS]
     motion, _ = join_clips(motions, graph.rate_hz)
     rec = simulate_marker_recording(motion, name, noise, seed=0, rate_hz=RATE_HZ)
-    warm_rec = simulate_marker_recording(load_motion(clip_file(bandai, WARM_CLIP)), name, noise, seed=1,
-                                         rate_hz=RATE_HZ)  # fmt: skip
+    warm_rec = simulate_marker_recording(
+        load_motion(clip_file(bandai, WARM_CLIP)), name, noise, seed=1, rate_hz=RATE_HZ
+    )
     options = Options(strategy="ssg")
     used, _, _, _ = used_markers(options.ssg, rec.marker_names, rec.meta)
     t0 = time.perf_counter()
@@ -595,24 +685,43 @@ def recon_child(args) -> dict:
     tm = report["timings_s"]
     w, _ = windows_for(used, options.ssg, float(graph.rate_hz))
     return {
-        "marker_set": name, "markers": len(used.markers), "window_frames": w.n, "overlap_frames": w.o, "k": w.k,
-        "input": {"clips": list(RECON_CLIPS), "samples": T, "seconds": round(input_s, 2),
-                  "seen": report.get("seen"), "offsets": report["ssg"]["offsets"]["mode"]},
-        "one_time_s": {"imports": round(import_s, 3), "graph_load": round(load_s, 3),
-                       "index_load" if cached else "index_build": round(index_s, 3),
-                       "kb_marker_clouds": round(clouds_s, 3), "numba_kernels": round(numba_s, 3),
-                       "warm_up_run": round(warm_s, 3)},
-        "per_input_s": {"wall": round(wall, 3), "search": tm.get("search"), "synthesis": tm.get("synthesis"),
-                        "prepare": tm.get("prepare"), "warm_up": tm.get("warm_up"),
-                        "all_runs_wall": [round(x[0], 3) for x in runs]},
+        "marker_set": name,
+        "markers": len(used.markers),
+        "window_frames": w.n,
+        "overlap_frames": w.o,
+        "k": w.k,
+        "input": {
+            "clips": list(RECON_CLIPS),
+            "samples": T,
+            "seconds": round(input_s, 2),
+            "seen": report.get("seen"),
+            "offsets": report["ssg"]["offsets"]["mode"],
+        },
+        "one_time_s": {
+            "imports": round(import_s, 3),
+            "graph_load": round(load_s, 3),
+            "index_load" if cached else "index_build": round(index_s, 3),
+            "kb_marker_clouds": round(clouds_s, 3),
+            "numba_kernels": round(numba_s, 3),
+            "warm_up_run": round(warm_s, 3),
+        },
+        "per_input_s": {
+            "wall": round(wall, 3),
+            "search": tm.get("search"),
+            "synthesis": tm.get("synthesis"),
+            "prepare": tm.get("prepare"),
+            "warm_up": tm.get("warm_up"),
+            "all_runs_wall": [round(x[0], 3) for x in runs],
+        },
         "seconds_per_input_second": round(wall / input_s, 4),
         "input_seconds_per_second": round(input_s / wall, 2),
         "meets_target": input_s / wall >= TARGET_INPUT_S_PER_S,
-        "windows": report["windows"], "dtw_cells": report["dtw_cells"],
+        "windows": report["windows"],
+        "dtw_cells": report["dtw_cells"],
         "search_mcells_per_s": round(report["dtw_cells"] / max(tm.get("search", 0.0), 1e-9) / 1e6, 1),
         "candidate_frames": report["candidate_frames"],
         "peak_rss_mb": peak_rss_mb(),
-    }  # fmt: skip
+    }
 
 
 # ---------------------------------------------------------------- accuracy
@@ -634,37 +743,88 @@ def evaluate_section(bandai: Path, work: Path, jobs: int) -> dict:
     graph = work / "dataset2.graph"
     exe = Path(sys.executable).with_name("graphsvc")
     cli = [str(exe)] if exe.exists() else [sys.executable, "-m", "graphsvc.cli"]
-    subprocess.run(cli + ["build", str(kb), "--no-msv", "--no-interp", "--no-bridges", "--jobs", str(jobs), "--quiet",
-                          "-o", str(graph)], check=True, capture_output=True)  # fmt: skip
+    subprocess.run(
+        cli
+        + [
+            "build",
+            str(kb),
+            "--no-msv",
+            "--no-interp",
+            "--no-bridges",
+            "--jobs",
+            str(jobs),
+            "--quiet",
+            "-o",
+            str(graph),
+        ],
+        check=True,
+        capture_output=True,
+    )
     rows = []
     runs = [(p, m, g, None) for p in EVAL_PROTOCOLS for m in EVAL_SETS for g in EVAL_GAPS]
     runs += [("takes", "hands-feet", g, 6) for g in EVAL_GAPS]  # (mixed: six held-out clips of six actions joined)
     for protocol, marker_set, gaps, mixed in runs:
         tests = EVAL_PROTOCOLS[protocol]
         out = work / f"{protocol}-{marker_set}-{gaps:g}-{mixed}.json"
-        cmd = cli + ["evaluate", str(kb), "--graph", str(graph), "--test", tests, "--hold-out", protocol,
-                     "--strategy", "ssg", "--markers", marker_set, "--jobs", str(jobs), "--quiet",
-                     "--json", str(out)] + (["--gap-fraction", f"{gaps:g}"] if gaps else []) + \
-            (["--mixed", str(mixed)] if mixed else [])  # fmt: skip
+        cmd = (
+            cli
+            + [
+                "evaluate",
+                str(kb),
+                "--graph",
+                str(graph),
+                "--test",
+                tests,
+                "--hold-out",
+                protocol,
+                "--strategy",
+                "ssg",
+                "--markers",
+                marker_set,
+                "--jobs",
+                str(jobs),
+                "--quiet",
+                "--json",
+                str(out),
+            ]
+            + (["--gap-fraction", f"{gaps:g}"] if gaps else [])
+            + (["--mixed", str(mixed)] if mixed else [])
+        )
         t0 = time.perf_counter()
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
-            rows.append({"protocol": protocol, "markers": marker_set, "gap_fraction": gaps, "mixed": mixed,
-                         "error": done.stderr[-600:]})  # fmt: skip
+            rows.append(
+                {
+                    "protocol": protocol,
+                    "markers": marker_set,
+                    "gap_fraction": gaps,
+                    "mixed": mixed,
+                    "error": done.stderr[-600:],
+                }
+            )
             continue
         run = json.loads(out.read_text())
         mean, groups = run["mean"], run.get("groups", {})
-        rows.append({
-            "protocol": protocol, "markers": marker_set, "gap_fraction": gaps, "mixed": mixed,
-            "clips": len(run["clips"]),
-            "joint_err_cm": round(mean["joint_err_cm"], 2), "root_err_cm": round(mean["root_err_cm"], 2),
-            "heading_err_deg": round(mean["heading_err_deg"], 2),
-            "label_acc": None if mean.get("label_acc") is None else round(mean["label_acc"], 3),
-            "locomotion_joint_err_cm": round(groups["locomotion"]["joint_err_cm"], 2) if "locomotion" in groups else None,
-            "gestures_joint_err_cm": round(groups["gestures"]["joint_err_cm"], 2) if "gestures" in groups else None,
-            "samples_per_s": mean.get("samples_per_s"), "wall_s": round(time.perf_counter() - t0, 1),
-            "command": shlex.join(["graphsvc"] + cmd[len(cli):]),
-        })  # fmt: skip
+        rows.append(
+            {
+                "protocol": protocol,
+                "markers": marker_set,
+                "gap_fraction": gaps,
+                "mixed": mixed,
+                "clips": len(run["clips"]),
+                "joint_err_cm": round(mean["joint_err_cm"], 2),
+                "root_err_cm": round(mean["root_err_cm"], 2),
+                "heading_err_deg": round(mean["heading_err_deg"], 2),
+                "label_acc": None if mean.get("label_acc") is None else round(mean["label_acc"], 3),
+                "locomotion_joint_err_cm": round(groups["locomotion"]["joint_err_cm"], 2)
+                if "locomotion" in groups
+                else None,
+                "gestures_joint_err_cm": round(groups["gestures"]["joint_err_cm"], 2) if "gestures" in groups else None,
+                "samples_per_s": mean.get("samples_per_s"),
+                "wall_s": round(time.perf_counter() - t0, 1),
+                "command": shlex.join(["graphsvc"] + cmd[len(cli) :]),
+            }
+        )
     return {"what": evaluate_section.__doc__.replace("\n    ", " ").strip(), "runs": rows}
 
 
@@ -674,20 +834,35 @@ def evaluate_section(bandai: Path, work: Path, jobs: int) -> dict:
 def main() -> None:
     default_data = os.environ.get("GRAPHSVC_DATA") or str(ROOT.parent / "shared" / "data")
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
-    parser.add_argument("data", nargs="?", default=default_data, metavar="DATA",
-                        help="folder with bandai/dataset-{1,2}/data (default $GRAPHSVC_DATA or ../shared/data)")
+    parser.add_argument(
+        "data",
+        nargs="?",
+        default=default_data,
+        metavar="DATA",
+        help="folder with bandai/dataset-{1,2}/data (default $GRAPHSVC_DATA or ../shared/data)",
+    )
     parser.add_argument("--graph", help="a graph built from Bandai datasets 1 and 2 (default: build a light one)")
     parser.add_argument("--repeats", type=int, default=15, help="kernel timings: best of this many (default 15)")
-    parser.add_argument("--recon-repeats", type=int, default=2,
-                        help="reconstruction timings: best of this many runs per marker set (default 2)")
+    parser.add_argument(
+        "--recon-repeats",
+        type=int,
+        default=2,
+        help="reconstruction timings: best of this many runs per marker set (default 2)",
+    )
     parser.add_argument("--series-frames", type=int, help="cap the kernel series at this many frames")
     parser.add_argument("--skip-dtaidistance", action="store_true", help="do not time dtaidistance")
-    parser.add_argument("--skip-blas-variant", action="store_true",
-                        help="do not rerun hands-feet with OPENBLAS_NUM_THREADS=1 (a diagnostic)")
+    parser.add_argument(
+        "--skip-blas-variant",
+        action="store_true",
+        help="do not rerun hands-feet with OPENBLAS_NUM_THREADS=1 (a diagnostic)",
+    )
     parser.add_argument("--pretty", action="store_true", help="indent the JSON")
-    parser.add_argument("--evaluate", action="store_true",
-                        help="also the accuracy runs: evaluate on dataset 2, three marker sets, with and without gaps, "
-                             "hold-out takes and actor (about 10 minutes on 2 cores)")
+    parser.add_argument(
+        "--evaluate",
+        action="store_true",
+        help="also the accuracy runs: evaluate on dataset 2, three marker sets, with and without gaps, "
+        "hold-out takes and actor (about 10 minutes on 2 cores)",
+    )
     parser.add_argument("--only-evaluate", action="store_true", help="the accuracy runs alone")
     parser.add_argument("--jobs", type=int, default=2, help="evaluate's worker processes (default 2)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
@@ -719,8 +894,9 @@ def main() -> None:
         else:
             graph_path = str(Path(tmp) / "bandai.graph")
             graph_info["built_s"] = round(build_graph_file(bandai, Path(graph_path)), 2)
-            graph_info["built"] = ("graphsvc build dataset-1/data dataset-2/data --no-msv --no-interp --no-bridges "
-                                   "--jobs 2")
+            graph_info["built"] = (
+                "graphsvc build dataset-1/data dataset-2/data --no-msv --no-interp --no-bridges --jobs 2"
+            )
         from graphsvc.graph.file import load_graph
         from graphsvc.strategies.ssg.index import build_arrays, load_index
 
@@ -733,8 +909,15 @@ def main() -> None:
         t0 = time.perf_counter()
         index = load_index(graph)  # (writes the cache beside the graph if missing; the children load it)
         graph_info["ssg_index_load_or_build_s"] = round(time.perf_counter() - t0, 3)
-        graph_info.update({"nodes": graph.num_nodes, "kb_frames": index.frames, "clips": len(graph.clips),
-                           "rate_hz": float(graph.rate_hz), "kb_minutes": round(index.frames / graph.rate_hz / 60, 1)})
+        graph_info.update(
+            {
+                "nodes": graph.num_nodes,
+                "kb_frames": index.frames,
+                "clips": len(graph.clips),
+                "rate_hz": float(graph.rate_hz),
+                "kb_minutes": round(index.frames / graph.rate_hz / 60, 1),
+            }
+        )
         result["graph"] = graph_info
         c = Contention()
         result["kernel"] = kernel_section(graph, index, bandai, args)
@@ -742,8 +925,17 @@ def main() -> None:
         del index, graph
 
         def child(name: str, env: dict | None = None) -> dict:
-            cmd = [sys.executable, __file__, args.data, "--child", name, "--graph", graph_path,
-                   "--recon-repeats", str(args.recon_repeats)]  # fmt: skip
+            cmd = [
+                sys.executable,
+                __file__,
+                args.data,
+                "--child",
+                name,
+                "--graph",
+                graph_path,
+                "--recon-repeats",
+                str(args.recon_repeats),
+            ]
             c = Contention()
             r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env={**os.environ, **(env or {})})
             if r.returncode != 0:
@@ -760,19 +952,21 @@ def main() -> None:
         if not args.skip_blas_variant and "OPENBLAS_NUM_THREADS" not in os.environ:
             result["reconstruction"]["diagnostic_openblas_1_thread"] = {
                 "why": "OpenBLAS's worker threads busy-wait after each product and take the cores from numba's "
-                       "OpenMP workers in the threaded kernels that follow; graphsvc shortens their wait "
-                       f"(OPENBLAS_THREAD_TIMEOUT={os.environ.get('OPENBLAS_THREAD_TIMEOUT')}): this run keeps BLAS "
-                       "on one thread instead, for comparison",
+                "OpenMP workers in the threaded kernels that follow; graphsvc shortens their wait "
+                f"(OPENBLAS_THREAD_TIMEOUT={os.environ.get('OPENBLAS_THREAD_TIMEOUT')}): this run keeps BLAS "
+                "on one thread instead, for comparison",
                 **child(RECON_SETS[0], {"OPENBLAS_NUM_THREADS": "1"}),
-            }  # fmt: skip
+            }
         if args.evaluate:
             result["accuracy"] = evaluate_section(bandai, Path(tmp), args.jobs)
     result["parent_peak_rss_mb"] = peak_rss_mb()
     result["contention_whole_run"] = whole.report()
     busy = result["contention_whole_run"]["other_processes_cpu_share"]
     if busy > 0.1:
-        result["caveat"] = (f"other processes took {busy:.0%} of the machine's CPU during this run: the threaded "
-                            "kernels (numba prange, OpenBLAS) lose most, run it again on a quiet machine")
+        result["caveat"] = (
+            f"other processes took {busy:.0%} of the machine's CPU during this run: the threaded "
+            "kernels (numba prange, OpenBLAS) lose most, run it again on a quiet machine"
+        )
     result["total_s"] = round(time.perf_counter() - started, 1)
     print(json.dumps(result, indent=2 if args.pretty else None, ensure_ascii=False), flush=True)
 

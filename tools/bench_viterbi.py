@@ -78,8 +78,10 @@ def problem(mode: str, nodes: int, edges: int, samples: int, graph_path: str | N
     else:
         weights = Weights(0.5, 1, 1)
     if mode == "APO+2constraints":
-        sets = [[{"start_s": 2.0, "end_s": 6.0, "require": {"contact": "both"}}],
-                [{"start_s": 4.0, "end_s": 12.0, "require": {"label": "b"}}]]  # fmt: skip
+        sets = [
+            [{"start_s": 2.0, "end_s": 6.0, "require": {"contact": "both"}}],
+            [{"start_s": 4.0, "end_s": 12.0, "require": {"label": "b"}}],
+        ]
     return g, acc, position, heading, weights, sets
 
 
@@ -91,18 +93,32 @@ def run(mode: str, nodes: int, edges: int, samples: int, graph_path: str | None 
     # whose memory a process touches for the first time once (45 ms on G_E), as a server
     # or `evaluate` does with its first long search.
     k = min(samples, batch_ring(samples)[0] + 1)
-    viterbi_search(g, acc[:k], None if position is None else position[:k], None if heading is None else heading[:k],
-                   weights, sets, pull_s=PULL)  # fmt: skip
+    viterbi_search(
+        g,
+        acc[:k],
+        None if position is None else position[:k],
+        None if heading is None else heading[:k],
+        weights,
+        sets,
+        pull_s=PULL,
+    )
     warm_up_search(g, threads=True)  # (and the walk-back kernels, which a 3-sample search never reaches)
     t0 = time.perf_counter()
     r = viterbi_search(g, acc, position, heading, weights, sets, pull_s=PULL)
     seconds = time.perf_counter() - t0
-    return {"mode": mode, "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
-            "seconds": round(seconds, 3), "ms_per_sample": round(1000 * seconds / samples, 3),
-            "edge_steps_per_s": round(g.num_edges * (samples - 1) / seconds),
-            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "compression": round(r.compression, 1), "peak_entries": r.peak_entries,
-            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}"}  # fmt: skip
+    return {
+        "mode": mode,
+        "nodes": g.num_nodes,
+        "edges": g.num_edges,
+        "samples": samples,
+        "seconds": round(seconds, 3),
+        "ms_per_sample": round(1000 * seconds / samples, 3),
+        "edge_steps_per_s": round(g.num_edges * (samples - 1) / seconds),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "compression": round(r.compression, 1),
+        "peak_entries": r.peak_entries,
+        "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
+    }
 
 
 def run_reference(nodes: int, edges: int, samples: int) -> dict:
@@ -120,11 +136,18 @@ def run_reference(nodes: int, edges: int, samples: int) -> dict:
     t0 = time.perf_counter()
     ref_path, _ = reference_viterbi(g, acc, position, heading, w, pull_s=PULL)
     t_ref = time.perf_counter() - t0
-    return {"mode": "APO numba vs numpy reference", "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples,
-            "seconds": round(t_fast, 3), "reference_seconds": round(t_ref, 3), "speed_ratio": round(t_ref / t_fast, 1),
-            "same_path": bool(np.array_equal(fast.node_path, ref_path)),
-            "edge_steps_per_s": round(g.num_edges * (samples - 1) / t_fast),
-            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+    return {
+        "mode": "APO numba vs numpy reference",
+        "nodes": g.num_nodes,
+        "edges": g.num_edges,
+        "samples": samples,
+        "seconds": round(t_fast, 3),
+        "reference_seconds": round(t_ref, 3),
+        "speed_ratio": round(t_ref / t_fast, 1),
+        "same_path": bool(np.array_equal(fast.node_path, ref_path)),
+        "edge_steps_per_s": round(g.num_edges * (samples - 1) / t_fast),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
 
 
 def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> dict:
@@ -150,13 +173,18 @@ def run_stream(nodes: int, edges: int, samples: int, threads: bool = False) -> d
         times[t] = time.perf_counter() - t0
     decoder.flush()
     kernels = "threads" if threads else "serial"
-    return {"mode": f"stream APO, fixed lag 1 s, {kernels}", "nodes": g.num_nodes, "edges": g.num_edges,
-            "samples": samples, "seconds": round(float(times.sum()), 3),
-            "ms_per_sample": round(1000 * float(times.mean()), 3),
-            "p50_ms": round(1000 * float(np.percentile(times, 50)), 3),
-            "p99_ms": round(1000 * float(np.percentile(times, 99)), 3),
-            "revisions": decoder.revisions,
-            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
+    return {
+        "mode": f"stream APO, fixed lag 1 s, {kernels}",
+        "nodes": g.num_nodes,
+        "edges": g.num_edges,
+        "samples": samples,
+        "seconds": round(float(times.sum()), 3),
+        "ms_per_sample": round(1000 * float(times.mean()), 3),
+        "p50_ms": round(1000 * float(np.percentile(times, 50)), 3),
+        "p99_ms": round(1000 * float(np.percentile(times, 99)), 3),
+        "revisions": decoder.revisions,
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }
 
 
 def run_beam(mode: str, beam: float, samples: int) -> dict:
@@ -172,9 +200,14 @@ def run_beam(mode: str, beam: float, samples: int) -> dict:
     warm_up_search(g, threads=False)
     exact, exact_path = bench_beam.run(g, mode, None, samples, lag=30)
     row, _ = bench_beam.run(g, mode, beam, samples, lag=30, exact_path=exact_path)
-    return {**row, "seconds": row["batch_seconds"], "ms_per_sample": round(1000 * row["batch_seconds"] / samples, 3),
-            "exact_seconds": exact["batch_seconds"], "exact_stream_ms_per_sample": exact["stream_ms_per_sample"],
-            "same_cost_as_exact": row["cost"] == exact["cost"]}  # fmt: skip
+    return {
+        **row,
+        "seconds": row["batch_seconds"],
+        "ms_per_sample": round(1000 * row["batch_seconds"] / samples, 3),
+        "exact_seconds": exact["batch_seconds"],
+        "exact_stream_ms_per_sample": exact["stream_ms_per_sample"],
+        "same_cost_as_exact": row["cost"] == exact["cost"],
+    }
 
 
 def run_beam_hour(beam: float, samples: int) -> dict:
@@ -193,16 +226,34 @@ def run_beam_hour(beam: float, samples: int) -> dict:
     t0 = time.perf_counter()
     r = viterbi_search(g, acc, position, heading, weights, beam=beam, pull_s=PULL)
     seconds = time.perf_counter() - t0
-    return {"mode": f"APO, long input, beam {beam:g}", "beam": beam, "input": "graph walk", "nodes": g.num_nodes,
-            "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),
-            "ms_per_sample": round(1000 * seconds / samples, 4),
-            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "compression": round(r.compression, 1), "peak_entries": r.peak_entries}  # fmt: skip
+    return {
+        "mode": f"APO, long input, beam {beam:g}",
+        "beam": beam,
+        "input": "graph walk",
+        "nodes": g.num_nodes,
+        "edges": g.num_edges,
+        "samples": samples,
+        "seconds": round(seconds, 3),
+        "ms_per_sample": round(1000 * seconds / samples, 4),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "compression": round(r.compression, 1),
+        "peak_entries": r.peak_entries,
+    }
 
 
 HELD_OUT_STYLES = ("active", "feminine", "normal")
-HELD_OUT_CONTENTS = ("walk", "run", "wave-left-hand", "walk-turn-left", "raise-up-both-hands", "walk-turn-right",
-                     "raise-up-left-hand", "wave-both-hands", "raise-up-right-hand", "wave-right-hand")
+HELD_OUT_CONTENTS = (
+    "walk",
+    "run",
+    "wave-left-hand",
+    "walk-turn-left",
+    "raise-up-both-hands",
+    "walk-turn-right",
+    "raise-up-left-hand",
+    "wave-both-hands",
+    "raise-up-right-hand",
+    "wave-right-hand",
+)
 
 
 def held_out_problem(data: str, samples: int):
@@ -248,20 +299,37 @@ def run_beam_held_out(mode: str, beam: float, samples: int, data: str) -> dict:
     pos, head = (None, None) if mode == "A" else (position, heading)
     warm_up_search(g, threads=True)
     viterbi_search(g, acc, pos, head, weights, pull_s=PULL)  # (the ring's memory, touched once)
-    viterbi_search(g, acc[:600], pos if pos is None else pos[:600], head if head is None else head[:600], weights,
-                   beam=beam, pull_s=PULL)  # the beam's tables  # fmt: skip
+    viterbi_search(
+        g,
+        acc[:600],
+        pos if pos is None else pos[:600],
+        head if head is None else head[:600],
+        weights,
+        beam=beam,
+        pull_s=PULL,
+    )  # the beam's tables
     t0 = time.perf_counter()
     exact = viterbi_search(g, acc, pos, head, weights, pull_s=PULL)
     exact_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     r = viterbi_search(g, acc, pos, head, weights, beam=beam, pull_s=PULL)
     seconds = time.perf_counter() - t0
-    return {"mode": f"{mode}, beam {beam:g}", "beam": beam, "input": "held-out", "held_out_clips": clips,
-            "nodes": g.num_nodes, "edges": g.num_edges, "samples": samples, "seconds": round(seconds, 3),
-            "exact_seconds": round(exact_s, 3), "speed_up": round(exact_s / seconds, 2),
-            "same_nodes_as_exact": round(float(np.mean(r.node_path == exact.node_path)), 4),
-            "cost": r.cost, "exact_cost": exact.cost,
-            "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}"}  # fmt: skip
+    return {
+        "mode": f"{mode}, beam {beam:g}",
+        "beam": beam,
+        "input": "held-out",
+        "held_out_clips": clips,
+        "nodes": g.num_nodes,
+        "edges": g.num_edges,
+        "samples": samples,
+        "seconds": round(seconds, 3),
+        "exact_seconds": round(exact_s, 3),
+        "speed_up": round(exact_s / seconds, 2),
+        "same_nodes_as_exact": round(float(np.mean(r.node_path == exact.node_path)), 4),
+        "cost": r.cost,
+        "exact_cost": exact.cost,
+        "machine": f"{platform.machine()} {os.cpu_count()} cores, Python {platform.python_version()}",
+    }
 
 
 RUNS = {
@@ -294,21 +362,35 @@ def main() -> None:
     if args.child:
         print(json.dumps(RUNS[args.child](args)), flush=True)
         return
-    names = [args.only] if args.only else [n for n in RUNS if (args.graph or not n.startswith("built")) and
-                                           (args.data or "held-out" not in n)]  # fmt: skip
+    names = (
+        [args.only]
+        if args.only
+        else [n for n in RUNS if (args.graph or not n.startswith("built")) and (args.data or "held-out" not in n)]
+    )
     if any(n.startswith("built") for n in names) and not args.graph:
         parser.error("the 'built' runs need --graph FILE")
     if any("held-out" in n for n in names) and not args.data:
         parser.error("the 'beam held-out' runs need --data DIR (the Bandai-Namco folder)")
     for name in names:
-        cmd = [sys.executable, __file__, "--child", name, "--hour-samples", str(args.hour_samples),
-               "--beam", str(args.beam)]
+        cmd = [
+            sys.executable,
+            __file__,
+            "--child",
+            name,
+            "--hour-samples",
+            str(args.hour_samples),
+            "--beam",
+            str(args.beam),
+        ]
         if args.graph:
             cmd += ["--graph", args.graph]
         if args.data:
             cmd += ["--data", args.data]
         out = subprocess.run(cmd, capture_output=True, text=True)
-        print(out.stdout.strip() if out.returncode == 0 else json.dumps({"run": name, "error": out.stderr[-400:]}), flush=True)
+        print(
+            out.stdout.strip() if out.returncode == 0 else json.dumps({"run": name, "error": out.stderr[-400:]}),
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

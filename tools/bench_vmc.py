@@ -52,10 +52,19 @@ def main(argv=None) -> int:
         for f in frames:
             sender.socket.sendto(sender.bundle(*f), sender.target)
         send_s = time.perf_counter() - start
-    print(json.dumps({"joints": skeleton.num_joints, "bones": len(sender.rig.names), "frames": n,
-                      "bundle_bytes": len(bundles[0]), "build_us_per_frame": round(1e6 * build_s / n, 1),
-                      "build_and_send_us_per_frame": round(1e6 * send_s / n, 1),
-                      "core_share_at_30_hz": round(30 * send_s / n, 4)}))  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "joints": skeleton.num_joints,
+                "bones": len(sender.rig.names),
+                "frames": n,
+                "bundle_bytes": len(bundles[0]),
+                "build_us_per_frame": round(1e6 * build_s / n, 1),
+                "build_and_send_us_per_frame": round(1e6 * send_s / n, 1),
+                "core_share_at_30_hz": round(30 * send_s / n, 4),
+            }
+        )
+    )
     return 0
 
 

@@ -95,18 +95,42 @@ def main() -> None:
         raise SystemExit(f"expected {RATE:g} Hz clips")
     base = NoiseModel(bias=0.2, misalign=5.0)
     rows = []
-    for sigma, tissue, damping, impact in itertools.product((0.5, 0.6, 0.7, 0.8, 0.9, 1.0), (0.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0),
-                                                            (0.1, 0.2, 0.3, 0.5), (0.0, 10.0, 20.0, 30.0, 40.0)):  # fmt: skip
+    for sigma, tissue, damping, impact in itertools.product(
+        (0.5, 0.6, 0.7, 0.8, 0.9, 1.0),
+        (0.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0),
+        (0.1, 0.2, 0.3, 0.5),
+        (0.0, 10.0, 20.0, 30.0, 40.0),
+    ):
         noise = replace(base, sigma=sigma, tissue=tissue, tissue_damping=damping, impact=impact)
         f = figures(clips, noise)
-        rows.append({"sigma": sigma, "tissue": tissue, "tissue_damping": damping, "impact": impact,
-                     **{k: round(v, 3) for k, v in f.items()}, "score": round(score(f), 4)})  # fmt: skip
+        rows.append(
+            {
+                "sigma": sigma,
+                "tissue": tissue,
+                "tissue_damping": damping,
+                "impact": impact,
+                **{k: round(v, 3) for k, v in f.items()},
+                "score": round(score(f), 4),
+            }
+        )
     rows.sort(key=lambda r: r["score"])
     seconds = sum(c.num_frames for c in clips) / RATE
-    print(json.dumps({"clips": [f.name for f in files], "seconds": round(seconds, 1), "rate_hz": RATE,
-                      "targets": TARGETS, "best": rows[0], "runners_up": rows[1:6],
-                      "rigid_default_sigma": next(r for r in rows if r["sigma"] == 0.5 and r["tissue"] == 0
-                                                  and r["impact"] == 0)}, indent=1))  # fmt: skip
+    print(
+        json.dumps(
+            {
+                "clips": [f.name for f in files],
+                "seconds": round(seconds, 1),
+                "rate_hz": RATE,
+                "targets": TARGETS,
+                "best": rows[0],
+                "runners_up": rows[1:6],
+                "rigid_default_sigma": next(
+                    r for r in rows if r["sigma"] == 0.5 and r["tissue"] == 0 and r["impact"] == 0
+                ),
+            },
+            indent=1,
+        )
+    )
     # (the `default` preset's sensors: σ 0.5, rigid, no jolts)
 
 

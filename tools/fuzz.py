@@ -78,8 +78,16 @@ def _worker_mutate(args, target, state: Path) -> dict:
         _save(Path(args.out), data, outcome.kind, f"{outcome.error}\n\n{outcome.trace}")
 
     _limit_memory(args.memory_mb)
-    stats = mutation_loop(target, corpus, seed=args.seed, seconds=args.seconds, time_limit_s=args.time_limit,
-                          memory_limit=args.trace_mb << 20, on_finding=found, on_execution=in_flight)  # fmt: skip
+    stats = mutation_loop(
+        target,
+        corpus,
+        seed=args.seed,
+        seconds=args.seconds,
+        time_limit_s=args.time_limit,
+        memory_limit=args.trace_mb << 20,
+        on_finding=found,
+        on_execution=in_flight,
+    )
     out = stats.as_dict()
     out["findings"] = [{"kind": o.kind, "error": o.error[:300]} for _, o in stats.findings]
     return out
@@ -104,9 +112,17 @@ def _worker_atheris(args, target, state: Path) -> None:
             _save(Path(args.out), data, outcome.kind, f"{outcome.error}\n\n{outcome.trace}")
             raise RuntimeError(f"{outcome.kind}: {outcome.error}")
 
-    argv = [sys.argv[0], f"-max_total_time={max(1, int(args.seconds))}", f"-timeout={int(args.time_limit) + 1}",
-            f"-rss_limit_mb={args.memory_mb + 1024}", f"-seed={args.seed + 1}", "-print_final_stats=1",
-            f"-artifact_prefix={args.out}/", "-max_len=262144", str(corpus_dir)]  # fmt: skip
+    argv = [
+        sys.argv[0],
+        f"-max_total_time={max(1, int(args.seconds))}",
+        f"-timeout={int(args.time_limit) + 1}",
+        f"-rss_limit_mb={args.memory_mb + 1024}",
+        f"-seed={args.seed + 1}",
+        "-print_final_stats=1",
+        f"-artifact_prefix={args.out}/",
+        "-max_len=262144",
+        str(corpus_dir),
+    ]
     atheris.Setup(argv, test_one)
     atheris.Fuzz()
 
@@ -119,9 +135,11 @@ def worker(args) -> None:
 
         # numba compiles a kernel from its bytecode: modules that define kernels stay
         # uninstrumented (their Python code is then not coverage-guided).
-        compiled = sorted(".".join(p.relative_to(ROOT).with_suffix("").parts)
-                          for p in (ROOT / "graphsvc").rglob("*.py")
-                          if "njit" in (text := p.read_text()) or "numba.jit" in text or "@numba" in text)  # fmt: skip
+        compiled = sorted(
+            ".".join(p.relative_to(ROOT).with_suffix("").parts)
+            for p in (ROOT / "graphsvc").rglob("*.py")
+            if "njit" in (text := p.read_text()) or "numba.jit" in text or "@numba" in text
+        )
         with atheris.instrument_imports(include=["graphsvc"], exclude=compiled):
             from graphsvc.fuzz.targets import TARGETS
 
@@ -155,17 +173,42 @@ def _atheris_executions(stderr: str) -> int:
 def supervise(args) -> dict:
     out = Path(args.out)
     deadline = time.monotonic() + args.seconds
-    total = {"target": args.target, "engine": args.engine, "seconds": args.seconds, "executions": 0,
-             "outcomes": {}, "findings": [], "restarts": 0}  # fmt: skip
+    total = {
+        "target": args.target,
+        "engine": args.engine,
+        "seconds": args.seconds,
+        "executions": 0,
+        "outcomes": {},
+        "findings": [],
+        "restarts": 0,
+    }
     seed = args.seed
     while True:
         left = deadline - time.monotonic()
         if left < 1 and total["restarts"] + total["executions"] > 0:
             break
         state = Path(tempfile.mkdtemp(prefix="graphsvc-fuzz-state-"))
-        cmd = [sys.executable, __file__, args.target, "--worker", str(state), "--engine", args.engine,
-               "--seconds", f"{max(left, 1):.1f}", "--seed", str(seed), "--out", str(out), "--time-limit",
-               str(args.time_limit), "--memory-mb", str(args.memory_mb), "--trace-mb", str(args.trace_mb)]  # fmt: skip
+        cmd = [
+            sys.executable,
+            __file__,
+            args.target,
+            "--worker",
+            str(state),
+            "--engine",
+            args.engine,
+            "--seconds",
+            f"{max(left, 1):.1f}",
+            "--seed",
+            str(seed),
+            "--out",
+            str(out),
+            "--time-limit",
+            str(args.time_limit),
+            "--memory-mb",
+            str(args.memory_mb),
+            "--trace-mb",
+            str(args.trace_mb),
+        ]
         if args.corpus:
             cmd += ["--corpus", args.corpus]
         err = open(state / "stderr", "w+")
@@ -189,8 +232,11 @@ def supervise(args) -> dict:
         if args.engine == "atheris":
             total["executions"] += _atheris_executions(stderr)
             if proc.returncode != 0:
-                crash = [line for line in stderr.splitlines() if "==ERROR" in line or "Uncaught" in line or
-                         "deadly signal" in line or "timeout" in line.lower()][:3]  # fmt: skip
+                crash = [
+                    line
+                    for line in stderr.splitlines()
+                    if "==ERROR" in line or "Uncaught" in line or "deadly signal" in line or "timeout" in line.lower()
+                ][:3]
                 total["findings"].append({"kind": "atheris", "error": " | ".join(crash)[:300]})
         else:
             stats_file = state / "stats.json"
@@ -206,8 +252,13 @@ def supervise(args) -> dict:
                 data = current.read_bytes()
                 kind = "hang" if hang else f"signal-{-proc.returncode}" if proc.returncode < 0 else "exit"
                 path = _save(out, data, kind, stderr[-4000:])
-                total["findings"].append({"kind": kind, "error": stderr.strip().splitlines()[-1:] and
-                                          stderr.strip().splitlines()[-1][:300] or "", "file": str(path)})  # fmt: skip
+                total["findings"].append(
+                    {
+                        "kind": kind,
+                        "error": stderr.strip().splitlines()[-1:] and stderr.strip().splitlines()[-1][:300] or "",
+                        "file": str(path),
+                    }
+                )
         shutil.rmtree(state, ignore_errors=True)
         seed += 1
         total["restarts"] += 1
@@ -223,8 +274,13 @@ def replay(args) -> dict:
     from graphsvc.fuzz.targets import TARGETS
 
     outcome = run_one(TARGETS[args.target], Path(args.replay).read_bytes(), time_limit_s=args.time_limit)
-    return {"target": args.target, "input": args.replay, "outcome": outcome.kind, "error": outcome.error,
-            "trace": outcome.trace}  # fmt: skip
+    return {
+        "target": args.target,
+        "input": args.replay,
+        "outcome": outcome.kind,
+        "error": outcome.error,
+        "trace": outcome.trace,
+    }
 
 
 def main() -> None:

@@ -48,10 +48,13 @@ def main() -> int:
         n = resample(m, args.rate).num_frames  # what join_clips played of it
         clips.append({"name": m.name, "label": str(labels[at]), "first_frame": at, "frames": n})
         at += n
-    write_text_atomic(args.output.with_suffix(".labels.json"),
-                      json.dumps({"rate_hz": args.rate, "clips": clips}, indent=1) + "\n")
-    print(f"wrote {args.output} ({joined.num_frames} frames, {joined.duration_s:.1f} s) and "
-          f"{args.output.with_suffix('.labels.json').name}")
+    write_text_atomic(
+        args.output.with_suffix(".labels.json"), json.dumps({"rate_hz": args.rate, "clips": clips}, indent=1) + "\n"
+    )
+    print(
+        f"wrote {args.output} ({joined.num_frames} frames, {joined.duration_s:.1f} s) and "
+        f"{args.output.with_suffix('.labels.json').name}"
+    )
     return 0
 
 

@@ -41,8 +41,12 @@ def main() -> None:
     parser.add_argument("--beams", default="10", help="beam widths, comma-separated")
     parser.add_argument("--mode", choices=("A", "APO"), default="APO")
     parser.add_argument("--no-exact", action="store_true", help="skip the exact search")
-    parser.add_argument("--track-pull", type=float, default=TRACK_PULL_S,
-                        help=f"the search's pull toward the tracker, s (APO; default {TRACK_PULL_S:g}, 0: placed once)")
+    parser.add_argument(
+        "--track-pull",
+        type=float,
+        default=TRACK_PULL_S,
+        help=f"the search's pull toward the tracker, s (APO; default {TRACK_PULL_S:g}, 0: placed once)",
+    )
     args = parser.parse_args()
     graph = bench_beam.benchmark_graph(args.graph)
     walk_nodes, acc, position, heading = bench_beam.graph_walk(graph, args.samples)
@@ -59,20 +63,34 @@ def main() -> None:
         pull = args.track_pull if args.mode == "APO" else 0.0
         r = viterbi_search(graph, acc, *measured, weights, beam=beam, pull_s=pull)
         seconds = time.perf_counter() - t0
-        track, turn = integrate_path(position[0], heading[0], graph.edge_offset[r.edge_path],
-                                     graph.edge_heading[r.edge_path])  # fmt: skip
+        track, turn = integrate_path(
+            position[0], heading[0], graph.edge_offset[r.edge_path], graph.edge_heading[r.edge_path]
+        )
         if args.mode == "APO":  # (the root a synthesis of this path places: fused with the tracker)
-            track = fused_track(graph, r.node_path, r.edge_path, position[0], heading[0], position,
-                                TrackModel(TRACK_SIGMA_M, TRACK_DRIFT, graph.rate_hz))  # fmt: skip
+            track = fused_track(
+                graph,
+                r.node_path,
+                r.edge_path,
+                position[0],
+                heading[0],
+                position,
+                TrackModel(TRACK_SIGMA_M, TRACK_DRIFT, graph.rate_hz),
+            )
         root_err = np.linalg.norm(track - true_position, axis=1)
         heading_err = np.abs((turn - true_heading + np.pi) % (2 * np.pi) - np.pi)
-        row = {"search": "exact" if beam is None else f"beam {beam:g}", "mode": args.mode, "track_pull_s": pull,
-               "nodes": graph.num_nodes,
-               "samples": args.samples, "seconds": round(seconds, 1), "cost": round(r.cost, 1),
-               "root_err_m": round(float(root_err.mean()), 3),
-               "root_err_m_by_quarter": [round(float(root_err[a:b].mean()), 3) for a, b in zip(quarters, quarters[1:])],
-               "heading_err_deg": round(float(np.degrees(heading_err.mean())), 2),
-               "on_walk": round(float(np.mean(r.node_path == walk_nodes)), 4)}  # fmt: skip
+        row = {
+            "search": "exact" if beam is None else f"beam {beam:g}",
+            "mode": args.mode,
+            "track_pull_s": pull,
+            "nodes": graph.num_nodes,
+            "samples": args.samples,
+            "seconds": round(seconds, 1),
+            "cost": round(r.cost, 1),
+            "root_err_m": round(float(root_err.mean()), 3),
+            "root_err_m_by_quarter": [round(float(root_err[a:b].mean()), 3) for a, b in zip(quarters, quarters[1:])],
+            "heading_err_deg": round(float(np.degrees(heading_err.mean())), 2),
+            "on_walk": round(float(np.mean(r.node_path == walk_nodes)), 4),
+        }
         if beam is None:
             exact_path = r.node_path
         elif exact_path is not None:

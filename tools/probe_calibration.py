@@ -63,8 +63,11 @@ def main() -> int:
     ap.add_argument("--pose", default="stand")
     ap.add_argument("--noise", default="default,mount=30")
     ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--accelerations-only", action="store_true",
-                    help="synthesize the match take from its accelerometers alone (no tracker positions or heading)")
+    ap.add_argument(
+        "--accelerations-only",
+        action="store_true",
+        help="synthesize the match take from its accelerometers alone (no tracker positions or heading)",
+    )
     args = ap.parse_args()
 
     graph = load_graph(args.graph)
@@ -91,9 +94,10 @@ def main() -> int:
             "mounting_deg": round(2 * float(np.degrees(np.arccos(min(1.0, abs(true[k, 0]))))), 2),
             "error_deg": round(calibration.angle_deg(est, quat.to_matrix(true[k])), 2),
             "error_vs_mount_and_misalign_deg": round(
-                calibration.angle_deg(est, quat.to_matrix(quat.mul(true[k], misalign[k]))), 2),
+                calibration.angle_deg(est, quat.to_matrix(quat.mul(true[k], misalign[k]))), 2
+            ),
             "residual_deg": cal["sensors"][n]["residual_deg"],
-        }  # fmt: skip
+        }
 
     truth_table = joint_map(match_motion.skeleton)
     pred_table = joint_map(graph.skeleton, graph.params.get("mapping"))

@@ -46,8 +46,14 @@ from graphsvc.sensors.layout import layout_from_dict  # noqa: E402
 from graphsvc.sensors.noise import PRESETS  # noqa: E402
 from graphsvc.strategies.options import Weights  # noqa: E402
 
-SIX = ("walk_normal", "run_normal", "wave-left-hand_normal", "walk-turn-left_normal", "raise-up-both-hands_normal",
-       "walk_masculine")  # fmt: skip
+SIX = (
+    "walk_normal",
+    "run_normal",
+    "wave-left-hand_normal",
+    "walk-turn-left_normal",
+    "raise-up-both-hands_normal",
+    "walk_masculine",
+)
 
 
 def _files(data: Path, names) -> list[Path]:
@@ -73,8 +79,10 @@ def joined(graph, files, seed: int) -> dict:
     out = {"clips": [m.name for m in motions], "seconds": round(truth.duration_s, 2), "hidden_clips": len(indices)}
     for key, setup in (
         ("positions_heading", loo.EvalSetup(PRESETS["default"], True, Options(weights=Weights(0.5, 1.0, 1.0)), seed)),
-        ("accelerometers", loo.EvalSetup(replace(PRESETS["default"], position=0.0, heading="none"), False, Options(),
-                                         seed)),  # fmt: skip
+        (
+            "accelerometers",
+            loo.EvalSetup(replace(PRESETS["default"], position=0.0, heading="none"), False, Options(), seed),
+        ),
     ):
         row = loo.evaluate_clip(graph, truth, indices, setup, labels)
         runs = []
@@ -89,8 +97,9 @@ def joined(graph, files, seed: int) -> dict:
 def constraint_query(graph, file: Path, seed: int) -> dict:
     motion = resample(load_motion(file), graph.rate_hz)
     setup = loo.EvalSetup(PRESETS["default"], True, Options(weights=Weights(0.5, 1.0, 1.0)), seed)
-    rec = loo.simulate_test_input(motion, layout_from_dict(graph.layout), setup, graph.rate_hz,
-                                  graph.params.get("mapping"))  # fmt: skip
+    rec = loo.simulate_test_input(
+        motion, layout_from_dict(graph.layout), setup, graph.rate_hz, graph.params.get("mapping")
+    )
     constraints = ([{"start_s": 2.0, "end_s": 5.0, "require": {"label": "run"}}],)
     result = reconstruct(graph, rec, Options(weights=Weights(0.5, 1.0, 1.0), constraints=constraints))
     labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
@@ -98,12 +107,13 @@ def constraint_query(graph, file: Path, seed: int) -> dict:
     inside = (t >= 2.0) & (t < 5.0)
     outside = (t < 1.0) | (t >= 6.5)
     return {
-        "clip": motion.name, "seconds": round(motion.duration_s, 2),
+        "clip": motion.name,
+        "seconds": round(motion.duration_s, 2),
         "run_inside_2_5_s": round(float(np.mean(labels[inside] == "run")), 4),
         "walk_before_1_after_6_5_s": round(float(np.mean(labels[outside] == "walk")), 4),
         "broken_constraints": result.report.get("broken_constraints"),
         "terms": result.report.get("terms"),
-    }  # fmt: skip
+    }
 
 
 def main() -> int:
@@ -116,9 +126,12 @@ def main() -> int:
     args = p.parse_args()
     graph = load_graph(args.graph)
     names = args.clips.split(",") if args.clips else SIX
-    out = {"graph": str(args.graph), "graph_nodes": graph.num_nodes,
-           "joined": joined(graph, _files(args.data, names), args.seed),
-           "constraint_query": constraint_query(graph, _files(args.data, [args.constraint_clip])[0], args.seed)}  # fmt: skip
+    out = {
+        "graph": str(args.graph),
+        "graph_nodes": graph.num_nodes,
+        "joined": joined(graph, _files(args.data, names), args.seed),
+        "constraint_query": constraint_query(graph, _files(args.data, [args.constraint_clip])[0], args.seed),
+    }
     print(json.dumps(out, indent=1))
     return 0
 

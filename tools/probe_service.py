@@ -47,8 +47,15 @@ METHOD = "/probe.Echo/Stream"
 FRAME_FLOATS = 27 * 7  # a pose frame's rotations and translations on a 27-joint skeleton
 
 
-def session_costs(graph_path: str, recordings: list[str], streams: int, samples: int, beam: float,
-                  live_paths: int | None = None, refine: bool = True) -> dict:  # fmt: skip
+def session_costs(
+    graph_path: str,
+    recordings: list[str],
+    streams: int,
+    samples: int,
+    beam: float,
+    live_paths: int | None = None,
+    refine: bool = True,
+) -> dict:
     import numpy as np
     from bench_service import joined_recordings
 
@@ -87,13 +94,16 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
     for k in range(samples):
         for i in range(streams):
             acc, pos, head = inputs[i]
-            wire = pb.StreamSynthesizeRequest(sample=convert.sample_to_proto(
-                k / graph.rate_hz, acc[k], None if pos is None else pos[k], None if head is None else head[k]),
-            ).SerializeToString()  # fmt: skip
+            wire = pb.StreamSynthesizeRequest(
+                sample=convert.sample_to_proto(
+                    k / graph.rate_hz, acc[k], None if pos is None else pos[k], None if head is None else head[k]
+                ),
+            ).SerializeToString()
             t0 = time.perf_counter()
             sample = pb.StreamSynthesizeRequest.FromString(wire).sample
-            t, a, p, h = convert.sample_from_proto(sample, len(names), None, None if k == 0 else (k - 1) / graph.rate_hz,
-                                                   "sample")  # fmt: skip
+            t, a, p, h = convert.sample_from_proto(
+                sample, len(names), None, None if k == 0 else (k - 1) / graph.rate_hz, "sample"
+            )
             markers = convert.sample_markers_from_proto(sample, 0, "sample")
             orientations = convert.sample_orientations_from_proto(sample, len(names), None, False, "sample")
             if k == warm and i == 0:
@@ -110,12 +120,20 @@ def session_costs(graph_path: str, recordings: list[str], streams: int, samples:
                 totals += (t1 - t0, t2 - t1, t3 - t2)
                 counted += 1
     ms = 1e3 * totals / max(1, counted)
-    return {"streams": streams, "samples": counted, "beam": beam, "live_paths": getattr(options.own, "live_paths", None),
-            "refine": options.shared.refine, "decode_ms": round(float(ms[0]), 4),
-            "push_ms": round(float(ms[1]), 4), "synthesis_ms": round(1e3 * spent[0] / max(1, counted), 4),
-            "encode_ms": round(float(ms[2]), 4), "warm_samples": warm,
-            "start_push_ms": round(float(1e3 * first_pushes.max(axis=1).mean()), 2),
-            "first_samples_ms": round(float(1e3 * first_pushes.sum(axis=1).mean()), 2)}  # fmt: skip
+    return {
+        "streams": streams,
+        "samples": counted,
+        "beam": beam,
+        "live_paths": getattr(options.own, "live_paths", None),
+        "refine": options.shared.refine,
+        "decode_ms": round(float(ms[0]), 4),
+        "push_ms": round(float(ms[1]), 4),
+        "synthesis_ms": round(1e3 * spent[0] / max(1, counted), 4),
+        "encode_ms": round(float(ms[2]), 4),
+        "warm_samples": warm,
+        "start_push_ms": round(float(1e3 * first_pushes.max(axis=1).mean()), 2),
+        "first_samples_ms": round(float(1e3 * first_pushes.sum(axis=1).mean()), 2),
+    }
 
 
 # ---------------------------------------------------------------- gRPC alone
@@ -135,8 +153,9 @@ def _request() -> bytes:
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
 
-    return pb.StreamSynthesizeRequest(sample=convert.sample_to_proto(0.1, [[0.1, 9.8, 0.2]] * 4, (1.0, 2.0), 0.3)
-                                      ).SerializeToString()  # fmt: skip
+    return pb.StreamSynthesizeRequest(
+        sample=convert.sample_to_proto(0.1, [[0.1, 9.8, 0.2]] * 4, (1.0, 2.0), 0.3)
+    ).SerializeToString()
 
 
 def _echo_clients(address: str, streams: int, messages: int, results) -> None:
@@ -181,8 +200,12 @@ def _measure(address: str, streams: int, messages: int) -> dict:
     cpu = time.process_time() - cpu0
     client.join()
     total = streams * messages
-    return {"streams": streams, "messages": total, "cpu_ms_per_message": round(1e3 * cpu / total, 4),
-            "messages_per_s": round(total / wall, 1)}  # fmt: skip
+    return {
+        "streams": streams,
+        "messages": total,
+        "cpu_ms_per_message": round(1e3 * cpu / total, 4),
+        "messages_per_s": round(total / wall, 1),
+    }
 
 
 def grpc_sync(streams: int, messages: int) -> dict:
@@ -195,8 +218,13 @@ def grpc_sync(streams: int, messages: int) -> dict:
             yield response
 
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=streams + 4), options=[("grpc.so_reuseport", 0)])
-    server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler("probe.Echo", {
-        "Stream": grpc.stream_stream_rpc_method_handler(handler)}),))  # fmt: skip
+    server.add_generic_rpc_handlers(
+        (
+            grpc.method_handlers_generic_handler(
+                "probe.Echo", {"Stream": grpc.stream_stream_rpc_method_handler(handler)}
+            ),
+        )
+    )
     port = server.add_insecure_port("127.0.0.1:0")
     server.start()
     try:
@@ -217,8 +245,13 @@ def grpc_aio(streams: int, messages: int) -> dict:
 
     async def main():
         server = grpc.aio.server(options=[("grpc.so_reuseport", 0)])
-        server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler("probe.Echo", {
-            "Stream": grpc.stream_stream_rpc_method_handler(handler)}),))  # fmt: skip
+        server.add_generic_rpc_handlers(
+            (
+                grpc.method_handlers_generic_handler(
+                    "probe.Echo", {"Stream": grpc.stream_stream_rpc_method_handler(handler)}
+                ),
+            )
+        )
         port = server.add_insecure_port("127.0.0.1:0")
         await server.start()
         loop = asyncio.get_running_loop()
@@ -237,10 +270,16 @@ def main(argv=None) -> int:
     parser.add_argument("--recordings", metavar="DIR", help=".rec recordings the streams play (joined)")
     parser.add_argument("--streams", type=int, default=8, help="streams side by side (default 8)")
     parser.add_argument("--samples", type=int, default=600, help="samples a stream (default 600)")
-    parser.add_argument("--messages", type=int, default=2000, help="messages a stream for the gRPC probes (default 2000)")
+    parser.add_argument(
+        "--messages", type=int, default=2000, help="messages a stream for the gRPC probes (default 2000)"
+    )
     parser.add_argument("--beam", type=float, default=10.0, help="beam of the sessions (default 10)")
-    parser.add_argument("--live-paths", type=int, metavar="PATHS",
-                        help="the sessions' --viterbi-live-paths (default: the option's; 0: the beam alone)")
+    parser.add_argument(
+        "--live-paths",
+        type=int,
+        metavar="PATHS",
+        help="the sessions' --viterbi-live-paths (default: the option's; 0: the beam alone)",
+    )
     parser.add_argument("--no-refine", action="store_true", help="the sessions without the refinement")
     parser.add_argument("--only", choices=("session", "grpc"), help="one part only")
     args = parser.parse_args(argv)
@@ -251,8 +290,9 @@ def main(argv=None) -> int:
         recs = sorted(str(p) for p in Path(args.recordings).glob("*.rec"))
         if not recs:
             raise SystemExit(f"{args.recordings}: no .rec recordings")
-        out["session"] = session_costs(args.graph, recs, args.streams, args.samples, args.beam, args.live_paths,
-                                       not args.no_refine)  # fmt: skip
+        out["session"] = session_costs(
+            args.graph, recs, args.streams, args.samples, args.beam, args.live_paths, not args.no_refine
+        )
     if args.only != "session":
         out["grpc_sync"] = grpc_sync(args.streams, args.messages)
         out["grpc_aio"] = grpc_aio(args.streams, args.messages)

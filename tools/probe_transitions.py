@@ -65,8 +65,11 @@ def main() -> None:
     lengths = np.array([c[0].num_frames for c in clips])
     clip_of_frame = np.repeat(np.arange(len(clips)), lengths)
     frame_in_clip = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    rules = {"exclude_same_clip_within": args.exclude_within, "local_min_radius": args.local_min_radius,
-                 "max_per_source": args.max_per_source}
+    rules = {
+        "exclude_same_clip_within": args.exclude_within,
+        "local_min_radius": args.local_min_radius,
+        "max_per_source": args.max_per_source,
+    }
 
     t2 = time.perf_counter()
     fr = tr.kb_frames(features, contacts, changes, clip_of_frame, frame_in_clip, lengths)
@@ -88,7 +91,8 @@ def main() -> None:
         "clips_with_out_edge": int(np.unique(src_clip).size),
         "clips_without_changes": int(np.sum(np.bincount(clip_of_frame[fr.is_change], minlength=len(clips)) == 0)),
         "distance_m_quantiles": [round(float(q), 4) for q in np.quantile(found.distance, [0.1, 0.5, 0.9])]
-        if len(found) else [],
+        if len(found)
+        else [],
         "load_fk_features_s": round(t1 - t0, 3),
         "index_s": round(t3 - t2, 3),
         "exact_rules_s": round(t4 - t3, 3),
@@ -96,8 +100,9 @@ def main() -> None:
     }
     if args.bruteforce:
         t5 = time.perf_counter()
-        ref = tr.find_transitions_bruteforce(features, contacts, changes, clip_of_frame, frame_in_clip, lengths,
-                                             threshold_m=args.threshold, **rules)  # fmt: skip
+        ref = tr.find_transitions_bruteforce(
+            features, contacts, changes, clip_of_frame, frame_in_clip, lengths, threshold_m=args.threshold, **rules
+        )
         result["bruteforce_s"] = round(time.perf_counter() - t5, 3)
         result["bruteforce_equal"] = bool(np.array_equal(ref.src, found.src) and np.array_equal(ref.dst, found.dst))
     print(json.dumps(result))

@@ -28,8 +28,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-TAKES = ("walk_normal_004", "run_active_004", "wave-left-hand_normal_004", "raise-up-both-hands_feminine_004",
-         "walk-turn-left_masculine_004")  # fmt: skip
+TAKES = (
+    "walk_normal_004",
+    "run_active_004",
+    "wave-left-hand_normal_004",
+    "raise-up-both-hands_feminine_004",
+    "walk-turn-left_masculine_004",
+)
 RUNS = {  # name: synthesize flags (after the files)
     "viterbi": ["--strategy", "viterbi", "--weights", "0.5,1,1"],
     "viterbi-live": ["--strategy", "viterbi", "--weights", "0.5,1,1", "--latency", "1"],
@@ -66,8 +71,18 @@ def main() -> int:
     if not (work / "demo.graph").is_file():
         graphsvc("build", demo / "kb", "--layout", "kelly6", "--quiet", "-o", work / "demo.graph")
     if not (work / "demo-markers.rec").is_file():
-        graphsvc("simulate", demo / "performance.bvh", "--markers", "hands-feet", "--noise", "default", "--seed", "7",
-                 "-o", work / "demo-markers.rec")  # fmt: skip
+        graphsvc(
+            "simulate",
+            demo / "performance.bvh",
+            "--markers",
+            "hands-feet",
+            "--noise",
+            "default",
+            "--seed",
+            "7",
+            "-o",
+            work / "demo-markers.rec",
+        )
     cases.append(("demo", work / "demo.graph", demo / "performance.rec", work / "demo-markers.rec"))
     graph = work / "d2.graph"
     if not graph.is_file():

@@ -66,10 +66,25 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_service import random_walk_readings, rss_mb, start_server  # noqa: E402
 
-SCENARIOS = {"complete": 0.35, "disconnect": 0.15, "deadline": 0.10, "malformed": 0.15, "out_of_order": 0.10,
-             "no_config": 0.05, "unary": 0.10}  # fmt: skip
-MALFORMED = ("sample_first", "second_config", "empty_message", "wrong_length", "nan_time", "unknown_graph",
-             "bad_option", "garbage")  # fmt: skip
+SCENARIOS = {
+    "complete": 0.35,
+    "disconnect": 0.15,
+    "deadline": 0.10,
+    "malformed": 0.15,
+    "out_of_order": 0.10,
+    "no_config": 0.05,
+    "unary": 0.10,
+}
+MALFORMED = (
+    "sample_first",
+    "second_config",
+    "empty_message",
+    "wrong_length",
+    "nan_time",
+    "unknown_graph",
+    "bad_option",
+    "garbage",
+)
 # The answers each scenario allows (a stream may also be refused at its limit).
 EXPECTED = {
     "complete": {"OK"},
@@ -103,8 +118,9 @@ def thread_count(pid: int) -> int | None:
 class _Client:
     """One client: calls one after another until `end_at`, tallying the answers."""
 
-    def __init__(self, conn, graph: str, readings: np.ndarray, rate_hz: float, config_timeout_s: float, seed: int,
-                 tally):  # fmt: skip
+    def __init__(
+        self, conn, graph: str, readings: np.ndarray, rate_hz: float, config_timeout_s: float, seed: int, tally
+    ):
         from graphsvc.service._generated import graphsvc_pb2 as pb
 
         self.pb = pb
@@ -120,12 +136,14 @@ class _Client:
     def _sample(self, k: int, t: float | None = None):
         from graphsvc.service import convert
 
-        return self.pb.StreamSynthesizeRequest(sample=convert.sample_to_proto(
-            k / self.rate if t is None else t, self.readings[k % len(self.readings)]))  # fmt: skip
+        return self.pb.StreamSynthesizeRequest(
+            sample=convert.sample_to_proto(k / self.rate if t is None else t, self.readings[k % len(self.readings)])
+        )
 
     def _config(self, **options):
-        return self.pb.StreamSynthesizeRequest(config=self.pb.StreamConfig(
-            graph=self.graph, options=self.pb.SynthesisOptions(beam=10.0, **options)))  # fmt: skip
+        return self.pb.StreamSynthesizeRequest(
+            config=self.pb.StreamConfig(graph=self.graph, options=self.pb.SynthesisOptions(beam=10.0, **options))
+        )
 
     def _paced(self, first, count: int, start: int = 0, then=()):
         """first, then `count` samples at the graph rate, then `then`'s requests."""
@@ -180,8 +198,11 @@ class _Client:
 
         canceller = threading.Thread(target=cancel_later, daemon=True)
         canceller.start()
-        status, _ = self._stream(self._paced(self._config(), 10 * n), 10 * n / self.rate + CALL_SLACK_S,
-                                 on_call=lambda call: holder.setdefault("call", call))  # fmt: skip
+        status, _ = self._stream(
+            self._paced(self._config(), 10 * n),
+            10 * n / self.rate + CALL_SLACK_S,
+            on_call=lambda call: holder.setdefault("call", call),
+        )
         answered.set()  # (refused at once: nothing to cancel)
         canceller.join()
         return status, "", EXPECTED["disconnect"]
@@ -193,8 +214,9 @@ class _Client:
 
     def _out_of_order(self):
         k = int(self.rng.integers(2, 60))
-        status, _ = self._stream(self._paced(self._config(), k, then=[self._sample(0, t=0.5 / self.rate)]),
-                                 k / self.rate + CALL_SLACK_S)  # fmt: skip
+        status, _ = self._stream(
+            self._paced(self._config(), k, then=[self._sample(0, t=0.5 / self.rate)]), k / self.rate + CALL_SLACK_S
+        )
         return status, "", EXPECTED["out_of_order"]
 
     def _no_config(self):
@@ -217,8 +239,9 @@ class _Client:
             if self.rng.random() < 0.5:
                 self.conn.stub.ListGraphs(pb.ListGraphsRequest(), timeout=CALL_SLACK_S, metadata=self.conn.metadata)
             else:
-                self.conn.stub.GetGraph(pb.GetGraphRequest(name="no-such-graph"), timeout=CALL_SLACK_S,
-                                        metadata=self.conn.metadata)  # fmt: skip
+                self.conn.stub.GetGraph(
+                    pb.GetGraphRequest(name="no-such-graph"), timeout=CALL_SLACK_S, metadata=self.conn.metadata
+                )
             return "OK", "", EXPECTED["unary"]
         except grpc.RpcError as exc:
             return exc.code().name, "", EXPECTED["unary"]
@@ -231,8 +254,13 @@ class _Client:
         if kind == "garbage":
             raw = self.conn.channel.stream_stream(STREAM_METHOD, request_serializer=None, response_deserializer=None)
             try:
-                list(raw(iter([bytes(self.rng.integers(0, 256, 64, dtype=np.uint8))]), timeout=CALL_SLACK_S,
-                         metadata=self.conn.metadata))  # fmt: skip
+                list(
+                    raw(
+                        iter([bytes(self.rng.integers(0, 256, 64, dtype=np.uint8))]),
+                        timeout=CALL_SLACK_S,
+                        metadata=self.conn.metadata,
+                    )
+                )
                 return "OK", "garbage answered OK", GARBAGE_EXPECTED
             except grpc.RpcError as exc:
                 return exc.code().name, "", GARBAGE_EXPECTED
@@ -278,8 +306,18 @@ def _client_process(address, graph_path, ids, end_at, config_timeout_s, seed, re
             elif status not in expected or detail:
                 unexpected.append(f"{scenario}: {status} {detail}".strip())
 
-    clients = [_Client(conn, "bench", random_walk_readings(graph_path, 300, seed * 1000 + i), rate, config_timeout_s,
-                       seed * 1000 + i, tally) for i in ids]  # fmt: skip
+    clients = [
+        _Client(
+            conn,
+            "bench",
+            random_walk_readings(graph_path, 300, seed * 1000 + i),
+            rate,
+            config_timeout_s,
+            seed * 1000 + i,
+            tally,
+        )
+        for i in ids
+    ]
 
     def run(client):
         while time.time() < end_at:
@@ -375,8 +413,16 @@ def slots_probe(address: str, n: int, timeout_s: float = 30.0) -> int:
     return started
 
 
-def soak(graph_path: str, seconds: float, streams: int, processes: int, max_streams: int, config_timeout_s: float,
-         every_s: float, seed: int) -> dict:  # fmt: skip
+def soak(
+    graph_path: str,
+    seconds: float,
+    streams: int,
+    processes: int,
+    max_streams: int,
+    config_timeout_s: float,
+    every_s: float,
+    seed: int,
+) -> dict:
     proc, address = start_server(graph_path, max_streams, "--config-timeout-s", f"{config_timeout_s:g}")
     from graphsvc.service.server import UNARY_WORKERS
 
@@ -389,9 +435,13 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
         end_at = time.time() + seconds
         ids = list(range(streams))
         per = math.ceil(streams / max(1, processes))
-        workers = [ctx.Process(target=_client_process, args=(address, graph_path, ids[i:i + per], end_at,
-                                                             config_timeout_s, seed, results))
-                   for i in range(0, streams, per)]  # fmt: skip
+        workers = [
+            ctx.Process(
+                target=_client_process,
+                args=(address, graph_path, ids[i : i + per], end_at, config_timeout_s, seed, results),
+            )
+            for i in range(0, streams, per)
+        ]
         for w in workers:
             w.start()
         summaries, hard_stop = [], end_at + 2 * CALL_SLACK_S + config_timeout_s
@@ -430,8 +480,9 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
         unexpected += s["unexpected"]
     rejected = np.array([ms for s in summaries for ms in s["rejected_ms"]], float)
     rejected_ms_max = float(rejected.max()) if rejected.size else 0.0
-    rejected_ms = {q: round(float(np.percentile(rejected, p)), 1) if rejected.size else None
-                   for q, p in (("p50", 50), ("p99", 99))}  # fmt: skip
+    rejected_ms = {
+        q: round(float(np.percentile(rejected, p)), 1) if rejected.size else None for q, p in (("p50", 50), ("p99", 99))
+    }
     threads_bound = (threads_start or 0) + max_streams + UNARY_WORKERS + THREAD_SLACK
     threads_max = max((n for _, n in monitor.threads if n is not None), default=None)
     growth = rss_growth(monitor.rss, warmup_s=seconds / 5)
@@ -446,8 +497,12 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
         "server_exit_0": exit_code == 0,
     }
     return {
-        "seconds": seconds, "streams": streams, "max_streams": max_streams, "config_timeout_s": config_timeout_s,
-        "calls": calls, "calls_total": sum(sum(v.values()) for v in calls.values()),
+        "seconds": seconds,
+        "streams": streams,
+        "max_streams": max_streams,
+        "config_timeout_s": config_timeout_s,
+        "calls": calls,
+        "calls_total": sum(sum(v.values()) for v in calls.values()),
         "unexpected": {"count": len(unexpected), "first": unexpected[:10]},
         "rejected_ms": {**rejected_ms, "max": round(rejected_ms_max, 1)},
         "health": monitor.health,
@@ -457,7 +512,7 @@ def soak(graph_path: str, seconds: float, streams: int, processes: int, max_stre
         "server_exit": exit_code,
         "checks": checks,
         "ok": all(checks.values()),
-    }  # fmt: skip
+    }
 
 
 def main(argv=None) -> int:
@@ -467,15 +522,24 @@ def main(argv=None) -> int:
     parser.add_argument("--streams", type=int, default=64, help="concurrent clients (default 64)")
     parser.add_argument("--processes", type=int, default=4, help="client processes (default 4)")
     parser.add_argument("--max-streams", type=int, default=16, help="the server's --max-streams (default 16, as serve)")
-    parser.add_argument("--config-timeout-s", type=float, default=2.0,
-                        help="the server's --config-timeout-s (default 2)")  # fmt: skip
+    parser.add_argument(
+        "--config-timeout-s", type=float, default=2.0, help="the server's --config-timeout-s (default 2)"
+    )
     parser.add_argument("--sample-every", type=float, default=5.0, help="RSS and thread samples, s (default 5)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     if not (0 < args.seconds <= 24 * 3600 and 1 <= args.streams <= 1024 and 1 <= args.max_streams):
         raise SystemExit("--seconds must be in (0, 86400], --streams in 1–1024, --max-streams ≥ 1")
-    result = soak(str(Path(args.graph).resolve()), args.seconds, args.streams, args.processes, args.max_streams,
-                  args.config_timeout_s, args.sample_every, args.seed)  # fmt: skip
+    result = soak(
+        str(Path(args.graph).resolve()),
+        args.seconds,
+        args.streams,
+        args.processes,
+        args.max_streams,
+        args.config_timeout_s,
+        args.sample_every,
+        args.seed,
+    )
     print(json.dumps(result), flush=True)
     return 0 if result["ok"] else 1
 

@@ -32,6 +32,12 @@ def generated_graph(nodes: int, edges: int, sensors: int = 6, clip_frames: int =
     acc = node_reading[pairs[:, 1]]
     own = (pairs[:, 1] != pairs[:, 0] + 1) & (rng.random(E) < 0.2)
     acc[own] = rng.normal(0, 9.81, (int(own.sum()), sensors, 3))
-    return graph_from_edges(pairs[:, 0], pairs[:, 1], acc,
-                            offsets=rng.normal(0, 0.05, (E, 2)), dheading=rng.normal(0, 0.03, E), contacts=contacts,
-                            labels=rng.integers(0, 2, nodes))  # fmt: skip
+    return graph_from_edges(
+        pairs[:, 0],
+        pairs[:, 1],
+        acc,
+        offsets=rng.normal(0, 0.05, (E, 2)),
+        dheading=rng.normal(0, 0.03, E),
+        contacts=contacts,
+        labels=rng.integers(0, 2, nodes),
+    )

@@ -27,13 +27,7 @@ from pathlib import Path
 
 from graphsvc.errors import FormatError, GraphsvcError, InputError
 from graphsvc.fileio import file_sha256, read_input_text, require_file
-from graphsvc.flags import (
-    add_performer_flags,
-    add_synthesize_flags,
-    calibration_choice,
-    options_from_flags,
-    os_message,  # fmt: skip
-)
+from graphsvc.flags import add_performer_flags, add_synthesize_flags, calibration_choice, options_from_flags, os_message
 from graphsvc.graph.file import graph_file_meta
 from graphsvc.motion.output import MOTION_OUTPUT_SUFFIXES
 from graphsvc.motion.proportions import performer_segments
@@ -77,8 +71,9 @@ def read_manifest(path) -> list[Item]:
     for line, row in rows:
         item = _item(path, line, row)
         if item.output in seen:
-            raise FormatError(path, f"output {item.output!r} is also line {seen[item.output]}'s (outputs must differ)",
-                              line)  # fmt: skip
+            raise FormatError(
+                path, f"output {item.output!r} is also line {seen[item.output]}'s (outputs must differ)", line
+            )
         seen[item.output] = line
         items.append(item)
     if not items:
@@ -97,12 +92,16 @@ def _csv_rows(path: Path, text: str):
                 header = [h.strip().lower() for h in row]
                 unknown = [h for h in header if h not in COLUMNS]
                 if unknown:
-                    raise FormatError(path, f"unknown column {unknown[0]!r} (columns: {', '.join(COLUMNS)})",
-                                      reader.line_num)  # fmt: skip
+                    raise FormatError(
+                        path, f"unknown column {unknown[0]!r} (columns: {', '.join(COLUMNS)})", reader.line_num
+                    )
                 missing = [c for c in REQUIRED if c not in header]
                 if missing:
-                    raise FormatError(path, f"the header lacks column {missing[0]!r} (required: {', '.join(REQUIRED)})",
-                                      reader.line_num)  # fmt: skip
+                    raise FormatError(
+                        path,
+                        f"the header lacks column {missing[0]!r} (required: {', '.join(REQUIRED)})",
+                        reader.line_num,
+                    )
                 continue
             if len(row) != len(header):
                 raise FormatError(path, f"{len(row)} fields, the header has {len(header)}", reader.line_num)
@@ -148,8 +147,12 @@ def _item(path: Path, line: int, row: dict) -> Item:
             raise FormatError(path, f"no {c} (required: {', '.join(REQUIRED)})", line)
         values[c] = v or None
     if not OUTPUT_NAME.match(values["output"]) or values["output"].lower().endswith((*MOTION_OUTPUT_SUFFIXES, ".json")):
-        raise FormatError(path, f"output {values['output']!r} must be a plain name (letters, digits, . _ - +), no "
-                                "folder and no extension (the format column chooses .bvh, .glb or .gltf)", line)  # fmt: skip
+        raise FormatError(
+            path,
+            f"output {values['output']!r} must be a plain name (letters, digits, . _ - +), no "
+            "folder and no extension (the format column chooses .bvh, .glb or .gltf)",
+            line,
+        )
     if values["format"] is not None:
         values["format"] = values["format"].lower().lstrip(".")
         if values["format"] not in FORMATS:
@@ -195,18 +198,34 @@ def plan_item(item: Item, folder: Path, graphs: dict, out_dir: Path, version: st
         if meta.get("kind") not in (None, "graph"):
             raise InputError(f"graph {item.graph}: {graph_path} is a {meta.get('kind')} file, not a graph")
         checksum = file_checksum(graph_path)
-        parts = {"version": version, "graph": checksum, "recording": file_sha256(recording), "argv": argv,
-                 "constraints": file_sha256(Path(item.constraints if Path(item.constraints).is_absolute()
-                                             else folder / item.constraints)) if item.constraints else None,
-                 "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
-                 if item.calibration else None,
-                 **({"performer": file_sha256(args.performer)} if args.performer is not None else {}),
-                 **({"format": item.format} if item.format not in (None, "bvh") else {})}  # fmt: skip
+        parts = {
+            "version": version,
+            "graph": checksum,
+            "recording": file_sha256(recording),
+            "argv": argv,
+            "constraints": file_sha256(
+                Path(item.constraints if Path(item.constraints).is_absolute() else folder / item.constraints)
+            )
+            if item.constraints
+            else None,
+            "calibration": file_sha256(_existing(folder, item.calibration, "calibration"))
+            if item.calibration
+            else None,
+            **({"performer": file_sha256(args.performer)} if args.performer is not None else {}),
+            **({"format": item.format} if item.format not in (None, "bvh") else {}),
+        }
     except (GraphsvcError, OSError) as exc:
         reason = str(exc) if isinstance(exc, GraphsvcError) else os_message(exc)
         return Plan(item, None, _digest({"error": reason, "item": repr(item), "version": version}), error=reason)
-    task = {"output": item.output, "out_dir": str(out_dir), "graph": str(graph_path), "graph_checksum": checksum,
-            "recording": str(recording), "argv": argv, "format": item.format or "bvh"}  # fmt: skip
+    task = {
+        "output": item.output,
+        "out_dir": str(out_dir),
+        "graph": str(graph_path),
+        "graph_checksum": checksum,
+        "recording": str(recording),
+        "argv": argv,
+        "format": item.format or "bvh",
+    }
     return Plan(item, task, _digest(parts))
 
 
@@ -223,7 +242,9 @@ def option_argv(item: Item, folder: Path) -> list[str]:
     for key in sorted(item.options):
         flag = str(key).strip().lstrip("-").replace("_", "-")
         if flag in RESERVED_FLAGS:
-            raise InputError(f"options: {key!r} is not an option here (strategy, weights, constraints and calibration are columns)")
+            raise InputError(
+                f"options: {key!r} is not an option here (strategy, weights, constraints and calibration are columns)"
+            )
         value = item.options[key]
         if value is True:
             argv.append(f"--{flag}")
@@ -288,4 +309,3 @@ def _existing(folder: Path, name: str, what: str) -> Path:
 
 def _digest(parts: dict) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:32]
-

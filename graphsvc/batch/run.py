@@ -70,9 +70,15 @@ def local_cluster(workers: int | None = None):
     if n < 1:
         raise InputError(f"--workers must be ≥ 1, got {n}")
     with kept_environ():
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                            silence_logs=logging.ERROR, scheduler_kwargs={"allowed_failures": 0},
-                            env=WORKER_ENV)  # fmt: skip
+        return LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            scheduler_kwargs={"allowed_failures": 0},
+            env=WORKER_ENV,
+        )
 
 
 @contextlib.contextmanager
@@ -102,8 +108,10 @@ def connect(scheduler: str | None, workers: int | None, timeout_s: float = CONNE
         try:
             return Client(address, timeout=f"{timeout_s}s", set_as_default=False), None
         except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"scheduler {address} did not answer within {timeout_s:g} s "
-                             f"({type(exc).__name__}: {store.one_line(exc, 120) or 'no reply'})") from None  # fmt: skip
+            raise InputError(
+                f"scheduler {address} did not answer within {timeout_s:g} s "
+                f"({type(exc).__name__}: {store.one_line(exc, 120) or 'no reply'})"
+            ) from None
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be ≥ 1, got {workers}")
     cluster = local_cluster(workers)
@@ -122,7 +130,9 @@ def cluster_map(client):
         from tqdm import tqdm
 
         futures = client.map(fn, client.scatter(list(items)), pure=False)
-        with tqdm(total=len(futures), desc=desc, unit="clip", disable=None if progress is None else not progress) as bar:
+        with tqdm(
+            total=len(futures), desc=desc, unit="clip", disable=None if progress is None else not progress
+        ) as bar:
             for _ in as_completed(futures, loop=client.loop):
                 bar.update(1)
         return client.gather(futures)
@@ -130,9 +140,20 @@ def cluster_map(client):
     return run
 
 
-def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | None = None, workers: int | None = None,
-              retries: int = 2, progress: bool | None = None, should_stop=None, client=None,
-              timeout_s: float = CONNECT_TIMEOUT_S, on_item=None, base=None) -> dict:  # fmt: skip
+def run_batch(
+    manifest,
+    out_dir,
+    graphs: dict | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    retries: int = 2,
+    progress: bool | None = None,
+    should_stop=None,
+    client=None,
+    timeout_s: float = CONNECT_TIMEOUT_S,
+    on_item=None,
+    base=None,
+) -> dict:
     """Run a manifest's items into `out_dir` and return the summary (also written to
     out_dir/summary.json). graphs: {name: path} for the manifest's graph names;
     retries: further attempts an item gets after a failure that is not its input's;
@@ -155,8 +176,18 @@ def run_batch(manifest, out_dir, graphs: dict | None = None, scheduler: str | No
     try:
         out = check_out_dir(out_dir)
         with store.folder_lock(out), kept_environ():  # (a worker restarted by its nanny)
-            return _run(client, manifest, items, out, graphs or {}, retries, progress, should_stop, on_item,
-                        Path(base) if base is not None else manifest.parent)  # fmt: skip
+            return _run(
+                client,
+                manifest,
+                items,
+                out,
+                graphs or {},
+                retries,
+                progress,
+                should_stop,
+                on_item,
+                Path(base) if base is not None else manifest.parent,
+            )
     finally:
         if own is not None:
             with contextlib.suppress(Exception):
@@ -272,10 +303,17 @@ def make_summary(con, outputs, seconds: float, skipped: int, state: str) -> dict
         res = r["result"] or {}
         entry = {"output": name, "line": r["line"], "state": r["state"], "attempts": r["attempts"]}
         if r["state"] == "done":
-            entry.update(seconds=round(res["seconds"], 4), samples=res["samples"], input_s=round(res["input_s"], 3),
-                         samples_per_s=res.get("samples_per_s"), cost=res.get("cost"), terms=res.get("terms", {}),
-                         path=r["output_path"], checksum=r["checksum"],
-                         **{k: res[k] for k in ("jitter_km_s3", "skate_cm_s") if k in res})  # fmt: skip
+            entry.update(
+                seconds=round(res["seconds"], 4),
+                samples=res["samples"],
+                input_s=round(res["input_s"], 3),
+                samples_per_s=res.get("samples_per_s"),
+                cost=res.get("cost"),
+                terms=res.get("terms", {}),
+                path=r["output_path"],
+                checksum=r["checksum"],
+                **{k: res[k] for k in ("jitter_km_s3", "skate_cm_s") if k in res},
+            )
             total_samples += res["samples"]
             total_input += res["input_s"]
             total_item_s += res["seconds"]
@@ -288,11 +326,17 @@ def make_summary(con, outputs, seconds: float, skipped: int, state: str) -> dict
     return {
         "state": state,
         "items": items,
-        "totals": {"items": len(items), **c, "skipped": skipped, "seconds": round(seconds, 3),
-                   "samples": int(total_samples), "input_hours": round(total_input / 3600.0, 5),
-                   "item_seconds": round(total_item_s, 3),
-                   "items_per_s": round((len(items) - skipped) / seconds, 4) if seconds > 0 else None,
-                   "input_hours_per_s": round(total_input / 3600.0 / seconds, 6) if seconds > 0 else None},  # fmt: skip
+        "totals": {
+            "items": len(items),
+            **c,
+            "skipped": skipped,
+            "seconds": round(seconds, 3),
+            "samples": int(total_samples),
+            "input_hours": round(total_input / 3600.0, 5),
+            "item_seconds": round(total_item_s, 3),
+            "items_per_s": round((len(items) - skipped) / seconds, 4) if seconds > 0 else None,
+            "input_hours_per_s": round(total_input / 3600.0 / seconds, 6) if seconds > 0 else None,
+        },
         "failures": failures,
     }
 
@@ -305,19 +349,28 @@ def format_summary(summary: dict) -> str:
     lines = [head]
     for e in summary["items"]:
         if e["state"] == "done":
-            lines.append([e["output"], e["state"], str(e["attempts"]), f"{e['seconds']:.2f}",
-                          f"{e['samples_per_s']:,.0f}" if e.get("samples_per_s") else "-",
-                          f"{e['jitter_km_s3']:.2f}" if e.get("jitter_km_s3") is not None else "-",
-                          f"{e['skate_cm_s']:.1f}" if e.get("skate_cm_s") is not None else "-",
-                          f"{e['cost']:.2f}" if e.get("cost") is not None else "-",
-                          *(f"{e['terms'][t]:.2f}" if t in e.get("terms", {}) else "-" for t in terms)])  # fmt: skip
+            lines.append(
+                [
+                    e["output"],
+                    e["state"],
+                    str(e["attempts"]),
+                    f"{e['seconds']:.2f}",
+                    f"{e['samples_per_s']:,.0f}" if e.get("samples_per_s") else "-",
+                    f"{e['jitter_km_s3']:.2f}" if e.get("jitter_km_s3") is not None else "-",
+                    f"{e['skate_cm_s']:.1f}" if e.get("skate_cm_s") is not None else "-",
+                    f"{e['cost']:.2f}" if e.get("cost") is not None else "-",
+                    *(f"{e['terms'][t]:.2f}" if t in e.get("terms", {}) else "-" for t in terms),
+                ]
+            )
         else:
             lines.append([e["output"], e["state"], str(e["attempts"])] + ["-"] * (len(head) - 3))
     widths = [max(len(row[k]) for row in lines) for k in range(len(head))]
     text = ["  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip() for row in lines]
     t = summary["totals"]
-    text.append(f"total: {t['items']} items, {t['done']} done ({t['skipped']} unchanged, skipped), {t['failed']} failed, "
-                f"{t['queued'] + t['running']} not run; {t['input_hours'] * 60:.1f} min of input in {t['seconds']:.1f} s")  # fmt: skip
+    text.append(
+        f"total: {t['items']} items, {t['done']} done ({t['skipped']} unchanged, skipped), {t['failed']} failed, "
+        f"{t['queued'] + t['running']} not run; {t['input_hours'] * 60:.1f} min of input in {t['seconds']:.1f} s"
+    )
     for f in summary["failures"]:
         text.append(f"failed: {f['output']} (line {f['line']}): {f['reason']}")
     return "\n".join(text)
@@ -331,8 +384,15 @@ class _Progress:
 
         self.t0 = time.perf_counter()
         self.input_s = 0.0
-        self.bar = tqdm(total=total, initial=skipped, unit="item", disable=False if show else (None if show is None else True),
-                        desc="batch", dynamic_ncols=True, smoothing=0.1)  # fmt: skip
+        self.bar = tqdm(
+            total=total,
+            initial=skipped,
+            unit="item",
+            disable=False if show else (None if show is None else True),
+            desc="batch",
+            dynamic_ncols=True,
+            smoothing=0.1,
+        )
 
     def update(self, result, failed: bool = False) -> None:
         if result and not failed:

@@ -85,8 +85,9 @@ class BatchManager:
             shutil.rmtree(staging, ignore_errors=True)
             raise
         stop = threading.Event()
-        thread = threading.Thread(target=self._run, args=(folder, manifest, retries, stop), daemon=True,
-                                  name=f"graphsvc-batch-{batch_id}")  # fmt: skip
+        thread = threading.Thread(
+            target=self._run, args=(folder, manifest, retries, stop), daemon=True, name=f"graphsvc-batch-{batch_id}"
+        )
         with self._lock:
             self._jobs[batch_id] = (thread, stop)
         thread.start()
@@ -94,8 +95,16 @@ class BatchManager:
 
     def _run(self, folder: Path, manifest: Path, retries: int, stop: threading.Event) -> None:
         try:
-            run_batch(manifest, folder, graphs=self.graphs, client=self._dask(), retries=retries, progress=False,
-                      should_stop=stop.is_set, base=self.root)  # fmt: skip
+            run_batch(
+                manifest,
+                folder,
+                graphs=self.graphs,
+                client=self._dask(),
+                retries=retries,
+                progress=False,
+                should_stop=stop.is_set,
+                base=self.root,
+            )
         except Exception as exc:  # noqa: BLE001 — the batch's own failure, read by GetBatch
             reason = str(exc) if isinstance(exc, GraphsvcError) else f"internal error ({type(exc).__name__}: {exc})"
             con = store.open_store(folder)
@@ -126,9 +135,15 @@ class BatchManager:
             counts = store.counts(con)
             total = max(store.get_meta(con, "items", 0), sum(counts.values()))
             counts["queued"] += total - sum(counts.values())  # not yet entered in the store
-            out = {"batch_id": batch_id, "state": state, "items": total, **counts,
-                   "error": store.get_meta(con, "error", "") or "", "submitted": store.get_meta(con, "submitted", 0.0),
-                   "folder": str(folder.resolve())}  # fmt: skip
+            out = {
+                "batch_id": batch_id,
+                "state": state,
+                "items": total,
+                **counts,
+                "error": store.get_meta(con, "error", "") or "",
+                "submitted": store.get_meta(con, "submitted", 0.0),
+                "folder": str(folder.resolve()),
+            }
             if items:
                 out["item_rows"] = store.rows(con)
             return out

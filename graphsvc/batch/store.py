@@ -89,14 +89,28 @@ def sync(con, plans, output_checksum) -> list:
         for position, plan in enumerate(plans):
             row = con.execute("SELECT * FROM items WHERE output = ?", (plan.item.output,)).fetchone()
             same = row is not None and row["fingerprint"] == plan.fingerprint
-            if same and row["state"] == "done" and row["output_path"] and \
-                    output_checksum(row["output_path"]) == row["checksum"]:  # fmt: skip
-                con.execute("UPDATE items SET line = ?, position = ? WHERE output = ?",
-                            (plan.item.line, position, plan.item.output))  # fmt: skip
+            if (
+                same
+                and row["state"] == "done"
+                and row["output_path"]
+                and output_checksum(row["output_path"]) == row["checksum"]
+            ):
+                con.execute(
+                    "UPDATE items SET line = ?, position = ? WHERE output = ?",
+                    (plan.item.line, position, plan.item.output),
+                )
                 continue
-            con.execute("INSERT OR REPLACE INTO items VALUES (?, ?, ?, 'queued', ?, ?, NULL, NULL, NULL, NULL, NULL, ?)",
-                        (plan.item.output, plan.item.line, plan.fingerprint, row["attempts"] if same else 0,
-                         row["reason"] if same else None, position))  # fmt: skip
+            con.execute(
+                "INSERT OR REPLACE INTO items VALUES (?, ?, ?, 'queued', ?, ?, NULL, NULL, NULL, NULL, NULL, ?)",
+                (
+                    plan.item.output,
+                    plan.item.line,
+                    plan.fingerprint,
+                    row["attempts"] if same else 0,
+                    row["reason"] if same else None,
+                    position,
+                ),
+            )
             todo.append(plan)
     return todo
 
@@ -104,20 +118,27 @@ def sync(con, plans, output_checksum) -> list:
 def mark_running(con, output: str) -> int:
     """A new attempt starts; returns its number."""
     with _transaction(con):
-        con.execute("UPDATE items SET state = 'running', attempts = attempts + 1, started = ?, ended = NULL "
-                    "WHERE output = ?", (time.time(), output))  # fmt: skip
+        con.execute(
+            "UPDATE items SET state = 'running', attempts = attempts + 1, started = ?, ended = NULL WHERE output = ?",
+            (time.time(), output),
+        )
         return con.execute("SELECT attempts FROM items WHERE output = ?", (output,)).fetchone()[0]
 
 
 def mark_done(con, output: str, result: dict) -> None:
-    con.execute("UPDATE items SET state = 'done', reason = NULL, ended = ?, output_path = ?, checksum = ?, result = ? "
-                "WHERE output = ?", (time.time(), result["output"], result["checksum"], json.dumps(result), output))  # fmt: skip
+    con.execute(
+        "UPDATE items SET state = 'done', reason = NULL, ended = ?, output_path = ?, checksum = ?, result = ? "
+        "WHERE output = ?",
+        (time.time(), result["output"], result["checksum"], json.dumps(result), output),
+    )
 
 
 def mark_failed(con, output: str, reason: str, final: bool = True) -> None:
     """The attempt failed: 'failed' if final, else queued for another."""
-    con.execute("UPDATE items SET state = ?, reason = ?, ended = ? WHERE output = ?",
-                ("failed" if final else "queued", one_line(reason), time.time(), output))  # fmt: skip
+    con.execute(
+        "UPDATE items SET state = ?, reason = ?, ended = ? WHERE output = ?",
+        ("failed" if final else "queued", one_line(reason), time.time(), output),
+    )
 
 
 def mark_queued(con, outputs) -> None:

@@ -38,8 +38,10 @@ def worker_graph(path: str, checksum: str):
     if graph is None:
         graph = load_graph(path, mmap=True)
         if graph.checksum != checksum:
-            raise InputError(f"graph {path} changed since the batch was planned (checksum {graph.checksum[:12]}…, "
-                             f"planned {checksum[:12]}…)")  # fmt: skip
+            raise InputError(
+                f"graph {path} changed since the batch was planned (checksum {graph.checksum[:12]}…, "
+                f"planned {checksum[:12]}…)"
+            )
         _GRAPHS[key] = graph
     return graph
 
@@ -75,11 +77,22 @@ def run_item(task: dict) -> dict:
         graph = worker_graph(task["graph"], task["graph_checksum"])
         warm_s = warm(graph, (task["graph"], task["graph_checksum"]), options.strategy)
         performer = performer_from_flags(args, graph.skeleton, graph.params.get("mapping"))
-        result = synthesize_files(graph, task["graph"], task["recording"], output, options, report_path=report_path,
-                                  scale=args.scale, up=args.up, units=args.units, device_map=args.device_map,
-                                  calibration=args.calibration, threads=False,
-                                  calibrate_from_start=None if args.calibrate_from_start is None
-                                  else (args.calibrate_from_start, args.pose), performer=performer)  # fmt: skip
+        result = synthesize_files(
+            graph,
+            task["graph"],
+            task["recording"],
+            output,
+            options,
+            report_path=report_path,
+            scale=args.scale,
+            up=args.up,
+            units=args.units,
+            device_map=args.device_map,
+            calibration=args.calibration,
+            threads=False,
+            calibrate_from_start=None if args.calibrate_from_start is None else (args.calibrate_from_start, args.pose),
+            performer=performer,
+        )
     except GraphsvcError as exc:
         return {"error": str(exc)}
     r = result.report
@@ -97,4 +110,3 @@ def run_item(task: dict) -> dict:
         **_seen(result.motion, graph.params.get("mapping")),
         "report": str(report_path),
     }
-

@@ -25,22 +25,40 @@ from graphsvc.cli import batch, client, evaluation, graph, motion_files, reconst
 from graphsvc.errors import GraphsvcError
 from graphsvc.flags import Parser, os_message
 
-DESCRIPTION = ("graphsvc reconstructs full-body human motion from sparse measurements — body-worn accelerometers, an "
-               "overhead tracker's position and heading, annotations, or a few optical markers — by searching motion "
-               "capture: build a motion graph of a knowledge base of clips, then synthesize motion from a recording, "
-               "in batch, or live through the gRPC service.")
+DESCRIPTION = (
+    "graphsvc reconstructs full-body human motion from sparse measurements — body-worn accelerometers, an "
+    "overhead tracker's position and heading, annotations, or a few optical markers — by searching motion "
+    "capture: build a motion graph of a knowledge base of clips, then synthesize motion from a recording, "
+    "in batch, or live through the gRPC service."
+)
 
 # The commands in the order `graphsvc --help` lists them.
-COMMANDS = (motion_files.add_inspect, motion_files.add_simulate, graph.add_build, graph.add_info, graph.add_relayout,
-            reconstruction.add_synthesize, reconstruction.add_calibrate, batch.add_batch, evaluation.add_evaluate,
-            evaluation.add_report, motion_files.add_mapping, reconstruction.add_demo, motion_files.add_samples,
-            service.add_serve,
-            client.add_client, client.add_sensor_bridge)  # fmt: skip
+COMMANDS = (
+    motion_files.add_inspect,
+    motion_files.add_simulate,
+    graph.add_build,
+    graph.add_info,
+    graph.add_relayout,
+    reconstruction.add_synthesize,
+    reconstruction.add_calibrate,
+    batch.add_batch,
+    evaluation.add_evaluate,
+    evaluation.add_report,
+    motion_files.add_mapping,
+    reconstruction.add_demo,
+    motion_files.add_samples,
+    service.add_serve,
+    client.add_client,
+    client.add_sensor_bridge,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = Parser(prog="graphsvc", description=DESCRIPTION,
-                    epilog="Run `graphsvc COMMAND --help` for a command's arguments; the README and docs/ for more.")  # fmt: skip
+    parser = Parser(
+        prog="graphsvc",
+        description=DESCRIPTION,
+        epilog="Run `graphsvc COMMAND --help` for a command's arguments; the README and docs/ for more.",
+    )
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error instead of one line")
     parser.add_argument("--version", action="version", version=_version(), help="print the version and exit")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser, metavar="COMMAND")

@@ -10,8 +10,9 @@ def command(sub, name: str, summary: str, description: str | None = None, **kwar
     """Subcommand `name` of `sub` (an argparse subparsers action): `summary` in the
     command list, `description` (default: the summary as a sentence) in its help;
     kwargs: `add_parser`'s others (parents, say)."""
-    return sub.add_parser(name, help=summary, description=description or summary[0].upper() + summary[1:] + ".",
-                          **kwargs)  # fmt: skip
+    return sub.add_parser(
+        name, help=summary, description=description or summary[0].upper() + summary[1:] + ".", **kwargs
+    )
 
 
 def file_arg(value: str | None) -> str | None:

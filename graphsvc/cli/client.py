@@ -23,7 +23,7 @@ from graphsvc.flags import (
     calibration_choice,
     options_from_flags,
     ranged,
-    synthesize_inputs,  # fmt: skip
+    synthesize_inputs,
 )
 
 
@@ -62,8 +62,16 @@ def _recording(args, info):
 
     notes = []
     try:
-        return read_recording_file(args.recording, args.up, args.units, args.device_map, args.calibration, notes,
-                                   layout_name=info.layout, sensor_names=tuple(info.sensor_names))  # fmt: skip
+        return read_recording_file(
+            args.recording,
+            args.up,
+            args.units,
+            args.device_map,
+            args.calibration,
+            notes,
+            layout_name=info.layout,
+            sensor_names=tuple(info.sensor_names),
+        )
     finally:
         print_notes(notes)
 
@@ -83,8 +91,10 @@ def _cmd_client_graphs(args) -> int:
         print(json.dumps({g.name: graph_info_dict(g) for g in graphs}, indent=2, sort_keys=True))
         return 0
     for g in graphs:
-        print(f"{g.name}: {g.node_count:,} nodes, {g.edge_count:,} edges, {g.rate_hz:g} Hz, "
-              f"layout {g.layout} ({', '.join(g.sensor_names)}), {g.kb_minutes:.1f} min of motion")  # fmt: skip
+        print(
+            f"{g.name}: {g.node_count:,} nodes, {g.edge_count:,} edges, {g.rate_hz:g} Hz, "
+            f"layout {g.layout} ({', '.join(g.sensor_names)}), {g.kb_minutes:.1f} min of motion"
+        )
     return 0
 
 
@@ -102,18 +112,27 @@ def _cmd_client_synthesize(args) -> int:
         info = resolve_graph(conn, args.graph, args.timeout)
         rec = _recording(args, info)
         options = _options(args, rec.constraints, rec)
-        result = synthesize(conn, info.name, rec, options, timeout_s=args.timeout,
-                            skeleton=skeleton_from_proto(info.skeleton),
-                            calibrate_from_start=None if start_s is None else (start_s, pose), performer=performer)  # fmt: skip
+        result = synthesize(
+            conn,
+            info.name,
+            rec,
+            options,
+            timeout_s=args.timeout,
+            skeleton=skeleton_from_proto(info.skeleton),
+            calibrate_from_start=None if start_s is None else (start_s, pose),
+            performer=performer,
+        )
     # The server's BVH as it sent it (centimetres); glTF from the returned motion.
     data = result.bvh if output_format(out) == "bvh" else motion_file_bytes(out, result.motion)
     report = [(args.report, json.dumps(result.report, indent=1, sort_keys=True) + "\n")] if args.report else []
     write_texts_atomic(report + [(out, data)])
     r = result.report
     timings = r.get("timings_s", {})
-    print(f"wrote {out}: {result.motion.num_frames} frames at {info.rate_hz:g} Hz from {rec.num_samples} samples, "
-          f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
-          f"search {timings.get('search', float('nan')):.2f} s)")  # fmt: skip
+    print(
+        f"wrote {out}: {result.motion.num_frames} frames at {info.rate_hz:g} Hz from {rec.num_samples} samples, "
+        f"graph {info.name} on {args.server} ({r.get('strategy', args.strategy)}, "
+        f"search {timings.get('search', float('nan')):.2f} s)"
+    )
     return 0
 
 
@@ -134,8 +153,10 @@ def _performer(args):
 
 
 def _batch_line(b) -> str:
-    line = (f"{b.batch_id}: {b.state}, {b.items} items: {b.done} done, {b.failed} failed, {b.running} running, "
-            f"{b.queued} queued")  # fmt: skip
+    line = (
+        f"{b.batch_id}: {b.state}, {b.items} items: {b.done} done, {b.failed} failed, {b.running} running, "
+        f"{b.queued} queued"
+    )
     return line + (f" — {b.error}" if b.error else "")
 
 
@@ -154,8 +175,9 @@ def _cmd_client_batch(args) -> int:
                 time.sleep(args.poll)
                 status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=status.batch_id), args.timeout)
         elif args.batch_command == "status":
-            status = batch_call(conn, "GetBatch", pb.GetBatchRequest(batch_id=args.batch_id, items=args.items),
-                                args.timeout)  # fmt: skip
+            status = batch_call(
+                conn, "GetBatch", pb.GetBatchRequest(batch_id=args.batch_id, items=args.items), args.timeout
+            )
         elif args.batch_command == "cancel":
             status = batch_call(conn, "CancelBatch", pb.CancelBatchRequest(batch_id=args.batch_id), args.timeout)
         else:
@@ -166,14 +188,21 @@ def _cmd_client_batch(args) -> int:
                 print(_batch_line(b))
             return 0
     if getattr(args, "json", False):
-        print(json.dumps(MessageToDict(status, preserving_proto_field_name=True, always_print_fields_with_no_presence=True),
-                         indent=1, sort_keys=True))  # fmt: skip
+        print(
+            json.dumps(
+                MessageToDict(status, preserving_proto_field_name=True, always_print_fields_with_no_presence=True),
+                indent=1,
+                sort_keys=True,
+            )
+        )
     else:
         print(_batch_line(status))
         for item in status.item_status:
-            print(f"  {item.output} (line {item.line}): {item.state}, {item.attempts} attempt(s)"
-                  + (f", {item.seconds:.2f} s, {item.output_path}" if item.state == "done" else "")
-                  + (f" — {item.reason}" if item.reason else ""))  # fmt: skip
+            print(
+                f"  {item.output} (line {item.line}): {item.state}, {item.attempts} attempt(s)"
+                + (f", {item.seconds:.2f} s, {item.output_path}" if item.state == "done" else "")
+                + (f" — {item.reason}" if item.reason else "")
+            )
     return 1 if status.failed or status.state == "error" else 0
 
 
@@ -192,21 +221,32 @@ def _cmd_client_stream(args) -> int:
         if vmc is not None:
             vmc.send(frame)
         if not args.quiet:
-            print_flushed(f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
-                          f"  latency {latency_ms:7.2f} ms")  # fmt: skip
+            print_flushed(
+                f"frame {frame.index:6d}  t {frame.time_s:8.3f} s  node {frame.node:7d}  {frame.label:<10s}"
+                f"  latency {latency_ms:7.2f} ms"
+            )
 
     with _connect(args) as conn:
         info = resolve_graph(conn, args.graph, args.timeout)
         vmc = _vmc_sender(args, info)
         rec = _recording(args, info)
         options = _options(args, recording=rec)
-        result = stream_recording(conn, info.name, rec, options, speed=args.speed, on_frame=on_frame,
-                                  calibrate_from_start=None if start_s is None else (start_s, pose))  # fmt: skip
+        result = stream_recording(
+            conn,
+            info.name,
+            rec,
+            options,
+            speed=args.speed,
+            on_frame=on_frame,
+            calibrate_from_start=None if start_s is None else (start_s, pose),
+        )
     s = latency_summary(result.latencies_ms)
     lag = result.started.lag_frames if result.started else 0
-    print(f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
-          f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms"
-          + (f"; server {result.server}" if result.server else ""))  # fmt: skip
+    print(
+        f"{s['frames']} frames from {rec.num_samples} samples; latency beyond the lag of {lag} frames "
+        f"({lag / info.rate_hz:.2f} s): p50 {s['p50_ms']} ms, p99 {s['p99_ms']} ms, max {s['max_ms']} ms"
+        + (f"; server {result.server}" if result.server else "")
+    )
     if vmc is not None:
         print(vmc.summary())
     if out is not None:
@@ -234,9 +274,12 @@ def _vmc_sender(args, info):
 
 
 def _add_vmc_flag(p) -> None:
-    p.add_argument("--vmc", metavar="HOST:PORT",
-                   help="also send each pose frame as it arrives to a VMC receiver (OSC over UDP: VSeeFace, EVMC4U, "
-                        "VMC4UE, VMC4B; e.g. 127.0.0.1:39539), Unity humanoid bones (default: none; docs/service.md)")
+    p.add_argument(
+        "--vmc",
+        metavar="HOST:PORT",
+        help="also send each pose frame as it arrives to a VMC receiver (OSC over UDP: VSeeFace, EVMC4U, "
+        "VMC4UE, VMC4B; e.g. 127.0.0.1:39539), Unity humanoid bones (default: none; docs/service.md)",
+    )
 
 
 def _cmd_sensor_bridge(args) -> int:
@@ -272,23 +315,40 @@ def _cmd_sensor_bridge(args) -> int:
             # Ctrl-C / SIGTERM end the input; the server's last frames still arrive.
             previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
-            print_flushed(f"sensor-bridge: reading {args.device} at {args.baud} baud ({args.units}), streaming to "
-                          f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
-                          + (f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
-                             if args.calibrate_seconds else ""))  # fmt: skip
-            result = run_bridge(port, conn, info, options, args.units, args.calibrate_seconds, stop, args.duration,
-                                on_frame=None if vmc is None else vmc.send, mounting=mounting)  # fmt: skip
+            print_flushed(
+                f"sensor-bridge: reading {args.device} at {args.baud} baud ({args.units}), streaming to "
+                f"{args.server} graph {info.name} ({', '.join(info.sensor_names)} at {info.rate_hz:g} Hz)"
+                + (
+                    f"; calibrating for {args.calibrate_seconds:g} s: stand still in the rest pose"
+                    if args.calibrate_seconds
+                    else ""
+                )
+            )
+            result = run_bridge(
+                port,
+                conn,
+                info,
+                options,
+                args.units,
+                args.calibrate_seconds,
+                stop,
+                args.duration,
+                on_frame=None if vmc is None else vmc.send,
+                mounting=mounting,
+            )
         finally:
             port.close()
             for s, handler in previous.items():
                 signal.signal(s, handler)
     st = result.stats
     reasons = ", ".join(f"{n} {r}" for r, n in sorted(st.corrupt.items()))
-    print_flushed(f"sensor-bridge: {result.end_reason}; {st.lines} lines, {st.corrupt_lines} corrupt skipped"
-                  + (f" ({reasons})" if reasons else "")
-                  + f"; {st.device_samples} device samples ({st.incomplete_samples} incomplete, "
-                  f"{st.calibration_samples} calibrating) → {st.samples_streamed} samples at {info.rate_hz:g} Hz; "
-                  f"{len(result.stream.frames)} frames")  # fmt: skip
+    print_flushed(
+        f"sensor-bridge: {result.end_reason}; {st.lines} lines, {st.corrupt_lines} corrupt skipped"
+        + (f" ({reasons})" if reasons else "")
+        + f"; {st.device_samples} device samples ({st.incomplete_samples} incomplete, "
+        f"{st.calibration_samples} calibrating) → {st.samples_streamed} samples at {info.rate_hz:g} Hz; "
+        f"{len(result.stream.frames)} frames"
+    )
     if result.calibration is not None:
         cal = result.calibration
         bias = "; ".join(f"{n} ({', '.join(f'{v:+.2f}' for v in b)})" for n, b in zip(info.sensor_names, cal.bias))
@@ -310,18 +370,31 @@ def _cmd_sensor_bridge(args) -> int:
 
 def _connection_parent() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(add_help=False)
-    p.add_argument("--server", default="127.0.0.1:50051", metavar="ADDR",
-                   help="HOST:PORT, or several as HOST:PORT,HOST:PORT,... (each call to the next server that answers, "
-                        "gRPC's round_robin; a stream stays on its server), or a gRPC target such as "
-                        "dns:///NAME:PORT (default 127.0.0.1:50051)")
+    p.add_argument(
+        "--server",
+        default="127.0.0.1:50051",
+        metavar="ADDR",
+        help="HOST:PORT, or several as HOST:PORT,HOST:PORT,... (each call to the next server that answers, "
+        "gRPC's round_robin; a stream stays on its server), or a gRPC target such as "
+        "dns:///NAME:PORT (default 127.0.0.1:50051)",
+    )
     p.add_argument("--graph", metavar="NAME", help="graph name on the server (default: its only graph)")
     p.add_argument("--token-file", metavar="F", type=PATH, help="file holding the bearer token (default: send none)")
-    p.add_argument("--tls-ca", metavar="F", type=PATH, help="PEM CA certificate of the server: use TLS (default: plaintext)")
-    p.add_argument("--tls-server-name", metavar="NAME",
-                   help="name to check the server certificate against (default: the host of --server)")
-    p.add_argument("--timeout", type=float, metavar="S",
-                   help="deadline of each unary call (graph lookup, synthesize, batches), seconds; a live stream has "
-                        "none (default: none)")  # fmt: skip
+    p.add_argument(
+        "--tls-ca", metavar="F", type=PATH, help="PEM CA certificate of the server: use TLS (default: plaintext)"
+    )
+    p.add_argument(
+        "--tls-server-name",
+        metavar="NAME",
+        help="name to check the server certificate against (default: the host of --server)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        metavar="S",
+        help="deadline of each unary call (graph lookup, synthesize, batches), seconds; a live stream has "
+        "none (default: none)",
+    )
     return p
 
 
@@ -332,8 +405,10 @@ def _live_latency_help(coda: str = "") -> str:
     from graphsvc.strategies.live import LiveSession
 
     lags = "; ".join(f"{name}'s {get(name).describe_lag(30.0)}" for name in available())
-    return (f"the search's fixed lag, seconds: it settles a frame S s after the frame's sample (default "
-            f"{LiveSession.DEFAULT_LATENCY_S:g}). The pose comes out later: {lags}" + coda)  # fmt: skip
+    return (
+        f"the search's fixed lag, seconds: it settles a frame S s after the frame's sample (default "
+        f"{LiveSession.DEFAULT_LATENCY_S:g}). The pose comes out later: {lags}" + coda
+    )
 
 
 def _json_flag(p, what: str) -> None:
@@ -343,25 +418,47 @@ def _json_flag(p, what: str) -> None:
 def add_client(sub) -> None:
     """`client` and its subcommands: graphs, synthesize, batch …, stream."""
     connection = _connection_parent()
-    p = command(sub, "client", "call a graphsvc server",
-                "Call a graphsvc server (graphsvc serve): list its graphs, reconstruct a recording, replay one live, "
-                "run batches.")  # fmt: skip
+    p = command(
+        sub,
+        "client",
+        "call a graphsvc server",
+        "Call a graphsvc server (graphsvc serve): list its graphs, reconstruct a recording, replay one live, "
+        "run batches.",
+    )
     client = p.add_subparsers(dest="client_command", required=True, parser_class=type(p), help="what to call")
 
     what = "list the server's graphs (--graph: one in full)"
-    c = client.add_parser("graphs", parents=[connection], help=what, description=(
-        "List the server's graphs, one line each; with --graph NAME, that graph in full, as `graphsvc info` "
-        "prints it."))  # fmt: skip
+    c = client.add_parser(
+        "graphs",
+        parents=[connection],
+        help=what,
+        description=(
+            "List the server's graphs, one line each; with --graph NAME, that graph in full, as `graphsvc info` "
+            "prints it."
+        ),
+    )
     _json_flag(c, "the graphs (with --graph: that graph)")
     c.set_defaults(run=_cmd_client_graphs)
 
     what = "reconstruct a recording on the server"
-    c = client.add_parser("synthesize", parents=[connection], help=what, description=(
-        "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
-        "BVH; the recording's own constraint sets are sent unless --constraints replaces them."))  # fmt: skip
+    c = client.add_parser(
+        "synthesize",
+        parents=[connection],
+        help=what,
+        description=(
+            "Reconstruct a recording on the server (Synthesize, the whole recording at once) and write the motion as "
+            "BVH; the recording's own constraint sets are sent unless --constraints replaces them."
+        ),
+    )
     c.add_argument("recording", metavar="REC", type=PATH, help="recording (.rec, device CSV or Xsens MVNX)")
-    c.add_argument("-o", "--output", required=True, metavar="OUT.bvh", type=PATH,
-                   help="the motion to write: .bvh (cm), .glb or .gltf (required)")
+    c.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT.bvh",
+        type=PATH,
+        help="the motion to write: .bvh (cm), .glb or .gltf (required)",
+    )
     c.add_argument("--report", metavar="OUT.json", type=PATH, help="write the search report (default: none)")
     add_input_file_flags(c)
     add_calibration_flag(c)
@@ -371,51 +468,94 @@ def add_client(sub) -> None:
     c.set_defaults(run=_cmd_client_synthesize)
 
     what = "batches on the server: submit, status, list, cancel"
-    c = client.add_parser("batch", help=what, description=(
-        "Batches of recordings on the server's files, run on its Dask cluster (a server started with --batch-dir; "
-        "docs/batch.md): submit, status, list, cancel."))  # fmt: skip
+    c = client.add_parser(
+        "batch",
+        help=what,
+        description=(
+            "Batches of recordings on the server's files, run on its Dask cluster (a server started with --batch-dir; "
+            "docs/batch.md): submit, status, list, cancel."
+        ),
+    )
     batch = c.add_subparsers(dest="batch_command", required=True, parser_class=type(p), help="what to do")
     what = "submit a manifest (its paths: the server's files)"
-    b = batch.add_parser("submit", parents=[connection], help=what, description=(
-        "Submit a manifest of recordings to reconstruct; its paths are the server's files. Prints the batch's "
-        "state (with --wait: once it ends; exit 1 if any item failed)."))  # fmt: skip
+    b = batch.add_parser(
+        "submit",
+        parents=[connection],
+        help=what,
+        description=(
+            "Submit a manifest of recordings to reconstruct; its paths are the server's files. Prints the batch's "
+            "state (with --wait: once it ends; exit 1 if any item failed)."
+        ),
+    )
     b.add_argument("manifest", metavar="MANIFEST", type=PATH, help="CSV or JSON manifest (docs/batch.md)")
-    b.add_argument("--format", choices=("csv", "json"), help="the manifest's format (default: by the file's extension, "
-                                                             "csv unless .json)")  # fmt: skip
+    b.add_argument(
+        "--format",
+        choices=("csv", "json"),
+        help="the manifest's format (default: by the file's extension, csv unless .json)",
+    )
     b.add_argument("--retries", type=int, metavar="R", help="further attempts after a worker's failure (default 2)")
     b.add_argument("--wait", action="store_true", help="poll until the batch ends (default: return once submitted)")
-    b.add_argument("--poll", type=float, default=2.0, metavar="S",
-                   help="with --wait: seconds between polls (default 2)")
+    b.add_argument(
+        "--poll", type=float, default=2.0, metavar="S", help="with --wait: seconds between polls (default 2)"
+    )
     _json_flag(b, "the batch's status")
     what = "a batch's state and counts"
-    b = batch.add_parser("status", parents=[connection], help=what, description=(
-        "Print a batch's state and item counts (exit 1 if any item failed)."))  # fmt: skip
+    b = batch.add_parser(
+        "status",
+        parents=[connection],
+        help=what,
+        description=("Print a batch's state and item counts (exit 1 if any item failed)."),
+    )
     b.add_argument("batch_id", metavar="ID", help="the batch's id (as submit printed it)")
-    b.add_argument("--items", action="store_true",
-                   help="every item's state, attempts and reason (default: counts only)")
+    b.add_argument(
+        "--items", action="store_true", help="every item's state, attempts and reason (default: counts only)"
+    )
     _json_flag(b, "the batch's status")
     what = "the server's batches, newest first"
-    b = batch.add_parser("list", parents=[connection], help=what, description=(
-        "List the server's batches, newest first, one line each."))  # fmt: skip
+    b = batch.add_parser(
+        "list", parents=[connection], help=what, description=("List the server's batches, newest first, one line each.")
+    )
     _json_flag(b, "the batches")
     what = "stop a batch (its unfinished items queued)"
-    b = batch.add_parser("cancel", parents=[connection], help=what, description=(
-        "Stop a running batch (its unfinished items are left queued, to resume with `graphsvc batch`) and print "
-        "its status."))  # fmt: skip
+    b = batch.add_parser(
+        "cancel",
+        parents=[connection],
+        help=what,
+        description=(
+            "Stop a running batch (its unfinished items are left queued, to resume with `graphsvc batch`) and print "
+            "its status."
+        ),
+    )
     b.add_argument("batch_id", metavar="ID", help="the batch's id (as submit printed it)")
     _json_flag(b, "the batch's status")
     c.set_defaults(run=_cmd_client_batch)
 
     what = "replay a recording live and print per-frame latency"
-    c = client.add_parser("stream", parents=[connection], help=what, description=(
-        "Replay a recording live through StreamSynthesize, in real time or --speed times faster; print one line per "
-        "frame with its latency (receipt minus sending of the sample that released it), then p50/p99/max beyond "
-        "the stream's lag, which the summary states."))  # fmt: skip
+    c = client.add_parser(
+        "stream",
+        parents=[connection],
+        help=what,
+        description=(
+            "Replay a recording live through StreamSynthesize, in real time or --speed times faster; print one line per "
+            "frame with its latency (receipt minus sending of the sample that released it), then p50/p99/max beyond "
+            "the stream's lag, which the summary states."
+        ),
+    )
     c.add_argument("recording", metavar="REC", type=PATH, help="recording to replay (.rec, device CSV or Xsens MVNX)")
-    c.add_argument("--speed", type=ranged(float, 0.0, 1e6, low_open=True), default=1.0, metavar="X",
-                   help="replay X times faster than real time (default 1: real time)")  # fmt: skip
-    c.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH,
-                   help="write the streamed motion: .bvh (cm), .glb or .gltf (default: none)")
+    c.add_argument(
+        "--speed",
+        type=ranged(float, 0.0, 1e6, low_open=True),
+        default=1.0,
+        metavar="X",
+        help="replay X times faster than real time (default 1: real time)",
+    )
+    c.add_argument(
+        "-o",
+        "--output",
+        metavar="OUT.bvh",
+        type=PATH,
+        help="write the streamed motion: .bvh (cm), .glb or .gltf (default: none)",
+    )
     c.add_argument("--quiet", action="store_true", help="only the summary, no line per frame (default: a line each)")
     add_input_file_flags(c)
     add_calibration_flag(c)
@@ -426,21 +566,40 @@ def add_client(sub) -> None:
 
 
 def add_sensor_bridge(sub) -> None:
-    p = command(sub, "sensor-bridge", "stream a serial accelerometer device to a server",
-                "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
-                "rate, stream them to a server and write the motion that comes back; ends when the device closes, "
-                "after --duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge).",
-                parents=[_connection_parent()])  # fmt: skip
-    p.add_argument("--device", required=True, metavar="DEV", type=PATH, help="serial device, e.g. /dev/ttyUSB0 (required)")
+    p = command(
+        sub,
+        "sensor-bridge",
+        "stream a serial accelerometer device to a server",
+        "Read accelerometer lines (t_ms,sensor_id,ax,ay,az) from a serial device, resample them to the graph "
+        "rate, stream them to a server and write the motion that comes back; ends when the device closes, "
+        "after --duration, or on Ctrl-C/SIGTERM (docs/service.md, Serial sensor bridge).",
+        parents=[_connection_parent()],
+    )
+    p.add_argument(
+        "--device", required=True, metavar="DEV", type=PATH, help="serial device, e.g. /dev/ttyUSB0 (required)"
+    )
     p.add_argument("--baud", type=int, default=115200, metavar="B", help="baud rate (default 115200)")
-    p.add_argument("--units", choices=("m/s2", "g"), default="m/s2",
-                   help="units of the device's readings (default m/s2)")
-    p.add_argument("--calibrate-seconds", type=float, default=0.0, metavar="S",
-                   help="stand still in the rest pose for the first S seconds to estimate sensor biases (default 0: "
-                        "no bias estimated)")  # fmt: skip
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)")
-    p.add_argument("-o", "--output", metavar="OUT.bvh", type=PATH,
-                   help="write the returned motion: .bvh (cm), .glb or .gltf (default: none)")
+    p.add_argument(
+        "--units", choices=("m/s2", "g"), default="m/s2", help="units of the device's readings (default m/s2)"
+    )
+    p.add_argument(
+        "--calibrate-seconds",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="stand still in the rest pose for the first S seconds to estimate sensor biases (default 0: "
+        "no bias estimated)",
+    )
+    p.add_argument(
+        "--duration", type=float, metavar="S", help="stop after S seconds (default: until the device closes)"
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="OUT.bvh",
+        type=PATH,
+        help="write the returned motion: .bvh (cm), .glb or .gltf (default: none)",
+    )
     add_calibration_flag(p)
     _add_vmc_flag(p)
     add_search_flags(p, latency_help=_live_latency_help())

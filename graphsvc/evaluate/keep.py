@@ -24,8 +24,18 @@ def kept_name(name: str, key: str) -> str:
     return (re.sub(r"[^A-Za-z0-9._-]+", "_", str(name)).strip("._") or "clip")[:80] + f"_{key}"
 
 
-def keep_clip(folder: Path, stem: str, motion, truth, rec, timeline: dict, per_frame: dict, labels,
-              constraints=(), virtual: np.ndarray | None = None) -> dict:  # fmt: skip
+def keep_clip(
+    folder: Path,
+    stem: str,
+    motion,
+    truth,
+    rec,
+    timeline: dict,
+    per_frame: dict,
+    labels,
+    constraints=(),
+    virtual: np.ndarray | None = None,
+) -> dict:
     """Write one evaluated clip into `folder`: the reconstruction (STEM.bvh), the truth
     at the graph rate (STEM.truth.bvh), the simulated input (STEM.rec) and STEM.json
     (timeline, per-frame errors and labels, and the path's virtual readings (T, S, 3)
@@ -36,8 +46,13 @@ def keep_clip(folder: Path, stem: str, motion, truth, rec, timeline: dict, per_f
     write_bvh(folder / files["output"], motion, scale=100.0)
     write_bvh(folder / files["truth"], truth, scale=100.0)
     save_recording(rec, folder / files["recording"])
-    doc = {"name": motion.name, "timeline": timeline, "per_frame": error_arrays(per_frame),
-           "labels": [str(v) for v in labels], "constraints": list(constraints or [])}  # fmt: skip
+    doc = {
+        "name": motion.name,
+        "timeline": timeline,
+        "per_frame": error_arrays(per_frame),
+        "labels": [str(v) for v in labels],
+        "constraints": list(constraints or []),
+    }
     if virtual is not None:  # (little-endian float32, base64, as the page's other arrays)
         f32 = base64.b64encode(np.ascontiguousarray(virtual, dtype="<f4").tobytes()).decode("ascii")
         doc["virtual"] = {"shape": list(virtual.shape), "f32": f32}

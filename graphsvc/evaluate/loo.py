@@ -171,8 +171,9 @@ def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_h
     lost to `setup.pattern` for one that reads markers), noise seeded by `clip_seed`;
     positions dropped unless `setup.positions`."""
     strategy = get_strategy(setup.options.strategy)
-    rec = strategy.simulate_input(motion, layout, setup.options, setup.noise, clip_seed(setup.seed, motion.name),
-                                  rate_hz, mapping, setup.pattern)  # fmt: skip
+    rec = strategy.simulate_input(
+        motion, layout, setup.options, setup.noise, clip_seed(setup.seed, motion.name), rate_hz, mapping, setup.pattern
+    )
     if not setup.positions:
         rec = replace(rec, ground_position=None)
     return rec
@@ -183,8 +184,9 @@ def simulate_test_input(motion: Motion, layout: Layout, setup: EvalSetup, rate_h
 CALIBRATION_POSE_S = 2.0
 
 
-def calibrated_test_input(graph: MotionGraph, truth: Motion, layout: Layout, setup: EvalSetup, mapping,
-                          hidden: list[str]) -> tuple[Recording, dict]:  # fmt: skip
+def calibrated_test_input(
+    graph: MotionGraph, truth: Motion, layout: Layout, setup: EvalSetup, mapping, hidden: list[str]
+) -> tuple[Recording, dict]:
     """The simulated input of a test clip (at the graph's rate) worn as devices are
     worn: CALIBRATION_POSE_S of `setup.calibration_pose` put before the clip
     (`motion.calibration_pose.with_calibration_pose`), the devices simulated over both
@@ -223,17 +225,24 @@ def calibrated_test_input(graph: MotionGraph, truth: Motion, layout: Layout, set
     full = apply_calibration(full, cal)
     cut = posed.num_frames - truth.num_frames
     pick = lambda a: None if a is None else a[cut:]  # noqa: E731
-    rec = replace(full, timestamps_s=full.timestamps_s[cut:] - full.timestamps_s[cut],
-                  accelerations=pick(full.accelerations), orientations=pick(full.orientations),
-                  ground_position=pick(full.ground_position), heading=pick(full.heading))  # fmt: skip
+    rec = replace(
+        full,
+        timestamps_s=full.timestamps_s[cut:] - full.timestamps_s[cut],
+        accelerations=pick(full.accelerations),
+        orientations=pick(full.orientations),
+        ground_position=pick(full.ground_position),
+        heading=pick(full.heading),
+    )
     names = tuple(full.sensor_names)
     estimated = calibration_rotations(cal, names)
     true = mounting(clip_seed(setup.seed, truth.name), names, setup.noise.mount)
     dots = np.abs(np.sum(estimated * true, axis=-1)).clip(0.0, 1.0)
     residuals = [s.get("residual_deg") for s in cal["sensors"].values() if s.get("residual_deg") is not None]
-    return rec, {"calibration_error_deg": float(np.degrees(2.0 * np.arccos(dots)).mean()),
-                 "calibration_residual_deg": float(np.mean(residuals)) if residuals else None,
-                 "calibration_flagged": flagged}  # fmt: skip
+    return rec, {
+        "calibration_error_deg": float(np.degrees(2.0 * np.arccos(dots)).mean()),
+        "calibration_residual_deg": float(np.mean(residuals)) if residuals else None,
+        "calibration_flagged": flagged,
+    }
 
 
 def _global_signals(world_pos: np.ndarray, table: dict, names=CANONICAL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -322,19 +331,31 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
     pred_canon, pred_ground, pred_heading = _global_signals(motion_fk(result.motion)[1], pred_table, compared)
     markers = rec.marker_positions is not None  # (markers place a reconstruction in the world themselves)
     fix_position = rec.ground_position is None and not markers
-    fix_heading = rec.heading is None and rec.ground_position is None and not markers  # (positions: the track placed it)
+    fix_heading = (
+        rec.heading is None and rec.ground_position is None and not markers
+    )  # (positions: the track placed it)
     if fix_position or fix_heading:
-        pred_canon, pred_ground, pred_heading = place_start(pred_canon, pred_ground, pred_heading, true_ground[0],
-                                                            true_heading[0], fix_position, fix_heading)  # fmt: skip
+        pred_canon, pred_ground, pred_heading = place_start(
+            pred_canon, pred_ground, pred_heading, true_ground[0], true_heading[0], fix_position, fix_heading
+        )
     if result.provenance is not None:
         pred_labels = np.asarray(result.provenance.label, dtype=object)
     else:
         pred_labels = np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[result.node_path]]
     true_label = motion.labels[0] if motion.labels else motion.name
     scored = scored_labels(true_label if true_labels is None else true_labels, offered_labels(graph, allowed))
-    row = evaluate_frames(pred_canon, true_canon, pred_ground, pred_heading, true_ground, true_heading,
-                          pred_labels=pred_labels, true_label=scored, name=motion.name,
-                          joints=compared)  # fmt: skip
+    row = evaluate_frames(
+        pred_canon,
+        true_canon,
+        pred_ground,
+        pred_heading,
+        true_ground,
+        true_heading,
+        pred_labels=pred_labels,
+        true_label=scored,
+        name=motion.name,
+        joints=compared,
+    )
     # What a viewer sees, of the output and of the truth (each over its own frames).
     feet = [compared.index(f) for f in ("l_ankle", "r_ankle")]
     seen, seen_per_frame = plausibility(pred_canon, rate, feet)
@@ -348,33 +369,49 @@ def evaluate_clip(graph: MotionGraph, motion: Motion, clip_index, setup: EvalSet
         key = (id(graph), names)
         if _oracle_nodes.get("key") != key:  # (one graph a worker: its nodes' poses once)
             _oracle_nodes.update(key=key, local=oracle.node_local_positions(graph, list(names)))
-        floor, _ = oracle.pose_oracle(_oracle_nodes["local"], allowed,
-                                      oracle.local_positions(true_canon, true_ground, true_heading))  # fmt: skip
+        floor, _ = oracle.pose_oracle(
+            _oracle_nodes["local"], allowed, oracle.local_positions(true_canon, true_ground, true_heading)
+        )
         row["oracle_joint_err_cm"] = float(floor.mean())
         row["per_frame"]["oracle_joint_err_cm"] = floor
     if setup.protocol == "content":
         row["label_acc"] = None  # (its label is hidden: no frame can carry it)
     if setup.keep_dir:
-        row["kept"] = _keep(graph, Path(setup.keep_dir), motion, truth, rec, result, pred_labels, row["per_frame"],
-                            (fix_position, fix_heading), (true_ground[0], true_heading[0], pred_ground, pred_heading))  # fmt: skip
+        row["kept"] = _keep(
+            graph,
+            Path(setup.keep_dir),
+            motion,
+            truth,
+            rec,
+            result,
+            pred_labels,
+            row["per_frame"],
+            (fix_position, fix_heading),
+            (true_ground[0], true_heading[0], pred_ground, pred_heading),
+        )
     report = result.report
-    row.update({
-        "file": clip_file_name(motion.source, motion.name),
-        "label": str(true_label),
-        "samples": int(report["samples"]),
-        "samples_per_s": float(report["samples_per_s"]),
-        "search_s": float(report["timings_s"]["search"]),
-        "hidden_nodes": int(np.count_nonzero(~allowed)),
-        "hidden_clips": int(np.size(clip_index)) if in_graph else 0,
-        "activity": activity(true_label) if true_labels is None else "mixed",
-        "in_graph": in_graph,
-        **({"joined": motion.source} if true_labels is not None else {}),
-        "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
-        **({"missing_joints": sorted(true_table.missing | pred_table.missing)}
-           if true_table.missing or pred_table.missing else {}),
-        "node_path": np.asarray(result.node_path if result.node_path is not None else [], dtype=np.int64),
-        "pred_labels": pred_labels,
-    })  # fmt: skip
+    row.update(
+        {
+            "file": clip_file_name(motion.source, motion.name),
+            "label": str(true_label),
+            "samples": int(report["samples"]),
+            "samples_per_s": float(report["samples_per_s"]),
+            "search_s": float(report["timings_s"]["search"]),
+            "hidden_nodes": int(np.count_nonzero(~allowed)),
+            "hidden_clips": int(np.size(clip_index)) if in_graph else 0,
+            "activity": activity(true_label) if true_labels is None else "mixed",
+            "in_graph": in_graph,
+            **({"joined": motion.source} if true_labels is not None else {}),
+            "start_placed": [k for k, v in (("position", fix_position), ("heading", fix_heading)) if v],
+            **(
+                {"missing_joints": sorted(true_table.missing | pred_table.missing)}
+                if true_table.missing or pred_table.missing
+                else {}
+            ),
+            "node_path": np.asarray(result.node_path if result.node_path is not None else [], dtype=np.int64),
+            "pred_labels": pred_labels,
+        }
+    )
     return row
 
 
@@ -408,8 +445,9 @@ def _keep(graph, folder: Path, motion, truth, rec, result, pred_labels, per_fram
         timeline = timeline_from_sources([str(c["name"]) for c in graph.clips], pred_labels, p.clip, p.frame, p.weight)
         virtual = source_readings(graph, p.clip, p.frame, p.weight)
     stem = kept_name(motion.name, hashlib.sha256(f"{motion.source}/{motion.name}".encode()).hexdigest()[:8])
-    return keep_clip(folder, stem, out.copy(name=motion.name), truth, rec, timeline, per_frame,
-                     pred_labels, rec.constraints, virtual)  # fmt: skip
+    return keep_clip(
+        folder, stem, out.copy(name=motion.name), truth, rec, timeline, per_frame, pred_labels, rec.constraints, virtual
+    )
 
 
 # ---------------------------------------------------------------- many clips
@@ -437,8 +475,14 @@ def _evaluate_in_worker(item: tuple) -> dict:
     return {k: v for k, v in row.items() if k not in ("node_path", "pred_labels")}
 
 
-def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, jobs: int = 1,
-                      graph_path: StrPath | None = None, progress: bool | None = None) -> list[dict]:  # fmt: skip
+def run_leave_one_out(
+    graph: MotionGraph,
+    tests: list[tuple],
+    setup: EvalSetup,
+    jobs: int = 1,
+    graph_path: StrPath | None = None,
+    progress: bool | None = None,
+) -> list[dict]:
     """`evaluate_clip` for each (motion, graph clip index) in `tests` — or (motion,
     clip indices, per-frame labels) for a joined performance; rows in the order of
     `tests` whatever `jobs`. jobs > 1: that many worker processes, each
@@ -457,8 +501,9 @@ def run_leave_one_out(graph: MotionGraph, tests: list[tuple], setup: EvalSetup, 
         threads = max(1, (os.cpu_count() or 1) // jobs)
         # spawn, not fork: numba's thread pool in the parent is not fork-safe.
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(str(graph_path), setup, threads)) as pool:  # fmt: skip
+        with ProcessPoolExecutor(
+            jobs, mp_context=ctx, initializer=_init_worker, initargs=(str(graph_path), setup, threads)
+        ) as pool:
             return list(tqdm(pool.map(_evaluate_in_worker, tests), **bar))
 
 
@@ -490,4 +535,3 @@ def summarize_run(rows: list[dict]) -> dict:
         if members:
             out["groups"][group] = summarize(members)["mean"]
     return out
-

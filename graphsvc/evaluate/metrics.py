@@ -165,8 +165,7 @@ def bone_scaled_positions(pos, lengths, parents) -> np.ndarray:
     return out
 
 
-def joint_err_scaled_cm(pred_pos, true_pos, parents, pred_ground, pred_heading, true_ground, true_heading,
-                        legs=None):  # fmt: skip
+def joint_err_scaled_cm(pred_pos, true_pos, parents, pred_ground, pred_heading, true_ground, true_heading, legs=None):
     """`joint_err_cm` of the prediction on the truth's bone lengths: ((T,) per-frame,
     mean) in centimetres. The predicted pose keeps its root and bone directions, each
     bone the truth's length in that frame (`bone_scaled_positions` with `bone_lengths`
@@ -236,8 +235,9 @@ def label_acc(pred_labels, true_label):
     scored = np.array([w is not None for w in want])
     if not scored.any():
         raise InputError("true_label: no frame has a label")
-    per_frame = np.array([lab is not None and w is not None and str(lab) == w for lab, w in zip(labels, want)],
-                         dtype=np.float64)  # fmt: skip
+    per_frame = np.array(
+        [lab is not None and w is not None and str(lab) == w for lab, w in zip(labels, want)], dtype=np.float64
+    )
     return per_frame, float(per_frame[scored].mean())
 
 
@@ -292,8 +292,11 @@ def plausibility(pos, rate_hz: float, feet) -> tuple[dict, dict]:
     """({"jitter_km_s3", "skate_cm_s", "penetration_cm": mean or None}, their per-frame
     arrays) of a motion's global joint positions (T, P, 3) m at rate_hz."""
     out, per_frame = {}, {}
-    for key, (values, mean) in (("jitter_km_s3", jitter_km_s3(pos, rate_hz)), ("skate_cm_s", skate_cm_s(pos, rate_hz, feet)),
-                                ("penetration_cm", penetration_cm(pos))):  # fmt: skip
+    for key, (values, mean) in (
+        ("jitter_km_s3", jitter_km_s3(pos, rate_hz)),
+        ("skate_cm_s", skate_cm_s(pos, rate_hz, feet)),
+        ("penetration_cm", penetration_cm(pos)),
+    ):
         out[key], per_frame[key] = mean, values
     return out, per_frame
 
@@ -352,7 +355,14 @@ def evaluate_frames(
     pred = {k: v[:n] for k, v in pred.items()}
     true = {k: v[:n] for k, v in true.items()}
 
-    joint, joint_mean = joint_err_cm(pred["pred_pos"], true["true_pos"], pred["pred_ground"], pred["pred_heading"], true["true_ground"], true["true_heading"])  # fmt: skip
+    joint, joint_mean = joint_err_cm(
+        pred["pred_pos"],
+        true["true_pos"],
+        pred["pred_ground"],
+        pred["pred_heading"],
+        true["true_ground"],
+        true["true_heading"],
+    )
     root, root_mean = root_err_cm(pred["pred_ground"], true["true_ground"])
     head, head_mean = heading_err_deg(pred["pred_heading"], true["true_heading"])
     per_frame = {"joint_err_cm": joint, "root_err_cm": root, "heading_err_deg": head, "label_acc": None}
@@ -371,8 +381,15 @@ def evaluate_frames(
         if len(joints) != pred_pos.shape[1]:
             raise InputError(f"joints: {len(joints)} names for {pred_pos.shape[1]} joints")
         per_frame["joint_err_scaled_cm"], scaled["joint_err_scaled_cm"] = joint_err_scaled_cm(
-            pred["pred_pos"], true["true_pos"], canonical_parents(joints), pred["pred_ground"], pred["pred_heading"],
-            true["true_ground"], true["true_heading"], legs=[joints.index(n) for n in LEG_JOINTS if n in joints])  # fmt: skip
+            pred["pred_pos"],
+            true["true_pos"],
+            canonical_parents(joints),
+            pred["pred_ground"],
+            pred["pred_heading"],
+            true["true_ground"],
+            true["true_heading"],
+            legs=[joints.index(n) for n in LEG_JOINTS if n in joints],
+        )
     return {
         "name": name,
         "frames": int(n),
@@ -406,8 +423,9 @@ def summarize(results: list[dict]) -> dict:
                 row[k] = float(row[k])
         rows.append(row)
     mean: dict = {"clips": len(rows), "frames": int(sum(int(r["frames"]) for r in rows))}
-    plausible = [k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY), *FLOORS, *SCALED)
-                 if any(k in r for r in rows)]  # fmt: skip
+    plausible = [
+        k for k in (*PLAUSIBILITY, *(f"truth_{p}" for p in PLAUSIBILITY), *FLOORS, *SCALED) if any(k in r for r in rows)
+    ]
     for k in (*METRICS, *plausible):
         have = [r for r in rows if r.get(k) is not None]
         weight = sum(int(r["frames"]) for r in have)
@@ -418,9 +436,14 @@ def summarize(results: list[dict]) -> dict:
 # ---------------------------------------------------------------- two motions, and for a JSON document
 
 
-def truth_errors(predicted: Motion, truth: Motion, pred_labels: ArrayLike | None = None,
-                 true_labels: str | ArrayLike | None = None, pred_mapping: JointMapping = None,
-                 true_mapping: JointMapping = None) -> dict:  # fmt: skip
+def truth_errors(
+    predicted: Motion,
+    truth: Motion,
+    pred_labels: ArrayLike | None = None,
+    true_labels: str | ArrayLike | None = None,
+    pred_mapping: JointMapping = None,
+    true_mapping: JointMapping = None,
+) -> dict:
     """`evaluate_frames` of a reconstruction against its truth (both at one rate; the
     shorter length counts): the scalar metrics and `per_frame` arrays."""
     pt, tt = joint_map(predicted.skeleton, pred_mapping), joint_map(truth.skeleton, true_mapping)
@@ -428,11 +451,17 @@ def truth_errors(predicted: Motion, truth: Motion, pred_labels: ArrayLike | None
     _, pw = motion_fk(predicted)
     _, tw = motion_fk(truth)
     return evaluate_frames(
-        pw[:, [pt[c] for c in names]], tw[:, [tt[c] for c in names]],
-        signals.ground_position(pw, pt["pelvis"]), signals.heading(pw, pt),
-        signals.ground_position(tw, tt["pelvis"]), signals.heading(tw, tt),
-        pred_labels=pred_labels, true_label=true_labels, name=predicted.name, joints=names,
-    )  # fmt: skip
+        pw[:, [pt[c] for c in names]],
+        tw[:, [tt[c] for c in names]],
+        signals.ground_position(pw, pt["pelvis"]),
+        signals.heading(pw, pt),
+        signals.ground_position(tw, tt["pelvis"]),
+        signals.heading(tw, tt),
+        pred_labels=pred_labels,
+        true_label=true_labels,
+        name=predicted.name,
+        joints=names,
+    )
 
 
 def error_arrays(per_frame: dict | None) -> dict | None:
@@ -440,5 +469,8 @@ def error_arrays(per_frame: dict | None) -> dict | None:
     if not per_frame:
         return None
     keys = ("joint_err_cm", "root_err_cm", "heading_err_deg")
-    return {k: [round(float(v), 2) if np.isfinite(v) else None for v in np.asarray(per_frame[k], dtype=np.float64)]
-            for k in keys if per_frame.get(k) is not None}  # fmt: skip
+    return {
+        k: [round(float(v), 2) if np.isfinite(v) else None for v in np.asarray(per_frame[k], dtype=np.float64)]
+        for k in keys
+        if per_frame.get(k) is not None
+    }

@@ -31,8 +31,9 @@ def _label(motion: Motion) -> str:
     return motion.labels[0] if motion.labels else motion.name
 
 
-def join_clips(motions: list[Motion], rate_hz: float, mapping=None, name: str | None = None,
-               turn: bool = False) -> tuple[Motion, np.ndarray]:  # fmt: skip
+def join_clips(
+    motions: list[Motion], rate_hz: float, mapping=None, name: str | None = None, turn: bool = False
+) -> tuple[Motion, np.ndarray]:
     """One performance of the clips in order, at `rate_hz` (module docstring).
 
     turn: also turn each clip about its first ground position so that it starts
@@ -48,7 +49,9 @@ def join_clips(motions: list[Motion], rate_hz: float, mapping=None, name: str | 
     end, end_heading = None, 0.0
     for m in motions:
         if not m.skeleton.same_topology(first.skeleton):
-            raise InputError(f"{m.name}: its skeleton differs from {first.name}'s; a performance has one skeleton topology")
+            raise InputError(
+                f"{m.name}: its skeleton differs from {first.name}'s; a performance has one skeleton topology"
+            )
         m = resample(m, rate_hz)
         table = joint_map(m.skeleton, mapping)
         pos = motion_fk(m)[1]
@@ -71,9 +74,15 @@ def join_clips(motions: list[Motion], rate_hz: float, mapping=None, name: str | 
         rot.append(r)
         trans.append(t)
         labels += [_label(m)] * m.num_frames
-    joined = Motion(first.skeleton, np.concatenate(rot), np.concatenate(trans), rate_hz,
-                    name=name or "+".join(m.name for m in motions), source="joined clips",
-                    labels=("mixed",))  # fmt: skip
+    joined = Motion(
+        first.skeleton,
+        np.concatenate(rot),
+        np.concatenate(trans),
+        rate_hz,
+        name=name or "+".join(m.name for m in motions),
+        source="joined clips",
+        labels=("mixed",),
+    )
     return joined, np.array(labels, dtype=object)
 
 
@@ -104,8 +113,9 @@ def mixed_groups(motions: list[Motion], n: int, seed: int = 0) -> list[list[int]
     return groups
 
 
-def mixed_items(tests: list[Motion], indices: list, n: int, rate_hz: float, mapping=None, seed: int = 0,
-                turn: bool = False) -> list[tuple]:  # fmt: skip
+def mixed_items(
+    tests: list[Motion], indices: list, n: int, rate_hz: float, mapping=None, seed: int = 0, turn: bool = False
+) -> list[tuple]:
     """`loo.run_leave_one_out` items of the joined performances of `tests` (`mixed_groups`):
     (joined motion named mixed_NN, the graph clip indices to hide, per-frame labels).
     indices: per test clip its graph clip index, a list of graph clips it hides

@@ -50,10 +50,13 @@ def node_local_positions(graph: MotionGraph, names: list[str]) -> np.ndarray:
     out = np.empty((graph.num_nodes, len(names), 3), np.float32)
     for lo in range(0, graph.num_nodes, CHUNK):
         n = np.arange(lo, min(lo + CHUNK, graph.num_nodes))
-        _, world = forward_kinematics(graph.node_rotations[n].astype(np.float64),
-                                      graph.node_translations[n].astype(np.float64), graph.skeleton.parents)  # fmt: skip
+        _, world = forward_kinematics(
+            graph.node_rotations[n].astype(np.float64),
+            graph.node_translations[n].astype(np.float64),
+            graph.skeleton.parents,
+        )
         ground = signals.ground_position(world, table["pelvis"])
-        out[lo: lo + n.size] = local_positions(world[:, picked], ground, signals.heading(world, table))
+        out[lo : lo + n.size] = local_positions(world[:, picked], ground, signals.heading(world, table))
     return out
 
 

@@ -46,11 +46,14 @@ _TAKE = re.compile(r"^(?P<stem>.*[A-Za-z].*)_(?P<take>\d{3,})$")
 _BANDAI = re.compile(r"^dataset-(?P<set>\d+)_(?P<content>[^_]+)_(?P<style>[^_]+)_(?P<take>\d+)$")
 _CMU = re.compile(r"^(?P<subject>\d+)_(?P<trial>\d+)$")
 BANDAI_DATASET2_ACTORS = {
-    "active": "bandai-2:active/elderly/exhausted", "elderly": "bandai-2:active/elderly/exhausted",
+    "active": "bandai-2:active/elderly/exhausted",
+    "elderly": "bandai-2:active/elderly/exhausted",
     "exhausted": "bandai-2:active/elderly/exhausted",
-    "feminine": "bandai-2:feminine/youthful", "youthful": "bandai-2:feminine/youthful",
-    "masculine": "bandai-2:masculine/normal", "normal": "bandai-2:masculine/normal",
-}  # fmt: skip
+    "feminine": "bandai-2:feminine/youthful",
+    "youthful": "bandai-2:feminine/youthful",
+    "masculine": "bandai-2:masculine/normal",
+    "normal": "bandai-2:masculine/normal",
+}
 
 
 @dataclass(frozen=True)
@@ -149,10 +152,16 @@ def check_actor_map(clips: list[Clip], actor_map: dict[str, str] | None = None) 
             continue
         by_name.setdefault(named, set()).add(key)
         by_offsets.setdefault(key, set()).add(named)
-    out = [f"actor {name!r}: its clips have {len(keys)} different skeletons" for name, keys in by_name.items()
-           if len(keys) > 1]  # fmt: skip
-    out += [f"one skeleton is named as {len(names)} actors: {', '.join(sorted(names))}" for names in by_offsets.values()
-            if len(names) > 1]  # fmt: skip
+    out = [
+        f"actor {name!r}: its clips have {len(keys)} different skeletons"
+        for name, keys in by_name.items()
+        if len(keys) > 1
+    ]
+    out += [
+        f"one skeleton is named as {len(names)} actors: {', '.join(sorted(names))}"
+        for names in by_offsets.values()
+        if len(names) > 1
+    ]
     return out
 
 
@@ -167,8 +176,9 @@ def graph_clips(graph: MotionGraph, offsets: dict[int, np.ndarray] | None = None
     return out
 
 
-def hidden_clips(protocol: str, test: Clip, clips: list[Clip], actors: np.ndarray | None = None,
-                 test_actor: int | None = None) -> list[int]:  # fmt: skip
+def hidden_clips(
+    protocol: str, test: Clip, clips: list[Clip], actors: np.ndarray | None = None, test_actor: int | None = None
+) -> list[int]:
     """Indices into `clips` (a graph's, `graph_clips`) that `test` hides under
     `protocol`. The test clip itself, if among them, is found by name. actors /
     test_actor: `actor_groups` over clips (and the test clip's group), for `actor`."""
@@ -186,25 +196,30 @@ def hidden_clips(protocol: str, test: Clip, clips: list[Clip], actors: np.ndarra
     return [k for k, c in enumerate(clips) if c.name == test.name or actors[k] == test_actor]
 
 
-def hide_lists(graph: MotionGraph, tests: list, protocol: str, offsets: dict | None = None,
-               actor_map: dict[str, str] | None = None) -> list[list[int]]:  # fmt: skip
+def hide_lists(
+    graph: MotionGraph, tests: list, protocol: str, offsets: dict | None = None, actor_map: dict[str, str] | None = None
+) -> list[list[int]]:
     """For each test clip (Motions), the graph clip indices it hides under `protocol`
     (`hidden_clips`; a test clip absent from the graph hides what the graph holds of
     its set). offsets: graph clip index → skeleton offsets where known (the actor
     protocol links equal skeletons; the test clips' own are always used)."""
     clips = graph_clips(graph, offsets)
-    wanted = [Clip(performance_key(m.source, m.name)[1], str(m.labels[0]) if m.labels else "",
-                   np.asarray(m.skeleton.offsets)) for m in tests]  # fmt: skip
+    wanted = [
+        Clip(performance_key(m.source, m.name)[1], str(m.labels[0]) if m.labels else "", np.asarray(m.skeleton.offsets))
+        for m in tests
+    ]
     actors = test_actors = None
     if protocol == "actor":
         groups = actor_groups(clips + wanted, actor_map)
-        actors, test_actors = groups[: len(clips)], groups[len(clips):]
+        actors, test_actors = groups[: len(clips)], groups[len(clips) :]
     out = []
     for i, c in enumerate(wanted):
         hide = hidden_clips(protocol, c, clips, actors, None if test_actors is None else int(test_actors[i]))
         if clips and len(hide) == len(clips):
-            raise InputError(f"--hold-out {protocol}: {c.name} hides every clip of the graph, leaving nothing to "
-                             "search (choose a protocol that hides less)")  # fmt: skip
+            raise InputError(
+                f"--hold-out {protocol}: {c.name} hides every clip of the graph, leaving nothing to "
+                "search (choose a protocol that hides less)"
+            )
         out.append(hide)
     return out
 
@@ -215,6 +230,6 @@ LOCOMOTION_WORDS = ("walk", "run", "dash", "jog", "stop", "step", "jump")
 
 
 def activity(label: str) -> str:
-    """"locomotion" or "gestures" for a content label (`LOCOMOTION_WORDS`)."""
+    """ "locomotion" or "gestures" for a content label (`LOCOMOTION_WORDS`)."""
     words = re.split(r"[^a-z]+", str(label).lower())
     return "locomotion" if any(w in LOCOMOTION_WORDS for w in words) else "gestures"

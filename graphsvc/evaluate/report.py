@@ -20,8 +20,17 @@ def format_table(summary: dict) -> str:
     (samples/s), and the pose-oracle floor (cm) after the joint error when it was
     scored (`evaluate.oracle`); then, when both occur, the means of the locomotion and the gesture
     clips (`protocols.activity`)."""
-    head = ("clip", "frames", "joint cm", "root cm", "heading °", "jitter out/truth", "skate out/truth", "label %",
-            "samples/s")  # fmt: skip
+    head = (
+        "clip",
+        "frames",
+        "joint cm",
+        "root cm",
+        "heading °",
+        "jitter out/truth",
+        "skate out/truth",
+        "label %",
+        "samples/s",
+    )
 
     floor = "oracle_joint_err_cm" in summary["mean"]
     if floor:
@@ -34,11 +43,19 @@ def format_table(summary: dict) -> str:
         return f"{_fmt(r.get(key), spec)} / {_fmt(r.get('truth_' + key), spec)}" if key in r else "—"
 
     def cells(title, r):
-        return (title, f"{r['frames']:,}", _fmt(r["joint_err_cm"], ".2f"),
-                *((_fmt(r.get("joint_err_scaled_cm"), ".2f"),) if scaled else ()),
-                *((_fmt(r.get("oracle_joint_err_cm"), ".2f"),) if floor else ()), _fmt(r["root_err_cm"], ".1f"),
-                _fmt(r["heading_err_deg"], ".1f"), pair(r, "jitter_km_s3", ".2f"), pair(r, "skate_cm_s", ".1f"),
-                _fmt(r["label_acc"], ".0f", 100.0, "n/a"), _fmt(r.get("samples_per_s"), ",.0f"))  # fmt: skip
+        return (
+            title,
+            f"{r['frames']:,}",
+            _fmt(r["joint_err_cm"], ".2f"),
+            *((_fmt(r.get("joint_err_scaled_cm"), ".2f"),) if scaled else ()),
+            *((_fmt(r.get("oracle_joint_err_cm"), ".2f"),) if floor else ()),
+            _fmt(r["root_err_cm"], ".1f"),
+            _fmt(r["heading_err_deg"], ".1f"),
+            pair(r, "jitter_km_s3", ".2f"),
+            pair(r, "skate_cm_s", ".1f"),
+            _fmt(r["label_acc"], ".0f", 100.0, "n/a"),
+            _fmt(r.get("samples_per_s"), ",.0f"),
+        )
 
     rows = [cells(str(r.get("file") or r["name"]), r) for r in summary["clips"]]
 
@@ -84,8 +101,14 @@ def plot_errors(path, rate_hz: float, per_frame: dict, pred_labels, true_labels,
     ax.axhline(float(joint.mean()), color="tab:blue", linestyle=":", linewidth=0.8)
     ax.set_ylabel("joint error\n[cm]", fontsize=8)
     ax.set_ylim(bottom=0)
-    ax.text(0.01, 0.9, f"mean {joint.mean():.1f} cm (local pose, root aligned)", transform=ax.transAxes, fontsize=7,
-            va="top")  # fmt: skip
+    ax.text(
+        0.01,
+        0.9,
+        f"mean {joint.mean():.1f} cm (local pose, root aligned)",
+        transform=ax.transAxes,
+        fontsize=7,
+        va="top",
+    )
 
     ax = axes[1]
     root = np.asarray(per_frame["root_err_cm"])
@@ -107,8 +130,14 @@ def plot_errors(path, rate_hz: float, per_frame: dict, pred_labels, true_labels,
     ax.set_yticks([1.5, 0.5], ["true", "predicted"], fontsize=7)
     ax.set_ylim(0, 2)
     ax.set_xlabel("time [s]", fontsize=8)
-    ax.legend(handles=[Patch(color=colours[n], label=n) for n in names], loc="upper center",
-              bbox_to_anchor=(0.5, -0.55), ncol=min(len(names), 8), fontsize=7, frameon=False)  # fmt: skip
+    ax.legend(
+        handles=[Patch(color=colours[n], label=n) for n in names],
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.55),
+        ncol=min(len(names), 8),
+        fontsize=7,
+        frameon=False,
+    )
     for a in axes:
         a.tick_params(labelsize=7)
         a.set_xlim(t[0], t[-1] if T > 1 else t[0] + 1.0 / rate_hz)

@@ -34,7 +34,7 @@ from graphsvc.motion.proportions import (
     complete_lengths,
     lengths_for_height,
     performer_segments,
-    segment_lengths,  # fmt: skip
+    segment_lengths,
     skeleton_height,
 )
 from graphsvc.sensors.layout import load_layout
@@ -126,8 +126,14 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
     test_mapping = config.mapping
     if test_mapping and test_mapping != "guess":
         test_mapping = load_mapping_file(test_mapping)
-    setup = loo.EvalSetup(noise=noise, positions=config.position_noise is not None or noise.position > 0,
-                          options=options, seed=config.seed, pattern=pattern, mapping=test_mapping)  # fmt: skip
+    setup = loo.EvalSetup(
+        noise=noise,
+        positions=config.position_noise is not None or noise.position > 0,
+        options=options,
+        seed=config.seed,
+        pattern=pattern,
+        mapping=test_mapping,
+    )
     strategy.check_simulation(options)
     if not loo.reads_markers(setup) and (config.flicker or config.gap_fraction):
         raise InputError("--flicker and --gap-fraction apply to a strategy that reads optical markers")
@@ -146,23 +152,35 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
 
         least = loo.CALIBRATION_POSE_S + 2.0  # (the pose, then 2 s of motion: `sensors.calibration`)
         if not (math.isfinite(config.calibrate_from_start) and config.calibrate_from_start >= least):
-            raise InputError(f"--calibrate-from-start must be a finite number of seconds ≥ {least:g} (the "
-                             f"{loo.CALIBRATION_POSE_S:g} s pose put before each clip, then motion), "
-                             f"got {config.calibrate_from_start}")  # fmt: skip
+            raise InputError(
+                f"--calibrate-from-start must be a finite number of seconds ≥ {least:g} (the "
+                f"{loo.CALIBRATION_POSE_S:g} s pose put before each clip, then motion), "
+                f"got {config.calibrate_from_start}"
+            )
         if config.calibration_pose not in POSES:
             raise InputError(f"unknown calibration pose {config.calibration_pose!r} (one of {', '.join(POSES)})")
         if loo.reads_markers(setup) or config.mixed is not None:
-            raise InputError("--calibrate-from-start applies to a strategy reading body-worn devices, one clip at a "
-                             "time (not --mixed)")  # fmt: skip
-        setup = replace(setup, calibrate_from_start=float(config.calibrate_from_start),
-                        calibration_pose=config.calibration_pose)  # fmt: skip
-    check_outputs([("--json", config.json, (".json",)), ("--report-html", config.report_html, (".html", ".htm"))],
-                  [("a knowledge-base file", k) for k in config.kb] + [("the graph", config.graph),
-                   ("the actor map", config.actors),
-                   ("the joint map", None if config.mapping in (None, "guess") else config.mapping),
-                   ("the performer", config.performer),
-                   ("the performer's joint map", None if config.performer_mapping in (None, "guess")
-                    else config.performer_mapping)])  # fmt: skip
+            raise InputError(
+                "--calibrate-from-start applies to a strategy reading body-worn devices, one clip at a "
+                "time (not --mixed)"
+            )
+        setup = replace(
+            setup, calibrate_from_start=float(config.calibrate_from_start), calibration_pose=config.calibration_pose
+        )
+    check_outputs(
+        [("--json", config.json, (".json",)), ("--report-html", config.report_html, (".html", ".htm"))],
+        [("a knowledge-base file", k) for k in config.kb]
+        + [
+            ("the graph", config.graph),
+            ("the actor map", config.actors),
+            ("the joint map", None if config.mapping in (None, "guess") else config.mapping),
+            ("the performer", config.performer),
+            (
+                "the performer's joint map",
+                None if config.performer_mapping in (None, "guess") else config.performer_mapping,
+            ),
+        ],
+    )
     performer = _performer_given(config)
     keep_tmp = None
     if config.keep_motions:
@@ -186,28 +204,43 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
         names = [f.name for f in files]
         picked = loo.select_clips(names, config.test)
         if not picked:
-            raise InputError(f"--test {config.test!r} matches none of the {len(files)} knowledge-base files (matched "
-                             "against file names, e.g. '*_001.bvh')")  # fmt: skip
+            raise InputError(
+                f"--test {config.test!r} matches none of the {len(files)} knowledge-base files (matched "
+                "against file names, e.g. '*_001.bvh')"
+            )
         if config.graph:
             graph = load_graph(config.graph)
             if layout is not None and layout.name != graph.layout.get("name"):
-                raise InputError(f"{config.graph} was built for layout {graph.layout.get('name')!r}, not "
-                                 f"{layout.name!r} (rebuild it or run `graphsvc relayout`)")  # fmt: skip
+                raise InputError(
+                    f"{config.graph} was built for layout {graph.layout.get('name')!r}, not "
+                    f"{layout.name!r} (rebuild it or run `graphsvc relayout`)"
+                )
             tests = [load_motion(files[k]) for k in picked]
             check_test_skeletons(tests, test_mapping if test_mapping is not None else graph.params.get("mapping"))
             indices = loo.match_graph_clips(graph, tests)
             offsets = {k: m.skeleton.offsets for m, k in zip(tests, indices) if k is not None}
             missing = [m.name for m, k in zip(tests, indices) if k is None]
             if missing:
-                note(f"{len(missing)} test clips are not in {config.graph} and are evaluated with nothing hidden: "
-                     + ", ".join(missing[:5]) + (" …" if len(missing) > 5 else ""))  # fmt: skip
+                note(
+                    f"{len(missing)} test clips are not in {config.graph} and are evaluated with nothing hidden: "
+                    + ", ".join(missing[:5])
+                    + (" …" if len(missing) > 5 else "")
+                )
             build_s = time.perf_counter() - t0
         else:
             augment = tuple(a for a in (config.augment or "").split(",") if a)
-            motions = load_knowledge_base([str(f) for f in files], augment=augment, jobs=config.jobs,
-                                          progress=config.progress)  # fmt: skip
-            graph, _ = build_graph(motions, BuildOptions(layout=layout or load_layout("wrists-ankles"), augment=augment,
-                                                         jobs=config.jobs, progress=config.progress))  # fmt: skip
+            motions = load_knowledge_base(
+                [str(f) for f in files], augment=augment, jobs=config.jobs, progress=config.progress
+            )
+            graph, _ = build_graph(
+                motions,
+                BuildOptions(
+                    layout=layout or load_layout("wrists-ankles"),
+                    augment=augment,
+                    jobs=config.jobs,
+                    progress=config.progress,
+                ),
+            )
             # load_knowledge_base keeps the files' order and appends augmented copies,
             # so file k is graph clip k.
             tests = [motions[k] for k in picked]
@@ -222,39 +255,71 @@ def run(config: EvalConfig, note: Callable[[str], None] | None = None, write_pag
                 note(problem)
         items = list(zip(tests, hides))
         if config.mixed is not None:
-            items = mixed_items(tests, hides, config.mixed, float(graph.rate_hz), graph.params.get("mapping"),
-                                config.seed)  # fmt: skip
+            items = mixed_items(
+                tests, hides, config.mixed, float(graph.rate_hz), graph.params.get("mapping"), config.seed
+            )
             if not items:
-                raise InputError(f"--mixed {config.mixed}: the test clips of no one performer cover {config.mixed} "
-                                 "different labels")  # fmt: skip
+                raise InputError(
+                    f"--mixed {config.mixed}: the test clips of no one performer cover {config.mixed} different labels"
+                )
         t0 = time.perf_counter()
-        rows = loo.run_leave_one_out(graph, items, setup, jobs=config.jobs, graph_path=config.graph,
-                                     progress=config.progress)  # fmt: skip
+        rows = loo.run_leave_one_out(
+            graph, items, setup, jobs=config.jobs, graph_path=config.graph, progress=config.progress
+        )
         eval_s = time.perf_counter() - t0
         out = loo.summarize_run(rows)
         out["mean"]["peak_rss_mb"] = round(loo.peak_rss_mb(), 1)
         out["config"] = {
-            "kb": list(config.kb), "test": config.test, "graph": config.graph, "layout": graph.layout.get("name"),
-            "graph_nodes": graph.num_nodes, "graph_edges": graph.num_edges, "inputs": loo.inputs_description(setup),
-            "noise": noise.to_dict(), "positions": setup.positions, "options": options.to_dict(), "seed": config.seed,
-            "jobs": config.jobs, "build_s": round(build_s, 2), "evaluate_s": round(eval_s, 2), "mixed": config.mixed,
-            "hold_out": config.hold_out, "actors": config.actors,
-            **({"calibrate_from_start": setup.calibrate_from_start, "calibration_pose": setup.calibration_pose}
-               if setup.calibrate_from_start else {}),
+            "kb": list(config.kb),
+            "test": config.test,
+            "graph": config.graph,
+            "layout": graph.layout.get("name"),
+            "graph_nodes": graph.num_nodes,
+            "graph_edges": graph.num_edges,
+            "inputs": loo.inputs_description(setup),
+            "noise": noise.to_dict(),
+            "positions": setup.positions,
+            "options": options.to_dict(),
+            "seed": config.seed,
+            "jobs": config.jobs,
+            "build_s": round(build_s, 2),
+            "evaluate_s": round(eval_s, 2),
+            "mixed": config.mixed,
+            "hold_out": config.hold_out,
+            "actors": config.actors,
+            **(
+                {"calibrate_from_start": setup.calibrate_from_start, "calibration_pose": setup.calibration_pose}
+                if setup.calibrate_from_start
+                else {}
+            ),
             **({"keep_motions": setup.keep_dir} if config.keep_motions else {}),
-            **({"performer": {"file": config.performer, "height_m": round(skeleton_height(setup.performer), 4),
-                              "segments_m": {k: round(v, 6) for k, v in setup.performer.items()}}}
-               if setup.performer is not None else {}),
-        }  # fmt: skip
+            **(
+                {
+                    "performer": {
+                        "file": config.performer,
+                        "height_m": round(skeleton_height(setup.performer), 4),
+                        "segments_m": {k: round(v, 6) for k, v in setup.performer.items()},
+                    }
+                }
+                if setup.performer is not None
+                else {}
+            ),
+        }
         # Without --keep-motions the clips' files live only until the page is written:
         # the summary does not point at them (`graphsvc report` of its JSON then says so).
-        saved = out if config.keep_motions else {**out, "clips": [{k: v for k, v in c.items() if k != "kept"}
-                                                                  for c in out["clips"]]}  # fmt: skip
+        saved = (
+            out
+            if config.keep_motions
+            else {**out, "clips": [{k: v for k, v in c.items() if k != "kept"} for c in out["clips"]]}
+        )
         if config.json:
             write_text_atomic(config.json, json.dumps(saved, indent=1, sort_keys=True) + "\n")
         if config.report_html:
-            write_page(config.report_html, {**out, "config": {**out["config"], "keep_motions": setup.keep_dir}},
-                       Path(setup.keep_dir))  # fmt: skip
+            write_page(
+                config.report_html,
+                {**out, "config": {**out["config"], "keep_motions": setup.keep_dir}},
+                Path(setup.keep_dir),
+            )
     finally:
         if keep_tmp is not None:
             keep_tmp.cleanup()
@@ -270,23 +335,29 @@ def summary_lines(summary: dict, config: EvalConfig) -> list[str]:
     lines = [f"wrote {config.report_html}"] if config.report_html else []
     lines.append(format_table(summary))
     w = options.weights
-    what = (f"{len(summary['clips'])} joined performances of {config.mixed} actions" if config.mixed else
-            "leave-one-out") + f" (hold-out {config.hold_out})"  # fmt: skip
-    searched = (f"{cfg['graph_nodes']:,} nodes, {cfg['inputs']}, strategy {options.strategy}"
-                if "markers" in get(options.strategy).needs else
-                f"{cfg['graph_nodes']:,} nodes ({cfg['layout']}), {cfg['inputs']}, "
-                f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}"
-                + "".join(f", {k} {v}" for k, v in values_of(options.own, changed_only=True).items()))  # fmt: skip
+    what = (
+        f"{len(summary['clips'])} joined performances of {config.mixed} actions" if config.mixed else "leave-one-out"
+    ) + f" (hold-out {config.hold_out})"
+    searched = (
+        f"{cfg['graph_nodes']:,} nodes, {cfg['inputs']}, strategy {options.strategy}"
+        if "markers" in get(options.strategy).needs
+        else f"{cfg['graph_nodes']:,} nodes ({cfg['layout']}), {cfg['inputs']}, "
+        f"weights {w.acc:g},{w.position:g},{w.heading:g},{w.orientation:g}"
+        + "".join(f", {k} {v}" for k, v in values_of(options.own, changed_only=True).items())
+    )
     mean = summary["mean"]
     if cfg.get("calibrate_from_start"):
         flagged = mean.get("calibration_flagged_clips", 0)
-        lines.append(f"devices calibrated from their first {cfg['calibrate_from_start']:g} s ({loo.CALIBRATION_POSE_S:g} s"
-                     f" of {cfg['calibration_pose']} put before each clip, then its motion): mounting error "
-                     f"{mean['calibration_error_deg']:.1f}° (mean over sensors and clips)"
-                     + (f"; {flagged} clips with a sensor the quality check named" if flagged else ""))  # fmt: skip
-    lines.append(f"{what} on {searched}; graph {cfg['build_s']:.1f} s, evaluation {cfg['evaluate_s']:.1f} s, "
-                 f"peak memory {summary['mean']['peak_rss_mb']:,.0f} MB"
-                 + (f"; wrote {config.json}" if config.json else ""))  # fmt: skip
+        lines.append(
+            f"devices calibrated from their first {cfg['calibrate_from_start']:g} s ({loo.CALIBRATION_POSE_S:g} s"
+            f" of {cfg['calibration_pose']} put before each clip, then its motion): mounting error "
+            f"{mean['calibration_error_deg']:.1f}° (mean over sensors and clips)"
+            + (f"; {flagged} clips with a sensor the quality check named" if flagged else "")
+        )
+    lines.append(
+        f"{what} on {searched}; graph {cfg['build_s']:.1f} s, evaluation {cfg['evaluate_s']:.1f} s, "
+        f"peak memory {summary['mean']['peak_rss_mb']:,.0f} MB" + (f"; wrote {config.json}" if config.json else "")
+    )
     return lines
 
 

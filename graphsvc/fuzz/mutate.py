@@ -11,13 +11,62 @@ import re
 
 # Numbers that break parsers: zero, signs, the integer and float limits, huge counts
 # (a declared size that must be refused before anything is allocated), non-finite.
-INTERESTING_NUMBERS = (b"0", b"-0", b"1", b"-1", b"2", b"255", b"65535", b"65536", b"2147483647", b"-2147483648",
-                       b"4294967296", b"9223372036854775807", b"18446744073709551616", b"1000000000000",
-                       b"1e308", b"1e309", b"-1e308", b"5e-324", b"1e-320", b"nan", b"inf", b"-inf", b"NaN",
-                       b"0.000000001", b"1.5", b"99999999999999999999999", b"0x10", b"1_000")  # fmt: skip
+INTERESTING_NUMBERS = (
+    b"0",
+    b"-0",
+    b"1",
+    b"-1",
+    b"2",
+    b"255",
+    b"65535",
+    b"65536",
+    b"2147483647",
+    b"-2147483648",
+    b"4294967296",
+    b"9223372036854775807",
+    b"18446744073709551616",
+    b"1000000000000",
+    b"1e308",
+    b"1e309",
+    b"-1e308",
+    b"5e-324",
+    b"1e-320",
+    b"nan",
+    b"inf",
+    b"-inf",
+    b"NaN",
+    b"0.000000001",
+    b"1.5",
+    b"99999999999999999999999",
+    b"0x10",
+    b"1_000",
+)
 _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
-_INTERESTING_INTS = (0, 1, 2, 3, 4, 7, 8, 16, 64, 127, 128, 255, 256, 512, 1024, 4096, 32767, 32768, 65535, 65536,
-                     0x7FFFFFFF, 0x80000000, 0xFFFFFFFF)  # fmt: skip
+_INTERESTING_INTS = (
+    0,
+    1,
+    2,
+    3,
+    4,
+    7,
+    8,
+    16,
+    64,
+    127,
+    128,
+    255,
+    256,
+    512,
+    1024,
+    4096,
+    32767,
+    32768,
+    65535,
+    65536,
+    0x7FFFFFFF,
+    0x80000000,
+    0xFFFFFFFF,
+)
 
 
 def _flip_bit(data: bytearray, rng: random.Random, corpus) -> None:
@@ -28,7 +77,9 @@ def _flip_bit(data: bytearray, rng: random.Random, corpus) -> None:
 
 def _set_byte(data: bytearray, rng: random.Random, corpus) -> None:
     if data:
-        data[rng.randrange(len(data))] = rng.choice((0, 0xFF, 0x7F, 0x80, 10, 13, 32, 34, 44, 123, 125, rng.randrange(256)))
+        data[rng.randrange(len(data))] = rng.choice(
+            (0, 0xFF, 0x7F, 0x80, 10, 13, 32, 34, 44, 123, 125, rng.randrange(256))
+        )
 
 
 def _set_int(data: bytearray, rng: random.Random, corpus) -> None:
@@ -104,15 +155,54 @@ def _number(data: bytearray, rng: random.Random, corpus) -> None:
 
 
 def _insert_token(data: bytearray, rng: random.Random, corpus) -> None:
-    token = rng.choice((b"\x00", b"\xff\xfe", b"\r\n", b"\n", b" ", b",", b";", b"#", b'"', b"{", b"}", b"[", b"]",
-                        b"<", b"&amp;", b"\xc3", b"\xe2\x82\xac", b"nan", b"1e999", b"-", b"Frames: 2",
-                        b"<!DOCTYPE a [<!ENTITY x 'xx'>]>", b"End Site", b"JOINT", b":", b"=", b"\t"))  # fmt: skip
+    token = rng.choice(
+        (
+            b"\x00",
+            b"\xff\xfe",
+            b"\r\n",
+            b"\n",
+            b" ",
+            b",",
+            b";",
+            b"#",
+            b'"',
+            b"{",
+            b"}",
+            b"[",
+            b"]",
+            b"<",
+            b"&amp;",
+            b"\xc3",
+            b"\xe2\x82\xac",
+            b"nan",
+            b"1e999",
+            b"-",
+            b"Frames: 2",
+            b"<!DOCTYPE a [<!ENTITY x 'xx'>]>",
+            b"End Site",
+            b"JOINT",
+            b":",
+            b"=",
+            b"\t",
+        )
+    )
     i = rng.randrange(len(data) + 1)
     data[i:i] = token
 
 
-MUTATORS = (_flip_bit, _set_byte, _set_int, _truncate, _delete, _duplicate, _line_op, _splice, _number, _number,
-            _insert_token)  # fmt: skip
+MUTATORS = (
+    _flip_bit,
+    _set_byte,
+    _set_int,
+    _truncate,
+    _delete,
+    _duplicate,
+    _line_op,
+    _splice,
+    _number,
+    _number,
+    _insert_token,
+)
 
 
 def mutate(data: bytes, rng: random.Random, corpus=(), structured=None, max_size: int = 1 << 20) -> bytes:
@@ -129,12 +219,48 @@ def mutate(data: bytes, rng: random.Random, corpus=(), structured=None, max_size
 
 # ---------------------------------------------------------------- protobuf messages
 
-_HOSTILE_FLOATS = (float("nan"), float("inf"), float("-inf"), 0.0, -0.0, -1.0, 1e308, -1e308, 5e-324, 1e-9, 3.4e38,
-                   1e12, 0.5, 30.0, 4096.0)  # fmt: skip
+_HOSTILE_FLOATS = (
+    float("nan"),
+    float("inf"),
+    float("-inf"),
+    0.0,
+    -0.0,
+    -1.0,
+    1e308,
+    -1e308,
+    5e-324,
+    1e-9,
+    3.4e38,
+    1e12,
+    0.5,
+    30.0,
+    4096.0,
+)
 _HOSTILE_INTS = (0, -1, 1, 2, 3, 4, 5, 257, 2**31 - 1, -(2**31), 2**63 - 1, -(2**63))
-_HOSTILE_STRINGS = ("", " ", "a", "l_forearm", "lower_back", "LWRA", "a,b", 'q"', "x\n", "\x00", " pad ", "{", "{}",
-                    '{"markers": []}', '{"markers": [{"name": "A", "segment": "head"}]}', "hands-feet", "vicon",
-                    "fit", "nominal", "walk", "é" * 3, "x" * 5000)  # fmt: skip
+_HOSTILE_STRINGS = (
+    "",
+    " ",
+    "a",
+    "l_forearm",
+    "lower_back",
+    "LWRA",
+    "a,b",
+    'q"',
+    "x\n",
+    "\x00",
+    " pad ",
+    "{",
+    "{}",
+    '{"markers": []}',
+    '{"markers": [{"name": "A", "segment": "head"}]}',
+    "hands-feet",
+    "vicon",
+    "fit",
+    "nominal",
+    "walk",
+    "é" * 3,
+    "x" * 5000,
+)
 
 
 def _fields(msg, out: list, depth: int = 0) -> list:
@@ -175,8 +301,23 @@ def _hostile(fd, rng: random.Random):
     return value
 
 
-_HOSTILE_KEYS = ("k", "m", "i", "beam", "markers", "keep", "window_s", "overlap_s", "offsets", "track_pull_s",
-                 "extended", "w_prior", "", "nope", "x" * 200)  # fmt: skip
+_HOSTILE_KEYS = (
+    "k",
+    "m",
+    "i",
+    "beam",
+    "markers",
+    "keep",
+    "window_s",
+    "overlap_s",
+    "offsets",
+    "track_pull_s",
+    "extended",
+    "w_prior",
+    "",
+    "nope",
+    "x" * 200,
+)
 
 
 def _mutate_map(entries, entry_type, rng: random.Random) -> None:

@@ -83,9 +83,13 @@ def run_one(target: Target, data: bytes, time_limit_s: float | None = 10.0, memo
             outcome.peak_bytes = tracemalloc.get_traced_memory()[1]
             tracemalloc.stop()
     if memory_limit is not None and outcome.peak_bytes > memory_limit and not outcome.finding:
-        outcome = Outcome(MEMORY, f"allocated {outcome.peak_bytes} bytes at peak (bound {memory_limit}); "
-                          f"then {outcome.kind}: {outcome.error}", seconds=outcome.seconds,
-                          peak_bytes=outcome.peak_bytes)  # fmt: skip
+        outcome = Outcome(
+            MEMORY,
+            f"allocated {outcome.peak_bytes} bytes at peak (bound {memory_limit}); "
+            f"then {outcome.kind}: {outcome.error}",
+            seconds=outcome.seconds,
+            peak_bytes=outcome.peak_bytes,
+        )
     return outcome
 
 
@@ -102,13 +106,27 @@ class LoopStats:
     seconds: float = 0.0
 
     def as_dict(self) -> dict:
-        return {"executions": self.executions, "outcomes": dict(sorted(self.outcomes.items())),
-                "findings": len(self.findings), "corpus": self.corpus_size, "seconds": round(self.seconds, 1)}  # fmt: skip
+        return {
+            "executions": self.executions,
+            "outcomes": dict(sorted(self.outcomes.items())),
+            "findings": len(self.findings),
+            "corpus": self.corpus_size,
+            "seconds": round(self.seconds, 1),
+        }
 
 
-def mutation_loop(target: Target, corpus: list[bytes], seed: int = 0, executions: int | None = None,
-                  seconds: float | None = None, time_limit_s: float | None = 10.0, memory_limit: int | None = None,
-                  on_finding=None, max_corpus: int = 2000, on_execution=None) -> LoopStats:  # fmt: skip
+def mutation_loop(
+    target: Target,
+    corpus: list[bytes],
+    seed: int = 0,
+    executions: int | None = None,
+    seconds: float | None = None,
+    time_limit_s: float | None = 10.0,
+    memory_limit: int | None = None,
+    on_finding=None,
+    max_corpus: int = 2000,
+    on_execution=None,
+) -> LoopStats:
     """Mutate corpus entries and run them until `executions` runs or `seconds` pass.
     An input whose outcome has a signature not seen before joins the corpus (the
     errors a reader can give stand in for coverage). Each finding is passed to

@@ -90,10 +90,19 @@ def small_motion(frames: int = 6, end_site: bool = True):
     from graphsvc.motion.skeleton import Motion, Skeleton
 
     names = ("Hips", "Spine", "Head", "Head_End") if end_site else ("Hips", "Spine", "Head", "Arm")
-    channels = (("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"),
-                ("Zrotation", "Xrotation", "Yrotation"), ("Xrotation",), () if end_site else ("Yrotation",))
-    sk = Skeleton(names, np.array([-1, 0, 1, 2]), np.array([[0, 0.9, 0], [0, 0.2, 0], [0, 0.3, 0], [0, 0.1, 0]]),
-                  channels, np.array([False, False, False, end_site]))  # fmt: skip
+    channels = (
+        ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"),
+        ("Zrotation", "Xrotation", "Yrotation"),
+        ("Xrotation",),
+        () if end_site else ("Yrotation",),
+    )
+    sk = Skeleton(
+        names,
+        np.array([-1, 0, 1, 2]),
+        np.array([[0, 0.9, 0], [0, 0.2, 0], [0, 0.3, 0], [0, 0.1, 0]]),
+        channels,
+        np.array([False, False, False, end_site]),
+    )
     k = np.arange(frames, dtype=np.float64)[:, None]
     angles = np.concatenate([0.1 * k, 0.05 * k, -0.02 * k], axis=1)
     rot = np.repeat(quat.from_euler(angles, "ZXY")[:, None], 4, axis=1)
@@ -144,8 +153,15 @@ def sensor_recording(samples: int = 8, markers: bool = False, orientations: bool
     if markers:
         pos = rng.normal(0.0, 0.3, (samples, 2, 3)) + np.array([0.0, 1.0, 0.0])
         pos[2, 1] = np.nan
-        return Recording(rate_hz=30.0, timestamps_s=t, sensor_names=(), accelerations=None,
-                         marker_names=("LWRA", "RTOE"), marker_positions=pos, meta={"source": "seed"})  # fmt: skip
+        return Recording(
+            rate_hz=30.0,
+            timestamps_s=t,
+            sensor_names=(),
+            accelerations=None,
+            marker_names=("LWRA", "RTOE"),
+            marker_positions=pos,
+            meta={"source": "seed"},
+        )
     layout = PRESETS["kelly6"]
     names = layout.sensor_names
     acc = rng.normal(0.0, 3.0, (samples, len(names), 3)).astype(np.float32)
@@ -154,10 +170,18 @@ def sensor_recording(samples: int = 8, markers: bool = False, orientations: bool
     if orientations:
         q = rng.normal(size=(samples, len(names), 4))
         q = (q / np.linalg.norm(q, axis=-1, keepdims=True)).astype(np.float32)
-    return Recording(rate_hz=30.0, timestamps_s=t, sensor_names=names, accelerations=acc,
-                     ground_position=rng.normal(size=(samples, 2)), heading=rng.normal(size=samples),
-                     constraints=[[{"start_s": 0.0, "end_s": 0.1, "require": {"contact": "left"}}]],
-                     layout=layout.to_dict(), meta={"source": "seed"}, orientations=q)  # fmt: skip
+    return Recording(
+        rate_hz=30.0,
+        timestamps_s=t,
+        sensor_names=names,
+        accelerations=acc,
+        ground_position=rng.normal(size=(samples, 2)),
+        heading=rng.normal(size=samples),
+        constraints=[[{"start_s": 0.0, "end_s": 0.1, "require": {"contact": "left"}}]],
+        layout=layout.to_dict(),
+        meta={"source": "seed"},
+        orientations=q,
+    )
 
 
 def rec_seeds() -> list[bytes]:
@@ -176,8 +200,10 @@ def csv_seeds() -> list[bytes]:
 
     folder = _scratch()
     export_csv(sensor_recording(orientations=False), folder / "a.csv")
-    device = ("# units=g\n# up=z\n# sensor_frame=device\nt_s,wrist_ax,wrist_ay,wrist_az,wrist_qw,wrist_qx,wrist_qy,"
-              "wrist_qz\n0,0.1,-1,0,1,0,0,0\n0.01,0.2,-0.9,nan,0.7071,0.7071,0,0\n0.02,,,,,,,\n")  # fmt: skip
+    device = (
+        "# units=g\n# up=z\n# sensor_frame=device\nt_s,wrist_ax,wrist_ay,wrist_az,wrist_qw,wrist_qx,wrist_qy,"
+        "wrist_qz\n0,0.1,-1,0,1,0,0,0\n0.01,0.2,-0.9,nan,0.7071,0.7071,0,0\n0.02,,,,,,,\n"
+    )
     return [(folder / "a.csv").read_bytes(), device.encode()]
 
 
@@ -220,15 +246,29 @@ def mvnx_seeds() -> list[bytes]:
     for k in range(3):
         acc = " ".join(f"{0.1 * (k + j):.3f}" for j in range(6))
         q = "1 0 0 0 0.7071 0 0.7071 0"
-        frames.append(f'      <frame time="{k * 17}" index="{k}" type="normal">\n'
-                      f"        <sensorFreeAcceleration>{acc}</sensorFreeAcceleration>\n"
-                      f"        <sensorOrientation>{q}</sensorOrientation>\n      </frame>")  # fmt: skip
-    text = "\n".join([
-        '<?xml version="1.0" encoding="UTF-8"?>', f'<mvnx xmlns="{ns}" version="3">',
-        '  <subject label="s" frameRate="60" segmentCount="23">', "    <sensors>",
-        '      <sensor label="Pelvis"/>', '      <sensor label="LeftForeArm"/>', "    </sensors>",
-        '    <frames segmentCount="23" sensorCount="2" jointCount="22">',
-        '      <frame time="0" index="" type="identity"/>', *frames, "    </frames>", "  </subject>", "</mvnx>", ""])  # fmt: skip
+        frames.append(
+            f'      <frame time="{k * 17}" index="{k}" type="normal">\n'
+            f"        <sensorFreeAcceleration>{acc}</sensorFreeAcceleration>\n"
+            f"        <sensorOrientation>{q}</sensorOrientation>\n      </frame>"
+        )
+    text = "\n".join(
+        [
+            '<?xml version="1.0" encoding="UTF-8"?>',
+            f'<mvnx xmlns="{ns}" version="3">',
+            '  <subject label="s" frameRate="60" segmentCount="23">',
+            "    <sensors>",
+            '      <sensor label="Pelvis"/>',
+            '      <sensor label="LeftForeArm"/>',
+            "    </sensors>",
+            '    <frames segmentCount="23" sensorCount="2" jointCount="22">',
+            '      <frame time="0" index="" type="identity"/>',
+            *frames,
+            "    </frames>",
+            "  </subject>",
+            "</mvnx>",
+            "",
+        ]
+    )
     return [text.encode()]
 
 
@@ -261,46 +301,81 @@ def layout_seeds() -> list[bytes]:
 
 
 def layout_toml_seeds() -> list[bytes]:
-    return [b'name = "two"\n[[sensors]]\nname = "a"\nsegment = "l_elbow"\nalong = 0.9\n'
-            b'[[sensors]]\nsegment = "pelvis"\ntoward = "spine"\noffset_m = [0.0, 0.1, 0.0]\n']
+    return [
+        b'name = "two"\n[[sensors]]\nname = "a"\nsegment = "l_elbow"\nalong = 0.9\n'
+        b'[[sensors]]\nsegment = "pelvis"\ntoward = "spine"\noffset_m = [0.0, 0.1, 0.0]\n'
+    ]
 
 
 def constraints_seeds() -> list[bytes]:
-    sets = [[{"start_s": 0.0, "end_s": 1.5, "require": {"label": "walk"}},
-             {"start_s": 2.0, "end_s": 2.5, "require": {"contact": "both"}}],
-            [{"start_s": 0.5, "end_s": 1.0, "require": {"contact": "none"}}]]  # fmt: skip
+    sets = [
+        [
+            {"start_s": 0.0, "end_s": 1.5, "require": {"label": "walk"}},
+            {"start_s": 2.0, "end_s": 2.5, "require": {"contact": "both"}},
+        ],
+        [{"start_s": 0.5, "end_s": 1.0, "require": {"contact": "none"}}],
+    ]
     return [json.dumps(sets, indent=1).encode(), b"[]"]
 
 
 def calibration_seeds() -> list[bytes]:
     from graphsvc.sensors.calibration import FORMAT, VERSION
 
-    doc = {"format": FORMAT, "version": VERSION, "sensor_frames": "anatomical", "pose": "npose",
-           "sensors": {"l_forearm": {"rotation_wxyz": [1, 0, 0, 0]},
-                       "r_shin": {"rotation_wxyz": [0.7071068, 0, 0.7071068, 0]}}}  # fmt: skip
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "sensor_frames": "anatomical",
+        "pose": "npose",
+        "sensors": {
+            "l_forearm": {"rotation_wxyz": [1, 0, 0, 0]},
+            "r_shin": {"rotation_wxyz": [0.7071068, 0, 0.7071068, 0]},
+        },
+    }
     return [json.dumps(doc, indent=1, sort_keys=True).encode()]
 
 
 def performer_seeds() -> list[bytes]:
     from graphsvc.motion.proportions import FORMAT, VERSION
 
-    doc = {"format": FORMAT, "version": VERSION, "name": "actor", "height_m": 1.8,
-           "segments_m": {"l_thigh": 0.46, "r_thigh": 0.46, "neck": 0.11, "l_foot": 0.15}}  # fmt: skip
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "name": "actor",
+        "height_m": 1.8,
+        "segments_m": {"l_thigh": 0.46, "r_thigh": 0.46, "neck": 0.11, "l_foot": 0.15},
+    }
     return [json.dumps(doc, indent=1, sort_keys=True).encode()]
 
 
 def manifest_seeds() -> list[bytes]:
-    text = ("# a match\nrecording,graph,strategy,output,weights,options\n"
-            'a.rec,g.graph,viterbi,p1,"0.5,1,1","{""beam"": 10, ""latency"": 2}"\n'
-            'b.csv,g.graph,olng,p2,,"{""olng-k"": 64}"\n')  # fmt: skip
+    text = (
+        "# a match\nrecording,graph,strategy,output,weights,options\n"
+        'a.rec,g.graph,viterbi,p1,"0.5,1,1","{""beam"": 10, ""latency"": 2}"\n'
+        'b.csv,g.graph,olng,p2,,"{""olng-k"": 64}"\n'
+    )
     return [text.encode()]
 
 
 def manifest_json_seeds() -> list[bytes]:
-    items = {"items": [{"recording": "a.rec", "graph": "g", "strategy": "viterbi", "output": "p1",
-                        "weights": [0.5, 1, 1], "options": {"beam": 10, "track-pull": 0.2}},
-                       {"recording": "b.c3d", "graph": "g", "strategy": "ssg", "output": "p2",
-                        "options": {"markers": "hands-feet", "keep": ["LWRA", "RWRA"]}}]}  # fmt: skip
+    items = {
+        "items": [
+            {
+                "recording": "a.rec",
+                "graph": "g",
+                "strategy": "viterbi",
+                "output": "p1",
+                "weights": [0.5, 1, 1],
+                "options": {"beam": 10, "track-pull": 0.2},
+            },
+            {
+                "recording": "b.c3d",
+                "graph": "g",
+                "strategy": "ssg",
+                "output": "p2",
+                "options": {"markers": "hands-feet", "keep": ["LWRA", "RWRA"]},
+            },
+        ]
+    }
     return [json.dumps(items, indent=1).encode()]
 
 
@@ -309,14 +384,21 @@ def mapping_seeds() -> list[bytes]:
 
 
 def marker_set_seeds() -> list[bytes]:
-    doc = {"name": "mine", "markers": [{"name": "LWRA", "segment": "l_elbow", "toward": "l_wrist", "along": 1.0},
-                                       {"name": "HEAD", "segment": "head", "offset_m": [0, 0.1, 0.05]}]}  # fmt: skip
+    doc = {
+        "name": "mine",
+        "markers": [
+            {"name": "LWRA", "segment": "l_elbow", "toward": "l_wrist", "along": 1.0},
+            {"name": "HEAD", "segment": "head", "offset_m": [0, 0.1, 0.05]},
+        ],
+    }
     return [json.dumps(doc).encode()]
 
 
 def device_map_seeds() -> list[bytes]:
-    return [json.dumps({"device": "xsens", "sensors": {"LeftForeArm": "l_forearm", "Pelvis": "lower_back"}}).encode(),
-            json.dumps({"a": "l_wrist"}).encode()]
+    return [
+        json.dumps({"device": "xsens", "sensors": {"LeftForeArm": "l_forearm", "Pelvis": "lower_back"}}).encode(),
+        json.dumps({"a": "l_wrist"}).encode(),
+    ]
 
 
 def grpc_synthesize_seeds() -> list[bytes]:
@@ -327,15 +409,22 @@ def grpc_synthesize_seeds() -> list[bytes]:
     from graphsvc.strategies.ssg.options import SsgOptions
 
     rec = sensor_recording(5)
-    a = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec),
-                             options=options_to_proto(Options(beam=10.0, latency_s=1.0),
-                                                      constraints=rec.constraints))  # fmt: skip
-    m = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(sensor_recording(4, markers=True)),
-                             options=options_to_proto(Options(strategy="ssg", ssg=SsgOptions(
-                                 markers="hands-feet", keep=("LWRA",)))))  # fmt: skip
+    a = pb.SynthesizeRequest(
+        graph="g",
+        recording=recording_to_proto(rec),
+        options=options_to_proto(Options(beam=10.0, latency_s=1.0), constraints=rec.constraints),
+    )
+    m = pb.SynthesizeRequest(
+        graph="g",
+        recording=recording_to_proto(sensor_recording(4, markers=True)),
+        options=options_to_proto(Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet", keep=("LWRA",)))),
+    )
     h = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec), performer=pb.Performer(height_m=1.8))
-    p = pb.SynthesizeRequest(graph="g", recording=recording_to_proto(rec), performer=pb.Performer(
-        segments=pb.PerformerSegments(segments_m={"l_thigh": 0.46, "neck": 0.11})))  # fmt: skip
+    p = pb.SynthesizeRequest(
+        graph="g",
+        recording=recording_to_proto(rec),
+        performer=pb.Performer(segments=pb.PerformerSegments(segments_m={"l_thigh": 0.46, "neck": 0.11})),
+    )
     return [r.SerializeToString(deterministic=True) for r in (a, m, h, p)]
 
 
@@ -347,10 +436,24 @@ def grpc_stream_seeds() -> list[bytes]:
     from graphsvc.strategies.options import Options
 
     rec = sensor_recording(2)
-    config = pb.StreamSynthesizeRequest(config=pb.StreamConfig(
-        graph="g", options=options_to_proto(Options(strategy="olng", olng=OlngOptions(k=32))),
-        sensor_names=list(reversed(rec.sensor_names)), marker_names=["LWRA", "RTOE"], orientations=True))  # fmt: skip
-    sample = sample_to_proto(0.5, rec.accelerations[0], rec.ground_position[0], rec.heading[0],
-                             markers=np.zeros((2, 3)), orientations=rec.orientations[0])  # fmt: skip
-    return [config.SerializeToString(deterministic=True),
-            pb.StreamSynthesizeRequest(sample=sample).SerializeToString(deterministic=True)]
+    config = pb.StreamSynthesizeRequest(
+        config=pb.StreamConfig(
+            graph="g",
+            options=options_to_proto(Options(strategy="olng", olng=OlngOptions(k=32))),
+            sensor_names=list(reversed(rec.sensor_names)),
+            marker_names=["LWRA", "RTOE"],
+            orientations=True,
+        )
+    )
+    sample = sample_to_proto(
+        0.5,
+        rec.accelerations[0],
+        rec.ground_position[0],
+        rec.heading[0],
+        markers=np.zeros((2, 3)),
+        orientations=rec.orientations[0],
+    )
+    return [
+        config.SerializeToString(deterministic=True),
+        pb.StreamSynthesizeRequest(sample=sample).SerializeToString(deterministic=True),
+    ]

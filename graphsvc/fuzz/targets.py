@@ -122,7 +122,7 @@ def reseal(data: bytes) -> bytes:
     checksummed again."""
     from graphsvc.store import _TRAILER, END_MAGIC
 
-    body = data[:-_TRAILER.size] if len(data) >= _TRAILER.size else data
+    body = data[: -_TRAILER.size] if len(data) >= _TRAILER.size else data
     return body + _TRAILER.pack(END_MAGIC, len(body) + _TRAILER.size, hashlib.sha256(body).digest())
 
 
@@ -260,7 +260,7 @@ def _grpc_stream(data: bytes) -> None:
         sample_from_proto,
         sample_markers_from_proto,
         sample_orientations_from_proto,
-        sensor_order,  # fmt: skip
+        sensor_order,
     )
     from graphsvc.service.options_proto import options_from_proto
 
@@ -280,12 +280,14 @@ def _grpc_stream(data: bytes) -> None:
         return _each(stream_checks, lambda: sensor_order(config.sensor_names, _LAYOUT, "config.sensor_names"))
     sample = msg.sample
     order = sensor_order(list(reversed(_LAYOUT)), _LAYOUT, "config.sensor_names")
-    return _each(lambda: sample_from_proto(sample, len(_LAYOUT), order, 0.0, "sample[1]", True),
-                 lambda: sample_from_proto(sample, 4, None, None, "sample[0]", False),
-                 lambda: sample_markers_from_proto(sample, 2, "sample[0]"),
-                 lambda: sample_markers_from_proto(sample, 0, "sample[0]"),
-                 lambda: sample_orientations_from_proto(sample, len(_LAYOUT), order, True, "sample[0]"),
-                 lambda: sample_orientations_from_proto(sample, len(_LAYOUT), None, False, "sample[0]"))
+    return _each(
+        lambda: sample_from_proto(sample, len(_LAYOUT), order, 0.0, "sample[1]", True),
+        lambda: sample_from_proto(sample, 4, None, None, "sample[0]", False),
+        lambda: sample_markers_from_proto(sample, 2, "sample[0]"),
+        lambda: sample_markers_from_proto(sample, 0, "sample[0]"),
+        lambda: sample_orientations_from_proto(sample, len(_LAYOUT), order, True, "sample[0]"),
+        lambda: sample_orientations_from_proto(sample, len(_LAYOUT), None, False, "sample[0]"),
+    )
 
 
 def _proto_mutator(message_name: str) -> Callable:
@@ -308,36 +310,59 @@ def _proto_mutator(message_name: str) -> Callable:
 # ---------------------------------------------------------------- the table
 
 
-TARGETS: dict[str, Target] = {t.name: t for t in (
-    Target("bvh", _bvh, seeds.bvh_seeds, doc="motion.bvh.read_bvh"),
-    Target("deepmimic", _deepmimic, seeds.deepmimic_seeds, doc="motion.deepmimic.read_deepmimic"),
-    Target("gltf", _gltf, seeds.gltf_seeds, doc="motion.gltf_read.read_gltf (.glb and .gltf)"),
-    Target("asf", _asf, lambda: [seeds.ASF.encode()], doc="motion.asfamc.read_asf_amc, the .asf"),
-    Target("amc", _amc, lambda: [seeds.AMC.encode()], doc="motion.asfamc.read_asf_amc, the .amc"),
-    Target("c3d", _reader(".c3d"), seeds.c3d_seeds, doc="sensors.optical.read_c3d (ezc3d)"),
-    Target("c3d-ezc3d", _c3d_ezc3d, seeds.c3d_seeds, in_process=False,
-           doc="c3d_guard.check_c3d, then ezc3d in this process (what read_c3d's child absorbs)"),
-    Target("csv", _reader(".csv"), seeds.csv_seeds, doc="sensors.recording.import_csv (device CSV)"),
-    Target("marker-csv", _reader(".csv"), seeds.marker_csv_seeds, doc="sensors.optical.read_marker_csv"),
-    Target("mvnx", _reader(".mvnx"), seeds.mvnx_seeds, doc="sensors.devices.read_mvnx"),
-    Target("rec", _rec, seeds.rec_seeds, doc="sensors.recording.load_recording"),
-    Target("rec-sealed", lambda d: _rec(reseal(d)), seeds.rec_seeds, doc="load_recording behind a valid checksum"),
-    Target("graph", _graph, seeds.graph_seeds, doc="graph.file.load_graph"),
-    Target("graph-sealed", lambda d: _graph(reseal(d)), seeds.graph_seeds, doc="load_graph behind a valid checksum"),
-    Target("layout", _layout(".json"), seeds.layout_seeds, doc="sensors.layout.load_layout (JSON)"),
-    Target("layout-toml", _layout(".toml"), seeds.layout_toml_seeds, doc="sensors.layout.load_layout (TOML)"),
-    Target("constraints", _constraints, seeds.constraints_seeds, doc="strategies.options.load_constraints"),
-    Target("calibration", _calibration, seeds.calibration_seeds, doc="sensors.calibration.load_calibration"),
-    Target("performer", _performer, seeds.performer_seeds,
-           doc="motion.proportions.load_performer_file, the lengths completed and a skeleton made of them"),
-    Target("manifest", _manifest(".csv"), seeds.manifest_seeds, doc="batch.manifest.read_manifest + item flags"),
-    Target("manifest-json", _manifest(".json"), seeds.manifest_json_seeds, doc="the same, a JSON manifest"),
-    Target("mapping", _mapping, seeds.mapping_seeds, doc="motion.joints.load_mapping_file"),
-    Target("marker-set", _marker_set, seeds.marker_set_seeds, doc="sensors.markers.load_marker_set"),
-    Target("device-map", _device_map, seeds.device_map_seeds, doc="sensors.devices.load_device_map"),
-    Target("grpc-synthesize", _grpc_synthesize, seeds.grpc_synthesize_seeds, structured=_proto_mutator(
-        "SynthesizeRequest"), doc="service.options_proto, convert_recording: a SynthesizeRequest's options, recording "
-                                  "and performer"),
-    Target("grpc-stream", _grpc_stream, seeds.grpc_stream_seeds, structured=_proto_mutator(
-        "StreamSynthesizeRequest"), doc="service.options_proto, convert_recording: a stream's config and samples"),
-)}  # fmt: skip
+TARGETS: dict[str, Target] = {
+    t.name: t
+    for t in (
+        Target("bvh", _bvh, seeds.bvh_seeds, doc="motion.bvh.read_bvh"),
+        Target("deepmimic", _deepmimic, seeds.deepmimic_seeds, doc="motion.deepmimic.read_deepmimic"),
+        Target("gltf", _gltf, seeds.gltf_seeds, doc="motion.gltf_read.read_gltf (.glb and .gltf)"),
+        Target("asf", _asf, lambda: [seeds.ASF.encode()], doc="motion.asfamc.read_asf_amc, the .asf"),
+        Target("amc", _amc, lambda: [seeds.AMC.encode()], doc="motion.asfamc.read_asf_amc, the .amc"),
+        Target("c3d", _reader(".c3d"), seeds.c3d_seeds, doc="sensors.optical.read_c3d (ezc3d)"),
+        Target(
+            "c3d-ezc3d",
+            _c3d_ezc3d,
+            seeds.c3d_seeds,
+            in_process=False,
+            doc="c3d_guard.check_c3d, then ezc3d in this process (what read_c3d's child absorbs)",
+        ),
+        Target("csv", _reader(".csv"), seeds.csv_seeds, doc="sensors.recording.import_csv (device CSV)"),
+        Target("marker-csv", _reader(".csv"), seeds.marker_csv_seeds, doc="sensors.optical.read_marker_csv"),
+        Target("mvnx", _reader(".mvnx"), seeds.mvnx_seeds, doc="sensors.devices.read_mvnx"),
+        Target("rec", _rec, seeds.rec_seeds, doc="sensors.recording.load_recording"),
+        Target("rec-sealed", lambda d: _rec(reseal(d)), seeds.rec_seeds, doc="load_recording behind a valid checksum"),
+        Target("graph", _graph, seeds.graph_seeds, doc="graph.file.load_graph"),
+        Target(
+            "graph-sealed", lambda d: _graph(reseal(d)), seeds.graph_seeds, doc="load_graph behind a valid checksum"
+        ),
+        Target("layout", _layout(".json"), seeds.layout_seeds, doc="sensors.layout.load_layout (JSON)"),
+        Target("layout-toml", _layout(".toml"), seeds.layout_toml_seeds, doc="sensors.layout.load_layout (TOML)"),
+        Target("constraints", _constraints, seeds.constraints_seeds, doc="strategies.options.load_constraints"),
+        Target("calibration", _calibration, seeds.calibration_seeds, doc="sensors.calibration.load_calibration"),
+        Target(
+            "performer",
+            _performer,
+            seeds.performer_seeds,
+            doc="motion.proportions.load_performer_file, the lengths completed and a skeleton made of them",
+        ),
+        Target("manifest", _manifest(".csv"), seeds.manifest_seeds, doc="batch.manifest.read_manifest + item flags"),
+        Target("manifest-json", _manifest(".json"), seeds.manifest_json_seeds, doc="the same, a JSON manifest"),
+        Target("mapping", _mapping, seeds.mapping_seeds, doc="motion.joints.load_mapping_file"),
+        Target("marker-set", _marker_set, seeds.marker_set_seeds, doc="sensors.markers.load_marker_set"),
+        Target("device-map", _device_map, seeds.device_map_seeds, doc="sensors.devices.load_device_map"),
+        Target(
+            "grpc-synthesize",
+            _grpc_synthesize,
+            seeds.grpc_synthesize_seeds,
+            structured=_proto_mutator("SynthesizeRequest"),
+            doc="service.options_proto, convert_recording: a SynthesizeRequest's options, recording and performer",
+        ),
+        Target(
+            "grpc-stream",
+            _grpc_stream,
+            seeds.grpc_stream_seeds,
+            structured=_proto_mutator("StreamSynthesizeRequest"),
+            doc="service.options_proto, convert_recording: a stream's config and samples",
+        ),
+    )
+}

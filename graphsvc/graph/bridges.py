@@ -151,8 +151,9 @@ KINDS = ("label", "end", "start")
 # ---------------------------------------------------------------- candidates
 
 
-def match_features(canon: np.ndarray, ground: np.ndarray, heading: np.ndarray, start: np.ndarray,
-                   rate_hz: float) -> np.ndarray:  # fmt: skip
+def match_features(
+    canon: np.ndarray, ground: np.ndarray, heading: np.ndarray, start: np.ndarray, rate_hz: float
+) -> np.ndarray:
     """(N, 3·P·3) float32: per frame the canonical joints (N, P, 3) at t − dt, t, t + dt
     (dt = FEATURE_DT_S, clamped to the clip), each relative to its own frame's root
     ground position and turned by frame t's heading onto +Z, the centre frame
@@ -169,8 +170,11 @@ def match_features(canon: np.ndarray, ground: np.ndarray, heading: np.ndarray, s
         x = canon[frames, :, 0] - ground[frames, None, 0]
         z = canon[frames, :, 2] - ground[frames, None, 1]
         # R_y(−h)·(x, z) = (c·x − s·z, s·x + c·z): the facing direction onto +Z.
-        parts += [weight * (c[:, None] * x - s[:, None] * z), weight * canon[frames, :, 1],
-                  weight * (s[:, None] * x + c[:, None] * z)]  # fmt: skip
+        parts += [
+            weight * (c[:, None] * x - s[:, None] * z),
+            weight * canon[frames, :, 1],
+            weight * (s[:, None] * x + c[:, None] * z),
+        ]
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
@@ -182,7 +186,7 @@ def body_features(canon: np.ndarray, ground: np.ndarray, start: np.ndarray, wind
     rel = canon.copy()
     rel[..., 0] -= ground[:, None, 0]
     rel[..., 2] -= ground[:, None, 1]
-    return concat_features([pose_features(rel[start[c]: start[c + 1]], window) for c in range(start.shape[0] - 1)])
+    return concat_features([pose_features(rel[start[c] : start[c + 1]], window) for c in range(start.shape[0] - 1)])
 
 
 def _project(x: np.ndarray, dims: int) -> np.ndarray:
@@ -217,14 +221,20 @@ def reachable_span(contacts: np.ndarray, start: np.ndarray) -> tuple[np.ndarray,
     last = np.full(C, -1, dtype=np.int64)
     grounded = contacts.any(axis=1)
     for c in range(C):
-        frames = np.flatnonzero(grounded[start[c]: start[c + 1]])
+        frames = np.flatnonzero(grounded[start[c] : start[c + 1]])
         if frames.size:
             first[c], last[c] = frames[0] + 1, frames[-1]
     return first, last
 
 
-def best_per_label(points: np.ndarray, state: np.ndarray, performance: np.ndarray, label: np.ndarray,
-                   num_labels: int, performer: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def best_per_label(
+    points: np.ndarray,
+    state: np.ndarray,
+    performance: np.ndarray,
+    label: np.ndarray,
+    num_labels: int,
+    performer: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """For each point (M, d) and each label, the nearest point of that label that
     shares a planted foot with it (contact states with a common bit) and belongs to
     another performance: (M, L, V) indices (−1: none) and squared distances (inf:
@@ -273,8 +283,11 @@ def _best_of_groups(key: np.ndarray, score: np.ndarray, limit: int) -> np.ndarra
 
 def blend_length(distance: np.ndarray, speed_change: np.ndarray, rate_hz: float) -> np.ndarray:
     """(B,) nodes of a bridge: the module docstring's rule."""
-    seconds = np.clip(np.maximum(np.maximum(POSE_CLOSING_S_PER_M * distance, speed_change / SPEED_CLOSING_M_S2),
-                                 MIN_BLEND_S), MIN_BLEND_S, MAX_BLEND_S)  # fmt: skip
+    seconds = np.clip(
+        np.maximum(np.maximum(POSE_CLOSING_S_PER_M * distance, speed_change / SPEED_CLOSING_M_S2), MIN_BLEND_S),
+        MIN_BLEND_S,
+        MAX_BLEND_S,
+    )
     return np.maximum(2, np.rint(seconds * rate_hz)).astype(np.int64)
 
 
@@ -287,9 +300,14 @@ def _ground_speed(kb: KBFrames, rate_hz: float) -> np.ndarray:
     return out
 
 
-def select_matches(kb: KBFrames, rate_hz: float, threshold_m: float = DEFAULT_THRESHOLD_M,
-                   end_threshold_m: float = DEFAULT_END_THRESHOLD_M, spacing_s: float = DEFAULT_SPACING_S,
-                   needed: np.ndarray | None = None) -> Matches:  # fmt: skip
+def select_matches(
+    kb: KBFrames,
+    rate_hz: float,
+    threshold_m: float = DEFAULT_THRESHOLD_M,
+    end_threshold_m: float = DEFAULT_END_THRESHOLD_M,
+    spacing_s: float = DEFAULT_SPACING_S,
+    needed: np.ndarray | None = None,
+) -> Matches:
     """The bridges of a knowledge base (module docstring), feasible and distinct.
     needed: (L, L) bool, the ordered label pairs that get bridges between labels (None:
     all)."""
@@ -303,8 +321,14 @@ def select_matches(kb: KBFrames, rate_hz: float, threshold_m: float = DEFAULT_TH
     feats = match_features(kb.canon, kb.ground, kb.heading, kb.start, rate_hz)
     points = _project(feats[frames], FEATURE_DIMS)
     fclip = clip[frames]
-    best, best_d2 = best_per_label(points, _state_code(kb.contacts[frames]), kb.performance[fclip], kb.label[fclip],
-                                   num_labels, kb.performer[fclip])  # fmt: skip
+    best, best_d2 = best_per_label(
+        points,
+        _state_code(kb.contacts[frames]),
+        kb.performance[fclip],
+        kb.label[fclip],
+        num_labels,
+        kb.performer[fclip],
+    )
     in_clip = frames - kb.start[fclip]
     lengths = np.diff(kb.start)
 
@@ -316,7 +340,9 @@ def select_matches(kb: KBFrames, rate_hz: float, threshold_m: float = DEFAULT_TH
     rows, labs, var = np.nonzero(np.isfinite(best_d2) & (own[:, None, None] != np.arange(num_labels)[None, :, None]))
     if needed is None:
         needed = ~np.eye(num_labels, dtype=bool)
-    key = ((fclip[rows] * (lengths.max() // bin_frames + 1) + in_clip[rows] // bin_frames) * num_labels + labs) * 2 + var
+    key = (
+        (fclip[rows] * (lengths.max() // bin_frames + 1) + in_clip[rows] // bin_frames) * num_labels + labs
+    ) * 2 + var
     # Departures from every stretch of every clip toward each other label (any
     # performer's clips and the clip's own performer's), and — D and the masks being
     # symmetric, the same table read the other way — arrivals into every stretch of
@@ -327,12 +353,16 @@ def select_matches(kb: KBFrames, rate_hz: float, threshold_m: float = DEFAULT_TH
     # data × labels.
     for arrive in (False, True):
         want = needed[labs, own[rows]] & (var == 0) if arrive else needed[own[rows], labs]
-        top = np.flatnonzero(want)[_best_of_groups(key[want], best_d2[rows[want], labs[want], var[want]],
-                                                   CANDIDATES_SCORED)]  # fmt: skip
+        top = np.flatnonzero(want)[
+            _best_of_groups(key[want], best_d2[rows[want], labs[want], var[want]], CANDIDATES_SCORED)
+        ]
         slots, first_of = np.unique(key[top], return_index=True)  # a slot's best candidate comes first
         stretch = (slots // 2) // num_labels * 2 + slots % 2  # (clip, stretch, variant)
-        kept = slots[_best_of_groups(stretch, best_d2[rows[top[first_of]], labs[top[first_of]], var[top[first_of]]],
-                                     MAX_LABELS_PER_STRETCH)]  # fmt: skip
+        kept = slots[
+            _best_of_groups(
+                stretch, best_d2[rows[top[first_of]], labs[top[first_of]], var[top[first_of]]], MAX_LABELS_PER_STRETCH
+            )
+        ]
         top = top[np.isin(key[top], kept)]
         here, there = frames[rows[top]], frames[best[rows[top], labs[top], var[top]]]
         src.append(there if arrive else here)
@@ -379,8 +409,9 @@ def select_matches(kb: KBFrames, rate_hz: float, threshold_m: float = DEFAULT_TH
     # Between labels the match is centred, moved as far as needed to keep the entry
     # p = i − c in a's reached frames and the exit q = j − c + L + 1 no later than b's
     # last grounded frame.
-    before = np.where(kind == 0, np.minimum(np.maximum(before, j + length + 1 - last_grounded[cb]), i - reach_a),
-                      before)  # fmt: skip
+    before = np.where(
+        kind == 0, np.minimum(np.maximum(before, j + length + 1 - last_grounded[cb]), i - reach_a), before
+    )
     feasible = (length >= 2) & (before >= 0) & (before <= length) & (i - before >= np.where(kind == 1, 0, reach_a))
     feasible &= j - before + length + 1 <= last_grounded[cb]
     sel = np.flatnonzero(feasible)
@@ -495,8 +526,9 @@ def _blend_poses(rotations, translations, rel, height, ga, gb, w, below, rot, tr
         height_out[m] = (1.0 - t) * height[a] + t * height[b]
 
 
-def blend_bridges(kb: KBFrames, matches: Matches, skeleton, joints: dict, placement_of_clip, rate_hz: float,
-                  chunk_nodes: int = 32768) -> BridgeNodes:  # fmt: skip
+def blend_bridges(
+    kb: KBFrames, matches: Matches, skeleton, joints: dict, placement_of_clip, rate_hz: float, chunk_nodes: int = 32768
+) -> BridgeNodes:
     """The nodes, edges' steps and readings of every bridge (module docstring), poses
     and readings in float32 as the graph stores them. joints: the canonical joint map;
     placement_of_clip(c): the layout placed on clip c's skeleton (a bridge's readings
@@ -508,8 +540,12 @@ def blend_bridges(kb: KBFrames, matches: Matches, skeleton, joints: dict, placem
     b0 = 0
     while b0 < len(matches):
         b1 = max(b0 + 1, int(np.searchsorted(ends, (ends[b0 - 1] if b0 else 0) + chunk_nodes, side="right")))
-        sub = Matches(*(getattr(matches, f)[b0:b1] for f in ("clip_a", "clip_b", "i", "j", "distance", "length",
-                                                             "before", "kind")))  # fmt: skip
+        sub = Matches(
+            *(
+                getattr(matches, f)[b0:b1]
+                for f in ("clip_a", "clip_b", "i", "j", "distance", "length", "before", "kind")
+            )
+        )
         parts.append(_blend_chunk(kb, sub, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all))
         b0 = b1
     if not parts:
@@ -519,13 +555,32 @@ def blend_bridges(kb: KBFrames, matches: Matches, skeleton, joints: dict, placem
         first.append(p.first + at)
         at += p.rotations.shape[0]
     cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-    return BridgeNodes(cat("rotations"), cat("translations"), cat("ground"), cat("heading"), cat("contacts"),
-                       cat("source_clip"), cat("source_frame"), np.concatenate(first), cat("count"),
-                       cat("step_offset"), cat("step_heading"), cat("readings"))  # fmt: skip
+    return BridgeNodes(
+        cat("rotations"),
+        cat("translations"),
+        cat("ground"),
+        cat("heading"),
+        cat("contacts"),
+        cat("source_clip"),
+        cat("source_frame"),
+        np.concatenate(first),
+        cat("count"),
+        cat("step_offset"),
+        cat("step_heading"),
+        cat("readings"),
+    )
 
 
-def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placement_of_clip, rate_hz: float,
-                 rel_all: np.ndarray, height_all: np.ndarray) -> BridgeNodes:  # fmt: skip
+def _blend_chunk(
+    kb: KBFrames,
+    matches: Matches,
+    skeleton,
+    joints: dict,
+    placement_of_clip,
+    rate_hz: float,
+    rel_all: np.ndarray,
+    height_all: np.ndarray,
+) -> BridgeNodes:
     """`blend_bridges` of a few bridges; rel_all, height_all: every KB frame's pelvis
     rotation relative to its heading and pelvis height (`motion.placement.relative_pose`)."""
     B = len(matches)
@@ -584,10 +639,36 @@ def _blend_chunk(kb: KBFrames, matches: Matches, skeleton, joints: dict, placeme
 
     world_rot, world_pos = forward_kinematics(rot, trans, parents)
     readings = meta.bridge_readings(
-        kb.world_rot, kb.world_pos, kb.ground, kb.heading, world_rot, world_pos, ground, heading, first, count,
-        entry, exit_frame, kb.start[matches.clip_a], kb.start[matches.clip_a + 1],
-        kb.start[matches.clip_b], kb.start[matches.clip_b + 1],
-        [placement_of_clip(int(c)) for c in matches.clip_a], rate_hz,
-    )  # fmt: skip
-    return BridgeNodes(rot.astype(np.float32), trans.astype(np.float32), ground, heading, contacts, source_clip,
-                       source_frame, first, count, step_offset, step_heading, readings)  # fmt: skip
+        kb.world_rot,
+        kb.world_pos,
+        kb.ground,
+        kb.heading,
+        world_rot,
+        world_pos,
+        ground,
+        heading,
+        first,
+        count,
+        entry,
+        exit_frame,
+        kb.start[matches.clip_a],
+        kb.start[matches.clip_a + 1],
+        kb.start[matches.clip_b],
+        kb.start[matches.clip_b + 1],
+        [placement_of_clip(int(c)) for c in matches.clip_a],
+        rate_hz,
+    )
+    return BridgeNodes(
+        rot.astype(np.float32),
+        trans.astype(np.float32),
+        ground,
+        heading,
+        contacts,
+        source_clip,
+        source_frame,
+        first,
+        count,
+        step_offset,
+        step_heading,
+        readings,
+    )

@@ -25,7 +25,7 @@ from graphsvc.graph import bridges as br
 from graphsvc.graph import interpolation as interp
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.connectivity import label_hops, typical_times
-from graphsvc.graph.distance import (  # fmt: skip
+from graphsvc.graph.distance import (
     DEFAULT_WINDOW_S,
     PoseFeatures,
     concat_features,
@@ -34,7 +34,7 @@ from graphsvc.graph.distance import (  # fmt: skip
     take,
     window_frames,
 )
-from graphsvc.graph.model import (  # fmt: skip
+from graphsvc.graph.model import (
     EDGE_BRIDGE,
     EDGE_INTERP,
     EDGE_ORIGINAL,
@@ -170,11 +170,21 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
     placement = anatomical_placement(layout, sk, mapping, world_rot, world_pos)
     readings = meta.speed_readings(world_rot, world_pos, half_world_rot, half_pos, placement, rate_hz)
     return PreparedClip(
-        motion=motion, world_pos=world_pos, contacts=contacts, changes=signals.contact_changes(contacts),
-        ground=ground, heading=heading, features=pose_features(canon, window), readings=readings,
-        half_ground=half_ground, half_heading=half_heading, half_rotations=half_rot,
-        half_translations=half_trans, placement=placement, digest=content_digest(motion),
-    )  # fmt: skip
+        motion=motion,
+        world_pos=world_pos,
+        contacts=contacts,
+        changes=signals.contact_changes(contacts),
+        ground=ground,
+        heading=heading,
+        features=pose_features(canon, window),
+        readings=readings,
+        half_ground=half_ground,
+        half_heading=half_heading,
+        half_rotations=half_rot,
+        half_translations=half_trans,
+        placement=placement,
+        digest=content_digest(motion),
+    )
 
 
 def standard_skeleton(motions: list[Motion]) -> Skeleton:
@@ -193,13 +203,27 @@ class _Edges:
     def add(self, src, dst, kind, acc, offset, dheading):
         n = len(src)
         if n:
-            self.parts.append((np.asarray(src, np.int64), np.asarray(dst, np.int64), np.full(n, kind, np.uint8),
-                               acc.astype(np.float32), offset.astype(np.float32), dheading.astype(np.float32)))  # fmt: skip
+            self.parts.append(
+                (
+                    np.asarray(src, np.int64),
+                    np.asarray(dst, np.int64),
+                    np.full(n, kind, np.uint8),
+                    acc.astype(np.float32),
+                    offset.astype(np.float32),
+                    dheading.astype(np.float32),
+                )
+            )
 
     def arrays(self, S: int):
         if not self.parts:
-            return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.uint8),
-                    np.zeros((0, S, 3), np.float32), np.zeros((0, 2), np.float32), np.zeros(0, np.float32))  # fmt: skip
+            return (
+                np.zeros(0, np.int64),
+                np.zeros(0, np.int64),
+                np.zeros(0, np.uint8),
+                np.zeros((0, S, 3), np.float32),
+                np.zeros((0, 2), np.float32),
+                np.zeros(0, np.float32),
+            )
         return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
 
 
@@ -208,8 +232,15 @@ def thread_map(jobs: int) -> Callable:
 
     def run(fn, items, desc: str = "", progress: bool | None = None) -> list:
         with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-            return list(tqdm(pool.map(fn, items), total=len(items), desc=desc, unit="clip",
-                             disable=None if progress is None else not progress))  # fmt: skip
+            return list(
+                tqdm(
+                    pool.map(fn, items),
+                    total=len(items),
+                    desc=desc,
+                    unit="clip",
+                    disable=None if progress is None else not progress,
+                )
+            )
 
     return run
 
@@ -220,8 +251,9 @@ def thread_map(jobs: int) -> Callable:
 ClipMap = Callable[..., list]
 
 
-def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict | None = None,
-                clip_map: ClipMap | None = None) -> tuple[MotionGraph, BuildReport]:  # fmt: skip
+def build_graph(
+    motions: list[Motion], options: BuildOptions, frame_labels: dict | None = None, clip_map: ClipMap | None = None
+) -> tuple[MotionGraph, BuildReport]:
     """Build the motion graph of a knowledge base (already loaded and augmented).
     frame_labels: clip name → (F,) per-frame content labels, for knowledge bases
     whose clips hold more than one action (the procedural one's stop clips walk first);
@@ -274,12 +306,17 @@ def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict
     t0 = time.perf_counter()
     scale = rate / 30.0  # the transition search's frame radii are tuned at 30 Hz
     trans = find_transitions(
-        concat_features([c.features for c in clips]), contacts, candidates, clip_of_frame, frame_in_clip, lengths,
+        concat_features([c.features for c in clips]),
+        contacts,
+        candidates,
+        clip_of_frame,
+        frame_in_clip,
+        lengths,
         threshold_m=options.transition_threshold_m,
         exclude_same_clip_within=max(1, int(round(10 * scale))),
         local_min_radius=max(1, int(round(5 * scale))),
         max_per_source=options.max_transitions_per_frame,
-    )  # fmt: skip
+    )
     report.transitions = len(trans)
     report.timings["transitions_s"] = time.perf_counter() - t0
 
@@ -298,11 +335,16 @@ def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict
     off, dh = meta.local_offsets(ground[i], heading[i], dst_ground, heading[j + 1] + trans.theta)
     edges.add(i, j + 1, EDGE_TRANSITION, normal[j + 1], off, dh)
 
-    node_parts: dict[str, list[np.ndarray]] = {"kind": [np.full(N0, NODE_ORIGINAL, np.uint8)], "clip": [clip_of_frame.astype(np.int32)],
-                  "frame": [frame_in_clip.astype(np.float32)], "contacts": [contacts],
-                  "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
-                  "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
-                  "ground": [ground.astype(np.float32)], "heading": [heading.astype(np.float32)]}  # fmt: skip
+    node_parts: dict[str, list[np.ndarray]] = {
+        "kind": [np.full(N0, NODE_ORIGINAL, np.uint8)],
+        "clip": [clip_of_frame.astype(np.int32)],
+        "frame": [frame_in_clip.astype(np.float32)],
+        "contacts": [contacts],
+        "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
+        "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
+        "ground": [ground.astype(np.float32)],
+        "heading": [heading.astype(np.float32)],
+    }
     next_node = N0
     if options.msv:
         for c, clip in enumerate(clips):
@@ -348,8 +390,9 @@ def build_graph(motions: list[Motion], options: BuildOptions, frame_labels: dict
         node_clip=node_clip,
         node_frame=np.concatenate(node_parts["frame"]),
         node_contacts=np.concatenate(node_parts["contacts"]),
-        node_label=_node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip,
-                                np.concatenate(node_parts["frame"])),
+        node_label=_node_labels(
+            per_frame, labels, label_of_clip, start, lengths, node_clip, np.concatenate(node_parts["frame"])
+        ),
         node_rotations=np.concatenate(node_parts["rot"]),
         node_translations=np.concatenate(node_parts["trans"]),
         node_ground=np.concatenate(node_parts["ground"]),
@@ -376,8 +419,14 @@ def _clip_record(clip: PreparedClip, frames: int, first_node: int) -> dict:
     content hash, frames and labels; `retargeted_from`, the skeleton family it was
     captured on, when it was put on the graph's skeleton from another."""
     m = clip.motion
-    out = {"name": m.name, "source": m.source, "sha256": clip.digest, "frames": frames, "first_node": first_node,
-           "labels": list(m.labels) or [m.name]}
+    out = {
+        "name": m.name,
+        "source": m.source,
+        "sha256": clip.digest,
+        "frames": frames,
+        "first_node": first_node,
+        "labels": list(m.labels) or [m.name],
+    }
     if m.retargeted_from:
         out["retargeted_from"] = m.retargeted_from
     return out
@@ -404,7 +453,7 @@ def _clip_frame_labels(motion: Motion, frame_labels: dict | None, frames: int) -
         if base not in frame_labels:
             return None
         out = np.asarray(frame_labels[base], dtype=str)
-        suffixes = motion.name[len(base):]  # (mirroring and reversing commute on labels)
+        suffixes = motion.name[len(base) :]  # (mirroring and reversing commute on labels)
         if "_reverse" in suffixes:
             out = out[::-1]
         if "_mirror" in suffixes:
@@ -420,9 +469,14 @@ def _node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, no
     interpolated nodes, the source frame for bridges)."""
     if all(f is None for f in per_frame):
         return label_of_clip[node_clip]
-    flat = np.concatenate([np.full(int(lengths[k]), label_of_clip[k], dtype=np.int32) if f is None else
-                           np.array([labels.index(x) for x in f], dtype=np.int32)
-                           for k, f in enumerate(per_frame)])  # fmt: skip
+    flat = np.concatenate(
+        [
+            np.full(int(lengths[k]), label_of_clip[k], dtype=np.int32)
+            if f is None
+            else np.array([labels.index(x) for x in f], dtype=np.int32)
+            for k, f in enumerate(per_frame)
+        ]
+    )
     frame = np.clip(np.floor(node_frame).astype(np.int64), 0, np.asarray(lengths)[node_clip] - 1)
     return flat[np.asarray(start)[node_clip] + frame]
 
@@ -496,7 +550,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     for members in bar(list(by_label.values()), desc="similarity", unit="label"):
         score = {}
         for k, a in enumerate(members):
-            for b in members[k + 1:]:
+            for b in members[k + 1 :]:
                 # A clip and its own mirror or reversal are one performance: blending
                 # a left punch with its mirrored right punch makes neither.
                 if _performance(clips[a].motion) == _performance(clips[b].motion):
@@ -519,8 +573,13 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
         distance = distance_block(A.features, B.features)
         same = interp.same_contact_matrix(A.contacts, B.contacts)
         for aligned in interp.aligned_segments(distance, same, options.interp_threshold_m, rate, options.interp_min_s):
-            path = interp.trim_to_reachable(aligned, (first_reached[a], last_grounded[a]),
-                                            (first_reached[b], last_grounded[b]), rate, options.interp_min_s)  # fmt: skip
+            path = interp.trim_to_reachable(
+                aligned,
+                (first_reached[a], last_grounded[a]),
+                (first_reached[b], last_grounded[b]),
+                rate,
+                options.interp_min_s,
+            )
             if path is None:
                 continue
             seg = _blend_segment(A, B, path, layout, rate, options.mapping)
@@ -542,19 +601,39 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
             edges.add(nodes[:-1], nodes[1:], EDGE_INTERP, readings[1:], off, dh)
             (a0, b0), (a1, b1) = path[0], path[-1]
             # b's frames, moved into a's frame by the segment's alignment.
-            b_ground = meta.rotate_ground(B.ground, np.full(B.ground.shape[0], theta), np.broadcast_to(shift, B.ground.shape))
+            b_ground = meta.rotate_ground(
+                B.ground, np.full(B.ground.shape[0], theta), np.broadcast_to(shift, B.ground.shape)
+            )
             b_heading = B.heading + theta
-            for clip_index, g, h, first, last, clip in ((a, A.ground, A.heading, a0, a1, A), (b, b_ground, b_heading, b0, b1, B)):
+            for clip_index, g, h, first, last, clip in (
+                (a, A.ground, A.heading, a0, a1, A),
+                (b, b_ground, b_heading, b0, b1, B),
+            ):
                 base = int(start[clip_index])
                 if first >= 1:  # enter from the frame before the segment
-                    off, dh = meta.local_offsets(g[first - 1:first], h[first - 1:first], ground[:1], heading[:1])
+                    off, dh = meta.local_offsets(g[first - 1 : first], h[first - 1 : first], ground[:1], heading[:1])
                     edges.add([base + first - 1], nodes[:1], EDGE_INTERP, readings[:1], off, dh)
                 if last + 1 < clip.motion.num_frames:  # leave toward the frame after it
-                    off, dh = meta.local_offsets(ground[-1:], heading[-1:], g[last + 1:last + 2], h[last + 1:last + 2])
-                    edges.add(nodes[-1:], [base + last + 1], EDGE_INTERP, clip.readings.normal[last + 1:last + 2], off, dh)
-            segments.append({"first_node": int(nodes[0]), "count": int(K), "clip_a": int(a), "clip_b": int(b),
-                             "a_start": int(a0), "a_end": int(a1), "b_start": int(b0), "b_end": int(b1),
-                             "theta": float(theta), "translation": [float(v) for v in shift]})  # fmt: skip
+                    off, dh = meta.local_offsets(
+                        ground[-1:], heading[-1:], g[last + 1 : last + 2], h[last + 1 : last + 2]
+                    )
+                    edges.add(
+                        nodes[-1:], [base + last + 1], EDGE_INTERP, clip.readings.normal[last + 1 : last + 2], off, dh
+                    )
+            segments.append(
+                {
+                    "first_node": int(nodes[0]),
+                    "count": int(K),
+                    "clip_a": int(a),
+                    "clip_b": int(b),
+                    "a_start": int(a0),
+                    "a_end": int(a1),
+                    "b_start": int(b0),
+                    "b_end": int(b1),
+                    "theta": float(theta),
+                    "translation": [float(v) for v in shift],
+                }
+            )
     return segments
 
 
@@ -568,34 +647,42 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     performances: dict = {}
     performance = np.array([performances.setdefault(_performance(c.motion), len(performances)) for c in clips])
     performers: dict = {}
-    performer = np.array([performers.setdefault(np.round(c.motion.skeleton.offsets, 6).tobytes(), len(performers))
-                          for c in clips])  # fmt: skip
+    performer = np.array(
+        [performers.setdefault(np.round(c.motion.skeleton.offsets, 6).tobytes(), len(performers)) for c in clips]
+    )
     world_pos = np.concatenate([c.world_pos for c in clips])
     rotations = np.concatenate([c.motion.rotations for c in clips])
     translations = np.concatenate([c.motion.translations for c in clips])
     world_rot, _ = forward_kinematics(rotations, translations, sk.parents)
     kb = br.KBFrames(
-        rotations=rotations, translations=translations, world_rot=world_rot, world_pos=world_pos,
-        ground=np.concatenate([c.ground for c in clips]), heading=np.concatenate([c.heading for c in clips]),
-        contacts=np.concatenate([c.contacts for c in clips]), window=window,
-        canon=world_pos[:, [joints[c] for c in CANONICAL]], start=start, label=np.asarray(label_of_clip),
-        performance=performance, performer=performer,
-    )  # fmt: skip
+        rotations=rotations,
+        translations=translations,
+        world_rot=world_rot,
+        world_pos=world_pos,
+        ground=np.concatenate([c.ground for c in clips]),
+        heading=np.concatenate([c.heading for c in clips]),
+        contacts=np.concatenate([c.contacts for c in clips]),
+        window=window,
+        canon=world_pos[:, [joints[c] for c in CANONICAL]],
+        start=start,
+        label=np.asarray(label_of_clip),
+        performance=performance,
+        performer=performer,
+    )
     # Bridges between labels only where the graph so far is slow to get from one to the
     # other: where plain transitions already connect two actions (a walk and a walk
     # that turns), bridges measured no better on mixed performances, at 11 % more nodes.
     node_label = np.asarray(label_of_clip)[np.concatenate(parts["clip"])]
     e_src, e_dst = (np.concatenate([p[k] for p in edges.parts]) for k in (0, 1))
-    typical = typical_times(label_hops(e_src, e_dst, node_label, int(np.max(label_of_clip)) + 1),
-                            node_label, rate)
+    typical = typical_times(label_hops(e_src, e_dst, node_label, int(np.max(label_of_clip)) + 1), node_label, rate)
     needed = ~(typical <= options.bridge_spacing_s / 2.0)
     np.fill_diagonal(needed, False)
-    matches = br.select_matches(kb, rate, options.bridge_threshold_m, options.bridge_end_threshold_m,
-                                options.bridge_spacing_s, needed)  # fmt: skip
+    matches = br.select_matches(
+        kb, rate, options.bridge_threshold_m, options.bridge_end_threshold_m, options.bridge_spacing_s, needed
+    )
     if not len(matches):
         return []
-    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement,
-                             rate)  # fmt: skip
+    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement, rate)
     B, M = len(matches), nodes.rotations.shape[0]
     parts["kind"].append(np.full(M, NODE_BRIDGE, np.uint8))
     parts["clip"].append(nodes.source_clip.astype(np.int32))
@@ -620,11 +707,21 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     src[inner], dst[inner] = src_in, ids
     src[~inner], dst[~inner] = last_ids, exit_frame
     edges.add(src, dst, EDGE_BRIDGE, nodes.readings, nodes.step_offset, nodes.step_heading)
-    return [{"first_node": int(next_node + nodes.first[b]), "count": int(nodes.count[b]),
-             "clip_a": int(matches.clip_a[b]), "clip_b": int(matches.clip_b[b]), "a_entry": int(matches.entry[b]),
-             "b_exit": int(matches.exit[b]), "a_match": int(matches.i[b]), "b_match": int(matches.j[b]),
-             "distance_m": round(float(matches.distance[b]), 5), "kind": br.KINDS[int(matches.kind[b])]}
-            for b in range(B)]  # fmt: skip
+    return [
+        {
+            "first_node": int(next_node + nodes.first[b]),
+            "count": int(nodes.count[b]),
+            "clip_a": int(matches.clip_a[b]),
+            "clip_b": int(matches.clip_b[b]),
+            "a_entry": int(matches.entry[b]),
+            "b_exit": int(matches.exit[b]),
+            "a_match": int(matches.i[b]),
+            "b_match": int(matches.j[b]),
+            "distance_m": round(float(matches.distance[b]), 5),
+            "kind": br.KINDS[int(matches.kind[b])],
+        }
+        for b in range(B)
+    ]
 
 
 def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: Layout, rate: float, mapping=None):
@@ -634,7 +731,9 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
     trans_b = B.motion.translations.copy()
     # Move all of B rigidly: turn and shift its root, the rest of the body follows.
     rot_b[:, 0] = quat.mul(quat.about_y(np.full(rot_b.shape[0], theta)), rot_b[:, 0])
-    root_xz = meta.rotate_ground(trans_b[:, 0, [0, 2]], np.full(rot_b.shape[0], theta), np.broadcast_to(shift, (rot_b.shape[0], 2)))
+    root_xz = meta.rotate_ground(
+        trans_b[:, 0, [0, 2]], np.full(rot_b.shape[0], theta), np.broadcast_to(shift, (rot_b.shape[0], 2))
+    )
     trans_b[:, 0, 0], trans_b[:, 0, 2] = root_xz[:, 0], root_xz[:, 1]
     rot = interp.blend_along_path(A.motion.rotations, rot_b, path)
     trans = interp.blend_arrays_along_path(A.motion.translations, trans_b, path)
@@ -649,9 +748,16 @@ def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: L
     return rot, trans, ground, heading, contacts, coords_a, readings, theta, np.asarray(shift, dtype=np.float64)
 
 
-def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augment: tuple[str, ...] = (), jobs: int = 1,
-                        progress: bool | None = None, skeleton: Motion | None = None, mapping=None,
-                        clip_map: ClipMap | None = None) -> list[Motion]:  # fmt: skip
+def load_knowledge_base(
+    paths: Sequence[str],
+    exclude: Sequence[str] = (),
+    augment: tuple[str, ...] = (),
+    jobs: int = 1,
+    progress: bool | None = None,
+    skeleton: Motion | None = None,
+    mapping=None,
+    clip_map: ClipMap | None = None,
+) -> list[Motion]:
     """Load KB files/folders/globs, put every clip on one skeleton (`retarget.pool_skeletons`:
     `skeleton`'s, else that of the first file of the first path), then add the requested
     augmented copies (`mirror`: left/right mirror images, `reverse`: time-reversed clips;
@@ -665,8 +771,9 @@ def load_knowledge_base(paths: Sequence[str], exclude: Sequence[str] = (), augme
         raise InputError("the knowledge base is empty: no .bvh, .amc or DeepMimic .txt files matched")
     motions = (clip_map or thread_map(jobs))(load_motion, files, desc="loading", progress=progress)
     first = next(iter(find_motion_files(list(paths)[:1], exclude=list(exclude))), files[0])
-    motions = pool_skeletons(motions, skeleton, mapping, first=files.index(first),
-                             clip_map=clip_map or thread_map(jobs), progress=progress)  # fmt: skip
+    motions = pool_skeletons(
+        motions, skeleton, mapping, first=files.index(first), clip_map=clip_map or thread_map(jobs), progress=progress
+    )
     if augment:
         extra = []
         if "mirror" in augment:

@@ -40,8 +40,10 @@ def calibrate_from_start(rec, graph, seconds: float, pose: str, hidden_clips=())
     calibrate against them). InputError (CalibrationQualityError among them) as
     `calibrate`."""
     if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and 0 < seconds <= MAX_FROM_START_S):
-        raise InputError(f"--calibrate-from-start must be a finite number of seconds > 0 and at most "
-                         f"{MAX_FROM_START_S:g}, got {seconds}")  # fmt: skip
+        raise InputError(
+            f"--calibrate-from-start must be a finite number of seconds > 0 and at most "
+            f"{MAX_FROM_START_S:g}, got {seconds}"
+        )
     if pose not in POSES:
         raise InputError(f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
     return calibrate_against(rec, pose, graph_reference(graph, hidden_clips), None, float(seconds))
@@ -57,9 +59,15 @@ def graph_reference(graph, hidden_clips=()) -> Reference:
         names = np.array([str(c.get("name", "")) for c in graph.clips] + [""])
         keep = ~np.isin(names[np.minimum(graph.node_clip[stream_nodes], len(graph.clips))], list(hidden))
         stream, runs, stream_nodes = stream[keep], runs[keep], stream_nodes[keep]
-    return Reference(layout=graph.layout, sensor_names=graph.sensor_names, rate_hz=graph.rate_hz,
-                     sensor_frames=graph.params.get("sensor_frames", REST_POSE), readings=stream, runs=runs,
-                     verticals=lambda rows, names: graph_verticals(graph, stream_nodes[rows], names))  # fmt: skip
+    return Reference(
+        layout=graph.layout,
+        sensor_names=graph.sensor_names,
+        rate_hz=graph.rate_hz,
+        sensor_frames=graph.params.get("sensor_frames", REST_POSE),
+        readings=stream,
+        runs=runs,
+        verticals=lambda rows, names: graph_verticals(graph, stream_nodes[rows], names),
+    )
 
 
 def graph_stream(graph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -88,8 +96,11 @@ def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
     clips = graph.node_clip[nodes]
     for c in np.unique(clips):
         pick = np.flatnonzero(clips == c)
-        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes[pick]].astype(np.float64),
-                                                  graph.node_translations[nodes[pick]].astype(np.float64), sk.parents)  # fmt: skip
+        world_rot, world_pos = forward_kinematics(
+            graph.node_rotations[nodes[pick]].astype(np.float64),
+            graph.node_translations[nodes[pick]].astype(np.float64),
+            sk.parents,
+        )
         placement = clip_placement(graph, layout, int(c))
         _, orientation = sensor_poses(world_rot, world_pos, placement)
         out[pick] = world_vertical(orientation)[:, cols]

@@ -51,8 +51,9 @@ def label_distances(graph: MotionGraph, allowed: np.ndarray | None = None) -> np
     return label_hops(graph.edge_src, graph.edge_dst, graph.node_label, len(graph.labels), allowed)
 
 
-def label_hops(src: np.ndarray, dst: np.ndarray, node_label: np.ndarray, num_labels: int,
-               allowed: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def label_hops(
+    src: np.ndarray, dst: np.ndarray, node_label: np.ndarray, num_labels: int, allowed: np.ndarray | None = None
+) -> np.ndarray:
     """`label_distances` of any edge list (E,) over N = len(node_label) nodes."""
     N = node_label.shape[0]
     src, dst = np.asarray(src, dtype=np.int64), np.asarray(dst, dtype=np.int64)
@@ -97,8 +98,9 @@ def connectivity(graph: MotionGraph, allowed: np.ndarray | None = None) -> dict:
     islands = []
     for c in order[:ISLANDS_LISTED]:
         present = np.bincount(labels[component == c], minlength=len(graph.labels))
-        islands.append({"nodes": int(sizes[c]),
-                        "labels": {graph.labels[k]: int(n) for k, n in enumerate(present) if n}})  # fmt: skip
+        islands.append(
+            {"nodes": int(sizes[c]), "labels": {graph.labels[k]: int(n) for k, n in enumerate(present) if n}}
+        )
     total = int(ok.sum())
     hops = label_distances(graph, ok)
     rate = float(graph.rate_hz)
@@ -112,8 +114,10 @@ def connectivity(graph: MotionGraph, allowed: np.ndarray | None = None) -> dict:
                 continue
             d = hops[b, nodes_a]
             shortest, typical = float(d.min()), float(np.median(d))
-            row[graph.labels[b]] = {"shortest_s": round(shortest / rate, 3) if np.isfinite(shortest) else None,
-                                    "typical_s": round(typical / rate, 3) if np.isfinite(typical) else None}  # fmt: skip
+            row[graph.labels[b]] = {
+                "shortest_s": round(shortest / rate, 3) if np.isfinite(shortest) else None,
+                "typical_s": round(typical / rate, 3) if np.isfinite(typical) else None,
+            }
         reach[graph.labels[a]] = row
     return {
         "nodes": total,
@@ -141,9 +145,11 @@ def worst_reach(report: dict) -> tuple[float, str, str] | None:
 def format_connectivity(report: dict) -> str:
     """A few lines for `graphsvc info` and `build`: the largest component, the islands
     and a label × label table of typical times (s; '-' where unreachable)."""
-    lines = [f"connectivity: largest strongly connected component {100 * report['largest_share']:.1f} % of "
-             f"{report['nodes']:,} nodes; {report['components'] - 1:,} other components "
-             f"({report['outside_largest_nodes']:,} nodes)"]  # fmt: skip
+    lines = [
+        f"connectivity: largest strongly connected component {100 * report['largest_share']:.1f} % of "
+        f"{report['nodes']:,} nodes; {report['components'] - 1:,} other components "
+        f"({report['outside_largest_nodes']:,} nodes)"
+    ]
     for isl in report["islands"][:3]:
         names = ", ".join(f"{k} {v:,}" for k, v in sorted(isl["labels"].items(), key=lambda kv: -kv[1])[:3])
         lines.append(f"  island of {isl['nodes']:,} nodes ({names})")
@@ -151,8 +157,10 @@ def format_connectivity(report: dict) -> str:
     if len(labels) >= 2:
         worst = worst_reach(report)
         where = "unreachable" if not np.isfinite(worst[0]) else f"{worst[0]:.2f} s"
-        lines.append(f"reach from a typical node of each label (row) to the nearest of another (column), s; "
-                     f"slowest {worst[1]} → {worst[2]}: {where}")  # fmt: skip
+        lines.append(
+            f"reach from a typical node of each label (row) to the nearest of another (column), s; "
+            f"slowest {worst[1]} → {worst[2]}: {where}"
+        )
         width = max(len(lab) for lab in labels)
         lines.append(" " * (width + 4) + "".join(f"{k + 1:>6d}" for k in range(len(labels))))
         for i, a in enumerate(labels):

@@ -77,9 +77,12 @@ def pose_features(positions: np.ndarray, window: int) -> PoseFeatures:
     y = cloud[..., 1] * sqrt_w
     norm2 = np.einsum("fn,fn->f", x, x) + np.einsum("fn,fn->f", z, z) + np.einsum("fn,fn->f", y, y)
     return PoseFeatures(
-        x.astype(np.float32), z.astype(np.float32), y.astype(np.float32),
-        norm2.astype(np.float64), mean_xz.astype(np.float64),
-    )  # fmt: skip
+        x.astype(np.float32),
+        z.astype(np.float32),
+        y.astype(np.float32),
+        norm2.astype(np.float64),
+        mean_xz.astype(np.float64),
+    )
 
 
 def concat_features(parts: list[PoseFeatures]) -> PoseFeatures:
@@ -87,8 +90,9 @@ def concat_features(parts: list[PoseFeatures]) -> PoseFeatures:
 
 
 def take(features: PoseFeatures, frames: np.ndarray) -> PoseFeatures:
-    return PoseFeatures(features.x[frames], features.z[frames], features.y[frames],
-                        features.norm2[frames], features.mean_xz[frames])  # fmt: skip
+    return PoseFeatures(
+        features.x[frames], features.z[frames], features.y[frames], features.norm2[frames], features.mean_xz[frames]
+    )
 
 
 def distance_block(a: PoseFeatures, b: PoseFeatures) -> np.ndarray:

@@ -21,9 +21,25 @@ from graphsvc.store import file_checksum, read_container, read_header, write_con
 KIND = "graph"
 FORMAT_VERSION = 2  # 2: bridge nodes and edges (kind 3 / 5) and their records
 READABLE_VERSIONS = (1, 2)
-ARRAYS = ("clip_offsets", "node_kind", "node_clip", "node_frame", "node_contacts", "node_label", "node_rotations",
-          "node_translations", "node_ground", "node_heading", "edge_src", "edge_dst", "edge_kind", "edge_acc",
-          "edge_offset", "edge_heading", "incoming")  # fmt: skip
+ARRAYS = (
+    "clip_offsets",
+    "node_kind",
+    "node_clip",
+    "node_frame",
+    "node_contacts",
+    "node_label",
+    "node_rotations",
+    "node_translations",
+    "node_ground",
+    "node_heading",
+    "edge_src",
+    "edge_dst",
+    "edge_kind",
+    "edge_acc",
+    "edge_offset",
+    "edge_heading",
+    "incoming",
+)
 OPTIONAL = ("edge_up",)  # absent from files written before it (loaded as None)
 
 
@@ -32,8 +48,13 @@ def save_graph(graph: MotionGraph, path: StrPath) -> None:
     sk = graph.skeleton
     meta = {
         "rate_hz": graph.rate_hz,
-        "skeleton": {"names": list(sk.names), "parents": sk.parents.tolist(), "offsets": sk.offsets.tolist(),
-                     "channels": [list(c) for c in sk.channels], "end_site": sk.end_site.tolist()},  # fmt: skip
+        "skeleton": {
+            "names": list(sk.names),
+            "parents": sk.parents.tolist(),
+            "offsets": sk.offsets.tolist(),
+            "channels": [list(c) for c in sk.channels],
+            "end_site": sk.end_site.tolist(),
+        },
         "layout": graph.layout,
         "clips": graph.clips,
         "labels": list(graph.labels),
@@ -51,19 +72,35 @@ def load_graph(path: StrPath, mmap: bool = True, verify: bool = True) -> MotionG
     """Load a graph file; refuses truncated, corrupted or foreign files (FormatError)."""
     meta, arrays, version = read_container(path, kind=KIND, mmap=mmap, verify=verify)
     if version not in READABLE_VERSIONS:
-        raise FormatError(path, f"graph format version {version} is not supported (this graphsvc reads "
-                                f"{', '.join(map(str, READABLE_VERSIONS))})")  # fmt: skip
+        raise FormatError(
+            path,
+            f"graph format version {version} is not supported (this graphsvc reads "
+            f"{', '.join(map(str, READABLE_VERSIONS))})",
+        )
     missing = [a for a in ARRAYS if a not in arrays]
     if missing:
         raise FormatError(path, f"graph file lacks arrays: {', '.join(missing)}")
     try:
         s = meta["skeleton"]
-        skeleton = Skeleton(tuple(s["names"]), np.array(s["parents"]), np.array(s["offsets"]),
-                            tuple(tuple(c) for c in s["channels"]), np.array(s["end_site"]))  # fmt: skip
+        skeleton = Skeleton(
+            tuple(s["names"]),
+            np.array(s["parents"]),
+            np.array(s["offsets"]),
+            tuple(tuple(c) for c in s["channels"]),
+            np.array(s["end_site"]),
+        )
         stored: dict[str, Any] = {name: arrays.get(name) for name in (*ARRAYS, *OPTIONAL)}  # (ARRAYS: all there)
-        graph = MotionGraph(rate_hz=float(meta["rate_hz"]), skeleton=skeleton, layout=meta["layout"],
-                            clips=meta["clips"], labels=tuple(meta["labels"]), params=meta["params"],
-                            segments=meta.get("segments", []), bridges=meta.get("bridges", []), **stored)  # fmt: skip
+        graph = MotionGraph(
+            rate_hz=float(meta["rate_hz"]),
+            skeleton=skeleton,
+            layout=meta["layout"],
+            clips=meta["clips"],
+            labels=tuple(meta["labels"]),
+            params=meta["params"],
+            segments=meta.get("segments", []),
+            bridges=meta.get("bridges", []),
+            **stored,
+        )
     except (KeyError, TypeError, ValueError) as exc:
         raise FormatError(path, f"graph metadata is incomplete: {exc}") from None
     N, E = graph.num_nodes, graph.num_edges
@@ -81,28 +118,52 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
     checks, so a file checksummed after it was altered must not reach them."""
     N, E, J, C = graph.num_nodes, graph.num_edges, graph.skeleton.num_joints, len(graph.clips)
     layout = graph.layout
-    if not isinstance(layout, dict) or not isinstance(layout.get("sensors"), list) or not all(
-            isinstance(s, dict) and isinstance(s.get("name"), str) for s in layout["sensors"]):
+    if (
+        not isinstance(layout, dict)
+        or not isinstance(layout.get("sensors"), list)
+        or not all(isinstance(s, dict) and isinstance(s.get("name"), str) for s in layout["sensors"])
+    ):
         raise FormatError(path, "graph metadata: the layout has no list of named sensors")
     S = len(layout["sensors"])
-    shapes = {"node_kind": (N,), "node_clip": (N,), "node_frame": (N,), "node_contacts": (N, 2), "node_label": (N,),
-              "node_rotations": (N, J, 4), "node_translations": (N, J, 3), "node_ground": (N, 2), "node_heading": (N,),
-              "edge_src": (E,), "edge_dst": (E,), "edge_kind": (E,), "edge_acc": (E, S, 3), "edge_offset": (E, 2),
-              "edge_heading": (E,), "incoming": (N + 1,), "clip_offsets": (C, J, 3)}  # fmt: skip
+    shapes = {
+        "node_kind": (N,),
+        "node_clip": (N,),
+        "node_frame": (N,),
+        "node_contacts": (N, 2),
+        "node_label": (N,),
+        "node_rotations": (N, J, 4),
+        "node_translations": (N, J, 3),
+        "node_ground": (N, 2),
+        "node_heading": (N,),
+        "edge_src": (E,),
+        "edge_dst": (E,),
+        "edge_kind": (E,),
+        "edge_acc": (E, S, 3),
+        "edge_offset": (E, 2),
+        "edge_heading": (E,),
+        "incoming": (N + 1,),
+        "clip_offsets": (C, J, 3),
+    }
     for name, shape in shapes.items():
         a = getattr(graph, name)
         if a is not None and (a.shape != shape or a.dtype.kind not in "biuf"):
-            raise FormatError(path, f"graph array {name} is {a.dtype}{list(a.shape)}, expected numbers of shape {list(shape)}")
+            raise FormatError(
+                path, f"graph array {name} is {a.dtype}{list(a.shape)}, expected numbers of shape {list(shape)}"
+            )
     up = graph.edge_up
     if up is not None:
         # The orientation cue: tilt (3) or relative to the root sensor (9, `sensors.orientation`).
         width = up.shape[-1] if up.ndim == 3 else None
         if up.shape[:2] != (E, S) or width not in WIDTHS or up.dtype.kind not in "f":
-            raise FormatError(path, f"graph array edge_up is {up.dtype}{list(up.shape)}, expected numbers of shape "
-                                    f"[{E}, {S}, 3 or 9]")  # fmt: skip
+            raise FormatError(
+                path, f"graph array edge_up is {up.dtype}{list(up.shape)}, expected numbers of shape [{E}, {S}, 3 or 9]"
+            )
         if width == RELATIVE_WIDTH and not any(s.get("segment") == ROOT_SEGMENT for s in layout["sensors"]):
-            raise FormatError(path, "graph metadata: orientations relative to a root sensor, and the layout has no "
-                                    f"sensor on the {ROOT_SEGMENT}")  # fmt: skip
+            raise FormatError(
+                path,
+                "graph metadata: orientations relative to a root sensor, and the layout has no "
+                f"sensor on the {ROOT_SEGMENT}",
+            )
     for name in ("edge_src", "edge_dst", "node_clip", "node_label", "incoming", "node_kind", "edge_kind"):
         if getattr(graph, name).dtype.kind not in "iu":
             raise FormatError(path, f"graph array {name} holds {getattr(graph, name).dtype}, expected integers")

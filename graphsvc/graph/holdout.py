@@ -38,8 +38,9 @@ def is_augmented(name: str) -> bool:
 def performance_clips(graph: MotionGraph, clip_index: int) -> np.ndarray:
     """(k,) int: indices of the graph clips of `clip_index`'s performance (itself included)."""
     want = performance_key(graph.clips[clip_index]["source"], graph.clips[clip_index]["name"])
-    return np.array([k for k, c in enumerate(graph.clips) if performance_key(c["source"], c["name"]) == want],
-                    dtype=np.int64)  # fmt: skip
+    return np.array(
+        [k for k, c in enumerate(graph.clips) if performance_key(c["source"], c["name"]) == want], dtype=np.int64
+    )
 
 
 def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray:
@@ -51,5 +52,5 @@ def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray
     hidden = np.isin(np.asarray(graph.node_clip), clips)
     for seg in (*graph.segments, *graph.bridges):
         if seg["clip_a"] in clips or seg["clip_b"] in clips:
-            hidden[seg["first_node"]: seg["first_node"] + seg["count"]] = True
+            hidden[seg["first_node"] : seg["first_node"] + seg["count"]] = True
     return ~hidden

@@ -234,8 +234,9 @@ def aligned_segments(
     return out
 
 
-def trim_to_reachable(path: np.ndarray, span_a: tuple[int, int], span_b: tuple[int, int], rate_hz: float,
-                      min_seconds: float = 0.5) -> np.ndarray | None:  # fmt: skip
+def trim_to_reachable(
+    path: np.ndarray, span_a: tuple[int, int], span_b: tuple[int, int], rate_hz: float, min_seconds: float = 0.5
+) -> np.ndarray | None:
     """An aligned path (K, 2) shortened so that its segment can be entered and left:
     a segment is entered from the frame before its first cell in either clip and
     leaves to the frame after its last, and only frames inside a clip's reachable

@@ -57,9 +57,13 @@ def half_speed_poses(rotations: np.ndarray, translations: np.ndarray) -> tuple[n
 
 
 def speed_readings(
-    world_rot: np.ndarray, world_pos: np.ndarray, half_world_rot: np.ndarray, half_world_pos: np.ndarray,
-    placement: Placement, rate_hz: float,
-) -> SpeedReadings:  # fmt: skip
+    world_rot: np.ndarray,
+    world_pos: np.ndarray,
+    half_world_rot: np.ndarray,
+    half_world_pos: np.ndarray,
+    placement: Placement,
+    rate_hz: float,
+) -> SpeedReadings:
     """Sensor readings of one clip at the three playback speeds, from the world
     poses of the clip (F, J, 4/3) and of its half-speed timeline (2F−1, J, 4/3).
     FK is per frame, so double speed needs no FK of its own: it plays every other
@@ -98,8 +102,12 @@ def apply_offsets(ground: np.ndarray, heading: float, offset: np.ndarray, dheadi
 
 
 def integrate_path(
-    ground0: np.ndarray, heading0: float, offsets: np.ndarray, dheadings: np.ndarray,
-    targets: np.ndarray | None = None, alpha: float = 0.0,
+    ground0: np.ndarray,
+    heading0: float,
+    offsets: np.ndarray,
+    dheadings: np.ndarray,
+    targets: np.ndarray | None = None,
+    alpha: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Root ground path (K+1, 2) and headings (K+1,) from a start and K edge offsets,
     `apply_offsets` step by step (compiled: a live stream integrates a few edges many
@@ -112,8 +120,14 @@ def integrate_path(
     ground[0], heading[0] = ground0, heading0
     if targets is None or alpha == 0.0:
         targets, alpha = np.full((0, 2), np.nan), 0.0
-    _integrate(np.ascontiguousarray(offsets, dtype=np.float64), np.ascontiguousarray(dheadings, dtype=np.float64),
-               np.ascontiguousarray(targets, dtype=np.float64), float(alpha), ground, heading)  # fmt: skip
+    _integrate(
+        np.ascontiguousarray(offsets, dtype=np.float64),
+        np.ascontiguousarray(dheadings, dtype=np.float64),
+        np.ascontiguousarray(targets, dtype=np.float64),
+        float(alpha),
+        ground,
+        heading,
+    )
     return ground, heading
 
 
@@ -135,8 +149,26 @@ def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray
     return np.stack([c * points[:, 0] + s * points[:, 1], -s * points[:, 0] + c * points[:, 1]], axis=-1) + translation
 
 
-def bridge_readings(ctx_rot, ctx_pos, ctx_ground, ctx_heading, node_rot, node_pos, node_ground, node_heading,
-                    first, count, entry, exit_frame, a_lo, a_hi, b_lo, b_hi, placements, rate_hz) -> np.ndarray:  # fmt: skip
+def bridge_readings(
+    ctx_rot,
+    ctx_pos,
+    ctx_ground,
+    ctx_heading,
+    node_rot,
+    node_pos,
+    node_ground,
+    node_heading,
+    first,
+    count,
+    entry,
+    exit_frame,
+    a_lo,
+    a_hi,
+    b_lo,
+    b_hi,
+    placements,
+    rate_hz,
+) -> np.ndarray:
     """(M + B, S, 3) float32 readings of B bridges, in the order of `BridgeNodes`.
 
     ctx_*: world poses (rotations, positions), ground positions and headings of the
@@ -218,15 +250,19 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
         world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
         placement = clip_placement(graph, layout, c, ANATOMICAL, (world_rot, world_pos))
         placements.append(placement)
-        r = speed_readings(world_rot, world_pos, *forward_kinematics(half_rot, half_trans, sk.parents), placement,
-                           graph.rate_hz)  # fmt: skip
+        r = speed_readings(
+            world_rot, world_pos, *forward_kinematics(half_rot, half_trans, sk.parents), placement, graph.rate_hz
+        )
         normal[nodes], double[nodes], half[nodes] = r.normal, r.double, r.half[0::2]
         slow = slow_nodes[clip_of[slow_nodes] == c]
         half[slow] = r.half[(2 * frame_of[slow]).astype(np.int64)]
     for seg in graph.segments:
         nodes = seg["first_node"] + np.arange(seg["count"])
-        world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                                  graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+        world_rot, world_pos = forward_kinematics(
+            graph.node_rotations[nodes].astype(np.float64),
+            graph.node_translations[nodes].astype(np.float64),
+            sk.parents,
+        )
         normal[nodes] = simulate_accelerations(world_rot, world_pos, placements[seg["clip_a"]], graph.rate_hz)
     dst, ekind = graph.edge_dst, graph.edge_kind
     out = normal[dst]
@@ -245,8 +281,9 @@ def _bridge_accelerations(graph, placements, out) -> None:
     layout on each clip."""
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
-    ctx_rot, ctx_pos = forward_kinematics(graph.node_rotations[:N0].astype(np.float64),
-                                          graph.node_translations[:N0].astype(np.float64), sk.parents)  # fmt: skip
+    ctx_rot, ctx_pos = forward_kinematics(
+        graph.node_rotations[:N0].astype(np.float64), graph.node_translations[:N0].astype(np.float64), sk.parents
+    )
     recs = graph.bridges
     first_node = np.array([b["first_node"] for b in recs], dtype=np.int64)
     count = np.array([b["count"] for b in recs], dtype=np.int64)
@@ -254,17 +291,31 @@ def _bridge_accelerations(graph, placements, out) -> None:
     ca = np.array([b["clip_a"] for b in recs], dtype=np.int64)
     cb = np.array([b["clip_b"] for b in recs], dtype=np.int64)
     nodes = np.concatenate([f + np.arange(n) for f, n in zip(first_node, count)])
-    node_rot, node_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                            graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    node_rot, node_pos = forward_kinematics(
+        graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64), sk.parents
+    )
     first = np.zeros(len(recs), dtype=np.int64)
     np.cumsum(count[:-1], out=first[1:])
     readings = bridge_readings(
-        ctx_rot, ctx_pos, graph.node_ground[:N0].astype(np.float64), graph.node_heading[:N0].astype(np.float64),
-        node_rot, node_pos, graph.node_ground[nodes].astype(np.float64), graph.node_heading[nodes].astype(np.float64),
-        first, count, clip_start[ca] + np.array([b["a_entry"] for b in recs]),
-        clip_start[cb] + np.array([b["b_exit"] for b in recs]), clip_start[ca], clip_start[ca + 1], clip_start[cb],
-        clip_start[cb + 1], [placements[int(c)] for c in ca], graph.rate_hz,
-    )  # fmt: skip
+        ctx_rot,
+        ctx_pos,
+        graph.node_ground[:N0].astype(np.float64),
+        graph.node_heading[:N0].astype(np.float64),
+        node_rot,
+        node_pos,
+        graph.node_ground[nodes].astype(np.float64),
+        graph.node_heading[nodes].astype(np.float64),
+        first,
+        count,
+        clip_start[ca] + np.array([b["a_entry"] for b in recs]),
+        clip_start[cb] + np.array([b["b_exit"] for b in recs]),
+        clip_start[ca],
+        clip_start[ca + 1],
+        clip_start[cb],
+        clip_start[cb + 1],
+        [placements[int(c)] for c in ca],
+        graph.rate_hz,
+    )
     # Row of each bridge node's entering edge, and of each bridge's exit edge.
     row_of_node = np.full(graph.num_nodes, -1, dtype=np.int64)
     row_of_node[nodes] = np.arange(nodes.size) + np.repeat(np.arange(len(recs)), count)
@@ -295,8 +346,9 @@ def graph_placement(graph, layout=None):
         return place(layout, sk, mapping)
     n0 = sum(int(c["frames"]) for c in graph.clips) or graph.num_nodes
     nodes = np.unique(np.linspace(0, n0 - 1, min(n0, PLACEMENT_SAMPLE)).round().astype(np.int64))
-    world_rot, world_pos = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                              graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+    world_rot, world_pos = forward_kinematics(
+        graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64), sk.parents
+    )
     return anatomical_placement(layout, sk, mapping, world_rot, world_pos)
 
 
@@ -322,16 +374,19 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
     width = TILT_WIDTH if root is None else RELATIVE_WIDTH
     owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
     for rec in list(graph.segments) + list(graph.bridges):
-        owner[int(rec["first_node"]):int(rec["first_node"]) + int(rec["count"])] = int(rec["clip_a"])
+        owner[int(rec["first_node"]) : int(rec["first_node"]) + int(rec["count"])] = int(rec["clip_a"])
     node_cue = np.zeros((N, S, width), np.float16)
     placements = clip_placements(graph, layout)
     for c in np.unique(owner):
         placement = placements[c]
         nodes = np.flatnonzero(owner == c)
         for k in range(0, nodes.size, _UP_CHUNK):
-            part = nodes[k:k + _UP_CHUNK]
-            world_rot, world_pos = forward_kinematics(graph.node_rotations[part].astype(np.float64),
-                                                      graph.node_translations[part].astype(np.float64), sk.parents)  # fmt: skip
+            part = nodes[k : k + _UP_CHUNK]
+            world_rot, world_pos = forward_kinematics(
+                graph.node_rotations[part].astype(np.float64),
+                graph.node_translations[part].astype(np.float64),
+                sk.parents,
+            )
             node_cue[part] = orientation_cue(sensor_poses(world_rot, world_pos, placement)[1], width, root)
     return node_cue[np.asarray(graph.edge_dst, dtype=np.int64)]
 
@@ -354,7 +409,10 @@ def clip_placement(graph, layout, c: int, convention: str | None = None, poses=N
     if poses is None:
         info = graph.clips[c]
         nodes = info["first_node"] + np.arange(info["frames"])
-        poses = forward_kinematics(graph.node_rotations[nodes].astype(np.float64),
-                                   graph.node_translations[nodes].astype(np.float64), sk.parents)  # fmt: skip
+        poses = forward_kinematics(
+            graph.node_rotations[nodes].astype(np.float64),
+            graph.node_translations[nodes].astype(np.float64),
+            sk.parents,
+        )
     world_rot, world_pos = poses
     return anatomical_placement(layout, skeleton, graph.params.get("mapping"), world_rot, world_pos)

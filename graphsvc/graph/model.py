@@ -143,8 +143,12 @@ def format_summary(s: dict) -> str:
         f"edges {s['edges']:,} ({kinds(s['edges_by_kind'])})",
         f"dead ends {s['dead_ends']:,}; clips {s['clips']}, {s['kb_frames']:,} frames "
         f"({s['kb_minutes']:.1f} min) at {s['rate_hz']:g} Hz, {s['joints']} joints",
-        f"layout {s['layout']} ({', '.join(s['sensors'])})" + ("; sensor orientations" if s.get("sensor_orientations")
-                                                               else "; no sensor orientations (`graphsvc relayout` adds them)"),
+        f"layout {s['layout']} ({', '.join(s['sensors'])})"
+        + (
+            "; sensor orientations"
+            if s.get("sensor_orientations")
+            else "; no sensor orientations (`graphsvc relayout` adds them)"
+        ),
         f"labels: {', '.join(s['labels'])}",
     ]
     if "file_bytes" in s:
@@ -152,8 +156,9 @@ def format_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
-def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None,
-                     rate_hz: float = 30.0, up=None) -> MotionGraph:  # fmt: skip
+def graph_from_edges(
+    src, dst, acc, offsets=None, dheading=None, contacts=None, labels=None, kinds=None, rate_hz: float = 30.0, up=None
+) -> MotionGraph:
     """A MotionGraph of bare edges, for synthetic studies (benchmarks, tests): N nodes
     (the largest index + 1) on a one-joint skeleton, without poses or clips. src, dst
     (E,) node indices; acc (E, S, 3) readings (m/s²); up (E, S, 3 or 9) the orientation cue
@@ -173,14 +178,28 @@ def graph_from_edges(src, dst, acc, offsets=None, dheading=None, contacts=None, 
     kinds = np.zeros(E, np.uint8) if kinds is None else np.asarray(kinds, np.uint8)
     S = acc.shape[1]
     return MotionGraph(
-        rate_hz=rate_hz, skeleton=sk, layout={"name": "t", "sensors": [{"name": f"s{i}"} for i in range(S)]},
-        clips=[], labels=("a", "b"), params={}, clip_offsets=np.zeros((1, 1, 3)),
-        node_kind=np.zeros(N, np.uint8), node_clip=np.zeros(N, np.int32), node_frame=np.zeros(N, np.float32),
-        node_contacts=contacts, node_label=labels, node_rotations=np.zeros((N, 1, 4), np.float32),
-        node_translations=np.zeros((N, 1, 3), np.float32), node_ground=np.zeros((N, 2), np.float32),
-        node_heading=np.zeros(N, np.float32), edge_src=src[order].astype(np.int32), edge_dst=dst[order].astype(np.int32),
-        edge_kind=kinds[order], edge_acc=np.asarray(acc, np.float32)[order],
-        edge_offset=offsets[order].astype(np.float32), edge_heading=dheading[order].astype(np.float32),
+        rate_hz=rate_hz,
+        skeleton=sk,
+        layout={"name": "t", "sensors": [{"name": f"s{i}"} for i in range(S)]},
+        clips=[],
+        labels=("a", "b"),
+        params={},
+        clip_offsets=np.zeros((1, 1, 3)),
+        node_kind=np.zeros(N, np.uint8),
+        node_clip=np.zeros(N, np.int32),
+        node_frame=np.zeros(N, np.float32),
+        node_contacts=contacts,
+        node_label=labels,
+        node_rotations=np.zeros((N, 1, 4), np.float32),
+        node_translations=np.zeros((N, 1, 3), np.float32),
+        node_ground=np.zeros((N, 2), np.float32),
+        node_heading=np.zeros(N, np.float32),
+        edge_src=src[order].astype(np.int32),
+        edge_dst=dst[order].astype(np.int32),
+        edge_kind=kinds[order],
+        edge_acc=np.asarray(acc, np.float32)[order],
+        edge_offset=offsets[order].astype(np.float32),
+        edge_heading=dheading[order].astype(np.float32),
         incoming=incoming_offsets(dst[order], N),
         edge_up=None if up is None else np.asarray(up, np.float16)[order],
     )

@@ -108,7 +108,9 @@ def kb_frames(features, contacts, changes, clip_of_frame, frame_in_clip, clip_le
             f"expected contacts (N, 2) and changes, clip_of_frame, frame_in_clip (N,) with N = {N}; "
             f"got {contacts.shape}, {changes.shape}, {clip.shape}, {in_clip.shape}"
         )
-    if N and (clip.min() < 0 or clip.max() >= lengths.shape[0] or np.any(in_clip < 0) or np.any(in_clip >= lengths[clip])):
+    if N and (
+        clip.min() < 0 or clip.max() >= lengths.shape[0] or np.any(in_clip < 0) or np.any(in_clip >= lengths[clip])
+    ):
         raise InputError("clip_of_frame / frame_in_clip do not fit clip_lengths")
     return KBFrames(contacts, clip, in_clip, changes & (in_clip > 0), in_clip + 1 < lengths[clip])
 
@@ -232,15 +234,19 @@ def best_per_source(src: np.ndarray, dist: np.ndarray, limit: int) -> np.ndarray
 def _pair_distances(features: PoseFeatures, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """`distance_pairs` of frames a[k], b[k], in chunks (each call gathers six
     (chunk, n) float64 arrays; unchunked that is gigabytes on a large KB)."""
-    parts = [distance_pairs(features, a[s : s + _PAIR_CHUNK], features, b[s : s + _PAIR_CHUNK])
-             for s in range(0, a.shape[0], _PAIR_CHUNK)]  # fmt: skip
+    parts = [
+        distance_pairs(features, a[s : s + _PAIR_CHUNK], features, b[s : s + _PAIR_CHUNK])
+        for s in range(0, a.shape[0], _PAIR_CHUNK)
+    ]
     return np.concatenate(parts) if parts else np.empty(0)
 
 
 def _pair_alignment(features: PoseFeatures, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`alignment` (cloud b[k] onto cloud a[k]) in chunks, as `_pair_distances`."""
-    parts = [alignment(features, a[s : s + _PAIR_CHUNK], features, b[s : s + _PAIR_CHUNK])
-             for s in range(0, a.shape[0], _PAIR_CHUNK)]  # fmt: skip
+    parts = [
+        alignment(features, a[s : s + _PAIR_CHUNK], features, b[s : s + _PAIR_CHUNK])
+        for s in range(0, a.shape[0], _PAIR_CHUNK)
+    ]
     if not parts:
         return np.empty(0), np.empty((0, 2))
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])

@@ -99,7 +99,9 @@ def _text_lines(path, data: bytes) -> list[str]:
         line = data[: exc.start].count(b"\n") + 1
         raise FormatError(path, "not UTF-8 text", line=line) from None
     if "\x00" in text:
-        raise FormatError(path, "binary data (NUL byte) in a text file", line=text[: text.index("\x00")].count("\n") + 1)
+        raise FormatError(
+            path, "binary data (NUL byte) in a text file", line=text[: text.index("\x00")].count("\n") + 1
+        )
     return [ln.split("#", 1)[0] for ln in text.replace("\r\n", "\n").replace("\r", "\n").split("\n")]
 
 
@@ -109,7 +111,9 @@ def _floats(path, words: list[str], count: int, what: str, line: int) -> np.ndar
     try:
         out = np.array([float(w) for w in words])
     except ValueError:
-        raise FormatError(path, f"expected {count} numbers for {what}, found {' '.join(words)[:60]!r}", line=line) from None
+        raise FormatError(
+            path, f"expected {count} numbers for {what}, found {' '.join(words)[:60]!r}", line=line
+        ) from None
     if not np.all(np.isfinite(out)):
         raise FormatError(path, f"expected finite numbers for {what}", line=line)
     return out
@@ -185,7 +189,11 @@ def read_asf(path) -> AsfSkeleton:
                 order = tuple(w.lower() for w in words[1:])
                 bad = [w for w in order if w not in ROOT_DOFS]
                 if bad or len(set(order)) != len(order):
-                    raise FormatError(path, f"expected root order tokens from {' '.join(ROOT_DOFS)}, found {' '.join(words[1:])!r}", line=ln)
+                    raise FormatError(
+                        path,
+                        f"expected root order tokens from {' '.join(ROOT_DOFS)}, found {' '.join(words[1:])!r}",
+                        line=ln,
+                    )
                 root["order"] = order
             elif key == "axis":
                 if len(words) != 2:
@@ -227,7 +235,9 @@ def read_asf(path) -> AsfSkeleton:
                 dof = tuple(w.lower() for w in words[1:])
                 bad = [w for w in dof if w not in BONE_DOFS]
                 if bad or len(set(dof)) != len(dof):
-                    raise FormatError(path, f"expected dof tokens from {' '.join(BONE_DOFS)}, found {' '.join(words[1:])!r}", line=ln)
+                    raise FormatError(
+                        path, f"expected dof tokens from {' '.join(BONE_DOFS)}, found {' '.join(words[1:])!r}", line=ln
+                    )
                 bone["dof"] = dof
             # limits (and their continuation lines), bodymass, cofmass: not needed
         elif section == "hierarchy":
@@ -288,7 +298,9 @@ def read_asf(path) -> AsfSkeleton:
             todo.append(c)
     missing = [b for b in bones if b not in reached]
     if missing:
-        raise FormatError(path, f"bones not connected to root in :hierarchy: {', '.join(missing[:5])}", line=bones[missing[0]].line)
+        raise FormatError(
+            path, f"bones not connected to root in :hierarchy: {', '.join(missing[:5])}", line=bones[missing[0]].line
+        )
 
     return AsfSkeleton(
         path=str(path),
@@ -455,7 +467,9 @@ def _parse_amc_general(path, data: bytes, start: int, first_line: int, counts: d
             raise FormatError(path, f"frame {frame}: bone {name!r} listed twice", line=ln)
         k = counts[name]
         if len(words) - 1 != k:
-            raise FormatError(path, f"frame {frame}: bone {name!r} expected {k} values, found {len(words) - 1}", line=ln)
+            raise FormatError(
+                path, f"frame {frame}: bone {name!r} expected {k} values, found {len(words) - 1}", line=ln
+            )
         try:
             rows[name].append([float(w) for w in words[1:]])
         except ValueError:
@@ -475,7 +489,9 @@ def read_amc(path, asf: AsfSkeleton, rate_hz: float = CMU_RATE_HZ) -> Motion:
         raise InputError(f"frame rate must be positive and finite, got {rate_hz}")
     data = read_file_bytes(path)
     if b"\x00" in data:
-        raise FormatError(path, "binary data (NUL byte) in a text file", line=data[: data.index(b"\x00")].count(b"\n") + 1)
+        raise FormatError(
+            path, "binary data (NUL byte) in a text file", line=data[: data.index(b"\x00")].count(b"\n") + 1
+        )
     _check_utf8_outside_comments(path, data)
     start, first_line, degrees = _amc_header(path, data)
     counts = _amc_layout(asf)
@@ -499,7 +515,9 @@ def read_amc(path, asf: AsfSkeleton, rate_hz: float = CMU_RATE_HZ) -> Motion:
     return motion
 
 
-def amc_to_motion(asf: AsfSkeleton, values: dict[str, np.ndarray], frames: int, to_rad: float, rate_hz: float) -> Motion:
+def amc_to_motion(
+    asf: AsfSkeleton, values: dict[str, np.ndarray], frames: int, to_rad: float, rate_hz: float
+) -> Motion:
     """Build local rotations/translations from per-bone AMC values ({name: (F, k)}
     in dof order, angles × to_rad = radians, lengths in file units)."""
     unit = asf.metres_per_unit
@@ -526,7 +544,9 @@ def amc_to_motion(asf: AsfSkeleton, values: dict[str, np.ndarray], frames: int, 
     def split(dof: tuple[str, ...], v: np.ndarray):
         """Rotation angles (F, k) + their axes, translation (F, 3), length change (F,)."""
         rot_axes = "".join(d[1].upper() for d in dof if d[0] == "r")
-        angles = np.stack([v[:, i] for i, d in enumerate(dof) if d[0] == "r"], axis=1) if rot_axes else np.zeros((frames, 0))
+        angles = (
+            np.stack([v[:, i] for i, d in enumerate(dof) if d[0] == "r"], axis=1) if rot_axes else np.zeros((frames, 0))
+        )
         t = np.zeros((frames, 3))
         dl = np.zeros(frames)
         for i, d in enumerate(dof):
@@ -585,9 +605,13 @@ def amc_to_motion(asf: AsfSkeleton, values: dict[str, np.ndarray], frames: int, 
     rot = quat.identity((frames, J))
     if rot_cols:
         _channels_to_pose(
-            np.stack(rot_cols, axis=1), np.array(rot_joint, dtype=np.int64),
-            np.array(rot_code, dtype=np.int64), rot, np.zeros((0, 0, 3)), 1.0,
-        )  # fmt: skip
+            np.stack(rot_cols, axis=1),
+            np.array(rot_joint, dtype=np.int64),
+            np.array(rot_code, dtype=np.int64),
+            rot,
+            np.zeros((0, 0, 3)),
+            1.0,
+        )
     rot = quat.mul(quat.mul(pre[None], rot), post[None])
     trans = offsets[None] + extra
     if not moving[0]:

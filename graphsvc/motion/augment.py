@@ -114,8 +114,7 @@ def mirror_pairs(names: Sequence[str], parents: np.ndarray | None = None) -> np.
     if bad.size:
         j = int(bad[0])
         raise SkeletonError(
-            "mirror pairing is not symmetric: "
-            f"{names[j]!r} → {names[pairs[j]]!r} → {names[pairs[pairs[j]]]!r}"
+            f"mirror pairing is not symmetric: {names[j]!r} → {names[pairs[j]]!r} → {names[pairs[pairs[j]]]!r}"
         )
     if parents is not None:
         parents = np.asarray(parents, dtype=np.int64)
@@ -234,7 +233,10 @@ def mirror_motion(motion: Motion) -> Motion:
     else:
         skeleton = Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
     return motion.copy(
-        skeleton=skeleton, rotations=rotations, translations=translations, name=motion.name + "_mirror",
+        skeleton=skeleton,
+        rotations=rotations,
+        translations=translations,
+        name=motion.name + "_mirror",
         labels=tuple(mirror_label(label) for label in motion.labels),
     )
 

@@ -28,9 +28,13 @@ from graphsvc.motion.skeleton import Motion, Skeleton
 
 # Channel name (lower case) → code: 0..2 position x/y/z, 3..5 rotation x/y/z.
 CHANNEL_CODES = {
-    "xposition": 0, "yposition": 1, "zposition": 2,
-    "xrotation": 3, "yrotation": 4, "zrotation": 5,
-}  # fmt: skip
+    "xposition": 0,
+    "yposition": 1,
+    "zposition": 2,
+    "xrotation": 3,
+    "yrotation": 4,
+    "zrotation": 5,
+}
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 
 # Auto unit detection: figure size (longest leaf-to-leaf bone path) above which the
@@ -249,9 +253,7 @@ def parse_number_block(path, data: bytes, start: int, first_line: int, rows: int
         raise FormatError(path, f"frame {row}: expected a number, found {token[:40]!r}", line=lineno)
     if status == ERR_EXTRA_ROWS:
         raise FormatError(path, f"more data rows than the {rows} frames declared (expected end of file)", line=lineno)
-    raise FormatError(
-        path, f"truncated: {rows} frames declared but only {row} data rows found", line=lineno
-    )
+    raise FormatError(path, f"truncated: {rows} frames declared but only {row} data rows found", line=lineno)
 
 
 def _line_text(buf: np.ndarray, line: int) -> str:
@@ -415,6 +417,7 @@ def _cached_hierarchy(path, header: bytes) -> _Joints:
             _HIERARCHY_CACHE.pop(next(iter(_HIERARCHY_CACHE)))
         _HIERARCHY_CACHE[header] = js
     return js
+
 
 # ---------------------------------------------------------------------------
 # Reading

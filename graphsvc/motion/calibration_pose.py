@@ -29,11 +29,22 @@ POSES = ("npose", "tpose", "stand")
 HOLD_BLEND_S = 0.5  # of the prepended seconds, the last this many blend into the clip
 
 # (joint, the canonical joint its bone points at) in the order they are turned.
-_BONES = (("pelvis", "spine"), ("spine", "chest"), ("chest", "neck"), ("neck", "head"),
-          ("l_hip", "l_knee"), ("l_knee", "l_ankle"), ("l_ankle", "l_toe"),
-          ("r_hip", "r_knee"), ("r_knee", "r_ankle"), ("r_ankle", "r_toe"),
-          ("l_shoulder", "l_elbow"), ("l_elbow", "l_wrist"),
-          ("r_shoulder", "r_elbow"), ("r_elbow", "r_wrist"))  # fmt: skip
+_BONES = (
+    ("pelvis", "spine"),
+    ("spine", "chest"),
+    ("chest", "neck"),
+    ("neck", "head"),
+    ("l_hip", "l_knee"),
+    ("l_knee", "l_ankle"),
+    ("l_ankle", "l_toe"),
+    ("r_hip", "r_knee"),
+    ("r_knee", "r_ankle"),
+    ("r_ankle", "r_toe"),
+    ("l_shoulder", "l_elbow"),
+    ("l_elbow", "l_wrist"),
+    ("r_shoulder", "r_elbow"),
+    ("r_elbow", "r_wrist"),
+)
 
 
 def _targets(pose: str, left: np.ndarray) -> dict[str, np.ndarray]:
@@ -98,9 +109,18 @@ def with_calibration_pose(motion: Motion, pose: str, seconds: float, mapping=Non
     s = np.clip((np.arange(n) - (n - blend)) / blend, 0.0, 1.0)
     w = s * s * (3.0 - 2.0 * s)
     J = rot.shape[0]
-    pre_rot = quat.slerp(np.broadcast_to(rot, (n, J, 4)), np.broadcast_to(motion.rotations[0], (n, J, 4)),
-                         np.broadcast_to(w[:, None], (n, J)))  # fmt: skip
+    pre_rot = quat.slerp(
+        np.broadcast_to(rot, (n, J, 4)),
+        np.broadcast_to(motion.rotations[0], (n, J, 4)),
+        np.broadcast_to(w[:, None], (n, J)),
+    )
     pre_trans = (1.0 - w)[:, None, None] * trans + w[:, None, None] * motion.translations[0]
-    return Motion(motion.skeleton, np.concatenate([pre_rot, motion.rotations]),
-                  np.concatenate([pre_trans, motion.translations]), motion.rate_hz, name=motion.name,
-                  source=motion.source, labels=motion.labels)  # fmt: skip
+    return Motion(
+        motion.skeleton,
+        np.concatenate([pre_rot, motion.rotations]),
+        np.concatenate([pre_trans, motion.translations]),
+        motion.rate_hz,
+        name=motion.name,
+        source=motion.source,
+        labels=motion.labels,
+    )

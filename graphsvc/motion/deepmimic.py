@@ -62,7 +62,7 @@ HUMANOID_URDF = (
     ("left_shoulder", "chest", "spherical", (-0.0962, 0.974, -0.73244)),
     ("left_elbow", "left_shoulder", "revolute", (0.0, -1.099152, 0.0)),
     ("left_wrist", "left_elbow", "fixed", (0.0, -1.035788, 0.0)),
-)  # fmt: skip
+)
 
 # End sites graphsvc adds (file units, in the parent's frame), from humanoid.urdf's
 # collision shapes: the neck link's sphere (centre 0 0.7 0), each ankle link's box
@@ -72,7 +72,7 @@ SITES = (
     ("head", "neck", (0.0, 0.7, 0.0)),
     ("right_toe", "right_ankle", (0.534, -0.2, 0.0)),
     ("left_toe", "left_ankle", (0.534, -0.2, 0.0)),
-)  # fmt: skip
+)
 
 # DeepMimic's frame (facing +X, right at +Z) → graphsvc's (facing +Z, left at +X): -90° about Y.
 TO_GRAPHSVC = quat.about_y(-0.5 * math.pi)
@@ -156,8 +156,10 @@ def character_from_urdf(path, scale: float = URDF_SCALE) -> Character:
         axis = _floats(axis.get("xyz") if axis is not None else None, "1 0 0", path, f"joint {j.get('name')!r} axis")
         kind = j.get("type")
         if kind not in WIDTH:
-            raise FormatError(path, f"joint {j.get('name')!r} is {kind!r}: a DeepMimic character has spherical, "
-                                    "revolute and fixed joints")  # fmt: skip
+            raise FormatError(
+                path,
+                f"joint {j.get('name')!r} is {kind!r}: a DeepMimic character has spherical, revolute and fixed joints",
+            )
         if np.any(rpy != 0):
             raise FormatError(path, f"joint {j.get('name')!r} has a rotated origin (rpy {rpy.tolist()})")
         parsed.append((j.get("name"), parent.get("link"), child.get("link"), kind, xyz, axis))
@@ -203,14 +205,20 @@ def skeleton_of(character: Character) -> tuple[Skeleton, np.ndarray]:
     parents = np.concatenate([character.parents, [p for _, p, _ in character.sites]]).astype(np.int64)
     offsets = np.concatenate([character.offsets, np.array([o for _, _, o in character.sites]).reshape(-1, 3)])
     end = [k == "fixed" and not has_child[j] for j, k in enumerate(character.kinds)] + [True] * len(character.sites)
-    channels = [ROOT_CHANNELS if k == "root" else () if e else JOINT_CHANNELS
-                for k, e in zip(character.kinds + ("site",) * len(character.sites), end)]  # fmt: skip
+    channels = [
+        ROOT_CHANNELS if k == "root" else () if e else JOINT_CHANNELS
+        for k, e in zip(character.kinds + ("site",) * len(character.sites), end)
+    ]
     order = _depth_first(parents)
     new = np.empty_like(order)
     new[order] = np.arange(order.size)
-    skeleton = Skeleton(tuple(names[j] for j in order), np.where(parents[order] < 0, -1, new[parents[order]]),
-                        quat.rotate(TO_GRAPHSVC, offsets[order]), tuple(channels[j] for j in order),
-                        np.array(end)[order])  # fmt: skip
+    skeleton = Skeleton(
+        tuple(names[j] for j in order),
+        np.where(parents[order] < 0, -1, new[parents[order]]),
+        quat.rotate(TO_GRAPHSVC, offsets[order]),
+        tuple(channels[j] for j in order),
+        np.array(end)[order],
+    )
     return skeleton, order
 
 
@@ -304,11 +312,17 @@ def _frames(path: Path, data, character: Character) -> np.ndarray:
         if not isinstance(frame, list) or not all(_is_number(v) for v in frame):
             raise FormatError(path, f"frame {k} is not a list of numbers")
         if len(frame) > width:
-            raise FormatError(path, f"frame {k} has {len(frame)} values, {len(frame) - width} more than the skeleton's "
-                                    f"{joints} joints take ({width}): values for a joint the skeleton lacks")
+            raise FormatError(
+                path,
+                f"frame {k} has {len(frame)} values, {len(frame) - width} more than the skeleton's "
+                f"{joints} joints take ({width}): values for a joint the skeleton lacks",
+            )
         if len(frame) < width:
-            raise FormatError(path, f"frame {k} has {len(frame)} values; the skeleton's {joints} joints take {width} "
-                                    f"(from {cols[len(frame)]} on missing)")
+            raise FormatError(
+                path,
+                f"frame {k} has {len(frame)} values; the skeleton's {joints} joints take {width} "
+                f"(from {cols[len(frame)]} on missing)",
+            )
     values = np.array(frames, dtype=np.float64)
     bad = ~np.isfinite(values)
     if bad.any():
@@ -371,8 +385,11 @@ def motion_from_frames(path, values: np.ndarray, character: Character, rate_hz: 
     times = np.concatenate([[0.0], np.cumsum(durations[:-1])])
     frames = times[-1] * rate
     if not (np.isfinite(rate) and rate > 0 and np.isfinite(frames) and frames <= MAX_UPSAMPLING * F):
-        raise FormatError(path, f"frame durations spanning {times[-1]:g} s make {frames:.3g} frames at {rate:g} Hz "
-                                f"of the file's {F}: more than {MAX_UPSAMPLING} times as many")
+        raise FormatError(
+            path,
+            f"frame durations spanning {times[-1]:g} s make {frames:.3g} frames at {rate:g} Hz "
+            f"of the file's {F}: more than {MAX_UPSAMPLING} times as many",
+        )
     rot, trans = resample_times(rot, trans, times, rate)
     return Motion(skeleton, rot, trans, rate, name=path.stem, source=str(path))
 

@@ -96,8 +96,12 @@ class _Buffer:
             view["target"] = target
         self.views.append(view)
         self.size += pad + data.nbytes
-        accessor = {"bufferView": len(self.views) - 1, "componentType": component, "count": int(data.shape[0]),
-                    "type": _TYPES[width]}  # fmt: skip
+        accessor = {
+            "bufferView": len(self.views) - 1,
+            "componentType": component,
+            "count": int(data.shape[0]),
+            "type": _TYPES[width],
+        }
         if bounds:
             flat = data.reshape(data.shape[0], width)
             accessor["min"] = [_number(v) for v in flat.min(axis=0)]
@@ -143,8 +147,10 @@ def _document(motion: Motion) -> tuple[dict, bytes]:
         inverse_bind[:, [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
         inverse_bind[:, :3, 3] = -bind
         ibm = buf.add(inverse_bind.transpose(0, 2, 1).reshape(J, 16), _FLOAT)  # column-major
-        attrs = {"POSITION": buf.add(pos, _FLOAT, _ARRAY_BUFFER, bounds=True),
-                 "NORMAL": buf.add(normal, _FLOAT, _ARRAY_BUFFER)}  # fmt: skip
+        attrs = {
+            "POSITION": buf.add(pos, _FLOAT, _ARRAY_BUFFER, bounds=True),
+            "NORMAL": buf.add(normal, _FLOAT, _ARRAY_BUFFER),
+        }
         joints4 = np.zeros((joint.size, 4), np.int64)
         joints4[:, 0] = joint
         attrs["JOINTS_0"] = buf.add(joints4, _UBYTE if J <= 256 else _USHORT, _ARRAY_BUFFER)
@@ -166,16 +172,29 @@ def _document(motion: Motion) -> tuple[dict, bytes]:
     doc = {
         "asset": {"version": "2.0", "generator": "graphsvc"},
         "scene": 0,
-        "scenes": [{"name": motion.name or "motion", "nodes": [0] + ([J] if meshes else []),
-                    "extras": {"rate_hz": float(motion.rate_hz), "frames": F}}],  # fmt: skip
+        "scenes": [
+            {
+                "name": motion.name or "motion",
+                "nodes": [0] + ([J] if meshes else []),
+                "extras": {"rate_hz": float(motion.rate_hz), "frames": F},
+            }
+        ],
         "nodes": nodes,
         "animations": [{"name": motion.name or "motion", "channels": channels, "samplers": samplers}],
     }
     if meshes:
         doc["skins"] = [{"name": "skeleton", "joints": list(range(J)), "skeleton": 0, "inverseBindMatrices": ibm}]
         doc["meshes"] = meshes
-        doc["materials"] = [{"name": "body", "pbrMetallicRoughness": {
-            "baseColorFactor": [0.72, 0.74, 0.78, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}]  # fmt: skip
+        doc["materials"] = [
+            {
+                "name": "body",
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.72, 0.74, 0.78, 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.8,
+                },
+            }
+        ]
     doc["accessors"] = buf.accessors
     doc["bufferViews"] = buf.views
     return doc, buf.blob()
@@ -213,8 +232,9 @@ def capsule_mesh(bind: np.ndarray, parents: np.ndarray, rigid: np.ndarray) -> tu
     S, H = CAPSULE_SIDES, CAPSULE_RINGS
     around = 2 * np.pi * np.arange(S) / S
     # rows from the start's pole to the end's: (which end, angle from the equator)
-    rows = [(0, -np.pi / 2 + np.pi / 2 * k / H) for k in range(1, H + 1)] + \
-           [(1, np.pi / 2 * k / H) for k in range(0, H)]  # fmt: skip
+    rows = [(0, -np.pi / 2 + np.pi / 2 * k / H) for k in range(1, H + 1)] + [
+        (1, np.pi / 2 * k / H) for k in range(0, H)
+    ]
     positions, normals, joints, triangles = [], [], [], []
     count = 0
     for j in range(1, len(parents)):
@@ -250,5 +270,9 @@ def capsule_mesh(bind: np.ndarray, parents: np.ndarray, rigid: np.ndarray) -> tu
         count += vp.shape[0]
     if not positions:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
-    return (np.vstack(positions), np.vstack(normals), np.concatenate(joints).astype(np.int64),
-            np.vstack(triangles).reshape(-1).astype(np.int64))  # fmt: skip
+    return (
+        np.vstack(positions),
+        np.vstack(normals),
+        np.concatenate(joints).astype(np.int64),
+        np.vstack(triangles).reshape(-1).astype(np.int64),
+    )

@@ -66,13 +66,13 @@ def _container(data: bytes) -> tuple[dict, bytes | None]:
         n, kind = struct.unpack_from("<II", data, 12)
         if kind != 0x4E4F534A or 20 + n > len(data):
             raise _Bad("the GLB's first chunk is not its JSON")
-        doc, chunk = _json(data[20:20 + n]), None
+        doc, chunk = _json(data[20 : 20 + n]), None
         if 28 + n <= len(data):
             m, kind = struct.unpack_from("<II", data, 20 + n)
             if kind == 0x004E4942:
                 if 28 + n + m > len(data):
                     raise _Bad("the GLB's binary chunk runs past the file's end")
-                chunk = data[28 + n:28 + n + m]
+                chunk = data[28 + n : 28 + n + m]
         return doc, chunk
     return _json(data), None
 
@@ -82,8 +82,11 @@ def _json(text: bytes) -> dict:
         doc = json.loads(text.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise _Bad(f"not glTF JSON ({exc})") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("asset"), dict) or \
-            not str(doc["asset"].get("version", "")).startswith("2."):  # fmt: skip
+    if (
+        not isinstance(doc, dict)
+        or not isinstance(doc.get("asset"), dict)
+        or not str(doc["asset"].get("version", "")).startswith("2.")
+    ):
         raise _Bad("not glTF 2.0 (no asset.version 2.x)")
     return doc
 
@@ -121,11 +124,16 @@ def _accessor(doc: dict, buffers: list[bytes], k: int, width: int) -> np.ndarray
     start = _index(view.get("byteOffset", 0)) + _index(a.get("byteOffset", 0))
     need = (count - 1) * stride + dtype.itemsize * width if count else 0
     buf = buffers[_index(view["buffer"])]
-    if start + need > min(len(buf), _index(view.get("byteOffset", 0)) + _index(view["byteLength"])) or \
-            stride < dtype.itemsize * width:  # fmt: skip
+    if (
+        start + need > min(len(buf), _index(view.get("byteOffset", 0)) + _index(view["byteLength"]))
+        or stride < dtype.itemsize * width
+    ):
         raise _Bad(f"accessor {k} runs past its buffer view")
-    rows = np.lib.stride_tricks.as_strided(np.frombuffer(buf, np.uint8, need, start) if need else np.zeros(0, np.uint8),
-                                           (count, dtype.itemsize * width), (stride, 1))  # fmt: skip
+    rows = np.lib.stride_tricks.as_strided(
+        np.frombuffer(buf, np.uint8, need, start) if need else np.zeros(0, np.uint8),
+        (count, dtype.itemsize * width),
+        (stride, 1),
+    )
     values = np.ascontiguousarray(rows).view(dtype).reshape(count, width).astype(np.float64)
     if not np.isfinite(values).all():
         raise _Bad(f"accessor {k} holds non-finite values")
@@ -178,7 +186,9 @@ def _motion(path: Path, doc: dict, chunk: bytes | None) -> Motion:
         parents[j] = p
     for k in joints:
         if "matrix" in nodes[k] or any(abs(float(s) - 1.0) > 1e-6 for s in nodes[k].get("scale", (1, 1, 1))):
-            raise _Bad(f"node {nodes[k].get('name', k)!r} has a matrix or a scale; only translation and rotation are read")
+            raise _Bad(
+                f"node {nodes[k].get('name', k)!r} has a matrix or a scale; only translation and rotation are read"
+            )
 
     anims = doc.get("animations") or []
     if not anims:
@@ -223,8 +233,10 @@ def _motion(path: Path, doc: dict, chunk: bytes | None) -> Motion:
     has_child[parents[1:]] = True
     end_site = ~has_child & np.array([(j, "rotation") not in animated for j in range(J)])
     end_site[0] = False
-    channels = tuple(ROOT_CHANNELS if j == 0 or (j, "translation") in animated else
-                     () if end_site[j] else JOINT_CHANNELS for j in range(J))  # fmt: skip
+    channels = tuple(
+        ROOT_CHANNELS if j == 0 or (j, "translation") in animated else () if end_site[j] else JOINT_CHANNELS
+        for j in range(J)
+    )
     skeleton = Skeleton(names, parents, translations[0].copy(), channels, end_site)
     name = str(anims[0].get("name") or path.stem)
     return Motion(skeleton, rotations, translations, rate, name=name, source=str(path))
@@ -240,8 +252,10 @@ def _rate(doc: dict, times: np.ndarray) -> float:
             raise _Bad("one keyframe and no extras.rate_hz: the frame rate is unknown")
         return float(rate)
     rate = (times.size - 1) / (times[-1] - times[0]) if times[-1] > times[0] else 0.0
-    if not (np.isfinite(rate) and rate > 0) or \
-            np.abs(times - times[0] - np.arange(times.size) / rate).max() > RATE_TOLERANCE_S:  # fmt: skip
+    if (
+        not (np.isfinite(rate) and rate > 0)
+        or np.abs(times - times[0] - np.arange(times.size) / rate).max() > RATE_TOLERANCE_S
+    ):
         raise _Bad("the keyframes are not at a uniform rate")
     extras = (doc.get("scenes") or [{}])[0].get("extras") or {}
     stated = extras.get("rate_hz") if isinstance(extras, dict) else None

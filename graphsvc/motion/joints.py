@@ -23,49 +23,114 @@ from graphsvc.fileio import read_json_file
 from graphsvc.motion.skeleton import Skeleton
 
 CANONICAL = (
-    "pelvis", "spine", "chest", "neck", "head",
-    "l_shoulder", "r_shoulder", "l_elbow", "r_elbow", "l_wrist", "r_wrist",
-    "l_hip", "r_hip", "l_knee", "r_knee", "l_ankle", "r_ankle", "l_toe", "r_toe",
-)  # fmt: skip
+    "pelvis",
+    "spine",
+    "chest",
+    "neck",
+    "head",
+    "l_shoulder",
+    "r_shoulder",
+    "l_elbow",
+    "r_elbow",
+    "l_wrist",
+    "r_wrist",
+    "l_hip",
+    "r_hip",
+    "l_knee",
+    "r_knee",
+    "l_ankle",
+    "r_ankle",
+    "l_toe",
+    "r_toe",
+)
 
 # The next canonical joint down each bone: the direction a segment points in.
 CANONICAL_CHILD = {
-    "pelvis": "spine", "spine": "chest", "chest": "neck", "neck": "head",
-    "l_shoulder": "l_elbow", "l_elbow": "l_wrist", "r_shoulder": "r_elbow", "r_elbow": "r_wrist",
-    "l_hip": "l_knee", "l_knee": "l_ankle", "l_ankle": "l_toe",
-    "r_hip": "r_knee", "r_knee": "r_ankle", "r_ankle": "r_toe",
-}  # fmt: skip
+    "pelvis": "spine",
+    "spine": "chest",
+    "chest": "neck",
+    "neck": "head",
+    "l_shoulder": "l_elbow",
+    "l_elbow": "l_wrist",
+    "r_shoulder": "r_elbow",
+    "r_elbow": "r_wrist",
+    "l_hip": "l_knee",
+    "l_knee": "l_ankle",
+    "l_ankle": "l_toe",
+    "r_hip": "r_knee",
+    "r_knee": "r_ankle",
+    "r_ankle": "r_toe",
+}
 
 MIRROR = {n: ("r_" + n[2:] if n.startswith("l_") else "l_" + n[2:] if n.startswith("r_") else n) for n in CANONICAL}
 
 BUILTIN_MAPS: dict[str, dict[str, str]] = {
     "procedural": {n: n for n in CANONICAL},
     "bandai": {
-        "pelvis": "Hips", "spine": "Spine", "chest": "Chest", "neck": "Neck", "head": "Head",
-        "l_shoulder": "UpperArm_L", "r_shoulder": "UpperArm_R",
-        "l_elbow": "LowerArm_L", "r_elbow": "LowerArm_R",
-        "l_wrist": "Hand_L", "r_wrist": "Hand_R",
-        "l_hip": "UpperLeg_L", "r_hip": "UpperLeg_R",
-        "l_knee": "LowerLeg_L", "r_knee": "LowerLeg_R",
-        "l_ankle": "Foot_L", "r_ankle": "Foot_R", "l_toe": "Toes_L", "r_toe": "Toes_R",
+        "pelvis": "Hips",
+        "spine": "Spine",
+        "chest": "Chest",
+        "neck": "Neck",
+        "head": "Head",
+        "l_shoulder": "UpperArm_L",
+        "r_shoulder": "UpperArm_R",
+        "l_elbow": "LowerArm_L",
+        "r_elbow": "LowerArm_R",
+        "l_wrist": "Hand_L",
+        "r_wrist": "Hand_R",
+        "l_hip": "UpperLeg_L",
+        "r_hip": "UpperLeg_R",
+        "l_knee": "LowerLeg_L",
+        "r_knee": "LowerLeg_R",
+        "l_ankle": "Foot_L",
+        "r_ankle": "Foot_R",
+        "l_toe": "Toes_L",
+        "r_toe": "Toes_R",
     },
     "cmu": {
-        "pelvis": "root", "spine": "upperback", "chest": "thorax", "neck": "lowerneck",
-        "head": "head", "l_shoulder": "lhumerus", "r_shoulder": "rhumerus",
-        "l_elbow": "lradius", "r_elbow": "rradius", "l_wrist": "lwrist", "r_wrist": "rwrist",
-        "l_hip": "lfemur", "r_hip": "rfemur", "l_knee": "ltibia", "r_knee": "rtibia",
-        "l_ankle": "lfoot", "r_ankle": "rfoot", "l_toe": "ltoes", "r_toe": "rtoes",
+        "pelvis": "root",
+        "spine": "upperback",
+        "chest": "thorax",
+        "neck": "lowerneck",
+        "head": "head",
+        "l_shoulder": "lhumerus",
+        "r_shoulder": "rhumerus",
+        "l_elbow": "lradius",
+        "r_elbow": "rradius",
+        "l_wrist": "lwrist",
+        "r_wrist": "rwrist",
+        "l_hip": "lfemur",
+        "r_hip": "rfemur",
+        "l_knee": "ltibia",
+        "r_knee": "rtibia",
+        "l_ankle": "lfoot",
+        "r_ankle": "rfoot",
+        "l_toe": "ltoes",
+        "r_toe": "rtoes",
     },
     # The DeepMimic humanoid (motion/deepmimic.py): one trunk joint, the chest, so no
     # spine (the chest stands in); head and toes are end sites graphsvc adds.
     "deepmimic": {
-        "pelvis": "root", "chest": "chest", "neck": "neck", "head": "head",
-        "l_shoulder": "left_shoulder", "r_shoulder": "right_shoulder",
-        "l_elbow": "left_elbow", "r_elbow": "right_elbow", "l_wrist": "left_wrist", "r_wrist": "right_wrist",
-        "l_hip": "left_hip", "r_hip": "right_hip", "l_knee": "left_knee", "r_knee": "right_knee",
-        "l_ankle": "left_ankle", "r_ankle": "right_ankle", "l_toe": "left_toe", "r_toe": "right_toe",
+        "pelvis": "root",
+        "chest": "chest",
+        "neck": "neck",
+        "head": "head",
+        "l_shoulder": "left_shoulder",
+        "r_shoulder": "right_shoulder",
+        "l_elbow": "left_elbow",
+        "r_elbow": "right_elbow",
+        "l_wrist": "left_wrist",
+        "r_wrist": "right_wrist",
+        "l_hip": "left_hip",
+        "r_hip": "right_hip",
+        "l_knee": "left_knee",
+        "r_knee": "right_knee",
+        "l_ankle": "left_ankle",
+        "r_ankle": "right_ankle",
+        "l_toe": "left_toe",
+        "r_toe": "right_toe",
     },
-}  # fmt: skip
+}
 
 
 def load_mapping_file(path) -> dict[str, str]:
@@ -215,7 +280,7 @@ def _words(name: str) -> tuple[str, str]:
     m = re.match(r"^(Left|Right|left|right|L|R)(?=[A-Z_.\- ]|$)", base) or re.match(r"^(l|r)(?=[_.\- ])", base)
     if m:
         side = m.group(1)[0].lower()
-        base = base[m.end():]
+        base = base[m.end() :]
     else:
         m = re.search(r"(?<=[a-z0-9_.\- ])(Left|Right|left|right|L|R|l|r)$", base)
         if m and (m.group(1) in ("Left", "Right", "left", "right") or base[m.start() - 1] in "_.- "):

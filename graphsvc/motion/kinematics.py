@@ -16,10 +16,12 @@ from graphsvc.motion.skeleton import Motion
 @numba.njit(cache=True)
 def qmul4(aw, ax, ay, az, bw, bx, by, bz):
     """a ⊗ b on (w, x, y, z) components, as four floats (the formula of `quat.mul`)."""
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)  # fmt: skip
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
 
 
 @numba.njit(cache=True)

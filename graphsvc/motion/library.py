@@ -42,11 +42,14 @@ def _check_suffix(path: Path) -> str:
             "(the .asf beside it is found automatically)"
         )
     if suffix not in MOTION_SUFFIXES:
-        raise UnknownFormatError(f"{path}: unknown motion format {suffix or '(no extension)'!r}; expected .bvh, .amc "
-                                 "or a DeepMimic .txt")
+        raise UnknownFormatError(
+            f"{path}: unknown motion format {suffix or '(no extension)'!r}; expected .bvh, .amc or a DeepMimic .txt"
+        )
     if suffix == ".txt" and path.is_file() and not may_be_deepmimic(path):
-        raise UnknownFormatError(f"{path}: unknown motion format: a .txt motion file is DeepMimic JSON "
-                                 '({"Frames": [...]}), and this file is not JSON')
+        raise UnknownFormatError(
+            f"{path}: unknown motion format: a .txt motion file is DeepMimic JSON "
+            '({"Frames": [...]}), and this file is not JSON'
+        )
     return suffix
 
 
@@ -108,8 +111,7 @@ def user_tags(path) -> list[str]:
     return tags
 
 
-_READERS: dict[str, Callable[..., Motion]] = {".bvh": read_bvh, ".amc": read_asf_amc,
-                                              ".txt": read_deepmimic}  # fmt: skip
+_READERS: dict[str, Callable[..., Motion]] = {".bvh": read_bvh, ".amc": read_asf_amc, ".txt": read_deepmimic}
 
 
 def load_motion(path: StrPath, **options: Any) -> Motion:

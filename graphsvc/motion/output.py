@@ -21,8 +21,10 @@ def output_format(path) -> str:
     """'bvh', 'glb' or 'gltf' by the path's suffix; InputError for any other."""
     suffix = Path(path).suffix.lower()
     if suffix not in MOTION_OUTPUT_SUFFIXES:
-        raise InputError(f"{path}: a motion is written as {', '.join(MOTION_OUTPUT_SUFFIXES)}, "
-                         f"not {suffix or 'a file without a suffix'}")  # fmt: skip
+        raise InputError(
+            f"{path}: a motion is written as {', '.join(MOTION_OUTPUT_SUFFIXES)}, "
+            f"not {suffix or 'a file without a suffix'}"
+        )
     return suffix[1:]
 
 

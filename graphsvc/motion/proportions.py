@@ -52,17 +52,25 @@ VERSION = 1
 
 # name → (proximal, distal) canonical joints
 SEGMENTS = {
-    "lower_spine": ("pelvis", "spine"), "upper_spine": ("spine", "chest"),
-    "chest": ("chest", "neck"), "neck": ("neck", "head"),
-    "l_clavicle": ("chest", "l_shoulder"), "l_upper_arm": ("l_shoulder", "l_elbow"),
+    "lower_spine": ("pelvis", "spine"),
+    "upper_spine": ("spine", "chest"),
+    "chest": ("chest", "neck"),
+    "neck": ("neck", "head"),
+    "l_clavicle": ("chest", "l_shoulder"),
+    "l_upper_arm": ("l_shoulder", "l_elbow"),
     "l_forearm": ("l_elbow", "l_wrist"),
-    "r_clavicle": ("chest", "r_shoulder"), "r_upper_arm": ("r_shoulder", "r_elbow"),
+    "r_clavicle": ("chest", "r_shoulder"),
+    "r_upper_arm": ("r_shoulder", "r_elbow"),
     "r_forearm": ("r_elbow", "r_wrist"),
-    "l_pelvis": ("pelvis", "l_hip"), "l_thigh": ("l_hip", "l_knee"), "l_shin": ("l_knee", "l_ankle"),
+    "l_pelvis": ("pelvis", "l_hip"),
+    "l_thigh": ("l_hip", "l_knee"),
+    "l_shin": ("l_knee", "l_ankle"),
     "l_foot": ("l_ankle", "l_toe"),
-    "r_pelvis": ("pelvis", "r_hip"), "r_thigh": ("r_hip", "r_knee"), "r_shin": ("r_knee", "r_ankle"),
+    "r_pelvis": ("pelvis", "r_hip"),
+    "r_thigh": ("r_hip", "r_knee"),
+    "r_shin": ("r_knee", "r_ankle"),
     "r_foot": ("r_ankle", "r_toe"),
-}  # fmt: skip
+}
 
 HEIGHT_FRACTION = 0.80
 TRUNK = ("lower_spine", "upper_spine", "chest", "neck")
@@ -90,7 +98,9 @@ def segment_lengths(skeleton: Skeleton, mapping=None) -> dict[str, float]:
         a, b = SEGMENTS[name]
         # (a mapping may name a distal joint that does not descend from the proximal one:
         # their distance with every rotation the identity)
-        out[name] = float(bones[path].sum()) if path is not None else float(np.linalg.norm(pos[table[b]] - pos[table[a]]))
+        out[name] = (
+            float(bones[path].sum()) if path is not None else float(np.linalg.norm(pos[table[b]] - pos[table[a]]))
+        )
     return out
 
 
@@ -153,8 +163,9 @@ def complete_lengths(kb_lengths: dict, given: dict, where: str = "segment length
     values = {}
     for name, v in given.items():
         if not _length_ok(v):
-            raise InputError(f"{where}: segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, "
-                             f"got {v!r}")
+            raise InputError(
+                f"{where}: segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, got {v!r}"
+            )
         values[name] = float(v)
     ratios = [values[n] / kb_lengths[n] for n in values if kb_lengths.get(n, 0.0) > 0.0]
     if not ratios:
@@ -184,8 +195,9 @@ def load_performer_file(path) -> dict[str, float]:
         raise FormatError(path, f"unknown segments: {', '.join(unknown)} (known: {', '.join(SEGMENTS)})")
     for name, v in segments.items():
         if not _length_ok(v):
-            raise FormatError(path, f"segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, "
-                                    f"got {v!r}")
+            raise FormatError(
+                path, f"segment {name} must be a number of metres ≥ 0 and at most {MAX_HEIGHT_M:g}, got {v!r}"
+            )
     return {name: float(v) for name, v in segments.items()}
 
 
@@ -206,8 +218,9 @@ def performer_segments(performer, mapping=None) -> dict[str, float]:
         raise SkeletonError(f"performer {path}: " + str(exc).replace("--mapping", "--performer-mapping")) from None
 
 
-def performer_lengths(kb_skeleton: Skeleton, performer=None, height=None, mapping=None,
-                      kb_mapping=None) -> dict[str, float]:  # fmt: skip
+def performer_lengths(
+    kb_skeleton: Skeleton, performer=None, height=None, mapping=None, kb_mapping=None
+) -> dict[str, float]:
     """Every segment's length in metres for a performer given as a file (`performer`: a
     .json performer file, or a .bvh/.amc motion whose skeleton is measured through its
     joint map or `mapping`) or as a `height` in metres, on the knowledge base's skeleton
@@ -257,8 +270,13 @@ def performer_skeleton(kb_skeleton: Skeleton, lengths: dict, mapping=None) -> Sk
             while p >= 0 and p not in ends and p != table["pelvis"]:
                 p = int(kb_skeleton.parents[p])
             factor[j] = ratio[ends[p]] if p in ends else legs
-    return Skeleton(kb_skeleton.names, kb_skeleton.parents, kb_skeleton.offsets * factor[:, None],
-                    kb_skeleton.channels, kb_skeleton.end_site)  # fmt: skip
+    return Skeleton(
+        kb_skeleton.names,
+        kb_skeleton.parents,
+        kb_skeleton.offsets * factor[:, None],
+        kb_skeleton.channels,
+        kb_skeleton.end_site,
+    )
 
 
 def on_performer(motion: Motion, skeleton: Skeleton, mapping=None) -> Motion:

@@ -120,8 +120,9 @@ def rest_heights(world_pos: np.ndarray, table: JointTable) -> np.ndarray:
     """(2,) a clip's resting ankle and toe heights: the 5th percentile over its frames
     and both feet of each (`signals.foot_contacts`)."""
     ankles, toes = _feet(table)
-    return np.array([np.percentile(world_pos[:, ankles, 1], FOOT_PERCENTILE),
-                     np.percentile(world_pos[:, toes, 1], FOOT_PERCENTILE)])  # fmt: skip
+    return np.array(
+        [np.percentile(world_pos[:, ankles, 1], FOOT_PERCENTILE), np.percentile(world_pos[:, toes, 1], FOOT_PERCENTILE)]
+    )
 
 
 def make_side(skeleton: Skeleton, motions: list[Motion], mapping=None) -> Side:
@@ -200,8 +201,9 @@ def _continuous(q: np.ndarray) -> np.ndarray:
     return q * np.cumprod(flip, axis=0)
 
 
-def _world_rotations(motion: Motion, source: Side, target: Side, src_rot: np.ndarray,
-                     src_pos: np.ndarray) -> np.ndarray:  # fmt: skip
+def _world_rotations(
+    motion: Motion, source: Side, target: Side, src_rot: np.ndarray, src_pos: np.ndarray
+) -> np.ndarray:
     """(F, J_target, 4) the target's world rotations, joint by joint (module docstring)."""
     tsk, ssk = target.skeleton, source.skeleton
     F = motion.num_frames
@@ -242,8 +244,9 @@ def _world_rotations(motion: Motion, source: Side, target: Side, src_rot: np.nda
         d = _unit(src_point(child) - src_point(c), _unit(a_t, np.array([0.0, 1.0, 0.0])))
         if c in ACROSS:
             left, right = ACROSS[c]
-            across_t = (local_vector(tsk, target.reference, j, target.table[left])
-                        - local_vector(tsk, target.reference, j, target.table[right]))  # fmt: skip
+            across_t = local_vector(tsk, target.reference, j, target.table[left]) - local_vector(
+                tsk, target.reference, j, target.table[right]
+            )
             world[:, j] = _frame_rotation(v_t, across_t, d, src_point(left) - src_point(right))
             continue
         swing = quat.mul(quat.between(a_t, d), guess)
@@ -285,12 +288,21 @@ def retarget(motion: Motion, source: Side, target: Side) -> Motion:
     _, pos = forward_kinematics(local, _moved(translations, world, tsk, carrier, shift), tsk.parents)
     lift = float(np.mean(target.foot_rest - rest_heights(pos, target.table)))
     translations = _moved(translations, world, tsk, carrier, shift + np.array([0.0, lift, 0.0]))
-    return Motion(tsk, local, translations, motion.rate_hz, name=motion.name, source=motion.source,
-                  labels=motion.labels, retargeted_from=source.table.family or "given")  # fmt: skip
+    return Motion(
+        tsk,
+        local,
+        translations,
+        motion.rate_hz,
+        name=motion.name,
+        source=motion.source,
+        labels=motion.labels,
+        retargeted_from=source.table.family or "given",
+    )
 
 
-def _moved(translations: np.ndarray, world: np.ndarray, skeleton: Skeleton, carrier: int,
-           shift: np.ndarray) -> np.ndarray:  # fmt: skip
+def _moved(
+    translations: np.ndarray, world: np.ndarray, skeleton: Skeleton, carrier: int, shift: np.ndarray
+) -> np.ndarray:
     """translations with the carrier joint moved by `shift` (F, 3) in the world."""
     out = translations.copy()
     p = int(skeleton.parents[carrier])
@@ -298,8 +310,14 @@ def _moved(translations: np.ndarray, world: np.ndarray, skeleton: Skeleton, carr
     return out
 
 
-def pool_skeletons(motions: list[Motion], skeleton: Motion | None = None, mapping=None, first: int = 0,
-                   clip_map=None, progress: bool | None = None) -> list[Motion]:  # fmt: skip
+def pool_skeletons(
+    motions: list[Motion],
+    skeleton: Motion | None = None,
+    mapping=None,
+    first: int = 0,
+    clip_map=None,
+    progress: bool | None = None,
+) -> list[Motion]:
     """Every clip on one skeleton: `skeleton`'s (a motion whose skeleton is the target;
     its frames join its family's clips in the reference pose), else that of the
     family of clip `first`, its bone offsets averaged over the family's clips. Clips
@@ -328,8 +346,12 @@ def pool_skeletons(motions: list[Motion], skeleton: Motion | None = None, mappin
     sides = {k: make_side(ms[0].skeleton, ms, mapping) for k, ms in families.items() if k != key}
     todo = [i for i, m in enumerate(motions) if topology_key(m.skeleton) != key]
     run = clip_map or (lambda fn, items, **_: [fn(x) for x in items])
-    done = run(partial(_retarget_from, sides=sides, target=target), [motions[i] for i in todo],
-               desc="retargeting", progress=progress)  # fmt: skip
+    done = run(
+        partial(_retarget_from, sides=sides, target=target),
+        [motions[i] for i in todo],
+        desc="retargeting",
+        progress=progress,
+    )
     out = list(motions)
     for i, m in zip(todo, done):
         out[i] = m

@@ -100,9 +100,7 @@ class Motion:
         if self.rotations.ndim != 3 or self.rotations.shape[1:] != (J, 4):
             raise InputError(f"rotations must be (frames, {J}, 4), got {self.rotations.shape}")
         if self.translations.shape != self.rotations.shape[:2] + (3,):
-            raise InputError(
-                f"translations must be (frames, {J}, 3), got {self.translations.shape}"
-            )
+            raise InputError(f"translations must be (frames, {J}, 3), got {self.translations.shape}")
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise InputError(f"frame rate must be positive and finite, got {self.rate_hz}")
 

@@ -145,8 +145,9 @@ def sensor_arrays(rec, motion: Motion, mapping=None, virtual: np.ndarray | None 
     T = motion.num_frames
     if virtual is None or virtual.shape[1] != measured.shape[1]:
         try:
-            virtual = simulate_recording(motion, layout_from_dict(rec.layout), PRESETS["none"],
-                                         mapping=mapping).accelerations  # fmt: skip
+            virtual = simulate_recording(
+                motion, layout_from_dict(rec.layout), PRESETS["none"], mapping=mapping
+            ).accelerations
         except GraphsvcError:
             return None
     v = np.full((T, measured.shape[1], 3), np.nan)
@@ -196,18 +197,37 @@ def constraint_arrays(constraints, labels, contacts: np.ndarray | None, rate_hz:
                 met = [bool(contacts[t, 0]) == want[0] and bool(contacts[t, 1]) == want[1] for t in range(a, b)]
             else:
                 met = []
-            out.append({"set": k, "start_s": float(c["start_s"]), "end_s": float(c["end_s"]), "require": req,
-                        "first_frame": a, "met": bits(met)})  # fmt: skip
+            out.append(
+                {
+                    "set": k,
+                    "start_s": float(c["start_s"]),
+                    "end_s": float(c["end_s"]),
+                    "require": req,
+                    "first_frame": a,
+                    "met": bits(met),
+                }
+            )
     return out
 
 
 # ---------------------------------------------------------------- one clip
 
 
-def clip_view(name: str, motion: Motion, timeline: dict, rec=None, truth: Motion | None = None,
-              per_frame: dict | None = None, constraints=None, labels=None, mapping=None,
-              info: dict | None = None, virtual: np.ndarray | None = None, truth_mapping=None,
-              notes: list | None = None) -> dict:  # fmt: skip
+def clip_view(
+    name: str,
+    motion: Motion,
+    timeline: dict,
+    rec=None,
+    truth: Motion | None = None,
+    per_frame: dict | None = None,
+    constraints=None,
+    labels=None,
+    mapping=None,
+    info: dict | None = None,
+    virtual: np.ndarray | None = None,
+    truth_mapping=None,
+    notes: list | None = None,
+) -> dict:
     """Everything the page shows of one reconstruction (module docstring). motion:
     the output; timeline: `strategies.sources.timeline_from_*`'s; rec: the input
     recording (or None); truth: the true motion at the same rate (or None); per_frame:
@@ -227,16 +247,18 @@ def clip_view(name: str, motion: Motion, timeline: dict, rec=None, truth: Motion
             except GraphsvcError as exc:  # (skeletons the metrics cannot compare: shown without errors)
                 per_frame = None
                 if notes is not None:
-                    notes.append(f"{name}: the error charts are left out, the truth cannot be compared joint by joint: "
-                                 f"{exc}")  # fmt: skip
+                    notes.append(
+                        f"{name}: the error charts are left out, the truth cannot be compared joint by joint: {exc}"
+                    )
     if labels is None:
         labels = [""] * T
         for seg in timeline["segments"]:
-            labels[seg["start"]: seg["start"] + seg["frames"]] = [seg["label"]] * seg["frames"]
+            labels[seg["start"] : seg["start"] + seg["frames"]] = [seg["label"]] * seg["frames"]
     contacts = None
     if figures[0]["contacts"] is not None:
-        contacts = np.array([[c == "1" for c in figures[0]["contacts"][0]],
-                             [c == "1" for c in figures[0]["contacts"][1]]]).T  # fmt: skip
+        contacts = np.array(
+            [[c == "1" for c in figures[0]["contacts"][0]], [c == "1" for c in figures[0]["contacts"][1]]]
+        ).T
     return {
         "name": name,
         "rate_hz": float(motion.rate_hz),

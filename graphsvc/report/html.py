@@ -31,7 +31,7 @@ def three_script() -> str:
     module's body in a function returning the names it exported."""
     src = _read("vendor/three.module.min.js")
     header = re.match(r"\s*/\*\*.*?\*/", src, re.S)
-    body = src[header.end():] if header else src
+    body = src[header.end() :] if header else src
     exports = re.search(r"export\s*\{([^}]*)\}\s*;?\s*$", body)
     if exports is None:
         raise RuntimeError("vendor/three.module.min.js does not end with an export list")
@@ -41,8 +41,14 @@ def three_script() -> str:
         local, name = parts[0].strip(), parts[-1].strip()
         pairs.append(f"{name}:{local}")
     body = body[: exports.start()]
-    return (header.group(0).strip() + "\n" if header else "") + \
-        'const THREE=(function(){"use strict";' + body + "\nreturn{" + ",".join(pairs) + "};})();"
+    return (
+        (header.group(0).strip() + "\n" if header else "")
+        + 'const THREE=(function(){"use strict";'
+        + body
+        + "\nreturn{"
+        + ",".join(pairs)
+        + "};})();"
+    )
 
 
 def data_json(doc: dict) -> str:
@@ -54,8 +60,12 @@ def data_json(doc: dict) -> str:
 
 def render_html(doc: dict) -> str:
     """The page for `doc` ({"title", "clips": [clip_view...], "table": {...} or None})."""
-    parts = {"TITLE": html.escape(str(doc.get("title", "graphsvc report"))), "DATA": data_json(doc),
-             "THREE": three_script(), "VIEWER": _read("viewer.js")}  # fmt: skip
+    parts = {
+        "TITLE": html.escape(str(doc.get("title", "graphsvc report"))),
+        "DATA": data_json(doc),
+        "THREE": three_script(),
+        "VIEWER": _read("viewer.js"),
+    }
     return _PLACEHOLDER.sub(lambda m: parts[m.group(1)], _read("template.html"))
 
 

@@ -29,13 +29,30 @@ from graphsvc.strategies.sources import (
     source_readings,
     timeline_from_labels,
     timeline_from_nodes,
-    timeline_from_sources,  # fmt: skip
+    timeline_from_sources,
 )
 
-TABLE_COLUMNS = ("clip", "label", "frames", "joint_err_cm", "joint_err_scaled_cm", "root_err_cm", "heading_err_deg",
-                 "label_acc", "samples_per_s", "jitter_km_s3", "truth_jitter_km_s3", "skate_cm_s",
-                 "truth_skate_cm_s")  # fmt: skip
-SEEN = ("jitter_km_s3", "truth_jitter_km_s3", "skate_cm_s", "truth_skate_cm_s")  # (what a viewer sees, in a view's info)
+TABLE_COLUMNS = (
+    "clip",
+    "label",
+    "frames",
+    "joint_err_cm",
+    "joint_err_scaled_cm",
+    "root_err_cm",
+    "heading_err_deg",
+    "label_acc",
+    "samples_per_s",
+    "jitter_km_s3",
+    "truth_jitter_km_s3",
+    "skate_cm_s",
+    "truth_skate_cm_s",
+)
+SEEN = (
+    "jitter_km_s3",
+    "truth_jitter_km_s3",
+    "skate_cm_s",
+    "truth_skate_cm_s",
+)  # (what a viewer sees, in a view's info)
 
 
 def _file(path, what: str, base: Path) -> Path:
@@ -56,15 +73,16 @@ def report_timeline(report: dict, graph) -> dict:
     if graph is not None and src:
         names = [str(c["name"]) for c in graph.clips]
         labels = _labels_from_runs(report.get("labels", []), len(src["clip"]))
-        return timeline_from_sources(names, labels, np.array(src["clip"]), np.array(src["frame"]),
-                                     np.array(src["weight"]))  # fmt: skip
+        return timeline_from_sources(
+            names, labels, np.array(src["clip"]), np.array(src["frame"]), np.array(src["weight"])
+        )
     return timeline_from_labels(report.get("labels", []))
 
 
 def _labels_from_runs(runs, T: int) -> list[str]:
     labels = [""] * T
     for r in runs:
-        labels[int(r["start_frame"]): int(r["start_frame"]) + int(r["frames"])] = [str(r["label"])] * int(r["frames"])
+        labels[int(r["start_frame"]) : int(r["start_frame"]) + int(r["frames"])] = [str(r["label"])] * int(r["frames"])
     return labels
 
 
@@ -85,8 +103,9 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None, truth_mapp
         read = files.get("read", {})
         path = _file(files["recording"], "recording", base)
         if graph is not None:  # (as the search read it: device names mapped, calibration applied)
-            rec = read_searched_recording(graph, path, read.get("up"), read.get("units"), read.get("device_map"),
-                                          read.get("calibration"))  # fmt: skip
+            rec = read_searched_recording(
+                graph, path, read.get("up"), read.get("units"), read.get("device_map"), read.get("calibration")
+            )
         else:
             rec = read_recording(path, up=read.get("up"), units=read.get("units"))
     if truth is not None and not hasattr(truth, "skeleton"):
@@ -97,8 +116,11 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None, truth_mapp
     constraints = options.get("constraints") or (rec.constraints if rec is not None else [])
     mapping = graph.params.get("mapping") if graph is not None else None
     labels = _labels_from_runs(report.get("labels", []), motion.num_frames)
-    info = {"strategy": report.get("strategy", "?"), "samples": report.get("samples"),
-            "graph": Path(files.get("graph", "")).name}  # fmt: skip
+    info = {
+        "strategy": report.get("strategy", "?"),
+        "samples": report.get("samples"),
+        "graph": Path(files.get("graph", "")).name,
+    }
     if "cost" in report:
         info["cost"] = round(float(report["cost"]), 3)
     try:  # what a viewer sees, of the output (and of the truth)
@@ -113,9 +135,20 @@ def synthesize_view(report: dict, base: Path, truth=None, graph=None, truth_mapp
     elif graph is not None and report.get("sources") and len(report["sources"]["clip"]) == motion.num_frames:
         src = report["sources"]
         virtual = source_readings(graph, np.array(src["clip"]), np.array(src["frame"]), np.array(src["weight"]))
-    return clip_view(Path(files["output"]).stem, motion, report_timeline(report, graph), rec, truth,
-                     constraints=constraints, labels=labels, mapping=mapping, info=info, virtual=virtual,
-                     truth_mapping=truth_mapping, notes=notes)  # fmt: skip
+    return clip_view(
+        Path(files["output"]).stem,
+        motion,
+        report_timeline(report, graph),
+        rec,
+        truth,
+        constraints=constraints,
+        labels=labels,
+        mapping=mapping,
+        info=info,
+        virtual=virtual,
+        truth_mapping=truth_mapping,
+        notes=notes,
+    )
 
 
 # ---------------------------------------------------------------- evaluation
@@ -137,10 +170,23 @@ def kept_view(folder: Path, files: dict, row: dict) -> dict:
 
         v = doc["virtual"]
         virtual = np.frombuffer(base64.b64decode(v["f32"]), dtype="<f4").astype(np.float64).reshape(v["shape"])
-    info = {k: round(row[k], 2) if isinstance(row[k], float) else row[k]
-            for k in ("file", "label", "joint_err_cm", "root_err_cm", "heading_err_deg", *SEEN) if row.get(k) is not None}
-    return clip_view(str(row.get("name", motion.name)), motion, doc["timeline"], rec, truth, per_frame,
-                     doc.get("constraints"), doc.get("labels"), info=info, virtual=virtual)  # fmt: skip
+    info = {
+        k: round(row[k], 2) if isinstance(row[k], float) else row[k]
+        for k in ("file", "label", "joint_err_cm", "root_err_cm", "heading_err_deg", *SEEN)
+        if row.get(k) is not None
+    }
+    return clip_view(
+        str(row.get("name", motion.name)),
+        motion,
+        doc["timeline"],
+        rec,
+        truth,
+        per_frame,
+        doc.get("constraints"),
+        doc.get("labels"),
+        info=info,
+        virtual=virtual,
+    )
 
 
 def evaluation_document(result: dict, base: Path) -> dict:
@@ -158,10 +204,15 @@ def evaluation_document(result: dict, base: Path) -> dict:
         clips.append(kept_view(folder, r["kept"], r))
         table.append([r.get("name"), r.get("label"), r.get("frames"), *(_num(r.get(k)) for k in TABLE_COLUMNS[3:])])
     cfg = result.get("config", {})
-    title = f"graphsvc evaluation: {len(clips)} clips, {cfg.get('inputs', '')}, strategy " \
+    title = (
+        f"graphsvc evaluation: {len(clips)} clips, {cfg.get('inputs', '')}, strategy "
         f"{cfg.get('options', {}).get('strategy', '?')}"
-    return {"title": title, "clips": clips,
-            "table": {"columns": list(TABLE_COLUMNS), "rows": table, "clip": list(range(len(clips)))}}  # fmt: skip
+    )
+    return {
+        "title": title,
+        "clips": clips,
+        "table": {"columns": list(TABLE_COLUMNS), "rows": table, "clip": list(range(len(clips)))},
+    }
 
 
 def _num(v):
@@ -189,9 +240,15 @@ def batch_document(folder: Path) -> dict:
         table.append([view["name"], report.get("strategy"), view["frames"], report.get("samples_per_s")])
     if not clips:
         raise InputError(f"{folder}: no item reports (OUTPUT.json of `graphsvc batch`) in the folder")
-    return {"title": f"graphsvc batch {folder.name}: {len(clips)} items", "clips": clips,
-            "table": {"columns": ["item", "strategy", "frames", "samples_per_s"], "rows": table,
-                      "clip": list(range(len(clips)))}}  # fmt: skip
+    return {
+        "title": f"graphsvc batch {folder.name}: {len(clips)} items",
+        "clips": clips,
+        "table": {
+            "columns": ["item", "strategy", "frames", "samples_per_s"],
+            "rows": table,
+            "clip": list(range(len(clips))),
+        },
+    }
 
 
 def load_document(result, truth=None, truth_mapping=None, notes=None) -> dict:

@@ -41,9 +41,12 @@ def _second_derivative(x, rate_hz, out):
     for t in range(2, F - 2):
         for k in range(K):
             out[t, k] = (
-                _CENTRAL[0] * x[t - 2, k] + _CENTRAL[1] * x[t - 1, k] + _CENTRAL[2] * x[t, k]
-                + _CENTRAL[3] * x[t + 1, k] + _CENTRAL[4] * x[t + 2, k]
-            ) * inv_h2  # fmt: skip
+                _CENTRAL[0] * x[t - 2, k]
+                + _CENTRAL[1] * x[t - 1, k]
+                + _CENTRAL[2] * x[t, k]
+                + _CENTRAL[3] * x[t + 1, k]
+                + _CENTRAL[4] * x[t + 2, k]
+            ) * inv_h2
     for k in range(K):
         a0 = 0.0
         a1 = 0.0
@@ -123,8 +126,7 @@ def carried_frame(seg_rot, rotation, carrier_rot, axis, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _sensor_poses(world_rot, world_pos, segment, toward, along, offset, rotation, carrier, axis, position,
-                  orientation):  # fmt: skip
+def _sensor_poses(world_rot, world_pos, segment, toward, along, offset, rotation, carrier, axis, position, orientation):
     F, S = position.shape[0], position.shape[1]
     tmp = np.empty(3)
     for f in range(F):
@@ -163,12 +165,18 @@ def sensor_poses(world_rot: np.ndarray, world_pos: np.ndarray, placement: Placem
     position = np.empty((F, S, 3))
     orientation = np.empty((F, S, 4))
     _sensor_poses(
-        np.ascontiguousarray(world_rot), np.ascontiguousarray(world_pos),
-        placement.segment, placement.toward, placement.along,
-        np.ascontiguousarray(placement.offset), np.ascontiguousarray(placement.rotation),
-        np.ascontiguousarray(placement.carrier), np.ascontiguousarray(placement.axis, dtype=np.float64),
-        position, orientation,
-    )  # fmt: skip
+        np.ascontiguousarray(world_rot),
+        np.ascontiguousarray(world_pos),
+        placement.segment,
+        placement.toward,
+        placement.along,
+        np.ascontiguousarray(placement.offset),
+        np.ascontiguousarray(placement.rotation),
+        np.ascontiguousarray(placement.carrier),
+        np.ascontiguousarray(placement.axis, dtype=np.float64),
+        position,
+        orientation,
+    )
     return position, orientation
 
 
@@ -176,8 +184,12 @@ def to_sensor_frames(orientation: np.ndarray, world_acc: np.ndarray) -> np.ndarr
     """(F, S, 3) float32 readings: world accelerations (F, S, 3) m/s² plus gravity's
     reaction, in the sensor frames of orientations (F, S, 4)."""
     out = np.empty(world_acc.shape, dtype=np.float32)
-    _to_sensor_frames(np.ascontiguousarray(orientation, dtype=np.float64),
-                      np.ascontiguousarray(world_acc, dtype=np.float64), GRAVITY, out)  # fmt: skip
+    _to_sensor_frames(
+        np.ascontiguousarray(orientation, dtype=np.float64),
+        np.ascontiguousarray(world_acc, dtype=np.float64),
+        GRAVITY,
+        out,
+    )
     return out
 
 

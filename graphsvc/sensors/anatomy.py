@@ -63,12 +63,26 @@ _FOOT = {"l": ("cross", "l_toe", "l_ankle", "l_knee"), "r": ("cross", "r_toe", "
 _HIPS = ("line", "l_hip", "r_hip")
 _SHOULDERS = ("line", "l_shoulder", "r_shoulder")
 REFERENCE = {
-    "pelvis": _HIPS, "spine": _HIPS, "chest": _SHOULDERS, "neck": _SHOULDERS, "head": _SHOULDERS,
-    "l_shoulder": _ARM["l"], "l_elbow": _ARM["l"], "l_wrist": _ARM["l"],
-    "r_shoulder": _ARM["r"], "r_elbow": _ARM["r"], "r_wrist": _ARM["r"],
-    "l_hip": _LEG["l"], "l_knee": _LEG["l"], "r_hip": _LEG["r"], "r_knee": _LEG["r"],
-    "l_ankle": _FOOT["l"], "l_toe": _FOOT["l"], "r_ankle": _FOOT["r"], "r_toe": _FOOT["r"],
-}  # fmt: skip
+    "pelvis": _HIPS,
+    "spine": _HIPS,
+    "chest": _SHOULDERS,
+    "neck": _SHOULDERS,
+    "head": _SHOULDERS,
+    "l_shoulder": _ARM["l"],
+    "l_elbow": _ARM["l"],
+    "l_wrist": _ARM["l"],
+    "r_shoulder": _ARM["r"],
+    "r_elbow": _ARM["r"],
+    "r_wrist": _ARM["r"],
+    "l_hip": _LEG["l"],
+    "l_knee": _LEG["l"],
+    "r_hip": _LEG["r"],
+    "r_knee": _LEG["r"],
+    "l_ankle": _FOOT["l"],
+    "l_toe": _FOOT["l"],
+    "r_ankle": _FOOT["r"],
+    "r_toe": _FOOT["r"],
+}
 
 # Sensors whose Y the upper arm carries (module docstring), and the upper arm's bone.
 CARRIED_BY = {"l_elbow": "l_shoulder", "r_elbow": "r_shoulder", "l_wrist": "l_shoulder", "r_wrist": "r_shoulder"}
@@ -98,8 +112,11 @@ def check_frames(graph_params: dict, meta: dict, what: str = "the recording") ->
     ours = recording_frames(meta)
     theirs = graph_params.get("sensor_frames", REST_POSE)
     if ours is not None and ours != theirs:
-        fix = ("convert the graph with `graphsvc relayout G --layout L -o NEW` (or rebuild it)" if theirs == REST_POSE
-               else "simulate the recording again")  # fmt: skip
+        fix = (
+            "convert the graph with `graphsvc relayout G --layout L -o NEW` (or rebuild it)"
+            if theirs == REST_POSE
+            else "simulate the recording again"
+        )
         raise InputError(f"{what}'s readings are in {ours} sensor frames, the graph's in {theirs}: {fix}")
 
 
@@ -130,8 +147,9 @@ def _rest_prior(rest_pos: np.ndarray, table, segment: str) -> np.ndarray:
     return np.cross(b - a, -forward * np.linalg.norm(c - b))  # the shin bent back
 
 
-def estimate_rotations(world_rot: np.ndarray, world_pos: np.ndarray, rest_rot: np.ndarray, rest_pos: np.ndarray,
-                       table, segments, towards) -> np.ndarray:  # fmt: skip
+def estimate_rotations(
+    world_rot: np.ndarray, world_pos: np.ndarray, rest_rot: np.ndarray, rest_pos: np.ndarray, table, segments, towards
+) -> np.ndarray:
     """(S, 4) each sensor frame's rotation relative to its segment's joint frame (w, x, y,
     z): the anatomical frame (module docstring) averaged over the frames of world_rot
     (F, J, 4) and world_pos (F, J, 3), plus the rest pose's prior (rest_rot (J, 4),

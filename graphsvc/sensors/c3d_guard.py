@@ -94,8 +94,10 @@ def check_c3d(path, data: bytes) -> dict:
         fail(f"the data's first block {data_block} is not after the parameters in the file")
     need = max(frames, 0) * (points * 4 + analogs) * width
     if need > size - data_start:
-        fail(f"truncated: {frames} frames of {points} points and {analogs} analog samples need {need} bytes of data, "
-             f"the file holds {size - data_start}")  # fmt: skip
+        fail(
+            f"truncated: {frames} frames of {points} points and {analogs} analog samples need {need} bytes of data, "
+            f"the file holds {size - data_start}"
+        )
     rotations = params.get(("ROTATION", "USED"), 0)
     if rotations > 0:
         rot_block = params.get(("ROTATION", "DATA_START"), 0)
@@ -107,11 +109,29 @@ def check_c3d(path, data: bytes) -> dict:
 
 
 # Parameters ezc3d reads the first value of, whose absence crashes it.
-_SCALARS = {("POINT", "USED"), ("POINT", "SCALE"), ("POINT", "RATE"), ("POINT", "DATA_START"), ("POINT", "FRAMES"),
-            ("ANALOG", "USED"), ("ANALOG", "RATE"), ("ANALOG", "GEN_SCALE"), ("FORCE_PLATFORM", "USED"),
-            ("ROTATION", "USED"), ("ROTATION", "RATE"), ("ROTATION", "DATA_START"), ("ROTATION", "RATIO")}  # fmt: skip
-_INT_PARAMS = {("POINT", "USED"), ("POINT", "FRAMES"), ("ANALOG", "USED"), ("ROTATION", "USED"),
-               ("ROTATION", "DATA_START"), ("ROTATION", "RATIO")}  # fmt: skip
+_SCALARS = {
+    ("POINT", "USED"),
+    ("POINT", "SCALE"),
+    ("POINT", "RATE"),
+    ("POINT", "DATA_START"),
+    ("POINT", "FRAMES"),
+    ("ANALOG", "USED"),
+    ("ANALOG", "RATE"),
+    ("ANALOG", "GEN_SCALE"),
+    ("FORCE_PLATFORM", "USED"),
+    ("ROTATION", "USED"),
+    ("ROTATION", "RATE"),
+    ("ROTATION", "DATA_START"),
+    ("ROTATION", "RATIO"),
+}
+_INT_PARAMS = {
+    ("POINT", "USED"),
+    ("POINT", "FRAMES"),
+    ("ANALOG", "USED"),
+    ("ROTATION", "USED"),
+    ("ROTATION", "DATA_START"),
+    ("ROTATION", "RATIO"),
+}
 
 
 def _walk_parameters(data: bytes, i: int, end: int, order: str, processor: int, fail) -> dict:
@@ -228,8 +248,12 @@ def read_isolated(path, size: int) -> dict:
     path = Path(path)
     limit = CHILD_MEMORY + 32 * size + (1 << 30)  # + what the interpreter, numpy and ezc3d map
     try:
-        run = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(limit)], capture_output=True,
-                             timeout=CHILD_TIMEOUT_S, stdin=subprocess.DEVNULL)  # fmt: skip
+        run = subprocess.run(
+            [sys.executable, "-c", _CHILD, str(path), str(limit)],
+            capture_output=True,
+            timeout=CHILD_TIMEOUT_S,
+            stdin=subprocess.DEVNULL,
+        )
     except subprocess.TimeoutExpired:
         raise FormatError(path, f"not a readable C3D file: ezc3d did not finish in {CHILD_TIMEOUT_S:g} s") from None
     if run.returncode == 3:

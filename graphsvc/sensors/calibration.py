@@ -255,8 +255,15 @@ def _split(x: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(c[..., 2]), np.ascontiguousarray(c[..., 0] + 1j * c[..., 1])
 
 
-def match_windows(device: np.ndarray, stream: np.ndarray, runs: np.ndarray, up_layout: np.ndarray,
-                  window: int, stride: int, best: int = BEST_MATCHES) -> list[tuple[int, int, float, np.ndarray]]:  # fmt: skip
+def match_windows(
+    device: np.ndarray,
+    stream: np.ndarray,
+    runs: np.ndarray,
+    up_layout: np.ndarray,
+    window: int,
+    stride: int,
+    best: int = BEST_MATCHES,
+) -> list[tuple[int, int, float, np.ndarray]]:
     """Device readings (T, S, 3) already turned into the layout's frames up to a
     rotation about each sensor's gravity axis up_layout (S, 3), against the graph's
     clip-ordered readings (N, S, 3) with run ids (N,): per query window (start q,
@@ -274,7 +281,7 @@ def match_windows(device: np.ndarray, stream: np.ndarray, runs: np.ndarray, up_l
     corr = np.empty((N - window + 1, S), dtype=np.complex128)
     out = []
     for q in range(0, T - window + 1, stride):
-        chunk = device[q:q + window]
+        chunk = device[q : q + window]
         if not np.isfinite(chunk).all():
             continue
         qp, qz = _split(chunk, axes)
@@ -295,8 +302,10 @@ def match_windows(device: np.ndarray, stream: np.ndarray, runs: np.ndarray, up_l
 def sensor_segments(layout: dict | None, names) -> list[str]:
     """Each named sensor's canonical segment, from a layout description."""
     if not layout or not isinstance(layout.get("sensors"), list):
-        raise InputError("calibration needs the sensors' layout (which segment each sensor is on): the recording "
-                         "carries none; give --graph")  # fmt: skip
+        raise InputError(
+            "calibration needs the sensors' layout (which segment each sensor is on): the recording "
+            "carries none; give --graph"
+        )
     seg = {s.get("name"): s.get("segment") for s in layout["sensors"] if isinstance(s, dict)}
     missing = [n for n in names if n not in seg]
     if missing:
@@ -311,8 +320,9 @@ def sensor_reversed(layout: dict, names) -> np.ndarray:
     from graphsvc.motion.joints import CANONICAL_CHILD
 
     spec = {s.get("name"): s for s in layout["sensors"] if isinstance(s, dict)}
-    return np.array([spec[n].get("toward") not in (None, CANONICAL_CHILD.get(spec[n].get("segment")))
-                     for n in names], dtype=bool)  # fmt: skip
+    return np.array(
+        [spec[n].get("toward") not in (None, CANONICAL_CHILD.get(spec[n].get("segment"))) for n in names], dtype=bool
+    )
 
 
 def gravity_gap_deg(acc: np.ndarray, orient: np.ndarray | None, rests: np.ndarray) -> np.ndarray:
@@ -382,8 +392,9 @@ class Reference:
     verticals: Callable[[np.ndarray, tuple], np.ndarray]
 
 
-def calibrate_against(rec, pose: str, reference: Reference | None = None, start_s: float | None = None,
-                      end_s: float | None = None) -> dict:  # fmt: skip
+def calibrate_against(
+    rec, pose: str, reference: Reference | None = None, start_s: float | None = None, end_s: float | None = None
+) -> dict:
     """The calibration (the CAL.json document, `save_calibration`) of a recording's
     sensors from a calibration take in `pose` (POSES), against a reference's readings of
     similar motion (a graph's: `graph.calibration.calibrate`). InputError when it cannot
@@ -401,10 +412,14 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     if reference is not None:
         gnames = reference.sensor_names
         if sorted(gnames) != sorted(names):
-            hint = ("" if rec.meta.get("device_sensors") is not None
-                    else ": give --device-map to name them as the layout does")  # (mapped already: some are missing)
-            raise InputError(f"the recording's sensors ({', '.join(names)}) are not the graph's "
-                             f"({', '.join(gnames)}){hint}")  # fmt: skip
+            hint = (
+                ""
+                if rec.meta.get("device_sensors") is not None
+                else ": give --device-map to name them as the layout does"
+            )  # (mapped already: some are missing)
+            raise InputError(
+                f"the recording's sensors ({', '.join(names)}) are not the graph's ({', '.join(gnames)}){hint}"
+            )
     segments = sensor_segments(layout, names)
     table = POSE_READINGS[pose]
     unknown = [f"{n} ({s})" for n, s in zip(names, segments) if s not in table]
@@ -420,16 +435,20 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
         orient = _orientations_at(rec, rate)
     rests = find_rest(acc, rate)
     if rests is None:
-        raise InputError(f"no still stretch of ≥ {REST_MIN_S:g} s (every sensor steady, |a| ≈ g) in the recording: "
-                         "a calibration take starts with the performer standing still in the pose")  # fmt: skip
+        raise InputError(
+            f"no still stretch of ≥ {REST_MIN_S:g} s (every sensor steady, |a| ≈ g) in the recording: "
+            "a calibration take starts with the performer standing still in the pose"
+        )
     has_rest = rests[:, 0] >= 0
     r0, r1 = (int(v) for v in rests[np.argmax(has_rest)])
     up_dev, rest_source = _rest_up_device(acc, orient, rests)
     up_lay = _unit(np.array([table[s] for s in segments], dtype=np.float64))
     up_lay[sensor_reversed(layout, names)] *= np.array([-1.0, -1.0, 1.0])
     if reference is None:
-        raise InputError(f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
-                         "(the motion after the rest, matched against the graph's readings, fixes it)")  # fmt: skip
+        raise InputError(
+            f"pose {pose} fixes each sensor's tilt but not its rotation about gravity; give --graph G "
+            "(the motion after the rest, matched against the graph's readings, fixes it)"
+        )
     S = len(names)
     R0 = np.stack([_between(up_dev[s], up_lay[s]) if has_rest[s] else np.eye(3) for s in range(S)])
     R = R0.copy()
@@ -439,18 +458,22 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     rolled = has_rest & np.array([pose == "tpose" and seg[2:] in _ARMS for seg in segments])
     noise_var = np.zeros(S)  # per axis, over each sensor's own rest
     for s in np.flatnonzero(has_rest):
-        noise_var[s] = noise_variance(np.diff(np.asarray(acc[rests[s, 0]:rests[s, 1], s], dtype=np.float64), axis=0).T)
+        noise_var[s] = noise_variance(
+            np.diff(np.asarray(acc[rests[s, 0] : rests[s, 1], s], dtype=np.float64), axis=0).T
+        )
     stream, runs = reference.readings, reference.runs
     cols = [list(reference.sensor_names).index(n) for n in names]
     stream = np.ascontiguousarray(stream[:, cols])
-    moving = acc[r0:r0 + int(MAX_MOTION_S * rate)]  # (the rest and the motion after it)
+    moving = acc[r0 : r0 + int(MAX_MOTION_S * rate)]  # (the rest and the motion after it)
     # With orientation output: the vertical each device frame saw (free of the yaw drift
     # and of linear acceleration), paired with the matched graph frames' (FK of its poses).
-    dev_up = None if orient is None else world_vertical(quat.normalize(orient[r0:r0 + moving.shape[0]]))
+    dev_up = None if orient is None else world_vertical(quat.normalize(orient[r0 : r0 + moving.shape[0]]))
     window, stride = max(4, int(round(WINDOW_S * rate))), max(1, int(round(STRIDE_S * rate)))
     if moving.shape[0] < 2 * window:
-        raise InputError(f"the recording has {moving.shape[0] / rate:.2f} s from its rest on; calibration needs "
-                         f"at least {2 * WINDOW_S:g} s")  # fmt: skip
+        raise InputError(
+            f"the recording has {moving.shape[0] / rate:.2f} s from its rest on; calibration needs "
+            f"at least {2 * WINDOW_S:g} s"
+        )
     # How far each reading leaves the rest's gravity axis during the motion, against the noise.
     moved = moving[np.isfinite(moving).all(axis=(1, 2))]
     along = np.einsum("tsi,si->ts", moved, up_dev)
@@ -491,8 +514,9 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
                 R[s] = _level_fit(R[s], dev, lay, w_s, up_dev[s], LEVEL_WEIGHT * w_s.sum())
             elif pose == "stand" or not has_rest[s]:
                 rest_w = REST_WEIGHT[pose] * w_s.sum() * has_rest[s]
-                R[s] = wahba(np.vstack([dev, up_dev[s] * GRAVITY]), np.vstack([lay, up_lay[s] * GRAVITY]),
-                             np.append(w_s, rest_w))  # fmt: skip
+                R[s] = wahba(
+                    np.vstack([dev, up_dev[s] * GRAVITY]), np.vstack([lay, up_lay[s] * GRAVITY]), np.append(w_s, rest_w)
+                )
             else:  # the tilt is the pose's: only the angle about gravity, over every pair
                 R[s] = _about_only(R0[s], dev, lay, w_s, up_lay[s])
             got = np.einsum("ij,kj->ki", R[s], dev)
@@ -502,9 +526,12 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
     rest = (r0, r1)
     gap = gravity_gap_deg(acc, orient, rests)
     problems = quality_problems(names, residual, has_rest, gap)
-    method = [("graph (never still)" if not has_rest[s] else f"rest ({rest_source[s]}) + graph") if seen[s]
-              else f"rest ({rest_source[s]}) only: the motion hardly turned it, no rotation about gravity"
-              for s in range(S)]  # fmt: skip
+    method = [
+        ("graph (never still)" if not has_rest[s] else f"rest ({rest_source[s]}) + graph")
+        if seen[s]
+        else f"rest ({rest_source[s]}) only: the motion hardly turned it, no rotation about gravity"
+        for s in range(S)
+    ]
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -518,10 +545,13 @@ def calibrate_against(rec, pose: str, reference: Reference | None = None, start_
         "rest_s": [round(offset + rest[0] / rate, 4), round(offset + rest[1] / rate, 4)],
         "matched_samples": int(pairs),
         "sensors": {
-            n: {"rotation_wxyz": [round(float(v), 9) for v in _canonical(quat.from_matrix(R[s]))],
-                "method": method[s], "residual_deg": round(float(residual[s]), 3)}
+            n: {
+                "rotation_wxyz": [round(float(v), 9) for v in _canonical(quat.from_matrix(R[s]))],
+                "method": method[s],
+                "residual_deg": round(float(residual[s]), 3),
+            }
             for s, n in enumerate(names)
-        },  # fmt: skip
+        },
         "problems": problems,
     }
     if problems:
@@ -549,8 +579,9 @@ def _robust_angle(sums: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return np.where(keep.any(axis=0), np.angle(kept), theta)
 
 
-def _level_fit(R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, up: np.ndarray,
-               rest_w: float) -> np.ndarray:  # fmt: skip
+def _level_fit(
+    R: np.ndarray, dev: np.ndarray, lay: np.ndarray, weight: np.ndarray, up: np.ndarray, rest_w: float
+) -> np.ndarray:
     """All three degrees of freedom (Wahba) over the pairs, and a rest term of weight
     rest_w pairing the device's gravity `up` with the nearest direction that keeps the
     bone (the layout's X) level: alternately that direction from the last R, R from it,
@@ -587,12 +618,19 @@ def _span(rec, start_s: float | None, end_s: float | None):
         raise InputError(f"--from/--to must be finite seconds with --from < --to, got {start_s}, {end_s}")
     keep = (t >= lo - 1e-9) & (t <= hi + 1e-9)
     if keep.sum() < 2:
-        raise InputError(f"the recording has no samples between {start_s} and {end_s} s "
-                         f"(it lasts {rec.duration_s:.2f} s)")  # fmt: skip
+        raise InputError(
+            f"the recording has no samples between {start_s} and {end_s} s (it lasts {rec.duration_s:.2f} s)"
+        )
     pick = lambda a: None if a is None else a[keep]  # noqa: E731
-    return replace(rec, timestamps_s=rec.timestamps_s[keep], accelerations=pick(rec.accelerations),
-                   orientations=pick(rec.orientations), ground_position=pick(rec.ground_position),
-                   heading=pick(rec.heading), marker_positions=pick(rec.marker_positions))  # fmt: skip
+    return replace(
+        rec,
+        timestamps_s=rec.timestamps_s[keep],
+        accelerations=pick(rec.accelerations),
+        orientations=pick(rec.orientations),
+        ground_position=pick(rec.ground_position),
+        heading=pick(rec.heading),
+        marker_positions=pick(rec.marker_positions),
+    )
 
 
 def _orientations_at(rec, rate: float) -> np.ndarray:
@@ -621,14 +659,14 @@ def load_calibration(path) -> dict:
 
 def check_calibration(doc, path="calibration") -> dict:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise FormatError(path, f"not a graphsvc calibration (expected \"format\": \"{FORMAT}\")")
+        raise FormatError(path, f'not a graphsvc calibration (expected "format": "{FORMAT}")')
     if doc.get("version") != VERSION:
         raise FormatError(path, f"calibration version {doc.get('version')!r} is not supported (this reads {VERSION})")
     if "sensor_frames" in doc and doc["sensor_frames"] not in CONVENTIONS:
         raise FormatError(path, f"sensor_frames must be {' or '.join(CONVENTIONS)}, got {doc['sensor_frames']!r}")
     sensors = doc.get("sensors")
     if not isinstance(sensors, dict) or not sensors:
-        raise FormatError(path, "\"sensors\" must be an object with at least one sensor")
+        raise FormatError(path, '"sensors" must be an object with at least one sensor')
     out = {}
     for name, item in sensors.items():
         q = item.get("rotation_wxyz") if isinstance(item, dict) else None
@@ -650,8 +688,10 @@ def calibration_rotations(cal: dict, names) -> np.ndarray:
     calibration holds exactly those sensors."""
     have = cal["rotations"]
     if sorted(have) != sorted(names):
-        raise InputError(f"{cal.get('path', 'the calibration')} calibrates sensors {', '.join(sorted(have))}, "
-                         f"not the recording's {', '.join(sorted(names))}")  # fmt: skip
+        raise InputError(
+            f"{cal.get('path', 'the calibration')} calibrates sensors {', '.join(sorted(have))}, "
+            f"not the recording's {', '.join(sorted(names))}"
+        )
     return np.stack([have[n] for n in names])
 
 
@@ -669,8 +709,10 @@ def apply_calibration(rec, cal: dict):
     from dataclasses import replace
 
     if rec.meta.get("sensor_frame") == "layout":
-        raise InputError("the recording's readings are already in the layout's sensor frames (sensor_frame=layout): "
-                         "it needs no calibration")  # fmt: skip
+        raise InputError(
+            "the recording's readings are already in the layout's sensor frames (sensor_frame=layout): "
+            "it needs no calibration"
+        )
     if rec.accelerations is None:
         raise InputError("the recording has no accelerometer readings to calibrate")
     R = calibration_rotations(cal, rec.sensor_names)

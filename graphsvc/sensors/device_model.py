@@ -43,8 +43,19 @@ TISSUE_SEGMENTS = frozenset({"l_hip", "r_hip", "l_knee", "r_knee", "l_ankle", "r
 IMPACT_TAU_S = 0.025
 IMPACT_HZ = 15.0
 # The share of an impact each segment's sensor takes (the segment's canonical joint).
-IMPACT_SHARE = {"l_knee": 1.0, "r_knee": 1.0, "l_ankle": 1.0, "r_ankle": 1.0, "l_toe": 1.0, "r_toe": 1.0,
-                "l_hip": 0.5, "r_hip": 0.5, "pelvis": 0.25, "spine": 0.25, "chest": 0.25}  # fmt: skip
+IMPACT_SHARE = {
+    "l_knee": 1.0,
+    "r_knee": 1.0,
+    "l_ankle": 1.0,
+    "r_ankle": 1.0,
+    "l_toe": 1.0,
+    "r_toe": 1.0,
+    "l_hip": 0.5,
+    "r_hip": 0.5,
+    "pelvis": 0.25,
+    "spine": 0.25,
+    "chest": 0.25,
+}
 
 
 def mounting(seed: int, names, degrees: float) -> np.ndarray:
@@ -112,8 +123,14 @@ def impacts(contacts: np.ndarray, segments, rate_hz: float, amplitude: float) ->
     return out
 
 
-def orientation_output(orientation: np.ndarray, rate_hz: float, sigma_deg: float, yaw_drift_deg: float,
-                       rng: np.random.Generator, heading_drift_deg: float = 0.0) -> np.ndarray:  # fmt: skip
+def orientation_output(
+    orientation: np.ndarray,
+    rate_hz: float,
+    sigma_deg: float,
+    yaw_drift_deg: float,
+    rng: np.random.Generator,
+    heading_drift_deg: float = 0.0,
+) -> np.ndarray:
     """(F, S, 4) the device orientations a real IMU would report: white rotation noise of
     σ degrees about a random axis a sample, a yaw about world +Y wandering
     `yaw_drift_deg` per √s (a random walk from 0) for each device, and one wandering

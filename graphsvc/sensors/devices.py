@@ -83,8 +83,10 @@ CALIBRATION_POSES = ("tpose", "tpose-isb", "npose")  # frames whose sensor orien
 _ACCELERATION_FIELDS = ("sensorAcceleration", "sensorFreeAcceleration")
 _ORIENTATION_FIELD = "sensorOrientation"
 # expat's "no element found" and "unclosed token": the text stopped inside an element.
-_XML_ENDS_EARLY = (expat_errors.codes[expat_errors.XML_ERROR_NO_ELEMENTS],
-                   expat_errors.codes[expat_errors.XML_ERROR_UNCLOSED_TOKEN])  # fmt: skip
+_XML_ENDS_EARLY = (
+    expat_errors.codes[expat_errors.XML_ERROR_NO_ELEMENTS],
+    expat_errors.codes[expat_errors.XML_ERROR_UNCLOSED_TOKEN],
+)
 
 
 # ---------------------------------------------------------------- MVNX
@@ -119,8 +121,9 @@ def _values(path: Path, text: str | None, sensors: int, per: int, what: str, whe
     except ValueError:
         raise FormatError(path, f"{where}: {what} holds a value that is not a number") from None
     if v.size != sensors * per:
-        raise FormatError(path, f"{where}: {what} has {v.size} values, expected {sensors * per} "
-                          f"({per} for each of {sensors} sensors)")  # fmt: skip
+        raise FormatError(
+            path, f"{where}: {what} has {v.size} values, expected {sensors * per} ({per} for each of {sensors} sensors)"
+        )
     if np.isinf(v).any():
         raise FormatError(path, f"{where}: {what} holds an infinite value")
     return v
@@ -145,8 +148,9 @@ def _orientations(path: Path, q: np.ndarray, names: list[str], where: str | None
     if bad.any():
         k = tuple(np.argwhere(bad)[0])
         at = where if where is not None else f"normal frame {k[0] + 1}"
-        raise FormatError(path, f"{at}: the sensorOrientation of {names[k[-1]]} is not a unit quaternion "
-                          f"(norm {norm[k]:.4g})")  # fmt: skip
+        raise FormatError(
+            path, f"{at}: the sensorOrientation of {names[k[-1]]} is not a unit quaternion (norm {norm[k]:.4g})"
+        )
     q[zero] = np.nan
     return q / np.where(zero, 1.0, norm)[..., None]
 
@@ -247,12 +251,16 @@ class _MvnxReader:
         if self.field is None:
             self.field = next((name for name in _ACCELERATION_FIELDS if name in children), None)
             if self.field is None:
-                raise FormatError(path, f"{where}: no sensor accelerations (neither "
-                                  f"{' nor '.join(_ACCELERATION_FIELDS)})")  # fmt: skip
+                raise FormatError(
+                    path, f"{where}: no sensor accelerations (neither {' nor '.join(_ACCELERATION_FIELDS)})"
+                )
             self.has_orientation = _ORIENTATION_FIELD in children
             if self.field == "sensorFreeAcceleration" and not self.has_orientation:
-                raise FormatError(path, f"{where}: sensorFreeAcceleration (global frame) needs "
-                                  f"{_ORIENTATION_FIELD} to turn it into each sensor's frame")  # fmt: skip
+                raise FormatError(
+                    path,
+                    f"{where}: sensorFreeAcceleration (global frame) needs "
+                    f"{_ORIENTATION_FIELD} to turn it into each sensor's frame",
+                )
             self.acc, self.q, self.times = _Rows(3 * S), _Rows(4 * S), _Rows(2)
         for name in (self.field, _ORIENTATION_FIELD) if self.has_orientation else (self.field,):
             if name not in children:
@@ -268,8 +276,11 @@ class _MvnxReader:
             raise FormatError(path, "holds no <subject>")
         S = self.S if self.S is not None else _sensor_count(path, self.labels, self.info["frames"])
         if self.field is None:
-            raise FormatError(path, "holds no normal frames (samples)" + (
-                f", only calibration frames ({', '.join(self.calibration)})" if self.calibration else ""))  # fmt: skip
+            raise FormatError(
+                path,
+                "holds no normal frames (samples)"
+                + (f", only calibration frames ({', '.join(self.calibration)})" if self.calibration else ""),
+            )
         subject = self.info["subject"]
         times = self.times.array()
         T = times.shape[0]
@@ -285,8 +296,10 @@ class _MvnxReader:
         bad = np.diff(t) <= 0
         if bad.any():
             k = int(np.argmax(bad)) + 1
-            raise FormatError(path, f"normal frame {k + 1}: its {source} ({t[k]:g} s) does not follow the "
-                              f"previous one's ({t[k - 1]:g} s)")  # fmt: skip
+            raise FormatError(
+                path,
+                f"normal frame {k + 1}: its {source} ({t[k]:g} s) does not follow the previous one's ({t[k - 1]:g} s)",
+            )
         if rate is None:
             if T < 2:
                 raise FormatError(path, "no frameRate, and one frame: cannot tell the sample rate")
@@ -300,18 +313,29 @@ class _MvnxReader:
             if self.field == "sensorFreeAcceleration":
                 readings = quat.inv_rotate(q_device, readings + np.array([0.0, 0.0, GRAVITY]))
         meta = {
-            "source": str(path), "imported_from": "mvnx", "sensor_frame": "device", "acceleration": self.field,
-            "mvnx_version": self.info.get("mvnx_version"), "mvn_version": self.info.get("mvn_version"),
-            "frame_rate_hz": float(rate), "configuration": subject.get("configuration"), "timestamps_from": source,
+            "source": str(path),
+            "imported_from": "mvnx",
+            "sensor_frame": "device",
+            "acceleration": self.field,
+            "mvnx_version": self.info.get("mvnx_version"),
+            "mvn_version": self.info.get("mvn_version"),
+            "frame_rate_hz": float(rate),
+            "configuration": subject.get("configuration"),
+            "timestamps_from": source,
             "calibration_frames": self.calibration,
-        }  # fmt: skip
+        }
         if self.poses:
             meta["poses"] = self.poses
         if self.subjects > 1:
             meta["subjects"] = self.subjects  # only the first is read
-        rec = Recording(rate_hz=float(rate), timestamps_s=np.ascontiguousarray(t, dtype=np.float64),
-                        sensor_names=tuple(self.labels), accelerations=readings.astype(np.float32),
-                        orientations=orientations, meta=meta)  # fmt: skip
+        rec = Recording(
+            rate_hz=float(rate),
+            timestamps_s=np.ascontiguousarray(t, dtype=np.float64),
+            sensor_names=tuple(self.labels),
+            accelerations=readings.astype(np.float32),
+            orientations=orientations,
+            meta=meta,
+        )
         try:
             rec.validate()
         except InputError as exc:
@@ -338,7 +362,7 @@ def _sensor_count(path: Path, labels: list[str], frames_attrib: dict) -> int:
         raise FormatError(path, f"duplicate sensor labels: {', '.join(dup)}")
     declared = frames_attrib.get("sensorCount")
     if declared is not None and declared.strip() != str(len(labels)):
-        raise FormatError(path, f"<frames sensorCount=\"{declared}\"> but {len(labels)} sensors are listed")
+        raise FormatError(path, f'<frames sensorCount="{declared}"> but {len(labels)} sensors are listed')
     return len(labels)
 
 
@@ -356,7 +380,7 @@ def generic_key(name: str) -> str:
     key = re.sub(r"[\W_]+", "", lowered)
     for word, side in (("left", "l"), ("right", "r")):
         if key.startswith(word):
-            return side + key[len(word):]
+            return side + key[len(word) :]
         if key.endswith(word):
             return side + key[: -len(word)]
     return key
@@ -382,8 +406,15 @@ def _naming_map(naming: dict, places: dict[str, str], present, loose: bool = Fal
         if place not in naming:
             continue
         for candidate in _names(naming[place]):
-            name = (candidate if by_key is None else by_key.get(generic_key(candidate)) if loose
-                    else candidate if candidate in present else None)  # fmt: skip
+            name = (
+                candidate
+                if by_key is None
+                else by_key.get(generic_key(candidate))
+                if loose
+                else candidate
+                if candidate in present
+                else None
+            )
             if name is not None and name not in out:
                 out[name] = sensor
                 break
@@ -411,27 +442,39 @@ def _xsens_naming(places: dict[str, str], trunk: dict[str, str]) -> dict[str, st
     return {**limbs, **trunk}
 
 
-XSENS_SEGMENTS = _xsens_naming(_XSENS_PLACES, {"pelvis": "Pelvis", "lower_back": "Pelvis", "chest": "T8", "head": "Head"})
+XSENS_SEGMENTS = _xsens_naming(
+    _XSENS_PLACES, {"pelvis": "Pelvis", "lower_back": "Pelvis", "chest": "T8", "head": "Head"}
+)
 MVN_SKELETON = _xsens_naming(_MVN_PLACES, {"pelvis": "Hips", "lower_back": "Hips", "chest": "Spine3", "head": "Head"})
 
 # The generic naming: per place, the names a device CSV may give it, most specific
 # first, compared by `generic_key` (case, separators and the side's spelling aside:
 # left_wrist, LeftWrist, l-wrist, lwrist and wrist_l are one name).
-_GENERIC_LIMBS = {"wrist": ("wrist", "forearm", "lower_arm"), "forearm": ("forearm", "lower_arm", "wrist"),
-                  "knee": ("knee", "shin", "lower_leg"), "shin": ("shin", "lower_leg", "knee", "ankle"),
-                  "ankle": ("ankle", "shin", "lower_leg")}  # fmt: skip
+_GENERIC_LIMBS = {
+    "wrist": ("wrist", "forearm", "lower_arm"),
+    "forearm": ("forearm", "lower_arm", "wrist"),
+    "knee": ("knee", "shin", "lower_leg"),
+    "shin": ("shin", "lower_leg", "knee", "ankle"),
+    "ankle": ("ankle", "shin", "lower_leg"),
+}
 GENERIC = {
-    **{prefix + place: tuple(f"{side.lower()}_{n}" for n in names) for prefix, side in _SIDES.items()
-       for place, names in _GENERIC_LIMBS.items()},
+    **{
+        prefix + place: tuple(f"{side.lower()}_{n}" for n in names)
+        for prefix, side in _SIDES.items()
+        for place, names in _GENERIC_LIMBS.items()
+    },
     "pelvis": ("pelvis", "hips", "hip", "waist", "sacrum", "root", "lower_back"),
     "lower_back": ("lower_back", "pelvis", "hips", "waist", "sacrum", "back"),
     "chest": ("chest", "sternum", "upper_back", "thorax", "torso"),
     "head": ("head", "forehead"),
-}  # fmt: skip
+}
 
 # device → its namings ({place: device name or names}, tried in turn).
-NAMINGS: dict[str, tuple[dict, ...]] = {"xsens": (XSENS_SEGMENTS, MVN_SKELETON), "mvn": (MVN_SKELETON,),
-                                        "generic": (GENERIC,)}  # fmt: skip
+NAMINGS: dict[str, tuple[dict, ...]] = {
+    "xsens": (XSENS_SEGMENTS, MVN_SKELETON),
+    "mvn": (MVN_SKELETON,),
+    "generic": (GENERIC,),
+}
 DEVICES = tuple(NAMINGS)  # the built-in maps, as `--device-map` names them
 
 # The places of each preset's sensors (a preset's sensor names are places).
@@ -442,7 +485,7 @@ PLACES: dict[str, dict[str, str]] = {name: {s: s for s in layout.sensor_names} f
 DEVICE_MAPS: dict[str, dict[str, dict[str, str]]] = {
     device: {layout: _naming_map(namings[0], places, None) for layout, places in PLACES.items()}
     for device, namings in NAMINGS.items()
-}  # fmt: skip
+}
 
 
 def _short(names, most: int = 6) -> str:
@@ -460,22 +503,27 @@ def device_map(name_or_path: str, layout_name: str | None, present=None) -> dict
     FormatError for a malformed file."""
     if name_or_path in NAMINGS:
         if layout_name not in PLACES:
-            raise InputError(f"no built-in {name_or_path} map for layout {layout_name!r} (it has maps for "
-                             f"{', '.join(PLACES)}); give a map file instead")  # fmt: skip
+            raise InputError(
+                f"no built-in {name_or_path} map for layout {layout_name!r} (it has maps for "
+                f"{', '.join(PLACES)}); give a map file instead"
+            )
         if present is None:
             return dict(DEVICE_MAPS[name_or_path][layout_name])
         present = tuple(present)
         maps = [_naming_map(n, PLACES[layout_name], present, loose=n is GENERIC) for n in NAMINGS[name_or_path]]
         best = max(maps, key=len)  # (the first of equals)
         if not best:
-            raise InputError(f"the {name_or_path} device map names none of the recording's sensors "
-                             f"({_short(present)}) for layout {layout_name!r} (it takes "
-                             f"{_short(DEVICE_MAPS[name_or_path][layout_name])})")  # fmt: skip
+            raise InputError(
+                f"the {name_or_path} device map names none of the recording's sensors "
+                f"({_short(present)}) for layout {layout_name!r} (it takes "
+                f"{_short(DEVICE_MAPS[name_or_path][layout_name])})"
+            )
         return best
     path = Path(name_or_path)
     if not path.is_file():
-        raise InputError(f"unknown device map {name_or_path!r}: not a built-in device ({', '.join(DEVICES)}) "
-                         "and no such file")  # fmt: skip
+        raise InputError(
+            f"unknown device map {name_or_path!r}: not a built-in device ({', '.join(DEVICES)}) and no such file"
+        )
     return load_device_map(path)
 
 
@@ -486,8 +534,10 @@ def unmapped_note(mapped: Recording, sensor_names, device: str) -> str | None:
     if not missing:
         return None
     device_names = mapped.meta.get("unmapped_sensors", [])
-    return (f"device map {device}: no sensor of the recording for {', '.join(missing)} (unmapped: "
-            f"{', '.join(device_names) or 'none'})")  # fmt: skip
+    return (
+        f"device map {device}: no sensor of the recording for {', '.join(missing)} (unmapped: "
+        f"{', '.join(device_names) or 'none'})"
+    )
 
 
 def load_device_map(path) -> dict[str, str]:
@@ -542,8 +592,9 @@ def apply_device_map(rec: Recording, mapping: dict, order=None) -> Recording:
     mapping = check_device_map(mapping)
     present = [k for k in mapping if k in rec.sensor_names]
     if not present:
-        raise InputError(f"the device map names none of the recording's sensors "
-                         f"({', '.join(rec.sensor_names) or 'it has none'})")  # fmt: skip
+        raise InputError(
+            f"the device map names none of the recording's sensors ({', '.join(rec.sensor_names) or 'it has none'})"
+        )
     if order is not None:
         rank = {n: i for i, n in enumerate(order)}
         present.sort(key=lambda k: rank.get(mapping[k], len(rank)))  # stable: the map's order after

@@ -30,7 +30,9 @@ def is_marker_csv(path) -> bool:
     return False
 
 
-def read_recording(path: StrPath, rate_hz: float | None = None, up: str | None = None, units: str | None = None) -> Recording:
+def read_recording(
+    path: StrPath, rate_hz: float | None = None, up: str | None = None, units: str | None = None
+) -> Recording:
     """A recording from a `.rec` file, a device CSV, an Xsens MVNX file, a C3D file or a
     marker CSV (by suffix, and a CSV by its first column: `time` for markers, `t_s` for
     devices). up, units: where the file does not say, for marker files the vertical axis

@@ -105,11 +105,17 @@ PRESETS: dict[str, Layout] = {
     # DIP-IMU's six (Huang et al. 2018), in its order: both forearms near the wrists, both
     # shins just below the knees, the head (on the head's segment, at its joint; X toward
     # the neck, no joint lying above it) and the pelvis, the root sensor.
-    "dip6": Layout("dip6", (
-        _sensor("l_wrist", "l_elbow", 0.9), _sensor("r_wrist", "r_elbow", 0.9),
-        _sensor("l_knee", "l_knee", 0.1), _sensor("r_knee", "r_knee", 0.1),
-        _sensor("head", "head", 0.0, "neck"), _sensor("pelvis", "pelvis", 0.0),
-    )),  # fmt: skip
+    "dip6": Layout(
+        "dip6",
+        (
+            _sensor("l_wrist", "l_elbow", 0.9),
+            _sensor("r_wrist", "r_elbow", 0.9),
+            _sensor("l_knee", "l_knee", 0.1),
+            _sensor("r_knee", "r_knee", 0.1),
+            _sensor("head", "head", 0.0, "neck"),
+            _sensor("pelvis", "pelvis", 0.0),
+        ),
+    ),
 }
 
 
@@ -161,7 +167,9 @@ def layout_from_dict(data: dict, source: str = "layout") -> Layout:
             raise LayoutError(f"{where}: along, offset_m and rotation_wxyz must be numbers") from None
         if len(offset) != 3 or not np.all(np.isfinite(offset)) or not np.isfinite(along):
             raise LayoutError(f"{where}: offset_m must be 3 finite numbers and along finite")
-        if rotation is not None and (len(rotation) != 4 or not np.isfinite(rotation).all() or np.linalg.norm(rotation) < 1e-6):
+        if rotation is not None and (
+            len(rotation) != 4 or not np.isfinite(rotation).all() or np.linalg.norm(rotation) < 1e-6
+        ):
             raise LayoutError(f"{where}: rotation_wxyz must be 4 finite numbers, not all zero")
         sensors.append(SensorSpec(name, segment, toward, along, offset, rotation))
     names = [s.name for s in sensors]
@@ -176,9 +184,7 @@ def load_layout(name_or_path: str) -> Layout:
         return PRESETS[name_or_path]
     path = Path(name_or_path)
     if not path.exists():
-        raise LayoutError(
-            f"unknown layout {name_or_path!r}: not a preset ({preset_names()}) and no such file"
-        )
+        raise LayoutError(f"unknown layout {name_or_path!r}: not a preset ({preset_names()}) and no such file")
     try:
         text = path.read_text()
         data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
@@ -248,8 +254,15 @@ def place(layout: Layout, skeleton: Skeleton, mapping=None) -> Placement:
         if len(_PLACEMENTS) > 256:
             _PLACEMENTS.clear()
         cached = _PLACEMENTS[key] = _place(layout, skeleton, mapping)
-        for arr in (cached.segment, cached.toward, cached.along, cached.offset, cached.rotation, cached.carrier,
-                    cached.axis):
+        for arr in (
+            cached.segment,
+            cached.toward,
+            cached.along,
+            cached.offset,
+            cached.rotation,
+            cached.carrier,
+            cached.axis,
+        ):
             arr.flags.writeable = False  # shared between callers
     return cached
 
@@ -266,8 +279,10 @@ def _place(layout: Layout, skeleton: Skeleton, mapping) -> Placement:
         bone = rest[tow] - rest[seg]
         if np.linalg.norm(bone) < 1e-6:
             lacks = [j for j in (s.segment, s.toward) if j in getattr(table, "missing", ())]
-            raise SkeletonError(f"sensor {s.name!r}: joints {s.segment} and {s.toward} coincide in this skeleton"
-                                + (f" (it has no {' or '.join(lacks)})" if lacks else ""))  # fmt: skip
+            raise SkeletonError(
+                f"sensor {s.name!r}: joints {s.segment} and {s.toward} coincide in this skeleton"
+                + (f" (it has no {' or '.join(lacks)})" if lacks else "")
+            )
         segment.append(seg)
         toward.append(tow)
         if s.rotation_wxyz is not None:
@@ -287,8 +302,9 @@ def _place(layout: Layout, skeleton: Skeleton, mapping) -> Placement:
     )
 
 
-def anatomical_placement(layout: Layout, skeleton: Skeleton, mapping, world_rot: np.ndarray,
-                         world_pos: np.ndarray) -> Placement:  # fmt: skip
+def anatomical_placement(
+    layout: Layout, skeleton: Skeleton, mapping, world_rot: np.ndarray, world_pos: np.ndarray
+) -> Placement:
     """The layout on a skeleton with anatomical sensor frames (`sensors.anatomy`),
     estimated from the motion world_rot (F, J, 4), world_pos (F, J, 3) that the sensors
     ride on (a clip, or a sample of a graph's nodes). Sensors whose layout gives
@@ -308,8 +324,9 @@ def anatomical_placement(layout: Layout, skeleton: Skeleton, mapping, world_rot:
         upper = anatomy.CARRIED_BY.get(seg)
         if upper is not None:  # Y: the elbow's axis as the upper arm carries it
             carrier[k] = table[upper]
-            up_rot = anatomy.estimate_rotations(world_rot, world_pos, rest_rot, rest_pos, table, [upper],
-                                                [anatomy.CARRIED_TOWARD[upper]])[0]  # fmt: skip
+            up_rot = anatomy.estimate_rotations(
+                world_rot, world_pos, rest_rot, rest_pos, table, [upper], [anatomy.CARRIED_TOWARD[upper]]
+            )[0]
             axis[k] = quat.rotate(up_rot, np.array([0.0, 1.0, 0.0]))
     out = replace(base, rotation=rotation, carrier=carrier, axis=axis, convention=anatomy.ANATOMICAL)
     for arr in (out.rotation, out.carrier, out.axis):

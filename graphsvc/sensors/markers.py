@@ -114,9 +114,11 @@ def _vicon() -> tuple[MarkerSpec, ...]:
         out.append(spec)
         out.append(_mirror(spec, "R" + spec.name[1:]))
     by_name = {s.name: s for s in out + trunk}
-    order = ("LFHD RFHD LBHD RBHD C7 T10 CLAV STRN RBAC LSHO LUPA LELB LFRM LWRA LWRB LFIN RSHO RUPA RELB RFRM "
-             "RWRA RWRB RFIN LFWT RFWT LBWT RBWT LTHI LKNE LSHN LANK LHEE LTOE LMT5 RTHI RKNE RSHN RANK RHEE RTOE "
-             "RMT5").split()  # fmt: skip
+    order = (
+        "LFHD RFHD LBHD RBHD C7 T10 CLAV STRN RBAC LSHO LUPA LELB LFRM LWRA LWRB LFIN RSHO RUPA RELB RFRM "
+        "RWRA RWRB RFIN LFWT RFWT LBWT RBWT LTHI LKNE LSHN LANK LHEE LTOE LMT5 RTHI RKNE RSHN RANK RHEE RTOE "
+        "RMT5"
+    ).split()
     return tuple(by_name[n] for n in order)
 
 
@@ -191,8 +193,9 @@ def load_marker_set(name_or_path) -> MarkerSet:
         return PRESETS[name_or_path]
     path = Path(name_or_path)
     if not path.is_file():
-        raise LayoutError(f"unknown marker set {str(name_or_path)!r}: not a built-in set ({', '.join(PRESETS)}) "
-                          "and no such file")  # fmt: skip
+        raise LayoutError(
+            f"unknown marker set {str(name_or_path)!r}: not a built-in set ({', '.join(PRESETS)}) and no such file"
+        )
     try:
         text = path.read_text(encoding="utf-8")
         data = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
@@ -219,8 +222,10 @@ def keep_markers(marker_set: MarkerSet, keep) -> MarkerSet:
     keep = tuple(keep)
     unknown = [n for n in keep if n not in marker_set.marker_names]
     if unknown:
-        raise InputError(f"marker set {marker_set.name!r} defines no marker {', '.join(unknown)} "
-                         f"(it has {', '.join(marker_set.marker_names)})")  # fmt: skip
+        raise InputError(
+            f"marker set {marker_set.name!r} defines no marker {', '.join(unknown)} "
+            f"(it has {', '.join(marker_set.marker_names)})"
+        )
     if not keep:
         raise InputError("no markers kept")
     return replace(marker_set, markers=tuple(m for m in marker_set.markers if m.name in keep))
@@ -264,11 +269,14 @@ def place_markers(marker_set: MarkerSet, skeleton: Skeleton, mapping=None) -> Ma
             point = point + m.along * (rest[table[m.toward]] - at)
         carrier.append(c)
         local.append(point - rest[c])
-    return MarkerPlacement(marker_set, np.array(carrier, dtype=np.int64), np.array(local, dtype=np.float64).reshape(-1, 3))
+    return MarkerPlacement(
+        marker_set, np.array(carrier, dtype=np.int64), np.array(local, dtype=np.float64).reshape(-1, 3)
+    )
 
 
-def marker_positions(world_rot: np.ndarray, world_pos: np.ndarray, placement: MarkerPlacement,
-                     local: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def marker_positions(
+    world_rot: np.ndarray, world_pos: np.ndarray, placement: MarkerPlacement, local: np.ndarray | None = None
+) -> np.ndarray:
     """(F, M, 3) world positions (m) of the placed markers on poses given by world
     rotations (F, J, 4) and positions (F, J, 3); local: (M, 3) offsets replacing the
     placement's (estimated ones)."""

@@ -72,8 +72,16 @@ PRESETS: dict[str, NoiseModel] = {
     # The default sensors with a tracker that errs as real ones do: offset by Kelly et
     # al.'s 13.7 cm and wandering 3 cm per √s (10 cm after 10 s, 23 cm after a minute).
     "tracker": NoiseModel(
-        sigma=0.5, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0,
-        position_offset=0.137, position_walk=0.03, marker=1.0,
+        sigma=0.5,
+        bias=0.2,
+        misalign=5.0,
+        range=12.0,
+        position=0.10,
+        heading="noisy",
+        heading_sigma=10.0,
+        position_offset=0.137,
+        position_walk=0.03,
+        marker=1.0,
     ),
     # A poorly mounted, lossy setup for robustness checks.
     # Real IMUs (`sensors.device_model`; fitted by tools/fit_real_noise.py so simulated
@@ -84,15 +92,35 @@ PRESETS: dict[str, NoiseModel] = {
     # strikes; an orientation output with 2° of noise, each device's yaw drifting 0.5° per
     # √s and the heading they share 1° per √s; the default tracker.
     "real": NoiseModel(
-        sigma=0.8, bias=0.2, misalign=5.0, range=12.0, position=0.10, heading="noisy", heading_sigma=10.0, marker=1.0,
-        tissue=3.0, tissue_damping=0.5, impact=20.0, orientations=1.0, orient_sigma=2.0, yaw_drift=0.5,
+        sigma=0.8,
+        bias=0.2,
+        misalign=5.0,
+        range=12.0,
+        position=0.10,
+        heading="noisy",
+        heading_sigma=10.0,
+        marker=1.0,
+        tissue=3.0,
+        tissue_damping=0.5,
+        impact=20.0,
+        orientations=1.0,
+        orient_sigma=2.0,
+        yaw_drift=0.5,
         heading_drift=1.0,
     ),
     "harsh": NoiseModel(
-        sigma=1.0, bias=0.5, misalign=10.0, range=8.0, drop=0.05, position=0.30,
-        position_drop=0.05, heading="rule", heading_sigma=20.0, marker=5.0,
+        sigma=1.0,
+        bias=0.5,
+        misalign=10.0,
+        range=8.0,
+        drop=0.05,
+        position=0.30,
+        position_drop=0.05,
+        heading="rule",
+        heading_sigma=20.0,
+        marker=5.0,
     ),
-}  # fmt: skip
+}
 
 
 def parse_noise(spec: str) -> NoiseModel:
@@ -153,8 +181,9 @@ def corrupt_accelerations(acc: np.ndarray, model: NoiseModel, rng: np.random.Gen
     return (out.astype(np.float32), mount) if misalignment else out.astype(np.float32)
 
 
-def corrupt_positions(position: np.ndarray, model: NoiseModel, rng: np.random.Generator,
-                      rate_hz: float = 30.0) -> np.ndarray:  # fmt: skip
+def corrupt_positions(
+    position: np.ndarray, model: NoiseModel, rng: np.random.Generator, rate_hz: float = 30.0
+) -> np.ndarray:
     """(T, 2) ground positions in metres at `rate_hz` → noisy copy, NaN where the tracker
     lost the player. The offset and the random walk are drawn from a generator spawned
     from rng, which leaves rng's own draws (white noise, losses, and what is drawn
@@ -215,9 +244,7 @@ def corrupt_heading(
         return heading.copy()
     if model.heading == "noisy":
         return quat.wrap_angle(heading + np.deg2rad(model.heading_sigma) * white)
-    return heading_from_track(
-        noisy_position, rate_hz, model.speed_threshold, np.deg2rad(model.rest_heading)
-    )
+    return heading_from_track(noisy_position, rate_hz, model.speed_threshold, np.deg2rad(model.rest_heading))
 
 
 class CausalTrackHeading:

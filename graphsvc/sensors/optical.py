@@ -157,15 +157,30 @@ def read_c3d(path, up: str | None = None, units: str | None = None) -> Recording
         how = "the markers' spread"
         if up is None:
             screen = str((params.get("Y_SCREEN") or [""])[0]).strip().upper()
-            up, how = ({"+Y": "y", "+Z": "z"}[screen], "POINT:Y_SCREEN") if screen in ("+Y", "+Z") else ("z", "the "
-                                                                                                          "C3D convention")  # fmt: skip
+            up, how = (
+                ({"+Y": "y", "+Z": "z"}[screen], "POINT:Y_SCREEN")
+                if screen in ("+Y", "+Z")
+                else ("z", "the C3D convention")
+            )
     xyz = np.ascontiguousarray(to_y_up(xyz, up))
     if not np.isfinite(xyz).any():
         raise FormatError(path, "every marker is missing in every frame")
-    rec = Recording(rate_hz=rate, timestamps_s=np.arange(F, dtype=np.float64) / rate, sensor_names=(),
-                    accelerations=None, marker_names=tuple(names), marker_positions=xyz,
-                    meta={"source": str(path), "imported_from": "c3d", "up": up, "up_from": how,
-                          "units_scale_m": scale, "first_frame": int(header.get("first_frame", 0))})  # fmt: skip
+    rec = Recording(
+        rate_hz=rate,
+        timestamps_s=np.arange(F, dtype=np.float64) / rate,
+        sensor_names=(),
+        accelerations=None,
+        marker_names=tuple(names),
+        marker_positions=xyz,
+        meta={
+            "source": str(path),
+            "imported_from": "c3d",
+            "up": up,
+            "up_from": how,
+            "units_scale_m": scale,
+            "first_frame": int(header.get("first_frame", 0)),
+        },
+    )
     rec.validate()
     return rec
 
@@ -188,8 +203,11 @@ def _marker_columns(path: Path, header: list, line: int) -> dict[str, dict[str, 
         markers[name][axis.lower()] = k
     for name, axes in markers.items():
         if len(axes) != 3:
-            raise FormatError(path, f"marker {name!r} lacks column(s) "
-                              f"{', '.join(f'{name}_{a}' for a in 'xyz' if a not in axes)}", line=line)  # fmt: skip
+            raise FormatError(
+                path,
+                f"marker {name!r} lacks column(s) {', '.join(f'{name}_{a}' for a in 'xyz' if a not in axes)}",
+                line=line,
+            )
     if not markers:
         raise FormatError(path, "no marker columns", line=line)
     return markers
@@ -217,9 +235,15 @@ def read_marker_csv(path, up: str | None = None, units: str | None = None, rate_
     names = tuple(markers)
     xyz = np.stack([table[:, [markers[n]["x"], markers[n]["y"], markers[n]["z"]]] for n in names], axis=1) * scale
     xyz[~np.isfinite(xyz).all(axis=-1)] = np.nan
-    rec = Recording(rate_hz=float(rate_hz), timestamps_s=np.ascontiguousarray(t), sensor_names=(), accelerations=None,
-                    marker_names=names, marker_positions=np.ascontiguousarray(to_y_up(xyz, up)),
-                    meta={"source": str(path), "imported_from": "marker csv", "up": up, "units_scale_m": scale})  # fmt: skip
+    rec = Recording(
+        rate_hz=float(rate_hz),
+        timestamps_s=np.ascontiguousarray(t),
+        sensor_names=(),
+        accelerations=None,
+        marker_names=names,
+        marker_positions=np.ascontiguousarray(to_y_up(xyz, up)),
+        meta={"source": str(path), "imported_from": "marker csv", "up": up, "units_scale_m": scale},
+    )
     rec.validate()
     return rec
 
@@ -229,8 +253,13 @@ def export_marker_csv(rec: Recording, path) -> None:
     if rec.marker_positions is None:
         raise InputError("the recording has no markers")
     rec.validate()
-    lines = [CSV_MAGIC, f"# rate_hz={rec.rate_hz:.12g}", "# units=m", "# up=y",
-             ",".join(["time"] + [f"{n}_{a}" for n in rec.marker_names for a in "xyz"])]  # fmt: skip
+    lines = [
+        CSV_MAGIC,
+        f"# rate_hz={rec.rate_hz:.12g}",
+        "# units=m",
+        "# up=y",
+        ",".join(["time"] + [f"{n}_{a}" for n in rec.marker_names for a in "xyz"]),
+    ]
     T = rec.num_samples
     lines += csv_rows(np.concatenate([rec.timestamps_s[:, None], rec.marker_positions.reshape(T, -1)], axis=1))
     with atomic_writer(path) as f:

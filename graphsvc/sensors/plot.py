@@ -28,14 +28,19 @@ def recording_figure(rec: Recording, contacts: np.ndarray | None = None):
     t = rec.timestamps_s
     heights = ([0.5] if contacts is not None else []) + [1.0] * S + ([2.0] if rec.ground_position is not None else [])
     fig, axes = plt.subplots(
-        len(heights), 1, figsize=(10, 1.5 * sum(heights) + 0.8), squeeze=False,
+        len(heights),
+        1,
+        figsize=(10, 1.5 * sum(heights) + 0.8),
+        squeeze=False,
         gridspec_kw={"height_ratios": heights},
-    )  # fmt: skip
+    )
     axes = list(axes[:, 0])
     if contacts is not None:
         ax = axes.pop(0)
         for row, (side, colour) in enumerate((("left", "tab:blue"), ("right", "tab:orange"))):
-            ax.fill_between(t, 1 - row - 0.9, 1 - row - 0.1, where=contacts[:, row], color=colour, step="mid", linewidth=0)
+            ax.fill_between(
+                t, 1 - row - 0.9, 1 - row - 0.1, where=contacts[:, row], color=colour, step="mid", linewidth=0
+            )
         ax.set_yticks([0.5, -0.5], ["left foot", "right foot"], fontsize=7)
         ax.set_ylim(-1, 1)
         ax.set_xlim(t[0], t[-1])

@@ -175,8 +175,10 @@ def check_rate(rate, what: str = "rate_hz") -> float:
 def check_gap(previous_s: float, t_s: float) -> None:
     """InputError when sample times `previous_s` → `t_s` are more than MAX_GAP_S apart."""
     if t_s - previous_s > MAX_GAP_S:
-        raise InputError(f"{t_s!r} s is {t_s - previous_s:.6g} s after the previous sample at {previous_s!r} s "
-                         f"(at most {MAX_GAP_S:g} s between samples)")  # fmt: skip
+        raise InputError(
+            f"{t_s!r} s is {t_s - previous_s:.6g} s after the previous sample at {previous_s!r} s "
+            f"(at most {MAX_GAP_S:g} s between samples)"
+        )
 
 
 def validate_recording(rec: Recording) -> None:
@@ -267,7 +269,7 @@ def validate_constraints(constraints) -> None:
             req = c["require"]
             if not isinstance(req, dict) or len(req) != 1:
                 raise InputError(f"{where}: require must be {{'contact': ...}} or {{'label': ...}}")
-            (key, value), = req.items()
+            ((key, value),) = req.items()
             if key == "contact":
                 if value not in CONTACTS:
                     raise InputError(f"{where}: contact must be one of {', '.join(CONTACTS)}, got {value!r}")
@@ -314,8 +316,9 @@ def load_recording(path: StrPath) -> Recording:
     recording file."""
     meta, arrays, version = read_container(path, kind=KIND, mmap=False)
     if version != FORMAT_VERSION:
-        raise FormatError(path, f"unsupported recording format version {version} "
-                          f"(this graphsvc reads {FORMAT_VERSION})")  # fmt: skip
+        raise FormatError(
+            path, f"unsupported recording format version {version} (this graphsvc reads {FORMAT_VERSION})"
+        )
     try:
         rate = meta["rate_hz"]
         names = meta["sensor_names"]
@@ -455,12 +458,14 @@ def read_csv_table(path, expect: str, on_header=None) -> CsvTable:
         raise FormatError(path, f"no header row (expected {expect})")
     if not rows:
         raise FormatError(path, "no samples after the header", line=header_line)
-    return CsvTable(text, comments, comment_lines, header, header_line, parsed, np.array(rows, dtype=np.float64),
-                    row_lines)  # fmt: skip
+    return CsvTable(
+        text, comments, comment_lines, header, header_line, parsed, np.array(rows, dtype=np.float64), row_lines
+    )
 
 
-def import_csv(path, rate_hz: float | None = None, units: str | None = None, layout: dict | None = None,
-               up: str | None = None) -> Recording:
+def import_csv(
+    path, rate_hz: float | None = None, units: str | None = None, layout: dict | None = None, up: str | None = None
+) -> Recording:
     """Read a CSV recording (ours or a device's; format in the module docstring).
 
     rate_hz: overrides the file's; else `# rate_hz=` or the median timestamp step.
@@ -487,8 +492,9 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
     bad = np.diff(t) <= 0
     if bad.any():
         i = int(np.argmax(bad)) + 1
-        raise FormatError(path, f"timestamps must be strictly increasing ({t[i]:g} after {t[i - 1]:g})",
-                          line=row_lines[i])  # fmt: skip
+        raise FormatError(
+            path, f"timestamps must be strictly increasing ({t[i]:g} after {t[i - 1]:g})", line=row_lines[i]
+        )
 
     rate_hz = sample_rate(path, rate_hz, comments, t)
 
@@ -516,8 +522,15 @@ def import_csv(path, rate_hz: float | None = None, units: str | None = None, lay
         ground_position=np.ascontiguousarray(table[:, pos_cols]) if pos_cols else None,
         heading=np.ascontiguousarray(table[:, heading_col]) if heading_col is not None else None,
         layout=layout,
-        meta={"source": str(path), "imported_from": "csv", "units": units, "up": up, "sensor_frame": sensor_frame,
-              "read_from": read_from, **_frames_comment(path, comments, comment_lines, ours and sensor_frame == "layout")},
+        meta={
+            "source": str(path),
+            "imported_from": "csv",
+            "units": units,
+            "up": up,
+            "sensor_frame": sensor_frame,
+            "read_from": read_from,
+            **_frames_comment(path, comments, comment_lines, ours and sensor_frame == "layout"),
+        },
         orientations=None if orientations is None else orientations.astype(np.float32),
         marker_names=marker_names,
         marker_positions=np.ascontiguousarray(table[:, marker_cols].reshape(len(t), -1, 3)) if marker_cols else None,
@@ -533,13 +546,17 @@ def _frames_comment(path, comments: dict, lines: dict, ours_in_layout: bool) -> 
         return {"sensor_frames": REST_POSE} if ours_in_layout else {}
     value = comments["sensor_frames"].lower()
     if value not in CONVENTIONS:
-        raise FormatError(path, f"bad sensor_frames comment {comments['sensor_frames']!r} (expected "
-                                f"{' or '.join(CONVENTIONS)})", line=lines["sensor_frames"])  # fmt: skip
+        raise FormatError(
+            path,
+            f"bad sensor_frames comment {comments['sensor_frames']!r} (expected {' or '.join(CONVENTIONS)})",
+            line=lines["sensor_frames"],
+        )
     return {"sensor_frames": value}
 
 
-def _device_comments(path, comments: dict, lines: dict, units: str | None, up: str | None,
-                     ours: bool) -> tuple[str, str, str, dict]:
+def _device_comments(
+    path, comments: dict, lines: dict, units: str | None, up: str | None, ours: bool
+) -> tuple[str, str, str, dict]:
     """(units, up, sensor_frame, read_from) of a device CSV: the arguments where given,
     else its `# units=`, `# up=`, `# sensor_frame=` comments, else the defaults (module
     docstring); read_from says which for each: "argument", "file" or "default".
@@ -604,9 +621,12 @@ def _parse_header(path: Path, cols: list[str], lineno: int):
         elif p:
             markers.setdefault(p.group(1), {})[p.group(2)] = k
         elif c not in ("t_s", _HEADING_COLUMN, *_POSITION_COLUMNS):
-            raise FormatError(path, f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, <sensor>_qw…_qz, "
-                              f"<marker>_px/_py/_pz, {', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})",
-                              line=lineno)  # fmt: skip
+            raise FormatError(
+                path,
+                f"unknown column {c!r} (expected t_s, <sensor>_ax/_ay/_az, <sensor>_qw…_qz, "
+                f"<marker>_px/_py/_pz, {', '.join(_POSITION_COLUMNS)}, {_HEADING_COLUMN})",
+                line=lineno,
+            )
     acc_cols: list[int | None] = []
     quat_cols: list[int | None] = []
     any_acc = any("a" in v for v in sensors.values())
@@ -633,8 +653,16 @@ def _parse_header(path: Path, cols: list[str], lineno: int):
     if any(have_pos) and not all(have_pos):
         raise FormatError(path, "pos_x_m and pos_z_m must both be present or both absent", line=lineno)
     pos_cols = [seen[c] for c in _POSITION_COLUMNS] if all(have_pos) else []
-    return (seen["t_s"], tuple(sensors), acc_cols, pos_cols, seen.get(_HEADING_COLUMN), quat_cols, tuple(markers),
-            marker_cols)  # fmt: skip
+    return (
+        seen["t_s"],
+        tuple(sensors),
+        acc_cols,
+        pos_cols,
+        seen.get(_HEADING_COLUMN),
+        quat_cols,
+        tuple(markers),
+        marker_cols,
+    )
 
 
 def _parse_cell(path: Path, cell: str, column: str, lineno: int) -> float:
@@ -645,8 +673,9 @@ def _parse_cell(path: Path, cell: str, column: str, lineno: int) -> float:
     except ValueError:
         raise FormatError(path, f"non-numeric value {cell!r} in column {column}", line=lineno) from None
     if math.isinf(v):
-        raise FormatError(path, f"infinite value {cell!r} in column {column} (leave the cell empty for missing)",
-                          line=lineno)  # fmt: skip
+        raise FormatError(
+            path, f"infinite value {cell!r} in column {column} (leave the cell empty for missing)", line=lineno
+        )
     if v != v:  # float() also reads "+nan", "-NaN"
         return math.nan
     return v
@@ -703,5 +732,8 @@ def reading_settings(meta: dict) -> dict:
     read_from = meta.get("read_from")
     if meta.get("imported_from") != "csv" or not isinstance(read_from, dict):  # (or read before it was kept)
         return {}
-    return {k: {"value": meta[k], "from": read_from[k]} for k in ("sensor_frame", "up", "units")
-            if k in meta and read_from.get(k) in ("argument", "file", "default")}  # fmt: skip
+    return {
+        k: {"value": meta[k], "from": read_from[k]}
+        for k in ("sensor_frame", "up", "units")
+        if k in meta and read_from.get(k) in ("argument", "file", "default")
+    }

@@ -26,8 +26,9 @@ from graphsvc.sensors.noise import NoiseModel, corrupt_accelerations, corrupt_he
 from graphsvc.sensors.recording import Recording
 
 
-def device_readings(world_rot: np.ndarray, world_pos: np.ndarray, placement, table, rate_hz: float,
-                    noise: NoiseModel, seed: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def device_readings(
+    world_rot: np.ndarray, world_pos: np.ndarray, placement, table, rate_hz: float, noise: NoiseModel, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """The readings (F, S, 3) m/s² of the layout's sensors as mounted devices, before
     the per-sample noise (`corrupt_accelerations`), and their frames' world orientations
     (F, S, 4): the ideal accelerometer of `sensors.accelerometer`, on soft tissue, with
@@ -76,8 +77,9 @@ def simulate_recording(
     orientations = None
     if noise.orientations:
         (orient_rng,) = rng.spawn(1)  # (its own stream: the other draws stay as they were)
-        orientations = orientation_output(quat.mul(device, misalign[None]), rate, noise.orient_sigma, noise.yaw_drift,
-                                          orient_rng, noise.heading_drift).astype(np.float32)  # fmt: skip
+        orientations = orientation_output(
+            quat.mul(device, misalign[None]), rate, noise.orient_sigma, noise.yaw_drift, orient_rng, noise.heading_drift
+        ).astype(np.float32)
     rec = Recording(
         rate_hz=float(rate),
         timestamps_s=np.arange(motion.num_frames, dtype=np.float64) / rate,
@@ -153,8 +155,9 @@ def check_pattern(pattern: MarkerPattern) -> None:
             raise InputError(f"{name.replace('_', ' ')} must be a share in [0, 1), got {v!r}")
 
 
-def marker_visibility(times_s: np.ndarray, num_markers: int, pattern: MarkerPattern, clip_rate_hz: float,
-                      rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+def marker_visibility(
+    times_s: np.ndarray, num_markers: int, pattern: MarkerPattern, clip_rate_hz: float, rng: np.random.Generator
+) -> np.ndarray:
     """(T, M) bool: whether each marker is seen at each sample time (s, from 0). Draws
     happen in one order whatever the settings (flicker, then random gaps)."""
     check_pattern(pattern)
@@ -183,15 +186,21 @@ def marker_visibility(times_s: np.ndarray, num_markers: int, pattern: MarkerPatt
             n = int(rng.integers(lo, hi + 1))
             n = min(n, T, max(lo, target - int(in_gap.sum())))  # (a short clip is not swallowed whole)
             s = int(rng.integers(0, T - n + 1))
-            in_gap[s:s + n] = True
+            in_gap[s : s + n] = True
         seen[in_gap] = False
     return seen
 
 
-def simulate_marker_recording(motion: Motion, marker_set: str | Path | MarkerSet, noise: NoiseModel, seed: int = 0,
-                              rate_hz: float | None = None, mapping: JointMapping = None,
-                              keep: Iterable[str] | None = None,
-                              pattern: MarkerPattern = MarkerPattern()) -> Recording:  # fmt: skip
+def simulate_marker_recording(
+    motion: Motion,
+    marker_set: str | Path | MarkerSet,
+    noise: NoiseModel,
+    seed: int = 0,
+    rate_hz: float | None = None,
+    mapping: JointMapping = None,
+    keep: Iterable[str] | None = None,
+    pattern: MarkerPattern = MarkerPattern(),
+) -> Recording:
     """A Recording of `motion`'s labelled optical markers (`sensors.markers`): the set's
     markers (those named in `keep`, or all) placed on the clip's own skeleton, at
     `rate_hz` (default the clip's), lost to `pattern` and moved by `noise.marker` (mm)

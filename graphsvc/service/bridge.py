@@ -63,7 +63,7 @@ class CorruptLine(ValueError):
 
 
 def parse_line(text: str, sensor_ids: dict[str, int], num_sensors: int, scale: float) -> tuple[float, int, np.ndarray]:
-    """"t_ms,sensor_id,ax,ay,az" → (t_ms, sensor index, (3,) m/s²). scale: m/s² per
+    """ "t_ms,sensor_id,ax,ay,az" → (t_ms, sensor index, (3,) m/s²). scale: m/s² per
     input unit. Raises CorruptLine."""
     fields = [f.strip() for f in text.split(",")]
     if len(fields) != 5:
@@ -243,8 +243,14 @@ class LineProtocol:
     """Bytes from the device → graph-rate samples (t_s, acc (S, 3) m/s²) ready to
     stream: line splitting, parsing, grouping, calibration, resampling."""
 
-    def __init__(self, sensor_names: tuple[str, ...], rate_hz: float, units: str = "m/s2",
-                 calibration: StaticCalibration | None = None, mounting: np.ndarray | None = None):  # fmt: skip
+    def __init__(
+        self,
+        sensor_names: tuple[str, ...],
+        rate_hz: float,
+        units: str = "m/s2",
+        calibration: StaticCalibration | None = None,
+        mounting: np.ndarray | None = None,
+    ):
         if units not in UNITS:
             raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
         self.names = tuple(sensor_names)
@@ -351,6 +357,7 @@ def read_device(port, protocol: LineProtocol, feed, stop: threading.Event, durat
     """Read `port` (a pyserial Serial or anything with read(n) and in_waiting) until
     the device goes away, `stop` is set or `duration_s` passes; put each graph-rate
     sample into `feed`, then close it. Returns why it ended."""
+
     def send(samples):
         for t, acc in samples:
             feed.put(sample_to_proto(t, acc))
@@ -375,9 +382,18 @@ def read_device(port, protocol: LineProtocol, feed, stop: threading.Event, durat
     return reason
 
 
-def run_bridge(port, conn, graph_info, options, units: str = "m/s2", calibrate_s: float = 0.0,
-               stop: threading.Event | None = None, duration_s: float | None = None,
-               on_frame=None, mounting: np.ndarray | None = None) -> BridgeResult:  # fmt: skip
+def run_bridge(
+    port,
+    conn,
+    graph_info,
+    options,
+    units: str = "m/s2",
+    calibrate_s: float = 0.0,
+    stop: threading.Event | None = None,
+    duration_s: float | None = None,
+    on_frame=None,
+    mounting: np.ndarray | None = None,
+) -> BridgeResult:
     """Stream what `port` reports to graph `graph_info` (a GraphInfo) on `conn`
     with SynthesisOptions `options`; returns when the device closes, `stop` is set,
     or `duration_s` passes, after the server has sent the last frames. `mounting` (S,

@@ -80,8 +80,13 @@ def read_token_file(path) -> str:
     raise InputError(f"{path}: no token in the token file")
 
 
-def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None, tls_server_name: str | None = None,
-            warn: Callable[[str], None] | None = None) -> Connection:  # fmt: skip
+def connect(
+    address: str = DEFAULT_SERVER,
+    token: str | None = None,
+    tls_ca=None,
+    tls_server_name: str | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> Connection:
     """A connection to `address`: HOST:PORT, several as HOST:PORT,HOST:PORT,… or a gRPC
     target (`servers.parse_servers`), calls spread over them by gRPC's `round_robin`
     (a stream stays on its server). With several, each is probed first: warn(line) (default:
@@ -103,8 +108,9 @@ def connect(address: str = DEFAULT_SERVER, token: str | None = None, tls_ca=None
     options.append(("grpc.service_config", SERVICE_CONFIG))
     settle_s = None
     if len(servers.addresses) > 1:
-        settle_s = probe_all(servers, credentials, options,
-                             warn or (lambda line: print(f"graphsvc: {line}", file=sys.stderr)))  # fmt: skip
+        settle_s = probe_all(
+            servers, credentials, options, warn or (lambda line: print(f"graphsvc: {line}", file=sys.stderr))
+        )
     if credentials is not None:
         channel = grpc.secure_channel(servers.target, credentials, options=options)
     else:
@@ -145,7 +151,9 @@ def resolve_graph(conn: Connection, name: str | None, timeout_s: float | None = 
         return get_graph(conn, name, timeout_s)
     graphs = list_graphs(conn, timeout_s)
     if len(graphs) != 1:
-        raise InputError(f"the server has {len(graphs)} graphs ({', '.join(g.name for g in graphs)}); choose one with --graph")
+        raise InputError(
+            f"the server has {len(graphs)} graphs ({', '.join(g.name for g in graphs)}); choose one with --graph"
+        )
     return graphs[0]
 
 
@@ -160,10 +168,16 @@ class BatchResult:
     report: dict
 
 
-def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
-               timeout_s: float | None = None, skeleton: Skeleton | None = None,
-               calibrate_from_start: tuple[float, str] | None = None,
-               performer: pb.Performer | None = None) -> BatchResult:  # fmt: skip
+def synthesize(
+    conn: Connection,
+    graph: str,
+    rec: Recording,
+    options: pb.SynthesisOptions | None = None,
+    timeout_s: float | None = None,
+    skeleton: Skeleton | None = None,
+    calibrate_from_start: tuple[float, str] | None = None,
+    performer: pb.Performer | None = None,
+) -> BatchResult:
     """One Synthesize call. skeleton: the graph's (fetched with GetGraph if None);
     calibrate_from_start: (seconds, pose), the server calibrates the device-frame
     recording from its own start against the graph first. performer: the proportions to
@@ -171,8 +185,9 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
     bones the response's translations carry."""
     if skeleton is None:
         skeleton = skeleton_from_proto(get_graph(conn, graph).skeleton)
-    request = pb.SynthesizeRequest(graph=graph, recording=recording_to_proto(rec),
-                                   options=options or pb.SynthesisOptions(), performer=performer)  # fmt: skip
+    request = pb.SynthesizeRequest(
+        graph=graph, recording=recording_to_proto(rec), options=options or pb.SynthesisOptions(), performer=performer
+    )
     if calibrate_from_start is not None:
         request.calibrate_from_start.seconds, request.calibrate_from_start.pose = calibrate_from_start
     try:
@@ -184,8 +199,9 @@ def synthesize(conn: Connection, graph: str, rec: Recording, options: pb.Synthes
         # (a joint without translation channels carries its bone's offset in every frame)
         moving = np.array([any(c.endswith("position") for c in ch) for ch in skeleton.channels])
         offsets = np.where(moving[:, None], skeleton.offsets, motion.translations[0])
-        motion = motion.copy(skeleton=Skeleton(skeleton.names, skeleton.parents, offsets, skeleton.channels,
-                                               skeleton.end_site))  # fmt: skip
+        motion = motion.copy(
+            skeleton=Skeleton(skeleton.names, skeleton.parents, offsets, skeleton.channels, skeleton.end_site)
+        )
     return BatchResult(motion, np.array(response.node_path, np.int64), response.bvh, report_from_proto(response))
 
 
@@ -240,8 +256,13 @@ class StreamResult:
         return frames_to_motion(self.frames, sk, self.started.rate_hz)
 
 
-def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = None, timeout_s: float | None = None,
-               on_call: Callable | None = None) -> StreamResult:  # fmt: skip
+def run_stream(
+    conn: Connection,
+    feed: SampleFeed,
+    on_frame: Callable | None = None,
+    timeout_s: float | None = None,
+    on_call: Callable | None = None,
+) -> StreamResult:
     """Run a StreamSynthesize call fed by `feed` until the server finishes.
     on_frame(frame, latency_ms) is called per pose frame; on_call(call) gets the
     call object (call.cancel() ends the stream early)."""
@@ -273,15 +294,25 @@ def run_stream(conn: Connection, feed: SampleFeed, on_frame: Callable | None = N
     return result
 
 
-def stream_config(graph: str, options: pb.SynthesisOptions | None = None, sensor_names=(),
-                  marker_names=(), orientations: bool = False,
-                  calibrate_from_start: tuple[float, str] | None = None) -> pb.StreamConfig:  # fmt: skip
+def stream_config(
+    graph: str,
+    options: pb.SynthesisOptions | None = None,
+    sensor_names=(),
+    marker_names=(),
+    orientations: bool = False,
+    calibrate_from_start: tuple[float, str] | None = None,
+) -> pb.StreamConfig:
     """marker_names: the markers each sample carries (`recording_samples` sends a
     recording's), in order; orientations: whether each carries the sensors' orientations;
     calibrate_from_start: (seconds, pose), the server calibrates the devices' mountings
     from the stream's first seconds."""
-    config = pb.StreamConfig(graph=graph, options=options or pb.SynthesisOptions(), sensor_names=list(sensor_names),
-                             marker_names=list(marker_names), orientations=bool(orientations))  # fmt: skip
+    config = pb.StreamConfig(
+        graph=graph,
+        options=options or pb.SynthesisOptions(),
+        sensor_names=list(sensor_names),
+        marker_names=list(marker_names),
+        orientations=bool(orientations),
+    )
     if calibrate_from_start is not None:
         config.calibrate_from_start.seconds, config.calibrate_from_start.pose = calibrate_from_start
     return config
@@ -318,14 +349,24 @@ def replay(rec: Recording, feed: SampleFeed, speed: float = 1.0, stop: threading
         feed.close()
 
 
-def stream_recording(conn: Connection, graph: str, rec: Recording, options: pb.SynthesisOptions | None = None,
-                     speed: float = 1.0, on_frame: Callable | None = None, timeout_s: float | None = None,
-                     calibrate_from_start: tuple[float, str] | None = None) -> StreamResult:  # fmt: skip
+def stream_recording(
+    conn: Connection,
+    graph: str,
+    rec: Recording,
+    options: pb.SynthesisOptions | None = None,
+    speed: float = 1.0,
+    on_frame: Callable | None = None,
+    timeout_s: float | None = None,
+    calibrate_from_start: tuple[float, str] | None = None,
+) -> StreamResult:
     """Replay `rec` in real time (÷ speed) through StreamSynthesize (its markers too,
     when it has them); calibrate_from_start as `stream_config`."""
     marker_names = rec.marker_names if rec.marker_positions is not None else ()
-    feed = SampleFeed(stream_config(graph, options, rec.sensor_names, marker_names, rec.orientations is not None,
-                                    calibrate_from_start))  # fmt: skip
+    feed = SampleFeed(
+        stream_config(
+            graph, options, rec.sensor_names, marker_names, rec.orientations is not None, calibrate_from_start
+        )
+    )
     stop = threading.Event()
     sender = threading.Thread(target=replay, args=(rec, feed, speed, stop), name="graphsvc-replay", daemon=True)
     sender.start()
@@ -342,8 +383,12 @@ def latency_summary(latencies_ms: Iterable[float]) -> dict:
     a = a[np.isfinite(a)]
     if a.size == 0:
         return {"frames": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
-    return {"frames": int(a.size), "p50_ms": round(float(np.percentile(a, 50)), 3),
-            "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}  # fmt: skip
+    return {
+        "frames": int(a.size),
+        "p50_ms": round(float(np.percentile(a, 50)), 3),
+        "p99_ms": round(float(np.percentile(a, 99)), 3),
+        "max_ms": round(float(a.max()), 3),
+    }
 
 
 def batch_call(conn: Connection, method: str, request, timeout_s: float | None = 30.0):
@@ -355,8 +400,9 @@ def batch_call(conn: Connection, method: str, request, timeout_s: float | None =
         raise service_error(exc, method) from None
 
 
-def submit_batch(conn: Connection, manifest_text: str, fmt: str = "", retries: int | None = None,
-                 timeout_s: float | None = 30.0) -> pb.BatchStatus:  # fmt: skip
+def submit_batch(
+    conn: Connection, manifest_text: str, fmt: str = "", retries: int | None = None, timeout_s: float | None = 30.0
+) -> pb.BatchStatus:
     request = pb.SubmitBatchRequest(manifest=manifest_text, format=fmt)
     if retries is not None:
         request.retries = retries

@@ -18,58 +18,81 @@ from __future__ import annotations
 
 from graphsvc.errors import FieldError
 from graphsvc.service.convert_graph import (
-                                            graph_info,
-                                            graph_info_dict,
-                                            rest_pose_readings,
-                                            skeleton_from_proto,
-                                            skeleton_to_proto,  # fmt: skip
+    graph_info,
+    graph_info_dict,
+    rest_pose_readings,
+    skeleton_from_proto,
+    skeleton_to_proto,
 )
 from graphsvc.service.convert_motion import (
-                                            frame_to_proto,
-                                            frames_to_motion,
-                                            motion_from_proto,
-                                            motion_to_proto,
-                                            provenance_to_proto,  # fmt: skip
+    frame_to_proto,
+    frames_to_motion,
+    motion_from_proto,
+    motion_to_proto,
+    provenance_to_proto,
 )
 from graphsvc.service.convert_recording import (
-                                            marker_names_from_proto,
-                                            recording_from_proto,
-                                            recording_to_proto,
-                                            sample_from_proto,
-                                            sample_markers_from_proto,
-                                            sample_orientations_from_proto,  # fmt: skip
-                                            sample_to_proto,
-                                            sensor_order,
+    marker_names_from_proto,
+    recording_from_proto,
+    recording_to_proto,
+    sample_from_proto,
+    sample_markers_from_proto,
+    sample_orientations_from_proto,
+    sample_to_proto,
+    sensor_order,
 )
 from graphsvc.service.convert_report import (
-                                            batch_status_to_proto,
-                                            json_safe,
-                                            report_from_proto,
-                                            report_to_proto,
-                                            struct_to_dict,  # fmt: skip
+    batch_status_to_proto,
+    json_safe,
+    report_from_proto,
+    report_to_proto,
+    struct_to_dict,
 )
 from graphsvc.service.options_proto import (
-                                            constraints_from_proto,
-                                            constraints_to_proto,
-                                            for_recording,
-                                            options_from_proto,
-                                            options_to_proto,
-                                            performer_from_proto,
-                                            performer_to_proto,  # fmt: skip
+    constraints_from_proto,
+    constraints_to_proto,
+    for_recording,
+    options_from_proto,
+    options_to_proto,
+    performer_from_proto,
+    performer_to_proto,
 )
 
 __all__ = [
     "FieldError",
     # convert_graph
-    "graph_info", "graph_info_dict", "rest_pose_readings", "skeleton_from_proto", "skeleton_to_proto",
+    "graph_info",
+    "graph_info_dict",
+    "rest_pose_readings",
+    "skeleton_from_proto",
+    "skeleton_to_proto",
     # convert_recording
-    "marker_names_from_proto", "recording_from_proto", "recording_to_proto", "sample_from_proto",
-    "sample_markers_from_proto", "sample_orientations_from_proto", "sample_to_proto", "sensor_order",
+    "marker_names_from_proto",
+    "recording_from_proto",
+    "recording_to_proto",
+    "sample_from_proto",
+    "sample_markers_from_proto",
+    "sample_orientations_from_proto",
+    "sample_to_proto",
+    "sensor_order",
     # convert_motion
-    "frame_to_proto", "frames_to_motion", "motion_from_proto", "motion_to_proto", "provenance_to_proto",
+    "frame_to_proto",
+    "frames_to_motion",
+    "motion_from_proto",
+    "motion_to_proto",
+    "provenance_to_proto",
     # convert_report
-    "batch_status_to_proto", "json_safe", "report_from_proto", "report_to_proto", "struct_to_dict",
+    "batch_status_to_proto",
+    "json_safe",
+    "report_from_proto",
+    "report_to_proto",
+    "struct_to_dict",
     # options_proto
-    "constraints_from_proto", "constraints_to_proto", "for_recording", "options_from_proto", "options_to_proto",
-    "performer_from_proto", "performer_to_proto",
-]  # fmt: skip
+    "constraints_from_proto",
+    "constraints_to_proto",
+    "for_recording",
+    "options_from_proto",
+    "options_to_proto",
+    "performer_from_proto",
+    "performer_to_proto",
+]

@@ -31,9 +31,13 @@ def skeleton_from_proto(msg: pb.Skeleton) -> Skeleton:
     J = len(msg.joint_names)
     if not (len(msg.parent_indices) == len(msg.channels) == len(msg.end_sites) == J and len(msg.offsets_m) == 3 * J):
         raise FieldError("skeleton", f"arrays disagree with {J} joint names")
-    return Skeleton(tuple(msg.joint_names), np.array(msg.parent_indices, np.int64),
-                    np.array(msg.offsets_m, np.float64).reshape(J, 3), tuple(tuple(c.names) for c in msg.channels),
-                    np.array(msg.end_sites, bool))  # fmt: skip
+    return Skeleton(
+        tuple(msg.joint_names),
+        np.array(msg.parent_indices, np.int64),
+        np.array(msg.offsets_m, np.float64).reshape(J, 3),
+        tuple(tuple(c.names) for c in msg.channels),
+        np.array(msg.end_sites, bool),
+    )
 
 
 def rest_pose_readings(graph: MotionGraph) -> np.ndarray:

@@ -12,7 +12,9 @@ from graphsvc.service._generated import graphsvc_pb2 as pb
 
 
 def motion_to_proto(motion: Motion) -> pb.Motion:
-    msg = pb.Motion(rate_hz=float(motion.rate_hz), frame_count=motion.num_frames, joint_count=motion.skeleton.num_joints)
+    msg = pb.Motion(
+        rate_hz=float(motion.rate_hz), frame_count=motion.num_frames, joint_count=motion.skeleton.num_joints
+    )
     msg.rotations_wxyz.extend(np.asarray(motion.rotations, np.float32).ravel().tolist())
     msg.translations_m.extend(np.asarray(motion.translations, np.float32).ravel().tolist())
     return msg
@@ -21,7 +23,9 @@ def motion_to_proto(motion: Motion) -> pb.Motion:
 def motion_from_proto(msg: pb.Motion, skeleton: Skeleton, name: str = "synthesized") -> Motion:
     F, J = msg.frame_count, msg.joint_count
     if J != skeleton.num_joints or len(msg.rotations_wxyz) != F * J * 4 or len(msg.translations_m) != F * J * 3:
-        raise FieldError("motion", f"arrays disagree with {F} frames of {J} joints on a {skeleton.num_joints}-joint skeleton")
+        raise FieldError(
+            "motion", f"arrays disagree with {F} frames of {J} joints on a {skeleton.num_joints}-joint skeleton"
+        )
     rot = np.array(msg.rotations_wxyz, np.float32).reshape(F, J, 4)
     trans = np.array(msg.translations_m, np.float32).reshape(F, J, 3)
     return Motion(skeleton, rot, trans, msg.rate_hz, name=name, source="graphsvc service")
@@ -29,8 +33,13 @@ def motion_from_proto(msg: pb.Motion, skeleton: Skeleton, name: str = "synthesiz
 
 def frame_to_proto(frame, input_sample_index: int) -> pb.PoseFrame:
     """A pipeline.Frame → PoseFrame."""
-    msg = pb.PoseFrame(index=int(frame.index), time_s=float(frame.time_s), node=int(frame.node), label=frame.label,
-                       input_sample_index=int(input_sample_index))  # fmt: skip
+    msg = pb.PoseFrame(
+        index=int(frame.index),
+        time_s=float(frame.time_s),
+        node=int(frame.node),
+        label=frame.label,
+        input_sample_index=int(input_sample_index),
+    )
     msg.rotations_wxyz.extend(np.asarray(frame.rotations, np.float32).ravel().tolist())
     msg.translations_m.extend(np.asarray(frame.translations, np.float32).ravel().tolist())
     msg.sources.extend(pb.FrameSource(clip=c, frame=f, weight=w) for c, f, w in frame.sources)
@@ -47,7 +56,9 @@ def provenance_to_proto(prov) -> pb.Provenance:
     return msg
 
 
-def frames_to_motion(frames: list[pb.PoseFrame], skeleton: Skeleton, rate_hz: float, name: str = "synthesized") -> Motion:
+def frames_to_motion(
+    frames: list[pb.PoseFrame], skeleton: Skeleton, rate_hz: float, name: str = "synthesized"
+) -> Motion:
     """PoseFrames (any order, consecutive indices) → one Motion."""
     J = skeleton.num_joints
     frames = sorted(frames, key=lambda f: f.index)

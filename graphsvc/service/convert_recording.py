@@ -21,7 +21,9 @@ from graphsvc.service._generated import graphsvc_pb2 as pb
 from graphsvc.strategies.inputs import layout_mismatch_message
 
 
-def sensor_order(given: list[str], graph_names: tuple[str, ...], field: str, layout_name: str = "?") -> np.ndarray | None:
+def sensor_order(
+    given: list[str], graph_names: tuple[str, ...], field: str, layout_name: str = "?"
+) -> np.ndarray | None:
     """Indices that put the request's sensor triplets into the graph's order, or None
     when they already are (or no names were given: the graph's order is implied).
     Sensors that are not the layout's are refused with the CLI's line naming them."""
@@ -58,8 +60,13 @@ def recording_to_proto(rec: Recording) -> pb.Recording:
     return msg
 
 
-def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field: str = "recording",
-                         match_layout: bool = True, layout_name: str = "?") -> Recording:  # fmt: skip
+def recording_from_proto(
+    msg: pb.Recording,
+    graph_names: tuple[str, ...],
+    field: str = "recording",
+    match_layout: bool = True,
+    layout_name: str = "?",
+) -> Recording:
     """A validated Recording with the sensors in the graph's order. Checks shapes,
     finiteness (NaN = missing is allowed in readings, never in times) and order.
     match_layout False (a strategy that reads no accelerations): the sensors are
@@ -86,15 +93,20 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
         M = len(marker_names)
         markers = np.array(msg.marker_positions_m, np.float64)
         if markers.shape[0] != T * M * 3:
-            raise FieldError(f"{field}.marker_positions_m", f"expected T×M×3 = {T}×{M}×3 = {T * M * 3} values "
-                             f"({T} timestamps, {M} marker names), got {markers.shape[0]}")  # fmt: skip
+            raise FieldError(
+                f"{field}.marker_positions_m",
+                f"expected T×M×3 = {T}×{M}×3 = {T * M * 3} values "
+                f"({T} timestamps, {M} marker names), got {markers.shape[0]}",
+            )
         _check_no_inf(f"{field}.marker_positions_m", markers, 3)
         markers = markers.reshape(T, M, 3)
     position = heading = None
     if len(msg.ground_positions_m):
         position = np.array(msg.ground_positions_m, np.float64)
         if position.shape[0] != 2 * T:
-            raise FieldError(f"{field}.ground_positions_m", f"expected 0 or T×2 = {2 * T} values, got {position.shape[0]}")
+            raise FieldError(
+                f"{field}.ground_positions_m", f"expected 0 or T×2 = {2 * T} values, got {position.shape[0]}"
+            )
         _check_no_inf(f"{field}.ground_positions_m", position, 2)
         position = position.reshape(T, 2)
     if len(msg.headings_rad):
@@ -102,9 +114,18 @@ def recording_from_proto(msg: pb.Recording, graph_names: tuple[str, ...], field:
         if heading.shape[0] != T:
             raise FieldError(f"{field}.headings_rad", f"expected 0 or T = {T} values, got {heading.shape[0]}")
         _check_no_inf(f"{field}.headings_rad", heading, 1)
-    rec = Recording(rate_hz=float(rate), timestamps_s=t, sensor_names=tuple(graph_names), accelerations=acc,
-                    ground_position=position, heading=heading, meta={"source": "grpc"}, orientations=orientations,
-                    marker_names=marker_names, marker_positions=markers)  # fmt: skip
+    rec = Recording(
+        rate_hz=float(rate),
+        timestamps_s=t,
+        sensor_names=tuple(graph_names),
+        accelerations=acc,
+        ground_position=position,
+        heading=heading,
+        meta={"source": "grpc"},
+        orientations=orientations,
+        marker_names=marker_names,
+        marker_positions=markers,
+    )
     try:
         rec.validate()
     except InputError as exc:  # anything the checks above missed still names the message
@@ -119,8 +140,11 @@ def _per_sensor(values, T: int, S: int, width: int, field: str, order, names=())
     if a.shape[0] == 0:
         return None
     if a.shape[0] != T * S * width:
-        raise FieldError(field, f"expected T×S×{width} = {T}×{S}×{width} = {T * S * width} values "
-                         f"({T} timestamps, {S} sensors{': ' if names else ''}{', '.join(names)}), got {a.shape[0]}")  # fmt: skip
+        raise FieldError(
+            field,
+            f"expected T×S×{width} = {T}×{S}×{width} = {T * S * width} values "
+            f"({T} timestamps, {S} sensors{': ' if names else ''}{', '.join(names)}), got {a.shape[0]}",
+        )
     _check_no_inf(field, a, S * width)
     a = a.reshape(T, S, width)
     return np.ascontiguousarray(a[:, order]) if order is not None else a
@@ -134,12 +158,15 @@ def _check_times(t: np.ndarray, field: str) -> None:
     steps = np.diff(t)
     if (steps <= 0).any():
         k = int(np.argmax(steps <= 0)) + 1
-        raise FieldError(f"{field}[{k}]", f"{t[k]!r} s is not after the previous timestamp {t[k - 1]!r} s "
-                         "(timestamps must strictly increase)")  # fmt: skip
+        raise FieldError(
+            f"{field}[{k}]",
+            f"{t[k]!r} s is not after the previous timestamp {t[k - 1]!r} s (timestamps must strictly increase)",
+        )
 
 
-def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, heading=None,
-                    markers=None, orientations=None) -> pb.SensorSample:  # fmt: skip
+def sample_to_proto(
+    time_s: float, acc: np.ndarray | None, position=None, heading=None, markers=None, orientations=None
+) -> pb.SensorSample:
     """acc (S, 3) m/s² NaN = missing, or None (a marker-only sample); position (2,) m
     or None; heading rad or None; markers (M, 3) m for the stream's marker names, NaN =
     not seen, or None; orientations (S, 4) w, x, y, z, NaN = missing, or None."""
@@ -157,8 +184,9 @@ def sample_to_proto(time_s: float, acc: np.ndarray | None, position=None, headin
     return msg
 
 
-def sample_orientations_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, expected: bool,
-                                   field: str) -> np.ndarray | None:  # fmt: skip
+def sample_orientations_from_proto(
+    msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, expected: bool, field: str
+) -> np.ndarray | None:
     """The sample's orientations (S, 4) float64 (w, x, y, z; NaN = missing) in the
     graph's sensor order when the stream's config says samples carry them, else None;
     checked: S×4 values, no ±inf, none where the config announced none."""
@@ -169,17 +197,24 @@ def sample_orientations_from_proto(msg: pb.SensorSample, num_sensors: int, order
             raise FieldError(name, "the stream's config.orientations is not set: samples carry no orientations")
         return None
     if values.shape[0] != 4 * num_sensors:
-        raise FieldError(name, f"expected S×4 = {4 * num_sensors} values for the graph's {num_sensors} sensors, "
-                               f"got {values.shape[0]}")  # fmt: skip
+        raise FieldError(
+            name,
+            f"expected S×4 = {4 * num_sensors} values for the graph's {num_sensors} sensors, got {values.shape[0]}",
+        )
     if np.isinf(values).any():
         raise FieldError(f"{name}[{int(np.argmax(np.isinf(values)))}]", "infinite value (use NaN for missing)")
     q = values.reshape(num_sensors, 4)
     return q if order is None else q[order]
 
 
-def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray | None, previous_time_s: float | None,
-                      field: str, reads_acc: bool = True,
-                      ) -> tuple[float, np.ndarray | None, np.ndarray | None, float | None]:  # fmt: skip
+def sample_from_proto(
+    msg: pb.SensorSample,
+    num_sensors: int,
+    order: np.ndarray | None,
+    previous_time_s: float | None,
+    field: str,
+    reads_acc: bool = True,
+) -> tuple[float, np.ndarray | None, np.ndarray | None, float | None]:
     """(time_s, acc (S, 3) float64 m/s², position (2,) m or None, heading rad or
     None) in the graph's sensor order, checked: finite time after the previous one,
     S×3 readings with no ±inf, finite-or-NaN position and heading. reads_acc False (a
@@ -188,8 +223,10 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
     if not math.isfinite(t):
         raise FieldError(f"{field}.time_s", f"not a finite number of seconds ({t})")
     if previous_time_s is not None and not t > previous_time_s:
-        raise FieldError(f"{field}.time_s", f"{t!r} s is not after the previous sample's {previous_time_s!r} s "
-                         "(times must strictly increase)")  # fmt: skip
+        raise FieldError(
+            f"{field}.time_s",
+            f"{t!r} s is not after the previous sample's {previous_time_s!r} s (times must strictly increase)",
+        )
     if previous_time_s is not None:
         try:
             check_gap(previous_time_s, t)
@@ -199,8 +236,13 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
     if acc.shape[0] == 0 and not reads_acc:
         acc = None
     else:
-        acc = _triplets(acc, num_sensors, f"{field}.accelerations_m_s2", f"S×3 = {3 * num_sensors} values for the "
-                        f"graph's {num_sensors} sensors{'' if reads_acc else ' (or none)'}", "missing")  # fmt: skip
+        acc = _triplets(
+            acc,
+            num_sensors,
+            f"{field}.accelerations_m_s2",
+            f"S×3 = {3 * num_sensors} values for the graph's {num_sensors} sensors{'' if reads_acc else ' (or none)'}",
+            "missing",
+        )
         if order is not None:
             acc = acc[order]
     position = None
@@ -219,9 +261,13 @@ def sample_from_proto(msg: pb.SensorSample, num_sensors: int, order: np.ndarray 
 def sample_markers_from_proto(msg: pb.SensorSample, num_markers: int, field: str) -> np.ndarray | None:
     """The sample's marker positions (M, 3) float64 m (NaN = not seen) for the stream's
     M marker names, None when it names none; checked: M×3 values, no ±inf."""
-    markers = _triplets(np.array(msg.marker_positions_m, np.float64), num_markers, f"{field}.marker_positions_m",
-                        f"M×3 = {3 * num_markers} values for the {num_markers} markers of config.marker_names",
-                        "not seen")  # fmt: skip
+    markers = _triplets(
+        np.array(msg.marker_positions_m, np.float64),
+        num_markers,
+        f"{field}.marker_positions_m",
+        f"M×3 = {3 * num_markers} values for the {num_markers} markers of config.marker_names",
+        "not seen",
+    )
     return markers if num_markers else None
 
 
@@ -242,9 +288,12 @@ def marker_names_from_proto(names, field: str) -> tuple[str, ...]:
     names = tuple(names)
     for i, n in enumerate(names):
         if not n or n != n.strip() or set(n) & set(',"\r\n'):
-            raise FieldError(f"{field}[{i}]", f"bad marker name {n!r} (non-empty, no commas, quotes, newlines or "
-                             "edge spaces)")  # fmt: skip
+            raise FieldError(
+                f"{field}[{i}]", f"bad marker name {n!r} (non-empty, no commas, quotes, newlines or edge spaces)"
+            )
     if len(set(names)) != len(names):
         dup = sorted(n for n, c in Counter(names).items() if c > 1)
-        raise FieldError(field, f"duplicate marker names: {', '.join(dup[:8])}" + (f" … (+{len(dup) - 8})" if len(dup) > 8 else ""))
+        raise FieldError(
+            field, f"duplicate marker names: {', '.join(dup[:8])}" + (f" … (+{len(dup) - 8})" if len(dup) > 8 else "")
+        )
     return names

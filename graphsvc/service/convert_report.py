@@ -63,14 +63,30 @@ def struct_to_dict(msg) -> dict:
 
 def batch_status_to_proto(status: dict) -> pb.BatchStatus:
     """A BatchManager status (batch.service) as a BatchStatus."""
-    msg = pb.BatchStatus(batch_id=status["batch_id"], state=status["state"], items=status["items"],
-                         queued=status["queued"], running=status["running"], done=status["done"],
-                         failed=status["failed"], error=status["error"], submitted_unix_s=status["submitted"],
-                         folder=status["folder"])  # fmt: skip
+    msg = pb.BatchStatus(
+        batch_id=status["batch_id"],
+        state=status["state"],
+        items=status["items"],
+        queued=status["queued"],
+        running=status["running"],
+        done=status["done"],
+        failed=status["failed"],
+        error=status["error"],
+        submitted_unix_s=status["submitted"],
+        folder=status["folder"],
+    )
     for r in status.get("item_rows", ()):
         res = r["result"] or {}
-        msg.item_status.append(pb.BatchItem(output=r["output"], line=r["line"] or 0, state=r["state"],
-                                            attempts=r["attempts"] or 0, reason=r["reason"] or "",
-                                            seconds=res.get("seconds", 0.0), output_path=r["output_path"] or "",
-                                            checksum=r["checksum"] or ""))  # fmt: skip
+        msg.item_status.append(
+            pb.BatchItem(
+                output=r["output"],
+                line=r["line"] or 0,
+                state=r["state"],
+                attempts=r["attempts"] or 0,
+                reason=r["reason"] or "",
+                seconds=res.get("seconds", 0.0),
+                output_path=r["output_path"] or "",
+                checksum=r["checksum"] or "",
+            )
+        )
     return msg

@@ -29,7 +29,7 @@ class LoadedGraph:
 
 
 def parse_graph_spec(text: str) -> tuple[str, Path]:
-    """"NAME=FILE" → (name, path)."""
+    """ "NAME=FILE" → (name, path)."""
     name, sep, path = text.partition("=")
     name = name.strip()
     if not sep or not name or not path:
@@ -52,6 +52,7 @@ def load_graphs(specs: list[str]) -> dict[str, LoadedGraph]:
         # threaded for a stream running alone), now, not in the first client's call.
         warm_up(graph, threads=False)
         warm_up(graph, threads=True)
-        graphs[name] = LoadedGraph(name, path, graph, graph_info(name, graph, path.stat().st_size),
-                                   time.perf_counter() - start)
+        graphs[name] = LoadedGraph(
+            name, path, graph, graph_info(name, graph, path.stat().st_size), time.perf_counter() - start
+        )
     return graphs

@@ -57,13 +57,18 @@ class BearerTokenInterceptor(grpc.ServerInterceptor):
         return False
 
     def intercept_service(self, continuation, handler_call_details):
-        if handler_call_details.method.startswith(self._open) or self._authorized(handler_call_details.invocation_metadata):
+        if handler_call_details.method.startswith(self._open) or self._authorized(
+            handler_call_details.invocation_metadata
+        ):
             return continuation(handler_call_details)
         handler = continuation(handler_call_details)
         if handler is None:  # unknown method: gRPC answers UNIMPLEMENTED itself
             return None
-        return _answer(handler, grpc.StatusCode.UNAUTHENTICATED,
-                       "missing or invalid bearer token (metadata 'authorization: Bearer <token>')")
+        return _answer(
+            handler,
+            grpc.StatusCode.UNAUTHENTICATED,
+            "missing or invalid bearer token (metadata 'authorization: Bearer <token>')",
+        )
 
 
 def _answer(handler: grpc.RpcMethodHandler, code: grpc.StatusCode, message: str) -> grpc.RpcMethodHandler:
@@ -93,8 +98,10 @@ class CallGate(grpc.ServerInterceptor):
     its status went out), so a drain can wait for exactly those."""
 
     LOADING, SERVING, DRAINING = "loading", "serving", "draining"
-    REFUSALS = {LOADING: "the server is loading its graphs (health answers NOT_SERVING until it serves); try again",
-                DRAINING: "the server is shutting down"}  # fmt: skip
+    REFUSALS = {
+        LOADING: "the server is loading its graphs (health answers NOT_SERVING until it serves); try again",
+        DRAINING: "the server is shutting down",
+    }
 
     def __init__(self, open_prefixes: tuple[str, ...] = (HEALTH_METHOD_PREFIX,)):
         self._open = open_prefixes
@@ -143,8 +150,11 @@ class CallGate(grpc.ServerInterceptor):
             return handler  # (None: unknown method, gRPC answers UNIMPLEMENTED itself)
         if self._stage != self.SERVING:
             return _answer(handler, grpc.StatusCode.UNAVAILABLE, self.REFUSALS[self._stage])
-        kind = ("stream" if handler.request_streaming else "unary") + "_" + \
-            ("stream" if handler.response_streaming else "unary")  # fmt: skip
+        kind = (
+            ("stream" if handler.request_streaming else "unary")
+            + "_"
+            + ("stream" if handler.response_streaming else "unary")
+        )
         return handler._replace(**{kind: self._counted(getattr(handler, kind))})
 
     def _counted(self, behavior):
@@ -158,4 +168,3 @@ class CallGate(grpc.ServerInterceptor):
             return behavior(request_or_iterator, context)
 
         return run
-

@@ -139,8 +139,9 @@ def _answer(graphs, sessions, op, sid, payload) -> tuple:
     try:
         if op == "open":
             name, options, names, marker_names, orientations = payload
-            session = open_session(graphs[name], options, names, keep_motion=False, marker_names=marker_names,
-                                  orientations=orientations)  # fmt: skip
+            session = open_session(
+                graphs[name], options, names, keep_motion=False, marker_names=marker_names, orientations=orientations
+            )
             sessions[sid] = session
             return (sid, "ok", session.lag_frames)
         if op == "push":
@@ -194,8 +195,10 @@ class _Worker:
         return "still running" if code is None else (f"killed by signal {-code}" if code < 0 else f"exit code {code}")
 
     def lost_reason(self) -> str:
-        return (f"the live worker process {self.pid} holding this stream stopped ({self.ending()}); its session is "
-                "gone: start a new stream")  # fmt: skip
+        return (
+            f"the live worker process {self.pid} holding this stream stopped ({self.ending()}); its session is "
+            "gone: start a new stream"
+        )
 
 
 class RemoteSession:
@@ -295,8 +298,9 @@ class LiveWorkers:
 
     def _spawn(self):
         front, back = self._context.Pipe(duplex=True)
-        process = self._context.Process(target=_worker_main, args=(back, self.graph_paths), daemon=True,
-                                        name="graphsvc-live-worker")  # fmt: skip
+        process = self._context.Process(
+            target=_worker_main, args=(back, self.graph_paths), daemon=True, name="graphsvc-live-worker"
+        )
         process.start()
         back.close()
         return process, front
@@ -307,13 +311,15 @@ class LiveWorkers:
         try:
             _, status, value = conn.recv()
         except (EOFError, OSError):
-            raise GraphsvcError(f"live worker {process.pid} stopped while loading the graphs "
-                                f"(exit code {process.exitcode})") from None  # fmt: skip
+            raise GraphsvcError(
+                f"live worker {process.pid} stopped while loading the graphs (exit code {process.exitcode})"
+            ) from None
         if status != "ok":
             raise GraphsvcError(f"live worker {process.pid} could not load the graphs: {value}")
         worker = _Worker(index, process, conn, value)
-        threading.Thread(target=self._receive, args=(worker,), name=f"graphsvc-live-worker-{index}",
-                         daemon=True).start()  # fmt: skip
+        threading.Thread(
+            target=self._receive, args=(worker,), name=f"graphsvc-live-worker-{index}", daemon=True
+        ).start()
         return worker
 
     def stop(self, timeout_s: float = 5.0) -> None:
@@ -353,8 +359,9 @@ class LiveWorkers:
             with worker.sessions_lock:
                 worker.sessions[session.sid] = session
         try:
-            session.lag_frames = session._call("open", (graph_name, options, tuple(names), tuple(marker_names or ()),
-                                                        bool(orientations)))  # fmt: skip
+            session.lag_frames = session._call(
+                "open", (graph_name, options, tuple(names), tuple(marker_names or ()), bool(orientations))
+            )
         except BaseException:
             session.close()
             raise
@@ -395,10 +402,15 @@ class LiveWorkers:
             session.lost = reason
             session._answers.put(("lost", reason))
         if not stopping:
-            print(f"graphsvc serve: live worker process {worker.pid} stopped ({worker.ending()}); "
-                  f"{len(held)} stream(s) ended with UNAVAILABLE; starting a new worker", file=sys.stderr, flush=True)
-            threading.Thread(target=self._replace, args=(worker,), name="graphsvc-live-worker-restart",
-                             daemon=True).start()  # fmt: skip
+            print(
+                f"graphsvc serve: live worker process {worker.pid} stopped ({worker.ending()}); "
+                f"{len(held)} stream(s) ended with UNAVAILABLE; starting a new worker",
+                file=sys.stderr,
+                flush=True,
+            )
+            threading.Thread(
+                target=self._replace, args=(worker,), name="graphsvc-live-worker-restart", daemon=True
+            ).start()
 
     def _replace(self, dead: _Worker) -> None:
         if time.monotonic() - dead.started_at < self.restart_delay_s:

@@ -41,13 +41,22 @@ class Metrics:
         self.streams_started = Counter("graphsvc_streams_started", "live streams that started", registry=r)
         self.samples = Counter("graphsvc_samples", "samples received on live streams", registry=r)
         self.frames = Counter("graphsvc_frames", "pose frames sent on live streams", registry=r)
-        self.push_seconds = Histogram("graphsvc_push_seconds", "a sample's push into its live session, seconds",
-                                      buckets=LATENCY_BUCKETS_S, registry=r)  # fmt: skip
-        self.sample_seconds = Histogram("graphsvc_sample_seconds", "a sample's arrival to its frames handed to gRPC, "
-                                        "seconds", buckets=LATENCY_BUCKETS_S, registry=r)  # fmt: skip
+        self.push_seconds = Histogram(
+            "graphsvc_push_seconds",
+            "a sample's push into its live session, seconds",
+            buckets=LATENCY_BUCKETS_S,
+            registry=r,
+        )
+        self.sample_seconds = Histogram(
+            "graphsvc_sample_seconds",
+            "a sample's arrival to its frames handed to gRPC, seconds",
+            buckets=LATENCY_BUCKETS_S,
+            registry=r,
+        )
         self.refusals = Counter("graphsvc_refusals", "calls ended with an error status, by code", ["code"], registry=r)
-        self.graph_load_seconds = Gauge("graphsvc_graph_load_seconds", "loading a graph, seconds", ["graph"],
-                                        registry=r)  # fmt: skip
+        self.graph_load_seconds = Gauge(
+            "graphsvc_graph_load_seconds", "loading a graph, seconds", ["graph"], registry=r
+        )
         self.start_seconds = Gauge("graphsvc_start_seconds", "port bound → taking calls, seconds", registry=r)
         self.servicer = None
         self.live_workers = None
@@ -102,12 +111,19 @@ class _ScrapeTime:
         slots = m.servicer.slots.active if m.servicer is not None else 0
         yield GaugeMetricFamily("graphsvc_streams_open", "live streams holding a slot", value=slots)
         restarts = m.live_workers.replaced if m.live_workers is not None else 0
-        yield CounterMetricFamily("graphsvc_live_worker_restarts", "live workers that died and were started again",
-                                  value=restarts)  # fmt: skip
-        cpu = CounterMetricFamily("graphsvc_process_cpu_seconds", "CPU time of the server's processes, seconds",
-                                  labels=["role", "worker", "pid"])  # fmt: skip
-        rss = GaugeMetricFamily("graphsvc_process_resident_bytes", "resident memory of the server's processes",
-                                labels=["role", "worker", "pid"])  # fmt: skip
+        yield CounterMetricFamily(
+            "graphsvc_live_worker_restarts", "live workers that died and were started again", value=restarts
+        )
+        cpu = CounterMetricFamily(
+            "graphsvc_process_cpu_seconds",
+            "CPU time of the server's processes, seconds",
+            labels=["role", "worker", "pid"],
+        )
+        rss = GaugeMetricFamily(
+            "graphsvc_process_resident_bytes",
+            "resident memory of the server's processes",
+            labels=["role", "worker", "pid"],
+        )
         processes = [("front", "", os.getpid())]
         if m.live_workers is not None:
             processes += [("worker", str(index), pid) for index, pid in m.live_workers.processes()]
@@ -141,20 +157,25 @@ class StatusCounter(grpc.ServerInterceptor):
         handler = continuation(handler_call_details)
         if handler is None:
             return None
-        kind = ("stream" if handler.request_streaming else "unary") + "_" + \
-            ("stream" if handler.response_streaming else "unary")  # fmt: skip
+        kind = (
+            ("stream" if handler.request_streaming else "unary")
+            + "_"
+            + ("stream" if handler.response_streaming else "unary")
+        )
         behavior = getattr(handler, kind)
         if handler.response_streaming:
+
             def run(request_or_iterator, context):
                 try:
                     yield from behavior(request_or_iterator, context)
                 finally:
                     self._count(context)
         else:
+
             def run(request_or_iterator, context):
                 try:
                     return behavior(request_or_iterator, context)
                 finally:
                     self._count(context)
-        return handler._replace(**{kind: run})
 
+        return handler._replace(**{kind: run})

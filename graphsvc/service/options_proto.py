@@ -30,12 +30,19 @@ from graphsvc.strategies.options import Options, SharedOptions, Weights, from_va
 
 # SynthesisOptions' own fields for what every strategy reads (proto name → Options field),
 # which a strategy's old message may carry too (ViterbiOptions).
-COMMON = {"heading_from_track": "heading_from_track", "rest_heading_deg": "rest_heading_deg",
-          "speed_threshold_m_s": "speed_threshold"}  # fmt: skip
+COMMON = {
+    "heading_from_track": "heading_from_track",
+    "rest_heading_deg": "rest_heading_deg",
+    "speed_threshold_m_s": "speed_threshold",
+}
 ONEOF = "strategy_options"
 ENUM_PREFIX = "STRATEGY_"
-CONTACT_NAMES = {pb.CONTACT_STATE_LEFT: "left", pb.CONTACT_STATE_RIGHT: "right", pb.CONTACT_STATE_BOTH: "both",
-                 pb.CONTACT_STATE_NONE: "none"}  # fmt: skip
+CONTACT_NAMES = {
+    pb.CONTACT_STATE_LEFT: "left",
+    pb.CONTACT_STATE_RIGHT: "right",
+    pb.CONTACT_STATE_BOTH: "both",
+    pb.CONTACT_STATE_NONE: "none",
+}
 CONTACT_VALUES = {v: k for k, v in CONTACT_NAMES.items()}
 
 
@@ -53,11 +60,11 @@ def strategy_from_enum(value: int, field: str) -> str | None:
     """The strategy the deprecated enum names (None: unspecified); FieldError for a value
     the enum does not have."""
     if value not in pb.Strategy.values():
-        known = ", ".join(f"{n[len(ENUM_PREFIX):]} = {v}" for n, v in pb.Strategy.items() if v)
+        known = ", ".join(f"{n[len(ENUM_PREFIX) :]} = {v}" for n, v in pb.Strategy.items() if v)
         raise FieldError(field, f"unknown strategy {value} ({known})")
     if value == 0:
         return None
-    return pb.Strategy.Name(value)[len(ENUM_PREFIX):].lower()
+    return pb.Strategy.Name(value)[len(ENUM_PREFIX) :].lower()
 
 
 def _negations(cls) -> dict[str, str]:
@@ -93,7 +100,7 @@ def constraints_to_proto(constraint_sets: list) -> list[pb.ConstraintSet]:
     for cset in constraint_sets:
         msg = pb.ConstraintSet()
         for c in cset:
-            (key, value), = c["require"].items()
+            ((key, value),) = c["require"].items()
             item = msg.constraints.add(start_s=float(c["start_s"]), end_s=float(c["end_s"]))
             if key == "contact":
                 item.contact = CONTACT_VALUES[value]
@@ -138,8 +145,9 @@ def constraints_from_proto(sets, field: str) -> list:
 # ---------------------------------------------------------------- to the wire
 
 
-def options_to_proto(options: Options | None = None, constraints: list | None = None,
-                     recording: Recording | None = None) -> pb.SynthesisOptions:  # fmt: skip
+def options_to_proto(
+    options: Options | None = None, constraints: list | None = None, recording: Recording | None = None
+) -> pb.SynthesisOptions:
     """Options (None: the defaults) → SynthesisOptions, in the named form and the
     deprecated one (module docstring). constraints: sets to send when
     options.constraints is None (a recording's own), else ignored. recording: the
@@ -150,9 +158,10 @@ def options_to_proto(options: Options | None = None, constraints: list | None = 
     strategy = get(options.strategy)
     own = strategy.to_wire(strategy.own(options))
     w = options.weights
-    msg = pb.SynthesisOptions(strategy_name=strategy.name,
-                              weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading,
-                                                     orientation=w.orientation))  # fmt: skip
+    msg = pb.SynthesisOptions(
+        strategy_name=strategy.name,
+        weights=pb.CostWeights(acceleration=w.acc, position=w.position, heading=w.heading, orientation=w.orientation),
+    )
     if options.latency_s is not None:
         msg.latency_s = float(options.latency_s)
     msg.heading_from_track = bool(options.heading_from_track)
@@ -249,8 +258,9 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options") -> Opti
                 flat.setdefault(owner, {})[option] = getattr(msg, key)
         for owner, values in flat.items():
             settings[owner] = (values, field)
-    shared_where = f"{field}.shared_settings" if msg.HasField("shared_settings") else (
-        f"{field}.{which}" if which else field)  # fmt: skip
+    shared_where = (
+        f"{field}.shared_settings" if msg.HasField("shared_settings") else (f"{field}.{which}" if which else field)
+    )
     if msg.HasField("shared_settings"):
         shared_values = struct_values(msg.shared_settings)
     shared = _checked(SharedOptions, shared_values, shared_where)
@@ -264,8 +274,15 @@ def options_from_proto(msg: pb.SynthesisOptions, field: str = "options") -> Opti
             raise _field_error(exc, where) from None
         own[owner] = _checked(get(owner).options_class, values, where)
     constraints = constraints_from_proto(msg.constraint_sets, f"{field}.constraint_sets")
-    return Options(strategy=name, weights=weights, latency_s=latency, constraints=tuple(constraints), shared=shared,
-                   settings=own, **common)  # fmt: skip
+    return Options(
+        strategy=name,
+        weights=weights,
+        latency_s=latency,
+        constraints=tuple(constraints),
+        shared=shared,
+        settings=own,
+        **common,
+    )
 
 
 def struct_values(struct) -> dict:

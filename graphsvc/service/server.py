@@ -148,8 +148,9 @@ def _add_reflection(server: grpc.Server, service_names: tuple[str, ...]) -> None
         request_deserializer=reflection_pb2.ServerReflectionRequest.FromString,
         response_serializer=reflection_pb2.ServerReflectionResponse.SerializeToString,
     )
-    server.add_generic_rpc_handlers((grpc.method_handlers_generic_handler(
-        "grpc.reflection.v1.ServerReflection", {"ServerReflectionInfo": v1}),))  # fmt: skip
+    server.add_generic_rpc_handlers(
+        (grpc.method_handlers_generic_handler("grpc.reflection.v1.ServerReflection", {"ServerReflectionInfo": v1}),)
+    )
 
 
 def check_address(host: str, port: int) -> None:
@@ -253,22 +254,30 @@ def bind_server(config: ServerConfig) -> BoundServer:
     check_address(config.host, config.port)
     credentials = None
     if config.tls_cert is not None:
-        credentials = grpc.ssl_server_credentials([(read_input_bytes(config.tls_key, "TLS key"),
-                                                    read_input_bytes(config.tls_cert, "TLS certificate"))])  # fmt: skip
+        credentials = grpc.ssl_server_credentials(
+            [(read_input_bytes(config.tls_key, "TLS key"), read_input_bytes(config.tls_cert, "TLS certificate"))]
+        )
     max_bytes = int(config.max_message_mb * 2**20)
     # SO_REUSEPORT off: two servers can never share a port (nor port 0 land on a held one).
     # Keepalive: a client whose machine or network vanished (no FIN) stops answering
     # pings, and its calls end (their slots freed) within about 40 s, idle or not.
-    options = [("grpc.max_receive_message_length", max_bytes), ("grpc.max_send_message_length", max_bytes),
-               ("grpc.so_reuseport", 0), ("grpc.keepalive_time_ms", 30_000), ("grpc.keepalive_timeout_ms", 10_000),
-               ("grpc.http2.max_pings_without_data", 0)]  # fmt: skip
+    options = [
+        ("grpc.max_receive_message_length", max_bytes),
+        ("grpc.max_send_message_length", max_bytes),
+        ("grpc.so_reuseport", 0),
+        ("grpc.keepalive_time_ms", 30_000),
+        ("grpc.keepalive_timeout_ms", 10_000),
+        ("grpc.http2.max_pings_without_data", 0),
+    ]
     gate = CallGate()  # outermost but for the counter: while loading or draining, nothing else runs
     interceptors = [gate] + ([BearerTokenInterceptor(config.tokens)] if config.tokens else [])
     metrics = None
     if config.metrics_port is not None:
         metrics = Metrics()
         interceptors.insert(0, StatusCounter(metrics))  # (sees what the gate and the token check refuse)
-    executor = futures.ThreadPoolExecutor(max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc")
+    executor = futures.ThreadPoolExecutor(
+        max_workers=config.max_streams + UNARY_WORKERS, thread_name_prefix="graphsvc-rpc"
+    )
     server = grpc.server(executor, interceptors=interceptors, options=options)
     address = f"{config.host}:{config.port}"
     with _fd2_captured() as logged:
@@ -287,11 +296,13 @@ def bind_server(config: ServerConfig) -> BoundServer:
     try:
         if metrics is not None:  # (after the gRPC port: the same port for both is refused here, one line)
             metrics.serve(config.host, config.metrics_port)
-        servicer = MotionGraphServicer({}, config.max_streams, config_timeout_s=config.config_timeout_s,
-                                       metrics=metrics)  # fmt: skip
+        servicer = MotionGraphServicer(
+            {}, config.max_streams, config_timeout_s=config.config_timeout_s, metrics=metrics
+        )
         pb_grpc.add_MotionGraphServiceServicer_to_server(servicer, server)
-        health_servicer = health.HealthServicer(experimental_non_blocking=True,
-                                                experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1))  # fmt: skip
+        health_servicer = health.HealthServicer(
+            experimental_non_blocking=True, experimental_thread_pool=futures.ThreadPoolExecutor(max_workers=1)
+        )
         health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
         for name in ("", SERVICE_NAME):
             health_servicer.set(name, health_pb2.HealthCheckResponse.NOT_SERVING)
@@ -305,8 +316,12 @@ def bind_server(config: ServerConfig) -> BoundServer:
     return BoundServer(server, port, config.max_streams, health_servicer, servicer, gate, metrics, time.monotonic())
 
 
-def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: BoundServer | None = None,
-                 live_workers: LiveWorkers | None = None) -> RunningServer:  # fmt: skip
+def start_server(
+    graphs: dict[str, LoadedGraph],
+    config: ServerConfig,
+    bound: BoundServer | None = None,
+    live_workers: LiveWorkers | None = None,
+) -> RunningServer:
     """Serve `graphs` on the server bind_server started (or one bound here): once the
     live workers are ready, calls go through and health turns SERVING (port: the bound
     port). live_workers: workers already launched for these graphs (else
@@ -315,8 +330,9 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
     try:
         batches = None
         if config.batch_dir is not None:
-            batches = BatchManager(config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler,
-                                   config.batch_workers)  # fmt: skip
+            batches = BatchManager(
+                config.batch_dir, {n: g.path for n, g in graphs.items()}, config.batch_scheduler, config.batch_workers
+            )
         workers = live_workers
         if workers is None and config.live_workers:
             workers = LiveWorkers({n: g.path for n, g in graphs.items()}, config.live_workers)
@@ -337,8 +353,13 @@ def start_server(graphs: dict[str, LoadedGraph], config: ServerConfig, bound: Bo
     return RunningServer(bound.server, bound.port, bound.health, bound.servicer, graphs, bound.gate, bound.metrics)
 
 
-def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, bound: BoundServer | None = None,
-          live_workers: LiveWorkers | None = None) -> int:  # fmt: skip
+def serve(
+    graphs: dict[str, LoadedGraph],
+    config: ServerConfig,
+    announce=print,
+    bound: BoundServer | None = None,
+    live_workers: LiveWorkers | None = None,
+) -> int:
     """Run until SIGTERM or SIGINT, then drain in-flight calls for config.grace_s and
     return 0. `announce` gets the "listening on" line (port 0 shows the real port)."""
     stop = threading.Event()
@@ -348,14 +369,21 @@ def serve(graphs: dict[str, LoadedGraph], config: ServerConfig, announce=print, 
         workers = running.servicer.live_workers
         security = "TLS" if config.tls_cert else "plaintext"
         auth = f"{len(config.tokens)} token(s)" if config.tokens else "no authentication"
-        announce(f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "
-                 + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values())
-                 + (f"; live sessions in {workers.count} worker process(es)" if workers is not None else "")
-                 + (f"; metrics on http://{config.host}:{running.metrics.port}/metrics"
-                    if running.metrics is not None else ""))  # fmt: skip
+        announce(
+            f"graphsvc serve: listening on {config.host}:{running.port} ({security}, {auth}); graphs: "
+            + ", ".join(f"{g.name} ({g.info.node_count:,} nodes)" for g in graphs.values())
+            + (f"; live sessions in {workers.count} worker process(es)" if workers is not None else "")
+            + (
+                f"; metrics on http://{config.host}:{running.metrics.port}/metrics"
+                if running.metrics is not None
+                else ""
+            )
+        )
         while not stop.wait(0.5):  # a timed wait keeps the main thread responsive to signals
             pass
-        announce(f"graphsvc serve: stopping, {running.servicer.slots.active} stream(s) in flight, grace {config.grace_s:g} s")
+        announce(
+            f"graphsvc serve: stopping, {running.servicer.slots.active} stream(s) in flight, grace {config.grace_s:g} s"
+        )
         running.stop(config.grace_s)
         announce("graphsvc serve: stopped")
         return 0

@@ -53,7 +53,7 @@ class ServerList:
 
 
 def split_host_port(text: str, flag: str = "--server", example: str = "") -> tuple[str, int]:
-    """"HOST:PORT" or "[V6]:PORT" → (host without brackets, port); InputError naming
+    """ "HOST:PORT" or "[V6]:PORT" → (host without brackets, port); InputError naming
     `flag` otherwise (with `example`, a valid address, in the message)."""
     value = (text or "").strip()
     host, sep, port = value.rpartition(":")
@@ -62,7 +62,9 @@ def split_host_port(text: str, flag: str = "--server", example: str = "") -> tup
     elif ":" in host:
         raise InputError(f"{flag} {text!r}: an IPv6 address goes in brackets, [ADDRESS]:PORT")
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise InputError(f"{flag} {text!r}: expected HOST:PORT with a port 1–65535" + (f" ({example})" if example else ""))
+        raise InputError(
+            f"{flag} {text!r}: expected HOST:PORT with a port 1–65535" + (f" ({example})" if example else "")
+        )
     return host, int(port)
 
 
@@ -127,8 +129,11 @@ def probe(address: str, credentials=None, options=(), timeout_s: float = PROBE_T
     from grpc_health.v1 import health_pb2, health_pb2_grpc
 
     start = time.monotonic()
-    channel = (grpc.secure_channel(address, credentials, options=list(options)) if credentials is not None
-               else grpc.insecure_channel(address, options=list(options)))  # fmt: skip
+    channel = (
+        grpc.secure_channel(address, credentials, options=list(options))
+        if credentials is not None
+        else grpc.insecure_channel(address, options=list(options))
+    )
     try:
         health_pb2_grpc.HealthStub(channel).Check(health_pb2.HealthCheckRequest(), timeout=timeout_s)
     except grpc.RpcError as exc:
@@ -140,8 +145,9 @@ def probe(address: str, credentials=None, options=(), timeout_s: float = PROBE_T
     return time.monotonic() - start, None
 
 
-def probe_all(servers: ServerList, credentials=None, options=(), warn=print,
-              timeout_s: float = PROBE_TIMEOUT_S) -> float:  # fmt: skip
+def probe_all(
+    servers: ServerList, credentials=None, options=(), warn=print, timeout_s: float = PROBE_TIMEOUT_S
+) -> float:
     """Probe every address at once; warn(line) for each that does not answer; the
     longest time one that answered took (connecting and answering), seconds.
     NoServerAnswers when none does."""

@@ -49,9 +49,15 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     """The service's handlers over the loaded graphs (`graphs`, by name), the batches
     (a BatchManager, or None) and the live workers (None: sessions in this process)."""
 
-    def __init__(self, graphs: dict[str, LoadedGraph], max_streams: int, batches=None,
-                 config_timeout_s: float = CONFIG_TIMEOUT_S,
-                 live_workers: LiveWorkers | None = None, metrics=None):  # fmt: skip
+    def __init__(
+        self,
+        graphs: dict[str, LoadedGraph],
+        max_streams: int,
+        batches=None,
+        config_timeout_s: float = CONFIG_TIMEOUT_S,
+        live_workers: LiveWorkers | None = None,
+        metrics=None,
+    ):
         self.graphs = graphs
         self.metrics = metrics  # a metrics.Metrics, or None (no --metrics-port)
         # Sent at the start of every stream (initial metadata SERVER_METADATA): which
@@ -73,11 +79,15 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
 
     def _graph(self, name: str, field: str = "graph") -> LoadedGraph:
         if not name:
-            raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"{field}: empty graph name (ListGraphs names the graphs)")
+            raise RpcStatus(
+                grpc.StatusCode.INVALID_ARGUMENT, f"{field}: empty graph name (ListGraphs names the graphs)"
+            )
         loaded = self.graphs.get(name)
         if loaded is None:
-            raise RpcStatus(grpc.StatusCode.NOT_FOUND, f"{field}: no graph named {name!r} "
-                            f"(this server has {', '.join(sorted(self.graphs))})")  # fmt: skip
+            raise RpcStatus(
+                grpc.StatusCode.NOT_FOUND,
+                f"{field}: no graph named {name!r} (this server has {', '.join(sorted(self.graphs))})",
+            )
         return loaded
 
     def ListGraphs(self, request, context):
@@ -93,11 +103,15 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         try:
             graph = self._graph(request.graph).graph
             options = options_from_proto(request.options, "options")
-            performer = (performer_from_proto(request.performer, graph.skeleton, graph.params.get("mapping"))
-                         if request.HasField("performer") else None)  # fmt: skip
+            performer = (
+                performer_from_proto(request.performer, graph.skeleton, graph.params.get("mapping"))
+                if request.HasField("performer")
+                else None
+            )
             reads_acc = "accelerations" in get_strategy(options.strategy).uses  # else any sensors, unread
-            rec = recording_from_proto(request.recording, graph.sensor_names, "recording", reads_acc,
-                                       graph.layout.get("name", "?"))
+            rec = recording_from_proto(
+                request.recording, graph.sensor_names, "recording", reads_acc, graph.layout.get("name", "?")
+            )
             if request.HasField("calibrate_from_start"):  # (device frames: calibrated here, against the graph)
                 c = request.calibrate_from_start
                 try:
@@ -110,13 +124,16 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
             # live stream does not take the threads). The search polls the call and
             # stops when the client cancels or its deadline passes.
             with self.threads.running():
-                result = pipeline.reconstruct(graph, rec, options, threads=False,
-                                              should_stop=lambda: not context.is_active())  # fmt: skip
+                result = pipeline.reconstruct(
+                    graph, rec, options, threads=False, should_stop=lambda: not context.is_active()
+                )
             if performer is not None:
                 result = pipeline.put_on_performer(graph, result, performer)
-            response = pb.SynthesizeResponse(motion=motion_to_proto(result.motion),
-                                             node_path=[] if result.node_path is None else result.node_path.tolist(),
-                                             bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"))  # fmt: skip
+            response = pb.SynthesizeResponse(
+                motion=motion_to_proto(result.motion),
+                node_path=[] if result.node_path is None else result.node_path.tolist(),
+                bvh=bvh_text(result.motion, scale=100.0).encode("utf-8"),
+            )
             if result.provenance is not None:
                 response.provenance.CopyFrom(provenance_to_proto(result.provenance))
             report_to_proto(result.report, response)
@@ -127,8 +144,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     def _batch_call(self, context, call):
         try:
             if self.batches is None:
-                raise RpcStatus(grpc.StatusCode.FAILED_PRECONDITION,
-                                "this server takes no batches (start it with --batch-dir DIR)")  # fmt: skip
+                raise RpcStatus(
+                    grpc.StatusCode.FAILED_PRECONDITION, "this server takes no batches (start it with --batch-dir DIR)"
+                )
             try:
                 return call()
             except BatchNotFound as exc:
@@ -138,16 +156,22 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
 
     def SubmitBatch(self, request, context):
         retries = request.retries if request.HasField("retries") else None
-        return self._batch_call(context, lambda: batch_status_to_proto(
-            self.batches.status(self.batches.submit(request.manifest, request.format, retries))))  # fmt: skip
+        return self._batch_call(
+            context,
+            lambda: batch_status_to_proto(
+                self.batches.status(self.batches.submit(request.manifest, request.format, retries))
+            ),
+        )
 
     def GetBatch(self, request, context):
-        return self._batch_call(context, lambda: batch_status_to_proto(
-            self.batches.status(request.batch_id, items=request.items)))  # fmt: skip
+        return self._batch_call(
+            context, lambda: batch_status_to_proto(self.batches.status(request.batch_id, items=request.items))
+        )
 
     def ListBatches(self, request, context):
-        return self._batch_call(context, lambda: pb.ListBatchesResponse(
-            batches=[batch_status_to_proto(b) for b in self.batches.list()]))  # fmt: skip
+        return self._batch_call(
+            context, lambda: pb.ListBatchesResponse(batches=[batch_status_to_proto(b) for b in self.batches.list()])
+        )
 
     def CancelBatch(self, request, context):
         return self._batch_call(context, lambda: batch_status_to_proto(self.batches.cancel(request.batch_id)))
@@ -155,8 +179,10 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
     def StreamSynthesize(self, request_iterator, context):
         release = self.slots.try_acquire()
         if release is None:
-            context.abort(grpc.StatusCode.RESOURCE_EXHAUSTED,
-                          f"the server is at its limit of {self.slots.limit} concurrent streams (--max-streams)")
+            context.abort(
+                grpc.StatusCode.RESOURCE_EXHAUSTED,
+                f"the server is at its limit of {self.slots.limit} concurrent streams (--max-streams)",
+            )
             return
         # Released when the call ends for any reason: the handler returning, the
         # client cancelling, the deadline passing, the server stopping.
@@ -196,9 +222,15 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         if metrics is not None:
             metrics.streams_started.inc()
         try:
-            yield pb.StreamSynthesizeResponse(started=pb.StreamStarted(
-                graph=loaded.name, rate_hz=graph.rate_hz, lag_frames=session.lag_frames,
-                sensor_names=list(stream.names), skeleton=loaded.info.skeleton))  # fmt: skip
+            yield pb.StreamSynthesizeResponse(
+                started=pb.StreamStarted(
+                    graph=loaded.name,
+                    rate_hz=graph.rate_hz,
+                    lag_frames=session.lag_frames,
+                    sensor_names=list(stream.names),
+                    skeleton=loaded.info.skeleton,
+                )
+            )
 
             sample_index = -1
             previous_t = None
@@ -208,16 +240,20 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                     return  # cancelled or past the deadline: stop searching now
                 kind = request.WhichOneof("message")
                 if kind == "config":
-                    raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: only the first "
-                                    "message may carry a config; every later one carries a sample")  # fmt: skip
+                    raise RpcStatus(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"sample[{sample_index + 1}]: only the first "
+                        "message may carry a config; every later one carries a sample",
+                    )
                 if kind is None:
                     raise RpcStatus(grpc.StatusCode.INVALID_ARGUMENT, f"sample[{sample_index + 1}]: empty message")
                 sample_index += 1
                 arrived = time.perf_counter()
                 sample = stream.sample(request.sample, previous_t, f"sample[{sample_index}]")
                 previous_t = sample[0]
-                for frame in self._push(session, [sample] if calibration is None else calibration.add(sample),
-                                        sample_index):  # fmt: skip
+                for frame in self._push(
+                    session, [sample] if calibration is None else calibration.add(sample), sample_index
+                ):
                     yield pb.StreamSynthesizeResponse(frame=frame_to_proto(frame, sample_index))
                     frames_out += 1
                     if metrics is not None:
@@ -245,8 +281,9 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
                 frames_out += 1
             if metrics is not None:
                 metrics.frames.inc(len(frames))
-            yield pb.StreamSynthesizeResponse(finished=pb.StreamFinished(samples_received=sample_index + 1,
-                                                                         frames_emitted=frames_out))  # fmt: skip
+            yield pb.StreamSynthesizeResponse(
+                finished=pb.StreamFinished(samples_received=sample_index + 1, frames_emitted=frames_out)
+            )
         finally:
             if self.live_workers is not None:  # (an in-process session is freed with this frame)
                 session.close()
@@ -274,9 +311,16 @@ class MotionGraphServicer(pb_grpc.MotionGraphServiceServicer):
         try:
             strategy.check_stream(check_options(options), stream.names, stream.marker_names)
             if self.live_workers is not None:
-                return self.live_workers.open(loaded.name, options, stream.names, stream.marker_names,
-                                              stream.orientations)  # fmt: skip
-            return pipeline.open_session(loaded.graph, options, stream.names, keep_motion=False,  # (the client keeps them)
-                                         marker_names=stream.marker_names, orientations=stream.orientations)  # fmt: skip
+                return self.live_workers.open(
+                    loaded.name, options, stream.names, stream.marker_names, stream.orientations
+                )
+            return pipeline.open_session(
+                loaded.graph,
+                options,
+                stream.names,
+                keep_motion=False,  # (the client keeps them)
+                marker_names=stream.marker_names,
+                orientations=stream.orientations,
+            )
         except InputError as exc:  # e.g. a constraint label the graph does not have
             raise _config_error(exc) from None

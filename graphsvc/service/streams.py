@@ -19,7 +19,7 @@ from graphsvc.service.convert_recording import (
     marker_names_from_proto,
     sample_from_proto,
     sample_markers_from_proto,
-    sample_orientations_from_proto,  # fmt: skip
+    sample_orientations_from_proto,
     sensor_order,
 )
 from graphsvc.service.status import RpcStatus
@@ -78,8 +78,11 @@ def first_message(request_iterator, timeout_s: float):
 
     threading.Thread(target=read, name="graphsvc-config", daemon=True).start()
     if not done.wait(timeout_s):
-        raise RpcStatus(grpc.StatusCode.DEADLINE_EXCEEDED, f"config: no StreamConfig within {timeout_s:g} s of "
-                        "connecting (the server's --config-timeout-s); the stream's slot is freed")  # fmt: skip
+        raise RpcStatus(
+            grpc.StatusCode.DEADLINE_EXCEEDED,
+            f"config: no StreamConfig within {timeout_s:g} s of "
+            "connecting (the server's --config-timeout-s); the stream's slot is freed",
+        )
     if isinstance(box[0], BaseException):
         raise box[0]
     return box[0]
@@ -116,8 +119,9 @@ class StreamInput:
     def sample(self, msg, previous_time_s: float | None, field: str) -> tuple:
         """A SensorSample read in the graph's sensor order: (time_s, acc, position,
         heading, markers, orientations), each checked (`convert_recording`)."""
-        t, acc, position, heading = sample_from_proto(msg, len(self.names), self.order, previous_time_s, field,
-                                                      self.reads_acc)  # fmt: skip
+        t, acc, position, heading = sample_from_proto(
+            msg, len(self.names), self.order, previous_time_s, field, self.reads_acc
+        )
         markers = sample_markers_from_proto(msg, len(self.marker_names), field)
         orientations = sample_orientations_from_proto(msg, len(self.names), self.order, self.orientations, field)
         return t, acc, position, heading, markers, orientations
@@ -136,8 +140,10 @@ class StartCalibration:
         from graphsvc.sensors.calibration import POSES
 
         if not (np.isfinite(seconds) and 0 < seconds <= MAX_FROM_START_S):
-            raise FieldError(f"{self.FIELD}.seconds", f"must be a finite number of seconds > 0 and at most "
-                             f"{MAX_FROM_START_S:g}, got {seconds}")  # fmt: skip
+            raise FieldError(
+                f"{self.FIELD}.seconds",
+                f"must be a finite number of seconds > 0 and at most {MAX_FROM_START_S:g}, got {seconds}",
+            )
         if pose not in POSES:
             raise FieldError(f"{self.FIELD}.pose", f"unknown pose {pose!r} (poses: {', '.join(POSES)})")
         self.graph, self.names, self.seconds, self.pose = graph, tuple(names), float(seconds), pose
@@ -177,10 +183,18 @@ class StartCalibration:
         if any(s[1] is None for s in self.held):
             raise FieldError(self.FIELD, "a calibration needs every sample's accelerations")
         acc = np.stack([s[1] for s in self.held]).astype(np.float32)
-        orient = None if any(s[5] is None for s in self.held) else np.stack([s[5] for s in self.held]).astype(np.float32)
+        orient = (
+            None if any(s[5] is None for s in self.held) else np.stack([s[5] for s in self.held]).astype(np.float32)
+        )
         rate = round(1.0 / float(np.median(np.diff(t))), 6) if t.size > 1 else float(self.graph.rate_hz)
-        rec = Recording(rate_hz=rate, timestamps_s=t, sensor_names=self.names, accelerations=acc, orientations=orient,
-                        meta={"source": "stream", "sensor_frame": "device"})  # fmt: skip
+        rec = Recording(
+            rate_hz=rate,
+            timestamps_s=t,
+            sensor_names=self.names,
+            accelerations=acc,
+            orientations=orient,
+            meta={"source": "stream", "sensor_frame": "device"},
+        )
         try:
             cal = check_calibration(calibrate_from_start(rec, self.graph, self.seconds, self.pose), self.FIELD)
         except InputError as exc:
@@ -196,8 +210,9 @@ class StartCalibration:
             if acc is not None:
                 acc = calibrate_sample(self.rotations, acc).astype(np.float32)
             if orient is not None:
-                orient = quat.mul(np.asarray(orient, dtype=np.float64), quat.conjugate(self.rotations)).astype(np.float32)
+                orient = quat.mul(np.asarray(orient, dtype=np.float64), quat.conjugate(self.rotations)).astype(
+                    np.float32
+                )
             out.append((t, acc, position, heading, markers, orient))
         self.held = []
         return out
-

@@ -57,29 +57,62 @@ from graphsvc.motion.skeleton import Skeleton
 from graphsvc.service.servers import split_host_port
 
 UNITY_BONES = {
-    "pelvis": "Hips", "spine": "Spine", "chest": "Chest", "neck": "Neck", "head": "Head",
-    "l_shoulder": "LeftUpperArm", "l_elbow": "LeftLowerArm", "l_wrist": "LeftHand",
-    "r_shoulder": "RightUpperArm", "r_elbow": "RightLowerArm", "r_wrist": "RightHand",
-    "l_hip": "LeftUpperLeg", "l_knee": "LeftLowerLeg", "l_ankle": "LeftFoot", "l_toe": "LeftToes",
-    "r_hip": "RightUpperLeg", "r_knee": "RightLowerLeg", "r_ankle": "RightFoot", "r_toe": "RightToes",
-}  # fmt: skip
+    "pelvis": "Hips",
+    "spine": "Spine",
+    "chest": "Chest",
+    "neck": "Neck",
+    "head": "Head",
+    "l_shoulder": "LeftUpperArm",
+    "l_elbow": "LeftLowerArm",
+    "l_wrist": "LeftHand",
+    "r_shoulder": "RightUpperArm",
+    "r_elbow": "RightLowerArm",
+    "r_wrist": "RightHand",
+    "l_hip": "LeftUpperLeg",
+    "l_knee": "LeftLowerLeg",
+    "l_ankle": "LeftFoot",
+    "l_toe": "LeftToes",
+    "r_hip": "RightUpperLeg",
+    "r_knee": "RightLowerLeg",
+    "r_ankle": "RightFoot",
+    "r_toe": "RightToes",
+}
 # The next humanoid bone up the body (before the joints a skeleton lacks are skipped).
 HUMANOID_PARENT = {
-    "spine": "pelvis", "chest": "spine", "neck": "chest", "head": "neck",
-    "l_shoulder": "chest", "l_elbow": "l_shoulder", "l_wrist": "l_elbow",
-    "r_shoulder": "chest", "r_elbow": "r_shoulder", "r_wrist": "r_elbow",
-    "l_hip": "pelvis", "l_knee": "l_hip", "l_ankle": "l_knee", "l_toe": "l_ankle",
-    "r_hip": "pelvis", "r_knee": "r_hip", "r_ankle": "r_knee", "r_toe": "r_ankle",
-}  # fmt: skip
+    "spine": "pelvis",
+    "chest": "spine",
+    "neck": "chest",
+    "head": "neck",
+    "l_shoulder": "chest",
+    "l_elbow": "l_shoulder",
+    "l_wrist": "l_elbow",
+    "r_shoulder": "chest",
+    "r_elbow": "r_shoulder",
+    "r_wrist": "r_elbow",
+    "l_hip": "pelvis",
+    "l_knee": "l_hip",
+    "l_ankle": "l_knee",
+    "l_toe": "l_ankle",
+    "r_hip": "pelvis",
+    "r_knee": "r_hip",
+    "r_ankle": "r_knee",
+    "r_toe": "r_ankle",
+}
 # The T-pose's direction of each segment (joint → its child joint), in graphsvc's
 # axes of a body facing +Z (left: +X); the bones not listed keep their parent's correction.
 TPOSE_SEGMENTS = {
-    "spine": ("chest", (0.0, 1.0, 0.0)), "chest": ("neck", (0.0, 1.0, 0.0)), "neck": ("head", (0.0, 1.0, 0.0)),
-    "l_shoulder": ("l_elbow", (1.0, 0.0, 0.0)), "l_elbow": ("l_wrist", (1.0, 0.0, 0.0)),
-    "r_shoulder": ("r_elbow", (-1.0, 0.0, 0.0)), "r_elbow": ("r_wrist", (-1.0, 0.0, 0.0)),
-    "l_hip": ("l_knee", (0.0, -1.0, 0.0)), "l_knee": ("l_ankle", (0.0, -1.0, 0.0)),
-    "r_hip": ("r_knee", (0.0, -1.0, 0.0)), "r_knee": ("r_ankle", (0.0, -1.0, 0.0)),
-}  # fmt: skip
+    "spine": ("chest", (0.0, 1.0, 0.0)),
+    "chest": ("neck", (0.0, 1.0, 0.0)),
+    "neck": ("head", (0.0, 1.0, 0.0)),
+    "l_shoulder": ("l_elbow", (1.0, 0.0, 0.0)),
+    "l_elbow": ("l_wrist", (1.0, 0.0, 0.0)),
+    "r_shoulder": ("r_elbow", (-1.0, 0.0, 0.0)),
+    "r_elbow": ("r_wrist", (-1.0, 0.0, 0.0)),
+    "l_hip": ("l_knee", (0.0, -1.0, 0.0)),
+    "l_knee": ("l_ankle", (0.0, -1.0, 0.0)),
+    "r_hip": ("r_knee", (0.0, -1.0, 0.0)),
+    "r_knee": ("r_ankle", (0.0, -1.0, 0.0)),
+}
 # The trunk's bones whose rest frame is set whole: (the joint above, whose direction
 # goes to +Y; the two joints whose right-to-left line goes to +X).
 TPOSE_FRAMES = {"pelvis": ("neck", ("l_hip", "r_hip")), "chest": ("neck", ("l_shoulder", "r_shoulder"))}
@@ -134,10 +167,17 @@ def vmc_rig(skeleton: Skeleton, mapping=None) -> VmcRig:
     parent = np.array([index[above(c)] if above(c) is not None else -1 for c in order], np.int64)
     joints = np.array([table[c] for c in order], np.int64)
     corr = np.array([correction[c] for c in order])
-    offsets = np.array([quat.rotate(corr[parent[k]], rest[joints[k]] - rest[joints[parent[k]]]) if parent[k] >= 0
-                        else np.array([0.0, rest[joints[k]][1], 0.0]) for k in range(len(order))])  # fmt: skip
-    return VmcRig(tuple(UNITY_BONES[c] for c in order), joints, parent, corr, offsets,
-                  np.asarray(skeleton.parents, np.int64))  # fmt: skip
+    offsets = np.array(
+        [
+            quat.rotate(corr[parent[k]], rest[joints[k]] - rest[joints[parent[k]]])
+            if parent[k] >= 0
+            else np.array([0.0, rest[joints[k]][1], 0.0])
+            for k in range(len(order))
+        ]
+    )
+    return VmcRig(
+        tuple(UNITY_BONES[c] for c in order), joints, parent, corr, offsets, np.asarray(skeleton.parents, np.int64)
+    )
 
 
 def _upright(up: np.ndarray, left: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -151,12 +191,15 @@ def _upright(up: np.ndarray, left: np.ndarray, fallback: np.ndarray) -> np.ndarr
     return quat.from_matrix(np.stack([x, y, np.cross(x, y)]))  # (rows: the rotation onto X, Y, Z)
 
 
-def pose_to_vmc(rig: VmcRig, rotations: np.ndarray, translations: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pose_to_vmc(
+    rig: VmcRig, rotations: np.ndarray, translations: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One frame's local rotations (J, 4) and translations (J, 3) → (root position (3,),
     bone local positions (B, 3), bone local rotations (B, 4) as (x, y, z, w)), in Unity's
     axes (the module docstring)."""
-    world_rot, world_pos = forward_kinematics(np.asarray(rotations, np.float64)[None],
-                                              np.asarray(translations, np.float64)[None], rig.parents)  # fmt: skip
+    world_rot, world_pos = forward_kinematics(
+        np.asarray(rotations, np.float64)[None], np.asarray(translations, np.float64)[None], rig.parents
+    )
     W, P = world_rot[0][rig.joints], world_pos[0][rig.joints]
     D = quat.normalize(quat.mul(W, quat.conjugate(rig.correction)))
     hips = rig.parent < 0
@@ -170,7 +213,7 @@ def pose_to_vmc(rig: VmcRig, rotations: np.ndarray, translations: np.ndarray) ->
 
 
 def parse_vmc_address(text: str) -> tuple[str, int]:
-    """"HOST:PORT" (IPv6 in brackets) → (numeric address, port); InputError, one line,
+    """ "HOST:PORT" (IPv6 in brackets) → (numeric address, port); InputError, one line,
     for a malformed address, a port outside 1–65535 or a host that does not resolve."""
     host, port = split_host_port(text, "--vmc", "a VMC receiver, e.g. 127.0.0.1:39539")
     try:

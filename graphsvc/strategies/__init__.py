@@ -80,8 +80,11 @@ def _load() -> None:
         try:
             register(ep.load())
         except Exception as exc:  # noqa: BLE001  (one broken plug-in must not stop the others)
-            print(f"graphsvc: warning: strategy plug-in {ep.name!r} ({ep.value}) did not load: "
-                  f"{type(exc).__name__}: {exc}", file=sys.stderr)  # fmt: skip
+            print(
+                f"graphsvc: warning: strategy plug-in {ep.name!r} ({ep.value}) did not load: "
+                f"{type(exc).__name__}: {exc}",
+                file=sys.stderr,
+            )
 
 
 def get(name: str) -> Strategy:
@@ -125,9 +128,16 @@ def check_options(options: Options) -> Options:
     return replace(options, settings=(*options.settings, (options.strategy, strategy.options_class())))
 
 
-def open_session(graph: MotionGraph, options: Options | None = None, sensor_names: Sequence[str] | None = None,
-                 allowed: np.ndarray | None = None, threads: bool = False, keep_motion: bool = True,
-                 marker_names: Sequence[str] | None = None, orientations: bool = False) -> LiveSession:  # fmt: skip
+def open_session(
+    graph: MotionGraph,
+    options: Options | None = None,
+    sensor_names: Sequence[str] | None = None,
+    allowed: np.ndarray | None = None,
+    threads: bool = False,
+    keep_motion: bool = True,
+    marker_names: Sequence[str] | None = None,
+    orientations: bool = False,
+) -> LiveSession:
     """The live session of `options.strategy` on `graph` (its `session_class`, a
     `strategies.live.LiveSession`): samples in by `push`, pose frames out as they become
     final, `flush` at the end. sensor_names: the stream's sensors, in the graph's order
@@ -139,8 +149,9 @@ def open_session(graph: MotionGraph, options: Options | None = None, sensor_name
     options = check_options(Options() if options is None else options)
     strategy = get(options.strategy)
     strategy.check_stream(options, sensor_names, marker_names)
-    return strategy.session_class(strategy, graph, options, sensor_names, allowed, threads, keep_motion, marker_names,
-                                  orientations)  # fmt: skip
+    return strategy.session_class(
+        strategy, graph, options, sensor_names, allowed, threads, keep_motion, marker_names, orientations
+    )
 
 
 def _legacy_names(name: str, default: bool = False):
@@ -162,5 +173,15 @@ def _legacy_names(name: str, default: bool = False):
 
 _options.LEGACY_NAMES = _legacy_names
 
-__all__ = ["BUILTIN", "DEFAULT", "ENTRY_POINTS", "Strategy", "available", "check_options", "get", "names",
-           "open_session", "register"]  # fmt: skip
+__all__ = [
+    "BUILTIN",
+    "DEFAULT",
+    "ENTRY_POINTS",
+    "Strategy",
+    "available",
+    "check_options",
+    "get",
+    "names",
+    "open_session",
+    "register",
+]

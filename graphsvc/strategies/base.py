@@ -101,8 +101,16 @@ class Strategy:
         """The strategy's index for `graph`, made once per graph object."""
         raise NotImplementedError
 
-    def reconstruct(self, index, graph: MotionGraph, inp, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None):  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ):
         """A `results.Reconstruction` of `inp` (a `inputs.PreparedInput`)."""
         raise NotImplementedError
 
@@ -130,8 +138,9 @@ class Strategy:
         """InputError, before an evaluation builds anything, when `simulate_input` could
         not make this strategy's input with these options."""
 
-    def simulate_input(self, motion, layout, options: Options, noise, seed: int, rate_hz: float, mapping=None,
-                       pattern=None):  # fmt: skip
+    def simulate_input(
+        self, motion, layout, options: Options, noise, seed: int, rate_hz: float, mapping=None, pattern=None
+    ):
         """The recording an evaluation reconstructs a test clip from: by default the
         layout's accelerometers (and the tracker, where the noise model keeps it)."""
         return simulate_recording(motion, layout, noise, seed=seed, rate_hz=rate_hz, mapping=mapping)

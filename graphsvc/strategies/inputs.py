@@ -170,8 +170,10 @@ def check_constraint_times(constraints, duration_s: float) -> None:
         for j, c in enumerate(cset):
             start, end = float(c["start_s"]), float(c["end_s"])
             if start >= duration_s:
-                raise InputError(f"constraint set {k}: constraint {j} ({start:g}–{end:g} s) starts after the "
-                                 f"recording ends ({duration_s:g} s)")  # fmt: skip
+                raise InputError(
+                    f"constraint set {k}: constraint {j} ({start:g}–{end:g} s) starts after the "
+                    f"recording ends ({duration_s:g} s)"
+                )
 
 
 def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, options: Options) -> PreparedInput:
@@ -209,5 +211,17 @@ def prepare_input(strategy: Strategy, graph: MotionGraph, rec: Recording, option
             track = CausalTrackHeading(rate, options.speed_threshold, rest)
             heading = np.array([track.push(p) for p in position])
         heading_source = "track"
-    return PreparedInput(acc, position, heading, constraints, resampled, heading_source, float(rec.rate_hz), ignored,
-                         markers, tuple(rec.marker_names) if markers is not None else (), dict(rec.meta), up)  # fmt: skip
+    return PreparedInput(
+        acc,
+        position,
+        heading,
+        constraints,
+        resampled,
+        heading_source,
+        float(rec.rate_hz),
+        ignored,
+        markers,
+        tuple(rec.marker_names) if markers is not None else (),
+        dict(rec.meta),
+        up,
+    )

@@ -50,9 +50,18 @@ class LiveSession:
         the default σ."""
         return lookahead_frames(rate_hz) + cls.SYNTH_BATCH - 1 + half_width(smooth_s * rate_hz)
 
-    def __init__(self, strategy, graph: MotionGraph, options: Options, sensor_names=None, allowed=None,
-                 threads: bool = False, keep_motion: bool = True, marker_names=None,
-                 orientations: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        strategy,
+        graph: MotionGraph,
+        options: Options,
+        sensor_names=None,
+        allowed=None,
+        threads: bool = False,
+        keep_motion: bool = True,
+        marker_names=None,
+        orientations: bool = False,
+    ):
         """strategy: the `base.Strategy` whose session this is; options: checked
         (`strategies.check_options`). Opened by `strategies.open_session`, which says
         what the rest are. A strategy's session sets itself up in `_open`."""
@@ -70,8 +79,12 @@ class LiveSession:
         self.S = len(graph.sensor_names) if self.reads_acc else 0
         # orientations: the stream's samples carry each sensor's orientation; they count
         # where the strategy uses them, the graph has their metadata and W_R > 0
-        self.reads_up = bool(orientations) and "orientations" in self.strategy.uses and graph.edge_up is not None \
+        self.reads_up = (
+            bool(orientations)
+            and "orientations" in self.strategy.uses
+            and graph.edge_up is not None
             and options.weights.orientation > 0
+        )
         self.M = len(self.marker_names)
         self.lag_frames = 0
         self.t0 = 0.0  # the first sample's time (set by the first push)
@@ -98,7 +111,11 @@ class LiveSession:
         pass
 
     def _check(self, t_s, acc, position, heading, markers=None, orientations=None):
-        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
+        if (
+            isinstance(t_s, bool)
+            or not isinstance(t_s, (int, float, np.integer, np.floating))
+            or not math.isfinite(t_s)
+        ):
             raise InputError(f"timestamp must be a finite number of seconds, got {t_s!r}")
         if self.prev is not None and not t_s > self.prev[0]:
             raise InputError(f"timestamps must increase: {t_s} after {self.prev[0]}")
@@ -112,7 +129,9 @@ class LiveSession:
         if self.M:
             markers = np.full((self.M, 3), np.nan) if markers is None else np.asarray(markers, dtype=np.float64)
             if markers.shape != (self.M, 3):
-                raise InputError(f"marker positions must be ({self.M}, 3) for the stream's markers, got {markers.shape}")
+                raise InputError(
+                    f"marker positions must be ({self.M}, 3) for the stream's markers, got {markers.shape}"
+                )
             if np.isinf(markers).any():
                 raise InputError("marker positions contain infinite values (use NaN for not seen)")
         else:
@@ -130,16 +149,24 @@ class LiveSession:
             q = np.asarray(orientations, dtype=np.float64)
             S = len(self.graph.sensor_names)
             if q.shape != (S, 4) or np.isinf(q).any():
-                raise InputError(f"orientations must be ({S}, 4) finite quaternions w, x, y, z (NaN for missing), "
-                                 f"got shape {q.shape}")  # fmt: skip
+                raise InputError(
+                    f"orientations must be ({S}, 4) finite quaternions w, x, y, z (NaN for missing), "
+                    f"got shape {q.shape}"
+                )
             if self.reads_up:
                 with np.errstate(invalid="ignore", divide="ignore"):
                     up = graph_cue(self.graph, q)  # (a zero or NaN quaternion gives NaN: missing)
         return float(t_s), acc, position, heading, markers, up
 
-    def push(self, t_s: float, acc: ArrayLike | None = None, position: ArrayLike | None = None,
-             heading: float | None = None, markers: ArrayLike | None = None,
-             orientations: ArrayLike | None = None) -> list[Frame]:  # fmt: skip
+    def push(
+        self,
+        t_s: float,
+        acc: ArrayLike | None = None,
+        position: ArrayLike | None = None,
+        heading: float | None = None,
+        markers: ArrayLike | None = None,
+        orientations: ArrayLike | None = None,
+    ) -> list[Frame]:
         """One sample at time t_s (s): acc (S, 3) m/s² (NaN = missing; None for a
         strategy that reads no accelerations), position (2,) m or None, heading rad or
         None, markers (M, 3) m for the session's marker names (NaN = not seen) or None,
@@ -190,7 +217,7 @@ class LiveSession:
         """The frames a StreamingSynthesizer made final, `synth.add`'s or `finish`'s
         (first, rotations, translations), with the nodes it played."""
         first, rot, trans = synthesized
-        nodes = synth.nodes[first - synth.base: first - synth.base + len(rot)] if len(rot) else []
+        nodes = synth.nodes[first - synth.base : first - synth.base + len(rot)] if len(rot) else []
         return self._emit(first, rot, trans, nodes)
 
     def _emit(self, first: int, rot: np.ndarray, trans: np.ndarray, nodes=None, provenance: Provenance | None = None):
@@ -206,9 +233,17 @@ class LiveSession:
         out = []
         for k in range(rot.shape[0]):
             f = first + k
-            out.append(Frame(f, self.t0 + f / self.rate, -1 if nodes is None else int(nodes[k]),
-                             str(provenance.label[k]), rot[k].astype(np.float32), trans[k].astype(np.float32),
-                             provenance.sources(k)))  # fmt: skip
+            out.append(
+                Frame(
+                    f,
+                    self.t0 + f / self.rate,
+                    -1 if nodes is None else int(nodes[k]),
+                    str(provenance.label[k]),
+                    rot[k].astype(np.float32),
+                    trans[k].astype(np.float32),
+                    provenance.sources(k),
+                )
+            )
         return out
 
     def motion(self) -> Motion:

@@ -64,13 +64,36 @@ class OptionSpec:
         return self.label or self.name
 
 
-def option(default, help: str, *, low=None, high=None, low_open: bool = False, choices=None, noun=None, label=None,
-           aliases=(), negated=(), metavar=None):  # fmt: skip
+def option(
+    default,
+    help: str,
+    *,
+    low=None,
+    high=None,
+    low_open: bool = False,
+    choices=None,
+    noun=None,
+    label=None,
+    aliases=(),
+    negated=(),
+    metavar=None,
+):
     """A dataclass field declaring an option (module docstring); the type is the field's
     annotation."""
-    meta = {"option": dict(help=help, low=low, high=high, low_open=low_open, choices=None if choices is None
-                           else tuple(choices), noun=noun, label=label, aliases=tuple(aliases), negated=tuple(negated),
-                           metavar=metavar)}  # fmt: skip
+    meta = {
+        "option": dict(
+            help=help,
+            low=low,
+            high=high,
+            low_open=low_open,
+            choices=None if choices is None else tuple(choices),
+            noun=noun,
+            label=label,
+            aliases=tuple(aliases),
+            negated=tuple(negated),
+            metavar=metavar,
+        )
+    }
     return field(default=default, metadata=meta)
 
 
@@ -163,20 +186,30 @@ def check_value(spec: OptionSpec, value, prefix: str = ""):
             raise OptionError(spec.name, f"{label} must be one of {', '.join(spec.choices)}, got {value!r}")
         return value
     if spec.kind is tuple:
-        if isinstance(value, str) or not isinstance(value, (tuple, list)) or not value \
-                or not all(isinstance(v, str) and v for v in value):  # fmt: skip
+        if (
+            isinstance(value, str)
+            or not isinstance(value, (tuple, list))
+            or not value
+            or not all(isinstance(v, str) and v for v in value)
+        ):
             raise OptionError(spec.name, f"{label} must be {spec.noun or 'a list of names'}, got {value!r}")
         return tuple(value)
     whole = spec.kind is int
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or (whole and value != int(value)):  # fmt: skip
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or (whole and value != int(value))
+    ):
         noun = spec.noun or ("a whole number" if whole else "a finite number")
         limits = _range_text(spec)
         raise OptionError(spec.name, f"{label} must be {noun}{' ' + limits if limits else ''}, got {value!r}")
     value = int(value) if whole else float(value)
     noun = spec.noun + " " if spec.noun and not whole else ""
     if spec.low is not None and (value <= spec.low if spec.low_open else value < spec.low):
-        raise OptionError(spec.name, f"{label} must be {noun}{'>' if spec.low_open else '≥'} {spec.low:g}, got {value!r}")
+        raise OptionError(
+            spec.name, f"{label} must be {noun}{'>' if spec.low_open else '≥'} {spec.low:g}, got {value!r}"
+        )
     if spec.high is not None and value > spec.high:
         raise OptionError(spec.name, f"{label} must be {noun}at most {spec.high:g}, got {value!r}")
     return value
@@ -198,8 +231,9 @@ def from_values(cls, values: dict, prefix: str = ""):
     specs = {s.name: s for s in option_specs(cls)}
     unknown = [k for k in values if k not in specs]
     if unknown:
-        raise OptionError(unknown[0], f"{prefix}{unknown[0]} is not an option here (options: "
-                                      f"{', '.join(specs) or 'none'})")  # fmt: skip
+        raise OptionError(
+            unknown[0], f"{prefix}{unknown[0]} is not an option here (options: {', '.join(specs) or 'none'})"
+        )
     obj = cls(**{k: check_value(specs[k], v, prefix) for k, v in values.items()})
     check_fields(obj, prefix)
     return obj
@@ -294,26 +328,54 @@ class SharedOptions:
     the output's poses (`synthesis.smooth`; 0: off). refine: each frame's pose from a
     local model of the knowledge base around the measured readings (`strategies.refine`)."""
 
-    track_pull_s: float = option(TRACK_PULL_S, low=0.0, label="track pull", noun="a finite number of seconds",
-                                 aliases=("--track-pull",), metavar="S",
-                                 help="time constant (s) with which the search's paths are placed toward the measured "
-                                      "positions as it scores them, and OLNG's heading turned toward the measured one "
-                                      f"(0: placed once, at the start; default {TRACK_PULL_S:g})")  # fmt: skip
-    track_sigma_m: float = option(TRACK_SIGMA_M, low=0.0, low_open=True, label="track sigma",
-                                  noun="a finite number of metres", metavar="M", aliases=("--track-sigma",),
-                                  help="the overhead tracker's white noise σ, m, with which the output's root is "
-                                       f"fused with the measured positions (default {TRACK_SIGMA_M:g})")  # fmt: skip
-    track_drift: float = option(TRACK_DRIFT, low=0.0, label="track drift", noun="a finite number", metavar="D",
-                                help="how fast the rate of the offset between the reconstruction's own root track and "
-                                     "the tracker may change, m/s per √s (0: one constant rate; default "
-                                     f"{TRACK_DRIFT:g})")  # fmt: skip
-    smooth_s: float = option(SMOOTH_S, low=0.0, label="smoothing", noun="a finite number of seconds", metavar="S",
-                             aliases=("--smooth",),
-                             help="σ (s) of the Gaussian over the output's poses that removes frame-to-frame jitter; a "
-                                  f"live stream waits about 3σ longer (0: off; default {SMOOTH_S:.3g})")  # fmt: skip
-    refine: bool = option(True, label="refinement",
-                          help="each frame's pose from a local linear model of the knowledge-base frames whose readings "
-                               "move as the measured ones do, on the strategy's root (default on)")  # fmt: skip
+    track_pull_s: float = option(
+        TRACK_PULL_S,
+        low=0.0,
+        label="track pull",
+        noun="a finite number of seconds",
+        aliases=("--track-pull",),
+        metavar="S",
+        help="time constant (s) with which the search's paths are placed toward the measured "
+        "positions as it scores them, and OLNG's heading turned toward the measured one "
+        f"(0: placed once, at the start; default {TRACK_PULL_S:g})",
+    )
+    track_sigma_m: float = option(
+        TRACK_SIGMA_M,
+        low=0.0,
+        low_open=True,
+        label="track sigma",
+        noun="a finite number of metres",
+        metavar="M",
+        aliases=("--track-sigma",),
+        help="the overhead tracker's white noise σ, m, with which the output's root is "
+        f"fused with the measured positions (default {TRACK_SIGMA_M:g})",
+    )
+    track_drift: float = option(
+        TRACK_DRIFT,
+        low=0.0,
+        label="track drift",
+        noun="a finite number",
+        metavar="D",
+        help="how fast the rate of the offset between the reconstruction's own root track and "
+        "the tracker may change, m/s per √s (0: one constant rate; default "
+        f"{TRACK_DRIFT:g})",
+    )
+    smooth_s: float = option(
+        SMOOTH_S,
+        low=0.0,
+        label="smoothing",
+        noun="a finite number of seconds",
+        metavar="S",
+        aliases=("--smooth",),
+        help="σ (s) of the Gaussian over the output's poses that removes frame-to-frame jitter; a "
+        f"live stream waits about 3σ longer (0: off; default {SMOOTH_S:.3g})",
+    )
+    refine: bool = option(
+        True,
+        label="refinement",
+        help="each frame's pose from a local linear model of the knowledge-base frames whose readings "
+        "move as the measured ones do, on the strategy's root (default on)",
+    )
 
 
 @dataclass(frozen=True)
@@ -354,10 +416,20 @@ class Options:
     shared: SharedOptions = SharedOptions()
     settings: tuple = ()  # ((strategy name, its options), ...) sorted by name
 
-    def __init__(self, strategy: str = "viterbi", weights: Weights = Weights(), latency_s: float | None = None,
-                 heading_from_track: bool = False, rest_heading_deg: float = 0.0, speed_threshold: float = 2.0,
-                 constraints: tuple | None = None, shared: SharedOptions = SharedOptions(), settings=(),
-                 own=None, **legacy):  # fmt: skip
+    def __init__(
+        self,
+        strategy: str = "viterbi",
+        weights: Weights = Weights(),
+        latency_s: float | None = None,
+        heading_from_track: bool = False,
+        rest_heading_deg: float = 0.0,
+        speed_threshold: float = 2.0,
+        constraints: tuple | None = None,
+        shared: SharedOptions = SharedOptions(),
+        settings=(),
+        own=None,
+        **legacy,
+    ):
         settings = dict(settings.items() if isinstance(settings, dict) else settings)
         if own is not None:
             settings[strategy] = own
@@ -371,12 +443,20 @@ class Options:
                 settings[where[1]] = value
             else:
                 _, name, field_name = where
-                settings[name] = dataclasses.replace(settings.get(name) or LEGACY_NAMES(name, default=True),
-                                                     **{field_name: value})  # fmt: skip
-        for name, value in (("strategy", strategy), ("weights", weights), ("latency_s", latency_s),
-                            ("heading_from_track", heading_from_track), ("rest_heading_deg", rest_heading_deg),
-                            ("speed_threshold", speed_threshold), ("constraints", constraints), ("shared", shared),
-                            ("settings", tuple(sorted(settings.items(), key=lambda kv: str(kv[0]))))):  # fmt: skip
+                settings[name] = dataclasses.replace(
+                    settings.get(name) or LEGACY_NAMES(name, default=True), **{field_name: value}
+                )
+        for name, value in (
+            ("strategy", strategy),
+            ("weights", weights),
+            ("latency_s", latency_s),
+            ("heading_from_track", heading_from_track),
+            ("rest_heading_deg", rest_heading_deg),
+            ("speed_threshold", speed_threshold),
+            ("constraints", constraints),
+            ("shared", shared),
+            ("settings", tuple(sorted(settings.items(), key=lambda kv: str(kv[0])))),
+        ):
             object.__setattr__(self, name, value)
 
     def __getattr__(self, name: str):
@@ -460,14 +540,17 @@ def check_constraints(constraints, graph=None) -> list:
         spans = sorted((float(c["start_s"]), float(c["end_s"]), j) for j, c in enumerate(cset))
         for (s0, e0, j0), (s1, e1, j1) in zip(spans, spans[1:]):
             if s1 <= e0:
-                raise InputError(f"constraint set {i}: constraints {j0} ({s0:g}–{e0:g} s) and {j1} ({s1:g}–{e1:g} s) overlap")
+                raise InputError(
+                    f"constraint set {i}: constraints {j0} ({s0:g}–{e0:g} s) and {j1} ({s1:g}–{e1:g} s) overlap"
+                )
     if graph is not None:
         for k, cset in enumerate(constraints):
             for item in cset:
                 label = item["require"].get("label")
                 if label is not None and label not in graph.labels:
-                    raise InputError(f"constraint set {k}: unknown label {label!r} (graph labels: "
-                                     f"{', '.join(graph.labels)})")  # fmt: skip
+                    raise InputError(
+                        f"constraint set {k}: unknown label {label!r} (graph labels: {', '.join(graph.labels)})"
+                    )
     return constraints
 
 

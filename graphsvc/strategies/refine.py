@@ -122,9 +122,12 @@ def _build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
             at = (nxt if d > 0 else prv)[at]
         parts.append(readings[at])
     layout = pose_layout(graph.skeleton, graph.params.get("mapping"))
-    return {"nodes": nodes, "edges": fr["edges"],
-            "windows": np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32),
-            "poses": node_pose_vectors(graph, nodes, layout)}
+    return {
+        "nodes": nodes,
+        "edges": fr["edges"],
+        "windows": np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32),
+        "poses": node_pose_vectors(graph, nodes, layout),
+    }
 
 
 def refine_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
@@ -181,9 +184,15 @@ def _make_index(graph: MotionGraph, allowed: np.ndarray | None) -> RefineIndex:
     windows = np.asarray(arrays["windows"][keep], dtype=np.float64)
     edges = np.asarray(arrays["edges"][keep], dtype=np.int64)
     cue = None if graph.edge_up is None else np.asarray(graph.edge_up, dtype=np.float64)[edges].reshape(edges.size, -1)
-    return RefineIndex(windows, np.asarray(arrays["poses"][keep], dtype=np.float64), cKDTree(windows),
-                       pose_layout(graph.skeleton, graph.params.get("mapping")), float(graph.rate_hz),
-                       graph.params.get("mapping"), cue)  # fmt: skip
+    return RefineIndex(
+        windows,
+        np.asarray(arrays["poses"][keep], dtype=np.float64),
+        cKDTree(windows),
+        pose_layout(graph.skeleton, graph.params.get("mapping")),
+        float(graph.rate_hz),
+        graph.params.get("mapping"),
+        cue,
+    )
 
 
 def regress(index: RefineIndex, queries: np.ndarray, weight: float = 0.0) -> np.ndarray:
@@ -220,8 +229,8 @@ def _aligned(p: np.ndarray, to: np.ndarray) -> np.ndarray:
     """Pose vectors p (n, D) with each quaternion on the side of `to`'s (n, D)."""
     p = p.copy()
     for s in [0, *range(5, p.shape[1], 4)]:
-        flip = np.sum(p[:, s: s + 4] * to[:, s: s + 4], axis=1) < 0.0
-        p[flip, s: s + 4] *= -1.0
+        flip = np.sum(p[:, s : s + 4] * to[:, s : s + 4], axis=1) < 0.0
+        p[flip, s : s + 4] *= -1.0
     return p
 
 
@@ -289,8 +298,9 @@ class Refiner:
             own = np.clip(np.arange(lo, hi), 0, max(newest, 0)) - self.base
             cue = np.stack(self.cues)[own] if self.cues else np.full((n, self.index.cue.shape[1]), np.nan)
             both = ok & np.all(np.isfinite(cue), axis=1)
-            poses[both] = regress(self.index, np.concatenate([q[both], np.sqrt(self.weight) * cue[both]], axis=1),
-                                  self.weight)  # fmt: skip
+            poses[both] = regress(
+                self.index, np.concatenate([q[both], np.sqrt(self.weight) * cue[both]], axis=1), self.weight
+            )
             ok_plain = ok & ~both
             poses[ok_plain] = regress(self.index, q[ok_plain])
             return poses, ok
@@ -332,20 +342,22 @@ class Refiner:
         self._deltas_to(end + 1, nodes_of)
         top = end if last is not None else first + K - 1 + self.h
         corr = np.zeros((K, self.index.poses.shape[1]))
-        rows = np.asarray(self.deltas[max(0, first - self.h - self.dbase):], dtype=np.float64)
+        rows = np.asarray(self.deltas[max(0, first - self.h - self.dbase) :], dtype=np.float64)
         row0 = max(0, first - self.h - self.dbase) + self.dbase
         for k, tap in enumerate(self.taps):  # (the same order of sums, live or not)
             at = np.clip(np.arange(first, first + K) + k - self.h, 0, top) - row0
             corr += tap * rows[at]
-        node = np.asarray(self.node_poses[first - self.dbase: first + K - self.dbase])
-        cue = np.asarray(self.frame_cues[first - self.dbase: first + K - self.dbase]) if self.impose else None
+        node = np.asarray(self.node_poses[first - self.dbase : first + K - self.dbase])
+        cue = np.asarray(self.frame_cues[first - self.dbase : first + K - self.dbase]) if self.impose else None
         drop = first + K - self.h - 1 - self.dbase
         if drop > 256:
             del self.deltas[:drop], self.node_poses[:drop], self.frame_cues[:drop]
             self.dbase += drop
         parents = self.graph.skeleton.parents
         pose = _aligned(pose_vectors(rot, trans, parents, self.index.layout), node)
-        out_rot, out_trans = place_local_poses(rot, trans, parents, self.index.layout, pose + corr, np.ones(K, dtype=bool))
+        out_rot, out_trans = place_local_poses(
+            rot, trans, parents, self.index.layout, pose + corr, np.ones(K, dtype=bool)
+        )
         nodes = nodes_of(first, first + K)
         if cue is not None:
             out_rot = self._imposed(cue, out_rot, nodes)
@@ -357,8 +369,16 @@ class Refiner:
         return impose_at_nodes(self.graph, rot, cue.reshape(rot.shape[0], len(self.graph.sensor_names), -1), nodes)
 
 
-def refine_motion(graph: MotionGraph, motion: Motion, nodes: np.ndarray, index: RefineIndex, acc: np.ndarray,
-                  smooth_frames: float, up: np.ndarray | None = None, weight: float = 0.0) -> Motion:  # fmt: skip
+def refine_motion(
+    graph: MotionGraph,
+    motion: Motion,
+    nodes: np.ndarray,
+    index: RefineIndex,
+    acc: np.ndarray,
+    smooth_frames: float,
+    up: np.ndarray | None = None,
+    weight: float = 0.0,
+) -> Motion:
     """A path's motion (its nodes (T,)) with its poses corrected from the accelerations
     (T, S, 3) m/s² of its T frames (and their orientation cue (T, S, W) weighed by
     weight, where given) and then filtered (`synthesis.smooth`, σ in frames): what a
@@ -383,5 +403,6 @@ def warm_up_refine(graph: MotionGraph) -> None:
     rot, trans = graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64)
     pose = pose_vectors(rot, trans, graph.skeleton.parents, index.layout)
     rot2, trans2 = place_local_poses(rot, trans, graph.skeleton.parents, index.layout, pose, np.ones(nodes.size, bool))
-    FootHold(graph.skeleton, index.rate_hz, index.mapping).apply(rot2, trans2, rot, trans,
-                                                                 np.ones((nodes.size, 2), dtype=bool))  # fmt: skip
+    FootHold(graph.skeleton, index.rate_hz, index.mapping).apply(
+        rot2, trans2, rot, trans, np.ones((nodes.size, 2), dtype=bool)
+    )

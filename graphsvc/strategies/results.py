@@ -28,17 +28,21 @@ class Provenance:
     def of_nodes(graph: MotionGraph, nodes: np.ndarray) -> Provenance:
         """One source a frame: each node's clip and frame (a blended node's dominant one)."""
         nodes = np.asarray(nodes, dtype=np.int64)
-        return Provenance(np.asarray(graph.node_clip)[nodes][:, None].astype(np.int64),
-                          np.asarray(graph.node_frame)[nodes][:, None].astype(np.float64),
-                          np.ones((nodes.size, 1)),
-                          np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[nodes]])  # fmt: skip
+        return Provenance(
+            np.asarray(graph.node_clip)[nodes][:, None].astype(np.int64),
+            np.asarray(graph.node_frame)[nodes][:, None].astype(np.float64),
+            np.ones((nodes.size, 1)),
+            np.asarray(graph.labels, dtype=object)[np.asarray(graph.node_label)[nodes]],
+        )
 
     def sources(self, t: int) -> list[tuple[int, float, float]]:
         """Frame t's sources as (clip, frame, weight), heaviest first."""
         keep = self.clip[t] >= 0
         order = np.argsort(-self.weight[t][keep], kind="stable")
-        return [(int(c), float(f), float(w)) for c, f, w in
-                zip(self.clip[t][keep][order], self.frame[t][keep][order], self.weight[t][keep][order])]  # fmt: skip
+        return [
+            (int(c), float(f), float(w))
+            for c, f, w in zip(self.clip[t][keep][order], self.frame[t][keep][order], self.weight[t][keep][order])
+        ]
 
 
 @dataclass

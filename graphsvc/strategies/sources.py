@@ -23,7 +23,7 @@ from graphsvc.graph.model import (
     NODE_INTERP,
     NODE_ORIGINAL,
     NODE_SLOW,
-)  # fmt: skip
+)
 from graphsvc.strategies.results import label_runs
 
 # A frame's kind on the timeline: the source clip played as captured, at another speed,
@@ -67,7 +67,9 @@ def source_readings(graph, clip: np.ndarray, frame: np.ndarray, weight: np.ndarr
     keep = np.asarray(graph.node_kind)[dst] == NODE_ORIGINAL
     original, dst = original[keep], dst[keep]
     span = int(np.asarray(graph.node_frame).max(initial=0)) + 2
-    keys = np.asarray(graph.node_clip)[dst].astype(np.int64) * span + np.rint(np.asarray(graph.node_frame)[dst]).astype(np.int64)
+    keys = np.asarray(graph.node_clip)[dst].astype(np.int64) * span + np.rint(np.asarray(graph.node_frame)[dst]).astype(
+        np.int64
+    )
     order = np.argsort(keys, kind="stable")
     keys, original = keys[order], original[order]
     want = np.maximum(clip, 0) * span + frame
@@ -107,15 +109,28 @@ def timeline_from_nodes(graph, nodes) -> dict:
     start = 0
     for t in range(1, T + 1):
         if t == T or jump[t] or kind[t] != kind[start] or clip[t] != clip[start]:
-            segments.append({"start": start, "frames": t - start, "clip": names[clip[start]], "label": labels[start],
-                             "kind": KINDS[kind[start]], "from_frame": round(float(src[start]), 1)})  # fmt: skip
+            segments.append(
+                {
+                    "start": start,
+                    "frames": t - start,
+                    "clip": names[clip[start]],
+                    "label": labels[start],
+                    "kind": KINDS[kind[start]],
+                    "from_frame": round(float(src[start]), 1),
+                }
+            )
             start = t
-    return {"segments": segments, "transitions": [int(t) for t in np.flatnonzero(jump)], "labels": label_runs(labels),
-            "neighbours": None}  # fmt: skip
+    return {
+        "segments": segments,
+        "transitions": [int(t) for t in np.flatnonzero(jump)],
+        "labels": label_runs(labels),
+        "neighbours": None,
+    }
 
 
-def timeline_from_sources(clip_names, labels, clip: np.ndarray, frame: np.ndarray, weight: np.ndarray,
-                          rows: int = 8) -> dict:  # fmt: skip
+def timeline_from_sources(
+    clip_names, labels, clip: np.ndarray, frame: np.ndarray, weight: np.ndarray, rows: int = 8
+) -> dict:
     """The timeline of frames made of several knowledge-base sources (OLNG's
     neighbourhood, SSG's cross-fades): runs of the heaviest source's clip (kind
     "blend" where a frame has more than one source), the frames where that clip
@@ -133,10 +148,16 @@ def timeline_from_sources(clip_names, labels, clip: np.ndarray, frame: np.ndarra
     start = 0
     for t in range(1, T + 1):
         if t == T or lead[t] != lead[start] or blended[t] != blended[start]:
-            segments.append({"start": start, "frames": t - start,
-                             "clip": clip_names[lead[start]] if lead[start] >= 0 else "",
-                             "label": labels[start], "kind": "blend" if blended[start] else "original",
-                             "from_frame": round(float(lead_frame[start]), 1)})  # fmt: skip
+            segments.append(
+                {
+                    "start": start,
+                    "frames": t - start,
+                    "clip": clip_names[lead[start]] if lead[start] >= 0 else "",
+                    "label": labels[start],
+                    "kind": "blend" if blended[start] else "original",
+                    "from_frame": round(float(lead_frame[start]), 1),
+                }
+            )
             start = t
     changes = [int(t) for t in range(1, T) if lead[t] != lead[t - 1]]
     totals: dict[int, float] = {}
@@ -153,10 +174,18 @@ def timeline_from_sources(clip_names, labels, clip: np.ndarray, frame: np.ndarra
 
 def timeline_from_labels(runs: list[dict]) -> dict:
     """A timeline from label runs alone (no graph to name the sources)."""
-    segments = [{"start": int(r["start_frame"]), "frames": int(r["frames"]), "clip": "", "label": str(r["label"]),
-                 "kind": "original", "from_frame": 0.0} for r in runs]  # fmt: skip
-    return {"segments": segments, "transitions": [s["start"] for s in segments[1:]], "labels": runs,
-            "neighbours": None}  # fmt: skip
+    segments = [
+        {
+            "start": int(r["start_frame"]),
+            "frames": int(r["frames"]),
+            "clip": "",
+            "label": str(r["label"]),
+            "kind": "original",
+            "from_frame": 0.0,
+        }
+        for r in runs
+    ]
+    return {"segments": segments, "transitions": [s["start"] for s in segments[1:]], "labels": runs, "neighbours": None}
 
 
 def compact_sources(provenance, top: int = 4) -> dict:
@@ -166,6 +195,8 @@ def compact_sources(provenance, top: int = 4) -> dict:
     order = np.argsort(-w, axis=1, kind="stable")[:, :top]
     rows = np.arange(w.shape[0])[:, None]
     clip = np.where(w[rows, order] > 0, provenance.clip[rows, order], -1)
-    return {"clip": clip.astype(int).tolist(),
-            "frame": np.round(provenance.frame[rows, order].astype(float), 1).tolist(),
-            "weight": np.round(np.clip(w[rows, order], 0.0, None), 3).tolist()}  # fmt: skip
+    return {
+        "clip": clip.astype(int).tolist(),
+        "frame": np.round(provenance.frame[rows, order].astype(float), 1).tolist(),
+        "weight": np.round(np.clip(w[rows, order], 0.0, None), 3).tolist(),
+    }

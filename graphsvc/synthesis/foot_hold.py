@@ -52,7 +52,8 @@ def _hold(rot, world_rot, world_pos, before_pos, parents, legs, contacts, blend,
                     for c in range(3):
                         if st[0] > 0.0:  # (in the span: the drift from the uncorrected step)
                             st[2 + 3 * k + c] += (world_pos[t, j, c] - st[14 + 3 * k + c]) - (
-                                before_pos[t, j, c] - st[20 + 3 * k + c])
+                                before_pos[t, j, c] - st[20 + 3 * k + c]
+                            )
                         else:
                             st[2 + 3 * k + c] = 0.0
                         off[k, c] = -st[2 + 3 * k + c]
@@ -79,8 +80,20 @@ def _hold(rot, world_rot, world_pos, before_pos, parents, legs, contacts, blend,
                     targets[k, c] = world_pos[t, joints[k], c] + off[k, c]
                     moved += abs(off[k, c])
             if moved > 1e-7:
-                _two_bone_ik(rot, world_rot, world_pos, parents, legs[side, 0], legs[side, 1], joints[0], joints[1],
-                             targets[0], targets[1], lateral, t)  # fmt: skip
+                _two_bone_ik(
+                    rot,
+                    world_rot,
+                    world_pos,
+                    parents,
+                    legs[side, 0],
+                    legs[side, 1],
+                    joints[0],
+                    joints[1],
+                    targets[0],
+                    targets[1],
+                    lateral,
+                    t,
+                )
 
 
 class FootHold:
@@ -92,8 +105,9 @@ class FootHold:
         table = joint_map(skeleton, mapping)
         self.enabled = not ({"l_toe", "r_toe"} & getattr(table, "missing", frozenset()))
         self.parents = np.ascontiguousarray(skeleton.parents, dtype=np.int64)
-        self.legs = np.array([[table[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")],
-                             dtype=np.int64)  # fmt: skip
+        self.legs = np.array(
+            [[table[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")], dtype=np.int64
+        )
         self.blend = max(1, round(FOOT_BLEND_S * rate_hz))
         self.state = np.zeros((2, _STATE))
         self.state[:, 1] = 1e9  # (no span yet: nothing to fade)
@@ -104,8 +118,18 @@ class FootHold:
             return rot
         trans = np.asarray(trans, dtype=np.float64)
         world_rot, world_pos = forward_kinematics(rot, trans, self.parents)
-        _, before = forward_kinematics(np.asarray(before_rot, dtype=np.float64),
-                                       np.asarray(before_trans, dtype=np.float64), self.parents)  # fmt: skip
-        _hold(rot, world_rot, world_pos, before, self.parents, self.legs,
-              np.ascontiguousarray(contacts, dtype=np.bool_), self.blend, self.state)  # fmt: skip
+        _, before = forward_kinematics(
+            np.asarray(before_rot, dtype=np.float64), np.asarray(before_trans, dtype=np.float64), self.parents
+        )
+        _hold(
+            rot,
+            world_rot,
+            world_pos,
+            before,
+            self.parents,
+            self.legs,
+            np.ascontiguousarray(contacts, dtype=np.bool_),
+            self.blend,
+            self.state,
+        )
         return rot

@@ -64,8 +64,9 @@ def positive_quaternions(p, slot):
                     p[f, s + c] = -p[f, s + c]
 
 
-def pose_vectors(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout,
-                 heading: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def pose_vectors(
+    rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout, heading: np.ndarray | None = None
+) -> np.ndarray:
     """(F, D) float64 local poses of frames with local rotations (F, J, 4) and
     translations (F, J, 3); heading (F,) rad: the frames' own when known (a graph's
     nodes carry theirs), else `signals.heading` of their pose."""
@@ -88,14 +89,16 @@ def node_pose_vectors(graph: MotionGraph, nodes: np.ndarray, layout: PoseLayout)
     out = np.empty((nodes.size, layout.dims), np.float32)
     parents = graph.skeleton.parents
     for lo in range(0, nodes.size, CHUNK):
-        n = nodes[lo: lo + CHUNK]
-        out[lo: lo + n.size] = pose_vectors(graph.node_rotations[n].astype(np.float64),
-                                            graph.node_translations[n].astype(np.float64), parents, layout)  # fmt: skip
+        n = nodes[lo : lo + CHUNK]
+        out[lo : lo + n.size] = pose_vectors(
+            graph.node_rotations[n].astype(np.float64), graph.node_translations[n].astype(np.float64), parents, layout
+        )
     return out
 
 
-def place_local_poses(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout,
-                      poses: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def place_local_poses(
+    rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, layout: PoseLayout, poses: np.ndarray, use: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Copies of a motion's (rot (T, J, 4), trans (T, J, 3)) with the frames where `use`
     (T,) holds posed as `poses` (T, D) says (quaternions normalised here), each at its
     own ground position and heading (`signals`); the other frames untouched. Frame by
@@ -114,7 +117,18 @@ def place_local_poses(rot: np.ndarray, trans: np.ndarray, parents: np.ndarray, l
     r, tr = rot[idx], trans[idx]
     r[:, layout.joints] = q / np.linalg.norm(q, axis=2, keepdims=True)
     src_rot, src_pos = forward_kinematics(r, tr, parents)
-    place_poses(r, tr, rel, p[:, 4].copy(), ground, heading, src_rot, src_pos, np.ascontiguousarray(parents, np.int64),
-                layout.pelvis, layout.carrier)  # fmt: skip
+    place_poses(
+        r,
+        tr,
+        rel,
+        p[:, 4].copy(),
+        ground,
+        heading,
+        src_rot,
+        src_pos,
+        np.ascontiguousarray(parents, np.int64),
+        layout.pelvis,
+        layout.carrier,
+    )
     rot[idx], trans[idx] = r, tr
     return rot, trans

@@ -156,8 +156,7 @@ def _continuous_edges(graph: MotionGraph, edges: np.ndarray) -> np.ndarray:
     src, dst = graph.edge_src[edges], graph.edge_dst[edges]
     inside_segment = (graph.node_kind[src] == NODE_INTERP) & (graph.node_kind[dst] == NODE_INTERP) & (dst == src + 1)
     into_bridge = graph.node_kind[dst] == NODE_BRIDGE
-    return ((kind != EDGE_TRANSITION) & ((kind != EDGE_INTERP) | inside_segment)
-            & ((kind != EDGE_BRIDGE) | into_bridge))  # fmt: skip
+    return (kind != EDGE_TRANSITION) & ((kind != EDGE_INTERP) | inside_segment) & ((kind != EDGE_BRIDGE) | into_bridge)
 
 
 def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
@@ -195,8 +194,10 @@ def _make_path_tables(graph: MotionGraph) -> PathTables:
     tables = PathTables(
         predecessor=_predecessors(graph, np.arange(graph.num_nodes, dtype=np.int64)),
         continuous=_continuous_edges(graph, np.arange(graph.num_edges, dtype=np.int64)),
-        joints=joints, below=below, carrier=carrier,
-    )  # fmt: skip
+        joints=joints,
+        below=below,
+        carrier=carrier,
+    )
     return tables
 
 
@@ -215,7 +216,9 @@ def check_path(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray,
         raise InputError("empty node path")
     if edge_path.shape != (T - 1,):
         raise InputError(f"edge path must have {T - 1} entries, got {edge_path.shape}")
-    if np.any((node_path < 0) | (node_path >= graph.num_nodes)) or np.any((edge_path < 0) | (edge_path >= graph.num_edges)):
+    if np.any((node_path < 0) | (node_path >= graph.num_nodes)) or np.any(
+        (edge_path < 0) | (edge_path >= graph.num_edges)
+    ):
         raise InputError("node or edge index out of range")
     if np.any(graph.edge_dst[edge_path] != node_path[1:]):
         raise InputError("edge path does not enter the node path")
@@ -233,8 +236,9 @@ def contact_spans(flags: np.ndarray) -> list[tuple[int, int]]:
 
 
 @_jit
-def _blend(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, entered_rel, entered_height,
-           half, half_root):  # fmt: skip
+def _blend(
+    rot, trans, rel, height, below, cuts, entered_rot, entered_trans, entered_rel, entered_height, half, half_root
+):
     """Offset blending at the cuts, in place on rot (T, J, 4), trans (T, J, 3), rel
     (T, 4) and height (T,). Cut c is a jump between frames cuts[c] − 1 and cuts[c];
     entered_* are the entered clip's own frame before it (rotations, translations,
@@ -289,8 +293,20 @@ def _blend(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, ent
         height[t] += off_height[t]
 
 
-def blend_cuts(rot, trans, rel, height, below, cuts, entered_rot, entered_trans, entered_rel, entered_height,
-               half_s: float, rate_hz: float) -> None:  # fmt: skip
+def blend_cuts(
+    rot,
+    trans,
+    rel,
+    height,
+    below,
+    cuts,
+    entered_rot,
+    entered_trans,
+    entered_rel,
+    entered_height,
+    half_s: float,
+    rate_hz: float,
+) -> None:
     """The offset blending of step 3 (module docstring) on frames that are not a graph
     path's, in place: rot (T, J, 4), trans (T, J, 3) local, rel (T, 4), height (T,);
     cuts (C,) the frames right after each jump; entered_* the entered sequence's own
@@ -299,10 +315,20 @@ def blend_cuts(rot, trans, rel, height, below, cuts, entered_rot, entered_trans,
     if cuts.size == 0 or half_s <= 0:
         return
     half = np.full(cuts.size, half_s * rate_hz)
-    _blend(rot, trans, rel, height, np.ascontiguousarray(below, dtype=np.bool_), cuts,
-           np.ascontiguousarray(entered_rot, dtype=np.float64), np.ascontiguousarray(entered_trans, dtype=np.float64),
-           np.ascontiguousarray(entered_rel, dtype=np.float64), np.ascontiguousarray(entered_height, dtype=np.float64),
-           half, half)  # fmt: skip
+    _blend(
+        rot,
+        trans,
+        rel,
+        height,
+        np.ascontiguousarray(below, dtype=np.bool_),
+        cuts,
+        np.ascontiguousarray(entered_rot, dtype=np.float64),
+        np.ascontiguousarray(entered_trans, dtype=np.float64),
+        np.ascontiguousarray(entered_rel, dtype=np.float64),
+        np.ascontiguousarray(entered_height, dtype=np.float64),
+        half,
+        half,
+    )
 
 
 @_jit
@@ -436,11 +462,25 @@ def _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, turn_angle, contacts
         _intended(src_pos, pred_pos, turn_angle, toe, intended)
         toe_offset = _foot_targets(world_pos[:, toe], intended, flags, blend_frames, toe_target, toe_weight)
         for t in range(T):
-            moved = _norm3(ankle_offset[t, 0], ankle_offset[t, 1], ankle_offset[t, 2]) > 1e-6 or _norm3(
-                toe_offset[t, 0], toe_offset[t, 1], toe_offset[t, 2]) > 1e-6
+            moved = (
+                _norm3(ankle_offset[t, 0], ankle_offset[t, 1], ankle_offset[t, 2]) > 1e-6
+                or _norm3(toe_offset[t, 0], toe_offset[t, 1], toe_offset[t, 2]) > 1e-6
+            )
             if weight[t] > 0.0 and moved:
-                _two_bone_ik(rot, world_rot, world_pos, parents, hip, knee, ankle, toe, ankle_target[t], toe_target[t],
-                             lateral[t], t)  # fmt: skip
+                _two_bone_ik(
+                    rot,
+                    world_rot,
+                    world_pos,
+                    parents,
+                    hip,
+                    knee,
+                    ankle,
+                    toe,
+                    ankle_target[t],
+                    toe_target[t],
+                    lateral[t],
+                    t,
+                )
 
 
 @_jit
@@ -497,9 +537,11 @@ def synthesize_motion(
 
     # a. Root path.
     ground, heading = meta.integrate_path(
-        np.asarray(start_ground, dtype=np.float64), float(start_heading),
-        graph.edge_offset[edge_path].astype(np.float64), graph.edge_heading[edge_path].astype(np.float64),
-    )  # fmt: skip
+        np.asarray(start_ground, dtype=np.float64),
+        float(start_heading),
+        graph.edge_offset[edge_path].astype(np.float64),
+        graph.edge_heading[edge_path].astype(np.float64),
+    )
 
     # b. Poses relative to their source placement.
     rot = graph.node_rotations[node_path].astype(np.float64)
@@ -539,16 +581,30 @@ def synthesize_motion(
             pred_pos = np.empty_like(src_pos)
             pred_pos[0], pred_pos[1:] = src_pos[0], src_pos[:-1]
             pred_pos[cuts] = e_pos
-            legs = np.array([[joints[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")],
-                            dtype=np.int64)  # fmt: skip
-            _fix_feet(rot, world_rot, world_pos, src_pos, pred_pos, heading - node_heading, contacts, parents, legs,
-                      legs[:, 0].copy(), max(1, round(FOOT_BLEND_S * rate)))  # fmt: skip
+            legs = np.array(
+                [[joints[f"{s}_{n}"] for n in ("hip", "knee", "ankle", "toe")] for s in ("l", "r")], dtype=np.int64
+            )
+            _fix_feet(
+                rot,
+                world_rot,
+                world_pos,
+                src_pos,
+                pred_pos,
+                heading - node_heading,
+                contacts,
+                parents,
+                legs,
+                legs[:, 0].copy(),
+                max(1, round(FOOT_BLEND_S * rate)),
+            )
 
     _normalize(rot)
     if track is not None:
         track = np.asarray(track, dtype=np.float64)
         if track.shape != ground.shape:
-            raise InputError(f"track must be ({ground.shape[0]}, 2) for a {ground.shape[0]}-frame path, got {track.shape}")
+            raise InputError(
+                f"track must be ({ground.shape[0]}, 2) for a {ground.shape[0]}-frame path, got {track.shape}"
+            )
         for root in np.flatnonzero(parents < 0):  # (root translations are in world space)
             trans[:, root, 0] += track[:, 0] - ground[:, 0]
             trans[:, root, 2] += track[:, 1] - ground[:, 1]

@@ -35,11 +35,16 @@ def clip_sensor_placements(graph) -> dict:
     """The graph layout's placement on each of its clips (`graph.metadata.clip_placements`:
     the anatomical frames estimated per clip), as rotation (C, S, 4), segment (S,),
     carrier (S,) and the root sensor's index; made once per graph in a process."""
+
     def make() -> dict:
         layout = layout_from_dict(graph.layout)
         every = clip_placements(graph, layout)
-        return {"rotation": np.stack([p.rotation for p in every]), "segment": every[0].segment,
-                "carrier": every[0].carrier, "root": root_sensor(layout)}  # fmt: skip
+        return {
+            "rotation": np.stack([p.rotation for p in every]),
+            "segment": every[0].segment,
+            "carrier": every[0].carrier,
+            "root": root_sensor(layout),
+        }
 
     return derived(graph, "sensor_orientations.placements", make)
 
@@ -57,9 +62,16 @@ def impose_at_nodes(graph, local: np.ndarray, cue: np.ndarray, nodes) -> np.ndar
     present = np.all(np.isfinite(cue), axis=-1)
     table = clip_sensor_placements(graph)
     clip = np.asarray(graph.node_clip, dtype=np.int64)[np.asarray(nodes, dtype=np.int64)]
-    return impose_sensor_orientations(local, graph.skeleton.parents, np.where(present[..., None], cue, 0.0),
-                                      table["rotation"][clip], table["segment"], table["carrier"], table["root"],
-                                      present)  # fmt: skip
+    return impose_sensor_orientations(
+        local,
+        graph.skeleton.parents,
+        np.where(present[..., None], cue, 0.0),
+        table["rotation"][clip],
+        table["segment"],
+        table["carrier"],
+        table["root"],
+        present,
+    )
 
 
 def world_rotations(local: np.ndarray, parents) -> np.ndarray:
@@ -84,9 +96,16 @@ def cue_rotations(cue: np.ndarray) -> np.ndarray:
     return out
 
 
-def impose_sensor_orientations(local: np.ndarray, parents, cue: np.ndarray, rotation: np.ndarray,
-                               segment: np.ndarray, carrier: np.ndarray, root: int,
-                               present: np.ndarray) -> np.ndarray:  # fmt: skip
+def impose_sensor_orientations(
+    local: np.ndarray,
+    parents,
+    cue: np.ndarray,
+    rotation: np.ndarray,
+    segment: np.ndarray,
+    carrier: np.ndarray,
+    root: int,
+    present: np.ndarray,
+) -> np.ndarray:
     """Local rotations (K, J, 4) with each present sensor's measured orientation imposed
     (module docstring). cue (K, S, 9): the measured cue relative to the root sensor;
     rotation (K, S, 4): each sensor's rotation in its segment's frame on each frame's
@@ -100,7 +119,7 @@ def impose_sensor_orientations(local: np.ndarray, parents, cue: np.ndarray, rota
         return out
     parents = np.asarray(parents)
     world = world_rotations(out, parents)
-    use = present & present[:, root:root + 1]
+    use = present & present[:, root : root + 1]
     heading = heading_twist(quat.mul(world[:, segment[root]], rotation[:, root]))  # H_out
     target = quat.mul(heading[:, None], cue_rotations(cue))  # T_s (K, S, 4)
     depth = np.array([_depth(parents, int(j)) for j in segment])

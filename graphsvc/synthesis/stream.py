@@ -40,10 +40,20 @@ class StreamingSynthesizer:
     gets its correction before the filter, as `strategies.refine.refine_motion` does in
     batch (it reads the path's nodes a few frames past the frame, within `lookahead`)."""
 
-    def __init__(self, graph: MotionGraph, start_ground, start_heading: float, blend_s: float = 0.7,
-                 flight_root_blend_s: float = 0.1, fix_feet: bool = True, max_back_s: float = 10.0,
-                 batch: int = 1, track_model: TrackModel | None = None, smooth_frames: float = 0.0,
-                 refiner=None):  # fmt: skip
+    def __init__(
+        self,
+        graph: MotionGraph,
+        start_ground,
+        start_heading: float,
+        blend_s: float = 0.7,
+        flight_root_blend_s: float = 0.1,
+        fix_feet: bool = True,
+        max_back_s: float = 10.0,
+        batch: int = 1,
+        track_model: TrackModel | None = None,
+        smooth_frames: float = 0.0,
+        refiner=None,
+    ):
         self.graph = graph
         self.smoother = StreamingSmoother(smooth_frames, graph.skeleton.num_joints)
         self.refiner = refiner
@@ -74,10 +84,13 @@ class StreamingSynthesizer:
         return the frames now final."""
         nodes = np.asarray(nodes, dtype=np.int64)
         edges = np.asarray(arrival_edges, dtype=np.int64)
-        positions = (np.full((nodes.size, 2), np.nan) if positions is None else
-                     np.asarray(positions, dtype=np.float64).reshape(nodes.size, 2))  # fmt: skip
+        positions = (
+            np.full((nodes.size, 2), np.nan)
+            if positions is None
+            else np.asarray(positions, dtype=np.float64).reshape(nodes.size, 2)
+        )
         first = self.base + self.nodes.size == 0
-        new = edges[(1 if first else 0):]
+        new = edges[(1 if first else 0) :]
         if new.size:
             # integrate_path, as a batch synthesis does (the path's own track): the same
             # float64 steps, so the same root.
@@ -117,7 +130,7 @@ class StreamingSynthesizer:
         return self.smoother.add(*part)
 
     def _nodes_of(self, lo: int, hi: int) -> np.ndarray:
-        return self.nodes[lo - self.base: hi - self.base]
+        return self.nodes[lo - self.base : hi - self.base]
 
     def _take_finals(self) -> None:
         """The fused track of the frames whose smoothed offset became final."""
@@ -172,12 +185,19 @@ class StreamingSynthesizer:
             final = np.array(self.ground[k:]).reshape(-1, 2)
             n = final.shape[0]
             last = final[-1] - self.plain[k + n - 1] if n else np.zeros(2)
-            track = np.concatenate([final, np.array(self.plain[k + n:]).reshape(-1, 2) + last])
+            track = np.concatenate([final, np.array(self.plain[k + n :]).reshape(-1, 2) + last])
         motion = synthesize_motion(
-            self.graph, self.nodes[k:], self.edges[k + 1 :], self.plain[k], self.heading[k],
-            blend_s=self.blend_s, flight_root_blend_s=self.flight_root_blend_s, fix_feet=self.fix_feet,
-            allow_jumps=True, track=track,
-        )  # fmt: skip
+            self.graph,
+            self.nodes[k:],
+            self.edges[k + 1 :],
+            self.plain[k],
+            self.heading[k],
+            blend_s=self.blend_s,
+            flight_root_blend_s=self.flight_root_blend_s,
+            fix_feet=self.fix_feet,
+            allow_jumps=True,
+            track=track,
+        )
         lo, hi = self.done - start, until - start
         first = self.done
         self.done = until

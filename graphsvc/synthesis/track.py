@@ -271,17 +271,27 @@ class FixedLagSmoother:
         return self._pass(dt, len(self._x))[0]
 
 
-def fused_track(graph: MotionGraph, node_path: np.ndarray, edge_path: np.ndarray, start_ground, start_heading: float,
-                positions: np.ndarray, model: TrackModel) -> np.ndarray:  # fmt: skip
+def fused_track(
+    graph: MotionGraph,
+    node_path: np.ndarray,
+    edge_path: np.ndarray,
+    start_ground,
+    start_heading: float,
+    positions: np.ndarray,
+    model: TrackModel,
+) -> np.ndarray:
     """The root's ground track (T, 2) m along a path (nodes (T,), edges (T−1,)): its own
     track (the edges' offsets integrated from the start) plus the smoothed offset to the
     tracker's positions (T, 2) (NaN where none; `smooth_offsets`, moving only while the
     path's nodes have a foot off the ground); for `synthesize_motion`'s track."""
     edge_path = np.asarray(edge_path, dtype=np.int64).reshape(-1)
     free = free_steps(graph.node_contacts[np.asarray(node_path, dtype=np.int64).reshape(-1)])
-    own, _ = meta.integrate_path(np.asarray(start_ground, dtype=np.float64), float(start_heading),
-                                 graph.edge_offset[edge_path].astype(np.float64),
-                                 graph.edge_heading[edge_path].astype(np.float64))  # fmt: skip
+    own, _ = meta.integrate_path(
+        np.asarray(start_ground, dtype=np.float64),
+        float(start_heading),
+        graph.edge_offset[edge_path].astype(np.float64),
+        graph.edge_heading[edge_path].astype(np.float64),
+    )
     return own + smooth_offsets(np.asarray(positions, dtype=np.float64).reshape(-1, 2) - own, model, free)
 
 
@@ -298,8 +308,12 @@ def advance_own_track(state, step, turn: float, contacts, position, heading) -> 
     batch's `shift_to_smoothed`); the heading is pulled toward the measured one by
     the share alpha."""
     if state.t > 0:
-        state.own = state.own + meta.rotate_ground(np.asarray(step, dtype=np.float64)[None], np.array([state.heading]),
-                                                   np.zeros((1, 2)))[0]  # fmt: skip
+        state.own = (
+            state.own
+            + meta.rotate_ground(np.asarray(step, dtype=np.float64)[None], np.array([state.heading]), np.zeros((1, 2)))[
+                0
+            ]
+        )
         state.heading = float(wrap_angle(state.heading + turn))
     measured = position is not None and bool(np.all(np.isfinite(position)))
     if measured and not state.placed:

@@ -31,8 +31,13 @@ def batch_files(tmp_path_factory) -> Path:
     for k in range(4):
         clip = motion.slice(30 * k, 30 * k + 90 + 30 * k)
         save_recording(simulate_recording(clip, layout, parse_noise("default"), seed=k), folder / f"perf{k}.rec")
-    markers = simulate_marker_recording(motion.slice(30, 120), "hands-feet", parse_noise("none"), seed=0,
-                                        pattern=MarkerPattern(gaps=((10, 20),), flicker=0.1))  # fmt: skip
+    markers = simulate_marker_recording(
+        motion.slice(30, 120),
+        "hands-feet",
+        parse_noise("none"),
+        seed=0,
+        pattern=MarkerPattern(gaps=((10, 20),), flicker=0.1),
+    )
     save_recording(markers, folder / "markers.rec")
     return folder
 

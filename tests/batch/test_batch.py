@@ -43,10 +43,20 @@ def leftovers(out: Path) -> list[str]:
 
 SIX = [  # every registered strategy, with the columns and options a manifest takes
     {"recording": "perf0.rec", "graph": "small", "strategy": "viterbi", "output": "v-weights", "weights": "0.5,1,1"},
-    {"recording": "perf1.rec", "graph": "small", "strategy": "viterbi", "output": "v-beam-lag",
-     "options": {"beam": 10, "latency": 0.5}},
-    {"recording": "perf2.rec", "graph": "small", "strategy": "viterbi", "output": "v-track",
-     "options": {"heading-from-track": True, "track_pull": 0}},
+    {
+        "recording": "perf1.rec",
+        "graph": "small",
+        "strategy": "viterbi",
+        "output": "v-beam-lag",
+        "options": {"beam": 10, "latency": 0.5},
+    },
+    {
+        "recording": "perf2.rec",
+        "graph": "small",
+        "strategy": "viterbi",
+        "output": "v-track",
+        "options": {"heading-from-track": True, "track_pull": 0},
+    },
     {"recording": "perf0.rec", "graph": "small", "strategy": "nearest", "output": "nearest"},
     {"recording": "perf1.rec", "graph": "small", "strategy": "olng", "output": "olng", "options": {"olng-k": 32}},
     {"recording": "markers.rec", "graph": "small", "strategy": "ssg", "output": "ssg", "format": "glb"},
@@ -58,8 +68,17 @@ def output_name(row: dict) -> str:
 
 
 def synthesize_argv(row: dict, graph: Path, folder: Path, out: Path) -> list[str]:
-    argv = ["synthesize", str(graph), str(folder / row["recording"]), "-o", str(out / output_name(row)),
-            "--report", str(out / f"{row['output']}.json"), "--strategy", row["strategy"]]  # fmt: skip
+    argv = [
+        "synthesize",
+        str(graph),
+        str(folder / row["recording"]),
+        "-o",
+        str(out / output_name(row)),
+        "--report",
+        str(out / f"{row['output']}.json"),
+        "--strategy",
+        row["strategy"],
+    ]
     if row.get("weights"):
         argv += ["--weights", row["weights"]]
     for k, v in row.get("options", {}).items():
@@ -72,8 +91,19 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
     manifest = write_manifest(tmp_path / "match.csv", SIX)
     out = tmp_path / "out"
     graph = batch_files / "small.graph"
-    code = main(["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler_address,
-                 "--graph", f"small={graph}", "--quiet"])  # fmt: skip
+    code = main(
+        [
+            "batch",
+            str(manifest),
+            "--out",
+            str(out),
+            "--scheduler",
+            cluster.scheduler_address,
+            "--graph",
+            f"small={graph}",
+            "--quiet",
+        ]
+    )
     printed = capsys.readouterr().out
     assert code == 0, printed
     summary = json.loads((out / "summary.json").read_text())
@@ -89,7 +119,9 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
         assert (out / output_name(row)).read_bytes() == (ref / output_name(row)).read_bytes(), name
         got, want = (json.loads((d / f"{name}.json").read_text()) for d in (out, ref))
         assert got["files"]["output"] == str((out / output_name(row)).resolve())
-        assert {k: v for k, v in got.items() if k not in VOLATILE} == {k: v for k, v in want.items() if k not in VOLATILE}
+        assert {k: v for k, v in got.items() if k not in VOLATILE} == {
+            k: v for k, v in want.items() if k not in VOLATILE
+        }
     capsys.readouterr()
     rows = store_rows(out)
     assert {r["state"] for r in rows.values()} == {"done"} and {r["attempts"] for r in rows.values()} == {1}
@@ -101,16 +133,44 @@ def test_six_items_on_two_workers_equal_synthesize_byte_for_byte(tmp_path, batch
     # Run again: nothing changed, nothing recomputed.
     mtimes = {p.name: p.stat().st_mtime_ns for p in [*out.glob("*.bvh"), *out.glob("*.glb")]}
     assert len(mtimes) == 6 and (out / "ssg.glb").is_file()
-    assert main(["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler_address,
-                 "--graph", f"small={graph}", "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "batch",
+                str(manifest),
+                "--out",
+                str(out),
+                "--scheduler",
+                cluster.scheduler_address,
+                "--graph",
+                f"small={graph}",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "6 done (6 unchanged, skipped)" in capsys.readouterr().out
     assert {p.name: p.stat().st_mtime_ns for p in [*out.glob("*.bvh"), *out.glob("*.glb")]} == mtimes
     assert store_rows(out) == rows
     # A changed option is a changed item: only it runs again.
     changed = [dict(r, weights="1,1,1") if r["output"] == "v-weights" else r for r in SIX]
     write_manifest(manifest, changed)
-    assert main(["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler_address,
-                 "--graph", f"small={graph}", "--quiet"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "batch",
+                str(manifest),
+                "--out",
+                str(out),
+                "--scheduler",
+                cluster.scheduler_address,
+                "--graph",
+                f"small={graph}",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     after = store_rows(out)
     assert after["v-weights"]["fingerprint"] != rows["v-weights"]["fingerprint"]
     assert {k for k in after if after[k]["ended"] != rows[k]["ended"]} == {"v-weights"}
@@ -147,8 +207,14 @@ def run_killing(client, output: str, manifest: Path, tmp_path: Path, batch_files
     with kept_environ():  # (what the nanny writes into ours when it restarts the killed worker)
         client.register_plugin(KillOnStart(output, str(tmp_path / "killed")), name=KillOnStart.name)
         try:
-            return run_batch(manifest, tmp_path / "out", graphs={"small": batch_files / "small.graph"}, client=client,
-                             retries=retries, progress=False)  # fmt: skip
+            return run_batch(
+                manifest,
+                tmp_path / "out",
+                graphs={"small": batch_files / "small.graph"},
+                client=client,
+                retries=retries,
+                progress=False,
+            )
         finally:
             client.unregister_worker_plugin(KillOnStart.name)
             client.wait_for_workers(2, timeout=60)
@@ -156,8 +222,15 @@ def run_killing(client, output: str, manifest: Path, tmp_path: Path, batch_files
 
 def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, batch_files, client):
     link_inputs(tmp_path, batch_files)
-    rows = [{"recording": f"perf{k % 4}.rec", "graph": "small", "strategy": ("viterbi", "nearest")[k % 2],
-             "output": f"item{k}"} for k in range(6)]  # fmt: skip
+    rows = [
+        {
+            "recording": f"perf{k % 4}.rec",
+            "graph": "small",
+            "strategy": ("viterbi", "nearest")[k % 2],
+            "output": f"item{k}",
+        }
+        for k in range(6)
+    ]
     manifest = write_manifest(tmp_path / "m.json", rows)
     summary = run_killing(client, "item3", manifest, tmp_path, batch_files, retries=2)
     assert (tmp_path / "killed").exists(), "the plugin never fired"
@@ -171,8 +244,20 @@ def test_worker_killed_midway_every_item_done_with_the_extra_attempt(tmp_path, b
     assert sorted(p.name for p in out.glob("*.bvh")) == [f"item{k}.bvh" for k in range(6)]
     # Each output is whole: the synthesize command's bytes.
     ref = tmp_path / "item3.bvh"
-    assert main(["synthesize", str(batch_files / "small.graph"), str(tmp_path / "perf3.rec"), "-o", str(ref),
-                 "--strategy", "nearest"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(batch_files / "small.graph"),
+                str(tmp_path / "perf3.rec"),
+                "-o",
+                str(ref),
+                "--strategy",
+                "nearest",
+            ]
+        )
+        == 0
+    )
     assert (out / "item3.bvh").read_bytes() == ref.read_bytes()
 
 
@@ -192,12 +277,32 @@ def test_client_killed_midway_restart_recomputes_nothing_done(tmp_path, batch_fi
     from graphsvc.batch.run import run_batch
 
     link_inputs(tmp_path, batch_files)
-    rows = [{"recording": f"perf{3 - k % 2}.rec", "graph": "small", "strategy": "olng", "output": f"o{k}",
-             "options": {"olng-k": 64}} for k in range(10)]  # fmt: skip
+    rows = [
+        {
+            "recording": f"perf{3 - k % 2}.rec",
+            "graph": "small",
+            "strategy": "olng",
+            "output": f"o{k}",
+            "options": {"olng-k": 64},
+        }
+        for k in range(10)
+    ]
     manifest = write_manifest(tmp_path / "m.csv", rows)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-c", "from graphsvc.cli import main; raise SystemExit(main())", "batch", str(manifest),
-           "--out", str(out), "--workers", "1", "--graph", f"small={batch_files / 'small.graph'}", "--quiet"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-c",
+        "from graphsvc.cli import main; raise SystemExit(main())",
+        "batch",
+        str(manifest),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--graph",
+        f"small={batch_files / 'small.graph'}",
+        "--quiet",
+    ]
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     try:
@@ -238,10 +343,20 @@ def test_items_that_fail_on_their_input_the_rest_finish(tmp_path, batch_files, c
         {"recording": "perf0.rec", "graph": "small", "strategy": "viterbi", "output": "good1"},
         {"recording": "absent.rec", "graph": "small", "strategy": "viterbi", "output": "no-recording"},
         {"recording": "perf1.rec", "graph": "nosuch", "strategy": "viterbi", "output": "no-graph"},
-        {"recording": "perf1.rec", "graph": "small", "strategy": "viterbi", "output": "bad-beam",
-         "options": {"beam": -1}},
-        {"recording": "perf1.rec", "graph": "small", "strategy": "viterbi", "output": "bad-flag",
-         "options": {"frobnicate": 3}},
+        {
+            "recording": "perf1.rec",
+            "graph": "small",
+            "strategy": "viterbi",
+            "output": "bad-beam",
+            "options": {"beam": -1},
+        },
+        {
+            "recording": "perf1.rec",
+            "graph": "small",
+            "strategy": "viterbi",
+            "output": "bad-flag",
+            "options": {"frobnicate": 3},
+        },
         {"recording": "markers.rec", "graph": "small", "strategy": "viterbi", "output": "no-accelerations"},
         {"recording": "small.graph", "graph": "small", "strategy": "nearest", "output": "not-a-recording"},
         {"recording": "perf2.rec", "graph": "small.graph", "strategy": "nearest", "output": "good2"},
@@ -249,8 +364,19 @@ def test_items_that_fail_on_their_input_the_rest_finish(tmp_path, batch_files, c
     (tmp_path / "small.graph").symlink_to(batch_files / "small.graph")
     manifest = write_manifest(tmp_path / "m.csv", rows)
     out = tmp_path / "out"
-    code = main(["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler_address,
-                 "--graph", f"small={batch_files / 'small.graph'}", "--quiet"])  # fmt: skip
+    code = main(
+        [
+            "batch",
+            str(manifest),
+            "--out",
+            str(out),
+            "--scheduler",
+            cluster.scheduler_address,
+            "--graph",
+            f"small={batch_files / 'small.graph'}",
+            "--quiet",
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 1
     assert "graphsvc: 6 of 8 items failed" in captured.err
@@ -267,25 +393,34 @@ def test_items_that_fail_on_their_input_the_rest_finish(tmp_path, batch_files, c
     assert all("\n" not in r for r in reasons.values())
     summary = json.loads((out / "summary.json").read_text())
     assert {f["output"]: f["line"] for f in summary["failures"]} == {
-        "no-recording": 3, "no-graph": 4, "bad-beam": 5, "bad-flag": 6, "no-accelerations": 7, "not-a-recording": 8}
+        "no-recording": 3,
+        "no-graph": 4,
+        "bad-beam": 5,
+        "bad-flag": 6,
+        "no-accelerations": 7,
+        "not-a-recording": 8,
+    }
     for name in reasons:
         assert f"failed: {name} (line" in captured.out
         assert not (out / f"{name}.bvh").exists()
 
 
-@pytest.mark.parametrize("case, needle", [
-    ("unparsable", "m.csv:3: 3 fields, the header has 4"),
-    ("quote", "m.csv:3: not valid CSV"),
-    ("duplicate", "m.csv:3: output 'a' is also line 2's"),
-    ("column", "unknown column 'colour'"),
-    ("missing-column", "the header lacks column 'strategy'"),
-    ("bad-name", "m.csv:2: output 'x/y' must be a plain name"),
-    ("options-json", "m.csv:2: options are not valid JSON"),
-    ("unwritable", "is not writable"),
-    ("scheduler", "scheduler tcp://127.0.0.1:1 did not answer within 1 s"),
-    ("retries", "--retries must be ≥ 0"),
-    ("graph-spec", "--graph takes NAME=FILE"),
-])
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("unparsable", "m.csv:3: 3 fields, the header has 4"),
+        ("quote", "m.csv:3: not valid CSV"),
+        ("duplicate", "m.csv:3: output 'a' is also line 2's"),
+        ("column", "unknown column 'colour'"),
+        ("missing-column", "the header lacks column 'strategy'"),
+        ("bad-name", "m.csv:2: output 'x/y' must be a plain name"),
+        ("options-json", "m.csv:2: options are not valid JSON"),
+        ("unwritable", "is not writable"),
+        ("scheduler", "scheduler tcp://127.0.0.1:1 did not answer within 1 s"),
+        ("retries", "--retries must be ≥ 0"),
+        ("graph-spec", "--graph takes NAME=FILE"),
+    ],
+)
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, case, needle):
     header = "recording,graph,strategy,output"
     body = {

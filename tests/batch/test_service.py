@@ -32,8 +32,9 @@ def server(batch_files, batch_root, cluster):
     path = batch_files / "small.graph"
     graph = load_graph(path)
     graphs = {"small": LoadedGraph("small", path, graph, graph_info("small", graph, path.stat().st_size))}
-    running = start_server(graphs, ServerConfig(host="127.0.0.1", port=0, batch_dir=batch_root,
-                                                batch_scheduler=cluster.scheduler_address))  # fmt: skip
+    running = start_server(
+        graphs, ServerConfig(host="127.0.0.1", port=0, batch_dir=batch_root, batch_scheduler=cluster.scheduler_address)
+    )
     yield running
     running.stop(0)
 
@@ -62,9 +63,11 @@ def test_submit_poll_list_one_output_equals_synthesize(conn, batch_files, batch_
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.client import batch_call, submit_batch
 
-    rows = [{"recording": "perf0.rec", "graph": "small", "strategy": "viterbi", "output": "v", "weights": "0.5,1,1"},
-            {"recording": "perf1.rec", "graph": "small", "strategy": "nearest", "output": "n"},
-            {"recording": "absent.rec", "graph": "small", "strategy": "nearest", "output": "missing"}]
+    rows = [
+        {"recording": "perf0.rec", "graph": "small", "strategy": "viterbi", "output": "v", "weights": "0.5,1,1"},
+        {"recording": "perf1.rec", "graph": "small", "strategy": "nearest", "output": "n"},
+        {"recording": "absent.rec", "graph": "small", "strategy": "nearest", "output": "missing"},
+    ]
     text = write_manifest(tmp_path / "m.csv", rows).read_text()
     status = submit_batch(conn, text)
     assert status.state in ("queued", "running") and status.items == 3
@@ -73,8 +76,20 @@ def test_submit_poll_list_one_output_equals_synthesize(conn, batch_files, batch_
     by_name = {i.output: i for i in status.item_status}
     assert "absent.rec: no such file" in by_name["missing"].reason and by_name["v"].attempts == 1
     ref = tmp_path / "v.bvh"
-    assert main(["synthesize", str(batch_files / "small.graph"), str(batch_root / "perf0.rec"), "-o", str(ref),
-                 "--weights", "0.5,1,1"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(batch_files / "small.graph"),
+                str(batch_root / "perf0.rec"),
+                "-o",
+                str(ref),
+                "--weights",
+                "0.5,1,1",
+            ]
+        )
+        == 0
+    )
     assert Path(by_name["v"].output_path).read_bytes() == ref.read_bytes()
     assert Path(by_name["v"].output_path).parent == Path(status.folder)
     listed = batch_call(conn, "ListBatches", pb.ListBatchesRequest()).batches
@@ -98,8 +113,10 @@ def test_cancel_queues_the_unfinished_items(conn, tmp_path):
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.client import batch_call, submit_batch
 
-    rows = [{"recording": "perf3.rec", "graph": "small", "strategy": "olng", "output": f"o{k}",
-             "options": {"olng-k": 64}} for k in range(12)]  # fmt: skip
+    rows = [
+        {"recording": "perf3.rec", "graph": "small", "strategy": "olng", "output": f"o{k}", "options": {"olng-k": 64}}
+        for k in range(12)
+    ]
     status = submit_batch(conn, json.dumps(rows), retries=0)
     deadline = time.monotonic() + 60
     while status.done == 0 and time.monotonic() < deadline:
@@ -110,21 +127,35 @@ def test_cancel_queues_the_unfinished_items(conn, tmp_path):
     assert 1 <= status.done < 12 and status.queued == 12 - status.done and status.running == 0
 
 
-@pytest.mark.parametrize("call, request_kwargs, code, needle", [
-    ("SubmitBatch", {"manifest": "recording,graph,strategy,output\na.rec,small,viterbi\n"},
-     grpc.StatusCode.INVALID_ARGUMENT, "manifest.csv:2: 3 fields, the header has 4"),
-    ("SubmitBatch", {"manifest": "[{\"recording\": 1}]"}, grpc.StatusCode.INVALID_ARGUMENT, "recording must be text"),
-    ("SubmitBatch", {"manifest": "x", "format": "xml"}, grpc.StatusCode.INVALID_ARGUMENT, "format must be csv or json"),
-    ("GetBatch", {"batch_id": "nope"}, grpc.StatusCode.NOT_FOUND, "no batch 'nope'"),
-    ("CancelBatch", {"batch_id": "../x"}, grpc.StatusCode.NOT_FOUND, "no batch"),
-])
+@pytest.mark.parametrize(
+    "call, request_kwargs, code, needle",
+    [
+        (
+            "SubmitBatch",
+            {"manifest": "recording,graph,strategy,output\na.rec,small,viterbi\n"},
+            grpc.StatusCode.INVALID_ARGUMENT,
+            "manifest.csv:2: 3 fields, the header has 4",
+        ),
+        ("SubmitBatch", {"manifest": '[{"recording": 1}]'}, grpc.StatusCode.INVALID_ARGUMENT, "recording must be text"),
+        (
+            "SubmitBatch",
+            {"manifest": "x", "format": "xml"},
+            grpc.StatusCode.INVALID_ARGUMENT,
+            "format must be csv or json",
+        ),
+        ("GetBatch", {"batch_id": "nope"}, grpc.StatusCode.NOT_FOUND, "no batch 'nope'"),
+        ("CancelBatch", {"batch_id": "../x"}, grpc.StatusCode.NOT_FOUND, "no batch"),
+    ],
+)
 def test_batch_errors_answer_their_status(conn, batch_root, call, request_kwargs, code, needle):
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.client import ServiceError, batch_call
 
     before = sorted(p.name for p in batch_root.iterdir())
-    request = getattr(pb, {"SubmitBatch": "SubmitBatchRequest", "GetBatch": "GetBatchRequest",
-                           "CancelBatch": "CancelBatchRequest"}[call])(**request_kwargs)  # fmt: skip
+    request = getattr(
+        pb,
+        {"SubmitBatch": "SubmitBatchRequest", "GetBatch": "GetBatchRequest", "CancelBatch": "CancelBatchRequest"}[call],
+    )(**request_kwargs)
     with pytest.raises(ServiceError) as err:
         batch_call(conn, call, request)
     assert err.value.code == code and needle in err.value.details
@@ -140,8 +171,10 @@ def test_server_without_batch_dir_refuses_batches(batch_files):
 
     path = batch_files / "small.graph"
     graph = load_graph(path)
-    running = start_server({"small": LoadedGraph("small", path, graph, graph_info("small", graph, None))},
-                           ServerConfig(host="127.0.0.1", port=0))  # fmt: skip
+    running = start_server(
+        {"small": LoadedGraph("small", path, graph, graph_info("small", graph, None))},
+        ServerConfig(host="127.0.0.1", port=0),
+    )
     try:
         with connect(f"127.0.0.1:{running.port}") as c, pytest.raises(ServiceError) as err:
             batch_call(c, "ListBatches", pb.ListBatchesRequest())

@@ -29,8 +29,9 @@ def kb_graph():
 
 
 def _setup(noise, seconds):
-    return loo.EvalSetup(noise=noise, positions=True, options=OPTIONS, seed=7, calibrate_from_start=seconds,
-                         calibration_pose="npose")  # fmt: skip
+    return loo.EvalSetup(
+        noise=noise, positions=True, options=OPTIONS, seed=7, calibrate_from_start=seconds, calibration_pose="npose"
+    )
 
 
 def test_the_clips_part_is_cut_out_calibrated_and_restarted_at_zero(kb_graph):
@@ -51,8 +52,9 @@ def test_the_clips_part_is_cut_out_calibrated_and_restarted_at_zero(kb_graph):
 
 def test_calibrated_run_scores_as_the_run_without_a_mounting(kb_graph):
     kb, graph = kb_graph
-    plain = loo.evaluate_clip(graph, kb[0], None, loo.EvalSetup(noise=NOISE["none"], positions=True, options=OPTIONS,
-                                                               seed=7))  # fmt: skip
+    plain = loo.evaluate_clip(
+        graph, kb[0], None, loo.EvalSetup(noise=NOISE["none"], positions=True, options=OPTIONS, seed=7)
+    )
     worn = loo.evaluate_clip(graph, kb[0], None, _setup(MOUNTED, 10.0))
     assert worn["frames"] == plain["frames"]
     assert abs(worn["joint_err_cm"] - plain["joint_err_cm"]) < 0.2
@@ -75,17 +77,29 @@ def test_the_hidden_clips_are_left_out_of_the_calibration(kb_graph, monkeypatch)
     assert seen == [[graph.clips[1]["name"]]]
 
 
-@pytest.mark.parametrize("seconds, pose, words", [(3.0, "npose", "seconds ≥ 4"), (float("nan"), "npose", "finite"),
-                                                  (10.0, "splits", "unknown calibration pose")])  # fmt: skip
+@pytest.mark.parametrize(
+    "seconds, pose, words",
+    [(3.0, "npose", "seconds ≥ 4"), (float("nan"), "npose", "finite"), (10.0, "splits", "unknown calibration pose")],
+)
 def test_bad_calibration_arguments_are_refused_before_anything_runs(tmp_path, seconds, pose, words):
-    config = EvalConfig(kb=(str(tmp_path / "missing"),), test="*.bvh", calibrate_from_start=seconds,
-                        calibration_pose=pose, progress=False)  # fmt: skip
+    config = EvalConfig(
+        kb=(str(tmp_path / "missing"),),
+        test="*.bvh",
+        calibrate_from_start=seconds,
+        calibration_pose=pose,
+        progress=False,
+    )
     with pytest.raises(InputError, match=words):
         run(config)
 
 
-@pytest.mark.parametrize("extra, words", [(["--calibrate-from-start", "3"], "seconds ≥ 4"),
-                                          (["--pose", "tpose"], "--pose goes with --calibrate-from-start")])  # fmt: skip
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--calibrate-from-start", "3"], "seconds ≥ 4"),
+        (["--pose", "tpose"], "--pose goes with --calibrate-from-start"),
+    ],
+)
 def test_the_cli_refuses_in_one_line(tmp_path, capsys, extra, words):
     from graphsvc.cli import main
 

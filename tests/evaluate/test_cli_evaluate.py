@@ -25,8 +25,23 @@ def kb(tmp_path_factory):
 
 def test_a_page_without_kept_motions_leaves_a_json_that_says_so(kb, tmp_path, capsys):
     clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
-    argv = ["evaluate", str(kb), "--test", clip, "--layout", "kelly6", "--hold-out", "clip", "--quiet", "--strategy",
-            "nearest", "--json", str(tmp_path / "E.json"), "--report-html", str(tmp_path / "E.html")]  # fmt: skip
+    argv = [
+        "evaluate",
+        str(kb),
+        "--test",
+        clip,
+        "--layout",
+        "kelly6",
+        "--hold-out",
+        "clip",
+        "--quiet",
+        "--strategy",
+        "nearest",
+        "--json",
+        str(tmp_path / "E.json"),
+        "--report-html",
+        str(tmp_path / "E.html"),
+    ]
     assert main(argv) == 0
     capsys.readouterr()
     result = json.loads((tmp_path / "E.json").read_text())
@@ -60,8 +75,26 @@ def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp
 
     clips = sorted(p.name for p in kb.glob("*.bvh"))[:2]
     out = tmp_path / "E.json"
-    assert main(["evaluate", str(kb), "--test", ",".join(clips), "--layout", "kelly6", "--hold-out", "clip", "--quiet",
-                 "--strategy", "nearest", "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                str(kb),
+                "--test",
+                ",".join(clips),
+                "--layout",
+                "kelly6",
+                "--hold-out",
+                "clip",
+                "--quiet",
+                "--strategy",
+                "nearest",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "jitter out/truth" in printed and "scaled cm" in printed
     e = json.loads(out.read_text())
@@ -87,8 +120,27 @@ def test_the_json_says_what_a_viewer_sees_of_the_output_and_of_the_truth(kb, tmp
 def test_pose_oracle_adds_the_floor_to_the_json_and_the_table(kb, tmp_path, capsys):
     clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
     out = tmp_path / "E.json"
-    assert main(["evaluate", str(kb), "--test", clip, "--layout", "kelly6", "--hold-out", "clip", "--quiet",
-                 "--strategy", "nearest", "--pose-oracle", "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                str(kb),
+                "--test",
+                clip,
+                "--layout",
+                "kelly6",
+                "--hold-out",
+                "clip",
+                "--quiet",
+                "--strategy",
+                "nearest",
+                "--pose-oracle",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert "oracle cm" in capsys.readouterr().out
     e = json.loads(out.read_text())
     row = e["clips"][0]
@@ -102,8 +154,19 @@ def test_a_performer_s_proportions_are_what_is_scored(kb, tmp_path, capsys):
     from graphsvc.motion.proportions import SEGMENTS, segment_lengths
 
     clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
-    base = ["evaluate", str(kb), "--test", clip, "--layout", "kelly6", "--hold-out", "clip", "--quiet", "--strategy",
-            "nearest"]  # fmt: skip
+    base = [
+        "evaluate",
+        str(kb),
+        "--test",
+        clip,
+        "--layout",
+        "kelly6",
+        "--hold-out",
+        "clip",
+        "--quiet",
+        "--strategy",
+        "nearest",
+    ]
     runs = {}
     for name, extra in (("plain", []), ("same", ["--height", "1.75"]), ("tall", ["--height", "1.96"])):
         out = tmp_path / f"{name}.json"
@@ -127,11 +190,14 @@ def test_a_performer_s_proportions_are_what_is_scored(kb, tmp_path, capsys):
         assert kept[name] == pytest.approx(1.12 * kb_lengths[name], abs=1e-6), name
 
 
-@pytest.mark.parametrize("extra, needle", [
-    (["--height", "1.8", "--performer", "p.json"], "not allowed with argument"),
-    (["--performer", "absent.json"], "no such file"),
-    (["--performer-mapping", "guess"], "--performer-mapping applies"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--height", "1.8", "--performer", "p.json"], "not allowed with argument"),
+        (["--performer", "absent.json"], "no such file"),
+        (["--performer-mapping", "guess"], "--performer-mapping applies"),
+    ],
+)
 def test_a_bad_performer_is_refused_before_any_work(kb, tmp_path, capsys, extra, needle):
     clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
     extra = [str(tmp_path / e) if e.endswith(".json") else e for e in extra]

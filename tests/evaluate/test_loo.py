@@ -54,7 +54,7 @@ def test_mask_hides_exactly_the_clip_its_slow_downs_its_blends_and_its_mirror(kb
     expected_original = np.zeros(graph.num_nodes, dtype=bool)
     for c in (k, mirror):
         first, frames = graph.clips[c]["first_node"], graph.clips[c]["frames"]
-        expected_original[first: first + frames] = True
+        expected_original[first : first + frames] = True
     assert np.array_equal(hidden & (kind == NODE_ORIGINAL), expected_original)
     # Slow-down nodes: all of the two clips', no other clip's.
     slow = kind == NODE_SLOW
@@ -66,7 +66,7 @@ def test_mask_hides_exactly_the_clip_its_slow_downs_its_blends_and_its_mirror(kb
     as_b = False
     for seg in graph.segments:
         if {seg["clip_a"], seg["clip_b"]} & {k, mirror}:
-            involved[seg["first_node"]: seg["first_node"] + seg["count"]] = True
+            involved[seg["first_node"] : seg["first_node"] + seg["count"]] = True
             as_b |= seg["clip_b"] in (k, mirror) and seg["clip_a"] not in (k, mirror)
     assert as_b, "fixture should blend another clip with this one as its second clip"
     assert np.array_equal(hidden & (kind == NODE_INTERP), involved)
@@ -74,7 +74,7 @@ def test_mask_hides_exactly_the_clip_its_slow_downs_its_blends_and_its_mirror(kb
     bridged = np.zeros(graph.num_nodes, dtype=bool)
     for b in graph.bridges:
         if {b["clip_a"], b["clip_b"]} & {k, mirror}:
-            bridged[b["first_node"]: b["first_node"] + b["count"]] = True
+            bridged[b["first_node"] : b["first_node"] + b["count"]] = True
     assert bridged.any(), "fixture should bridge this clip to others"
     assert np.array_equal(hidden & (kind == NODE_BRIDGE), bridged)
     # Other clips' original and slow-down nodes all stay.
@@ -176,8 +176,16 @@ def test_label_accuracy_with_per_frame_truth():
     with pytest.raises(Exception, match="per-frame true labels"):
         label_acc(["walk"], ["walk", "run"])
     z = np.zeros((4, 2, 3))
-    r = evaluate_frames(z, z[:3], np.zeros((4, 2)), np.zeros(4), np.zeros((3, 2)), np.zeros(3),
-                        pred_labels=["a", "b", "a", "a"], true_label=["a", "a", "a"])  # fmt: skip
+    r = evaluate_frames(
+        z,
+        z[:3],
+        np.zeros((4, 2)),
+        np.zeros(4),
+        np.zeros((3, 2)),
+        np.zeros(3),
+        pred_labels=["a", "b", "a", "a"],
+        true_label=["a", "a", "a"],
+    )
     assert r["frames"] == 3 and r["label_acc"] == pytest.approx(2 / 3)
 
 
@@ -200,8 +208,15 @@ def test_table_and_json_say_not_applicable_for_label_accuracy():
     from graphsvc.evaluate.metrics import summarize
     from graphsvc.evaluate.report import format_table
 
-    row = {"name": "run_01", "frames": 10, "joint_err_cm": 3.0, "root_err_cm": 9.0, "heading_err_deg": 2.0,
-           "label_acc": None, "per_frame": {}}  # fmt: skip
+    row = {
+        "name": "run_01",
+        "frames": 10,
+        "joint_err_cm": 3.0,
+        "root_err_cm": 9.0,
+        "heading_err_deg": 2.0,
+        "label_acc": None,
+        "per_frame": {},
+    }
     summary = summarize([row])
     assert summary["mean"]["label_acc"] is None  # null in the JSON
     lines = format_table(summary).splitlines()
@@ -221,4 +236,5 @@ def test_the_pose_oracle_is_exact_in_the_graph_and_a_floor_under_nearest_outside
     assert np.all(held_out["per_frame"]["oracle_joint_err_cm"] <= held_out["per_frame"]["joint_err_cm"] + 0.01)
     summary = loo.summarize_run([in_graph, held_out])
     assert "oracle_joint_err_cm" in summary["mean"] and "oracle_joint_err_cm" not in loo.evaluate_clip(
-        graph, kb[k], k, EXACT)
+        graph, kb[k], k, EXACT
+    )

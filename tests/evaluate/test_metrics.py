@@ -31,7 +31,11 @@ def _walk(frames, headings, ground, skeleton):
     m.translations[:, 0] = np.stack([ground[:, 0], np.full(frames, 0.96), ground[:, 1]], -1)
     _, pos = motion_fk(m)
     table = joint_map(skeleton)
-    return pos[:, canonical_indices(skeleton)], signals.ground_position(pos, table["pelvis"]), signals.heading(pos, table)
+    return (
+        pos[:, canonical_indices(skeleton)],
+        signals.ground_position(pos, table["pelvis"]),
+        signals.heading(pos, table),
+    )
 
 
 def test_identical_inputs_give_zero(skeleton):
@@ -115,12 +119,36 @@ def test_bad_inputs_raise(skeleton):
 
 
 def test_summarize_weights_by_frames():
-    a = {"name": "a", "frames": 10, "frames_dropped": 0, "joint_err_cm": 2.0, "root_err_cm": 10.0,
-         "heading_err_deg": 0.0, "label_acc": 1.0, "per_frame": {"joint_err_cm": np.zeros(10)}}  # fmt: skip
-    b = {"name": "b", "frames": 30, "frames_dropped": 1, "joint_err_cm": 6.0, "root_err_cm": 20.0,
-         "heading_err_deg": 4.0, "label_acc": 0.5, "per_frame": {}}  # fmt: skip
-    c = {"name": "c", "frames": 60, "frames_dropped": 0, "joint_err_cm": 1.0, "root_err_cm": 0.0,
-         "heading_err_deg": 1.0, "label_acc": None, "per_frame": {}}  # fmt: skip
+    a = {
+        "name": "a",
+        "frames": 10,
+        "frames_dropped": 0,
+        "joint_err_cm": 2.0,
+        "root_err_cm": 10.0,
+        "heading_err_deg": 0.0,
+        "label_acc": 1.0,
+        "per_frame": {"joint_err_cm": np.zeros(10)},
+    }
+    b = {
+        "name": "b",
+        "frames": 30,
+        "frames_dropped": 1,
+        "joint_err_cm": 6.0,
+        "root_err_cm": 20.0,
+        "heading_err_deg": 4.0,
+        "label_acc": 0.5,
+        "per_frame": {},
+    }
+    c = {
+        "name": "c",
+        "frames": 60,
+        "frames_dropped": 0,
+        "joint_err_cm": 1.0,
+        "root_err_cm": 0.0,
+        "heading_err_deg": 1.0,
+        "label_acc": None,
+        "per_frame": {},
+    }
     s = summarize([a, b, c])
     assert [r["name"] for r in s["clips"]] == ["a", "b", "c"]
     assert all("per_frame" not in r for r in s["clips"])

@@ -34,14 +34,14 @@ def test_join_shifts_each_clip_to_start_where_the_last_ended():
     for k, clip in enumerate(clips):
         own_ground, own_heading = _ground_heading(resample(clip, 30.0))
         n = own_ground.shape[0]
-        assert list(labels[at: at + n]) == [clip.labels[0]] * n
+        assert list(labels[at : at + n]) == [clip.labels[0]] * n
         # Pose and heading as recorded; the track moved rigidly by a shift only.
-        np.testing.assert_allclose(heading[at: at + n], own_heading, atol=1e-9)
+        np.testing.assert_allclose(heading[at : at + n], own_heading, atol=1e-9)
         shift = ground[at] - own_ground[0]
-        np.testing.assert_allclose(ground[at: at + n], own_ground + shift, atol=1e-9)
+        np.testing.assert_allclose(ground[at : at + n], own_ground + shift, atol=1e-9)
         if k:
             np.testing.assert_allclose(ground[at], ground[at - 1], atol=1e-9)  # starts where the last ended
-        np.testing.assert_array_equal(joined.rotations[at: at + n], resample(clip, 30.0).rotations)
+        np.testing.assert_array_equal(joined.rotations[at : at + n], resample(clip, 30.0).rotations)
         at += n
 
 
@@ -74,8 +74,14 @@ def test_groups_have_distinct_labels_and_one_performer():
 
 def test_groups_keep_performers_apart():
     clips = mixed_kb(13, clips_per_kind=1, seconds=2.0)
-    taller = [c.copy(skeleton=type(c.skeleton)(c.skeleton.names, c.skeleton.parents, c.skeleton.offsets * 1.1,
-                                                c.skeleton.channels, c.skeleton.end_site)) for c in clips]
+    taller = [
+        c.copy(
+            skeleton=type(c.skeleton)(
+                c.skeleton.names, c.skeleton.parents, c.skeleton.offsets * 1.1, c.skeleton.channels, c.skeleton.end_site
+            )
+        )
+        for c in clips
+    ]
     groups = mixed_groups(clips + taller, 4, seed=0)
     assert sorted(sorted(g) for g in groups) == [[0, 1, 2, 3], [4, 5, 6, 7]]
 

@@ -12,12 +12,18 @@ from graphsvc.evaluate import protocols as P
 def _clips():
     a, b, c = (np.full((3, 3), v) for v in (1.0, 2.0, 3.0))  # three skeletons
     spec = [
-        ("dataset-2_walk_normal_001", "walk", c), ("dataset-2_walk_normal_004", "walk", c),
-        ("dataset-2_walk_masculine_002", "walk", c), ("dataset-2_run_normal_001", "run", c),
-        ("dataset-2_walk_youthful_001", "walk", b), ("dataset-2_wave-left-hand_feminine_003", "wave-left-hand", b),
-        ("dataset-2_walk_active_001", "walk", a), ("dataset-1_walk_normal_001", "walk", c),
-        ("dataset-1_bow_sad_001", "bow", None), ("walk_01", "walk", None), ("02_05", "", None),
-    ]  # fmt: skip
+        ("dataset-2_walk_normal_001", "walk", c),
+        ("dataset-2_walk_normal_004", "walk", c),
+        ("dataset-2_walk_masculine_002", "walk", c),
+        ("dataset-2_run_normal_001", "run", c),
+        ("dataset-2_walk_youthful_001", "walk", b),
+        ("dataset-2_wave-left-hand_feminine_003", "wave-left-hand", b),
+        ("dataset-2_walk_active_001", "walk", a),
+        ("dataset-1_walk_normal_001", "walk", c),
+        ("dataset-1_bow_sad_001", "bow", None),
+        ("walk_01", "walk", None),
+        ("02_05", "", None),
+    ]
     return [P.Clip(n, label, o) for n, label, o in spec]
 
 
@@ -35,15 +41,28 @@ def test_each_protocol_hides_its_set():
     clips = _clips()
     names = [c.name for c in clips]
     test = clips[1]  # walk, normal, take 004
-    hide = {p: sorted(names[k] for k in P.hidden_clips(p, test, clips, *(
-        (P.actor_groups(clips), P.actor_groups(clips)[1]) if p == "actor" else ()))) for p in P.PROTOCOLS}
+    hide = {
+        p: sorted(
+            names[k]
+            for k in P.hidden_clips(
+                p, test, clips, *((P.actor_groups(clips), P.actor_groups(clips)[1]) if p == "actor" else ())
+            )
+        )
+        for p in P.PROTOCOLS
+    }
     assert hide["clip"] == ["dataset-2_walk_normal_004"]
     assert hide["takes"] == ["dataset-2_walk_normal_001", "dataset-2_walk_normal_004"]
     # normal and masculine are one actor (built-in), and dataset 1's walk_normal has
     # the same skeleton: the same person, found by the offsets.
-    assert hide["actor"] == sorted(["dataset-2_walk_normal_001", "dataset-2_walk_normal_004",
-                                    "dataset-2_walk_masculine_002", "dataset-2_run_normal_001",
-                                    "dataset-1_walk_normal_001"])  # fmt: skip
+    assert hide["actor"] == sorted(
+        [
+            "dataset-2_walk_normal_001",
+            "dataset-2_walk_normal_004",
+            "dataset-2_walk_masculine_002",
+            "dataset-2_run_normal_001",
+            "dataset-1_walk_normal_001",
+        ]
+    )
     assert hide["content"] == sorted(n for n, c in zip(names, clips) if c.label == "walk")
     with pytest.raises(InputError, match="unknown hold-out protocol"):
         P.hidden_clips("performer", test, clips)
@@ -69,8 +88,9 @@ def test_actor_map_file_joins_and_checks(tmp_path):
 
 def test_activity_groups():
     assert [P.activity(x) for x in ("walk", "walk-turn-left", "run", "stop", "dash")] == ["locomotion"] * 5
-    assert [P.activity(x) for x in ("wave-left-hand", "raise-up-both-hands", "bow", "idle", "forehand")] == \
-        ["gestures"] * 5
+    assert [P.activity(x) for x in ("wave-left-hand", "raise-up-both-hands", "bow", "idle", "forehand")] == [
+        "gestures"
+    ] * 5
 
 
 def test_builtin_bandai_actors_agree_with_the_skeletons(data_dir):

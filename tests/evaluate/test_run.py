@@ -29,8 +29,15 @@ def graph_file(kb, tmp_path_factory):
 
 def test_the_summary_is_the_json_and_the_lines_are_the_commands(kb, graph_file, tmp_path, capsys):
     clip = sorted(p.name for p in kb.glob("*.bvh"))[0]
-    config = EvalConfig(kb=(str(kb),), test=clip, graph=str(graph_file), hold_out="clip",
-                        options=Options(strategy="nearest"), json=str(tmp_path / "E.json"), progress=False)  # fmt: skip
+    config = EvalConfig(
+        kb=(str(kb),),
+        test=clip,
+        graph=str(graph_file),
+        hold_out="clip",
+        options=Options(strategy="nearest"),
+        json=str(tmp_path / "E.json"),
+        progress=False,
+    )
     notes = []
     summary = run(config, note=notes.append)
     assert summary == json.loads((tmp_path / "E.json").read_text()) and notes == []
@@ -41,15 +48,29 @@ def test_the_summary_is_the_json_and_the_lines_are_the_commands(kb, graph_file, 
     assert lines[1].endswith(f"; wrote {tmp_path / 'E.json'}") and "(kelly6)" in lines[1]
 
     # the command prints the same lines (the timings aside) and writes the same JSON
-    argv = ["evaluate", str(kb), "--test", clip, "--graph", str(graph_file), "--hold-out", "clip", "--strategy",
-            "nearest", "--json", str(tmp_path / "C.json"), "--quiet"]  # fmt: skip
+    argv = [
+        "evaluate",
+        str(kb),
+        "--test",
+        clip,
+        "--graph",
+        str(graph_file),
+        "--hold-out",
+        "clip",
+        "--strategy",
+        "nearest",
+        "--json",
+        str(tmp_path / "C.json"),
+        "--quiet",
+    ]
     capsys.readouterr()
     assert main(argv) == 0
     out = capsys.readouterr().out.splitlines()
     again = json.loads((tmp_path / "C.json").read_text())
     timing = ("build_s", "evaluate_s", "json")
-    assert {k: v for k, v in again["config"].items() if k not in timing} == \
-        {k: v for k, v in summary["config"].items() if k not in timing}
+    assert {k: v for k, v in again["config"].items() if k not in timing} == {
+        k: v for k, v in summary["config"].items() if k not in timing
+    }
     assert [c["joint_err_cm"] for c in again["clips"]] == [c["joint_err_cm"] for c in summary["clips"]]
     assert out[0].split() == lines[0].splitlines()[0].split()
     assert out[-1].split(" on ")[1].split(";")[0] == lines[1].split(" on ")[1].split(";")[0]
@@ -61,8 +82,12 @@ def test_a_test_clip_not_in_the_graph_is_a_note(kb, graph_file, tmp_path):
     write_procedural_kb(other, seed=9, minutes=0.1)
     clip = sorted(p.name for p in other.glob("*.bvh"))[0]
     notes = []
-    run(EvalConfig(kb=(str(other),), test=clip, graph=str(graph_file), options=Options(strategy="nearest"),
-                   progress=False), note=notes.append)  # fmt: skip
+    run(
+        EvalConfig(
+            kb=(str(other),), test=clip, graph=str(graph_file), options=Options(strategy="nearest"), progress=False
+        ),
+        note=notes.append,
+    )
     assert len(notes) == 1 and "are evaluated with nothing hidden" in notes[0]
 
 

@@ -67,7 +67,9 @@ def test_bridges_respect_foot_contacts_and_never_start_in_flight(graph):
         k = np.arange(1, b["count"] + 1)
         fa = np.clip(b["a_entry"] + k, 0, g.clips[b["clip_a"]]["frames"] - 1)
         fb = np.clip(b["b_exit"] - b["count"] - 1 + k, 0, g.clips[b["clip_b"]]["frames"] - 1)
-        both = g.node_contacts[_frame_node(g, b["clip_a"], 0) + fa] & g.node_contacts[_frame_node(g, b["clip_b"], 0) + fb]
+        both = (
+            g.node_contacts[_frame_node(g, b["clip_a"], 0) + fa] & g.node_contacts[_frame_node(g, b["clip_b"], 0) + fb]
+        )
         np.testing.assert_array_equal(g.node_contacts[nodes], both)
         # Entered from a frame of a, left to a frame of b, one edge per step.
         e_in = np.flatnonzero((g.edge_dst == nodes[0]) & (g.edge_kind == EDGE_BRIDGE))
@@ -88,11 +90,12 @@ def test_bridge_blends_from_one_clip_into_the_other(graph):
     pelvis = joint_map(sk)["pelvis"]
 
     def local(nodes):
-        _, pos = forward_kinematics(g.node_rotations[nodes].astype(np.float64),
-                                    g.node_translations[nodes].astype(np.float64), sk.parents)
+        _, pos = forward_kinematics(
+            g.node_rotations[nodes].astype(np.float64), g.node_translations[nodes].astype(np.float64), sk.parents
+        )
         c, s = np.cos(g.node_heading[nodes]), np.sin(g.node_heading[nodes])
-        x = pos[..., 0] - pos[:, pelvis: pelvis + 1, 0]
-        z = pos[..., 2] - pos[:, pelvis: pelvis + 1, 2]
+        x = pos[..., 0] - pos[:, pelvis : pelvis + 1, 0]
+        z = pos[..., 2] - pos[:, pelvis : pelvis + 1, 2]
         return np.stack([c[:, None] * x - s[:, None] * z, pos[..., 1], s[:, None] * x + c[:, None] * z], axis=-1)
 
     for b in g.bridges[:: max(1, len(g.bridges) // 12)]:
@@ -148,10 +151,16 @@ def test_synthesis_plays_through_a_bridge_without_jumps(graph):
 
     step = fastest(motion.rotations, motion.translations)
     # The two clips as recorded, over the frames the bridge blends and a bit around.
-    own = max(fastest(g.node_rotations[r].astype(float), g.node_translations[r].astype(float)).max()
-              for r in (np.arange(entry - 5, min(entry + b["count"] + 6, g.clips[b["clip_a"]]["first_node"]
-                                                 + g.clips[b["clip_a"]]["frames"])),
-                        np.arange(max(exit_node - b["count"] - 6, g.clips[b["clip_b"]]["first_node"]), exit_node + 6)))
+    own = max(
+        fastest(g.node_rotations[r].astype(float), g.node_translations[r].astype(float)).max()
+        for r in (
+            np.arange(
+                entry - 5,
+                min(entry + b["count"] + 6, g.clips[b["clip_a"]]["first_node"] + g.clips[b["clip_a"]]["frames"]),
+            ),
+            np.arange(max(exit_node - b["count"] - 6, g.clips[b["clip_b"]]["first_node"]), exit_node + 6),
+        )
+    )
     assert step.max() < 1.25 * own, (step.max(), own)  # no teleport anywhere on the way
 
 
@@ -175,8 +184,9 @@ def test_graph_file_keeps_bridges(graph, tmp_path):
 def test_blend_length_rule():
     rate = 30.0
     # 0.3 s at least; 3 s per metre of pose difference; Δv / 2 m/s²; 1.2 s at most.
-    np.testing.assert_array_equal(br.blend_length(np.array([0.0, 0.2, 0.05, 1.0]), np.array([0.0, 0.0, 1.4, 0.0]), rate),
-                                  [9, 18, 21, 36])
+    np.testing.assert_array_equal(
+        br.blend_length(np.array([0.0, 0.2, 0.05, 1.0]), np.array([0.0, 0.0, 1.4, 0.0]), rate), [9, 18, 21, 36]
+    )
 
 
 def test_match_features_ignore_where_and_which_way_a_clip_goes(kb):

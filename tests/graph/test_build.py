@@ -89,7 +89,10 @@ def test_original_edges_reproduce_the_clip_stream_and_root_path(built, kb):
         assert acc.shape[0] == F - 1
         np.testing.assert_array_equal(acc, rec.accelerations[1:])  # exact to float32
         ground, heading = meta.integrate_path(
-            rec.ground_position[0], rec.heading[0], g.edge_offset[e][order].astype(float), g.edge_heading[e][order].astype(float)
+            rec.ground_position[0],
+            rec.heading[0],
+            g.edge_offset[e][order].astype(float),
+            g.edge_heading[e][order].astype(float),
         )
         assert np.max(np.linalg.norm(ground - rec.ground_position, axis=-1)) < 1e-3
         assert np.max(np.abs(np.angle(np.exp(1j * (heading - rec.heading))))) < 1e-4

@@ -50,13 +50,16 @@ def test_exclude_and_no_msv(kb_dir, tmp_path, capsys):
     assert "run" not in info["labels"] and info["nodes_by_kind"]["slow-down"] == 0
 
 
-@pytest.mark.parametrize("case, needle", [
-    ("empty", "empty"),
-    ("missing-folder", "does not exist"),
-    ("layout", "unknown layout"),
-    ("short", "shorter than the distance window"),
-    ("corrupt-info", "corrupted"),
-])
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("empty", "empty"),
+        ("missing-folder", "does not exist"),
+        ("layout", "unknown layout"),
+        ("short", "shorter than the distance window"),
+        ("corrupt-info", "corrupted"),
+    ],
+)
 def test_bad_input_exit_2_no_file(kb_dir, tmp_path, capsys, case, needle):
     empty = tmp_path / "empty"
     empty.mkdir()

@@ -17,8 +17,11 @@ KINDS = ("walk", "run", "idle", "punch")
 def mixed_kb(seed: int, clips_per_kind: int = 2, seconds: float = 6.0):
     rng = np.random.default_rng(seed)
     sk = standard_skeleton()
-    return [make_clip(kind, rng, sk, 30.0, seconds, f"{kind}_{k:02d}", seed) for kind in KINDS
-            for k in range(clips_per_kind)]  # fmt: skip
+    return [
+        make_clip(kind, rng, sk, 30.0, seconds, f"{kind}_{k:02d}", seed)
+        for kind in KINDS
+        for k in range(clips_per_kind)
+    ]
 
 
 @pytest.fixture(scope="module")

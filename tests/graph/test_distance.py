@@ -18,11 +18,13 @@ def rot_y(theta):
 
 def brute_force(cloud_a, cloud_b, w):
     """Weighted RMS after the best Y rotation (1-D search) and optimal XZ translation."""
+
     def cost(theta):
         rb = cloud_b @ rot_y(theta).T
         t = np.sum(w[:, None] * (cloud_a - rb), axis=0)
         t[1] = 0.0
         return np.sum(w * np.sum((cloud_a - rb - t) ** 2, axis=-1))
+
     grid = np.linspace(-np.pi, np.pi, 721)
     start = grid[np.argmin([cost(g) for g in grid])]
     res = minimize_scalar(cost, bounds=(start - 0.01, start + 0.01), method="bounded", options={"xatol": 1e-12})

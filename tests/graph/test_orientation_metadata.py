@@ -50,8 +50,7 @@ def test_edge_up_is_what_the_simulated_devices_report_of_the_same_frames(built):
         first, frames = g.clips[c]["first_node"], g.clips[c]["frames"]
         edges = np.flatnonzero((g.edge_kind == EDGE_ORIGINAL) & (g.edge_dst >= first) & (g.edge_dst < first + frames))
         assert edges.size == frames - 1
-        np.testing.assert_allclose(g.edge_up[edges].astype(np.float64), measured[g.edge_dst[edges] - first],
-                                   atol=2e-3)  # fmt: skip
+        np.testing.assert_allclose(g.edge_up[edges].astype(np.float64), measured[g.edge_dst[edges] - first], atol=2e-3)
 
 
 def test_relayout_and_a_saved_graph_agree_with_the_build(built, tmp_path):

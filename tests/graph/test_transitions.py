@@ -11,7 +11,7 @@ from graphsvc.graph.transitions import (
     find_transitions,
     find_transitions_bruteforce,
     local_minima,
-)  # fmt: skip
+)
 from graphsvc.motion.signals import contact_changes
 
 PERIOD = 30  # frames per gait cycle
@@ -174,7 +174,11 @@ def test_local_minimum_and_determinism(kb):
                     continue
                 if np.any(contacts[s2] != contacts[s]) or np.any(contacts[t2] != contacts[s]):
                     continue
-                if clip[s2] == clip[t2] and abs(s2 - t2) < 10 or args["frame_in_clip"][t2] + 1 >= args["clip_lengths"][clip[t2]]:
+                if (
+                    clip[s2] == clip[t2]
+                    and abs(s2 - t2) < 10
+                    or args["frame_in_clip"][t2] + 1 >= args["clip_lengths"][clip[t2]]
+                ):
                     continue
                 assert d[s2, t2] >= dist - 1e-6
     more = find_transitions(**args, threshold_m=0.3, local_min_radius=0)

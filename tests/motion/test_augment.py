@@ -122,14 +122,29 @@ def test_pairs_on_bandai_names():
 
 
 def test_pairs_on_other_conventions():
-    names = ("Hips", "LeftUpLeg", "RightUpLeg", "mixamorig:LeftHand", "mixamorig:RightHand",
-             "hand.L", "hand.R", "thigh_l", "thigh_r")  # fmt: skip
+    names = (
+        "Hips",
+        "LeftUpLeg",
+        "RightUpLeg",
+        "mixamorig:LeftHand",
+        "mixamorig:RightHand",
+        "hand.L",
+        "hand.R",
+        "thigh_l",
+        "thigh_r",
+    )
     got = _partner_names(names, mirror_pairs(names))
     assert got == {
-        "Hips": "Hips", "LeftUpLeg": "RightUpLeg", "RightUpLeg": "LeftUpLeg",
-        "mixamorig:LeftHand": "mixamorig:RightHand", "mixamorig:RightHand": "mixamorig:LeftHand",
-        "hand.L": "hand.R", "hand.R": "hand.L", "thigh_l": "thigh_r", "thigh_r": "thigh_l",
-    }  # fmt: skip
+        "Hips": "Hips",
+        "LeftUpLeg": "RightUpLeg",
+        "RightUpLeg": "LeftUpLeg",
+        "mixamorig:LeftHand": "mixamorig:RightHand",
+        "mixamorig:RightHand": "mixamorig:LeftHand",
+        "hand.L": "hand.R",
+        "hand.R": "hand.L",
+        "thigh_l": "thigh_r",
+        "thigh_r": "thigh_l",
+    }
 
 
 def test_unpaired_and_inconsistent_names_raise():
@@ -144,7 +159,7 @@ def test_unpaired_and_inconsistent_names_raise():
 
 def test_no_fitting_reflection_raises():
     # The right hip sits in front where the left one sits to the side.
-    sk = _skeleton([("pelvis", None, (0, 1, 0)), ("l_hip", "pelvis", (0.1, 0, 0)), ("r_hip", "pelvis", (0, 0, 0.1))])  # fmt: skip
+    sk = _skeleton([("pelvis", None, (0, 1, 0)), ("l_hip", "pelvis", (0.1, 0, 0)), ("r_hip", "pelvis", (0, 0, 0.1))])
     with pytest.raises(SkeletonError, match="reflection"):
         mirror_motion(_random_motion(sk, frames=2))
 

@@ -117,9 +117,12 @@ def test_zxy_means_rz_rx_ry(tmp_path):
     [(0.01, 1.0), (1.0, 0.01), (10.0, 0.001)],
 )
 def test_unit_auto_detection(tmp_path, factor, expected):
-    text = SIMPLE.replace("OFFSET 0 50 0", f"OFFSET 0 {50 * factor} 0").replace(
-        "OFFSET 0 -85 0", f"OFFSET 0 {-85 * factor} 0"
-    ).replace("OFFSET 0 15 0", f"OFFSET 0 {15 * factor} 0").replace("OFFSET 10 -5 0", f"OFFSET {10 * factor} {-5 * factor} 0")
+    text = (
+        SIMPLE.replace("OFFSET 0 50 0", f"OFFSET 0 {50 * factor} 0")
+        .replace("OFFSET 0 -85 0", f"OFFSET 0 {-85 * factor} 0")
+        .replace("OFFSET 0 15 0", f"OFFSET 0 {15 * factor} 0")
+        .replace("OFFSET 10 -5 0", f"OFFSET {10 * factor} {-5 * factor} 0")
+    )
     text = text.replace("0 10 0 5 6 7", f"0 {10 * factor} 0 5 6 7").replace("0 12 0 0 0 0", f"0 {12 * factor} 0 0 0 0")
     m = read_bvh(write(tmp_path, text))
     np.testing.assert_allclose(m.skeleton.offsets[5], [0, -85 * factor * expected, 0], rtol=1e-9)
@@ -281,10 +284,30 @@ def test_fk_preserves_bone_lengths(motion):
 MALFORMED = [
     ("no hierarchy", lambda t: t.replace("HIERARCHY\n", ""), "expected HIERARCHY", 1),
     ("no motion", lambda t: t.split("MOTION")[0], "MOTION", None),
-    ("channel count", lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"), "declares 4 channels but lists 3", 13),
-    ("channel count low", lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 2 Zrotation"), "declares 2 channels but lists 3", 13),
-    ("channel name", lambda t: t.replace("CHANNELS 1 Xrotation", "CHANNELS 1 Wrotation"), "unknown channel name 'Wrotation'", 23),
-    ("missing close", lambda t: t.replace("      }\n    }\n  }\n", "      }\n    }\n", 1), "expected '}' closing joint", None),
+    (
+        "channel count",
+        lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"),
+        "declares 4 channels but lists 3",
+        13,
+    ),
+    (
+        "channel count low",
+        lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 2 Zrotation"),
+        "declares 2 channels but lists 3",
+        13,
+    ),
+    (
+        "channel name",
+        lambda t: t.replace("CHANNELS 1 Xrotation", "CHANNELS 1 Wrotation"),
+        "unknown channel name 'Wrotation'",
+        23,
+    ),
+    (
+        "missing close",
+        lambda t: t.replace("      }\n    }\n  }\n", "      }\n    }\n", 1),
+        "expected '}' closing joint",
+        None,
+    ),
     ("extra close", lambda t: t.replace("}\nMOTION", "}\n}\nMOTION"), "expected MOTION", 30),
     ("frames mismatch", lambda t: t.replace("Frames: 2", "Frames: 3"), "truncated", None),
     ("too many rows", lambda t: t.replace("Frames: 2", "Frames: 1"), "more data rows", 34),

@@ -65,7 +65,7 @@ def test_prepended_pose_is_held_then_blends_into_the_clip(clip):
     assert np.allclose(out.rotations[:held], rot[None])
     pos = motion_fk(out)[1]
     # The blend is smooth: no joint jumps more than the clip's own fastest step at the seam.
-    steps = np.linalg.norm(np.diff(pos[held - 1:n + 1], axis=0), axis=-1).max(axis=-1)
+    steps = np.linalg.norm(np.diff(pos[held - 1 : n + 1], axis=0), axis=-1).max(axis=-1)
     assert steps.max() < 0.1  # m a frame; a jump to the first frame would be ~0.5 m for the arms
     assert np.linalg.norm(pos[n - 1] - pos[n], axis=-1).max() < 0.05
 

@@ -22,8 +22,18 @@ def frame(duration=1 / 30, root=(0.0, 0.9, 0.0), root_rot=IDENTITY, knee_r=0.0, 
     """A frame of the humanoid: duration, root position and rotation, then chest, neck,
     right hip, right knee, right ankle, right shoulder, right elbow, left hip, left knee,
     left ankle, left shoulder, left elbow."""
-    return ([duration, *root, *root_rot] + IDENTITY * 3 + [knee_r] + IDENTITY * 2 + [0.0] + IDENTITY
-            + [0.0] + IDENTITY + list(shoulder_l) + [0.0])  # fmt: skip
+    return (
+        [duration, *root, *root_rot]
+        + IDENTITY * 3
+        + [knee_r]
+        + IDENTITY * 2
+        + [0.0]
+        + IDENTITY
+        + [0.0]
+        + IDENTITY
+        + list(shoulder_l)
+        + [0.0]
+    )
 
 
 def write(path, data) -> str:
@@ -44,9 +54,16 @@ def test_known_rotations_give_hand_worked_positions(tmp_path):
     #   right toe: (0, 0, 0.084887) + (0, -0.421546, 0) + (0, -0.40987, 0) + (0.1335, -0.05, 0)
     #     = (0.1335, -0.881416, 0.084887), turned (0.084887, -0.881416, -0.1335), + root
     # graphsvc's frame (facing +Z, left at +X) is DeepMimic's turned: (x, y, z) → (-z, y, x).
-    path = write(tmp_path / "pose.txt", {"Loop": "none", "Frames": [
-        frame(knee_r=-math.pi / 2, shoulder_l=[H, H, 0.0, 0.0]),
-        frame(duration=0.0, root=(1.0, 0.9, 2.0), root_rot=[H, 0.0, H, 0.0])]})  # fmt: skip
+    path = write(
+        tmp_path / "pose.txt",
+        {
+            "Loop": "none",
+            "Frames": [
+                frame(knee_r=-math.pi / 2, shoulder_l=[H, H, 0.0, 0.0]),
+                frame(duration=0.0, root=(1.0, 0.9, 2.0), root_rot=[H, 0.0, H, 0.0]),
+            ],
+        },
+    )
     m = load_motion(path)
     assert (m.num_frames, m.rate_hz, m.labels) == (2, 30.0, ("pose",))
     t = joint_map(m.skeleton)
@@ -88,8 +105,10 @@ def test_folder_scan_collects_deepmimic_txt_only(tmp_path):
 
 BAD = {
     "missing key": ({"Loop": "wrap"}, 'missing key "Frames"'),
-    "non-finite": ('{"Frames": [' + json.dumps(frame()).replace("0.9", "NaN", 1) + "]}",
-                   "frame 0: non-finite value (nan) for root position y"),
+    "non-finite": (
+        '{"Frames": [' + json.dumps(frame()).replace("0.9", "NaN", 1) + "]}",
+        "frame 0: non-finite value (nan) for root position y",
+    ),
     "extra joint": ({"Frames": [frame() + IDENTITY]}, "values for a joint the skeleton lacks"),
     "too few": ({"Frames": [frame()[:-5]]}, "from left_shoulder rotation w on missing"),
     "mirror joint": ({"Frames": [frame()], "RightJoints": [3, 20]}, "names joint 20, which the skeleton lacks"),
@@ -97,7 +116,7 @@ BAD = {
     "no duration": ({"Frames": [frame(0.0), frame(0.0)]}, "every frame lasts 0 s"),
     "zero quaternion": ({"Frames": [frame(shoulder_l=[0.0] * 4)]}, "left_shoulder's rotation quaternion has zero"),
     "not json": ("{Frames: oops", "not valid JSON"),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize("case", sorted(BAD))

@@ -28,8 +28,9 @@ from tests.conftest import still_motion
 
 # Where the validator is looked for: $GLTF_VALIDATOR (the package's folder), else the
 # folder `.ci/run` installs it into (npm install --prefix ~/.cache/graphsvc/node).
-VALIDATOR = Path(os.environ.get("GLTF_VALIDATOR",
-                                Path.home() / ".cache" / "graphsvc" / "node" / "node_modules" / "gltf-validator"))  # fmt: skip
+VALIDATOR = Path(
+    os.environ.get("GLTF_VALIDATOR", Path.home() / ".cache" / "graphsvc" / "node" / "node_modules" / "gltf-validator")
+)
 _VALIDATE_JS = """
 const fs = require('fs'), path = require('path');
 const validator = require(process.argv[1]);
@@ -52,9 +53,12 @@ def validate(paths) -> list[dict]:
     if node is None:
         pytest.skip("node is not installed: the glTF validator (npm gltf-validator) cannot run")
     if not (VALIDATOR / "package.json").is_file():
-        pytest.skip(f"the npm package gltf-validator is not at {VALIDATOR} (`.ci/run` installs it; or set GLTF_VALIDATOR)")
-    done = subprocess.run([node, "-e", _VALIDATE_JS, str(VALIDATOR), *map(str, paths)], capture_output=True,
-                          text=True, timeout=120)  # fmt: skip
+        pytest.skip(
+            f"the npm package gltf-validator is not at {VALIDATOR} (`.ci/run` installs it; or set GLTF_VALIDATOR)"
+        )
+    done = subprocess.run(
+        [node, "-e", _VALIDATE_JS, str(VALIDATOR), *map(str, paths)], capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
 
@@ -70,10 +74,10 @@ def parse(path: Path) -> tuple[dict, bytes]:
         assert magic == b"glTF" and version == 2 and length == len(data)
         n, kind = struct.unpack_from("<II", data, 12)
         assert kind == 0x4E4F534A and n % 4 == 0
-        doc = json.loads(data[20:20 + n])
+        doc = json.loads(data[20 : 20 + n])
         m, kind = struct.unpack_from("<II", data, 20 + n)
         assert kind == 0x004E4942 and m % 4 == 0 and 28 + n + m == len(data)
-        return doc, data[28 + n:28 + n + m]
+        return doc, data[28 + n : 28 + n + m]
     doc = json.loads(data)
     uri = doc["buffers"][0]["uri"]
     head, payload = uri.split(",", 1)
@@ -121,24 +125,32 @@ def matrix(translation, rotation) -> np.ndarray:
     """T·R of a glTF node: rotation as x, y, z, w."""
     x, y, z, w = rotation
     m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]  # fmt: skip
+    m[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
     m[:3, 3] = translation
     return m
 
 
 def world_matrices(doc: dict, blob: bytes, t: float) -> dict[int, np.ndarray]:
     """Every node's world matrix at time t of the first animation."""
-    trs = {k: {"translation": np.array(n.get("translation", [0.0, 0, 0])),
-               "rotation": np.array(n.get("rotation", [0.0, 0, 0, 1]))} for k, n in enumerate(doc["nodes"])}  # fmt: skip
+    trs = {
+        k: {
+            "translation": np.array(n.get("translation", [0.0, 0, 0])),
+            "rotation": np.array(n.get("rotation", [0.0, 0, 0, 1])),
+        }
+        for k, n in enumerate(doc["nodes"])
+    }
     anim = doc["animations"][0]
     for ch in anim["channels"]:
         s = anim["samplers"][ch["sampler"]]
         assert s["interpolation"] == "LINEAR"
         path = ch["target"]["path"]
-        trs[ch["target"]["node"]][path] = sample(accessor(doc, blob, s["input"]), accessor(doc, blob, s["output"]), t,
-                                                 path == "rotation")  # fmt: skip
+        trs[ch["target"]["node"]][path] = sample(
+            accessor(doc, blob, s["input"]), accessor(doc, blob, s["output"]), t, path == "rotation"
+        )
     world = {}
 
     def visit(k, parent):
@@ -323,16 +335,19 @@ def test_read_back_the_same_motion(tmp_path, clip):
         assert np.abs(motion_fk(back)[1] - motion_fk(motion)[1]).max() < TOLERANCE_M
 
 
-@pytest.mark.parametrize("case, needle", [
-    ("not glTF", "not glTF JSON"),
-    ("truncated", "GLB version 2, length"),
-    ("external buffer", "external file"),
-    ("accessor past its view", "runs past its buffer view"),
-    ("nan", "non-finite"),
-    ("no animation", "no animation"),
-    ("uneven keyframes", "not at a uniform rate"),
-    ("bad index", "is not an index"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("not glTF", "not glTF JSON"),
+        ("truncated", "GLB version 2, length"),
+        ("external buffer", "external file"),
+        ("accessor past its view", "runs past its buffer view"),
+        ("nan", "non-finite"),
+        ("no animation", "no animation"),
+        ("uneven keyframes", "not at a uniform rate"),
+        ("bad index", "is not an index"),
+    ],
+)
 def test_a_malformed_glTF_is_one_line_naming_the_file(tmp_path, clip, case, needle):
     from graphsvc.errors import FormatError
     from graphsvc.motion.gltf_read import read_gltf
@@ -355,7 +370,7 @@ def test_a_malformed_glTF_is_one_line_naming_the_file(tmp_path, clip, case, need
             blob = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
             a = doc["accessors"][doc["animations"][0]["samplers"][0]["output"]]
             o = doc["bufferViews"][a["bufferView"]]["byteOffset"]
-            blob[o:o + 4] = struct.pack("<f", np.nan)
+            blob[o : o + 4] = struct.pack("<f", np.nan)
             doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
         elif case == "no animation":
             del doc["animations"]
@@ -363,7 +378,7 @@ def test_a_malformed_glTF_is_one_line_naming_the_file(tmp_path, clip, case, need
             blob = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
             a = doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]
             o = doc["bufferViews"][a["bufferView"]]["byteOffset"] + 4
-            blob[o:o + 4] = struct.pack("<f", 0.01)
+            blob[o : o + 4] = struct.pack("<f", 0.01)
             doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
         elif case == "bad index":
             doc["animations"][0]["samplers"][0]["input"] = -1
@@ -387,10 +402,12 @@ def test_commands_that_write_no_motion_refuse_glTF_in_one_line(tmp_path, capsys)
     from tests.conftest import write_gliding_clip
 
     clip = write_gliding_clip(tmp_path)
-    for argv in (["simulate", clip, "--markers", "hands-feet", "-o", tmp_path / "m.glb"],
-                 ["simulate", clip, "--layout", "kelly6", "-o", tmp_path / "m.gltf"],
-                 ["mapping", clip, "-o", tmp_path / "map.glb"],
-                 ["build", clip, "-o", tmp_path / "g.glb"]):  # fmt: skip
+    for argv in (
+        ["simulate", clip, "--markers", "hands-feet", "-o", tmp_path / "m.glb"],
+        ["simulate", clip, "--layout", "kelly6", "-o", tmp_path / "m.gltf"],
+        ["mapping", clip, "-o", tmp_path / "map.glb"],
+        ["build", clip, "-o", tmp_path / "g.glb"],
+    ):
         assert main([str(a) for a in argv]) == 2
         err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
         assert len(err) == 1 and err[0].startswith("graphsvc: error:") and ".gl" in err[0], err

@@ -19,40 +19,124 @@ from graphsvc.sensors.simulate import simulate_recording
 
 # (parent, name) in topological order, with "{s}" for the side's spelling.
 BODY = [
-    (None, "{hips}"), ("{hips}", "{spine}"), ("{spine}", "{chest}"), ("{chest}", "{neck}"), ("{neck}", "{head}"),
-    ("{chest}", "{L}{collar}"), ("{L}{collar}", "{L}{upper}"), ("{L}{upper}", "{L}{fore}"), ("{L}{fore}", "{L}{hand}"),
-    ("{chest}", "{R}{collar}"), ("{R}{collar}", "{R}{upper}"), ("{R}{upper}", "{R}{fore}"), ("{R}{fore}", "{R}{hand}"),
-    ("{hips}", "{L}{thigh}"), ("{L}{thigh}", "{L}{shin}"), ("{L}{shin}", "{L}{foot}"), ("{L}{foot}", "{L}{toe}"),
-    ("{hips}", "{R}{thigh}"), ("{R}{thigh}", "{R}{shin}"), ("{R}{shin}", "{R}{foot}"), ("{R}{foot}", "{R}{toe}"),
-]  # fmt: skip
+    (None, "{hips}"),
+    ("{hips}", "{spine}"),
+    ("{spine}", "{chest}"),
+    ("{chest}", "{neck}"),
+    ("{neck}", "{head}"),
+    ("{chest}", "{L}{collar}"),
+    ("{L}{collar}", "{L}{upper}"),
+    ("{L}{upper}", "{L}{fore}"),
+    ("{L}{fore}", "{L}{hand}"),
+    ("{chest}", "{R}{collar}"),
+    ("{R}{collar}", "{R}{upper}"),
+    ("{R}{upper}", "{R}{fore}"),
+    ("{R}{fore}", "{R}{hand}"),
+    ("{hips}", "{L}{thigh}"),
+    ("{L}{thigh}", "{L}{shin}"),
+    ("{L}{shin}", "{L}{foot}"),
+    ("{L}{foot}", "{L}{toe}"),
+    ("{hips}", "{R}{thigh}"),
+    ("{R}{thigh}", "{R}{shin}"),
+    ("{R}{shin}", "{R}{foot}"),
+    ("{R}{foot}", "{R}{toe}"),
+]
 
 
 def _skeleton(**words) -> Skeleton:
     fill = lambda t: None if t is None else t.format(**words)  # noqa: E731
     names = [fill(n) for _, n in BODY]
     parents = [-1 if p is None else names.index(fill(p)) for p, _ in BODY]
-    return Skeleton(tuple(names), np.array(parents), np.zeros((len(names), 3)), tuple(() for _ in names),
-                    np.zeros(len(names), bool))  # fmt: skip
+    return Skeleton(
+        tuple(names), np.array(parents), np.zeros((len(names), 3)), tuple(() for _ in names), np.zeros(len(names), bool)
+    )
 
 
 SCHEMES = {
-    "LeftElbow": dict(hips="Hips", spine="Spine", chest="Chest", neck="Neck", head="Head", L="Left", R="Right",
-                      collar="Collar", upper="Shoulder", fore="Elbow", hand="Wrist", thigh="Hip", shin="Knee",
-                      foot="Ankle", toe="Toe"),
-    "l_elbow": dict(hips="pelvis", spine="spine", chest="chest", neck="neck", head="head", L="l_", R="r_",
-                    collar="clavicle", upper="shoulder", fore="elbow", hand="wrist", thigh="hip", shin="knee",
-                    foot="ankle", toe="toe"),
-    "LeftForeArm": dict(hips="Hips", spine="Spine", chest="Spine2", neck="Neck", head="Head", L="Left", R="Right",
-                        collar="Shoulder", upper="Arm", fore="ForeArm", hand="Hand", thigh="UpLeg", shin="Leg",
-                        foot="Foot", toe="ToeBase"),
-    "mixamorig:LeftForeArm": dict(hips="mixamorig:Hips", spine="mixamorig:Spine", chest="mixamorig:Spine2",
-                                  neck="mixamorig:Neck", head="mixamorig:Head", L="mixamorig:Left",
-                                  R="mixamorig:Right", collar="Shoulder", upper="Arm", fore="ForeArm", hand="Hand",
-                                  thigh="UpLeg", shin="Leg", foot="Foot", toe="ToeBase"),
-}  # fmt: skip
+    "LeftElbow": dict(
+        hips="Hips",
+        spine="Spine",
+        chest="Chest",
+        neck="Neck",
+        head="Head",
+        L="Left",
+        R="Right",
+        collar="Collar",
+        upper="Shoulder",
+        fore="Elbow",
+        hand="Wrist",
+        thigh="Hip",
+        shin="Knee",
+        foot="Ankle",
+        toe="Toe",
+    ),
+    "l_elbow": dict(
+        hips="pelvis",
+        spine="spine",
+        chest="chest",
+        neck="neck",
+        head="head",
+        L="l_",
+        R="r_",
+        collar="clavicle",
+        upper="shoulder",
+        fore="elbow",
+        hand="wrist",
+        thigh="hip",
+        shin="knee",
+        foot="ankle",
+        toe="toe",
+    ),
+    "LeftForeArm": dict(
+        hips="Hips",
+        spine="Spine",
+        chest="Spine2",
+        neck="Neck",
+        head="Head",
+        L="Left",
+        R="Right",
+        collar="Shoulder",
+        upper="Arm",
+        fore="ForeArm",
+        hand="Hand",
+        thigh="UpLeg",
+        shin="Leg",
+        foot="Foot",
+        toe="ToeBase",
+    ),
+    "mixamorig:LeftForeArm": dict(
+        hips="mixamorig:Hips",
+        spine="mixamorig:Spine",
+        chest="mixamorig:Spine2",
+        neck="mixamorig:Neck",
+        head="mixamorig:Head",
+        L="mixamorig:Left",
+        R="mixamorig:Right",
+        collar="Shoulder",
+        upper="Arm",
+        fore="ForeArm",
+        hand="Hand",
+        thigh="UpLeg",
+        shin="Leg",
+        foot="Foot",
+        toe="ToeBase",
+    ),
+}
 # Which body word each canonical joint takes: the shoulder is the upper arm's start.
-ROLE = {"pelvis": "hips", "spine": "spine", "chest": "chest", "neck": "neck", "head": "head", "shoulder": "upper",
-        "elbow": "fore", "wrist": "hand", "hip": "thigh", "knee": "shin", "ankle": "foot", "toe": "toe"}  # fmt: skip
+ROLE = {
+    "pelvis": "hips",
+    "spine": "spine",
+    "chest": "chest",
+    "neck": "neck",
+    "head": "head",
+    "shoulder": "upper",
+    "elbow": "fore",
+    "wrist": "hand",
+    "hip": "thigh",
+    "knee": "shin",
+    "ankle": "foot",
+    "toe": "toe",
+}
 
 
 @pytest.mark.parametrize("scheme", sorted(SCHEMES))
@@ -75,9 +159,13 @@ def test_a_mapping_may_leave_out_joints_the_skeleton_lacks():
     words = dict(SCHEMES["LeftElbow"])
     sk = _skeleton(**words)
     keep = [k for k, n in enumerate(sk.names) if not n.endswith("Toe")]
-    lean = Skeleton(tuple(sk.names[k] for k in keep), np.array([keep.index(sk.parents[k]) if sk.parents[k] >= 0 else -1
-                                                                 for k in keep]),
-                    np.zeros((len(keep), 3)), tuple(() for _ in keep), np.zeros(len(keep), bool))  # fmt: skip
+    lean = Skeleton(
+        tuple(sk.names[k] for k in keep),
+        np.array([keep.index(sk.parents[k]) if sk.parents[k] >= 0 else -1 for k in keep]),
+        np.zeros((len(keep), 3)),
+        tuple(() for _ in keep),
+        np.zeros(len(keep), bool),
+    )
     mapping, missing = guess_mapping(lean)
     assert missing == ["l_toe", "r_toe"]
     table = joint_map(lean, mapping)
@@ -96,8 +184,13 @@ def _without_toes(motion: Motion) -> Motion:
     drop = {j for j, n in enumerate(sk.names) if "toe" in n.lower()}
     keep = [j for j in range(sk.num_joints) if j not in drop]
     parents = np.array([keep.index(sk.parents[j]) if sk.parents[j] >= 0 else -1 for j in keep])
-    lean = Skeleton(tuple(sk.names[j] for j in keep), parents, sk.offsets[keep], tuple(sk.channels[j] for j in keep),
-                    sk.end_site[keep])  # fmt: skip
+    lean = Skeleton(
+        tuple(sk.names[j] for j in keep),
+        parents,
+        sk.offsets[keep],
+        tuple(sk.channels[j] for j in keep),
+        sk.end_site[keep],
+    )
     return Motion(lean, motion.rotations[:, keep], motion.translations[:, keep], motion.rate_hz, name="lean")
 
 
@@ -143,12 +236,42 @@ def test_cli_mapping_and_a_test_clip_on_another_skeleton(tmp_path, capsys):
     assert "not found: l_toe, r_toe (a skeleton may lack these)" in err
     assert json.loads((tmp_path / "map.json").read_text())["l_wrist"] == "l_wrist"
     out = tmp_path / "e.json"
-    assert main(["evaluate", str(tmp_path / "lean_clip.bvh"), "--graph", str(tmp_path / "g.graph"), "--test", "*.bvh",
-                 "--mapping", str(tmp_path / "map.json"), "--noise", "none", "--quiet", "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                str(tmp_path / "lean_clip.bvh"),
+                "--graph",
+                str(tmp_path / "g.graph"),
+                "--test",
+                "*.bvh",
+                "--mapping",
+                str(tmp_path / "map.json"),
+                "--noise",
+                "none",
+                "--quiet",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     row = json.loads(out.read_text())["clips"][0]
     assert row["missing_joints"] == ["l_toe", "r_toe"] and row["in_graph"] is False
     assert row["joint_err_cm"] < 1.0  # (the clip is in the graph's knowledge base, on the full skeleton)
     capsys.readouterr()
-    assert main(["evaluate", str(tmp_path / "lean_clip.bvh"), "--graph", str(tmp_path / "g.graph"), "--test", "*.bvh",
-                 "--quiet"]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                str(tmp_path / "lean_clip.bvh"),
+                "--graph",
+                str(tmp_path / "g.graph"),
+                "--test",
+                "*.bvh",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     assert "--mapping guess" in capsys.readouterr().err

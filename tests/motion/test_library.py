@@ -82,7 +82,9 @@ def test_find_motion_files(tree):
     ]
     assert everything == sorted(everything, key=lambda p: p.as_posix())
     # Patterns, duplicates, single files, exclusion by name and by path.
-    found = find_motion_files([str(tree / "**" / "*.bvh"), str(tree / "dataset-2" / "data" / "dataset-2_run_normal_001.bvh")])
+    found = find_motion_files(
+        [str(tree / "**" / "*.bvh"), str(tree / "dataset-2" / "data" / "dataset-2_run_normal_001.bvh")]
+    )
     assert [p.name for p in found] == ["dataset-2_run_normal_001.bvh", "dataset-2_walk_normal_001.bvh"]
     assert [p.name for p in find_motion_files([str(tree)], exclude=["*walk*"])] == [
         "07_01.amc",
@@ -126,12 +128,15 @@ def test_real_data_labels_match_file_names(data_dir):
         assert m.labels[0] == "02_01" and m.rate_hz == 120.0
 
 
-@pytest.mark.parametrize("name, label", [
-    ("dataset-2_walk_normal_001.bvh", "walk"),
-    ("walk_03.bvh", "walk"),
-    ("forehand-12.bvh", "forehand"),
-    ("01_01.amc", "01_01"),
-    ("serve.bvh", "serve"),
-])
+@pytest.mark.parametrize(
+    "name, label",
+    [
+        ("dataset-2_walk_normal_001.bvh", "walk"),
+        ("walk_03.bvh", "walk"),
+        ("forehand-12.bvh", "forehand"),
+        ("01_01.amc", "01_01"),
+        ("serve.bvh", "serve"),
+    ],
+)
 def test_content_label_from_file_name(tmp_path, name, label):
     assert content_label(tmp_path / name) == label

@@ -55,22 +55,16 @@ def test_skeleton_is_canonical_tpose_of_adult_height():
     table = joint_map(sk)  # the procedural map: canonical names used verbatim
     assert set(CANONICAL) <= set(sk.names)
     assert all(sk.names[table[c]] == c for c in CANONICAL)
-    assert {"head_End", "l_wrist_End", "r_wrist_End", "l_toe_End", "r_toe_End"} <= set(
-        sk.names
-    )
+    assert {"head_End", "l_wrist_End", "r_wrist_End", "l_toe_End", "r_toe_End"} <= set(sk.names)
     assert all(len(ch) == 0 for ch, e in zip(sk.channels, sk.end_site) if e)
-    assert len(sk.channels[0]) == 6 and all(
-        len(ch) == 3 for ch, e in zip(sk.channels[1:], sk.end_site[1:]) if not e
-    )
+    assert len(sk.channels[0]) == 6 and all(len(ch) == 3 for ch, e in zip(sk.channels[1:], sk.end_site[1:]) if not e)
     F = 1
     _, pos = motion_fk_rest(sk, F)
     p = {n: pos[0, i] for i, n in enumerate(sk.names)}
     assert 1.65 < p["head_End"][1] < 1.85
     assert p["l_wrist"][0] > 0.6 and p["r_wrist"][0] < -0.6  # arms along ±X, left to +X
     assert abs(p["l_wrist"][1] - p["l_shoulder"][1]) < 1e-9
-    assert (
-        p["l_toe"][2] > p["l_ankle"][2] and p["l_knee"][1] > p["l_ankle"][1]
-    )  # feet point +Z, legs down
+    assert p["l_toe"][2] > p["l_ankle"][2] and p["l_knee"][1] > p["l_ankle"][1]  # feet point +Z, legs down
     assert abs(p["l_ankle"][1] - 0.08) < 0.01 and 0.0 <= p["l_toe"][1] <= 0.03
 
 
@@ -91,10 +85,9 @@ def test_deterministic_by_seed():
         assert x.labels == y.labels and x.rate_hz == y.rate_hz
         np.testing.assert_array_equal(x.rotations, y.rotations)
         np.testing.assert_array_equal(x.translations, y.translations)
-    assert any(
-        x.num_frames != y.num_frames or not np.array_equal(x.rotations, y.rotations)
-        for x, y in zip(a, c)
-    ) or [m.name for m in a] != [m.name for m in c]
+    assert any(x.num_frames != y.num_frames or not np.array_equal(x.rotations, y.rotations) for x, y in zip(a, c)) or [
+        m.name for m in a
+    ] != [m.name for m in c]
     p1, l1 = generate_performance(seed=1, seconds=8.0)
     p2, l2 = generate_performance(seed=1, seconds=8.0)
     np.testing.assert_array_equal(p1.rotations, p2.rotations)
@@ -109,9 +102,7 @@ def test_all_labels_present_names_and_durations(kb):
     for c, _ in kb:
         assert c.name.startswith(c.labels[0] + "_") and c.name[-2:].isdigit()
         assert 4.0 < c.duration_s < 20.0 and c.rate_hz == 30.0
-        assert np.all(np.isfinite(c.rotations)) and np.allclose(
-            np.linalg.norm(c.rotations, axis=-1), 1.0
-        )
+        assert np.all(np.isfinite(c.rotations)) and np.allclose(np.linalg.norm(c.rotations, axis=-1), 1.0)
     assert len({c.name for c, _ in kb}) == len(kb)
 
 
@@ -119,9 +110,7 @@ def test_bone_lengths_preserved_and_body_above_ground(kb):
     for c, pos in kb:
         sk = c.skeleton
         bones = np.linalg.norm(pos[:, 1:] - pos[:, sk.parents[1:]], axis=-1)
-        np.testing.assert_allclose(
-            bones, np.broadcast_to(sk.bone_lengths()[1:], bones.shape), atol=1e-9
-        )
+        np.testing.assert_allclose(bones, np.broadcast_to(sk.bone_lengths()[1:], bones.shape), atol=1e-9)
         assert pos[..., 1].min() > -0.005, c.name
         assert pos[:, sk.index("head_End"), 1].min() > 1.45, c.name  # no collapsing
 
@@ -135,13 +124,9 @@ def test_feet_planted_without_skate(kb):
             for j, ground in (("ankle", 0.08), ("toe", 0.02)):
                 x = pos[:, sk.index(f"{side}_{j}")]
                 assert abs(x[:, 1].min() - ground) < 0.01, (c.name, side, j)
-                low = (x[:, 1] < x[:, 1].min() + 0.02) & (
-                    _ground_speed(x, c.rate_hz) < 0.2
-                )
+                low = (x[:, 1] < x[:, 1].min() + 0.02) & (_ground_speed(x, c.rate_hz) < 0.2)
                 for r in _runs(low):
-                    slide = np.linalg.norm(
-                        x[r][:, [0, 2]] - x[r[0], [0, 2]], axis=-1
-                    ).max()
+                    slide = np.linalg.norm(x[r][:, [0, 2]] - x[r[0], [0, 2]], axis=-1).max()
                     assert slide < 0.01, (c.name, side, j, slide)
 
 
@@ -153,9 +138,7 @@ def test_feet_lift_and_gait_phases(kb):
             sk = c.skeleton
             left = _contact(pos, sk, "l", c.rate_hz)
             right = _contact(pos, sk, "r", c.rate_hz)
-            strides = c.duration_s * (
-                0.8 if label == "walk" else 1.3
-            )  # at least this many
+            strides = c.duration_s * (0.8 if label == "walk" else 1.3)  # at least this many
             if label == "walk":
                 assert len(_runs(left & right)) >= 0.8 * strides, c.name
                 assert not np.any(~left & ~right), c.name  # never airborne
@@ -164,17 +147,13 @@ def test_feet_lift_and_gait_phases(kb):
                 assert not np.any(left & right), c.name
             for side in "lr":
                 toe = pos[:, sk.index(f"{side}_toe"), 1]
-                assert toe.max() - toe.min() > (0.05 if label == "walk" else 0.15), (
-                    c.name
-                )
+                assert toe.max() - toe.min() > (0.05 if label == "walk" else 0.15), c.name
 
 
 def test_wrist_accelerations_plausible(kb):
     """Second differences of wrist positions (what a wrist accelerometer sees,
     minus gravity): no spikes."""
-    limits = {"walk": 3.0, "idle": 1.0, "stop": 5.0, "run": 8.0} | {
-        k: 15.0 for k in SWINGS
-    }
+    limits = {"walk": 3.0, "idle": 1.0, "stop": 5.0, "run": 8.0} | {k: 15.0 for k in SWINGS}
     peak = {}
     for c, pos in kb:
         w = pos[:, [c.skeleton.index("l_wrist"), c.skeleton.index("r_wrist")]]
@@ -204,9 +183,7 @@ def test_locomotion_speed_ranges_and_turns(kb):
         for c, pos in clips:
             table = joint_map(c.skeleton)
             ground = signals.ground_position(pos, table["pelvis"])
-            speed = (
-                np.linalg.norm(np.diff(ground, axis=0), axis=-1).sum() / c.duration_s
-            )
+            speed = np.linalg.norm(np.diff(ground, axis=0), axis=-1).sum() / c.duration_s
             assert lo < speed < hi, (c.name, speed)
             heading = np.unwrap(signals.heading(pos, table))
             turned.append(np.ptp(heading))
@@ -223,30 +200,20 @@ def test_stops_come_to_rest(kb):
     for c, pos in _by_label(kb, "stop"):
         v = _ground_speed(pos[:, 0], c.rate_hz)
         assert v.max() > 0.8 and np.mean(v < 0.05) > 0.1, c.name
-        both = _contact(pos, c.skeleton, "l", c.rate_hz) & _contact(
-            pos, c.skeleton, "r", c.rate_hz
-        )
-        assert np.any([len(r) > c.rate_hz for r in _runs(both)]), (
-            c.name
-        )  # stands a second
+        both = _contact(pos, c.skeleton, "l", c.rate_hz) & _contact(pos, c.skeleton, "r", c.rate_hz)
+        assert np.any([len(r) > c.rate_hz for r in _runs(both)]), c.name  # stands a second
 
 
 def test_performance_is_held_out_and_labelled_per_frame():
     perf, labels = generate_performance(seed=1, seconds=20.0)
     assert labels.shape == (perf.num_frames,) and perf.num_frames >= 20 * 30
-    assert {"walk", "run", "punch"} <= set(labels) and set(labels) <= set(
-        CONTENT_LABELS
-    )
+    assert {"walk", "run", "punch"} <= set(labels) and set(labels) <= set(CONTENT_LABELS)
     assert {"forehand", "backhand", "overhead"} & set(labels)
     changes = np.count_nonzero(labels[1:] != labels[:-1])
     assert changes >= 5
     _, pos = motion_fk(perf)
-    assert (
-        np.linalg.norm(np.diff(pos, axis=0), axis=-1).max() * perf.rate_hz < 20.0
-    )  # continuous
+    assert np.linalg.norm(np.diff(pos, axis=0), axis=-1).max() * perf.rate_hz < 20.0  # continuous
     kb = generate_knowledge_base(seed=0, minutes=0.5)
     assert all(
-        c.num_frames < perf.num_frames
-        or not np.allclose(c.rotations, perf.rotations[: c.num_frames])
-        for c in kb
+        c.num_frames < perf.num_frames or not np.allclose(c.rotations, perf.rotations[: c.num_frames]) for c in kb
     )

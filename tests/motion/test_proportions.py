@@ -24,7 +24,7 @@ from graphsvc.motion.proportions import (
     on_performer,
     performer_lengths,
     performer_skeleton,
-    segment_lengths,  # fmt: skip
+    segment_lengths,
     skeleton_height,
 )
 from graphsvc.motion.skeleton import Skeleton
@@ -33,12 +33,25 @@ BANDAI = Path("/work/shared/data/bandai/dataset-1/data")
 
 # The procedural skeleton's segments, from its offsets (procedural/body.py) by hand.
 PROCEDURAL = {
-    "lower_spine": 0.10, "upper_spine": 0.14, "chest": 0.22, "neck": 0.10,
-    "l_clavicle": math.sqrt(0.17**2 + 0.19**2), "l_upper_arm": 0.29, "l_forearm": 0.26,
-    "r_clavicle": math.sqrt(0.17**2 + 0.19**2), "r_upper_arm": 0.29, "r_forearm": 0.26,
-    "l_pelvis": math.sqrt(0.09**2 + 0.07**2), "l_thigh": 0.42, "l_shin": 0.42, "l_foot": math.sqrt(0.06**2 + 0.13**2),
-    "r_pelvis": math.sqrt(0.09**2 + 0.07**2), "r_thigh": 0.42, "r_shin": 0.42, "r_foot": math.sqrt(0.06**2 + 0.13**2),
-}  # fmt: skip
+    "lower_spine": 0.10,
+    "upper_spine": 0.14,
+    "chest": 0.22,
+    "neck": 0.10,
+    "l_clavicle": math.sqrt(0.17**2 + 0.19**2),
+    "l_upper_arm": 0.29,
+    "l_forearm": 0.26,
+    "r_clavicle": math.sqrt(0.17**2 + 0.19**2),
+    "r_upper_arm": 0.29,
+    "r_forearm": 0.26,
+    "l_pelvis": math.sqrt(0.09**2 + 0.07**2),
+    "l_thigh": 0.42,
+    "l_shin": 0.42,
+    "l_foot": math.sqrt(0.06**2 + 0.13**2),
+    "r_pelvis": math.sqrt(0.09**2 + 0.07**2),
+    "r_thigh": 0.42,
+    "r_shin": 0.42,
+    "r_foot": math.sqrt(0.06**2 + 0.13**2),
+}
 
 
 def _walk():
@@ -199,11 +212,16 @@ def test_a_json_performer_fills_the_segments_it_leaves_out(tmp_path):
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": "long"}}', "l_thigh must be"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": 46}}', "at most 3"),
         ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_thigh": 1e308}}', "at most 3"),
-        ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 0.3, "l_thig": 0.4, "l_shin": 0.4}}',
-         "unknown segments: l_thig, tail"),
-        ('{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_shin": 0.4}, "mass": 70}', "unknown keys: mass"),
+        (
+            '{"format": "graphsvc-performer", "version": 1, "segments_m": {"tail": 0.3, "l_thig": 0.4, "l_shin": 0.4}}',
+            "unknown segments: l_thig, tail",
+        ),
+        (
+            '{"format": "graphsvc-performer", "version": 1, "segments_m": {"l_shin": 0.4}, "mass": 70}',
+            "unknown keys: mass",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_bad_performer_file_is_a_format_error_naming_it(tmp_path, text, match):
     path = tmp_path / "bad.json"
     path.write_text(text)

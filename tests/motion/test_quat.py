@@ -50,9 +50,14 @@ def test_between_maps_u_onto_v_including_opposite():
 def test_matrix_round_trip():
     q = quat.normalize(np.array([0.3, -0.2, 0.9, 0.1]))
     np.testing.assert_allclose(np.abs(quat.from_matrix(quat.to_matrix(q))), np.abs(q), atol=1e-12)
-    np.testing.assert_allclose(quat.to_matrix(q) @ [1.0, 2.0, 3.0], quat.rotate(q, np.array([1.0, 2.0, 3.0])), atol=1e-12)
+    np.testing.assert_allclose(
+        quat.to_matrix(q) @ [1.0, 2.0, 3.0], quat.rotate(q, np.array([1.0, 2.0, 3.0])), atol=1e-12
+    )
 
 
 def test_wrap_angle():
-    np.testing.assert_allclose(quat.wrap_angle(np.array([0.0, 3 * np.pi / 2, -3 * np.pi / 2, 7.0])),
-                               [0.0, -np.pi / 2, np.pi / 2, 7.0 - 2 * np.pi], atol=1e-12)
+    np.testing.assert_allclose(
+        quat.wrap_angle(np.array([0.0, 3 * np.pi / 2, -3 * np.pi / 2, 7.0])),
+        [0.0, -np.pi / 2, np.pi / 2, 7.0 - 2 * np.pi],
+        atol=1e-12,
+    )

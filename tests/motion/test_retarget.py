@@ -34,20 +34,34 @@ def _other_skeleton(seed: int = 3) -> Motion:
     p["l_arm"] = (p["chest"] + p["l_shoulder"]) / 2.0
     p["r_arm"] = (p["chest"] + p["r_shoulder"]) / 2.0
     joints = [  # name, parent, world position of the standing pose
-        ("joint_Root", None, p["pelvis"] * np.array([1.0, 0.0, 1.0])), ("Hips", "joint_Root", p["pelvis"]),
-        ("Spine", "Hips", p["spine"]), ("Chest", "Spine", p["chest"]), ("Neck", "Chest", p["neck"]),
-        ("Head", "Neck", p["head"]), ("Head_End", "Head", p["head"]),
-        ("Shoulder_L", "Chest", p["l_arm"]), ("UpperArm_L", "Shoulder_L", p["l_shoulder"]),
-        ("LowerArm_L", "UpperArm_L", p["l_elbow"]), ("Hand_L", "LowerArm_L", p["l_wrist"]),
+        ("joint_Root", None, p["pelvis"] * np.array([1.0, 0.0, 1.0])),
+        ("Hips", "joint_Root", p["pelvis"]),
+        ("Spine", "Hips", p["spine"]),
+        ("Chest", "Spine", p["chest"]),
+        ("Neck", "Chest", p["neck"]),
+        ("Head", "Neck", p["head"]),
+        ("Head_End", "Head", p["head"]),
+        ("Shoulder_L", "Chest", p["l_arm"]),
+        ("UpperArm_L", "Shoulder_L", p["l_shoulder"]),
+        ("LowerArm_L", "UpperArm_L", p["l_elbow"]),
+        ("Hand_L", "LowerArm_L", p["l_wrist"]),
         ("Hand_L_End", "Hand_L", p["l_wrist"]),
-        ("Shoulder_R", "Chest", p["r_arm"]), ("UpperArm_R", "Shoulder_R", p["r_shoulder"]),
-        ("LowerArm_R", "UpperArm_R", p["r_elbow"]), ("Hand_R", "LowerArm_R", p["r_wrist"]),
+        ("Shoulder_R", "Chest", p["r_arm"]),
+        ("UpperArm_R", "Shoulder_R", p["r_shoulder"]),
+        ("LowerArm_R", "UpperArm_R", p["r_elbow"]),
+        ("Hand_R", "LowerArm_R", p["r_wrist"]),
         ("Hand_R_End", "Hand_R", p["r_wrist"]),
-        ("UpperLeg_L", "Hips", p["l_hip"]), ("LowerLeg_L", "UpperLeg_L", p["l_knee"]),
-        ("Foot_L", "LowerLeg_L", p["l_ankle"]), ("Toes_L", "Foot_L", p["l_toe"]), ("Toes_L_End", "Toes_L", p["l_toe"]),
-        ("UpperLeg_R", "Hips", p["r_hip"]), ("LowerLeg_R", "UpperLeg_R", p["r_knee"]),
-        ("Foot_R", "LowerLeg_R", p["r_ankle"]), ("Toes_R", "Foot_R", p["r_toe"]), ("Toes_R_End", "Toes_R", p["r_toe"]),
-    ]  # fmt: skip
+        ("UpperLeg_L", "Hips", p["l_hip"]),
+        ("LowerLeg_L", "UpperLeg_L", p["l_knee"]),
+        ("Foot_L", "LowerLeg_L", p["l_ankle"]),
+        ("Toes_L", "Foot_L", p["l_toe"]),
+        ("Toes_L_End", "Toes_L", p["l_toe"]),
+        ("UpperLeg_R", "Hips", p["r_hip"]),
+        ("LowerLeg_R", "UpperLeg_R", p["r_knee"]),
+        ("Foot_R", "LowerLeg_R", p["r_ankle"]),
+        ("Toes_R", "Foot_R", p["r_toe"]),
+        ("Toes_R_End", "Toes_R", p["r_toe"]),
+    ]
     names = tuple(n for n, _, _ in joints)
     parents = np.array([-1 if q is None else names.index(q) for _, q, _ in joints])
     frames = quat.normalize(np.random.default_rng(seed).normal(size=(len(names), 4)))  # each joint's world axes
@@ -186,7 +200,9 @@ def test_build_mixed_sources_and_skeleton_flag(tmp_path, capsys):
     for kind in ("walk", "run"):
         write_bvh(kb / "a" / f"{kind}_001.bvh", _walk(2.5, kind), scale=100.0)
     stand = _other_skeleton()
-    held = stand.copy(rotations=np.repeat(stand.rotations, 40, axis=0), translations=np.repeat(stand.translations, 40, axis=0))
+    held = stand.copy(
+        rotations=np.repeat(stand.rotations, 40, axis=0), translations=np.repeat(stand.translations, 40, axis=0)
+    )
     write_bvh(kb / "b" / "idle_001.bvh", held, scale=100.0)
     out = tmp_path / "mixed.graph"
     flags = ["--no-interp", "--no-bridges", "--no-msv", "--quiet"]
@@ -194,8 +210,11 @@ def test_build_mixed_sources_and_skeleton_flag(tmp_path, capsys):
     assert "2 clips retargeted onto the graph's skeleton from procedural" in capsys.readouterr().out
     graph = load_graph(out)
     assert graph.skeleton.names == stand.skeleton.names
-    assert {c["name"]: c.get("retargeted_from") for c in graph.clips} == {"idle_001": None, "run_001": "procedural",
-                                                                          "walk_001": "procedural"}  # fmt: skip
+    assert {c["name"]: c.get("retargeted_from") for c in graph.clips} == {
+        "idle_001": None,
+        "run_001": "procedural",
+        "walk_001": "procedural",
+    }
     # --skeleton: onto the procedural family's, the clip of the other family retargeted
     out2 = tmp_path / "onto.graph"
     assert main(["build", str(kb), "-o", str(out2), "--skeleton", str(kb / "a" / "walk_001.bvh"), *flags]) == 0

@@ -14,7 +14,9 @@ def test_heading_follows_root_rotation_and_ground_position(skeleton):
     _, pos = motion_fk(m)
     table = joint_map(skeleton)
     np.testing.assert_allclose(signals.heading(pos, table), angles, atol=1e-12)
-    np.testing.assert_allclose(signals.ground_position(pos, table["pelvis"]), np.stack([np.arange(8.0), -np.arange(8.0)], -1))
+    np.testing.assert_allclose(
+        signals.ground_position(pos, table["pelvis"]), np.stack([np.arange(8.0), -np.arange(8.0)], -1)
+    )
 
 
 def _feet(frames):

@@ -10,9 +10,19 @@ import time
 import pytest
 
 # A closed network refuses Chromium's background connections unless they are turned off.
-FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--enable-unsafe-swiftshader", "--window-size=1100,1500", "--hide-scrollbars")  # fmt: skip
+FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+    "--window-size=1100,1500",
+    "--hide-scrollbars",
+)
 
 
 def find_chromium() -> tuple[str, str]:
@@ -20,8 +30,10 @@ def find_chromium() -> tuple[str, str]:
     browser = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
     driver = shutil.which("chromedriver")
     if browser is None or driver is None:
-        pytest.skip("no Chromium found (install Debian's chromium and chromium-driver to run the browser tests): "
-                    f"browser {browser or 'missing'}, chromedriver {driver or 'missing'}")  # fmt: skip
+        pytest.skip(
+            "no Chromium found (install Debian's chromium and chromium-driver to run the browser tests): "
+            f"browser {browser or 'missing'}, chromedriver {driver or 'missing'}"
+        )
     return browser, driver
 
 

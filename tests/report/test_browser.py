@@ -60,8 +60,10 @@ def test_demo_page_plays_scrubs_and_draws_the_bvh_pose(driver, demo_run, tmp_pat
     _, recon_world = motion_fk(recon)
     _, truth_world = motion_fk(truth)
     for frame in (T // 3, T - 1):
-        driver.execute_script("const s = document.getElementById('scrub'); s.value = arguments[0];"
-                              "s.dispatchEvent(new Event('input'));", frame)  # fmt: skip
+        driver.execute_script(
+            "const s = document.getElementById('scrub'); s.value = arguments[0];s.dispatchEvent(new Event('input'));",
+            frame,
+        )
         assert driver.execute_script(hook + "frame()") == frame
         assert label.text == f"frame {frame} / {T - 1}"
         for fig, world in ((0, recon_world), (1, truth_world)):
@@ -101,8 +103,26 @@ def test_evaluation_table_sorts_and_opens_each_clip(driver, tmp_path, capsys):
     (tmp_path / "kb").mkdir()
     kb = write_procedural_kb(tmp_path / "kb", seed=5, minutes=0.4)
     clips = sorted(p.name for p in kb.glob("*.bvh"))[:3]
-    assert main(["evaluate", str(kb), "--test", ",".join(clips), "--layout", "kelly6", "--hold-out", "clip",
-                 "--quiet", "--json", str(tmp_path / "eval.json"), "--report-html", str(tmp_path / "eval.html")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "evaluate",
+                str(kb),
+                "--test",
+                ",".join(clips),
+                "--layout",
+                "kelly6",
+                "--hold-out",
+                "clip",
+                "--quiet",
+                "--json",
+                str(tmp_path / "eval.json"),
+                "--report-html",
+                str(tmp_path / "eval.html"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     rows = json.loads((tmp_path / "eval.json").read_text())["clips"]
     open_page(driver, tmp_path / "eval.html")
@@ -141,8 +161,14 @@ def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, stra
 
     d, graph, truth = files
     rec = d / ("markers.rec" if strategy == "ssg" else "take.rec")
-    synthesize_files(graph, d / "kb.graph", rec, tmp_path / "out.bvh", Options(strategy=strategy, weights=Weights(0.5, 1, 1)),
-                     report_path=tmp_path / "out.json")  # fmt: skip
+    synthesize_files(
+        graph,
+        d / "kb.graph",
+        rec,
+        tmp_path / "out.bvh",
+        Options(strategy=strategy, weights=Weights(0.5, 1, 1)),
+        report_path=tmp_path / "out.json",
+    )
     write_bvh(tmp_path / "truth.bvh", truth, scale=100.0)
     write_html(tmp_path / "page.html", load_document(tmp_path / "out.json", truth=tmp_path / "truth.bvh"))
     open_page(driver, tmp_path / "page.html")
@@ -163,7 +189,9 @@ def test_every_strategys_page_runs_and_seeks_from_its_charts(driver, files, stra
     select = driver.find_element("id", "layout")
     driver.execute_script("arguments[0].value = 'overlay'; arguments[0].dispatchEvent(new Event('change'));", select)
     frame = driver.execute_script(hook + "frame()")
-    drawn = np.array(driver.execute_script("return document.getElementById('view') && graphsvcViewer.drawnJointPositions(1)"))
+    drawn = np.array(
+        driver.execute_script("return document.getElementById('view') && graphsvcViewer.drawnJointPositions(1)")
+    )
     _, world = motion_fk(truth)
     assert np.abs(drawn - world[frame]).max() < 0.001
     assert console_errors(driver) == []
@@ -283,7 +311,7 @@ def test_timeline_tells_clips_of_one_prefix_apart(driver, tmp_path):
         CanvasRenderingContext2D.prototype.fillText = fill;
         return texts;""")
     row0 = [(t, x, w) for t, x, y, w in drawn if y < 22 and x > 100]  # (the runs' names, right of the row names)
-    short = [n[len("dataset-2_"):] for n in names]
+    short = [n[len("dataset-2_") :] for n in names]
     assert [t for t, _, _ in row0][::2] == [short[0], short[2]]  # (wide runs: the whole name but the prefix)
     narrow, x, width = row0[1]
     assert _fitted(narrow, short[1]) and narrow != short[1] and "…" in narrow, narrow

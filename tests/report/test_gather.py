@@ -21,7 +21,7 @@ from graphsvc.strategies.sources import (
     source_readings,
     timeline_from_nodes,
     timeline_from_sources,
-)  # fmt: skip
+)
 from tests.conftest import tpose_skeleton
 
 
@@ -123,10 +123,15 @@ def test_timeline_of_a_node_path_names_clips_kinds_and_transitions():
     assert path_edges(g, nodes).tolist() == [-1, 0, 1, 3, 4, 5]  # (edges sorted by destination: 2→4 is 3rd)
     tl = timeline_from_nodes(g, nodes)
     assert [(s["start"], s["frames"], s["clip"], s["label"], s["kind"], s["from_frame"]) for s in tl["segments"]] == [
-        (0, 3, "walk_01", "a", "original", 0.0), (3, 1, "run_01", "b", "original", 0.0),
-        (4, 2, "run_01", "b", "speed", 0.5)]  # fmt: skip
+        (0, 3, "walk_01", "a", "original", 0.0),
+        (3, 1, "run_01", "b", "original", 0.0),
+        (4, 2, "run_01", "b", "speed", 0.5),
+    ]
     assert tl["transitions"] == [3]
-    assert tl["labels"] == [{"label": "a", "start_frame": 0, "frames": 3}, {"label": "b", "start_frame": 3, "frames": 3}]
+    assert tl["labels"] == [
+        {"label": "a", "start_frame": 0, "frames": 3},
+        {"label": "b", "start_frame": 3, "frames": 3},
+    ]
     readings = path_readings(g, nodes)
     assert np.isnan(readings[0]).all()
     by_pair = {(s, d): acc[k] for k, (s, d) in enumerate(zip([0, 1, 2, 2, 4, 5], [1, 2, 3, 4, 5, 6]))}
@@ -155,22 +160,31 @@ def test_timeline_of_blended_sources_lists_the_heaviest_clips():
     weight = np.array([[0.6, 0.4], [0.5, 0.5], [1.0, 0.0], [0.8, 0.2]])
     tl = timeline_from_sources(names, ["walk", "walk", "run", "idle"], clip, frame, weight, rows=2)
     assert [(s["start"], s["frames"], s["clip"], s["kind"]) for s in tl["segments"]] == [
-        (0, 2, "walk_01", "blend"), (2, 1, "run_01", "original"), (3, 1, "idle_01", "blend")]
+        (0, 2, "walk_01", "blend"),
+        (2, 1, "run_01", "original"),
+        (3, 1, "idle_01", "blend"),
+    ]
     assert tl["transitions"] == [2, 3]
     # total weights: walk 1.3, run 1.9, idle 0.8 → run, walk
     assert tl["neighbours"]["clips"] == ["run_01", "walk_01"]
     assert tl["neighbours"]["weights"] == ["4490", "5402"]  # (weight × 9, rounded; 4.5 rounds to even)
     prov = Provenance(clip, frame, weight, np.array(["walk", "walk", "run", "idle"], object))
     c = compact_sources(prov, top=1)
-    assert c == {"clip": [[0], [0], [1], [2]], "frame": [[5.0], [6.0], [11.0], [0.0]], "weight": [[0.6], [0.5], [1.0], [0.8]]}
+    assert c == {
+        "clip": [[0], [0], [1], [2]],
+        "frame": [[5.0], [6.0], [11.0], [0.0]],
+        "weight": [[0.6], [0.5], [1.0], [0.8]],
+    }
 
 
 def test_constraints_marked_met_frame_by_frame():
     labels = ["walk"] * 4 + ["run"] * 4
     contacts = np.zeros((8, 2), bool)
     contacts[:3, 0] = True
-    sets = [[{"start_s": 0.1, "end_s": 0.5, "require": {"contact": "left"}}],
-            [{"start_s": 0.2, "end_s": 10.0, "require": {"label": "run"}}]]  # fmt: skip
+    sets = [
+        [{"start_s": 0.1, "end_s": 0.5, "require": {"contact": "left"}}],
+        [{"start_s": 0.2, "end_s": 10.0, "require": {"label": "run"}}],
+    ]
     out = constraint_arrays(sets, labels, contacts, rate_hz=10.0)
     assert [(c["set"], c["first_frame"], c["met"]) for c in out] == [(0, 1, "1100"), (1, 2, "001111")]
 
@@ -183,7 +197,10 @@ def test_page_is_self_contained_and_its_data_cannot_close_the_script():
     assert page.count("</script>") == 3  # (the data's, three.js's and the viewer's own)
     assert "t &lt;b&gt;" in page
     # nothing loaded from the network: no src, href, import or fetch of an http(s) URL
-    network = re.compile(r"""(src|href)\s*=\s*["']?\s*https?:|import\s*\(?\s*["']https?:|from\s*["']https?:|fetch\(\s*["']https?:""", re.I)
+    network = re.compile(
+        r"""(src|href)\s*=\s*["']?\s*https?:|import\s*\(?\s*["']https?:|from\s*["']https?:|fetch\(\s*["']https?:""",
+        re.I,
+    )
     assert not network.search(page)
     assert "<link" not in page and not re.search(r"<script[^>]*\bsrc=", page)
     three = three_script()

@@ -28,8 +28,9 @@ def _positions(fig, T):
 
 # (multilinear needs clips named <content>_<style>_<take>, which the procedural knowledge
 # base's are not: tests/strategies/test_multilinear.py makes its page)
-@pytest.mark.parametrize("strategy", [n for n in available() if type(get(n)).__module__.startswith("graphsvc.")
-                                      and n != "multilinear"])  # fmt: skip
+@pytest.mark.parametrize(
+    "strategy", [n for n in available() if type(get(n)).__module__.startswith("graphsvc.") and n != "multilinear"]
+)
 def test_a_synthesize_report_of_every_strategy_becomes_a_page(files, strategy, capsys):
     d, graph, truth = files
     rec = d / ("markers.rec" if strategy == "ssg" else "take.rec")
@@ -65,7 +66,12 @@ def test_a_synthesize_report_of_every_strategy_becomes_a_page(files, strategy, c
     from graphsvc.motion.bvh import write_bvh
 
     write_bvh(d / "truth.bvh", truth, scale=100.0)
-    assert main(["report", str(d / f"{strategy}.json"), "-o", str(d / f"{strategy}.html"), "--truth", str(d / "truth.bvh")]) == 0
+    assert (
+        main(
+            ["report", str(d / f"{strategy}.json"), "-o", str(d / f"{strategy}.html"), "--truth", str(d / "truth.bvh")]
+        )
+        == 0
+    )
     assert "wrote" in capsys.readouterr().out
     page = (d / f"{strategy}.html").read_text()
     assert page.startswith("<!DOCTYPE html>") and len(page) < 3_000_000
@@ -77,8 +83,9 @@ def test_a_page_says_what_a_viewer_sees_of_the_output_and_of_its_truth(files):
     from graphsvc.report.load import synthesize_view
 
     d, graph, truth = files
-    result = synthesize_files(graph, d / "kb.graph", d / "take.rec", d / "seen.bvh", Options(strategy="nearest"),
-                              report_path=d / "seen.json")  # fmt: skip
+    result = synthesize_files(
+        graph, d / "kb.graph", d / "take.rec", d / "seen.bvh", Options(strategy="nearest"), report_path=d / "seen.json"
+    )
     view = synthesize_view(json.loads((d / "seen.json").read_text()), d, truth=truth)
     out, true = motion_plausibility(load_motion(d / "seen.bvh")), motion_plausibility(truth)
     assert view["info"]["jitter_km_s3"] == pytest.approx(out["jitter_km_s3"], abs=1e-4)
@@ -94,16 +101,23 @@ def test_report_refuses_what_it_cannot_show(files, tmp_path, capsys):
     moved["files"] = {"output": str(tmp_path / "gone.bvh")}
     (tmp_path / "moved.json").write_text(json.dumps(moved))
     (tmp_path / "empty").mkdir()
-    for argv, message in [([str(tmp_path / "none.json")], "does not exist"),
-                          ([str(tmp_path / "other.json")], "not a synthesize report"),
-                          ([str(tmp_path / "broken.json")], "not valid JSON"),
-                          ([str(tmp_path / "moved.json")], "gone.bvh does not exist"),
-                          ([str(tmp_path / "empty")], "no item reports")]:  # fmt: skip
+    for argv, message in [
+        ([str(tmp_path / "none.json")], "does not exist"),
+        ([str(tmp_path / "other.json")], "not a synthesize report"),
+        ([str(tmp_path / "broken.json")], "not valid JSON"),
+        ([str(tmp_path / "moved.json")], "gone.bvh does not exist"),
+        ([str(tmp_path / "empty")], "no item reports"),
+    ]:
         assert main(["report", *argv, "-o", str(tmp_path / "r.html")]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err, err
     (tmp_path / "eval.json").write_text('{"clips": [], "mean": {}}')
-    assert main(["report", str(tmp_path / "eval.json"), "-o", str(tmp_path / "r.html"), "--truth", str(tmp_path / "t.bvh")]) == 2
+    assert (
+        main(
+            ["report", str(tmp_path / "eval.json"), "-o", str(tmp_path / "r.html"), "--truth", str(tmp_path / "t.bvh")]
+        )
+        == 2
+    )
     assert "--truth applies to a synthesize report" in capsys.readouterr().err
     assert not (tmp_path / "r.html").exists()
     assert main(["report", str(tmp_path / "other.json"), "-o", str(tmp_path / "no" / "r.html")]) == 2
@@ -126,9 +140,23 @@ def test_evaluate_keeps_motions_and_writes_the_page(tmp_path, capsys):
     (tmp_path / "kb").mkdir()
     kb = write_procedural_kb(tmp_path / "kb", seed=5, minutes=0.4)
     clips = sorted(p.name for p in kb.glob("*.bvh"))[:2]
-    argv = ["evaluate", str(kb), "--test", ",".join(clips), "--layout", "kelly6", "--hold-out", "clip", "--quiet",
-            "--json", str(tmp_path / "eval.json"), "--keep-motions", str(tmp_path / "kept"),
-            "--report-html", str(tmp_path / "eval.html")]  # fmt: skip
+    argv = [
+        "evaluate",
+        str(kb),
+        "--test",
+        ",".join(clips),
+        "--layout",
+        "kelly6",
+        "--hold-out",
+        "clip",
+        "--quiet",
+        "--json",
+        str(tmp_path / "eval.json"),
+        "--keep-motions",
+        str(tmp_path / "kept"),
+        "--report-html",
+        str(tmp_path / "eval.html"),
+    ]
     assert main(argv) == 0
     capsys.readouterr()
     result = json.loads((tmp_path / "eval.json").read_text())
@@ -167,8 +195,14 @@ def test_a_truth_on_an_unknown_skeleton_takes_a_joint_map(files, tmp_path, capsy
     from graphsvc.motion.bvh import write_bvh
 
     d, graph, truth = files
-    synthesize_files(graph, d / "kb.graph", d / "take.rec", tmp_path / "out.bvh", Options(weights=Weights(0.5, 1, 1)),
-                     report_path=tmp_path / "out.json")  # fmt: skip
+    synthesize_files(
+        graph,
+        d / "kb.graph",
+        d / "take.rec",
+        tmp_path / "out.bvh",
+        Options(weights=Weights(0.5, 1, 1)),
+        report_path=tmp_path / "out.json",
+    )
     sk = truth.skeleton
     renamed = replace(truth, skeleton=replace(sk, names=tuple(f"Bone{i:02d}" for i in range(len(sk.names)))))
     write_bvh(tmp_path / "odd.bvh", renamed, scale=100.0)
@@ -176,8 +210,12 @@ def test_a_truth_on_an_unknown_skeleton_takes_a_joint_map(files, tmp_path, capsy
     mapping = tmp_path / "odd.json"
     mapping.write_text(json.dumps({n: f"Bone{i:02d}" for i, n in enumerate(sk.names) if n in CANONICAL}))
 
-    assert main(["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "a.html"), "--truth",
-                 str(tmp_path / "odd.bvh")]) == 0  # fmt: skip
+    assert (
+        main(
+            ["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "a.html"), "--truth", str(tmp_path / "odd.bvh")]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and err.startswith("note: out: the error charts are left out")
     assert "--mapping" in err
@@ -185,8 +223,21 @@ def test_a_truth_on_an_unknown_skeleton_takes_a_joint_map(files, tmp_path, capsy
     without = load_document(tmp_path / "out.json", truth=tmp_path / "odd.bvh", notes=notes)
     assert without["clips"][0]["errors"] is None and len(notes) == 1
 
-    assert main(["report", str(tmp_path / "out.json"), "-o", str(tmp_path / "b.html"), "--truth",
-                 str(tmp_path / "odd.bvh"), "--mapping", str(mapping)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "report",
+                str(tmp_path / "out.json"),
+                "-o",
+                str(tmp_path / "b.html"),
+                "--truth",
+                str(tmp_path / "odd.bvh"),
+                "--mapping",
+                str(mapping),
+            ]
+        )
+        == 0
+    )
     assert capsys.readouterr().err == ""
     mapped = load_document(tmp_path / "out.json", truth=tmp_path / "odd.bvh", truth_mapping=str(mapping))
     known = load_document(tmp_path / "out.json", truth=tmp_path / "known.bvh")

@@ -25,9 +25,15 @@ def random_graph(rng, N=40, out=3, S=2):
     dst = rng.integers(0, N, len(src))
     pairs = np.unique(np.stack([src, dst], 1), axis=0)
     E = len(pairs)
-    return tiny_graph(pairs[:, 0], pairs[:, 1], rng.normal(0, 9.81, (E, S, 3)), offsets=rng.normal(0, 0.05, (E, 2)),
-                      dheading=rng.normal(0, 0.05, E), contacts=rng.random((N, 2)) < 0.6,
-                      labels=rng.integers(0, 2, N))  # fmt: skip
+    return tiny_graph(
+        pairs[:, 0],
+        pairs[:, 1],
+        rng.normal(0, 9.81, (E, S, 3)),
+        offsets=rng.normal(0, 0.05, (E, 2)),
+        dheading=rng.normal(0, 0.05, E),
+        contacts=rng.random((N, 2)) < 0.6,
+        labels=rng.integers(0, 2, N),
+    )
 
 
 def random_up(rng, shape):
@@ -47,8 +53,6 @@ def random_walk_problem(seed, T=70):
     return g, meas, position, heading
 
 
-
-
 def shared_reading_graph(rng, N=1200, out=3, S=2):
     """A graph shaped like a built one: edges mostly read their destination's own
     reading (a node's shared edges), a fifth of the rest a reading of their own; big
@@ -61,5 +65,11 @@ def shared_reading_graph(rng, N=1200, out=3, S=2):
     acc = node_reading[pairs[:, 1]]
     own = rng.random(E) < 0.2
     acc[own] = rng.normal(0, 9.81, (int(own.sum()), S, 3))
-    return tiny_graph(pairs[:, 0], pairs[:, 1], acc, offsets=rng.normal(0, 0.05, (E, 2)),
-                      dheading=rng.normal(0, 0.03, E), kinds=(rng.random(E) < 0.3).astype(np.uint8))  # fmt: skip
+    return tiny_graph(
+        pairs[:, 0],
+        pairs[:, 1],
+        acc,
+        offsets=rng.normal(0, 0.05, (E, 2)),
+        dheading=rng.normal(0, 0.03, E),
+        kinds=(rng.random(E) < 0.3).astype(np.uint8),
+    )

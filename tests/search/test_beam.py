@@ -57,10 +57,13 @@ def test_an_infinite_beam_is_the_exact_search_bit_for_bit(seed, threads, steps, 
     meas, position, heading = _inputs(rng, g, 90)
     allowed = rng.random(g.num_nodes) < 0.85
     for weights, pull_s in ((UNPLACED, None), (PLACED, None), (PLACED, 0.2)):
-        searches = [ViterbiSearch(g, weights, 0, allowed, threads, ring=(16, 8), beam=beam, pull_s=pull_s)
-                    for beam in (None, np.inf)]  # fmt: skip
-        (exact_nodes, exact_edges, exact_cost), (nodes, edges, cost) = (_run(s, meas, position, heading)
-                                                                        for s in searches)  # fmt: skip
+        searches = [
+            ViterbiSearch(g, weights, 0, allowed, threads, ring=(16, 8), beam=beam, pull_s=pull_s)
+            for beam in (None, np.inf)
+        ]
+        (exact_nodes, exact_edges, exact_cost), (nodes, edges, cost) = (
+            _run(s, meas, position, heading) for s in searches
+        )
         np.testing.assert_array_equal(nodes, exact_nodes)
         np.testing.assert_array_equal(edges, exact_edges)
         assert cost == exact_cost  # (bit for bit)
@@ -86,8 +89,9 @@ def _graph_with_dead_ends(rng):
     g = random_graph(rng, N=45, out=3)
     cut = rng.random(g.num_nodes) < 0.3
     keep = ~cut[g.edge_src]
-    return tiny_graph(g.edge_src[keep], g.edge_dst[keep], g.edge_acc[keep], offsets=g.edge_offset[keep],
-                      dheading=g.edge_heading[keep])  # fmt: skip
+    return tiny_graph(
+        g.edge_src[keep], g.edge_dst[keep], g.edge_acc[keep], offsets=g.edge_offset[keep], dheading=g.edge_heading[keep]
+    )
 
 
 @pytest.mark.parametrize("weights", [UNPLACED, PLACED])
@@ -167,8 +171,10 @@ def test_a_beam_search_keeps_every_dead_node_at_cost_inf_and_without_arrival(ste
         live = search._live[: search._n_live]
         assert np.all(np.diff(live) > 0)
         np.testing.assert_array_equal(np.flatnonzero(np.isfinite(search.state[:, COST])), live)
-        np.testing.assert_array_equal(np.flatnonzero(search.arrivals[(search.first + search.used - 1) %
-                                                                     search.arrivals.shape[0]] != search.none), live)
+        np.testing.assert_array_equal(
+            np.flatnonzero(search.arrivals[(search.first + search.used - 1) % search.arrivals.shape[0]] != search.none),
+            live,
+        )
         assert len(live) < g.num_nodes
 
 

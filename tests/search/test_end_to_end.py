@@ -30,11 +30,15 @@ def test_noise_free_clip_reconstructs_below_half_a_centimetre():
         table = joint_map(clip.skeleton)
         canon = canonical_indices(clip.skeleton)
         out = evaluate_frames(
-            pred_pos[:, canonical_indices(motion.skeleton)], true_pos[:, canon],
-            signals.ground_position(pred_pos, joint_map(motion.skeleton)["pelvis"]), signals.heading(pred_pos, joint_map(motion.skeleton)),
-            signals.ground_position(true_pos, table["pelvis"]), signals.heading(true_pos, table),
-            pred_labels=[graph.labels[graph.node_label[n]] for n in result.node_path], true_label=clip.labels[0],
-        )  # fmt: skip
+            pred_pos[:, canonical_indices(motion.skeleton)],
+            true_pos[:, canon],
+            signals.ground_position(pred_pos, joint_map(motion.skeleton)["pelvis"]),
+            signals.heading(pred_pos, joint_map(motion.skeleton)),
+            signals.ground_position(true_pos, table["pelvis"]),
+            signals.heading(true_pos, table),
+            pred_labels=[graph.labels[graph.node_label[n]] for n in result.node_path],
+            true_label=clip.labels[0],
+        )
         assert out["joint_err_cm"] < 0.5, (clip.name, out["joint_err_cm"])
         assert out["root_err_cm"] < 0.5 and out["heading_err_deg"] < 0.5
         assert out["label_acc"] == 1.0

@@ -181,8 +181,9 @@ def test_search_tables_give_every_edge_its_own_reading_and_pass_1_every_edge_onc
     seen += zip(pass1["own_pos"], pass1["own_src"], pass1["own_arrival"])
     position = tables["node_pos"][dst]
     arrival = np.arange(E) - g.incoming[dst]
-    assert sorted((int(p), int(m), int(a)) for p, m, a in seen) == sorted(zip(position.tolist(), g.edge_src.tolist(),
-                                                                             arrival.tolist()))  # fmt: skip
+    assert sorted((int(p), int(m), int(a)) for p, m, a in seen) == sorted(
+        zip(position.tolist(), g.edge_src.tolist(), arrival.tolist())
+    )
     assert pass1["own_bounds"][-1] == len(pass1["own_src"]) == E - shared.sum()
 
 
@@ -287,9 +288,12 @@ def test_eight_wide_candidates_without_avx2_load_one_by_one_and_agree(tmp_path):
         "scalar, wide = k(False)\n"
         "asm = ''.join(wide.inspect_asm().values())\n"
         "print('vgatherdps' in asm, 'vpgatherdd' in asm)\n"
-    )  # fmt: skip
-    env = {"NUMBA_CPU_FEATURES": features.replace("+avx2", "-avx2"), "NUMBA_CACHE_DIR": str(tmp_path),
-           "PATH": "/usr/bin:/bin"}  # fmt: skip
+    )
+    env = {
+        "NUMBA_CPU_FEATURES": features.replace("+avx2", "-avx2"),
+        "NUMBA_CACHE_DIR": str(tmp_path),
+        "PATH": "/usr/bin:/bin",
+    }
     root = str(__import__("pathlib").Path(__file__).resolve().parents[2])
     done = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]

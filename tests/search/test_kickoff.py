@@ -116,8 +116,10 @@ def test_a_bound_holding_every_node_gives_the_unbounded_decoders_frames():
     rng = np.random.default_rng(2)
     g = random_graph(rng, N=70, out=3)
     meas, position, heading = _inputs(rng, g, 70)
-    decoders = [FixedLagDecoder(g, PLACED, lag=6, threads=False, beam=8.0, start_samples=12, max_live=k)
-                for k in (0, g.num_nodes)]  # fmt: skip
+    decoders = [
+        FixedLagDecoder(g, PLACED, lag=6, threads=False, beam=8.0, start_samples=12, max_live=k)
+        for k in (0, g.num_nodes)
+    ]
     for t in range(len(meas)):
         a, b = (d.push(meas[t], position[t], heading[t]) for d in decoders)
         for x, y in zip(a, b):

@@ -45,12 +45,15 @@ def test_measured_orientations_pick_the_path_whose_sensors_they_match(chain):
     ref_path, ref_cost = reference_viterbi(g, acc, weights=Weights(1, 0, 0, 1.0), up=up)
     np.testing.assert_array_equal(ref_path, r.node_path)
     assert r.cost == pytest.approx(ref_cost, rel=1e-6)
-    forced = viterbi_search(g, acc, weights=Weights(1, 0, 0, 1.0), up=up,
-                            allowed=np.array([True, other == 1, other == 2]))
+    forced = viterbi_search(
+        g, acc, weights=Weights(1, 0, 0, 1.0), up=up, allowed=np.array([True, other == 1, other == 2])
+    )
     assert forced.terms["orientation_chord2"] == pytest.approx((T - 1) * (2 - 2 * np.cos(np.radians(40))), rel=1e-3)
     # with W_R = 0 the two chains tie: the costs are equal, either may be taken
     tie = viterbi_search(g, acc, weights=Weights(1, 0, 0, 0.0), up=up)
-    tied = viterbi_search(g, acc, weights=Weights(1, 0, 0, 0.0), up=up, allowed=np.array([True, other == 1, other == 2]))
+    tied = viterbi_search(
+        g, acc, weights=Weights(1, 0, 0, 0.0), up=up, allowed=np.array([True, other == 1, other == 2])
+    )
     assert tie.cost == tied.cost
     assert "orientation_chord2" not in tie.terms
 
@@ -59,8 +62,9 @@ def test_the_term_is_yaw_free_and_chord_squared():
     g = two_paths(S=1)
     T = 6
     acc = np.tile([0.0, 9.81, 0.0], (T, 1, 1))
-    base = viterbi_search(g, acc, weights=Weights(0, 0, 0, 2.0), up=np.tile(tilted(25), (T, 1, 1)),
-                          allowed=np.array([True, True, False]))  # fmt: skip
+    base = viterbi_search(
+        g, acc, weights=Weights(0, 0, 0, 2.0), up=np.tile(tilted(25), (T, 1, 1)), allowed=np.array([True, True, False])
+    )
     # C_R of an upright chain against a 25° tilt: 2 − 2 cos 25° a sample, weighted by W_R (W_A = 0)
     assert base.cost == pytest.approx(2.0 * (T - 1) * (2 - 2 * np.cos(np.radians(25))), rel=1e-5)
     # a device's yaw drift turns its reported orientation about the world vertical
@@ -82,8 +86,9 @@ def test_search_refuses_an_oriented_search_without_metadata_or_weight():
     with pytest.raises(InputError, match="orientation weight"):
         ViterbiSearch(two_paths(), Weights(1, 0, 0, 0.0), oriented=True)
     # batch: without metadata the term is simply off (the report lists orientations as ignored)
-    r = viterbi_search(g, np.tile([0.0, 9.81, 0.0], (4, 2, 1)), weights=Weights(1, 0, 0, 1.0),
-                       up=np.tile(UPRIGHT, (4, 2, 1)))  # fmt: skip
+    r = viterbi_search(
+        g, np.tile([0.0, 9.81, 0.0], (4, 2, 1)), weights=Weights(1, 0, 0, 1.0), up=np.tile(UPRIGHT, (4, 2, 1))
+    )
     assert "orientation_chord2" not in r.terms
 
 
@@ -182,8 +187,7 @@ def test_orientations_relative_to_the_root_pick_the_path_whose_sensors_turned_as
     assert r.cost == pytest.approx(ref_cost, rel=1e-6)
     forced = viterbi_search(g, acc, weights=w, up=up, allowed=np.array([True, chain == 2, chain == 1]))
     # one sensor of three off by 40°: the mean chord² is (2 − 2·cos 40°) / 3 a sample
-    assert forced.terms["orientation_chord2"] == pytest.approx((T - 1) * (2 - 2 * np.cos(np.radians(40))) / 3,
-                                                               rel=2e-3)  # fmt: skip
+    assert forced.terms["orientation_chord2"] == pytest.approx((T - 1) * (2 - 2 * np.cos(np.radians(40))) / 3, rel=2e-3)
 
 
 def test_old_graph_files_search_as_before_and_list_orientations_ignored(built, tmp_path):
@@ -212,8 +216,9 @@ def test_old_graph_files_search_as_before_and_list_orientations_ignored(built, t
     assert "ignored_inputs" not in on.report
     t = on.report["terms"]
     assert t["orientation_chord2"] > 0
-    assert (0.5 * t["acc_g2"] + t["position_m"] + t["heading_rad"] + t["orientation_chord2"]) == \
-        pytest.approx(on.report["cost"], rel=1e-6)
+    assert (0.5 * t["acc_g2"] + t["position_m"] + t["heading_rad"] + t["orientation_chord2"]) == pytest.approx(
+        on.report["cost"], rel=1e-6
+    )
     # W_R = 0: the orientations count for nothing, bit for bit
     zero = reconstruct(g, rec, Options(weights=Weights(0.5, 1, 1, 0.0)))
     np.testing.assert_array_equal(zero.node_path, plain.node_path)
@@ -255,15 +260,17 @@ def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_e
     window, lag = 8, 2
     emitted, differs = [], False
     for oriented in (True, False):
-        decoder = SlidingWindowDecoder(g, w if oriented else Weights(0.5, 1, 1, 0.0), window=window, lag=lag,
-                                       oriented=oriented)  # fmt: skip
+        decoder = SlidingWindowDecoder(
+            g, w if oriented else Weights(0.5, 1, 1, 0.0), window=window, lag=lag, oriented=oriented
+        )
         out = []
         for t in range(len(meas)):
             out.extend(decoder.push(meas[t], position[t], heading[t], up[t] if oriented else None)[0].tolist())
             if oriented and t >= lag:
                 lo = max(0, t - window + 1)
-                fresh = viterbi_search(g, meas[lo : t + 1], position[lo : t + 1], heading[lo : t + 1], w,
-                                       up=up[lo : t + 1]).node_path  # fmt: skip
+                fresh = viterbi_search(
+                    g, meas[lo : t + 1], position[lo : t + 1], heading[lo : t + 1], w, up=up[lo : t + 1]
+                ).node_path
                 assert out[t - lag] == fresh[t - lag - lo]
         out.extend(decoder.flush()[0].tolist())
         differs = differs or (emitted and out != emitted)
@@ -271,8 +278,16 @@ def test_the_sliding_window_decoder_weighs_orientations_as_a_fresh_search_over_e
     assert differs  # (the orientation term changed what was emitted)
 
 
-@pytest.mark.parametrize("strategy,layout", [("viterbi", "wrists-ankles"), ("olng", "wrists-ankles"),
-                                             ("viterbi", "kelly6"), ("olng", "kelly6"), ("nearest", "kelly6")])
+@pytest.mark.parametrize(
+    "strategy,layout",
+    [
+        ("viterbi", "wrists-ankles"),
+        ("olng", "wrists-ankles"),
+        ("viterbi", "kelly6"),
+        ("olng", "kelly6"),
+        ("nearest", "kelly6"),
+    ],
+)
 def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built, built6, strategy, layout):
     from dataclasses import replace
 
@@ -293,11 +308,17 @@ def test_a_live_session_given_orientations_equals_the_batch_reconstruction(built
         live = open_session(g, opts, rec.sensor_names, orientations=orientations)
         frames = []
         for k in range(rec.num_samples):
-            frames += live.push(float(rec.timestamps_s[k]), rec.accelerations[k], rec.ground_position[k],
-                                rec.heading[k], orientations=rec.orientations[k])  # fmt: skip
+            frames += live.push(
+                float(rec.timestamps_s[k]),
+                rec.accelerations[k],
+                rec.ground_position[k],
+                rec.heading[k],
+                orientations=rec.orientations[k],
+            )
         frames += live.flush()
         assert [f.index for f in frames] == list(range(rec.num_samples))
         np.testing.assert_allclose(live.motion().rotations, want.motion.rotations, atol=1e-6)
     with pytest.raises(InputError, match="orientations must be"):
-        open_session(g, opts, rec.sensor_names, orientations=True).push(0.0, rec.accelerations[0],
-                                                                         orientations=np.ones((1, 4)))  # fmt: skip
+        open_session(g, opts, rec.sensor_names, orientations=True).push(
+            0.0, rec.accelerations[0], orientations=np.ones((1, 4))
+        )

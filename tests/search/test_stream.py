@@ -48,7 +48,9 @@ def test_fixed_lag_emits_frame_t_minus_lag_of_the_best_prefix_path(lag, ring):
     emitted.extend(nodes.tolist())
     assert len(emitted) == T
     # The frames decided at flush are the full search's.
-    np.testing.assert_array_equal(emitted[T - lag :], viterbi_search(g, meas, position, heading, w).node_path[T - lag :])
+    np.testing.assert_array_equal(
+        emitted[T - lag :], viterbi_search(g, meas, position, heading, w).node_path[T - lag :]
+    )
 
 
 def test_converged_prefix_is_emitted_before_its_lag(ring):

@@ -19,7 +19,9 @@ from tests.search.problems import path_cost, random_graph, random_up, random_wal
 @st.composite
 def random_problem(draw):
     N = draw(st.integers(2, 5))
-    pairs = draw(st.lists(st.tuples(st.integers(0, N - 1), st.integers(0, N - 1)), min_size=N, max_size=12, unique=True))
+    pairs = draw(
+        st.lists(st.tuples(st.integers(0, N - 1), st.integers(0, N - 1)), min_size=N, max_size=12, unique=True)
+    )
     src, dst = zip(*pairs)
     if len(set(dst)) < 1:
         src, dst = src + (0,), dst + (0,)
@@ -73,8 +75,10 @@ def test_pruned_survivor_tree_equals_full_lattice(seed, ring):
     position = np.cumsum(rng.normal(0, 0.05, (T, 2)), axis=0)
     heading = np.cumsum(rng.normal(0, 0.05, T))
     position[rng.random(T) < 0.1] = np.nan
-    constraints = [[{"start_s": 0.5, "end_s": 1.5, "require": {"contact": "both"}}],
-                   [{"start_s": 1.0, "end_s": 3.0, "require": {"label": "b"}}]]  # fmt: skip
+    constraints = [
+        [{"start_s": 0.5, "end_s": 1.5, "require": {"contact": "both"}}],
+        [{"start_s": 1.0, "end_s": 3.0, "require": {"label": "b"}}],
+    ]
     for weights, sets in ((Weights(1, 0, 0), []), (Weights(0.5, 1, 1), []), (Weights(0.5, 1, 1), constraints)):
         fast = viterbi_search(g, meas, position, heading, weights, sets)
         ref_path, ref_cost = reference_viterbi(g, meas, position, heading, weights, sets)
@@ -116,7 +120,9 @@ def test_bad_inputs():
     with pytest.raises(InputError, match="layout"):
         viterbi_search(g, np.zeros((3, 2, 3)))
     with pytest.raises(InputError, match="unknown label"):
-        viterbi_search(g, np.zeros((3, 1, 3)), constraint_sets=[[{"start_s": 0, "end_s": 1, "require": {"label": "zzz"}}]])
+        viterbi_search(
+            g, np.zeros((3, 1, 3)), constraint_sets=[[{"start_s": 0, "end_s": 1, "require": {"label": "zzz"}}]]
+        )
 
 
 def test_noise_free_input_decodes_to_its_own_clip():
@@ -265,9 +271,19 @@ def test_flush_from_the_ancestors_lists_the_survivors_of_a_walk_from_the_newest_
             level_nodes = np.zeros(self.N * self.used + 16, np.int32)
             level_start = np.zeros(self.BLOCK + 1, np.int64)
             whole = np.arange(self.N, dtype=np.int32)  # every live node is its own ancestor at the newest row
-            total, _ = V._block_levels(self.arrivals, self.first, self.used, self.BLOCK, self.incoming, self.edge_src,
-                                       self.alive_map, level_nodes, level_start, whole,
-                                       self.state)  # fmt: skip
+            total, _ = V._block_levels(
+                self.arrivals,
+                self.first,
+                self.used,
+                self.BLOCK,
+                self.incoming,
+                self.edge_src,
+                self.alive_map,
+                level_nodes,
+                level_start,
+                whole,
+                self.state,
+            )
             flushes.append(self.ancestor_t >= 0)
             super()._flush()
             np.testing.assert_array_equal(self.level_start, level_start)
@@ -318,15 +334,24 @@ def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
             args = (self.arrivals, self.first, self.used)
             scratch = (self.incoming, self.edge_src, self.alive_map)
             for listed in (self.BLOCK, self.used):  # the flush's rows, and every row walked
-                want_nodes, want_start, want_converged = _levels_by_sets(*args, listed, self.incoming, self.edge_src,
-                                                                         ancestor, self.cost)  # fmt: skip
+                want_nodes, want_start, want_converged = _levels_by_sets(
+                    *args, listed, self.incoming, self.edge_src, ancestor, self.cost
+                )
                 for short in (len(want_nodes) - 1, len(want_nodes) // 2, 0):  # runs out: -1, nothing left marked
-                    total, _ = V._block_levels(*args, listed, *scratch, np.zeros(short, np.int32),
-                                               np.zeros(listed + 1, np.int64), ancestor, self.state)  # fmt: skip
+                    total, _ = V._block_levels(
+                        *args,
+                        listed,
+                        *scratch,
+                        np.zeros(short, np.int32),
+                        np.zeros(listed + 1, np.int64),
+                        ancestor,
+                        self.state,
+                    )
                     assert total == -1 and not self.alive_map.any()
                 level_nodes, level_start = np.zeros(len(want_nodes), np.int32), np.zeros(listed + 1, np.int64)
-                total, converged = V._block_levels(*args, listed, *scratch, level_nodes, level_start, ancestor,
-                                                   self.state)  # fmt: skip
+                total, converged = V._block_levels(
+                    *args, listed, *scratch, level_nodes, level_start, ancestor, self.state
+                )
                 assert not self.alive_map.any()
                 assert total == len(want_nodes)
                 np.testing.assert_array_equal(level_nodes, want_nodes)
@@ -377,8 +402,9 @@ def test_serial_kernels_never_load_the_threaded_ones_from_the_cache(tmp_path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
 
     def cache_hits(name):
-        done = subprocess.run([sys.executable, "-c", code.format(name=name)], env=env, capture_output=True, text=True,
-                              timeout=600)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-c", code.format(name=name)], env=env, capture_output=True, text=True, timeout=600
+        )
         assert done.returncode == 0, done.stderr[-2000:]
         return int(done.stdout.split()[-1])
 
@@ -532,8 +558,9 @@ def test_paths_start_at_the_first_measured_position_and_heading():
     p0, h0 = s.start_placement
     np.testing.assert_array_equal(p0, position[4])
     assert h0 == heading[2]
-    assert fast.terms["position_m"] * w.position + fast.terms["heading_rad"] * w.heading + \
-        fast.terms["acc_g2"] * w.acc == pytest.approx(fast.cost, rel=1e-6)
+    assert fast.terms["position_m"] * w.position + fast.terms["heading_rad"] * w.heading + fast.terms[
+        "acc_g2"
+    ] * w.acc == pytest.approx(fast.cost, rel=1e-6)
 
 
 def test_track_pull_is_a_first_order_filter_with_its_time_constant():
@@ -564,8 +591,9 @@ def test_pulled_placements_equal_the_reference_and_the_reported_terms(seed):
         np.testing.assert_array_equal(fast.node_path, ref_path)
         assert fast.cost == pytest.approx(ref_cost, rel=1e-6)
         t = fast.terms
-        assert t["acc_g2"] * w.acc + t["position_m"] * w.position + t["heading_rad"] * w.heading == \
-            pytest.approx(fast.cost, rel=1e-6)
+        assert t["acc_g2"] * w.acc + t["position_m"] * w.position + t["heading_rad"] * w.heading == pytest.approx(
+            fast.cost, rel=1e-6
+        )
         # Following the tracker, the paths score far less position cost than placed once.
         assert t["position_m"] < 0.5 * plain.terms["position_m"]
         changed |= not np.array_equal(plain.node_path, fast.node_path)
@@ -582,8 +610,12 @@ def test_pulled_placements_equal_the_reference_and_the_reported_terms(seed):
         assert fast.cost == pytest.approx(ref_cost, rel=1e-6)
         t = fast.terms
         assert t["orientation_chord2"] > 0
-        assert (t["acc_g2"] * w.acc + t["position_m"] * w.position + t["heading_rad"] * w.heading
-                + t["orientation_chord2"] * w.orientation) == pytest.approx(fast.cost, rel=1e-6)
+        assert (
+            t["acc_g2"] * w.acc
+            + t["position_m"] * w.position
+            + t["heading_rad"] * w.heading
+            + t["orientation_chord2"] * w.orientation
+        ) == pytest.approx(fast.cost, rel=1e-6)
 
 
 def test_a_pulled_track_closes_the_gap_to_the_tracker_geometrically():

@@ -18,12 +18,28 @@ from graphsvc.sensors.noise import parse_noise
 from graphsvc.sensors.recording import export_csv, import_csv
 from graphsvc.sensors.simulate import simulate_recording
 
-EVERY_SEGMENT = Layout("every", tuple(
-    SensorSpec(n, n, t, 0.6) for n, t in [
-        ("pelvis", "spine"), ("spine", "chest"), ("chest", "neck"), ("neck", "head"),
-        ("l_shoulder", "l_elbow"), ("l_elbow", "l_wrist"), ("r_shoulder", "r_elbow"), ("r_elbow", "r_wrist"),
-        ("l_hip", "l_knee"), ("l_knee", "l_ankle"), ("r_hip", "r_knee"), ("r_knee", "r_ankle"),
-        ("l_ankle", "l_toe"), ("r_ankle", "r_toe")]))  # fmt: skip
+EVERY_SEGMENT = Layout(
+    "every",
+    tuple(
+        SensorSpec(n, n, t, 0.6)
+        for n, t in [
+            ("pelvis", "spine"),
+            ("spine", "chest"),
+            ("chest", "neck"),
+            ("neck", "head"),
+            ("l_shoulder", "l_elbow"),
+            ("l_elbow", "l_wrist"),
+            ("r_shoulder", "r_elbow"),
+            ("r_elbow", "r_wrist"),
+            ("l_hip", "l_knee"),
+            ("l_knee", "l_ankle"),
+            ("r_hip", "r_knee"),
+            ("r_knee", "r_ankle"),
+            ("l_ankle", "l_toe"),
+            ("r_ankle", "r_toe"),
+        ]
+    ),
+)
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +73,9 @@ def test_readings_agree_on_a_skeleton_whose_joint_frames_are_turned(walk):
     wr2, wp2 = motion_fk(turned)
     np.testing.assert_allclose(wp2, wp, atol=1e-9)  # (the same motion)
     a = simulate_accelerations(wr, wp, anatomical_placement(EVERY_SEGMENT, walk.skeleton, None, wr, wp), walk.rate_hz)
-    b = simulate_accelerations(wr2, wp2, anatomical_placement(EVERY_SEGMENT, turned.skeleton, None, wr2, wp2),
-                               turned.rate_hz)  # fmt: skip
+    b = simulate_accelerations(
+        wr2, wp2, anatomical_placement(EVERY_SEGMENT, turned.skeleton, None, wr2, wp2), turned.rate_hz
+    )
     rms = np.sqrt(np.mean((a.astype(float) - b) ** 2, axis=(0, 2)))
     assert rms.max() < 0.05, rms  # m/s²: only the rest-pose prior differs (module docstring)
     # The rest-pose convention reads the two skeletons differently (the test could fail).
@@ -144,8 +161,11 @@ def test_bandai_and_cmu_walks_read_alike_in_anatomical_frames(data_dir):
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
     def angles(anatomical):
-        return np.degrees(np.arccos(np.clip(np.sum(mean_direction(bandai, anatomical) * mean_direction(cmu, anatomical),
-                                                   axis=1), -1, 1)))  # fmt: skip
+        return np.degrees(
+            np.arccos(
+                np.clip(np.sum(mean_direction(bandai, anatomical) * mean_direction(cmu, anatomical), axis=1), -1, 1)
+            )
+        )
 
     new, old = angles(True), angles(False)
     assert new.max() < 20.0, new

@@ -22,7 +22,7 @@ from graphsvc.sensors.calibration import (
     angle_deg,
     apply_calibration,
     calibrate_sample,
-    check_calibration,  # fmt: skip
+    check_calibration,
     find_rest,
     load_calibration,
     match_windows,
@@ -44,8 +44,11 @@ def pose_take(clip: Motion, pose: np.ndarray, hold_s: float = 1.5, blend_s: floa
     trans[0] = clip.translations[0, 0]
     hold, blend = int(hold_s * rate), int(blend_s * rate)
     t = (1.0 - np.cos(np.pi * (np.arange(1, blend + 1) / (blend + 1)))) / 2.0  # (eased: still at both ends)
-    rot_b = quat.slerp(np.broadcast_to(pose, (blend, *pose.shape)), np.broadcast_to(clip.rotations[0], (blend, *pose.shape)),
-                       t[:, None])  # fmt: skip
+    rot_b = quat.slerp(
+        np.broadcast_to(pose, (blend, *pose.shape)),
+        np.broadcast_to(clip.rotations[0], (blend, *pose.shape)),
+        t[:, None],
+    )
     trans_b = trans[None] + t[:, None, None] * (clip.translations[0][None] - trans[None])
     rot = np.concatenate([np.broadcast_to(pose, (hold, *pose.shape)), rot_b, clip.rotations])
     tr = np.concatenate([np.broadcast_to(trans, (hold, *trans.shape)), trans_b, clip.translations])
@@ -82,7 +85,9 @@ def _errors(cal: dict, seed: int, names, degrees: float, misalign=None) -> np.nd
     if misalign is not None:
         true = quat.mul(true, misalign)
     doc = check_calibration(cal)
-    return np.array([angle_deg(quat.to_matrix(doc["rotations"][n]), quat.to_matrix(true[k])) for k, n in enumerate(names)])
+    return np.array(
+        [angle_deg(quat.to_matrix(doc["rotations"][n]), quat.to_matrix(true[k])) for k, n in enumerate(names)]
+    )
 
 
 # ---------------------------------------------------------------- pieces
@@ -161,7 +166,9 @@ def test_the_complex_sum_gives_the_rotation_about_gravity_and_the_best_window():
     up = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
     theta = np.array([0.4, -1.1])
     # The device window is graph window 130 turned by −θ about gravity: the graph = R(θ)·device.
-    device = np.stack([Rotation.from_rotvec(-theta[s] * up[s]).apply(stream[130:130 + W, s]) for s in range(S)], axis=1)
+    device = np.stack(
+        [Rotation.from_rotvec(-theta[s] * up[s]).apply(stream[130 : 130 + W, s]) for s in range(S)], axis=1
+    )
     matches = match_windows(device, stream, runs, up, W, W)
     q, j, cost, sums = matches[0]
     assert (q, j) == (0, 130) and cost == pytest.approx(0.0, abs=1e-6)
@@ -205,18 +212,27 @@ def test_a_t_pose_take_calibrates_sensors_in_anatomical_frames(kb):
     from graphsvc.sensors.layout import layout_from_dict
 
     c = float(np.sqrt(0.5))
-    layout = layout_from_dict({"name": "anatomical", "sensors": [
-        {"name": "l_wrist", "segment": "l_elbow", "along": 0.9, "rotation_wxyz": [1, 0, 0, 0]},
-        {"name": "r_wrist", "segment": "r_elbow", "along": 0.9, "rotation_wxyz": [0, 0, 0, 1]},
-        {"name": "l_ankle", "segment": "l_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]},
-        {"name": "r_ankle", "segment": "r_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]}]})  # fmt: skip
+    layout = layout_from_dict(
+        {
+            "name": "anatomical",
+            "sensors": [
+                {"name": "l_wrist", "segment": "l_elbow", "along": 0.9, "rotation_wxyz": [1, 0, 0, 0]},
+                {"name": "r_wrist", "segment": "r_elbow", "along": 0.9, "rotation_wxyz": [0, 0, 0, 1]},
+                {"name": "l_ankle", "segment": "l_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]},
+                {"name": "r_ankle", "segment": "r_knee", "along": 0.9, "rotation_wxyz": [c, 0, 0, -c]},
+            ],
+        }
+    )
     g, _ = build_graph(kb, BuildOptions(layout=layout, progress=False))
     seed = 8
     take = pose_take(_clip(kb, "stop"), quat.identity((kb[0].skeleton.num_joints,)))
     rec = simulate_recording(take, layout, parse_noise("none,mount=90"), seed=seed)
     rest = rec.accelerations[5].astype(float)  # (the T-pose's readings without the mounting:)
-    np.testing.assert_allclose(quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
-                               [POSE_READINGS["tpose"][s.segment] for s in layout.sensors], atol=1e-3)  # fmt: skip
+    np.testing.assert_allclose(
+        quat.rotate(mounting(seed, layout.sensor_names, 90.0), rest),
+        [POSE_READINGS["tpose"][s.segment] for s in layout.sensors],
+        atol=1e-3,
+    )
     # (The arms' roll about their bone comes from the motion, not the table, even here
     # where the table's is the truth: 2.0° and 1.4°, the shins 0.03°.)
     err = _errors(calibrate(rec, "tpose", g), seed, layout.sensor_names, 90.0)
@@ -278,16 +294,27 @@ def test_apply_calibration_with_the_true_mounting_gives_the_mount_free_recording
     mounted = simulate_recording(clip, LAYOUT, parse_noise(spec + ",mount=70"), seed=4)
     free = simulate_recording(clip, LAYOUT, parse_noise(spec), seed=4)
     true = mounting(4, LAYOUT.sensor_names, 70.0)
-    doc = check_calibration({"format": "graphsvc-calibration", "version": 1, "sensors": {
-        n: {"rotation_wxyz": true[k].tolist()} for k, n in enumerate(LAYOUT.sensor_names)}}, "cal.json")  # fmt: skip
+    doc = check_calibration(
+        {
+            "format": "graphsvc-calibration",
+            "version": 1,
+            "sensors": {n: {"rotation_wxyz": true[k].tolist()} for k, n in enumerate(LAYOUT.sensor_names)},
+        },
+        "cal.json",
+    )
     out = apply_calibration(mounted, doc)
     np.testing.assert_allclose(out.accelerations, free.accelerations, atol=2e-4)
     dots = np.abs(np.sum(out.orientations.astype(float) * free.orientations.astype(float), axis=-1))
     assert dots.min() > 1 - 1e-6
     assert out.meta["sensor_frame"] == "layout" and out.meta["calibration"] == "cal.json"
     # The live form turns one sample the same way.
-    np.testing.assert_allclose(calibrate_sample(doc["rotations"] and np.stack([doc["rotations"][n] for n in LAYOUT.sensor_names]),
-                                                mounted.accelerations[7]), free.accelerations[7], atol=2e-4)  # fmt: skip
+    np.testing.assert_allclose(
+        calibrate_sample(
+            doc["rotations"] and np.stack([doc["rotations"][n] for n in LAYOUT.sensor_names]), mounted.accelerations[7]
+        ),
+        free.accelerations[7],
+        atol=2e-4,
+    )
     with pytest.raises(InputError, match="already in the layout"):
         apply_calibration(out, doc)
     wrong = {**doc, "rotations": {**doc["rotations"], "extra": np.array([1.0, 0, 0, 0])}}
@@ -397,10 +424,15 @@ def test_a_pose_before_the_clip_calibrates_every_sensor(kb, graph6, monkeypatch,
 
 
 def test_quality_problems_name_each_sensor_in_one_phrase():
-    got = cal_mod.quality_problems(("a", "b", "c", "d"), [25.5, 3.0, 24.9, 40.0], [True, False, True, True],
-                                   [np.nan, np.nan, 10.5, 9.9])  # fmt: skip
-    assert got == ["a (residual 25.5° > 25°)", "b (moved during the pose)",
-                   "c (gravity from acceleration and orientation 10.5° apart (> 10°))", "d (residual 40.0° > 25°)"]  # fmt: skip
+    got = cal_mod.quality_problems(
+        ("a", "b", "c", "d"), [25.5, 3.0, 24.9, 40.0], [True, False, True, True], [np.nan, np.nan, 10.5, 9.9]
+    )
+    assert got == [
+        "a (residual 25.5° > 25°)",
+        "b (moved during the pose)",
+        "c (gravity from acceleration and orientation 10.5° apart (> 10°))",
+        "d (residual 40.0° > 25°)",
+    ]
 
 
 def _wobbled(rec, sensor: int):
@@ -435,7 +467,9 @@ def test_gravity_from_acceleration_and_orientation_that_disagree_is_named(kb, gr
     acc[:, 2] = quat.rotate(turn[None], acc[:, 2])
     gap = cal_mod.gravity_gap_deg(acc, rec.orientations.astype(np.float64), np.array([[0, 30]] * 4))
     assert gap[2] == pytest.approx(15.0, abs=1e-3) and np.abs(gap[[0, 1, 3]]).max() < 1e-3
-    with pytest.raises(cal_mod.CalibrationQualityError, match=r"l_ankle \(gravity from acceleration and orientation 15\.0°"):
+    with pytest.raises(
+        cal_mod.CalibrationQualityError, match=r"l_ankle \(gravity from acceleration and orientation 15\.0°"
+    ):
         calibrate(replace(rec, accelerations=acc.astype(np.float32)), "npose", graph)
 
 
@@ -457,8 +491,10 @@ def test_hidden_clips_are_left_out_of_the_reference(kb, graph):
     np.testing.assert_array_equal(graph_reference(graph).readings, full)
     # The verticals follow the kept rows: row k of the reference is row keep[k] of the whole.
     rows = np.array([0, 7, int(keep.sum()) - 1])
-    np.testing.assert_allclose(ref.verticals(rows, LAYOUT.sensor_names),
-                               graph_reference(graph).verticals(np.flatnonzero(keep)[rows], LAYOUT.sensor_names))  # fmt: skip
+    np.testing.assert_allclose(
+        ref.verticals(rows, LAYOUT.sensor_names),
+        graph_reference(graph).verticals(np.flatnonzero(keep)[rows], LAYOUT.sensor_names),
+    )
     rec = simulate_recording(npose_take(_clip(kb, "stop")), LAYOUT, parse_noise("none,mount=30"), seed=2)
     assert calibrate_from_start(rec, graph, 5.0, "npose") == calibrate(rec, "npose", graph, None, 5.0)
     with pytest.raises(InputError, match="no window of the graph's readings"):

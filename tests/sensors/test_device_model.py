@@ -38,12 +38,14 @@ def test_a_mounted_device_reads_in_its_rotated_frame_and_reports_it(walk):
     ideal = simulate_recording(walk, layout, parse_noise("none"), seed=3)
     mounted = simulate_recording(walk, layout, parse_noise("none,mount=40,orientations=1"), seed=3)
     M = mounting(3, layout.sensor_names, 40.0)
-    np.testing.assert_allclose(mounted.accelerations, quat.inv_rotate(M[None], ideal.accelerations.astype(float)),
-                               atol=2e-4)  # fmt: skip
+    np.testing.assert_allclose(
+        mounted.accelerations, quat.inv_rotate(M[None], ideal.accelerations.astype(float)), atol=2e-4
+    )
     # The orientation output is the mounted frame's: with it, reading − gravity is the sensor point's p̈.
     world_rot, world_pos = motion_fk(walk)
-    position, orientation = sensor_poses(world_rot, world_pos,
-                                         anatomical_placement(layout, walk.skeleton, None, world_rot, world_pos))
+    position, orientation = sensor_poses(
+        world_rot, world_pos, anatomical_placement(layout, walk.skeleton, None, world_rot, world_pos)
+    )
     np.testing.assert_allclose(mounted.orientations, quat.mul(orientation, M[None]), atol=1e-6)
     free = quat.rotate(mounted.orientations.astype(float), mounted.accelerations.astype(float)) - G_UP
     np.testing.assert_allclose(free, second_derivative(position, walk.rate_hz), atol=2e-3)

@@ -25,8 +25,19 @@ NS = "http://www.xsens.com/mvn/mvnx"
 C45 = math.sqrt(0.5)  # cos 45° = sin 45°
 FREE_FILE = "blender-mvnx-io_test_mocap.mvnx"
 RAW_FILE = "robotology_Meri-020.mvnx"
-XSENS_UPPER = ("Pelvis", "T8", "Head", "RightShoulder", "RightUpperArm", "RightForeArm", "RightHand",
-               "LeftShoulder", "LeftUpperArm", "LeftForeArm", "LeftHand")  # fmt: skip
+XSENS_UPPER = (
+    "Pelvis",
+    "T8",
+    "Head",
+    "RightShoulder",
+    "RightUpperArm",
+    "RightForeArm",
+    "RightHand",
+    "LeftShoulder",
+    "LeftUpperArm",
+    "LeftForeArm",
+    "LeftHand",
+)
 XSENS_FULL = XSENS_UPPER + ("RightUpperLeg", "RightLowerLeg", "RightFoot", "LeftUpperLeg", "LeftLowerLeg", "LeftFoot")
 
 
@@ -34,10 +45,14 @@ def mvnx_text(labels, frames, rate=60, version="3", namespace=True, sensor_count
     """An MVNX document: `frames` is a list of (attributes, {element: values}), values
     written as given (a string) or joined with spaces (a sequence of numbers)."""
     ns = f' xmlns="{NS}"' if namespace else ""
-    out = ['<?xml version="1.0" encoding="UTF-8"?>', f'<mvnx{ns} version="{version}">',
-           '  <mvn version="2019.0.0" build="test"/>',
-           f'  <subject label="s" frameRate="{rate}" segmentCount="23" configuration="FullBody">',
-           "    <segments><segment label=\"Pelvis\" id=\"1\"/></segments>", "    <sensors>"]  # fmt: skip
+    out = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        f'<mvnx{ns} version="{version}">',
+        '  <mvn version="2019.0.0" build="test"/>',
+        f'  <subject label="s" frameRate="{rate}" segmentCount="23" configuration="FullBody">',
+        '    <segments><segment label="Pelvis" id="1"/></segments>',
+        "    <sensors>",
+    ]
     out += [f'      <sensor label="{n}"/>' for n in labels]
     count = len(labels) if sensor_count is None else sensor_count
     out += ["    </sensors>", f'    <frames segmentCount="23" sensorCount="{count}" jointCount="22">']
@@ -93,10 +108,12 @@ def test_free_acceleration_hand_checked(tmp_path, namespace):
     #   its X reads −9.81.
     q = [[1, 0, 0, 0], [C45, 0, 0, C45], [C45, 0, C45, 0]]
     free = [[1, 0, 0], [0, 2, 0], [0, 0, 0]]
-    frames = [({"time": "0", "tc": "00", "ms": "0", "type": "identity"}, {"orientation": [1, 0, 0, 0]}),
-              ({"time": "0", "tc": "00", "ms": "0", "type": "tpose"}, {"sensorOrientation": q}),
-              normal(0, sensorFreeAcceleration=free, sensorOrientation=q, sensorMagneticField=np.zeros(9)),
-              normal(1, sensorFreeAcceleration=np.zeros(9), sensorOrientation=q)]  # fmt: skip
+    frames = [
+        ({"time": "0", "tc": "00", "ms": "0", "type": "identity"}, {"orientation": [1, 0, 0, 0]}),
+        ({"time": "0", "tc": "00", "ms": "0", "type": "tpose"}, {"sensorOrientation": q}),
+        normal(0, sensorFreeAcceleration=free, sensorOrientation=q, sensorMagneticField=np.zeros(9)),
+        normal(1, sensorFreeAcceleration=np.zeros(9), sensorOrientation=q),
+    ]
     rec = read_mvnx(write_mvnx(tmp_path / "t.mvnx", ("a", "b", "c"), frames, version="4", namespace=namespace))
     assert rec.sensor_names == ("a", "b", "c") and rec.num_samples == 2 and rec.rate_hz == 60.0
     np.testing.assert_allclose(rec.timestamps_s, [0.0, 0.017])  # the frames' time, ms
@@ -126,9 +143,11 @@ def test_free_acceleration_hand_checked(tmp_path, namespace):
 def test_raw_acceleration_read_as_is(tmp_path):
     acc = [[-9.026212, 0.558642, 3.671129], [0.1, 9.8, -0.2]]
     q = [[C45, 0, 0, C45], [1, 0, 0, 0]]
-    frames = [({"time": "0", "index": "-2", "type": "tpose"}, {"orientation": np.zeros(4)}),
-              normal(0, 240, sensorAcceleration=acc, sensorOrientation=q, sensorFreeAcceleration=np.ones(6)),
-              normal(1, 240, sensorAcceleration=acc, sensorOrientation=q, sensorFreeAcceleration=np.ones(6))]  # fmt: skip
+    frames = [
+        ({"time": "0", "index": "-2", "type": "tpose"}, {"orientation": np.zeros(4)}),
+        normal(0, 240, sensorAcceleration=acc, sensorOrientation=q, sensorFreeAcceleration=np.ones(6)),
+        normal(1, 240, sensorAcceleration=acc, sensorOrientation=q, sensorFreeAcceleration=np.ones(6)),
+    ]
     rec = read_mvnx(write_mvnx(tmp_path / "r.mvnx", ("LeftForeArm", "Pelvis"), frames, rate=240))
     np.testing.assert_array_equal(rec.accelerations[0], np.float32(acc))  # not rotated, not re-gravitated
     assert rec.meta["acceleration"] == "sensorAcceleration" and "poses" not in rec.meta
@@ -173,23 +192,32 @@ def test_many_frames_and_missing_sensor(tmp_path):
     np.testing.assert_allclose(back, free[ok], atol=2e-5)
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda t: t[: len(t) // 2], "ends early"),
-    (lambda t: t.replace("</mvnx>", ""), "ends early"),
-    (lambda t: t.replace("<frames ", "<frames <", 1), "not a well-formed"),
-    (lambda t: t.replace("0.000000", "zero", 1), "not a number"),
-    (lambda t: t.replace(" 0.707107</sensorOrientation>", "</sensorOrientation>", 1), "has 7 values, expected 8 \\(4 for each of 2 sensors\\)"),
-    (lambda t: t.replace("9.810000", "inf", 1), "infinite"),
-    (lambda t: t.replace('sensorCount="2"', 'sensorCount="3"'), "sensorCount"),
-    (lambda t: t.replace('label="b"', 'label="a"'), "duplicate sensor labels: a"),
-    (lambda t: t.replace('<sensor label="a"/>', "").replace('<sensor label="b"/>', ""), "no sensors"),
-    (lambda t: t.replace('type="normal"', 'type="tpose"'), "no normal frames"),
-    (lambda t: t.replace("sensorOrientation", "sensorMagneticField"), "needs sensorOrientation"),
-    (lambda t: t.replace("sensorFreeAcceleration", "acceleration"), "no sensor accelerations"),
-    (lambda t: t.replace('time="17"', 'time="0"'), "does not follow"),
-    (lambda t: t.replace("<mvnx", "<mvnz").replace("</mvnx", "</mvnz"), "not an MVNX file"),
-    (lambda t: t.replace("0.707107 0.000000 0.000000 0.707107", "0.5 0 0 0.5"), "the sensorOrientation of b is not a unit quaternion"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda t: t[: len(t) // 2], "ends early"),
+        (lambda t: t.replace("</mvnx>", ""), "ends early"),
+        (lambda t: t.replace("<frames ", "<frames <", 1), "not a well-formed"),
+        (lambda t: t.replace("0.000000", "zero", 1), "not a number"),
+        (
+            lambda t: t.replace(" 0.707107</sensorOrientation>", "</sensorOrientation>", 1),
+            "has 7 values, expected 8 \\(4 for each of 2 sensors\\)",
+        ),
+        (lambda t: t.replace("9.810000", "inf", 1), "infinite"),
+        (lambda t: t.replace('sensorCount="2"', 'sensorCount="3"'), "sensorCount"),
+        (lambda t: t.replace('label="b"', 'label="a"'), "duplicate sensor labels: a"),
+        (lambda t: t.replace('<sensor label="a"/>', "").replace('<sensor label="b"/>', ""), "no sensors"),
+        (lambda t: t.replace('type="normal"', 'type="tpose"'), "no normal frames"),
+        (lambda t: t.replace("sensorOrientation", "sensorMagneticField"), "needs sensorOrientation"),
+        (lambda t: t.replace("sensorFreeAcceleration", "acceleration"), "no sensor accelerations"),
+        (lambda t: t.replace('time="17"', 'time="0"'), "does not follow"),
+        (lambda t: t.replace("<mvnx", "<mvnz").replace("</mvnx", "</mvnz"), "not an MVNX file"),
+        (
+            lambda t: t.replace("0.707107 0.000000 0.000000 0.707107", "0.5 0 0 0.5"),
+            "the sensorOrientation of b is not a unit quaternion",
+        ),
+    ],
+)
 def test_malformed_mvnx_refused(tmp_path, edit, message):
     q = [[1, 0, 0, 0], [C45, 0, 0, C45]]
     frames = [normal(k, sensorFreeAcceleration=[0, 0, 0, 0, 0, 9.81 * k], sensorOrientation=q) for k in range(3)]
@@ -284,11 +312,20 @@ def test_real_mvnx_truncated(data_dir, tmp_path):
 
 
 def test_builtin_xsens_maps_follow_the_presets():
-    assert device_map("xsens", "kelly6") == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
-                                             "LeftLowerLeg": "l_shin", "RightLowerLeg": "r_shin",
-                                             "Pelvis": "lower_back", "T8": "chest"}  # fmt: skip
-    assert device_map("xsens", "wrists-ankles") == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist",
-                                                    "LeftLowerLeg": "l_ankle", "RightLowerLeg": "r_ankle"}  # fmt: skip
+    assert device_map("xsens", "kelly6") == {
+        "LeftForeArm": "l_forearm",
+        "RightForeArm": "r_forearm",
+        "LeftLowerLeg": "l_shin",
+        "RightLowerLeg": "r_shin",
+        "Pelvis": "lower_back",
+        "T8": "chest",
+    }
+    assert device_map("xsens", "wrists-ankles") == {
+        "LeftForeArm": "l_wrist",
+        "RightForeArm": "r_wrist",
+        "LeftLowerLeg": "l_ankle",
+        "RightLowerLeg": "r_ankle",
+    }
     assert device_map("xsens", "right-wrist") == {"RightForeArm": "r_wrist"}
     for layout, mapping in DEVICE_MAPS["xsens"].items():
         assert tuple(mapping.values()) == PRESETS[layout].sensor_names  # in the layout's order
@@ -299,19 +336,57 @@ def test_builtin_xsens_maps_follow_the_presets():
         device_map("vicon-imu", "kelly6")
 
 
-XSENS_SKELETON = ("Hips", "Spine", "Spine1", "Spine2", "Spine3", "Neck", "Head", "RightShoulder", "RightArm",
-                  "RightForeArm", "RightHand", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "RightUpLeg",
-                  "RightLeg", "RightFoot", "LeftUpLeg", "LeftLeg", "LeftFoot")  # fmt: skip
+XSENS_SKELETON = (
+    "Hips",
+    "Spine",
+    "Spine1",
+    "Spine2",
+    "Spine3",
+    "Neck",
+    "Head",
+    "RightShoulder",
+    "RightArm",
+    "RightForeArm",
+    "RightHand",
+    "LeftShoulder",
+    "LeftArm",
+    "LeftForeArm",
+    "LeftHand",
+    "RightUpLeg",
+    "RightLeg",
+    "RightFoot",
+    "LeftUpLeg",
+    "LeftLeg",
+    "LeftFoot",
+)
 XSENS_SEGMENTS_ALL = ("Pelvis", "L5", "L3", "T12", "T8", "Neck", "Head") + XSENS_FULL[3:]
 
 
 def test_builtin_maps_for_dip6():
-    assert device_map("xsens", "dip6") == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist", "LeftLowerLeg": "l_knee",
-                                           "RightLowerLeg": "r_knee", "Head": "head", "Pelvis": "pelvis"}  # fmt: skip
-    assert device_map("mvn", "dip6") == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist", "LeftLeg": "l_knee",
-                                         "RightLeg": "r_knee", "Head": "head", "Hips": "pelvis"}  # fmt: skip
-    assert device_map("generic", "dip6") == {"left_wrist": "l_wrist", "right_wrist": "r_wrist", "left_knee": "l_knee",
-                                             "right_knee": "r_knee", "head": "head", "pelvis": "pelvis"}  # fmt: skip
+    assert device_map("xsens", "dip6") == {
+        "LeftForeArm": "l_wrist",
+        "RightForeArm": "r_wrist",
+        "LeftLowerLeg": "l_knee",
+        "RightLowerLeg": "r_knee",
+        "Head": "head",
+        "Pelvis": "pelvis",
+    }
+    assert device_map("mvn", "dip6") == {
+        "LeftForeArm": "l_wrist",
+        "RightForeArm": "r_wrist",
+        "LeftLeg": "l_knee",
+        "RightLeg": "r_knee",
+        "Head": "head",
+        "Hips": "pelvis",
+    }
+    assert device_map("generic", "dip6") == {
+        "left_wrist": "l_wrist",
+        "right_wrist": "r_wrist",
+        "left_knee": "l_knee",
+        "right_knee": "r_knee",
+        "head": "head",
+        "pelvis": "pelvis",
+    }
     for device in DEVICE_MAPS:
         for layout, mapping in DEVICE_MAPS[device].items():
             assert tuple(mapping.values()) == PRESETS[layout].sensor_names
@@ -321,26 +396,54 @@ def test_xsens_takes_the_naming_that_names_more_sensors():
     # MVN segment names (an MVNX's sensors): Pelvis, T8, LowerLeg.
     assert device_map("xsens", "kelly6", XSENS_SEGMENTS_ALL) == DEVICE_MAPS["xsens"]["kelly6"]
     # MVN skeleton names (a BVH export's): Hips, Spine3, Leg; Head and LeftForeArm are in both.
-    assert device_map("xsens", "kelly6", XSENS_SKELETON) == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
-                                                             "LeftLeg": "l_shin", "RightLeg": "r_shin",
-                                                             "Hips": "lower_back", "Spine3": "chest"}  # fmt: skip
+    assert device_map("xsens", "kelly6", XSENS_SKELETON) == {
+        "LeftForeArm": "l_forearm",
+        "RightForeArm": "r_forearm",
+        "LeftLeg": "l_shin",
+        "RightLeg": "r_shin",
+        "Hips": "lower_back",
+        "Spine3": "chest",
+    }
     assert device_map("xsens", "dip6", XSENS_SKELETON) == device_map("mvn", "dip6")
     # An upper-body take in skeleton names: the skeleton naming still names more (Hips, Spine3 against none).
     upper = ("Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm")
-    assert device_map("xsens", "kelly6", upper) == {"LeftForeArm": "l_forearm", "RightForeArm": "r_forearm",
-                                                    "Hips": "lower_back", "Spine3": "chest"}  # fmt: skip
-    with pytest.raises(InputError, match=re.escape("the mvn device map names none of the recording's sensors (S1, S2) "
-                                                   "for layout 'right-wrist' (it takes RightForeArm)")):
+    assert device_map("xsens", "kelly6", upper) == {
+        "LeftForeArm": "l_forearm",
+        "RightForeArm": "r_forearm",
+        "Hips": "lower_back",
+        "Spine3": "chest",
+    }
+    with pytest.raises(
+        InputError,
+        match=re.escape(
+            "the mvn device map names none of the recording's sensors (S1, S2) "
+            "for layout 'right-wrist' (it takes RightForeArm)"
+        ),
+    ):
         device_map("mvn", "right-wrist", ("S1", "S2"))
     # mvn never reads segment names.
-    assert device_map("mvn", "dip6", XSENS_SEGMENTS_ALL) == {"LeftForeArm": "l_wrist", "RightForeArm": "r_wrist",
-                                                             "Head": "head"}  # fmt: skip
+    assert device_map("mvn", "dip6", XSENS_SEGMENTS_ALL) == {
+        "LeftForeArm": "l_wrist",
+        "RightForeArm": "r_wrist",
+        "Head": "head",
+    }
 
 
-@pytest.mark.parametrize("name, key", [("left_wrist", "lwrist"), ("LeftWrist", "lwrist"), ("l-wrist", "lwrist"),
-                                       ("lwrist", "lwrist"), ("wrist_L", "lwrist"), ("wrist_left", "lwrist"),
-                                       ("Right Knee", "rknee"), ("RIGHT_LOWER_LEG", "rlowerleg"),
-                                       ("Lower-Back", "lowerback"), ("head", "head")])  # fmt: skip
+@pytest.mark.parametrize(
+    "name, key",
+    [
+        ("left_wrist", "lwrist"),
+        ("LeftWrist", "lwrist"),
+        ("l-wrist", "lwrist"),
+        ("lwrist", "lwrist"),
+        ("wrist_L", "lwrist"),
+        ("wrist_left", "lwrist"),
+        ("Right Knee", "rknee"),
+        ("RIGHT_LOWER_LEG", "rlowerleg"),
+        ("Lower-Back", "lowerback"),
+        ("head", "head"),
+    ],
+)
 def test_generic_key(name, key):
     assert generic_key(name) == key
 
@@ -357,21 +460,35 @@ def test_generic_map_on_a_device_csv(tmp_path):
     path = tmp_path / "dev.csv"
     path.write_text(f"# rate_hz=10\nt_s,{cols}\n" + "\n".join(row(t / 10) for t in range(4)) + "\n")
     notes = []
-    rec = read_recording_file(path, device_map="generic", notes=notes, layout_name="dip6",
-                              sensor_names=PRESETS["dip6"].sensor_names)  # fmt: skip
+    rec = read_recording_file(
+        path, device_map="generic", notes=notes, layout_name="dip6", sensor_names=PRESETS["dip6"].sensor_names
+    )
     assert rec.sensor_names == PRESETS["dip6"].sensor_names
-    assert rec.meta["device_sensors"] == {"l_wrist": "LWrist", "r_wrist": "wrist_r", "l_knee": "Left_Knee",
-                                          "r_knee": "right-knee", "head": "HEAD", "pelvis": "Pelvis"}  # fmt: skip
+    assert rec.meta["device_sensors"] == {
+        "l_wrist": "LWrist",
+        "r_wrist": "wrist_r",
+        "l_knee": "Left_Knee",
+        "r_knee": "right-knee",
+        "head": "HEAD",
+        "pelvis": "Pelvis",
+    }
     assert rec.meta["unmapped_sensors"] == ["left_shin", "chest"]
     # columns follow their sensors: Left_Knee is the 5th device sensor, its x the 13th number
     np.testing.assert_allclose(rec.accelerations[1, 2], [12.05, 13.05, 14.05], rtol=1e-6)
     assert len(notes) == 1 and "own frame" in notes[0]  # all six found: no note of unmapped ones
     # kelly6 from the same file: the shin sensor for l_shin, the knee for r_shin (no right shin), chest
     notes = []
-    rec = read_recording_file(path, device_map="generic", notes=notes, layout_name="kelly6",
-                              sensor_names=PRESETS["kelly6"].sensor_names)  # fmt: skip
-    assert rec.meta["device_sensors"] == {"l_forearm": "LWrist", "r_forearm": "wrist_r", "l_shin": "left_shin",
-                                          "r_shin": "right-knee", "lower_back": "Pelvis", "chest": "chest"}  # fmt: skip
+    rec = read_recording_file(
+        path, device_map="generic", notes=notes, layout_name="kelly6", sensor_names=PRESETS["kelly6"].sensor_names
+    )
+    assert rec.meta["device_sensors"] == {
+        "l_forearm": "LWrist",
+        "r_forearm": "wrist_r",
+        "l_shin": "left_shin",
+        "r_shin": "right-knee",
+        "lower_back": "Pelvis",
+        "chest": "chest",
+    }
 
 
 @pytest.mark.parametrize("device", ["xsens", "mvn"])
@@ -383,11 +500,20 @@ def test_xsens_and_mvn_maps_on_a_device_csv_in_skeleton_names(tmp_path, device):
     names = ["Hips", "Spine3", "Head", "LeftForeArm", "RightForeArm", "LeftLeg", "RightLeg", "LeftUpLeg"]
     cols = ",".join(f"{n}_a{c}" for n in names for c in "xyz")
     path = tmp_path / "mvn.csv"
-    path.write_text(f"t_s,{cols}\n" + "\n".join(",".join([f"{t / 10:g}"] + [str(k + 100 * t) for k in range(24)])
-                                                for t in range(3)) + "\n")  # fmt: skip
+    path.write_text(
+        f"t_s,{cols}\n"
+        + "\n".join(",".join([f"{t / 10:g}"] + [str(k + 100 * t) for k in range(24)]) for t in range(3))
+        + "\n"
+    )
     rec = read_recording_file(path, device_map=device, layout_name="dip6", sensor_names=PRESETS["dip6"].sensor_names)
-    assert rec.meta["device_sensors"] == {"l_wrist": "LeftForeArm", "r_wrist": "RightForeArm", "l_knee": "LeftLeg",
-                                          "r_knee": "RightLeg", "head": "Head", "pelvis": "Hips"}  # fmt: skip
+    assert rec.meta["device_sensors"] == {
+        "l_wrist": "LeftForeArm",
+        "r_wrist": "RightForeArm",
+        "l_knee": "LeftLeg",
+        "r_knee": "RightLeg",
+        "head": "Head",
+        "pelvis": "Hips",
+    }
     assert rec.meta["unmapped_sensors"] == ["Spine3", "LeftUpLeg"]
     # l_knee is LeftLeg, the 6th sensor: columns 15–17; at t = 0.2 s each value is k + 200
     np.testing.assert_array_equal(rec.accelerations[2, 2], np.float32([215, 216, 217]))
@@ -396,14 +522,19 @@ def test_xsens_and_mvn_maps_on_a_device_csv_in_skeleton_names(tmp_path, device):
 def test_one_note_names_the_layout_sensors_left_unmapped(tmp_path):
     from graphsvc.pipeline import read_recording_file
 
-    path = write_mvnx(tmp_path / "upper.mvnx", XSENS_UPPER, [normal(k, sensorAcceleration=np.zeros(33)) for k in range(3)])
+    path = write_mvnx(
+        tmp_path / "upper.mvnx", XSENS_UPPER, [normal(k, sensorAcceleration=np.zeros(33)) for k in range(3)]
+    )
     notes = []
-    rec = read_recording_file(path, device_map="xsens", notes=notes, layout_name="dip6",
-                              sensor_names=PRESETS["dip6"].sensor_names)  # fmt: skip
+    rec = read_recording_file(
+        path, device_map="xsens", notes=notes, layout_name="dip6", sensor_names=PRESETS["dip6"].sensor_names
+    )
     assert rec.sensor_names == ("l_wrist", "r_wrist", "head", "pelvis")
     mapped = [n for n in notes if n.startswith("device map")]
-    assert mapped == ["device map xsens: no sensor of the recording for l_knee, r_knee (unmapped: T8, RightShoulder, "
-                      "RightUpperArm, RightHand, LeftShoulder, LeftUpperArm, LeftHand)"]  # fmt: skip
+    assert mapped == [
+        "device map xsens: no sensor of the recording for l_knee, r_knee (unmapped: T8, RightShoulder, "
+        "RightUpperArm, RightHand, LeftShoulder, LeftUpperArm, LeftHand)"
+    ]
 
 
 def test_map_files(tmp_path):
@@ -415,16 +546,19 @@ def test_map_files(tmp_path):
     assert device_map(str(bare), None) == {"S1": "l_wrist"}
 
 
-@pytest.mark.parametrize("text, message", [
-    ('{"S1": "l_wrist", "S1": "r_wrist"}', "'S1' more than once"),
-    ('{"S1": "l_wrist", "S2": "l_wrist"}', "l_wrist more than once"),
-    ('{"S1": "l_wrist",\n "S2": }', "not valid JSON"),
-    ("{}", "non-empty"),
-    ('["S1", "l_wrist"]', "non-empty object"),
-    ('{"S1": 3}', "non-empty strings"),
-    ('{"S1": ""}', "non-empty strings"),
-    ('{"device": "x", "sensors": {"S1": "a"}, "layout": "kelly6"}', "unknown keys layout"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('{"S1": "l_wrist", "S1": "r_wrist"}', "'S1' more than once"),
+        ('{"S1": "l_wrist", "S2": "l_wrist"}', "l_wrist more than once"),
+        ('{"S1": "l_wrist",\n "S2": }', "not valid JSON"),
+        ("{}", "non-empty"),
+        ('["S1", "l_wrist"]', "non-empty object"),
+        ('{"S1": 3}', "non-empty strings"),
+        ('{"S1": ""}', "non-empty strings"),
+        ('{"device": "x", "sensors": {"S1": "a"}, "layout": "kelly6"}', "unknown keys layout"),
+    ],
+)
 def test_bad_map_files(tmp_path, text, message):
     path = tmp_path / "m.json"
     path.write_text(text)
@@ -438,8 +572,14 @@ def _device_recording(names=("Pelvis", "LeftForeArm", "Head", "RightForeArm")) -
     acc = np.arange(T * S * 3, dtype=np.float32).reshape(T, S, 3)
     q = np.zeros((T, S, 4), np.float32)
     q[..., 0] = 1.0
-    return Recording(rate_hz=60.0, timestamps_s=np.arange(T) / 60.0, sensor_names=tuple(names), accelerations=acc,
-                     orientations=q, meta={"imported_from": "mvnx"})  # fmt: skip
+    return Recording(
+        rate_hz=60.0,
+        timestamps_s=np.arange(T) / 60.0,
+        sensor_names=tuple(names),
+        accelerations=acc,
+        orientations=q,
+        meta={"imported_from": "mvnx"},
+    )
 
 
 def test_apply_device_map():
@@ -468,8 +608,9 @@ def test_real_mvnx_through_the_xsens_maps(data_dir):
     out = apply_device_map(rec, device_map("xsens", "wrists-ankles"))
     assert out.sensor_names == PRESETS["wrists-ankles"].sensor_names
     for new, old in (("l_wrist", "LeftForeArm"), ("r_ankle", "RightLowerLeg")):
-        np.testing.assert_array_equal(out.accelerations[:, out.sensor_names.index(new)],
-                                      rec.accelerations[:, rec.sensor_names.index(old)])  # fmt: skip
+        np.testing.assert_array_equal(
+            out.accelerations[:, out.sensor_names.index(new)], rec.accelerations[:, rec.sensor_names.index(old)]
+        )
     assert len(out.meta["unmapped_sensors"]) == 13
     upper = apply_device_map(read_mvnx(data_dir / "mvnx" / FREE_FILE), device_map("xsens", "kelly6"))
     assert upper.sensor_names == ("l_forearm", "r_forearm", "lower_back", "chest")  # no legs in an upper-body take
@@ -497,8 +638,7 @@ def test_csv_up_z_turns_orientations_onto_y_up(tmp_path):
     # along +Y. Sample 1: 90° about the device's Z → its X along the device's Y (left),
     # graphsvc +X; its Z still up (+Y).
     path = tmp_path / "d.csv"
-    text = (f"# up=z\nt_s,s_ax,s_ay,s_az,s_qw,s_qx,s_qy,s_qz\n0,0,0,9.81,1,0,0,0\n"
-            f"0.01,0,0,9.81,{C45!r},0,0,{C45!r}\n")  # fmt: skip
+    text = f"# up=z\nt_s,s_ax,s_ay,s_az,s_qw,s_qx,s_qy,s_qz\n0,0,0,9.81,1,0,0,0\n0.01,0,0,9.81,{C45!r},0,0,{C45!r}\n"
     path.write_text(text)
     rec = import_csv(path)
     o = rec.orientations[:, 0].astype(np.float64)
@@ -531,11 +671,14 @@ def test_csv_sensor_frame(tmp_path):
     assert import_csv(tmp_path / "dev.csv").meta["sensor_frame"] == "device"
 
 
-@pytest.mark.parametrize("comment, message", [
-    ("# units=mg", "bad units comment 'mg' (expected m/s2 or g)"),
-    ("# up=x", "bad up comment 'x' (expected y or z)"),
-    ("# sensor_frame=body", "bad sensor_frame comment 'body' (expected device or layout)"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "comment, message",
+    [
+        ("# units=mg", "bad units comment 'mg' (expected m/s2 or g)"),
+        ("# up=x", "bad up comment 'x' (expected y or z)"),
+        ("# sensor_frame=body", "bad sensor_frame comment 'body' (expected device or layout)"),
+    ],
+)
 def test_csv_bad_comments_have_line_numbers(tmp_path, comment, message):
     path = tmp_path / "bad.csv"
     path.write_text(f"# rate_hz=100\n{comment}\nt_s,s_ax,s_ay,s_az\n0,1,2,3\n")
@@ -572,8 +715,9 @@ def test_cli_truncated_mvnx_one_line_exit_2(tmp_path, capsys):
 
 
 def test_cli_inspect_mvnx(tmp_path, capsys):
-    path = write_mvnx(tmp_path / "t.mvnx", ("Pelvis", "RightForeArm"),
-                      [normal(k, sensorAcceleration=np.zeros(6)) for k in range(6)])  # fmt: skip
+    path = write_mvnx(
+        tmp_path / "t.mvnx", ("Pelvis", "RightForeArm"), [normal(k, sensorAcceleration=np.zeros(6)) for k in range(6)]
+    )
     code, out, _ = run(["inspect", str(path), "--json"], capsys)
     info = json.loads(out)["recordings"][0]
     assert code == 0 and info["samples"] == 6 and info["sensors"] == ["Pelvis", "RightForeArm"]
@@ -587,8 +731,13 @@ def gliding_graph(folder, capsys, layout: str, *flags: str):
     m.translations[:, 0, 2] = np.linspace(0, 1.0, 60)
     write_bvh(folder / "walk_demo_001.bvh", m, scale=100.0)
     graph = folder / f"{layout}.graph"
-    assert run(["build", str(folder / "walk_demo_001.bvh"), "-o", str(graph), "--layout", layout, "--quiet", *flags],
-               capsys)[0] == 0  # fmt: skip
+    assert (
+        run(
+            ["build", str(folder / "walk_demo_001.bvh"), "-o", str(graph), "--layout", layout, "--quiet", *flags],
+            capsys,
+        )[0]
+        == 0
+    )
     return graph
 
 
@@ -627,8 +776,10 @@ def test_real_mvnx_mapped_and_reconstructed_on_dip6(data_dir, dip6_graph, tmp_pa
     0.012 s, which holds the grid's 0, 1/240 and 2/240 s (3/240 s is past the end)."""
     take = data_dir / "mvnx" / RAW_FILE
     out, report = tmp_path / "take.bvh", tmp_path / "take.json"
-    code, stdout, err = run(["synthesize", str(dip6_graph), str(take), "--device-map", "xsens", "-o", str(out),
-                             "--report", str(report)], capsys)  # fmt: skip
+    code, stdout, err = run(
+        ["synthesize", str(dip6_graph), str(take), "--device-map", "xsens", "-o", str(out), "--report", str(report)],
+        capsys,
+    )
     assert code == 0, err
     assert "from 3 samples (resampled from 240 Hz)" in stdout and "no sensor of the recording" not in err
     r = json.loads(report.read_text())
@@ -636,7 +787,9 @@ def test_real_mvnx_mapped_and_reconstructed_on_dip6(data_dir, dip6_graph, tmp_pa
     rec = read_mvnx(take)
     mapped = apply_device_map(rec, device_map("xsens", "dip6", rec.sensor_names))
     assert mapped.sensor_names == PRESETS["dip6"].sensor_names
-    np.testing.assert_array_equal(mapped.accelerations[:, 2], rec.accelerations[:, rec.sensor_names.index("LeftLowerLeg")])
+    np.testing.assert_array_equal(
+        mapped.accelerations[:, 2], rec.accelerations[:, rec.sensor_names.index("LeftLowerLeg")]
+    )
     assert len(mapped.meta["unmapped_sensors"]) == 11
 
 
@@ -644,12 +797,24 @@ def test_export_csv_keeps_a_device_recordings_frame(tmp_path):
     """A recording still in its devices' frames says so in the CSV it is exported to."""
     from graphsvc.sensors.recording import Recording, export_csv, import_csv
 
-    rec = Recording(rate_hz=10.0, timestamps_s=np.arange(3) / 10.0, sensor_names=("a",),
-                    accelerations=np.zeros((3, 1, 3), np.float32), meta={"sensor_frame": "device"})
+    rec = Recording(
+        rate_hz=10.0,
+        timestamps_s=np.arange(3) / 10.0,
+        sensor_names=("a",),
+        accelerations=np.zeros((3, 1, 3), np.float32),
+        meta={"sensor_frame": "device"},
+    )
     export_csv(rec, tmp_path / "d.csv")
     assert import_csv(tmp_path / "d.csv").meta["sensor_frame"] == "device"
-    export_csv(Recording(rate_hz=10.0, timestamps_s=np.arange(3) / 10.0, sensor_names=("a",),
-                         accelerations=np.zeros((3, 1, 3), np.float32)), tmp_path / "l.csv")
+    export_csv(
+        Recording(
+            rate_hz=10.0,
+            timestamps_s=np.arange(3) / 10.0,
+            sensor_names=("a",),
+            accelerations=np.zeros((3, 1, 3), np.float32),
+        ),
+        tmp_path / "l.csv",
+    )
     assert import_csv(tmp_path / "l.csv").meta["sensor_frame"] == "layout"
 
 
@@ -658,8 +823,22 @@ def kelly6_csv(tmp_path, capsys):
     """(a kelly6 graph of the gliding T-pose, a CSV of its clip's kelly6 readings)."""
     graph = gliding_graph(tmp_path, capsys, "kelly6")
     rec = tmp_path / "rec.csv"
-    assert run(["simulate", str(tmp_path / "walk_demo_001.bvh"), "--layout", "kelly6", "--noise", "default",
-                "-o", str(rec)], capsys)[0] == 0  # fmt: skip
+    assert (
+        run(
+            [
+                "simulate",
+                str(tmp_path / "walk_demo_001.bvh"),
+                "--layout",
+                "kelly6",
+                "--noise",
+                "default",
+                "-o",
+                str(rec),
+            ],
+            capsys,
+        )[0]
+        == 0
+    )
     return graph, rec
 
 
@@ -715,22 +894,28 @@ def test_cli_inspect_says_how_a_device_csv_was_read(tmp_path, capsys):
     assert out.splitlines()[-1] == "  read: sensor frame device (default), up z (--up), units g (file header)"
     code, out, _ = run(["inspect", str(path), "--units", "m/s2", "--json"], capsys)
     reading = json.loads(out)["recordings"][0]["reading"]
-    assert reading == {"sensor_frame": {"value": "device", "from": "default"}, "up": {"value": "y", "from": "default"},
-                       "units": {"value": "m/s2", "from": "argument"}}  # fmt: skip
+    assert reading == {
+        "sensor_frame": {"value": "device", "from": "default"},
+        "up": {"value": "y", "from": "default"},
+        "units": {"value": "m/s2", "from": "argument"},
+    }
     path.write_text("# sensor_frame=layout\n# up=Z\nt_s,s_ax,s_ay,s_az\n0,0,0,1\n0.01,0,0,1\n")
     code, out, _ = run(["inspect", str(path)], capsys)
     assert out.splitlines()[-1] == "  read: sensor frame layout (file header), up z (file header), units m/s2 (default)"
     mvnx = write_mvnx(tmp_path / "t.mvnx", ("Pelvis",), [normal(k, sensorAcceleration=[0, 0, G]) for k in range(3)])
     code, out, _ = run(["inspect", str(mvnx)], capsys)
-    assert out.splitlines()[-1] == ("  read: sensor frame device (MVNX format), up z (MVNX format), "
-                                    "units m/s2 (MVNX format)")  # fmt: skip
+    assert out.splitlines()[-1] == (
+        "  read: sensor frame device (MVNX format), up z (MVNX format), units m/s2 (MVNX format)"
+    )
     rec = tmp_path / "r.rec"
     from dataclasses import replace
 
     from graphsvc.sensors.recording import save_recording
 
-    for meta in ({"simulated": True},  # a layout's recording
-                 {"imported_from": "csv", "units": "g", "up": "y", "sensor_frame": "device"}):  # not saying whence
+    for meta in (
+        {"simulated": True},  # a layout's recording
+        {"imported_from": "csv", "units": "g", "up": "y", "sensor_frame": "device"},
+    ):  # not saying whence
         save_recording(replace(_device_recording(("a",)), meta=meta), rec)
         code, out, _ = run(["inspect", str(rec)], capsys)
         assert code == 0 and "read:" not in out

@@ -31,25 +31,31 @@ def test_default_frames_follow_spec_in_tpose(skeleton):
 
 def test_custom_layout_file_json_and_toml(tmp_path, skeleton):
     j = tmp_path / "one.json"
-    j.write_text(json.dumps({"sensors": [{"name": "hand", "segment": "r_elbow", "along": 1.0,
-                                          "rotation_wxyz": [0, 0, 0, 1]}]}))
+    j.write_text(
+        json.dumps({"sensors": [{"name": "hand", "segment": "r_elbow", "along": 1.0, "rotation_wxyz": [0, 0, 0, 1]}]})
+    )
     layout = load_layout(str(j))
     assert layout.name == "one" and layout.sensors[0].toward == "r_wrist"
     p = place(layout, skeleton)
     np.testing.assert_allclose(p.rotation[0], [0, 0, 0, 1])
     t = tmp_path / "two.toml"
-    t.write_text('name = "shins"\n[[sensors]]\nname = "l"\nsegment = "l_knee"\n[[sensors]]\nname = "r"\nsegment = "r_knee"\nalong = 0.8\n')
+    t.write_text(
+        'name = "shins"\n[[sensors]]\nname = "l"\nsegment = "l_knee"\n[[sensors]]\nname = "r"\nsegment = "r_knee"\nalong = 0.8\n'
+    )
     assert load_layout(str(t)).sensor_names == ("l", "r")
 
 
-@pytest.mark.parametrize("content", [
-    '{"sensors": []}',
-    '{"sensors": [{"segment": "tail"}]}',
-    '{"sensors": [{"segment": "l_knee", "along": "x"}]}',
-    '{"sensors": [{"segment": "l_knee", "colour": 1}]}',
-    '{"sensors": [{"segment": "l_knee"}, {"segment": "l_knee"}]}',
-    'not json',
-])
+@pytest.mark.parametrize(
+    "content",
+    [
+        '{"sensors": []}',
+        '{"sensors": [{"segment": "tail"}]}',
+        '{"sensors": [{"segment": "l_knee", "along": "x"}]}',
+        '{"sensors": [{"segment": "l_knee", "colour": 1}]}',
+        '{"sensors": [{"segment": "l_knee"}, {"segment": "l_knee"}]}',
+        "not json",
+    ],
+)
 def test_bad_layout_files_raise_layout_error(tmp_path, content):
     f = tmp_path / "bad.json"
     f.write_text(content)
@@ -66,7 +72,13 @@ def test_layout_on_skeleton_lacking_joints_is_refused(skeleton):
     keep = [i for i, n in enumerate(skeleton.names) if not n.startswith("r_")]
     names = tuple(skeleton.names[i] for i in keep)
     parents = [-1] + [keep.index(skeleton.parents[i]) for i in keep[1:]]
-    small = Skeleton(names, np.array(parents), skeleton.offsets[keep], tuple(skeleton.channels[i] for i in keep), np.zeros(len(keep), bool))
+    small = Skeleton(
+        names,
+        np.array(parents),
+        skeleton.offsets[keep],
+        tuple(skeleton.channels[i] for i in keep),
+        np.zeros(len(keep), bool),
+    )
     with pytest.raises(SkeletonError):
         place(PRESETS["right-wrist"], small)
 
@@ -86,8 +98,14 @@ def test_dip6_places_six_sensors_on_the_tpose(skeleton):
     m = still_motion(1)
     world_rot, world_pos = forward_kinematics(m.rotations, m.translations, skeleton.parents)
     position, _ = sensor_poses(world_rot, world_pos, place(layout, skeleton))
-    expected = [(0.685, 1.46, 0.0), (-0.685, 1.46, 0.0), (0.10, 0.448, 0.0), (-0.10, 0.448, 0.0), (0.0, 1.61, 0.0),
-                (0.0, 0.96, 0.0)]  # fmt: skip
+    expected = [
+        (0.685, 1.46, 0.0),
+        (-0.685, 1.46, 0.0),
+        (0.10, 0.448, 0.0),
+        (-0.10, 0.448, 0.0),
+        (0.0, 1.61, 0.0),
+        (0.0, 0.96, 0.0),
+    ]
     np.testing.assert_allclose(position[0], expected, atol=1e-12)
     p = place(layout, skeleton)
     assert [skeleton.names[j] for j in p.segment] == ["l_elbow", "r_elbow", "l_knee", "r_knee", "head", "pelvis"]

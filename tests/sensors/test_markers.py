@@ -70,7 +70,7 @@ def test_marker_set_files_and_bad_definitions(tmp_path):
         ({"markers": [{"name": "a", "segment": "head"}, {"name": "a", "segment": "chest"}]}, "duplicate marker names"),
         ({"markers": [{"name": "a", "segment": "head", "offset_m": [1, 2]}]}, "offset_m"),
         ({"markers": []}, "at least one marker"),
-    ):  # fmt: skip
+    ):
         f.write_text(json.dumps(bad))
         with pytest.raises(LayoutError, match=needle):
             load_marker_set(str(f))
@@ -104,13 +104,17 @@ def test_gaps_and_flicker_patterns():
 def test_simulated_marker_recordings(clip, tmp_path):
     exact = simulate_marker_recording(clip, "hands-feet", NOISE["none"], seed=4)
     world_rot, world_pos = motion_fk(clip)
-    np.testing.assert_array_equal(exact.marker_positions,
-                                  marker_positions(world_rot, world_pos, place_markers(PRESETS["hands-feet"], clip.skeleton)))  # fmt: skip
+    np.testing.assert_array_equal(
+        exact.marker_positions,
+        marker_positions(world_rot, world_pos, place_markers(PRESETS["hands-feet"], clip.skeleton)),
+    )
     assert exact.accelerations is None and exact.sensor_names == () and exact.meta["simulated"]
-    noisy = simulate_marker_recording(clip, "hands-feet", parse_noise("none,marker=2"), seed=4,
-                                      pattern=MarkerPattern(flicker=0.2))  # fmt: skip
-    again = simulate_marker_recording(clip, "hands-feet", parse_noise("none,marker=2"), seed=4,
-                                      pattern=MarkerPattern(flicker=0.2))  # fmt: skip
+    noisy = simulate_marker_recording(
+        clip, "hands-feet", parse_noise("none,marker=2"), seed=4, pattern=MarkerPattern(flicker=0.2)
+    )
+    again = simulate_marker_recording(
+        clip, "hands-feet", parse_noise("none,marker=2"), seed=4, pattern=MarkerPattern(flicker=0.2)
+    )
     np.testing.assert_array_equal(noisy.marker_positions, again.marker_positions)  # same seed, same bytes
     seen = np.isfinite(noisy.marker_positions[..., 0])
     err = (noisy.marker_positions - exact.marker_positions)[seen]
@@ -135,8 +139,9 @@ def test_marker_csv_round_trip_units_and_up_axis(clip, tmp_path):
     z = read_marker_csv(tmp_path / "z.csv")
     np.testing.assert_allclose(z.marker_positions[0, 0], [0.2, 1.7, 0.1])
     assert np.isnan(z.marker_positions[1, 0]).all() and z.rate_hz == pytest.approx(100.0)
-    np.testing.assert_allclose(read_marker_csv(tmp_path / "z.csv", up="y", units="cm").marker_positions[0, 0],
-                               [1.0, 2.0, 17.0])  # (flags override the file)
+    np.testing.assert_allclose(
+        read_marker_csv(tmp_path / "z.csv", up="y", units="cm").marker_positions[0, 0], [1.0, 2.0, 17.0]
+    )  # (flags override the file)
     for text, needle in (
         ("time,A_x,A_y\n0,1,2\n", "lacks column"),
         ("time,A_x,A_y,A_z\n0,1,2,3\n0.1,1,2\n", ":3: expected 4 columns"),
@@ -145,7 +150,7 @@ def test_marker_csv_round_trip_units_and_up_axis(clip, tmp_path):
         ("time,A_w,A_y,A_z\n0,1,2,3\n", "not NAME_x"),
         ("# units=furlongs\ntime,A_x,A_y,A_z\n0,1,2,3\n", "unknown length unit"),
         ("time,A_x,A_y,A_z\n", "no samples"),
-    ):  # fmt: skip
+    ):
         (tmp_path / "bad.csv").write_text(text)
         with pytest.raises(FormatError, match=needle):
             read_marker_csv(tmp_path / "bad.csv")
@@ -163,7 +168,10 @@ def _write_c3d(path, points_mm, labels, rate=100.0, residual=None):
     data[:3] = np.transpose(points_mm, (2, 1, 0))
     c["data"]["points"] = data
     if residual is not None:
-        c["data"]["meta_points"] = {"residuals": residual.T[None].astype(float), "camera_masks": np.zeros((7, len(labels), points_mm.shape[0]), bool)}
+        c["data"]["meta_points"] = {
+            "residuals": residual.T[None].astype(float),
+            "camera_masks": np.zeros((7, len(labels), points_mm.shape[0]), bool),
+        }
     c.write(str(path))
 
 

@@ -91,8 +91,9 @@ def test_tracker_offset_and_wander_leave_the_other_draws_alone():
     np.testing.assert_allclose(shift, np.broadcast_to(shift[0], shift.shape), atol=1e-12)
     assert np.hypot(*shift[0]) == pytest.approx(0.137)
     # The wander: a random walk of 0.03 m/√s, so after t seconds σ = 0.03·√t per axis.
-    walk = np.stack([corrupt_positions(pos, NoiseModel(position_walk=0.03), np.random.default_rng(s), 30.0)
-                     for s in range(400)])  # fmt: skip
+    walk = np.stack(
+        [corrupt_positions(pos, NoiseModel(position_walk=0.03), np.random.default_rng(s), 30.0) for s in range(400)]
+    )
     assert walk[:, -1].std() == pytest.approx(0.03 * np.sqrt(T / 30.0), rel=0.1)
     assert walk[:, 29].std() == pytest.approx(0.03 * np.sqrt(1.0), rel=0.1)
     assert PRESETS["tracker"].position_offset == 0.137 and parse_noise("tracker,position_walk=0").position_walk == 0

@@ -11,7 +11,7 @@ from graphsvc.sensors.orientation import (
     normalised_rows,
     orientation_cue,
     relative_orientations,
-    sensor_up,  # fmt: skip
+    sensor_up,
 )
 
 

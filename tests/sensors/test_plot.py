@@ -12,8 +12,7 @@ def _recording() -> Recording:
     acc = np.zeros((4, 2, 3), dtype=np.float32)
     acc[:, 0, 1] = 9.81
     acc[:, 1, 0] = [0.0, 10.0, 30.0, np.nan]
-    return Recording(30.0, np.arange(4) / 30.0, ("chest", "l_forearm"), acc,
-                     ground_position=np.zeros((4, 2)))  # fmt: skip
+    return Recording(30.0, np.arange(4) / 30.0, ("chest", "l_forearm"), acc, ground_position=np.zeros((4, 2)))
 
 
 def test_sensor_panels_plot_metres_per_second_squared():

@@ -19,9 +19,11 @@ from graphsvc.store import read_container, write_container
 
 CONSTRAINTS = [
     [{"start_s": 0.0, "end_s": 0.1, "require": {"contact": "left"}}],
-    [{"start_s": 0.05, "end_s": 0.2, "require": {"label": "walk"}},
-     {"start_s": 0, "end_s": 1, "require": {"contact": "none"}}],
-]  # fmt: skip
+    [
+        {"start_s": 0.05, "end_s": 0.2, "require": {"label": "walk"}},
+        {"start_s": 0, "end_s": 1, "require": {"contact": "none"}},
+    ],
+]
 
 
 def make_recording(T: int = 12, optional: bool = True, rate: float = 30.0) -> Recording:
@@ -76,8 +78,12 @@ def test_properties():
     [
         {"rate_hz": 0.0},
         {"rate_hz": float("inf")},
-        {"timestamps_s": np.zeros(0), "accelerations": np.zeros((0, 2, 3), np.float32),
-         "ground_position": None, "heading": None},
+        {
+            "timestamps_s": np.zeros(0),
+            "accelerations": np.zeros((0, 2, 3), np.float32),
+            "ground_position": None,
+            "heading": None,
+        },
         {"timestamps_s": np.r_[0.0, 0.1, 0.1, *np.arange(3, 12) / 10]},
         {"timestamps_s": np.r_[np.nan, np.arange(1, 12) / 30]},
         {"sensor_names": ("a", "a")},
@@ -179,8 +185,9 @@ def test_csv_format(tmp_path):
     lines = (tmp_path / "r.csv").read_text().splitlines()
     assert lines[0] == "# graphsvc recording v1"
     assert lines[1] == "# rate_hz=30"
-    assert lines[2] == ("t_s,l_wrist_ax,l_wrist_ay,l_wrist_az,r_ankle_ax,r_ankle_ay,r_ankle_az,"
-                        "pos_x_m,pos_z_m,heading_rad")  # fmt: skip
+    assert lines[2] == (
+        "t_s,l_wrist_ax,l_wrist_ay,l_wrist_az,r_ankle_ax,r_ankle_ay,r_ankle_az,pos_x_m,pos_z_m,heading_rad"
+    )
     row = lines[4].split(",")
     assert row[0] == "0.0333333333"
     assert row[4] == "9.81000042"  # float32(9.81) with '%.9g'
@@ -281,14 +288,23 @@ def test_describe():
     assert info == {
         "samples": 30,
         "sensors": ["l_wrist", "r_ankle"],
-        "channels": ["l_wrist.ax", "l_wrist.ay", "l_wrist.az", "r_ankle.ax", "r_ankle.ay", "r_ankle.az",
-                     "ground_position.x", "ground_position.z", "heading"],
+        "channels": [
+            "l_wrist.ax",
+            "l_wrist.ay",
+            "l_wrist.az",
+            "r_ankle.ax",
+            "r_ankle.ay",
+            "r_ankle.az",
+            "ground_position.x",
+            "ground_position.z",
+            "heading",
+        ],
         "rate_hz": 30.0,
         "duration_s": 1.0,
         "has_ground_position": True,
         "has_heading": True,
         "constraint_sets": 2,
-    }  # fmt: skip
+    }
     bare = describe_recording(make_recording(optional=False))
     assert bare["channels"][-1] == "r_ankle.az" and not bare["has_heading"] and bare["constraint_sets"] == 0
 
@@ -307,15 +323,22 @@ def with_orientations_and_markers(rec: Recording, accelerations: bool = True) ->
     q[3, 1] = np.nan
     markers = rng.normal(size=(T, 3, 3))
     markers[[1, 2, 6], 2] = np.nan  # a marker flickering out
-    return replace(rec, accelerations=rec.accelerations if accelerations else None, orientations=q,
-                   marker_names=("LFHD", "RWRA", "LTOE"), marker_positions=markers)
+    return replace(
+        rec,
+        accelerations=rec.accelerations if accelerations else None,
+        orientations=q,
+        marker_names=("LFHD", "RWRA", "LTOE"),
+        marker_positions=markers,
+    )
 
 
 @pytest.mark.parametrize("accelerations", [True, False])
 def test_orientations_and_markers_round_trip_through_rec_and_csv(tmp_path, accelerations):
     rec = with_orientations_and_markers(make_recording(), accelerations)
-    for path, read, write, exact in ((tmp_path / "r.rec", load_recording, save_recording, True),
-                                     (tmp_path / "r.csv", import_csv, export_csv, False)):
+    for path, read, write, exact in (
+        (tmp_path / "r.rec", load_recording, save_recording, True),
+        (tmp_path / "r.csv", import_csv, export_csv, False),
+    ):
         write(rec, path)
         back = read(path)
         assert back.marker_names == rec.marker_names and back.sensor_names == rec.sensor_names
@@ -339,12 +362,15 @@ def test_orientations_and_markers_round_trip_through_rec_and_csv(tmp_path, accel
     assert back.orientations is None and back.marker_positions is None and back.marker_names == ()
 
 
-@pytest.mark.parametrize("change, message", [
-    (lambda r: r.orientations.__setitem__((0, 0), [2.0, 0, 0, 0]), "unit quaternions"),
-    (lambda r: r.orientations.__setitem__((0, 0, 0), np.inf), "infinite"),
-    (lambda r: setattr(r, "marker_names", ("A", "A", "B")), "duplicate marker names"),
-    (lambda r: setattr(r, "marker_positions", r.marker_positions[:, :2]), "marker_positions has shape"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda r: r.orientations.__setitem__((0, 0), [2.0, 0, 0, 0]), "unit quaternions"),
+        (lambda r: r.orientations.__setitem__((0, 0, 0), np.inf), "infinite"),
+        (lambda r: setattr(r, "marker_names", ("A", "A", "B")), "duplicate marker names"),
+        (lambda r: setattr(r, "marker_positions", r.marker_positions[:, :2]), "marker_positions has shape"),
+    ],
+)
 def test_orientation_and_marker_checks(change, message):
     rec = with_orientations_and_markers(make_recording())
     change(rec)

@@ -115,20 +115,36 @@ def live_frames(graph, recording, options):
     session = open_session(graph, options, recording.sensor_names)
     frames = []
     for k in range(recording.num_samples):
-        frames += session.push(recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k],
-                               recording.heading[k])  # fmt: skip
+        frames += session.push(
+            recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k], recording.heading[k]
+        )
     return frames + session.flush(), session
 
 
 def run_cli(*args, timeout=60, **kwargs) -> subprocess.CompletedProcess:
     """`python -m graphsvc.cli ARGS` (graphsvc as a process)."""
-    return subprocess.run([sys.executable, "-m", "graphsvc.cli", *map(str, args)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=timeout, env=_env(), check=False, **kwargs)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "graphsvc.cli", *map(str, args)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=_env(),
+        check=False,
+        **kwargs,
+    )
 
 
 def popen_cli(*args, **kwargs) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "graphsvc.cli", *map(str, args)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), **kwargs)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "graphsvc.cli", *map(str, args)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_env(),
+        **kwargs,
+    )
 
 
 def _env() -> dict:
@@ -190,8 +206,11 @@ def scrape(port: int) -> dict:
 
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=10) as response:
         text = response.read().decode()
-    return {(s.name, tuple(sorted(s.labels.items()))): s.value
-            for family in text_string_to_metric_families(text) for s in family.samples}  # fmt: skip
+    return {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for family in text_string_to_metric_families(text)
+        for s in family.samples
+    }
 
 
 def nearest_options():

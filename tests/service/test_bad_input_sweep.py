@@ -63,8 +63,16 @@ CLI_CASES = {
     "simulate noise value nan": [*SIM, "--noise", "default,accel_sigma=nan"],
     "simulate flicker nan": ["simulate", "{clip}", "--markers", "hands-feet", "--flicker", "nan", "-o", "{out}.rec"],
     "simulate flicker 2": ["simulate", "{clip}", "--markers", "hands-feet", "--flicker", "2", "-o", "{out}.rec"],
-    "simulate gap fraction inf": ["simulate", "{clip}", "--markers", "hands-feet", "--gap-fraction", BIG,
-                                  "-o", "{out}.rec"],
+    "simulate gap fraction inf": [
+        "simulate",
+        "{clip}",
+        "--markers",
+        "hands-feet",
+        "--gap-fraction",
+        BIG,
+        "-o",
+        "{out}.rec",
+    ],
     "simulate gaps text": ["simulate", "{clip}", "--markers", "hands-feet", "--gaps", "a:b", "-o", "{out}.rec"],
     "simulate mapping garbage": [*SIM, "--mapping", "{txt}"],
     # build / relayout
@@ -190,8 +198,17 @@ CLI_CASES = {
     "serve batch dir missing": ["serve", "--graph", "g={graph}", "--port", "0", "--batch-dir", "{dir}/no"],
     "serve metrics port out of range": ["serve", "--graph", "g={graph}", "--port", "0", "--metrics-port", "70000"],
     "serve metrics port text": ["serve", "--graph", "g={graph}", "--port", "0", "--metrics-port", "http"],
-    "serve batch workers zero": ["serve", "--graph", "g={graph}", "--port", "0", "--batch-dir", "{dir}",
-                                 "--batch-workers", "0"],
+    "serve batch workers zero": [
+        "serve",
+        "--graph",
+        "g={graph}",
+        "--port",
+        "0",
+        "--batch-dir",
+        "{dir}",
+        "--batch-workers",
+        "0",
+    ],
     # client
     "client nothing": ["client"],
     "client graphs empty server": ["client", "graphs", "--server", ""],
@@ -255,9 +272,17 @@ def files(tmp_path_factory, graph_file, rec_file, server):
     for suffix in (".bvh", ".rec"):
         (root / f"garbage{suffix}").write_bytes(b"\x00\xffHIERARCHY nonsense\n" * 3)
     (root / "dir").mkdir()
-    return {"graph": graph_file, "rec": rec_file, "clip": sorted(kb.glob("*.bvh"))[0], "kb": kb, "txt": txt,
-            "empty": root / "empty.txt", "garbage": garbage, "dir": root / "dir",
-            "server": f"127.0.0.1:{server.port}"}  # fmt: skip
+    return {
+        "graph": graph_file,
+        "rec": rec_file,
+        "clip": sorted(kb.glob("*.bvh"))[0],
+        "kb": kb,
+        "txt": txt,
+        "empty": root / "empty.txt",
+        "garbage": garbage,
+        "dir": root / "dir",
+        "server": f"127.0.0.1:{server.port}",
+    }
 
 
 def _answer(argv, capsys) -> tuple[int, str]:
@@ -322,23 +347,47 @@ def _fixed(request):
 UNARY_CASES = {
     "GetGraph empty": ("GetGraph", _fixed(pb.GetGraphRequest(name="")), INVALID, "name"),
     "GetGraph unknown": ("GetGraph", _fixed(pb.GetGraphRequest(name="nope")), grpc.StatusCode.NOT_FOUND, "nope"),
-    "GetGraph oversize name": ("GetGraph", _fixed(pb.GetGraphRequest(name="x" * 100_000)),
-                               grpc.StatusCode.NOT_FOUND, "graph"),
+    "GetGraph oversize name": (
+        "GetGraph",
+        _fixed(pb.GetGraphRequest(name="x" * 100_000)),
+        grpc.StatusCode.NOT_FOUND,
+        "graph",
+    ),
     "Synthesize empty": ("Synthesize", _fixed(pb.SynthesizeRequest()), INVALID, "graph"),
     "Synthesize no recording": ("Synthesize", _fixed(pb.SynthesizeRequest(graph="small")), INVALID, "recording"),
     "rate inf": ("Synthesize", _synth(_set("recording.rate_hz", INF)), INVALID, "rate_hz"),
     "rate huge": ("Synthesize", _synth(_set("recording.rate_hz", 1e300)), INVALID, "rate_hz"),
     "rate negative": ("Synthesize", _synth(_set("recording.rate_hz", -30.0)), INVALID, "rate_hz"),
-    "times inf": ("Synthesize", _synth(_set("recording.timestamps_s", lambda n: [0.0, INF] + [9.0] * (n - 2))),
-                  INVALID, "timestamps_s"),
-    "times huge": ("Synthesize", _synth(_set("recording.timestamps_s", lambda n: [k * 1e12 for k in range(n)])),
-                   INVALID, "timestamps_s"),
-    "headings inf": ("Synthesize", _synth(_set("recording.headings_rad", lambda n: [INF] * n)), INVALID,
-                     "headings_rad"),
-    "orientations short": ("Synthesize", _synth(_set("recording.orientations_wxyz", [1.0] * 7)), INVALID,
-                           "orientations_wxyz"),
-    "markers without names": ("Synthesize", _synth(_set("recording.marker_positions_m", [0.0] * 3)), INVALID,
-                              "marker_positions_m"),
+    "times inf": (
+        "Synthesize",
+        _synth(_set("recording.timestamps_s", lambda n: [0.0, INF] + [9.0] * (n - 2))),
+        INVALID,
+        "timestamps_s",
+    ),
+    "times huge": (
+        "Synthesize",
+        _synth(_set("recording.timestamps_s", lambda n: [k * 1e12 for k in range(n)])),
+        INVALID,
+        "timestamps_s",
+    ),
+    "headings inf": (
+        "Synthesize",
+        _synth(_set("recording.headings_rad", lambda n: [INF] * n)),
+        INVALID,
+        "headings_rad",
+    ),
+    "orientations short": (
+        "Synthesize",
+        _synth(_set("recording.orientations_wxyz", [1.0] * 7)),
+        INVALID,
+        "orientations_wxyz",
+    ),
+    "markers without names": (
+        "Synthesize",
+        _synth(_set("recording.marker_positions_m", [0.0] * 3)),
+        INVALID,
+        "marker_positions_m",
+    ),
     "latency inf": ("Synthesize", _synth(_set("options.latency_s", INF)), INVALID, "latency_s"),
     "latency negative": ("Synthesize", _synth(_set("options.latency_s", -1.0)), INVALID, "latency_s"),
     "beam inf": ("Synthesize", _synth(_set("options.beam", INF)), INVALID, "beam"),
@@ -346,24 +395,54 @@ UNARY_CASES = {
     "weight inf": ("Synthesize", _synth(_set("options.weights.acceleration", INF)), INVALID, "weights"),
     "track pull nan": ("Synthesize", _synth(_set("options.viterbi.track_pull_s", NAN)), INVALID, "track_pull"),
     "rest heading inf": ("Synthesize", _synth(_set("options.rest_heading_deg", INF)), INVALID, "rest_heading"),
-    "speed threshold nan": ("Synthesize", _synth(_set("options.speed_threshold_m_s", NAN)), INVALID,
-                            "speed_threshold"),
+    "speed threshold nan": ("Synthesize", _synth(_set("options.speed_threshold_m_s", NAN)), INVALID, "speed_threshold"),
     "strategy out of range": ("Synthesize", _synth(_set("options.strategy", 99)), INVALID, "strategy"),
-    "olng k huge": ("Synthesize", _synth(_set("options.strategy", pb.STRATEGY_OLNG), _set("options.olng.k", 2**31 - 1)),
-                    INVALID, "OLNG K"),
-    "olng weight nan": ("Synthesize", _synth(_set("options.strategy", pb.STRATEGY_OLNG),
-                                             _set("options.olng.w_prior", NAN)), INVALID, "olng"),
-    "ssg window inf": ("Synthesize", _synth(_set("options.strategy", pb.STRATEGY_SSG),
-                                            _set("options.ssg.markers", "hands-feet"),
-                                            _set("options.ssg.window_s", INF)), INVALID, "ssg"),
-    "constraint end inf": ("Synthesize", _synth(lambda r: r.options.constraint_sets.add().constraints.add(
-        start_s=0.0, end_s=INF, label="walk")), INVALID, "constraint"),
-    "GetBatch without a batch folder": ("GetBatch", _fixed(pb.GetBatchRequest(batch_id="x")),
-                                        grpc.StatusCode.FAILED_PRECONDITION, "batch"),
-    "SubmitBatch without a batch folder": ("SubmitBatch", _fixed(pb.SubmitBatchRequest(manifest="a")),
-                                           grpc.StatusCode.FAILED_PRECONDITION, "batch"),
-    "CancelBatch without a batch folder": ("CancelBatch", _fixed(pb.CancelBatchRequest(batch_id="")),
-                                           grpc.StatusCode.FAILED_PRECONDITION, "batch"),
+    "olng k huge": (
+        "Synthesize",
+        _synth(_set("options.strategy", pb.STRATEGY_OLNG), _set("options.olng.k", 2**31 - 1)),
+        INVALID,
+        "OLNG K",
+    ),
+    "olng weight nan": (
+        "Synthesize",
+        _synth(_set("options.strategy", pb.STRATEGY_OLNG), _set("options.olng.w_prior", NAN)),
+        INVALID,
+        "olng",
+    ),
+    "ssg window inf": (
+        "Synthesize",
+        _synth(
+            _set("options.strategy", pb.STRATEGY_SSG),
+            _set("options.ssg.markers", "hands-feet"),
+            _set("options.ssg.window_s", INF),
+        ),
+        INVALID,
+        "ssg",
+    ),
+    "constraint end inf": (
+        "Synthesize",
+        _synth(lambda r: r.options.constraint_sets.add().constraints.add(start_s=0.0, end_s=INF, label="walk")),
+        INVALID,
+        "constraint",
+    ),
+    "GetBatch without a batch folder": (
+        "GetBatch",
+        _fixed(pb.GetBatchRequest(batch_id="x")),
+        grpc.StatusCode.FAILED_PRECONDITION,
+        "batch",
+    ),
+    "SubmitBatch without a batch folder": (
+        "SubmitBatch",
+        _fixed(pb.SubmitBatchRequest(manifest="a")),
+        grpc.StatusCode.FAILED_PRECONDITION,
+        "batch",
+    ),
+    "CancelBatch without a batch folder": (
+        "CancelBatch",
+        _fixed(pb.CancelBatchRequest(batch_id="")),
+        grpc.StatusCode.FAILED_PRECONDITION,
+        "batch",
+    ),
 }
 
 
@@ -395,27 +474,58 @@ def _with(samples, change):
 
 STREAM_CASES = {
     "empty config": (lambda rec: [pb.StreamSynthesizeRequest(config=pb.StreamConfig())], INVALID, "graph"),
-    "oversize graph name": (lambda rec: _requests(C.stream_config("x" * 100_000), _samples(rec)),
-                            grpc.StatusCode.NOT_FOUND, "graph"),
-    "latency inf": (lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(latency_s=INF)),
-                                          _samples(rec)), INVALID, "latency_s"),
-    "beam nan": (lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(beam=NAN)), _samples(rec)),
-                 INVALID, "beam"),
-    "strategy out of range": (lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(strategy=42)),
-                                                    _samples(rec)), INVALID, "strategy"),
-    "time nan": (lambda rec: _requests(C.stream_config("small"), _samples(rec, s1_time_s=NAN)), INVALID,
-                 "sample[1].time_s"),
-    "time inf": (lambda rec: _requests(C.stream_config("small"), _samples(rec, s2_time_s=INF)), INVALID,
-                 "sample[2].time_s"),
-    "time huge jump": (lambda rec: _requests(C.stream_config("small"), _samples(rec, s2_time_s=1e300)), INVALID,
-                       "sample[2].time_s"),
-    "position inf": (lambda rec: _requests(C.stream_config("small"), _with(_samples(rec),
-                     lambda s: s[0].ground_position.__setattr__("x_m", INF))), INVALID, "sample[0]"),
-    "heading inf": (lambda rec: _requests(C.stream_config("small"), _samples(rec, s0_heading_rad=INF)), INVALID,
-                    "sample[0]"),
-    "oversize sample": (lambda rec: _requests(C.stream_config("small"),
-                                              _samples(rec, s0_accelerations_m_s2=[0.0] * 300_000)),
-                        INVALID, "sample[0].accelerations_m_s2"),
+    "oversize graph name": (
+        lambda rec: _requests(C.stream_config("x" * 100_000), _samples(rec)),
+        grpc.StatusCode.NOT_FOUND,
+        "graph",
+    ),
+    "latency inf": (
+        lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(latency_s=INF)), _samples(rec)),
+        INVALID,
+        "latency_s",
+    ),
+    "beam nan": (
+        lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(beam=NAN)), _samples(rec)),
+        INVALID,
+        "beam",
+    ),
+    "strategy out of range": (
+        lambda rec: _requests(C.stream_config("small", pb.SynthesisOptions(strategy=42)), _samples(rec)),
+        INVALID,
+        "strategy",
+    ),
+    "time nan": (
+        lambda rec: _requests(C.stream_config("small"), _samples(rec, s1_time_s=NAN)),
+        INVALID,
+        "sample[1].time_s",
+    ),
+    "time inf": (
+        lambda rec: _requests(C.stream_config("small"), _samples(rec, s2_time_s=INF)),
+        INVALID,
+        "sample[2].time_s",
+    ),
+    "time huge jump": (
+        lambda rec: _requests(C.stream_config("small"), _samples(rec, s2_time_s=1e300)),
+        INVALID,
+        "sample[2].time_s",
+    ),
+    "position inf": (
+        lambda rec: _requests(
+            C.stream_config("small"), _with(_samples(rec), lambda s: s[0].ground_position.__setattr__("x_m", INF))
+        ),
+        INVALID,
+        "sample[0]",
+    ),
+    "heading inf": (
+        lambda rec: _requests(C.stream_config("small"), _samples(rec, s0_heading_rad=INF)),
+        INVALID,
+        "sample[0]",
+    ),
+    "oversize sample": (
+        lambda rec: _requests(C.stream_config("small"), _samples(rec, s0_accelerations_m_s2=[0.0] * 300_000)),
+        INVALID,
+        "sample[0].accelerations_m_s2",
+    ),
     "empty sample": (lambda rec: _requests(C.stream_config("small"), [pb.SensorSample()]), INVALID, "sample[0]"),
 }
 
@@ -435,8 +545,11 @@ def test_grpc_garbage_bytes_and_the_server_still_serves(conn, server, recording)
     channel = grpc.insecure_channel(f"127.0.0.1:{server.port}")
     try:
         for method in ("GetGraph", "Synthesize"):
-            call = channel.unary_unary(f"/graphsvc.v1.MotionGraphService/{method}", request_serializer=lambda b: b,
-                                       response_deserializer=lambda b: b)  # fmt: skip
+            call = channel.unary_unary(
+                f"/graphsvc.v1.MotionGraphService/{method}",
+                request_serializer=lambda b: b,
+                response_deserializer=lambda b: b,
+            )
             with pytest.raises(grpc.RpcError) as info:
                 call(b"\xff\xff\xff\xff garbage", timeout=10)
             assert info.value.code() in (grpc.StatusCode.INTERNAL, INVALID), method
@@ -457,17 +570,27 @@ def batch_server(loaded_graphs, tmp_path_factory):
 BATCH_CASES = {
     "submit empty": ("SubmitBatch", pb.SubmitBatchRequest(manifest=""), INVALID, "manifest"),
     "submit garbage": ("SubmitBatch", pb.SubmitBatchRequest(manifest="\x00\x01 not a manifest"), INVALID, "manifest"),
-    "submit format unknown": ("SubmitBatch", pb.SubmitBatchRequest(manifest="a,b\n1,2\n", format="xml"), INVALID,
-                              "format"),
-    "submit oversize": ("SubmitBatch", pb.SubmitBatchRequest(manifest="recording,graph,strategy,output\n"
-                                                             + "x.rec,small,viterbi,o\n" * 100_000), INVALID,
-                        "manifest"),
-    "submit retries negative": ("SubmitBatch", pb.SubmitBatchRequest(
-        manifest="recording,graph,strategy,output\nx.rec,small,viterbi,o\n", retries=-1), INVALID, "retries"),
+    "submit format unknown": (
+        "SubmitBatch",
+        pb.SubmitBatchRequest(manifest="a,b\n1,2\n", format="xml"),
+        INVALID,
+        "format",
+    ),
+    "submit oversize": (
+        "SubmitBatch",
+        pb.SubmitBatchRequest(manifest="recording,graph,strategy,output\n" + "x.rec,small,viterbi,o\n" * 100_000),
+        INVALID,
+        "manifest",
+    ),
+    "submit retries negative": (
+        "SubmitBatch",
+        pb.SubmitBatchRequest(manifest="recording,graph,strategy,output\nx.rec,small,viterbi,o\n", retries=-1),
+        INVALID,
+        "retries",
+    ),
     "get empty id": ("GetBatch", pb.GetBatchRequest(batch_id=""), grpc.StatusCode.NOT_FOUND, "batch_id"),
     "get path id": ("GetBatch", pb.GetBatchRequest(batch_id="../../etc"), grpc.StatusCode.NOT_FOUND, "batch_id"),
-    "get oversize id": ("GetBatch", pb.GetBatchRequest(batch_id="x" * 100_000), grpc.StatusCode.NOT_FOUND,
-                        "batch_id"),
+    "get oversize id": ("GetBatch", pb.GetBatchRequest(batch_id="x" * 100_000), grpc.StatusCode.NOT_FOUND, "batch_id"),
     "cancel unknown": ("CancelBatch", pb.CancelBatchRequest(batch_id="nope"), grpc.StatusCode.NOT_FOUND, "batch_id"),
 }
 

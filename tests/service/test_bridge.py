@@ -47,13 +47,28 @@ def test_lines_group_into_samples():
 def test_corrupt_lines_are_counted_and_skipped():
     p = LineProtocol(NAMES, rate_hz=10.0)
     good = _lines(0, np.ones((3, 3)))
-    junk = (b"garbage\n" b"1,2,3\n" b"0,7,1,1,1\n" b"0,zz,1,1,1\n" b"x,0,1,1,1\n" b"0,0,nan,1,1\n" b"0,0,inf,1,1\n"
-            b"\xff\xfe,0,1,1,1\n" + b"9" * 300 + b"\n" b"# banner lines are not corrupt\n\n")  # fmt: skip
+    junk = (
+        b"garbage\n"
+        b"1,2,3\n"
+        b"0,7,1,1,1\n"
+        b"0,zz,1,1,1\n"
+        b"x,0,1,1,1\n"
+        b"0,0,nan,1,1\n"
+        b"0,0,inf,1,1\n"
+        b"\xff\xfe,0,1,1,1\n" + b"9" * 300 + b"\n"
+        b"# banner lines are not corrupt\n\n"
+    )
     out = p.push_bytes(junk + good + b"0,0,1,1,1\n" + _lines(100, np.ones((3, 3)))[:20] + b"\n")
     assert len(out) == 1  # the one good round
-    assert p.stats.corrupt == {"wrong field count": 3, "unknown sensor": 2, "not a number": 1,
-                               "NaN or infinite value": 2, "not ASCII": 1, "line too long": 1,
-                               "time out of order": 1}  # fmt: skip
+    assert p.stats.corrupt == {
+        "wrong field count": 3,
+        "unknown sensor": 2,
+        "not a number": 1,
+        "NaN or infinite value": 2,
+        "not ASCII": 1,
+        "line too long": 1,
+        "time out of order": 1,
+    }
     p.push_bytes(b"100,0,1,1,1\n100,0,2,2,2\n")  # a sensor twice in one round
     assert p.stats.corrupt["sensor twice in one sample"] == 1
     p.push_bytes(b"200,0,1,1")
@@ -114,7 +129,7 @@ def _write_all(fd, data: bytes) -> None:
     while view:
         _, writable, _ = select.select([], [fd], [], 5.0)
         assert writable, "the bridge stopped reading"
-        view = view[os.write(fd, view[:1024]):]
+        view = view[os.write(fd, view[:1024]) :]
 
 
 def _unread(fd) -> int:
@@ -130,10 +145,27 @@ def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path, vmc
     master, slave = os.openpty()
     tty.setraw(slave)  # as pyserial will: no echo, no line editing, before the bridge opens it
     out = tmp_path / "bridge.bvh"
-    proc = popen_cli("sensor-bridge", "--device", os.ttyname(slave), "--baud", "115200",
-                     "--server", f"127.0.0.1:{server.port}", "--graph", "small", "--units", "g",
-                     "--calibrate-seconds", "0.5", "--latency", "0.3", "-o", out,
-                     "--vmc", f"127.0.0.1:{vmc_receiver.port}")  # fmt: skip
+    proc = popen_cli(
+        "sensor-bridge",
+        "--device",
+        os.ttyname(slave),
+        "--baud",
+        "115200",
+        "--server",
+        f"127.0.0.1:{server.port}",
+        "--graph",
+        "small",
+        "--units",
+        "g",
+        "--calibrate-seconds",
+        "0.5",
+        "--latency",
+        "0.3",
+        "-o",
+        out,
+        "--vmc",
+        f"127.0.0.1:{vmc_receiver.port}",
+    )
     try:
         first = proc.stdout.readline()
         assert first.startswith("sensor-bridge: reading"), first + proc.stderr.read()
@@ -170,7 +202,9 @@ def test_bridge_end_to_end_through_a_pty(server, graph, recording, tmp_path, vmc
     assert f"sensor-bridge: vmc: {recording.num_samples} frames sent to 127.0.0.1:{vmc_receiver.port}" in stdout
     wait_for(lambda: len(vmc_receiver.frames) == recording.num_samples)  # (each frame out as it came)
     assert f"→ {recording.num_samples} samples at 30 Hz" in stdout
-    got_bias = np.array([float(v) for v in re.findall(r"[+-]\d+\.\d+", stdout.split("calibration bias m/s²:")[1].splitlines()[0])])
+    got_bias = np.array(
+        [float(v) for v in re.findall(r"[+-]\d+\.\d+", stdout.split("calibration bias m/s²:")[1].splitlines()[0])]
+    )
     np.testing.assert_allclose(got_bias.reshape(S, 3), bias, atol=0.006)
 
     # The motion written is what a live session makes of the corrected samples.

@@ -43,18 +43,38 @@ def test_the_server_calibrates_from_the_start_as_synthesize_does(server, conn, g
     assert got.bvh.decode() == expected
     out = tmp_path / "c.bvh"
     common = ["--server", f"127.0.0.1:{server.port}"]
-    assert main(["client", "synthesize", str(path), "-o", str(out), *common, "--calibrate-from-start", "5",
-                 "--pose", "npose"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "client",
+                "synthesize",
+                str(path),
+                "-o",
+                str(out),
+                *common,
+                "--calibrate-from-start",
+                "5",
+                "--pose",
+                "npose",
+            ]
+        )
+        == 0
+    )
     assert out.read_text() == expected
     capsys.readouterr()
     assert main(["client", "synthesize", str(path), "-o", str(out), *common, "--calibrate-from-start", "5"]) == 2
     assert "needs --pose" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("seconds, pose, needle", [(0.0, "npose", "finite number of seconds > 0"),
-                                                   (4000.0, "npose", "at most 3600"),
-                                                   (5.0, "sitting", "unknown pose"),
-                                                   (1.0, "npose", "calibration needs at least 2 s")])  # fmt: skip
+@pytest.mark.parametrize(
+    "seconds, pose, needle",
+    [
+        (0.0, "npose", "finite number of seconds > 0"),
+        (4000.0, "npose", "at most 3600"),
+        (5.0, "sitting", "unknown pose"),
+        (1.0, "npose", "calibration needs at least 2 s"),
+    ],
+)
 def test_bad_calibrate_from_start_is_invalid_argument(conn, posed, seconds, pose, needle):
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.convert_recording import recording_to_proto
@@ -62,7 +82,9 @@ def test_bad_calibrate_from_start_is_invalid_argument(conn, posed, seconds, pose
     request = pb.SynthesizeRequest(graph="small", recording=recording_to_proto(posed[0]))
     request.calibrate_from_start.seconds, request.calibrate_from_start.pose = seconds, pose
     code, details = rpc_error(conn.stub.Synthesize, request, timeout=60)
-    assert code == grpc.StatusCode.INVALID_ARGUMENT and details.startswith("calibrate_from_start: ") and needle in details
+    assert (
+        code == grpc.StatusCode.INVALID_ARGUMENT and details.startswith("calibrate_from_start: ") and needle in details
+    )
 
 
 def test_a_stream_calibrates_from_its_own_first_seconds(conn, graph, posed, capsys, server):
@@ -95,7 +117,10 @@ def test_a_stream_calibrates_from_its_own_first_seconds(conn, graph, posed, caps
     feed.close()
     with pytest.raises(C.ServiceError, match="INVALID_ARGUMENT: config.calibrate_from_start: .* needs at least 2 s"):
         C.run_stream(conn, feed)
-    for value, needle in (((5.0, "sitting"), "pose: unknown pose"), ((4000.0, "npose"), "seconds: must be .* at most 3600")):
+    for value, needle in (
+        ((5.0, "sitting"), "pose: unknown pose"),
+        ((4000.0, "npose"), "seconds: must be .* at most 3600"),
+    ):
         feed = C.SampleFeed(C.stream_config("small", calibrate_from_start=value))
         feed.close()
         with pytest.raises(C.ServiceError, match=f"INVALID_ARGUMENT: config.calibrate_from_start.{needle}"):

@@ -42,8 +42,14 @@ def _shared_options() -> set[str]:
 
 def test_every_service_subcommand_has_a_description_and_every_argument_a_help():
     parsers = list(_service_parsers())
-    assert {p for p, _ in parsers} >= {("serve",), ("client", "graphs"), ("client", "synthesize"),
-                                       ("client", "stream"), ("client", "batch", "submit"), ("sensor-bridge",)}
+    assert {p for p, _ in parsers} >= {
+        ("serve",),
+        ("client", "graphs"),
+        ("client", "synthesize"),
+        ("client", "stream"),
+        ("client", "batch", "submit"),
+        ("sensor-bridge",),
+    }
     shared = _shared_options()
     missing = []
     for path, parser in parsers:
@@ -55,8 +61,13 @@ def test_every_service_subcommand_has_a_description_and_every_argument_a_help():
             name = "/".join(action.option_strings) or action.dest
             if not (action.help or "").strip():
                 missing.append((path, name, "help"))
-            elif (action.option_strings and action.default not in NO_DEFAULT and not action.required
-                  and "default" not in action.help and not shared & set(action.option_strings)):  # fmt: skip
+            elif (
+                action.option_strings
+                and action.default not in NO_DEFAULT
+                and not action.required
+                and "default" not in action.help
+                and not shared & set(action.option_strings)
+            ):
                 missing.append((path, name, f"default {action.default!r} not stated"))
     assert not missing, missing
 

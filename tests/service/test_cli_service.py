@@ -20,8 +20,21 @@ from tests.service.conftest import popen_cli, run_cli
 def served(graph_file, tmp_path):
     token = tmp_path / "token"
     token.write_text("# the service's token\nabc123\n")
-    proc = popen_cli("serve", "--graph", f"small={graph_file}", "--host", "127.0.0.1", "--port", "0",
-                     "--token-file", token, "--grace-s", "10", "--max-streams", "2")  # fmt: skip
+    proc = popen_cli(
+        "serve",
+        "--graph",
+        f"small={graph_file}",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--token-file",
+        token,
+        "--grace-s",
+        "10",
+        "--max-streams",
+        "2",
+    )
     line = proc.stdout.readline()
     match = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
     assert match, line + proc.stderr.read() if proc.poll() is not None else line
@@ -69,8 +82,23 @@ def test_client_commands(served, rec_file, graph, recording, marker_rec_file, ma
     # Errors: one line, exit 2.
     assert main(["client", "graphs", "--server", address]) == 2
     assert "UNAUTHENTICATED" in capsys.readouterr().err
-    assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--strategy", "ssg",
-                 "--markers", "hands-feet"]) == 2  # (an accelerometer recording: no markers)
+    assert (
+        main(
+            [
+                "client",
+                "synthesize",
+                str(rec_file),
+                "-o",
+                str(out),
+                *common,
+                "--strategy",
+                "ssg",
+                "--markers",
+                "hands-feet",
+            ]
+        )
+        == 2
+    )  # (an accelerometer recording: no markers)
     assert "INVALID_ARGUMENT" in (err := capsys.readouterr().err) and "needs markers" in err, err
 
     # SSG: a marker-only recording, the set by name or from a file (sent as its content).
@@ -79,18 +107,44 @@ def test_client_commands(served, rec_file, graph, recording, marker_rec_file, ma
 
     set_file = tmp_path / "feet.json"
     set_file.write_text(json.dumps({**PRESETS["hands-feet"].to_dict(), "name": "feet"}))
-    for flags, ssg in ((["--markers", "hands-feet"], SsgOptions(markers="hands-feet")),
-                       (["--markers", str(set_file), "--keep", "l_foot,r_foot", "--ssg-k", "4"],
-                        SsgOptions(markers=str(set_file), keep=("l_foot", "r_foot"), k=4))):  # fmt: skip
-        assert main(["client", "synthesize", str(marker_rec_file), "-o", str(out), *common, "--strategy", "ssg",
-                     *flags]) == 0  # fmt: skip
+    for flags, ssg in (
+        (["--markers", "hands-feet"], SsgOptions(markers="hands-feet")),
+        (
+            ["--markers", str(set_file), "--keep", "l_foot,r_foot", "--ssg-k", "4"],
+            SsgOptions(markers=str(set_file), keep=("l_foot", "r_foot"), k=4),
+        ),
+    ):
+        assert (
+            main(["client", "synthesize", str(marker_rec_file), "-o", str(out), *common, "--strategy", "ssg", *flags])
+            == 0
+        )
         assert f"{marker_recording.num_samples} frames" in capsys.readouterr().out
         expected = reconstruct(graph, marker_recording, Options(strategy="ssg", ssg=ssg))
         assert out.read_text() == bvh_text(expected.motion, scale=100.0)
     # Live, with the marker set the recording names.
-    assert main(["client", "stream", str(marker_rec_file), "-o", str(live), *common, "--speed", "30", "--strategy",
-                 "ssg", "--latency", "0.5", "--quiet"]) == 0  # fmt: skip
-    assert f"{marker_recording.num_samples} frames from {marker_recording.num_samples} samples" in capsys.readouterr().out
+    assert (
+        main(
+            [
+                "client",
+                "stream",
+                str(marker_rec_file),
+                "-o",
+                str(live),
+                *common,
+                "--speed",
+                "30",
+                "--strategy",
+                "ssg",
+                "--latency",
+                "0.5",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert (
+        f"{marker_recording.num_samples} frames from {marker_recording.num_samples} samples" in capsys.readouterr().out
+    )
 
 
 def test_client_commands_apply_a_calibration_before_sending(served, graph, recording, tmp_path, capsys):
@@ -108,20 +162,32 @@ def test_client_commands_apply_a_calibration_before_sending(served, graph, recor
     _, address, token = served
     common = ["--server", address, "--token-file", str(token)]
     M = mounting(4, recording.sensor_names, 60.0)
-    mounted = replace(recording, accelerations=quat.inv_rotate(M[None], recording.accelerations.astype(float)).astype(np.float32),
-                      meta={**recording.meta, "sensor_frame": "device"})  # fmt: skip
+    mounted = replace(
+        recording,
+        accelerations=quat.inv_rotate(M[None], recording.accelerations.astype(float)).astype(np.float32),
+        meta={**recording.meta, "sensor_frame": "device"},
+    )
     rec_file = tmp_path / "mounted.rec"
     save_recording(mounted, rec_file)
     cal_file = tmp_path / "cal.json"
-    cal_file.write_text(json.dumps({"format": "graphsvc-calibration", "version": 1, "sensors": {
-        n: {"rotation_wxyz": M[k].tolist()} for k, n in enumerate(recording.sensor_names)}}))  # fmt: skip
+    cal_file.write_text(
+        json.dumps(
+            {
+                "format": "graphsvc-calibration",
+                "version": 1,
+                "sensors": {n: {"rotation_wxyz": M[k].tolist()} for k, n in enumerate(recording.sensor_names)},
+            }
+        )
+    )
     out = tmp_path / "cal.bvh"
     assert main(["client", "synthesize", str(rec_file), "-o", str(out), *common, "--calibration", str(cal_file)]) == 0
     capsys.readouterr()
     expected = reconstruct(graph, apply_calibration(mounted, load_calibration(cal_file)))
     assert out.read_text() == bvh_text(expected.motion, scale=100.0)
-    assert main(["client", "stream", str(rec_file), *common, "--speed", "30", "--quiet",
-                 "--calibration", str(cal_file)]) == 0  # fmt: skip
+    assert (
+        main(["client", "stream", str(rec_file), *common, "--speed", "30", "--quiet", "--calibration", str(cal_file)])
+        == 0
+    )
     assert f"{recording.num_samples} frames" in capsys.readouterr().out
     cal_file.write_text("[]")
     assert main(["client", "stream", str(rec_file), *common, "--calibration", str(cal_file)]) == 2
@@ -278,9 +344,28 @@ def test_serve_answers_health_not_serving_while_its_graphs_load(graph_file, tmp_
 
     gate = tmp_path / "gate"
     os.mkfifo(gate)
-    proc = subprocess.Popen([sys.executable, "-c", _HELD_LOAD, str(gate), "serve", "--graph", f"small={graph_file}",
-                             "--host", "127.0.0.1", "--port", "0", "--live-workers", "0"],
-                            cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            _HELD_LOAD,
+            str(gate),
+            "serve",
+            "--graph",
+            f"small={graph_file}",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--live-workers",
+            "0",
+        ],
+        cwd=ROOT,
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = proc.stdout.readline()
         assert line.startswith("bound "), line + proc.stderr.read()
@@ -326,26 +411,53 @@ def test_client_commands_name_a_devices_sensors_with_a_device_map(served, graph,
     _, address, token = served
     common = ["--server", address, "--token-file", str(token)]
     export_csv(recording, tmp_path / "named.csv")
-    device = {"l_forearm": "LeftForearm", "r_forearm": "forearm_r", "l_shin": "left-shin", "r_shin": "RShin",
-              "lower_back": "Lower_Back", "chest": "CHEST"}  # fmt: skip
+    device = {
+        "l_forearm": "LeftForearm",
+        "r_forearm": "forearm_r",
+        "l_shin": "left-shin",
+        "r_shin": "RShin",
+        "lower_back": "Lower_Back",
+        "chest": "CHEST",
+    }
     cols = [5, 0, 3, 1, 4, 2]
-    renamed = replace(recording, sensor_names=tuple(device[recording.sensor_names[c]] for c in cols),
-                      accelerations=recording.accelerations[:, cols])  # fmt: skip
+    renamed = replace(
+        recording,
+        sensor_names=tuple(device[recording.sensor_names[c]] for c in cols),
+        accelerations=recording.accelerations[:, cols],
+    )
     export_csv(renamed, tmp_path / "device.csv")
     expected = bvh_text(reconstruct(graph, import_csv(tmp_path / "named.csv")).motion, scale=100.0)
 
     out = tmp_path / "mapped.bvh"
-    assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common,
-                 "--device-map", "generic"]) == 0  # fmt: skip
+    assert (
+        main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common, "--device-map", "generic"])
+        == 0
+    )
     assert f"wrote {out}: {recording.num_samples} frames" in capsys.readouterr().out
     assert out.read_text() == expected
-    assert main(["client", "stream", str(tmp_path / "device.csv"), *common, "--speed", "30", "--quiet",
-                 "--device-map", "generic"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "client",
+                "stream",
+                str(tmp_path / "device.csv"),
+                *common,
+                "--speed",
+                "30",
+                "--quiet",
+                "--device-map",
+                "generic",
+            ]
+        )
+        == 0
+    )
     assert f"{recording.num_samples} frames from {recording.num_samples} samples" in capsys.readouterr().out
 
     assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common]) == 2
     err = capsys.readouterr().err
     assert "not in the graph: CHEST" in err and "--device-map (xsens, mvn, generic or a map file)" in err
-    assert main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common,
-                 "--device-map", "mvn"]) == 2  # (MVN names none of these)  # fmt: skip
+    assert (
+        main(["client", "synthesize", str(tmp_path / "device.csv"), "-o", str(out), *common, "--device-map", "mvn"])
+        == 2
+    )  # (MVN names none of these)
     assert "the mvn device map names none of the recording's sensors (CHEST, LeftForearm" in capsys.readouterr().err

@@ -27,8 +27,10 @@ def test_committed_stubs_match_the_proto():
         import grpc_tools
 
         version = getattr(grpc_tools, "__version__", None) or _dist_version("grpcio-tools")
-        pytest.fail(f"stale stubs {stale} in {gen.OUT_DIR}: regenerate with `{sys.executable} tools/gen_proto.py` "
-                    f"(grpcio-tools {version}; the [test] extra pins the version the stubs were made with)")
+        pytest.fail(
+            f"stale stubs {stale} in {gen.OUT_DIR}: regenerate with `{sys.executable} tools/gen_proto.py` "
+            f"(grpcio-tools {version}; the [test] extra pins the version the stubs were made with)"
+        )
 
 
 def _dist_version(name: str) -> str:
@@ -43,13 +45,30 @@ def test_descriptor_names_the_proto_package():
     assert pb.DESCRIPTOR.name == "graphsvc/v1/graphsvc.proto"
     assert pb.DESCRIPTOR.package == "graphsvc.v1"
     methods = [m.name for m in pb.DESCRIPTOR.services_by_name["MotionGraphService"].methods]
-    assert methods == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize", "SubmitBatch", "GetBatch",
-                       "ListBatches", "CancelBatch"]
+    assert methods == [
+        "ListGraphs",
+        "GetGraph",
+        "Synthesize",
+        "StreamSynthesize",
+        "SubmitBatch",
+        "GetBatch",
+        "ListBatches",
+        "CancelBatch",
+    ]
     # The values a client already sends keep their numbers; strategies added since follow.
     assert [(v.name, v.number) for v in pb.Strategy.DESCRIPTOR.values][:4] == [
-        ("STRATEGY_UNSPECIFIED", 0), ("STRATEGY_VITERBI", 1), ("STRATEGY_OLNG", 2), ("STRATEGY_SSG", 3)]
+        ("STRATEGY_UNSPECIFIED", 0),
+        ("STRATEGY_VITERBI", 1),
+        ("STRATEGY_OLNG", 2),
+        ("STRATEGY_SSG", 3),
+    ]
     assert pb.Strategy.Value("STRATEGY_NEAREST") == 4
     # A request's fields keep their numbers: calibrate_from_start (released first) is 4,
     # performer (on a branch that also took 4) follows as 5.
     assert {f.name: f.number for f in pb.SynthesizeRequest.DESCRIPTOR.fields} == {
-        "graph": 1, "recording": 2, "options": 3, "calibrate_from_start": 4, "performer": 5}
+        "graph": 1,
+        "recording": 2,
+        "options": 3,
+        "calibrate_from_start": 4,
+        "performer": 5,
+    }

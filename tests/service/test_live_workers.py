@@ -59,8 +59,11 @@ def _options(kind: str):
     from graphsvc.pipeline import Options
     from graphsvc.strategies.olng.options import OlngOptions
 
-    return {"viterbi": Options(latency_s=0.4, beam=10.0), "nearest": Options(strategy="nearest"),
-            "olng": Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False))}[kind]  # fmt: skip
+    return {
+        "viterbi": Options(latency_s=0.4, beam=10.0),
+        "nearest": Options(strategy="nearest"),
+        "olng": Options(strategy="olng", olng=OlngOptions(k=24, i=6, m=12, extended=False)),
+    }[kind]
 
 
 @pytest.mark.parametrize("kind", ["viterbi", "nearest", "olng"])
@@ -71,7 +74,8 @@ def test_a_stream_in_a_worker_matches_a_session_here(wconn, graph, recording, ki
     assert result.started.lag_frames == session.lag_frames
     assert_frames_equal(expected, result.frames)
     assert [[(s.clip, s.frame, s.weight) for s in f.sources] for f in result.frames] == [
-        [(c, pytest.approx(fr), pytest.approx(w)) for c, fr, w in f.sources] for f in expected]
+        [(c, pytest.approx(fr), pytest.approx(w)) for c, fr, w in f.sources] for f in expected
+    ]
     assert result.finished.samples_received == recording.num_samples
     assert result.finished.frames_emitted == len(expected)
 
@@ -105,21 +109,36 @@ def test_concurrent_streams_spread_over_the_workers_and_stay_independent(worker_
 
 def test_bad_input_gets_the_same_status_through_a_worker(worker_server, wconn, recording):
     samples = list(C.recording_samples(recording))[:4]
-    unknown_label = pb.SynthesisOptions(constraint_sets=[pb.ConstraintSet(constraints=[
-        pb.Constraint(start_s=0.0, end_s=1.0, label="no-such-label")])])  # fmt: skip
+    unknown_label = pb.SynthesisOptions(
+        constraint_sets=[pb.ConstraintSet(constraints=[pb.Constraint(start_s=0.0, end_s=1.0, label="no-such-label")])]
+    )
     cases = {  # (the config is refused in the worker; the sample in the server's process)
         "label": ([pb.StreamSynthesizeRequest(config=C.stream_config("small", unknown_label))], "config.options"),
-        "sample": ([pb.StreamSynthesizeRequest(config=C.stream_config("small")),
-                    pb.StreamSynthesizeRequest(sample=pb.SensorSample(time_s=0.0, accelerations_m_s2=[0.0] * 17))],
-                   "sample[0].accelerations_m_s2"),
-    }  # fmt: skip
+        "sample": (
+            [
+                pb.StreamSynthesizeRequest(config=C.stream_config("small")),
+                pb.StreamSynthesizeRequest(sample=pb.SensorSample(time_s=0.0, accelerations_m_s2=[0.0] * 17)),
+            ],
+            "sample[0].accelerations_m_s2",
+        ),
+    }
     for name, (requests, mention) in cases.items():
         code, details = rpc_error(lambda r=requests: list(wconn.stub.StreamSynthesize(iter(r), timeout=30)))
         assert code == grpc.StatusCode.INVALID_ARGUMENT and mention in details, (name, code, details)
-    code, details = rpc_error(lambda: list(wconn.stub.StreamSynthesize(iter([
-        pb.StreamSynthesizeRequest(config=C.stream_config("small")), *[pb.StreamSynthesizeRequest(sample=s)
-                                                                       for s in samples[:2]],
-        pb.StreamSynthesizeRequest(sample=samples[1])]), timeout=30)))  # fmt: skip
+    code, details = rpc_error(
+        lambda: list(
+            wconn.stub.StreamSynthesize(
+                iter(
+                    [
+                        pb.StreamSynthesizeRequest(config=C.stream_config("small")),
+                        *[pb.StreamSynthesizeRequest(sample=s) for s in samples[:2]],
+                        pb.StreamSynthesizeRequest(sample=samples[1]),
+                    ]
+                ),
+                timeout=30,
+            )
+        )
+    )
     assert code == grpc.StatusCode.INVALID_ARGUMENT and "sample[2].time_s" in details
     wait_for(lambda: worker_server.servicer.live_workers.sessions() == 0)
     wait_for(lambda: worker_server.servicer.slots.active == 0)
@@ -175,8 +194,11 @@ def test_a_killed_worker_ends_its_streams_unavailable_and_is_replaced(worker_ser
     assert seen[("graphsvc_live_worker_restarts_total", ())] == workers.replaced == replaced + 1
     assert seen[("graphsvc_refusals_total", (("code", "UNAVAILABLE"),))] >= 1
     for kind in ("graphsvc_process_cpu_seconds_total", "graphsvc_process_resident_bytes"):
-        series = {dict(labels)["pid"]: (dict(labels)["worker"], v) for (name, labels), v in seen.items()
-                  if name == kind and dict(labels)["role"] == "worker"}  # fmt: skip
+        series = {
+            dict(labels)["pid"]: (dict(labels)["worker"], v)
+            for (name, labels), v in seen.items()
+            if name == kind and dict(labels)["role"] == "worker"
+        }
         assert {int(p): w for p, (w, _) in series.items()} == {w.pid: str(w.index) for w in workers._workers}
         assert all(v > 0 for _, v in series.values())
     expected, _ = live_frames(graph, recording, Options())
@@ -211,8 +233,7 @@ def test_a_starting_session_does_not_hold_up_the_others(graph_file, graph, recor
     from graphsvc.service import live_workers
 
     front, back = Pipe()
-    worker = threading.Thread(target=live_workers._worker_main, args=(back, {"small": str(graph_file)}),
-                              daemon=True)  # fmt: skip
+    worker = threading.Thread(target=live_workers._worker_main, args=(back, {"small": str(graph_file)}), daemon=True)
     worker.start()
     assert front.poll(120) and front.recv()[1] == "ok"
     names = tuple(recording.sensor_names)
@@ -223,8 +244,11 @@ def test_a_starting_session_does_not_hold_up_the_others(graph_file, graph, recor
         return front.recv()
 
     def sample(k):
-        return False, (recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k],
-                       recording.heading[k]), {}  # fmt: skip
+        return (
+            False,
+            (recording.timestamps_s[k], recording.accelerations[k], recording.ground_position[k], recording.heading[k]),
+            {},
+        )
 
     young = round(live_workers.YOUNG_S * graph.rate_hz)
     assert young < recording.num_samples

@@ -33,8 +33,9 @@ def test_a_scrape_during_a_stream_sees_the_counters_move(metered, recording):
     assert before[("graphsvc_graph_load_seconds", (("graph", "small"),))] > 0
     assert before[("graphsvc_start_seconds", ())] > 0
     front = {k: v for k, v in before.items() if k[0] == "graphsvc_process_cpu_seconds_total"}
-    assert list(front) == [("graphsvc_process_cpu_seconds_total", (("pid", str(os.getpid())),
-                                                                    ("role", "front"), ("worker", "")))]  # fmt: skip
+    assert list(front) == [
+        ("graphsvc_process_cpu_seconds_total", (("pid", str(os.getpid())), ("role", "front"), ("worker", "")))
+    ]
     assert next(iter(front.values())) > 0
     samples = list(C.recording_samples(recording))
     with C.connect(f"127.0.0.1:{metered.port}") as conn:

@@ -52,15 +52,24 @@ def test_synthesize_on_segments_scales_the_others_by_their_mean_ratio(conn, grap
         assert on[name] == pytest.approx(given.get(name, 1.15 * kb[name]), abs=1e-6), name
 
 
-@pytest.mark.parametrize("performer, field, mention", [
-    (pb.Performer(height_m=-1.75), "performer.height_m", "height must be"),
-    (pb.Performer(height_m=175.0), "performer.height_m", "at most 3"),
-    (pb.Performer(segments=pb.PerformerSegments(segments_m={"tail": 0.3})), "performer.segments.segments_m",
-     "unknown segments: tail"),
-    (pb.Performer(segments=pb.PerformerSegments(segments_m={"l_shin": float("nan")})), "performer.segments.segments_m",
-     "l_shin must be"),
-    (pb.Performer(), "performer", "give height_m or segments"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "performer, field, mention",
+    [
+        (pb.Performer(height_m=-1.75), "performer.height_m", "height must be"),
+        (pb.Performer(height_m=175.0), "performer.height_m", "at most 3"),
+        (
+            pb.Performer(segments=pb.PerformerSegments(segments_m={"tail": 0.3})),
+            "performer.segments.segments_m",
+            "unknown segments: tail",
+        ),
+        (
+            pb.Performer(segments=pb.PerformerSegments(segments_m={"l_shin": float("nan")})),
+            "performer.segments.segments_m",
+            "l_shin must be",
+        ),
+        (pb.Performer(), "performer", "give height_m or segments"),
+    ],
+)
 def test_bad_proportions_are_invalid_argument_naming_the_field(conn, recording, performer, field, mention):
     request = pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording), performer=performer)
     code, details = _code(conn.stub.Synthesize, request, timeout=10)
@@ -84,8 +93,10 @@ def test_client_synthesize_sends_a_performer(served, rec_file, graph, recording,
     capsys.readouterr()
     assert segment_lengths(read_bvh(out).skeleton)["l_forearm"] == pytest.approx(1.5 * kb["l_forearm"], abs=1e-6)
     spec.write_text(json.dumps({"format": "graphsvc-performer", "version": 1, "segments_m": {"wing": 0.15}}))
-    assert main(["client", "synthesize", str(rec_file), "-o", str(tmp_path / "x.bvh"), *common,
-                 "--performer", str(spec)]) == 2  # fmt: skip
+    assert (
+        main(["client", "synthesize", str(rec_file), "-o", str(tmp_path / "x.bvh"), *common, "--performer", str(spec)])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "unknown segments: wing" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.bvh").exists()

@@ -19,8 +19,21 @@ from tests.service.conftest import nearest_options, popen_cli, start, wait_for
 
 
 def _serve(graph_file):
-    return popen_cli("serve", "--graph", f"small={graph_file}", "--host", "127.0.0.1", "--port", "0",
-                     "--live-workers", "0", "--max-streams", "16", "--grace-s", "0")  # fmt: skip
+    return popen_cli(
+        "serve",
+        "--graph",
+        f"small={graph_file}",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--live-workers",
+        "0",
+        "--max-streams",
+        "16",
+        "--grace-s",
+        "0",
+    )
 
 
 def _port(proc) -> int:
@@ -119,12 +132,17 @@ def test_streams_spread_and_survive_a_server(two_servers, recording, capsys):
     assert main(["client", "graphs", "--server", f"{dead},127.0.0.1:{ports[1]}"]) == 0
     printed = capsys.readouterr()
     assert printed.out.startswith("small: ")
-    assert re.fullmatch(rf"graphsvc: warning: server {dead} does not answer \(UNAVAILABLE: .+\); carrying on with "
-                        rf"127\.0\.0\.1:{ports[1]}\n", printed.err), printed.err  # fmt: skip
+    assert re.fullmatch(
+        rf"graphsvc: warning: server {dead} does not answer \(UNAVAILABLE: .+\); carrying on with "
+        rf"127\.0\.0\.1:{ports[1]}\n",
+        printed.err,
+    ), printed.err
     assert main(["client", "graphs", "--server", f"{dead},127.0.0.1:{_free_port()}"]) == 2
     printed = capsys.readouterr()
     assert printed.out == ""
-    assert re.fullmatch(rf"graphsvc: error: no server answers: {dead} \(UNAVAILABLE: .+\); .+\n", printed.err), printed.err
+    assert re.fullmatch(rf"graphsvc: error: no server answers: {dead} \(UNAVAILABLE: .+\); .+\n", printed.err), (
+        printed.err
+    )
 
 
 def test_server_lists_parse():
@@ -137,8 +155,14 @@ def test_server_lists_parse():
     assert one.target == "players.example:50051" and one.addresses == ("players.example:50051",)
     assert parse_servers("dns:///players.example:50051").target == "dns:///players.example:50051"
     assert parse_servers("ipv4:10.0.0.1:1,10.0.0.2:2").addresses == ("10.0.0.1:1", "10.0.0.2:2")
-    for bad, said in [("a:1,,b:2", "empty address"), ("a:1,b", "HOST:PORT"), ("a:70000,b:1", "port 1–65535"),
-                      ("::1:5,a:1", "brackets"), ("", "empty"), ("ipv4:10.0.0.1", "HOST:PORT")]:  # fmt: skip
+    for bad, said in [
+        ("a:1,,b:2", "empty address"),
+        ("a:1,b", "HOST:PORT"),
+        ("a:70000,b:1", "port 1–65535"),
+        ("::1:5,a:1", "brackets"),
+        ("", "empty"),
+        ("ipv4:10.0.0.1", "HOST:PORT"),
+    ]:
         with pytest.raises(Exception, match=said):
             parse_servers(bad)
 

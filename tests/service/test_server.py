@@ -37,8 +37,9 @@ def test_list_and_get_graph(conn, graph, graph_file):
     # (sensors.anatomy) the left arm reads +1 g along Y, the right along −Y, legs along −X,
     # the trunk along +X.
     np.testing.assert_allclose(np.linalg.norm(rest, axis=1), 9.81, atol=1e-4)
-    np.testing.assert_allclose(rest, [[0, 9.81, 0], [0, -9.81, 0], [-9.81, 0, 0], [-9.81, 0, 0], [9.81, 0, 0],
-                                      [9.81, 0, 0]], atol=1e-3)  # fmt: skip
+    np.testing.assert_allclose(
+        rest, [[0, 9.81, 0], [0, -9.81, 0], [-9.81, 0, 0], [-9.81, 0, 0], [9.81, 0, 0], [9.81, 0, 0]], atol=1e-3
+    )
 
 
 # ---------------------------------------------------------------- round trips
@@ -66,8 +67,11 @@ def test_synthesize_reorders_named_sensors(conn, graph, recording):
     from dataclasses import replace
 
     order = np.arange(recording.num_sensors)[::-1]
-    shuffled = replace(recording, sensor_names=tuple(np.array(recording.sensor_names)[order]),
-                       accelerations=np.ascontiguousarray(recording.accelerations[:, order]))  # fmt: skip
+    shuffled = replace(
+        recording,
+        sensor_names=tuple(np.array(recording.sensor_names)[order]),
+        accelerations=np.ascontiguousarray(recording.accelerations[:, order]),
+    )
     a = C.synthesize(conn, "small", recording)
     b = C.synthesize(conn, "small", shuffled)
     np.testing.assert_array_equal(a.node_path, b.node_path)
@@ -111,8 +115,9 @@ def test_a_default_stream_lags_by_the_frames_it_reports(conn, recording):
     assert max(waits) == 47 and len(result.frames) == recording.num_samples
 
 
-def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(conn, server, graph, recording,
-                                                                            monkeypatch):  # fmt: skip
+def test_a_lone_stream_steps_with_the_threads_and_matches_the_serial_session(
+    conn, server, graph, recording, monkeypatch
+):
     # While a stream runs alone the server gives its steps numba's threads; the frames
     # are those of a serial LiveSession all the same.
     from graphsvc.pipeline import LiveSession, Options
@@ -138,12 +143,23 @@ def test_replay_in_real_time_reports_latency(conn, recording):
 
     from graphsvc.pipeline import Options
 
-    short = replace(recording, timestamps_s=recording.timestamps_s[:30], accelerations=recording.accelerations[:30],
-                    ground_position=recording.ground_position[:30], heading=recording.heading[:30])  # fmt: skip
+    short = replace(
+        recording,
+        timestamps_s=recording.timestamps_s[:30],
+        accelerations=recording.accelerations[:30],
+        ground_position=recording.ground_position[:30],
+        heading=recording.heading[:30],
+    )
     seen = []
     t0 = time.perf_counter()
-    result = C.stream_recording(conn, "small", short, convert.options_to_proto(Options(latency_s=0.2)), speed=4.0,
-                                on_frame=lambda f, ms: seen.append(ms))  # fmt: skip
+    result = C.stream_recording(
+        conn,
+        "small",
+        short,
+        convert.options_to_proto(Options(latency_s=0.2)),
+        speed=4.0,
+        on_frame=lambda f, ms: seen.append(ms),
+    )
     elapsed = time.perf_counter() - t0
     assert elapsed >= (short.timestamps_s[-1] - short.timestamps_s[0]) / 4.0  # paced, not dumped
     assert len(seen) == len(result.frames) == 30
@@ -172,9 +188,12 @@ def _health(port: int) -> dict:
 
     with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
         stub = health_pb2_grpc.HealthStub(channel)
-        return {service: health_pb2.HealthCheckResponse.ServingStatus.Name(
-            stub.Check(health_pb2.HealthCheckRequest(service=service), timeout=10).status)
-            for service in ("", "graphsvc.v1.MotionGraphService")}  # fmt: skip
+        return {
+            service: health_pb2.HealthCheckResponse.ServingStatus.Name(
+                stub.Check(health_pb2.HealthCheckRequest(service=service), timeout=10).status
+            )
+            for service in ("", "graphsvc.v1.MotionGraphService")
+        }
 
 
 def test_health_answers_not_serving_until_the_graphs_are_served(loaded_graphs):
@@ -230,20 +249,34 @@ def test_reflection_lists_and_describes_the_service(server, version):
 
     with grpc.insecure_channel(f"127.0.0.1:{server.port}") as channel:
         # What grpcurl does: list services, then fetch the file declaring one.
-        call = channel.stream_stream(f"/grpc.reflection.{version}.ServerReflection/ServerReflectionInfo",
-                                     request_serializer=reflection_pb2.ServerReflectionRequest.SerializeToString,
-                                     response_deserializer=reflection_pb2.ServerReflectionResponse.FromString)  # fmt: skip
-        requests = [reflection_pb2.ServerReflectionRequest(list_services=""),
-                    reflection_pb2.ServerReflectionRequest(file_containing_symbol="graphsvc.v1.MotionGraphService")]  # fmt: skip
+        call = channel.stream_stream(
+            f"/grpc.reflection.{version}.ServerReflection/ServerReflectionInfo",
+            request_serializer=reflection_pb2.ServerReflectionRequest.SerializeToString,
+            response_deserializer=reflection_pb2.ServerReflectionResponse.FromString,
+        )
+        requests = [
+            reflection_pb2.ServerReflectionRequest(list_services=""),
+            reflection_pb2.ServerReflectionRequest(file_containing_symbol="graphsvc.v1.MotionGraphService"),
+        ]
         listed, described = list(call(iter(requests), timeout=5))
     names = {s.name for s in listed.list_services_response.service}
     assert {"graphsvc.v1.MotionGraphService", "grpc.health.v1.Health"} <= names
-    files = [descriptor_pb2.FileDescriptorProto.FromString(b)
-             for b in described.file_descriptor_response.file_descriptor_proto]  # fmt: skip
+    files = [
+        descriptor_pb2.FileDescriptorProto.FromString(b)
+        for b in described.file_descriptor_response.file_descriptor_proto
+    ]
     (mine,) = [f for f in files if f.name == "graphsvc/v1/graphsvc.proto"]
     (service,) = mine.service
-    assert [m.name for m in service.method] == ["ListGraphs", "GetGraph", "Synthesize", "StreamSynthesize",
-                                                 "SubmitBatch", "GetBatch", "ListBatches", "CancelBatch"]
+    assert [m.name for m in service.method] == [
+        "ListGraphs",
+        "GetGraph",
+        "Synthesize",
+        "StreamSynthesize",
+        "SubmitBatch",
+        "GetBatch",
+        "ListBatches",
+        "CancelBatch",
+    ]
     assert service.method[3].client_streaming and service.method[3].server_streaming
 
 
@@ -302,22 +335,32 @@ def _bad_cases(recording):
     back_t[5] = back_t[4]
     inf_acc = list(acc)
     inf_acc[40] = float("inf")
-    bad_constraint = pb.SynthesisOptions(constraint_sets=[pb.ConstraintSet(constraints=[
-        pb.Constraint(start_s=2.0, end_s=1.0, contact=pb.CONTACT_STATE_LEFT)])])  # fmt: skip
-    unknown_label = pb.SynthesisOptions(constraint_sets=[pb.ConstraintSet(constraints=[
-        pb.Constraint(start_s=0.0, end_s=1.0, label="no-such-label")])])  # fmt: skip
+    bad_constraint = pb.SynthesisOptions(
+        constraint_sets=[
+            pb.ConstraintSet(constraints=[pb.Constraint(start_s=2.0, end_s=1.0, contact=pb.CONTACT_STATE_LEFT)])
+        ]
+    )
+    unknown_label = pb.SynthesisOptions(
+        constraint_sets=[pb.ConstraintSet(constraints=[pb.Constraint(start_s=0.0, end_s=1.0, label="no-such-label")])]
+    )
     INVALID = grpc.StatusCode.INVALID_ARGUMENT
     return {
         "unknown graph": ({"graph": "nope"}, grpc.StatusCode.NOT_FOUND, "graph"),
         "no graph": ({"graph": ""}, INVALID, "graph"),
         "sensor count": ({"recording.accelerations_m_s2": acc[:-3]}, INVALID, "recording.accelerations_m_s2"),
         "sensor names": ({"recording.sensor_names": ["a", "b"]}, INVALID, "recording.sensor_names"),
-        "unknown sensor": ({"recording.sensor_names": ["x", *recording.sensor_names[1:]]}, INVALID,
-                           "recording.sensor_names"),
+        "unknown sensor": (
+            {"recording.sensor_names": ["x", *recording.sensor_names[1:]]},
+            INVALID,
+            "recording.sensor_names",
+        ),
         "nan time": ({"recording.timestamps_s": nan_t}, INVALID, "recording.timestamps_s[3]"),
         "time backwards": ({"recording.timestamps_s": back_t}, INVALID, "recording.timestamps_s[5]"),
-        "no samples": ({"recording.timestamps_s": [], "recording.accelerations_m_s2": []}, INVALID,
-                       "recording.timestamps_s"),
+        "no samples": (
+            {"recording.timestamps_s": [], "recording.accelerations_m_s2": []},
+            INVALID,
+            "recording.timestamps_s",
+        ),
         "inf reading": ({"recording.accelerations_m_s2": inf_acc}, INVALID, "recording.accelerations_m_s2[40]"),
         "bad rate": ({"recording.rate_hz": 0.0}, INVALID, "recording.rate_hz"),
         "positions": ({"recording.ground_positions_m": [0.0, 1.0, 2.0]}, INVALID, "recording.ground_positions_m"),
@@ -354,13 +397,17 @@ def test_wrong_layout_names_the_sensors_as_the_cli_does(conn, graph, recording):
     with pytest.raises(InputError) as cli:
         check_layout(graph, wrong)
     assert f"missing {names[0]}" in str(cli.value) and "not in the graph: elbow_x" in str(cli.value)
-    code, details = _code(conn.stub.Synthesize, _recording_request(recording, **{"recording.sensor_names": wrong}),
-                          timeout=10)
+    code, details = _code(
+        conn.stub.Synthesize, _recording_request(recording, **{"recording.sensor_names": wrong}), timeout=10
+    )
     assert code == grpc.StatusCode.INVALID_ARGUMENT
     assert details == f"recording.sensor_names: {cli.value}"
     samples = list(C.recording_samples(recording))[:3]
-    code, details = _code(lambda: list(conn.stub.StreamSynthesize(
-        _requests(C.stream_config("small", None, names[:-1]), samples), timeout=10)))
+    code, details = _code(
+        lambda: list(
+            conn.stub.StreamSynthesize(_requests(C.stream_config("small", None, names[:-1]), samples), timeout=10)
+        )
+    )
     assert code == grpc.StatusCode.INVALID_ARGUMENT
     assert f"missing {names[-1]}" in details and details.startswith("config.sensor_names: the recording's sensors")
     assert C.synthesize(conn, "small", recording).motion.num_frames == recording.num_samples
@@ -378,15 +425,29 @@ def _stream_cases(recording):
         "sample first": ([pb.StreamSynthesizeRequest(sample=samples[0])], INVALID, "config"),
         "config twice": ([pb.StreamSynthesizeRequest(config=config)] * 2, INVALID, "sample[0]"),
         "unknown graph": (list(_requests(C.stream_config("nope"), samples)), grpc.StatusCode.NOT_FOUND, "nope"),
-        "ssg without a marker set": (list(_requests(C.stream_config("small", pb.SynthesisOptions(
-            strategy=pb.STRATEGY_SSG)), samples)), INVALID, "config.options.ssg.markers"),
+        "ssg without a marker set": (
+            list(_requests(C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG)), samples)),
+            INVALID,
+            "config.options.ssg.markers",
+        ),
         "time backwards": (list(_requests(config, back)), INVALID, "sample[2].time_s"),
         "sensor count": (list(_requests(config, short)), INVALID, "sample[0].accelerations_m_s2"),
         "inf reading": (list(_requests(config, inf)), INVALID, "sample[0].accelerations_m_s2[17]"),
-        "sensor names": (list(_requests(C.stream_config("small", None, ["a"]), samples)), INVALID,
-                         "config.sensor_names"),
-        "bad weight": (list(_requests(C.stream_config("small", pb.SynthesisOptions(
-            weights=pb.CostWeights(acceleration=float("nan")))), samples)), INVALID, "config.options.weights"),
+        "sensor names": (
+            list(_requests(C.stream_config("small", None, ["a"]), samples)),
+            INVALID,
+            "config.sensor_names",
+        ),
+        "bad weight": (
+            list(
+                _requests(
+                    C.stream_config("small", pb.SynthesisOptions(weights=pb.CostWeights(acceleration=float("nan")))),
+                    samples,
+                )
+            ),
+            INVALID,
+            "config.options.weights",
+        ),
     }
 
 
@@ -402,8 +463,11 @@ def test_message_size_limit(loaded_graphs, recording):
     running = start(loaded_graphs, max_message_mb=0.001)  # ~1 kB: the recording is larger
     try:
         with C.connect(f"127.0.0.1:{running.port}") as conn:
-            code, _ = _code(conn.stub.Synthesize, pb.SynthesizeRequest(graph="small",
-                            recording=convert.recording_to_proto(recording)), timeout=10)  # fmt: skip
+            code, _ = _code(
+                conn.stub.Synthesize,
+                pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording)),
+                timeout=10,
+            )
             assert code == grpc.StatusCode.RESOURCE_EXHAUSTED
             # Small messages still pass: a request for an unknown graph is answered as usual.
             code, _ = _code(conn.stub.GetGraph, pb.GetGraphRequest(name="nope"), timeout=10)
@@ -482,8 +546,11 @@ def test_cancelling_mid_stream_frees_the_worker(one_stream_server, recording):
 
 
 def test_deadline_exceeded(conn, server, recording):
-    code, _ = _code(conn.stub.Synthesize, pb.SynthesizeRequest(graph="small",
-                    recording=convert.recording_to_proto(recording)), timeout=0.001)  # fmt: skip
+    code, _ = _code(
+        conn.stub.Synthesize,
+        pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(recording)),
+        timeout=0.001,
+    )
     assert code == grpc.StatusCode.DEADLINE_EXCEEDED
     # A stream whose client keeps it open past the deadline ends, and its slot is freed.
     feed = C.SampleFeed(C.stream_config("small"))
@@ -544,7 +611,8 @@ def test_nearest_through_synthesize_and_stream(conn, graph, recording):
     result = C.run_stream(conn, feed)
     assert_frames_equal(live, result.frames)
     assert [(s.clip, s.frame, s.weight) for s in result.frames[0].sources] == [
-        (live[0].sources[0][0], pytest.approx(live[0].sources[0][1]), 1.0)]
+        (live[0].sources[0][0], pytest.approx(live[0].sources[0][1]), 1.0)
+    ]
 
 
 def _synthesized_and_streamed_as_the_library(conn, graph, recording, options, msg):
@@ -595,8 +663,12 @@ def test_piecewise_through_synthesize_and_stream(conn, graph, recording):
     got, _ = _synthesized_and_streamed_as_the_library(conn, graph, recording, options, msg)
     assert got.report["strategy"] == "piecewise" and got.report["piecewise"]["clusters"] == 3
     request = _recording_request(recording)
-    for settings, message in (({"width": float("nan")}, "width"), ({"clusters": "many"}, "clusters"),
-                              ({"clusters": "100000"}, "clusters"), ({"dims": 250}, "pose dimension")):  # fmt: skip
+    for settings, message in (
+        ({"width": float("nan")}, "width"),
+        ({"clusters": "many"}, "clusters"),
+        ({"clusters": "100000"}, "clusters"),
+        ({"dims": 250}, "pose dimension"),
+    ):
         request.options.CopyFrom(pb.SynthesisOptions(strategy_name="piecewise"))
         request.options.strategy_settings.update(settings)
         code, details = _code(conn.stub.Synthesize, request, timeout=30)
@@ -664,8 +736,13 @@ def test_a_stream_with_orientations_matches_a_live_session_given_them(conn, grap
     session = open_session(graph, options, rec.sensor_names, orientations=True)
     expected = []
     for k in range(rec.num_samples):
-        expected += session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k], rec.heading[k],
-                                 orientations=rec.orientations[k])  # fmt: skip
+        expected += session.push(
+            rec.timestamps_s[k],
+            rec.accelerations[k],
+            rec.ground_position[k],
+            rec.heading[k],
+            orientations=rec.orientations[k],
+        )
     expected += session.flush()
     plain, _ = live_frames(graph, recording, options)
     assert [f.node for f in expected] != [f.node for f in plain]  # (they count)
@@ -676,12 +753,21 @@ def test_a_stream_with_orientations_matches_a_live_session_given_them(conn, grap
     assert_frames_equal(expected, C.run_stream(conn, feed).frames)
     # samples with orientations the config did not announce, or too few of them, are refused
     samples = list(C.recording_samples(rec))[:3]
-    for config, mention in ((C.stream_config("small"), "config.orientations is not set"),
-                            (C.stream_config("small", None, (), (), True), None)):
+    for config, mention in (
+        (C.stream_config("small"), "config.orientations is not set"),
+        (C.stream_config("small", None, (), (), True), None),
+    ):
         if mention is None:
-            samples = [pb.SensorSample(time_s=s.time_s, accelerations_m_s2=s.accelerations_m_s2,
-                                       orientations_wxyz=list(s.orientations_wxyz)[:-1]) for s in samples]
+            samples = [
+                pb.SensorSample(
+                    time_s=s.time_s,
+                    accelerations_m_s2=s.accelerations_m_s2,
+                    orientations_wxyz=list(s.orientations_wxyz)[:-1],
+                )
+                for s in samples
+            ]
             mention = "sample[0].orientations_wxyz"
-        got, details = _code(lambda: list(conn.stub.StreamSynthesize(iter(list(_requests(config, samples))),
-                                                                          timeout=10)))  # fmt: skip
+        got, details = _code(
+            lambda: list(conn.stub.StreamSynthesize(iter(list(_requests(config, samples))), timeout=10))
+        )
         assert got == grpc.StatusCode.INVALID_ARGUMENT and mention in details, details

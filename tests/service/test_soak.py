@@ -11,10 +11,33 @@ from tests.service.conftest import ROOT, _env
 
 
 def test_a_short_soak_leaks_no_slot_or_thread(graph_file):
-    run = subprocess.run([sys.executable, str(ROOT / "tools" / "soak_service.py"), str(graph_file), "--seconds", "5",
-                          "--streams", "8", "--max-streams", "4", "--processes", "1", "--config-timeout-s", "0.5",
-                          "--sample-every", "0.5", "--seed", "3"],
-                         cwd=ROOT, capture_output=True, text=True, timeout=300, env=_env(), check=False)  # fmt: skip
+    run = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "tools" / "soak_service.py"),
+            str(graph_file),
+            "--seconds",
+            "5",
+            "--streams",
+            "8",
+            "--max-streams",
+            "4",
+            "--processes",
+            "1",
+            "--config-timeout-s",
+            "0.5",
+            "--sample-every",
+            "0.5",
+            "--seed",
+            "3",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=_env(),
+        check=False,
+    )
     assert run.stdout.strip(), run.stderr[-2000:]
     result = json.loads(run.stdout)
     assert result["checks"]["no_slot_leaked"] and result["slots_probe"] == {"started": 4, "of": 4}

@@ -32,12 +32,16 @@ def _ssg(**kw):
 # ---------------------------------------------------------------- batch
 
 
-@pytest.mark.parametrize("options", [
-    _ssg(markers="hands-feet"),  # "auto" offsets: nominal for a simulated recording, as the library picks
-    # The recording's own marker set (sent as JSON), every option set, the offsets fitted.
-    _ssg(keep=("l_hand", "r_hand", "l_foot"), window_s=0.3, overlap_s=0.1, k=6, weight=2.0, offsets="fit"),
-    _ssg(markers="hands-feet", latency_s=0.5),
-], ids=["preset", "meta-set-fit", "latency"])  # fmt: skip
+@pytest.mark.parametrize(
+    "options",
+    [
+        _ssg(markers="hands-feet"),  # "auto" offsets: nominal for a simulated recording, as the library picks
+        # The recording's own marker set (sent as JSON), every option set, the offsets fitted.
+        _ssg(keep=("l_hand", "r_hand", "l_foot"), window_s=0.3, overlap_s=0.1, k=6, weight=2.0, offsets="fit"),
+        _ssg(markers="hands-feet", latency_s=0.5),
+    ],
+    ids=["preset", "meta-set-fit", "latency"],
+)
 def test_synthesize_matches_the_library(conn, graph, marker_recording, options):
     from graphsvc.pipeline import reconstruct
 
@@ -70,8 +74,9 @@ def test_synthesize_matches_the_library(conn, graph, marker_recording, options):
 def test_ssg_options_cross_the_wire(tmp_path):
     from graphsvc.sensors.markers import PRESETS
 
-    options = _ssg(markers="head-back", keep=("C7", "T10"), window_s=0.4, overlap_s=0.2, k=12, weight=0.5,
-                   offsets="nominal")  # fmt: skip
+    options = _ssg(
+        markers="head-back", keep=("C7", "T10"), window_s=0.4, overlap_s=0.2, k=12, weight=0.5, offsets="nominal"
+    )
     assert convert.options_from_proto(convert.options_to_proto(options)).ssg == options.ssg
     # A marker set file is read on the client's side and sent as its content.
     path = tmp_path / "mine.json"
@@ -80,8 +85,12 @@ def test_ssg_options_cross_the_wire(tmp_path):
     assert json.loads(msg.ssg.markers)["name"] == "mine"
     assert convert.options_from_proto(msg).ssg.markers == msg.ssg.markers
     # Unset fields stay unset: the strategy picks its defaults by the markers used.
-    assert convert.options_from_proto(pb.SynthesisOptions(strategy=pb.STRATEGY_SSG, ssg=pb.SsgOptions(
-        markers="vicon"))).ssg == _ssg(markers="vicon").ssg  # fmt: skip
+    assert (
+        convert.options_from_proto(
+            pb.SynthesisOptions(strategy=pb.STRATEGY_SSG, ssg=pb.SsgOptions(markers="vicon"))
+        ).ssg
+        == _ssg(markers="vicon").ssg
+    )
 
 
 # ---------------------------------------------------------------- live
@@ -100,8 +109,9 @@ def test_stream_matches_live_session_and_batch(conn, graph, marker_recording):
 
     samples = list(C.recording_samples(rec))
     assert not samples[0].accelerations_m_s2 and len(samples[0].marker_positions_m) == 3 * len(rec.marker_names)
-    feed = C.SampleFeed(C.stream_config("small", convert.options_to_proto(options, recording=rec),
-                                        marker_names=rec.marker_names))  # fmt: skip
+    feed = C.SampleFeed(
+        C.stream_config("small", convert.options_to_proto(options, recording=rec), marker_names=rec.marker_names)
+    )
     for s in samples:
         feed.put(s)
     feed.close()
@@ -110,8 +120,9 @@ def test_stream_matches_live_session_and_batch(conn, graph, marker_recording):
     assert_frames_equal(expected, result.frames)
     assert all(f.node == -1 for f in result.frames)
     for a, b in zip(expected, result.frames):
-        assert [(s.clip, s.frame, s.weight) for s in b.sources] == [(c, pytest.approx(f), pytest.approx(w))
-                                                                   for c, f, w in a.sources]  # fmt: skip
+        assert [(s.clip, s.frame, s.weight) for s in b.sources] == [
+            (c, pytest.approx(f), pytest.approx(w)) for c, f, w in a.sources
+        ]
     assert result.finished.samples_received == rec.num_samples == result.finished.frames_emitted
     # The same lag in batch predicts the stream (to float32 precision).
     batch = reconstruct(graph, rec, options).motion
@@ -141,8 +152,9 @@ def test_sensors_an_ssg_input_also_carries_need_not_match_the_graph(conn, graph,
     got = C.synthesize(conn, "small", rec, convert.options_to_proto(options, recording=rec))
     np.testing.assert_array_equal(got.motion.rotations, expected.motion.rotations.astype(np.float32))
     assert got.report["ignored_inputs"] == ["accelerations"]
-    result = C.stream_recording(conn, "small", rec, convert.options_to_proto(options, recording=rec), speed=100.0,
-                                timeout_s=60)  # fmt: skip
+    result = C.stream_recording(
+        conn, "small", rec, convert.options_to_proto(options, recording=rec), speed=100.0, timeout_s=60
+    )
     assert list(result.started.sensor_names) == ["imu_a", "imu_b"] and len(result.frames) == T
     np.testing.assert_allclose(result.motion().rotations, expected.motion.rotations, atol=1e-6)
 
@@ -168,13 +180,22 @@ def _synthesize_cases(rec):
         "k": ({}, ssg(markers="hands-feet", k=0), "options.ssg.k"),
         "weight": ({}, ssg(markers="hands-feet", weight=float("nan")), "options.ssg.weight"),
         "offsets": ({}, ssg(markers="hands-feet", offsets="sideways"), "options.ssg.offsets"),
-        "every marker missing": ({"marker_positions_m": all_nan}, ssg(markers="hands-feet"),
-                                 "missing for the whole input"),
-        "kept markers missing": ({"marker_positions_m": _blank(rec, ("l_hand",))},
-                                 ssg(markers="hands-feet", keep=["l_hand"]), "missing for the whole input"),
+        "every marker missing": (
+            {"marker_positions_m": all_nan},
+            ssg(markers="hands-feet"),
+            "missing for the whole input",
+        ),
+        "kept markers missing": (
+            {"marker_positions_m": _blank(rec, ("l_hand",))},
+            ssg(markers="hands-feet", keep=["l_hand"]),
+            "missing for the whole input",
+        ),
         "none of the set's": ({}, ssg(markers="head-back"), "none of the markers"),
-        "marker count": ({"marker_positions_m": markers[:-3]}, ssg(markers="hands-feet"),
-                         "recording.marker_positions_m"),
+        "marker count": (
+            {"marker_positions_m": markers[:-3]},
+            ssg(markers="hands-feet"),
+            "recording.marker_positions_m",
+        ),
         "inf marker": ({"marker_positions_m": inf}, ssg(markers="hands-feet"), "recording.marker_positions_m[7]"),
         "no markers": ({"marker_names": [], "marker_positions_m": []}, ssg(markers="hands-feet"), "needs markers"),
     }
@@ -189,8 +210,9 @@ def _blank(rec, names) -> list:
 
 def test_bad_ssg_synthesize_requests_are_invalid_argument(conn, marker_recording):
     for name, (changes, options, mention) in _synthesize_cases(marker_recording).items():
-        request = pb.SynthesizeRequest(graph="small", recording=convert.recording_to_proto(marker_recording),
-                                       options=options)  # fmt: skip
+        request = pb.SynthesizeRequest(
+            graph="small", recording=convert.recording_to_proto(marker_recording), options=options
+        )
         for key, value in changes.items():
             del getattr(request.recording, key)[:]
             getattr(request.recording, key).extend(value)
@@ -208,23 +230,35 @@ def test_bad_ssg_stream_requests_are_invalid_argument(conn, server, marker_recor
     short = [pb.SensorSample(time_s=0.0, marker_positions_m=[0.0] * 11)]
     inf = [pb.SensorSample(time_s=0.0, marker_positions_m=[0.0] * 5 + [float("inf")] + [0.0] * 6)]
     blind = [pb.SensorSample(time_s=s.time_s, marker_positions_m=[float("nan")] * 12) for s in samples[:40]]
+
     def ssg(**kw):
-        return C.stream_config("small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG, ssg=pb.SsgOptions(**kw)),
-                               marker_names=names)
+        return C.stream_config(
+            "small", pb.SynthesisOptions(strategy=pb.STRATEGY_SSG, ssg=pb.SsgOptions(**kw)), marker_names=names
+        )
+
     cases = {  # name: (config, samples, what the message names)
         "marker count": (config, short, "sample[0].marker_positions_m"),
         "inf marker": (config, inf, "sample[0].marker_positions_m[5]"),
         "every marker missing": (config, blind, "sample[*].marker_positions_m"),
         "unknown set": (ssg(markers="no-such-set"), samples[:3], "config.options.ssg.markers"),
         "keep unknown": (ssg(markers="hands-feet", keep=["LFHD"]), samples[:3], "config.options.ssg.keep"),
-        "overlap": (ssg(markers="hands-feet", window_s=0.2, overlap_s=0.15), samples[:3],
-                    "config.options.ssg.overlap_s"),
+        "overlap": (
+            ssg(markers="hands-feet", window_s=0.2, overlap_s=0.15),
+            samples[:3],
+            "config.options.ssg.overlap_s",
+        ),
         "offsets fit": (ssg(markers="hands-feet", offsets="fit"), samples[:3], "config.options"),
         "no marker names": (C.stream_config("small", options), samples[:3], "config.marker_names"),
-        "duplicate names": (C.stream_config("small", options, marker_names=["l_hand"] * 4), samples[:3],
-                            "config.marker_names"),
-        "acc for a strategy that needs them": (C.stream_config("small", marker_names=names), samples[:3],
-                                               "sample[0].accelerations_m_s2"),
+        "duplicate names": (
+            C.stream_config("small", options, marker_names=["l_hand"] * 4),
+            samples[:3],
+            "config.marker_names",
+        ),
+        "acc for a strategy that needs them": (
+            C.stream_config("small", marker_names=names),
+            samples[:3],
+            "sample[0].accelerations_m_s2",
+        ),
     }
     for name, (cfg, items, mention) in cases.items():
         got, details = _code(lambda: list(conn.stub.StreamSynthesize(_stream_requests(cfg, items), timeout=30)))
@@ -247,6 +281,9 @@ def test_an_unbuilt_strategy_still_answers_unimplemented(conn, recording, monkey
     got, details = _code(conn.stub.Synthesize, request, timeout=30)
     assert got == grpc.StatusCode.UNIMPLEMENTED and "nearest" in details, details
     samples = list(C.recording_samples(recording))[:3]
-    got, details = _code(lambda: list(conn.stub.StreamSynthesize(_stream_requests(C.stream_config("small", options),
-                                                                                  samples), timeout=30)))  # fmt: skip
+    got, details = _code(
+        lambda: list(
+            conn.stub.StreamSynthesize(_stream_requests(C.stream_config("small", options), samples), timeout=30)
+        )
+    )
     assert got == grpc.StatusCode.UNIMPLEMENTED and "nearest" in details, details

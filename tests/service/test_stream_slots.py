@@ -166,8 +166,9 @@ def test_a_stream_whose_client_goes_away_frees_its_session_at_once(server, recor
                     threading.Timer(0.3, call.cancel).start()
                 with pytest.raises(grpc.RpcError) as info:
                     list(call)
-                assert info.value.code() == (grpc.StatusCode.CANCELLED if ending == "cancel"
-                                             else grpc.StatusCode.DEADLINE_EXCEEDED)  # fmt: skip
+                assert info.value.code() == (
+                    grpc.StatusCode.CANCELLED if ending == "cancel" else grpc.StatusCode.DEADLINE_EXCEEDED
+                )
             _wait_for(lambda: server.servicer.slots.active == 0)
             assert len(opened) == 3
             _wait_for(lambda: all(ref() is None for ref in opened))
@@ -186,8 +187,9 @@ def test_the_server_stops_after_a_request_that_does_not_parse(loaded_graphs):
     gc.disable()
     try:
         with C.connect(f"127.0.0.1:{running.port}") as conn:
-            raw = conn.channel.stream_stream("/graphsvc.v1.MotionGraphService/StreamSynthesize",
-                                             request_serializer=None, response_deserializer=None)  # fmt: skip
+            raw = conn.channel.stream_stream(
+                "/graphsvc.v1.MotionGraphService/StreamSynthesize", request_serializer=None, response_deserializer=None
+            )
             with pytest.raises(grpc.RpcError) as info:
                 list(raw(iter([b"\xff\x01 not a request"]), timeout=10))
             assert info.value.code() == grpc.StatusCode.INTERNAL

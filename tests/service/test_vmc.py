@@ -14,11 +14,27 @@ from tests.service.conftest import wait_for
 
 # Unity's humanoid bone of each of the procedural skeleton's joints, and its parent bone
 # (the procedural skeleton's own parent joint: it has no joint between two bones).
-BONES = {"pelvis": "Hips", "spine": "Spine", "chest": "Chest", "neck": "Neck", "head": "Head",
-         "l_shoulder": "LeftUpperArm", "l_elbow": "LeftLowerArm", "l_wrist": "LeftHand",
-         "r_shoulder": "RightUpperArm", "r_elbow": "RightLowerArm", "r_wrist": "RightHand",
-         "l_hip": "LeftUpperLeg", "l_knee": "LeftLowerLeg", "l_ankle": "LeftFoot", "l_toe": "LeftToes",
-         "r_hip": "RightUpperLeg", "r_knee": "RightLowerLeg", "r_ankle": "RightFoot", "r_toe": "RightToes"}  # fmt: skip
+BONES = {
+    "pelvis": "Hips",
+    "spine": "Spine",
+    "chest": "Chest",
+    "neck": "Neck",
+    "head": "Head",
+    "l_shoulder": "LeftUpperArm",
+    "l_elbow": "LeftLowerArm",
+    "l_wrist": "LeftHand",
+    "r_shoulder": "RightUpperArm",
+    "r_elbow": "RightLowerArm",
+    "r_wrist": "RightHand",
+    "l_hip": "LeftUpperLeg",
+    "l_knee": "LeftLowerLeg",
+    "l_ankle": "LeftFoot",
+    "l_toe": "LeftToes",
+    "r_hip": "RightUpperLeg",
+    "r_knee": "RightLowerLeg",
+    "r_ankle": "RightFoot",
+    "r_toe": "RightToes",
+}
 
 
 def _rebuild(received: dict, skeleton) -> dict[str, np.ndarray]:
@@ -76,8 +92,11 @@ def test_client_stream_sends_vmc_and_refuses_a_bad_address(server, rec_file, vmc
     frames = int(out.split(" frames from", 1)[0])
     assert f"vmc: {frames} frames sent to {vmc}" in out
     wait_for(lambda: len(vmc_receiver.frames) == frames, timeout_s=10)
-    for bad, said in [("127.0.0.1", "expected HOST:PORT"), ("127.0.0.1:0", "port 1–65535"),
-                      ("no-such-host.invalid:39539", "cannot resolve no-such-host.invalid")]:  # fmt: skip
+    for bad, said in [
+        ("127.0.0.1", "expected HOST:PORT"),
+        ("127.0.0.1:0", "port 1–65535"),
+        ("no-such-host.invalid:39539", "cannot resolve no-such-host.invalid"),
+    ]:
         assert main([*common, "--vmc", bad]) == 2
         printed = capsys.readouterr()
         assert printed.out == "" and len(printed.err.splitlines()) == 1, printed.err
@@ -102,9 +121,15 @@ def test_a_rest_that_is_no_t_pose_is_sent_as_one():
     hanging = Skeleton(sk.names, sk.parents, offsets, sk.channels, sk.end_site)
     rig = vmc_rig(hanging)
     sent = dict(zip(rig.names, rig.offsets))
-    for bone, expected in {"LeftLowerArm": (0.29, 0, 0), "LeftHand": (0.26, 0, 0), "RightLowerArm": (-0.29, 0, 0),
-                           "LeftUpperArm": (0.17, 0.19, 0), "LeftUpperLeg": (0.09, -0.07, 0), "Spine": (0, 0.1, 0),
-                           "LeftToes": (0, -0.06, 0.13)}.items():  # fmt: skip
+    for bone, expected in {
+        "LeftLowerArm": (0.29, 0, 0),
+        "LeftHand": (0.26, 0, 0),
+        "RightLowerArm": (-0.29, 0, 0),
+        "LeftUpperArm": (0.17, 0.19, 0),
+        "LeftUpperLeg": (0.09, -0.07, 0),
+        "Spine": (0, 0.1, 0),
+        "LeftToes": (0, -0.06, 0.13),
+    }.items():
         np.testing.assert_allclose(sent[bone], expected, atol=1e-9, err_msg=bone)
     rng = np.random.default_rng(3)
     rotations = quat.normalize(rng.normal(size=(hanging.num_joints, 4)))

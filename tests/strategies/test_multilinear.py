@@ -35,8 +35,12 @@ def _clips(seed=3, seconds=3.0):
     """Walks and punches in two styles, three takes each, and one take of standing."""
     rng = np.random.default_rng(seed)
     sk = standard_skeleton()
-    clips = [make_clip(kind, rng, sk, 30.0, seconds, f"{kind}_{style}_{take:03d}", seed)
-             for kind in ("walk", "punch") for style in ("a", "b") for take in (1, 2, 3)]  # fmt: skip
+    clips = [
+        make_clip(kind, rng, sk, 30.0, seconds, f"{kind}_{style}_{take:03d}", seed)
+        for kind in ("walk", "punch")
+        for style in ("a", "b")
+        for take in (1, 2, 3)
+    ]
     return clips + [make_clip("idle", rng, sk, 30.0, 3.0, "idle_a_001", seed)]
 
 
@@ -64,13 +68,19 @@ def test_hosvd_keeps_the_stated_variance_and_gives_back_its_rows():
         centred = X - X.mean(axis=(2, 3), keepdims=True)
         for mode, k in ((2, 0), (3, 1)):
             s = np.linalg.svd(_unfold(centred, mode), compute_uv=False)
-            energy = np.cumsum(s ** 2) / np.sum(s ** 2)
+            energy = np.cumsum(s**2) / np.sum(s**2)
             kept = int(t["kept"][k])
             assert energy[kept - 1] >= share - 1e-12 and (kept == 1 or energy[kept - 2] < share), (share, mode)
             np.testing.assert_allclose(t["sv_style" if mode == 2 else "sv_rep"], s, rtol=0, atol=1e-9 * s[0])
     # every row back from its own rows of the untruncated matrices, up to float error
-    full = tensor_of({**decompose(X, 1.0), "row_clip": np.zeros(24), "row_frame": np.zeros((24, 5)),
-                      "row_readings": np.zeros((24, 5, 3))})  # fmt: skip
+    full = tensor_of(
+        {
+            **decompose(X, 1.0),
+            "row_clip": np.zeros(24),
+            "row_frame": np.zeros((24, 5)),
+            "row_readings": np.zeros((24, 5, 3)),
+        }
+    )
     core = tn.natural_core(X - full.mean[:, :, None, None], full.u_style, full.u_rep)
     for s in range(4):
         for r in range(6):
@@ -94,8 +104,14 @@ def test_the_fit_gives_back_the_mixing_coefficients_of_a_new_mix(graph):
     X = np.moveaxis(X, (0, 1), (2, 3))
     body = graph_body(graph)
     readings = np.stack([simulate_unit(X[:, :, s, r].T, body).reshape(F, -1) for s in range(2) for r in range(3)])
-    t = tensor_of({**decompose(X, 1.0), "row_clip": np.zeros(6, np.int64), "row_frame": np.zeros((6, F)),
-                   "row_readings": readings})  # fmt: skip
+    t = tensor_of(
+        {
+            **decompose(X, 1.0),
+            "row_clip": np.zeros(6, np.int64),
+            "row_frame": np.zeros((6, F)),
+            "row_readings": readings,
+        }
+    )
     target = 0.3 * A + 0.7 * B
     measured = simulate_unit(target, body)
     fit = fit_unit(t, measured, np.ones(F, bool), body, prior=0.0, warp=False, evaluations=200)
@@ -129,8 +145,9 @@ def test_a_held_out_take_is_reconstructed(graph, kb):
     e = truth_errors(r.motion, truth)
     assert e["joint_err_cm"] < 3.0 and r.motion.num_frames == rec.num_samples
     assert r.provenance.weight.sum(axis=1) == pytest.approx(1.0)
-    held = reconstruct(graph, rec, Options(strategy="multilinear", settings={"multilinear": MultilinearOptions(
-        hold_feet=True)}))  # fmt: skip
+    held = reconstruct(
+        graph, rec, Options(strategy="multilinear", settings={"multilinear": MultilinearOptions(hold_feet=True)})
+    )
     assert np.abs(held.motion.rotations - r.motion.rotations).max() > 1e-6  # (the legs turned to hold the feet)
     np.testing.assert_array_equal(held.motion.translations, r.motion.translations)
 
@@ -147,7 +164,8 @@ def test_its_report_becomes_a_page(graph, kb, tmp_path):
     (view,) = load_document(tmp_path / "o.json")["clips"]
     segments = view["timeline"]["segments"]
     assert sum(s["frames"] for s in segments) == view["frames"] and {s["clip"] for s in segments} <= {
-        c["name"] for c in graph.clips}
+        c["name"] for c in graph.clips
+    }
     write_html(tmp_path / "page.html", load_document(tmp_path / "o.json"))
     assert (tmp_path / "page.html").read_text().startswith("<!DOCTYPE html>")
 
@@ -158,10 +176,12 @@ def test_bad_input_gives_one_line_and_exit_2(graph, kb, tmp_path, capsys):
     rec = simulate_recording(kb[1], LAYOUT, NOISE["none"], seed=0, rate_hz=graph.rate_hz)
     save_recording(rec, r)
     save_recording(simulate_recording(kb[1].slice(0, 8), LAYOUT, NOISE["none"], seed=0, rate_hz=graph.rate_hz), short)
-    for args, message in (([str(r), "--multilinear-label", "idle"], "fewer than two takes"),
-                          ([str(r), "--multilinear-label", "swim"], "not a class"),
-                          ([str(short)], "shorter than one motion unit"),
-                          ([str(r), "--multilinear-variance", "0"], "variance")):  # fmt: skip
+    for args, message in (
+        ([str(r), "--multilinear-label", "idle"], "fewer than two takes"),
+        ([str(r), "--multilinear-label", "swim"], "not a class"),
+        ([str(short)], "shorter than one motion unit"),
+        ([str(r), "--multilinear-variance", "0"], "variance"),
+    ):
         capsys.readouterr()
         try:
             code = main(["synthesize", str(g), *args, "--strategy", "multilinear", "-o", str(tmp_path / "o.bvh")])

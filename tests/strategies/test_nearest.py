@@ -119,15 +119,47 @@ def test_cli_synthesize_and_evaluate_with_nearest(kb, tmp_path, capsys):
     save_recording(simulate_recording(clip, PRESETS["kelly6"], NOISE["default"], seed=1), rec)
     capsys.readouterr()
     out, report = tmp_path / "out.bvh", tmp_path / "r.json"
-    assert main(["synthesize", str(graph), str(rec), "-o", str(out), "--strategy", "nearest", "--beam", "3",
-                 "--report", str(report)]) == 0
+    assert (
+        main(
+            [
+                "synthesize",
+                str(graph),
+                str(rec),
+                "-o",
+                str(out),
+                "--strategy",
+                "nearest",
+                "--beam",
+                "3",
+                "--report",
+                str(report),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "ignored: beam" in printed and out.is_file()
     r = json.loads(report.read_text())
     assert r["strategy"] == "nearest" and r["ignored_options"] == ["beam"]
     assert r["files"] == {"output": str(out.resolve()), "graph": str(graph.resolve()), "recording": str(rec.resolve())}
-    assert main(["evaluate", str(kb_dir), "--test", "walk_*.bvh", "--graph", str(graph), "--strategy", "nearest",
-                 "--json", str(tmp_path / "e.json"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(kb_dir),
+                "--test",
+                "walk_*.bvh",
+                "--graph",
+                str(graph),
+                "--strategy",
+                "nearest",
+                "--json",
+                str(tmp_path / "e.json"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     e = json.loads((tmp_path / "e.json").read_text())
     assert e["config"]["options"]["strategy"] == "nearest" and e["mean"]["joint_err_cm"] < 15.0
 

@@ -59,14 +59,29 @@ def test_gradient_matches_finite_differences(graph):
     offsets = np.asarray(graph.skeleton.offsets)[model.active]
     x_t = pose_positions(Q[0], offsets, model)
     S = model.sensor_a.size
-    terms = EnergyTerms(Q, w, offsets, X + rng.normal(0, 0.02, X.shape), rng.normal(0, 3.0, X.shape),
-                        rng.normal(0, 0.3, (9, S, 3)), x_t, x_t + 0.01, np.array([3.0, 1.0, 0.5, 1.0]), 30.0)
+    terms = EnergyTerms(
+        Q,
+        w,
+        offsets,
+        X + rng.normal(0, 0.02, X.shape),
+        rng.normal(0, 3.0, X.shape),
+        rng.normal(0, 0.3, (9, S, 3)),
+        x_t,
+        x_t + 0.01,
+        np.array([3.0, 1.0, 0.5, 1.0]),
+        30.0,
+    )
     for _ in range(3):
         z = rng.normal(0, 0.3, basis.shape[1])
         e, g = energy(z, mean, basis, terms, model)
         h = 1e-6
-        fd = np.array([(energy(z + h * u, mean, basis, terms, model)[0] - energy(z - h * u, mean, basis, terms, model)[0])
-                       / (2 * h) for u in np.eye(z.size)])  # fmt: skip
+        fd = np.array(
+            [
+                (energy(z + h * u, mean, basis, terms, model)[0] - energy(z - h * u, mean, basis, terms, model)[0])
+                / (2 * h)
+                for u in np.eye(z.size)
+            ]
+        )
         np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-7)
         assert np.isfinite(e) and e > 0
 
@@ -132,7 +147,10 @@ def test_live_equals_batch_frame_for_frame(graph, kb, fix_feet):
     np.testing.assert_array_equal(whole.motion.translations[:, 0, 1], batch.motion.translations[:, 0, 1])
     shift = whole.motion.translations[:, 0, [0, 2]] - batch.motion.translations[:, 0, [0, 2]]
     assert np.abs(shift).max() > 1e-3
-    jerk = [np.linalg.norm(np.diff(m.translations[:, 0, [0, 2]], n=3, axis=0), axis=1).mean() for m in (whole.motion, batch.motion)]
+    jerk = [
+        np.linalg.norm(np.diff(m.translations[:, 0, [0, 2]], n=3, axis=0), axis=1).mean()
+        for m in (whole.motion, batch.motion)
+    ]
     assert jerk[0] < jerk[1], jerk
     # With the poses' filter too (the default): every joint steadier.
     filtered = reconstruct(graph, rec, options).motion
@@ -168,13 +186,16 @@ def test_report_and_a_missing_sensor(graph, kb):
     assert np.all(np.isfinite(r.motion.rotations))
 
 
-@pytest.mark.parametrize("olng, message", [
-    (OlngOptions(k=100_000), "exceeds"),
-    (OlngOptions(k=8, i=9), "I must be between 1 and K"),
-    (OlngOptions(m=1), "M must be ≥ 2"),
-    (OlngOptions(w_pose=float("nan")), "weight pose"),
-    (OlngOptions(w_prior=0, w_contr=0), "all zero"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "olng, message",
+    [
+        (OlngOptions(k=100_000), "exceeds"),
+        (OlngOptions(k=8, i=9), "I must be between 1 and K"),
+        (OlngOptions(m=1), "M must be ≥ 2"),
+        (OlngOptions(w_pose=float("nan")), "weight pose"),
+        (OlngOptions(w_prior=0, w_contr=0), "all zero"),
+    ],
+)
 def test_bad_options_are_refused(graph, kb, olng, message):
     with pytest.raises(InputError, match=message):
         reconstruct(graph, _rec(graph, kb[0].slice(0, 20)), Options(strategy="olng", olng=olng))
@@ -185,11 +206,33 @@ def test_cli_options_and_bad_ones(graph, kb, tmp_path, capsys):
     save_graph(graph, g)
     save_recording(_rec(graph, kb[0].slice(0, 30)), r)
     out = tmp_path / "o.bvh"
-    assert main(["synthesize", str(g), str(r), "--strategy", "olng", "--olng-k", "32", "--olng-i", "8",
-                 "--olng-basic-steps", "-o", str(out), "--report", str(tmp_path / "rep.json")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(g),
+                str(r),
+                "--strategy",
+                "olng",
+                "--olng-k",
+                "32",
+                "--olng-i",
+                "8",
+                "--olng-basic-steps",
+                "-o",
+                str(out),
+                "--report",
+                str(tmp_path / "rep.json"),
+            ]
+        )
+        == 0
+    )
     assert out.is_file()
-    for bad, message in ((["--olng-m", "1"], "M must be ≥ 2"), (["--olng-weights", "5,1,1"], "five numbers"),
-                         (["--olng-k", "4", "--olng-i", "5"], "I must be between")):  # fmt: skip
+    for bad, message in (
+        (["--olng-m", "1"], "M must be ≥ 2"),
+        (["--olng-weights", "5,1,1"], "five numbers"),
+        (["--olng-k", "4", "--olng-i", "5"], "I must be between"),
+    ):
         capsys.readouterr()
         try:
             code = main(["synthesize", str(g), str(r), "--strategy", "olng", *bad, "-o", str(out)])

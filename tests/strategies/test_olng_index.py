@@ -50,7 +50,7 @@ def test_query_is_the_nearest_by_brute_force_and_drops_hidden_frames(graph):
     # dropped: the hidden frames nearer than the last one kept
     by_distance = np.argsort(d, kind="stable")
     last = list(by_distance).index(expect[-1])
-    assert h.dropped == int(np.sum(~ok[by_distance[:last + 1]])) > 0
+    assert h.dropped == int(np.sum(~ok[by_distance[: last + 1]])) > 0
 
 
 def test_bad_queries_are_refused(graph):

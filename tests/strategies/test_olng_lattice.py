@@ -50,8 +50,7 @@ def test_costs_equal_every_paths_minimum_while_the_window_holds_every_column(see
     lattice = Lattice(clip_of, LatticeOptions(k=K, m=T + 2, i=3, extended=extended))
     for t, (frames, dist) in enumerate(columns):
         lattice.push(frames, dist)
-        np.testing.assert_allclose(lattice.column()["cost"], _brute_force(columns[:t + 1], clip_of, steps),
-                                   rtol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(lattice.column()["cost"], _brute_force(columns[: t + 1], clip_of, steps), rtol=1e-12)
 
 
 def test_a_hand_made_window_slides_and_skips():
@@ -107,8 +106,12 @@ def test_path_weights():
 
 
 def test_bad_options_and_columns_are_refused():
-    for options, match in ((LatticeOptions(k=0), "K"), (LatticeOptions(m=1), "M"),
-                           (LatticeOptions(k=4, i=5), "I"), (LatticeOptions(k=2.5), "whole")):  # fmt: skip
+    for options, match in (
+        (LatticeOptions(k=0), "K"),
+        (LatticeOptions(m=1), "M"),
+        (LatticeOptions(k=4, i=5), "I"),
+        (LatticeOptions(k=2.5), "whole"),
+    ):
         with pytest.raises(InputError, match=match):
             Lattice(np.zeros(10, np.int64), options)
     with pytest.raises(InputError, match="exceeds"):

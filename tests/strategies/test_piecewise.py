@@ -55,7 +55,7 @@ def test_the_model_gives_back_the_poses_it_learned(graph):
     m = Model(arrays, readings[rows])
     poses = np.asarray(data["poses"], np.float64)
     truth = (poses - m.mean) @ m.components.T  # (the PCA's own projection: orthonormal components)
-    picks = rows[:: 37]
+    picks = rows[::37]
     got = np.array([m.rbf(m.cluster(readings[i]), readings[i])[0][: m.d] for i in picks])
     err = np.linalg.norm(got - truth[picks], axis=1)
     assert np.median(err) < 0.02, np.median(err)
@@ -99,8 +99,12 @@ def test_the_optimised_pose_is_the_minimum_of_xies_objective(graph):
     np.testing.assert_allclose(m1.optimise(k, c, None, None), posterior, atol=1e-8)
     # With its mean given, the prior is centred there: the same objective about it.
     centre = mu[:d] + 0.1
-    want = minimize(lambda r: objective(r, False) - (r - mu[:d]) @ prior @ (r - mu[:d])
-                    + (r - centre) @ prior @ (r - centre), centre, method="BFGS", options={"gtol": 1e-10}).x  # fmt: skip
+    want = minimize(
+        lambda r: objective(r, False) - (r - mu[:d]) @ prior @ (r - mu[:d]) + (r - centre) @ prior @ (r - centre),
+        centre,
+        method="BFGS",
+        options={"gtol": 1e-10},
+    ).x
     np.testing.assert_allclose(m.optimise(k, c, None, None, centre), want, atol=1e-5)
 
 
@@ -245,14 +249,17 @@ def test_models_are_cached_beside_the_graph_one_per_hold_out(graph, tmp_path):
     assert not np.asarray(again["centres"]).flags.writeable and b["centres"].shape != a["centres"].shape
 
 
-@pytest.mark.parametrize("own, message", [
-    (PiecewiseOptions(dims=97), "must be below the pose dimension"),
-    (PiecewiseOptions(clusters="100000"), "clusters must be a whole number"),
-    (PiecewiseOptions(clusters="2000"), "exceeds the knowledge base's"),
-    (PiecewiseOptions(clusters="two"), "clusters must be a whole number"),
-    (PiecewiseOptions(width=float("inf")), "width must be a finite width"),
-    (PiecewiseOptions(width=0.0), "width must be"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "own, message",
+    [
+        (PiecewiseOptions(dims=97), "must be below the pose dimension"),
+        (PiecewiseOptions(clusters="100000"), "clusters must be a whole number"),
+        (PiecewiseOptions(clusters="2000"), "exceeds the knowledge base's"),
+        (PiecewiseOptions(clusters="two"), "clusters must be a whole number"),
+        (PiecewiseOptions(width=float("inf")), "width must be a finite width"),
+        (PiecewiseOptions(width=0.0), "width must be"),
+    ],
+)
 def test_bad_options_are_refused(graph, kb, own, message):
     with pytest.raises(InputError, match=message):
         reconstruct(graph, _rec(graph, kb[0].slice(0, 20)), Options(strategy="piecewise", piecewise=own))
@@ -263,14 +270,35 @@ def test_cli_options_and_bad_ones(graph, kb, tmp_path, capsys):
     save_graph(graph, g)
     save_recording(_rec(graph, kb[0].slice(0, 30)), r)
     out = tmp_path / "o.bvh"
-    assert main(["synthesize", str(g), str(r), "--strategy", "piecewise", "--piecewise-method", "optimise",
-                 "--piecewise-dims", "9", "--piecewise-clusters", "3", "--piecewise-width", "1.5",
-                 "-o", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(g),
+                str(r),
+                "--strategy",
+                "piecewise",
+                "--piecewise-method",
+                "optimise",
+                "--piecewise-dims",
+                "9",
+                "--piecewise-clusters",
+                "3",
+                "--piecewise-width",
+                "1.5",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert out.is_file()
-    for bad, message in ((["--piecewise-dims", "97"], "below the pose dimension"),
-                         (["--piecewise-clusters", "2000"], "exceeds the knowledge base's"),
-                         (["--piecewise-width", "nan"], "width"),
-                         (["--piecewise-reduce", "tsne"], "reduce")):  # fmt: skip
+    for bad, message in (
+        (["--piecewise-dims", "97"], "below the pose dimension"),
+        (["--piecewise-clusters", "2000"], "exceeds the knowledge base's"),
+        (["--piecewise-width", "nan"], "width"),
+        (["--piecewise-reduce", "tsne"], "reduce"),
+    ):
         capsys.readouterr()
         try:
             code = main(["synthesize", str(g), str(r), "--strategy", "piecewise", *bad, "-o", str(out)])

@@ -37,7 +37,7 @@ def test_the_start_is_the_line_fitted_to_the_first_second():
     assert start_placement(track, heading, RATE)[1] == pytest.approx(np.pi - 0.1, abs=1e-9)
     # Only the first second is read; gaps are skipped; fewer than three: the first measured.
     late = track.copy()
-    late[start_samples(RATE):] += 50.0
+    late[start_samples(RATE) :] += 50.0
     late[:5] = np.nan
     np.testing.assert_allclose(start_placement(late, None, RATE)[0], [1.0, 2.0], atol=1e-9)
     few = np.full_like(track, np.nan)
@@ -123,12 +123,16 @@ def test_positions_without_heading_start_facing_the_direction_of_travel(graph, k
         assert np.hypot(*(ground - true_ground).T).mean() < 0.15
     # Live: the same start, once the first second has arrived.
     session = open_session(graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.5))
-    frames = [f for k in range(rec.num_samples)
-              for f in session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k])]
+    frames = [
+        f
+        for k in range(rec.num_samples)
+        for f in session.push(rec.timestamps_s[k], rec.accelerations[k], rec.ground_position[k])
+    ]
     frames += session.flush()
     assert len(frames) == rec.num_samples
-    live = Motion(graph.skeleton, np.stack([f.rotations for f in frames]), np.stack([f.translations for f in frames]),
-                  RATE)  # fmt: skip
+    live = Motion(
+        graph.skeleton, np.stack([f.rotations for f in frames]), np.stack([f.translations for f in frames]), RATE
+    )
     ground, heading = _track(live, joint_map(graph.skeleton))
     assert abs((heading[0] - true_heading[0] + math.pi) % (2 * math.pi) - math.pi) < math.radians(20)
     assert np.hypot(*(ground - true_ground).T).mean() < 0.15
@@ -136,8 +140,9 @@ def test_positions_without_heading_start_facing_the_direction_of_travel(graph, k
 
 def test_evaluation_never_turns_a_reconstruction_placed_by_the_track(graph, kb):
     walk, _ = _walk_facing_away(kb)
-    setup = EvalSetup(noise=replace(NOISE["none"], heading="none"), positions=True,
-                      options=Options(weights=Weights(0.5, 1, 1)))  # fmt: skip
+    setup = EvalSetup(
+        noise=replace(NOISE["none"], heading="none"), positions=True, options=Options(weights=Weights(0.5, 1, 1))
+    )
     row = evaluate_clip(graph, walk, None, setup)
     assert row["start_placed"] == []
     assert row["root_err_cm"] < 15 and row["heading_err_deg"] < 15

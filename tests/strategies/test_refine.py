@@ -57,8 +57,10 @@ def test_a_noise_free_clip_in_the_graph_comes_back_within_half_a_centimetre(buil
     opts = Options(weights=Weights(0.5, 1, 1), smooth_s=0.0)
     plain = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1), smooth_s=0.0, refine=False)).motion
     refined = reconstruct(graph, rec, opts).motion
-    assert _joints_cm(refined.rotations, refined.translations, plain.rotations, plain.translations,
-                      graph.skeleton.parents) < 0.5  # fmt: skip
+    assert (
+        _joints_cm(refined.rotations, refined.translations, plain.rotations, plain.translations, graph.skeleton.parents)
+        < 0.5
+    )
 
 
 def test_a_missing_reading_leaves_the_frames_whose_window_holds_it_unrefined(built):

@@ -92,9 +92,10 @@ def test_a_measured_orientation_is_reproduced_within_a_degree_by_the_refinement(
     placement = clip_placement(graph, layout, 3)
     from graphsvc.motion.kinematics import forward_kinematics
 
-    got = relative_orientations(sensor_poses(*forward_kinematics(out.rotations, out.translations,
-                                                                 graph.skeleton.parents), placement)[1],
-                                root_sensor(layout))  # fmt: skip
+    got = relative_orientations(
+        sensor_poses(*forward_kinematics(out.rotations, out.translations, graph.skeleton.parents), placement)[1],
+        root_sensor(layout),
+    )
     measured = relative_orientations(q, root_sensor(layout))
     trunk = [layout.sensor_names.index(n) for n in ("lower_back", "chest")]
     err = _angle_deg(cue_rotations(got[:, trunk]), cue_rotations(measured[:, trunk]))
@@ -105,9 +106,12 @@ def test_a_measured_orientation_is_reproduced_within_a_degree_by_the_refinement(
     err = np.degrees(np.arccos(np.clip(np.sum(got_x * want_x, axis=-1), -1.0, 1.0)))
     assert np.percentile(err, 95) < 1.0, np.percentile(err, [50, 95, 100])
     # and the arms moved: without the orientations the forearms stay about 25° off
-    plain = reconstruct(graph, replace(rec, orientations=None), Options(weights=Weights(0.5, 1, 1), smooth_s=0.0)).motion
-    off = relative_orientations(sensor_poses(*forward_kinematics(plain.rotations, plain.translations,
-                                                                 graph.skeleton.parents), placement)[1],
-                                root_sensor(layout))  # fmt: skip
+    plain = reconstruct(
+        graph, replace(rec, orientations=None), Options(weights=Weights(0.5, 1, 1), smooth_s=0.0)
+    ).motion
+    off = relative_orientations(
+        sensor_poses(*forward_kinematics(plain.rotations, plain.translations, graph.skeleton.parents), placement)[1],
+        root_sensor(layout),
+    )
     off_x = quat.rotate(cue_rotations(off[:, arms]), x)
     assert np.median(np.degrees(np.arccos(np.clip(np.sum(off_x * want_x, axis=-1), -1.0, 1.0)))) > 10.0

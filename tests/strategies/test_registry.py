@@ -20,7 +20,9 @@ from graphsvc.strategies.viterbi import ViterbiSession
 
 @pytest.fixture(scope="module")
 def graph():
-    g, _ = build_graph(generate_knowledge_base(seed=2, minutes=0.5), BuildOptions(layout=PRESETS["kelly6"], progress=False))
+    g, _ = build_graph(
+        generate_knowledge_base(seed=2, minutes=0.5), BuildOptions(layout=PRESETS["kelly6"], progress=False)
+    )
     return g
 
 
@@ -72,7 +74,11 @@ def test_live_session_opens_the_strategys_session(graph, rec, monkeypatch):
 def test_a_missing_input_is_named(graph, rec, strategy):
     from dataclasses import replace
 
-    bare = replace(rec, accelerations=None, orientations=np.tile([1.0, 0, 0, 0], (rec.num_samples, rec.num_sensors, 1)).astype(np.float32))
+    bare = replace(
+        rec,
+        accelerations=None,
+        orientations=np.tile([1.0, 0, 0, 0], (rec.num_samples, rec.num_sensors, 1)).astype(np.float32),
+    )
     with pytest.raises(InputError, match=f"strategy '{strategy}' needs accelerations, and the recording has none"):
         reconstruct(graph, bare, Options(strategy=strategy))
 
@@ -93,8 +99,18 @@ def test_inputs_and_options_a_strategy_cannot_use_are_reported(graph, rec):
 def test_every_strategy_reports_the_same_fields(graph, rec, strategy):
     r = reconstruct(graph, rec, Options(strategy=strategy))
     rep = r.report
-    for key in ("strategy", "options", "graph", "samples", "labels", "node_path", "timings_s", "samples_per_s",
-                "terms", "cost"):
+    for key in (
+        "strategy",
+        "options",
+        "graph",
+        "samples",
+        "labels",
+        "node_path",
+        "timings_s",
+        "samples_per_s",
+        "terms",
+        "cost",
+    ):
         assert key in rep, key
     assert rep["strategy"] == strategy
     assert {"warm_up", "prepare", "search", "synthesis"} <= set(rep["timings_s"])

@@ -49,20 +49,26 @@ def _max_step(motion):
     return float(np.linalg.norm(np.diff(pos, axis=0), axis=-1).max())
 
 
-@pytest.mark.parametrize("markers, pattern, clips", [
-    ("hands-feet", MarkerPattern(), "all"),
-    ("head-back", MarkerPattern(), "all"),
-    ("left-foot", MarkerPattern(), "locomotion"),
-    ("hands-feet", MarkerPattern(gaps=((20, 40), (100, 12)), flicker=0.2), "longest"),
-    ("head-back", MarkerPattern(gaps=((50, 80),), flicker=0.3), "longest"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "markers, pattern, clips",
+    [
+        ("hands-feet", MarkerPattern(), "all"),
+        ("head-back", MarkerPattern(), "all"),
+        ("left-foot", MarkerPattern(), "locomotion"),
+        ("hands-feet", MarkerPattern(gaps=((20, 40), (100, 12)), flicker=0.2), "longest"),
+        ("head-back", MarkerPattern(gaps=((50, 80),), flicker=0.3), "longest"),
+    ],
+)
 def test_a_performance_in_the_knowledge_base_comes_back_as_a_copy(graph, kb, markers, pattern, clips):
     """Tautges 2012, §4.4: 'if the original motion was included in the knowledge base, the
     synthesized motion would always be an identical copy of it, no matter how sparse'.
     One foot marker tells nothing while the foot stands (it matches every stance of
     every clip equally): that holds while it moves, on the locomotion clips."""
-    chosen = {"all": kb, "longest": [max(kb, key=lambda m: m.num_frames)],
-              "locomotion": [m for m in kb if m.labels[0] in ("walk", "run")]}[clips]  # fmt: skip
+    chosen = {
+        "all": kb,
+        "longest": [max(kb, key=lambda m: m.num_frames)],
+        "locomotion": [m for m in kb if m.labels[0] in ("walk", "run")],
+    }[clips]
     assert chosen
     for clip in chosen:
         rec = simulate_marker_recording(clip, markers, NOISE["none"], seed=1, pattern=pattern)
@@ -86,8 +92,9 @@ def test_gaps_and_changing_marker_sets_leave_the_output_continuous(graph, perfor
     """Gaps of 5 to 80 frames and, between them, markers flickering so that the set seen
     changes every few frames: a whole motion, no joint moving between frames more than
     1.5 times the truth's largest step and 2 cm."""
-    rec = simulate_marker_recording(performance, "hands-feet", NOISE["default"], seed=3,
-                                    pattern=MarkerPattern(gaps=gaps, flicker=0.3))  # fmt: skip
+    rec = simulate_marker_recording(
+        performance, "hands-feet", NOISE["default"], seed=3, pattern=MarkerPattern(gaps=gaps, flicker=0.3)
+    )
     seen = np.isfinite(rec.marker_positions[..., 0])
     changes = np.flatnonzero((seen[1:] != seen[:-1]).any(axis=1))
     assert np.median(np.diff(changes)) <= 3  # (the set seen changes every few frames)
@@ -99,8 +106,13 @@ def test_gaps_and_changing_marker_sets_leave_the_output_continuous(graph, perfor
 
 
 def test_live_equals_batch_at_the_same_lag(graph, performance):
-    rec = simulate_marker_recording(performance.slice(0, 200), "hands-feet", NOISE["default"], seed=5,
-                                    pattern=MarkerPattern(gaps=((40, 30),), flicker=0.1))  # fmt: skip
+    rec = simulate_marker_recording(
+        performance.slice(0, 200),
+        "hands-feet",
+        NOISE["default"],
+        seed=5,
+        pattern=MarkerPattern(gaps=((40, 30),), flicker=0.1),
+    )
     options = Options(strategy="ssg", latency_s=0.8, ssg=SsgOptions(markers="hands-feet"))
     batch = reconstruct(graph, rec, options)
     session = open_session(graph, options, marker_names=rec.marker_names)
@@ -126,10 +138,16 @@ def test_offsets_of_real_markers_are_fitted(graph, kb):
     """Markers 6 cm off the set's nominal spots (the skin, not the bone): fitted from the
     input, they come back within 1.5 cm, and the reconstruction is a copy again."""
     clip = max(kb, key=lambda m: m.num_frames)
-    shift = {"l_hand": (0.0, 0.06, 0.0), "r_hand": (0.0, 0.0, 0.06), "l_foot": (0.06, 0.0, 0.0),
-             "r_foot": (-0.04, 0.04, 0.0)}  # fmt: skip
-    worn = MarkerSet("worn", tuple(replace(m, offset_m=tuple(np.add(m.offset_m, shift[m.name])))
-                                   for m in MARKERS["hands-feet"].markers))  # fmt: skip
+    shift = {
+        "l_hand": (0.0, 0.06, 0.0),
+        "r_hand": (0.0, 0.0, 0.06),
+        "l_foot": (0.06, 0.0, 0.0),
+        "r_foot": (-0.04, 0.04, 0.0),
+    }
+    worn = MarkerSet(
+        "worn",
+        tuple(replace(m, offset_m=tuple(np.add(m.offset_m, shift[m.name]))) for m in MARKERS["hands-feet"].markers),
+    )
     rec = simulate_marker_recording(clip, worn, NOISE["none"], seed=2)
     rec = replace(rec, meta={"source": "a capture"})  # (not simulated: offsets are fitted by default)
     options = Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet"))
@@ -142,8 +160,11 @@ def test_offsets_of_real_markers_are_fitted(graph, kb):
     assert _score(graph, clip, fitted)["joint_err_cm"] < 0.5
     assert _score(graph, clip, fitted)["joint_err_cm"] <= _score(graph, clip, nominal)["joint_err_cm"]
     # The fitted set reads back as a marker set, and with it the nominal reconstruction is a copy.
-    again = reconstruct(graph, rec, replace(options, ssg=SsgOptions(markers=json.dumps(offsets["fitted_marker_set"]),
-                                                                    offsets="nominal")))  # fmt: skip
+    again = reconstruct(
+        graph,
+        rec,
+        replace(options, ssg=SsgOptions(markers=json.dumps(offsets["fitted_marker_set"]), offsets="nominal")),
+    )
     assert _score(graph, clip, again)["joint_err_cm"] < 0.5
 
 
@@ -152,7 +173,12 @@ def test_windows_options_and_the_report(graph, kb):
     rec = simulate_marker_recording(clip, "head-back", NOISE["none"], seed=0)
     r = reconstruct(graph, rec, Options(strategy="ssg"))
     s = r.report["ssg"]
-    assert (s["window_frames"], s["overlap_frames"], s["k"], s["weight"]) == (8, 3, 16, 4.0)  # head and trunk: 0.25, 0.1 s
+    assert (s["window_frames"], s["overlap_frames"], s["k"], s["weight"]) == (
+        8,
+        3,
+        16,
+        4.0,
+    )  # head and trunk: 0.25, 0.1 s
     r = reconstruct(graph, rec, Options(strategy="ssg", ssg=SsgOptions(window_s=0.5, overlap_s=0.2, k=3, weight=2.0)))
     s = r.report["ssg"]
     assert (s["window_frames"], s["overlap_frames"], s["k"], s["weight"]) == (15, 6, 3, 2.0)
@@ -180,7 +206,9 @@ def test_bad_input_is_refused(graph, kb):
     clip = kb[0].slice(0, 60)
     rec = simulate_marker_recording(clip, "hands-feet", NOISE["none"], seed=0)
     with pytest.raises(InputError, match="every kept marker .* is missing for the whole input"):
-        reconstruct(graph, replace(rec, marker_positions=np.full_like(rec.marker_positions, np.nan)), Options(strategy="ssg"))
+        reconstruct(
+            graph, replace(rec, marker_positions=np.full_like(rec.marker_positions, np.nan)), Options(strategy="ssg")
+        )
     with pytest.raises(InputError, match="needs a marker set"):
         reconstruct(graph, replace(rec, meta={}), Options(strategy="ssg"))
     with pytest.raises(InputError, match="none of the markers of set 'head-back'"):
@@ -190,15 +218,28 @@ def test_bad_input_is_refused(graph, kb):
     with pytest.raises(LayoutError, match="unknown marker set"):
         reconstruct(graph, rec, Options(strategy="ssg", ssg=SsgOptions(markers="elbows")))
     with pytest.raises(LayoutError, match="segment must be a canonical joint"):
-        reconstruct(graph, rec, Options(strategy="ssg", ssg=SsgOptions(markers=json.dumps(
-            {"name": "x", "markers": [{"name": "l_hand", "segment": "l_paw"}]}))))  # fmt: skip
-    for bad, needle in ((SsgOptions(window_s=0.2, overlap_s=0.15), "at most half"), (SsgOptions(k=0), "SSG k"),
-                        (SsgOptions(weight=-1.0), "weight"), (SsgOptions(offsets="guess"), "offsets")):  # fmt: skip
+        reconstruct(
+            graph,
+            rec,
+            Options(
+                strategy="ssg",
+                ssg=SsgOptions(markers=json.dumps({"name": "x", "markers": [{"name": "l_hand", "segment": "l_paw"}]})),
+            ),
+        )
+    for bad, needle in (
+        (SsgOptions(window_s=0.2, overlap_s=0.15), "at most half"),
+        (SsgOptions(k=0), "SSG k"),
+        (SsgOptions(weight=-1.0), "weight"),
+        (SsgOptions(offsets="guess"), "offsets"),
+    ):
         with pytest.raises(InputError, match=needle):
             reconstruct(graph, rec, Options(strategy="ssg", ssg=bad))
     with pytest.raises(InputError, match="offsets 'fit' needs the whole input"):
-        open_session(graph, Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet", offsets="fit")),
-                    marker_names=rec.marker_names)  # fmt: skip
+        open_session(
+            graph,
+            Options(strategy="ssg", ssg=SsgOptions(markers="hands-feet", offsets="fit")),
+            marker_names=rec.marker_names,
+        )
 
 
 def test_cli_simulate_and_synthesize_markers(graph, kb, tmp_path, capsys):
@@ -208,29 +249,86 @@ def test_cli_simulate_and_synthesize_markers(graph, kb, tmp_path, capsys):
 
     write_bvh(clip_path, kb[2])
     rec = tmp_path / "m.csv"
-    assert main(["simulate", str(clip_path), "--markers", "vicon", "--keep", "LFHD,RFHD,LWRA,RWRA,LTOE,RTOE",
-                 "--gaps", "10:20", "--flicker", "0.1", "--noise", "default,marker=2", "-o", str(rec)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "simulate",
+                str(clip_path),
+                "--markers",
+                "vicon",
+                "--keep",
+                "LFHD,RFHD,LWRA,RWRA,LTOE,RTOE",
+                "--gaps",
+                "10:20",
+                "--flicker",
+                "0.1",
+                "--noise",
+                "default,marker=2",
+                "-o",
+                str(rec),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "6 markers" in out and "marker noise 2 mm" in out
     assert rec.read_text().startswith("# graphsvc markers v1")
     bvh, report = tmp_path / "o.bvh", tmp_path / "r.json"
-    assert main(["synthesize", str(gpath), str(rec), "--strategy", "ssg", "--markers", "vicon", "--ssg-offsets", "nominal",
-                 "-o", str(bvh), "--report", str(report)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(gpath),
+                str(rec),
+                "--strategy",
+                "ssg",
+                "--markers",
+                "vicon",
+                "--ssg-offsets",
+                "nominal",
+                "-o",
+                str(bvh),
+                "--report",
+                str(report),
+            ]
+        )
+        == 0
+    )
     r = json.loads(report.read_text())
     assert r["strategy"] == "ssg" and r["ssg"]["markers"] == ["LFHD", "RFHD", "LWRA", "RWRA", "LTOE", "RTOE"]
     assert bvh.is_file()
     capsys.readouterr()
     for argv, needle in (
         (["simulate", str(clip_path), "-o", str(tmp_path / "x.rec")], "--layout (accelerometers) or --markers"),
-        (["simulate", str(clip_path), "--markers", "hands-feet", "--gaps", "10-20", "-o", str(tmp_path / "x.rec")],
-         "START:LEN"),
-        (["simulate", str(clip_path), "--markers", "hands-feet", "--flicker", "1.2", "-o", str(tmp_path / "x.rec")],
-         "flicker"),
-        (["simulate", str(clip_path), "--layout", "kelly6", "--gaps", "1:2", "-o", str(tmp_path / "x.rec")],
-         "apply to --markers"),
-        (["synthesize", str(gpath), str(rec), "--strategy", "ssg", "--markers", "vicon", "--keep", "LELB", "-o",
-          str(tmp_path / "y.bvh")], "none of the markers"),
-    ):  # fmt: skip
+        (
+            ["simulate", str(clip_path), "--markers", "hands-feet", "--gaps", "10-20", "-o", str(tmp_path / "x.rec")],
+            "START:LEN",
+        ),
+        (
+            ["simulate", str(clip_path), "--markers", "hands-feet", "--flicker", "1.2", "-o", str(tmp_path / "x.rec")],
+            "flicker",
+        ),
+        (
+            ["simulate", str(clip_path), "--layout", "kelly6", "--gaps", "1:2", "-o", str(tmp_path / "x.rec")],
+            "apply to --markers",
+        ),
+        (
+            [
+                "synthesize",
+                str(gpath),
+                str(rec),
+                "--strategy",
+                "ssg",
+                "--markers",
+                "vicon",
+                "--keep",
+                "LELB",
+                "-o",
+                str(tmp_path / "y.bvh"),
+            ],
+            "none of the markers",
+        ),
+    ):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and needle in err, err
@@ -238,8 +336,22 @@ def test_cli_simulate_and_synthesize_markers(graph, kb, tmp_path, capsys):
     # A ragged marker CSV: its line named.
     ragged = tmp_path / "ragged.csv"
     ragged.write_text("time,a_x,a_y,a_z\n0,1,2,3\n0.1,1,2\n")
-    assert main(["synthesize", str(gpath), str(ragged), "--strategy", "ssg", "--markers", "hands-feet", "-o",
-                 str(tmp_path / "y.bvh")]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "synthesize",
+                str(gpath),
+                str(ragged),
+                "--strategy",
+                "ssg",
+                "--markers",
+                "hands-feet",
+                "-o",
+                str(tmp_path / "y.bvh"),
+            ]
+        )
+        == 2
+    )
     assert "ragged.csv:3: expected 4 columns, got 3" in capsys.readouterr().err
     native = tmp_path / "m.rec"
     save_recording(simulate_marker_recording(kb[2], "left-foot", NOISE["none"]), native)
@@ -254,10 +366,14 @@ def test_a_live_session_holds_constant_memory_and_the_frames_of_one_that_keeps_e
     kb = generate_knowledge_base(seed=3, minutes=0.15)
     graph, _ = build_graph(kb, BuildOptions(msv=False, interp=False, bridges=False, progress=False))
     motion, _ = generate_performance(seed=11, seconds=20.0)
-    rec = simulate_marker_recording(motion, "hands-feet", NOISE["default"], seed=3,
-                                    pattern=MarkerPattern(gaps=((100, 25),), flicker=0.1))  # fmt: skip
-    options = Options(strategy="ssg", latency_s=1.0,
-                      ssg=SsgOptions(markers="hands-feet", keep=("l_hand", "r_foot"), window_s=1.0, overlap_s=0.2))
+    rec = simulate_marker_recording(
+        motion, "hands-feet", NOISE["default"], seed=3, pattern=MarkerPattern(gaps=((100, 25),), flicker=0.1)
+    )
+    options = Options(
+        strategy="ssg",
+        latency_s=1.0,
+        ssg=SsgOptions(markers="hands-feet", keep=("l_hand", "r_foot"), window_s=1.0, overlap_s=0.2),
+    )
     pruned = open_session(graph, options, marker_names=rec.marker_names, keep_motion=False)
     whole = open_session(graph, options, marker_names=rec.marker_names, keep_motion=False)
     whole.decoder.prune = False

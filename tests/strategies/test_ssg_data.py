@@ -58,8 +58,16 @@ def test_hdm05_c3d_reads_in_metres_with_y_up(hdm05):
     assert len(rec.marker_names) == 41 and rec.meta["up"] == "z"
     pos = motion_fk(truth)[1]
     names = truth.skeleton.names
-    for marker, joint in (("LFHD", "head"), ("LTOE", "ltoes"), ("RANK", "rfoot"), ("LELB", "lradius"), ("RKNE", "rtibia")):
-        d = np.linalg.norm(rec.marker_positions[:, rec.marker_names.index(marker)] - pos[:, names.index(joint)], axis=-1)
+    for marker, joint in (
+        ("LFHD", "head"),
+        ("LTOE", "ltoes"),
+        ("RANK", "rfoot"),
+        ("LELB", "lradius"),
+        ("RKNE", "rtibia"),
+    ):
+        d = np.linalg.norm(
+            rec.marker_positions[:, rec.marker_names.index(marker)] - pos[:, names.index(joint)], axis=-1
+        )
         assert d.max() < 0.25, (marker, d.max())  # (a wrong unit or axis: metres off)
     head = rec.marker_positions[:, rec.marker_names.index("LFHD"), 1]
     toe = rec.marker_positions[:, rec.marker_names.index("LTOE"), 1]
@@ -72,7 +80,9 @@ def test_hdm05_take_from_few_markers_on_cmu(hdm05, keep):
     the take (another actor, another lab, offsets fitted to the input): its error
     against the take's own AMC (docs/ssg.md reports it)."""
     rec, truth, graph = hdm05
-    result = reconstruct(graph, rec, Options(strategy="ssg", ssg=SsgOptions(markers="vicon", keep=tuple(keep.split(",")))))
+    result = reconstruct(
+        graph, rec, Options(strategy="ssg", ssg=SsgOptions(markers="vicon", keep=tuple(keep.split(","))))
+    )
     assert result.report["ssg"]["offsets"]["mode"] == "fit"
     assert result.report["ssg"]["markers"] == keep.split(",")
     truth30 = resample(truth, graph.rate_hz)
@@ -91,8 +101,9 @@ def test_bandai_held_out_take_with_gaps_and_flicker(data_dir):
     kb = load_knowledge_base([str(root)], exclude=["*_004.bvh"], jobs=2, progress=False)
     graph, _ = build_graph(kb, LIGHT)
     truth = load_motion(root / "dataset-2_walk-turn-left_normal_004.bvh")
-    rec = simulate_marker_recording(truth, "hands-feet", NOISE["default"], seed=0,
-                                    pattern=MarkerPattern(gaps=((20, 30), (90, 25)), flicker=0.1))  # fmt: skip
+    rec = simulate_marker_recording(
+        truth, "hands-feet", NOISE["default"], seed=0, pattern=MarkerPattern(gaps=((20, 30), (90, 25)), flicker=0.1)
+    )
     result = reconstruct(graph, rec, Options(strategy="ssg"))
     row = _score(truth, graph, result.motion)
     assert result.report["blind_windows"] > 0

@@ -114,13 +114,16 @@ def test_the_plain_kernels_agree_with_the_cost_matrix_kernel_and_brute_force():
             elif m == 0:
                 want[n, m] = want[n - 1, m] + C[n, m]
             else:
-                want[n, m] = min(want[n - 1, m - 1] + 2 * C[n, m], want[n - 1, m] + 2 * C[n, m], want[n, m - 1] + C[n, m])
+                want[n, m] = min(
+                    want[n - 1, m - 1] + 2 * C[n, m], want[n - 1, m] + 2 * C[n, m], want[n, m - 1] + C[n, m]
+                )
     dtw.classic_dtw(q, s, last)
     np.testing.assert_allclose(last, want[-1], rtol=1e-12)
 
 
 def _kovar(q, k, w):
     """min over θ, (tx, tz) of Σ w |q − (R_y(θ) k + t)|² / Σ w, numerically."""
+
     def cost(theta):
         c, s = np.cos(theta), np.sin(theta)
         r = np.stack([c * k[:, 0] + s * k[:, 2], k[:, 1], -s * k[:, 0] + c * k[:, 2]], axis=1)
@@ -144,8 +147,12 @@ def test_local_cost_is_the_aligned_point_cloud_distance():
     seen = rng.random((T, M)) > 0.3
     kbm = rng.normal(size=(F, len(taus), M, 3))
     flat = kbm.reshape(F, -1, 3)
-    kb = WindowPoints(*(np.ascontiguousarray(flat[..., i], dtype=np.float32) for i in range(3)),
-                      np.ascontiguousarray((flat ** 2).sum(-1), dtype=np.float32), taus, weights)  # fmt: skip
+    kb = WindowPoints(
+        *(np.ascontiguousarray(flat[..., i], dtype=np.float32) for i in range(3)),
+        np.ascontiguousarray((flat**2).sum(-1), dtype=np.float32),
+        taus,
+        weights,
+    )
     frames = np.array([0, 4, 8])
     got = dtw.local_costs(kb, points, seen, frames, np.ones(F, dtype=bool))
     for b, n in enumerate(frames):
@@ -196,6 +203,7 @@ def test_cheapest_path_equals_networkx():
         want = nx.shortest_path_length(G, "s", "t", weight="weight")
         path, cost = cheapest_path(layers, edges, weight)
         assert cost == pytest.approx(want, rel=1e-12)
-        total = layers[0].cost[path[0]] + sum(layers[z + 1].cost[path[z + 1]] + weight * edges[z][path[z], path[z + 1]]
-                                               for z in range(len(edges)))  # fmt: skip
+        total = layers[0].cost[path[0]] + sum(
+            layers[z + 1].cost[path[z + 1]] + weight * edges[z][path[z], path[z + 1]] for z in range(len(edges))
+        )
         assert total == pytest.approx(cost, rel=1e-12)

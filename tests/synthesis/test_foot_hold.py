@@ -50,6 +50,8 @@ def test_chunk_by_chunk_is_the_whole_call():
     contacts[5:9, 1] = True
     whole = FootHold(sk, 30.0).apply(changed, trans, rot, trans, contacts)
     hold = FootHold(sk, 30.0)
-    parts = [hold.apply(changed[a:b], trans[a:b], rot[a:b], trans[a:b], contacts[a:b]) for a, b in
-             ((0, 3), (3, 4), (4, 11), (11, 20))]  # fmt: skip
+    parts = [
+        hold.apply(changed[a:b], trans[a:b], rot[a:b], trans[a:b], contacts[a:b])
+        for a, b in ((0, 3), (3, 4), (4, 11), (11, 20))
+    ]
     np.testing.assert_array_equal(np.concatenate(parts), whole)

@@ -31,8 +31,9 @@ def test_a_motions_own_local_poses_put_back_give_the_same_joints():
     p = pose_vectors(rot, trans, sk.parents, layout)
     assert p.shape == (rot.shape[0], layout.dims) and np.all(p[:, 0] >= 0) and np.all(p[:, 5] >= 0)
     r, t = place_local_poses(rot, trans, sk.parents, layout, p, np.ones(rot.shape[0], dtype=bool))
-    np.testing.assert_allclose(forward_kinematics(r, t, sk.parents)[1], forward_kinematics(rot, trans, sk.parents)[1],
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        forward_kinematics(r, t, sk.parents)[1], forward_kinematics(rot, trans, sk.parents)[1], atol=1e-9
+    )
 
 
 def test_another_pose_put_in_keeps_the_frames_place_and_heading_and_only_where_asked():
@@ -43,8 +44,9 @@ def test_another_pose_put_in_keeps_the_frames_place_and_heading_and_only_where_a
     use = np.arange(rot.shape[0]) % 2 == 0
     r, t = place_local_poses(rot, trans, sk.parents, layout, other, use)
     before, after = forward_kinematics(rot, trans, sk.parents)[1], forward_kinematics(r, t, sk.parents)[1]
-    np.testing.assert_allclose(signals.ground_position(after, table["pelvis"]),
-                               signals.ground_position(before, table["pelvis"]), atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        signals.ground_position(after, table["pelvis"]), signals.ground_position(before, table["pelvis"]), atol=1e-9
+    )
     np.testing.assert_allclose(signals.heading(after[use], table), signals.heading(before[use], table), atol=1e-9)
     np.testing.assert_array_equal(r[~use], rot[~use])
     # the frames asked for hold the other poses: the same vectors read back

@@ -53,7 +53,11 @@ def transition_path(graph):
     frames = np.array([c["frames"] for c in g.clips])[g.node_clip]
     e = np.nonzero(g.edge_kind == EDGE_TRANSITION)[0]
     src, dst = g.edge_src[e], g.edge_dst[e]
-    ok = (src - first[src] >= margin) & (first[dst] + frames[dst] - 1 - dst >= margin) & (g.node_clip[src] != g.node_clip[dst])
+    ok = (
+        (src - first[src] >= margin)
+        & (first[dst] + frames[dst] - 1 - dst >= margin)
+        & (g.node_clip[src] != g.node_clip[dst])
+    )
     k = int(e[ok][0])
     a_nodes, a_edges = _clip_path(g, g.edge_src[k] - margin, g.edge_src[k])
     b_nodes, b_edges = _clip_path(g, g.edge_dst[k], g.edge_dst[k] + margin)
@@ -85,7 +89,9 @@ def test_root_placed_on_the_integrated_path(graph, transition_path):
     assert motion.num_frames == nodes.size and motion.rate_hz == g.rate_hz
     pos = path_world_positions(motion)
     table = joint_map(g.skeleton)
-    ground, heading = meta.integrate_path(start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float))
+    ground, heading = meta.integrate_path(
+        start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float)
+    )
     np.testing.assert_allclose(signals.ground_position(pos, table["pelvis"]), ground, atol=1e-9)
     # Away from the blend window the pose heading is the integrated heading exactly.
     far = np.abs(np.arange(nodes.size) - cut) > 0.5 * 0.7 * g.rate_hz + 1
@@ -116,13 +122,15 @@ def _skate(g, nodes, edges, start, pos, joint, side):
     pred = nodes.copy()
     cont = g.edge_kind[edges] != EDGE_TRANSITION
     pred[1:] = np.where(cont, nodes[:-1], predecessor_nodes(g, nodes[1:]))
-    _, heading = meta.integrate_path(start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float))
+    _, heading = meta.integrate_path(
+        start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float)
+    )
     turn = quat.about_y(heading - g.node_heading[nodes])
     step = quat.rotate(turn, _source_positions(g, nodes)[:, joint] - _source_positions(g, pred)[:, joint])
     worst = 0.0
     for s, e in contact_spans(g.node_contacts[nodes, side]):
         if e - s > 1:
-            drift = np.cumsum(pos[s + 1:e, joint] - pos[s:e - 1, joint] - step[s + 1:e], axis=0)
+            drift = np.cumsum(pos[s + 1 : e, joint] - pos[s : e - 1, joint] - step[s + 1 : e], axis=0)
             worst = max(worst, float(np.max(np.linalg.norm(drift, axis=-1))))
     return worst
 
@@ -225,7 +233,9 @@ def test_a_track_moves_the_whole_body_onto_it_and_keeps_every_pose(graph, transi
     rng = np.random.default_rng(0)
     positions = np.cumsum(rng.normal(0.0, 0.05, (nodes.size, 2)), axis=0) + 1.0
     track = fused_track(g, nodes, edges, *start, positions, TrackModel(0.1, 0.3, float(g.rate_hz)))
-    ground, _ = meta.integrate_path(start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float))
+    ground, _ = meta.integrate_path(
+        start[0], start[1], g.edge_offset[edges].astype(float), g.edge_heading[edges].astype(float)
+    )
     moved = synthesize_motion(g, nodes, edges, *start, track=track)
     np.testing.assert_array_equal(moved.rotations, own.rotations)
     _, own_world = motion_fk(own)

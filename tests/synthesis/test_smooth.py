@@ -69,7 +69,7 @@ def test_the_stream_gives_the_batch_bit_for_bit(chunks):
     got_r, got_t, t, k = [], [], 0, 0
     while t < len(rot):
         n = chunks[k % len(chunks)]
-        first, r, tr = s.add(t, rot[t:t + n], trans[t:t + n])
+        first, r, tr = s.add(t, rot[t : t + n], trans[t : t + n])
         assert first == sum(len(x) for x in got_r)  # in order, each frame once
         assert first + len(r) <= max(0, t + n - s.h)  # a frame waits for the h after it
         got_r.append(r), got_t.append(tr)

@@ -34,16 +34,21 @@ def _walk(g, steps, rng):
 def _fixed_lag_track(g, nodes, edges, start, positions, model, lag):
     """The fused track a stream with `lag` frames of look-ahead makes: frame t's offset
     smoothed over the frames up to t + lag (all of them for the last lag frames)."""
-    own, _ = meta.integrate_path(np.asarray(start[0]), start[1], g.edge_offset[edges].astype(np.float64),
-                                 g.edge_heading[edges].astype(np.float64))  # fmt: skip
+    own, _ = meta.integrate_path(
+        np.asarray(start[0]),
+        start[1],
+        g.edge_offset[edges].astype(np.float64),
+        g.edge_heading[edges].astype(np.float64),
+    )
     z, free = positions - own, free_steps(g.node_contacts[nodes])
     T = nodes.size
     offsets = np.array([smooth_offsets(z[: t + lag + 1], model, free[: t + lag + 1])[t] for t in range(T)])
     return own + offsets
 
 
-@pytest.mark.parametrize("fused, smooth", [(False, 0.0), (True, 0.0), (True, 1.0)],
-                         ids=["placed-once", "fused", "fused-smoothed"])
+@pytest.mark.parametrize(
+    "fused, smooth", [(False, 0.0), (True, 0.0), (True, 1.0)], ids=["placed-once", "fused", "fused-smoothed"]
+)
 def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused, smooth):
     g = graph
     rng = np.random.default_rng(2)
@@ -65,11 +70,11 @@ def test_frames_in_pieces_equal_the_whole_path_and_own_their_memory(graph, fused
         assert np.abs(whole.translations[:, 0] - placed_once.translations[:, 0]).max() > 0.05
         # Where the look-ahead reaches the end, the whole path's smoother.
         batch = fused_track(g, nodes, edges, *start, positions, model)
-        np.testing.assert_allclose(track[-synth.lookahead:], batch[-synth.lookahead:], atol=1e-12)
+        np.testing.assert_allclose(track[-synth.lookahead :], batch[-synth.lookahead :], atol=1e-12)
     arrival = np.concatenate([[-1], edges])
     rot, trans = [], []
     for a in range(0, nodes.size, 7):
-        first, r, t = synth.add(nodes[a:a + 7], arrival[a:a + 7], positions[a:a + 7])
+        first, r, t = synth.add(nodes[a : a + 7], arrival[a : a + 7], positions[a : a + 7])
         assert first == sum(len(x) for x in rot)  # in order, each frame once
         rot.append(r)
         trans.append(t)

@@ -17,7 +17,7 @@ from graphsvc.synthesis.track import (
     FixedLagSmoother,
     TrackModel,
     free_steps,
-    smooth_offsets,  # fmt: skip
+    smooth_offsets,
 )
 
 
@@ -41,8 +41,8 @@ def _least_squares(z: np.ndarray, model: TrackModel) -> np.ndarray:
         rows.append(e), rhs.append(0.0)
         for t in range(T - 1):
             block = np.zeros((2, 2 * T))
-            block[:, 2 * t + 2: 2 * t + 4] = W
-            block[:, 2 * t: 2 * t + 2] = -W @ F
+            block[:, 2 * t + 2 : 2 * t + 4] = W
+            block[:, 2 * t : 2 * t + 2] = -W @ F
             rows += list(block)
             rhs += [0.0, 0.0]
         for t in range(T):

@@ -33,9 +33,11 @@ from graphsvc.strategies.results import Provenance, Reconstruction, label_runs
 
 @dataclass(frozen=True)
 class MeanPoseOptions:
-    label: str | None = option(None, metavar="LABEL",
-                               help="average only the knowledge-base frames of this content label, e.g. idle "
-                                    "(default: every frame)")  # fmt: skip
+    label: str | None = option(
+        None,
+        metavar="LABEL",
+        help="average only the knowledge-base frames of this content label, e.g. idle (default: every frame)",
+    )
 
 
 def mean_pose_node(graph: MotionGraph, allowed: np.ndarray | None, label: str | None) -> int:
@@ -102,8 +104,9 @@ class MeanPoseStrategy(Strategy):
     def prepare(self, graph: MotionGraph) -> dict:
         return {}  # (a node a label and hidden set: `mean_pose_node`, cheap)
 
-    def reconstruct(self, index, graph: MotionGraph, inp, options: Options, allowed=None, threads: bool = True,
-                    should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self, index, graph: MotionGraph, inp, options: Options, allowed=None, threads: bool = True, should_stop=None
+    ) -> Reconstruction:
         t0 = time.perf_counter()
         node = mean_pose_node(graph, allowed, self.own(options).label)
         T = inp.num_samples
@@ -111,12 +114,23 @@ class MeanPoseStrategy(Strategy):
         motion = Motion(graph.skeleton, rot, trans, float(graph.rate_hz), name="synthesized", source="meanpose")
         seconds = time.perf_counter() - t0
         label = graph.labels[int(graph.node_label[node])]
-        provenance = Provenance(np.full((T, 1), int(graph.node_clip[node])), np.full((T, 1), float(graph.node_frame[node])),
-                                np.ones((T, 1)), np.array([label] * T, dtype=object))  # fmt: skip
-        report = {"meanpose": {"node": node, "clip": graph.clips[int(graph.node_clip[node])]["name"],
-                               "frame": float(graph.node_frame[node]), "label": label},
-                  "labels": label_runs([label] * T), "timings_s": {"search": round(seconds, 4)},
-                  "samples_per_s": round(T / max(seconds, 1e-9), 1)}  # fmt: skip
+        provenance = Provenance(
+            np.full((T, 1), int(graph.node_clip[node])),
+            np.full((T, 1), float(graph.node_frame[node])),
+            np.ones((T, 1)),
+            np.array([label] * T, dtype=object),
+        )
+        report = {
+            "meanpose": {
+                "node": node,
+                "clip": graph.clips[int(graph.node_clip[node])]["name"],
+                "frame": float(graph.node_frame[node]),
+                "label": label,
+            },
+            "labels": label_runs([label] * T),
+            "timings_s": {"search": round(seconds, 4)},
+            "samples_per_s": round(T / max(seconds, 1e-9), 1),
+        }
         return Reconstruction(motion, None, None, report, provenance)
 
 
@@ -127,9 +141,12 @@ class MeanPoseSession(LiveSession):
         graph = self.graph
         self.node = mean_pose_node(graph, allowed, self.own.label)
         label = graph.labels[int(graph.node_label[self.node])]
-        self.provenance = Provenance(np.array([[int(graph.node_clip[self.node])]]),
-                                     np.array([[float(graph.node_frame[self.node])]]), np.ones((1, 1)),
-                                     np.array([label], dtype=object))  # fmt: skip
+        self.provenance = Provenance(
+            np.array([[int(graph.node_clip[self.node])]]),
+            np.array([[float(graph.node_frame[self.node])]]),
+            np.ones((1, 1)),
+            np.array([label], dtype=object),
+        )
         self.ground, self.heading = np.zeros(2), 0.0
         self.frame_index = 0
 

@@ -53,9 +53,7 @@ def _motion(
     R, T = _render(plan, sk, t)
     if frame_labels is not None:
         frame_labels[name] = _segment_labels(plan, t, label)
-    return Motion(
-        sk, R, T, rate_hz, name=name, source=f"procedural:seed={seed}", labels=(label,)
-    )
+    return Motion(sk, R, T, rate_hz, name=name, source=f"procedural:seed={seed}", labels=(label,))
 
 
 def _segment_labels(plan: _Plan, t: np.ndarray, default: str) -> np.ndarray:
@@ -70,12 +68,14 @@ def _segment_labels(plan: _Plan, t: np.ndarray, default: str) -> np.ndarray:
 # --------------------------------------------------------------------------- public generators
 
 
-def _cruise_and_stop(plan, rng, run: bool, speed: float, cruise_s: float, max_turn_rate: float,
-                     stand_s: tuple[float, float]) -> None:  # fmt: skip
+def _cruise_and_stop(
+    plan, rng, run: bool, speed: float, cruise_s: float, max_turn_rate: float, stand_s: tuple[float, float]
+) -> None:
     """Walk or run at `speed` for cruise_s seconds (turning at up to max_turn_rate),
     stop, and stand for a time drawn from stand_s, labelled "stop"."""
-    _locomote(plan, rng, run, speed, plan.t + cruise_s, _turns(rng, plan.t, plan.t + cruise_s + 4.0, max_turn_rate),
-              stop=True)  # fmt: skip
+    _locomote(
+        plan, rng, run, speed, plan.t + cruise_s, _turns(rng, plan.t, plan.t + cruise_s + 4.0, max_turn_rate), stop=True
+    )
     _idle(plan, rng, rng.uniform(*stand_s), label="stop")
 
 
@@ -141,9 +141,7 @@ def make_clip(
             _punches(plan, rng, int(rng.integers(3, 8)))
             _idle(plan, rng, rng.uniform(0.4, 1.0), label="idle")
         return _motion(plan, sk, rate_hz, 0.0, plan.t, name, kind, seed, frame_labels)
-    raise ValueError(
-        f"unknown procedural content {kind!r}; expected one of {', '.join(CONTENT_LABELS)}"
-    )
+    raise ValueError(f"unknown procedural content {kind!r}; expected one of {', '.join(CONTENT_LABELS)}")
 
 
 def generate_knowledge_base(
@@ -180,9 +178,7 @@ def generate_knowledge_base(
     return clips
 
 
-def generate_performance(
-    seed: int = 1, rate_hz: float = 30.0, seconds: float = 20.0
-) -> tuple[Motion, np.ndarray]:
+def generate_performance(seed: int = 1, rate_hz: float = 30.0, seconds: float = 20.0) -> tuple[Motion, np.ndarray]:
     """A continuous held-out performance (use a seed not used for the knowledge base):
     idle → walk → stop → a stroke → run → stop → punches → ..., repeated until
     `seconds`. Returns the Motion (labels=("performance",)) and a (F,) array of
@@ -204,9 +200,6 @@ def generate_performance(
         _idle(plan, rng, rng.uniform(0.4, 0.8))
         i += 1
     t1 = min(plan.t, seconds) if plan.t > seconds + 3.0 else plan.t
-    motion = _motion(
-        plan, sk, rate_hz, 0.0, t1, f"performance_s{seed}", "performance", seed
-    )
+    motion = _motion(plan, sk, rate_hz, 0.0, t1, f"performance_s{seed}", "performance", seed)
     t = np.arange(motion.num_frames) / rate_hz
     return motion, _segment_labels(plan, t, "idle")
-

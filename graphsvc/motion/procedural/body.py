@@ -68,9 +68,7 @@ ANKLE_H = 0.08  # ankle height above ground with the foot flat (m)
 TOE_H = 0.02  # toe (ball) height with the foot flat (m)
 TOE_FROM_ANKLE = _OFF["l_toe"]  # (3,) foot frame
 PELVIS_H = 0.99  # rest pelvis height (m)
-STAND_H = (
-    PELVIS_H - 0.01
-)  # knees a touch soft when standing (hip–ankle at 98.8 % of the leg)
+STAND_H = PELVIS_H - 0.01  # knees a touch soft when standing (hip–ankle at 98.8 % of the leg)
 STAND_W = 0.10  # lateral half-distance between standing feet (m)
 G = 9.81
 
@@ -81,10 +79,7 @@ def standard_skeleton() -> Skeleton:
     names = tuple(n for n, _, _ in _BONES)
     parents = np.array([-1 if p is None else _IDX[p] for _, p, _ in _BONES])
     end = np.array([n.endswith("_End") for n in names])
-    channels = tuple(
-        ROOT_CHANNELS if p is None else () if n.endswith("_End") else JOINT_CHANNELS
-        for n, p, _ in _BONES
-    )
+    channels = tuple(ROOT_CHANNELS if p is None else () if n.endswith("_End") else JOINT_CHANNELS for n, p, _ in _BONES)
     offsets = np.array([off for _, _, off in _BONES], dtype=float)
     return Skeleton(names, parents, offsets, channels, end)
 
@@ -115,15 +110,11 @@ def _bump(tau: np.ndarray) -> np.ndarray:
 
 
 def _rot_x(angle: np.ndarray) -> np.ndarray:
-    return quat.from_axis_angle(
-        np.array([1.0, 0.0, 0.0]), np.asarray(angle, dtype=float)
-    )
+    return quat.from_axis_angle(np.array([1.0, 0.0, 0.0]), np.asarray(angle, dtype=float))
 
 
 def _rot_z(angle: np.ndarray) -> np.ndarray:
-    return quat.from_axis_angle(
-        np.array([0.0, 0.0, 1.0]), np.asarray(angle, dtype=float)
-    )
+    return quat.from_axis_angle(np.array([0.0, 0.0, 1.0]), np.asarray(angle, dtype=float))
 
 
 def _frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -153,20 +144,14 @@ def _bend_directions(u, pole):
             c = w * b / max(n, 1e-12) + (1.0 - w) * q
         cn = np.sqrt(np.sum(c * c))
         if cn < 1e-9:  # fully degenerate: any perpendicular
-            c = (
-                np.array([u[t, 1], -u[t, 0], 0.0])
-                if abs(u[t, 2]) < 0.9
-                else np.array([0.0, u[t, 2], -u[t, 1]])
-            )
+            c = np.array([u[t, 1], -u[t, 0], 0.0]) if abs(u[t, 2]) < 0.9 else np.array([0.0, u[t, 2], -u[t, 1]])
             cn = np.sqrt(np.sum(c * c))
         out[t] = c / cn
         prev = out[t]
     return out
 
 
-def two_bone_ik(
-    root, target, pole, parent_rot, l1, l2, rest_dir, rest_pole, soft=False
-):
+def two_bone_ik(root, target, pole, parent_rot, l1, l2, rest_dir, rest_pole, soft=False):
     """Analytic two-bone IK over frames.
 
     root, target, pole: (F, 3) world positions of the first joint, the end effector
@@ -185,9 +170,7 @@ def two_bone_ik(
     u = vec / np.maximum(dist, 1e-9)
     if soft:
         r0, r1 = 0.85 * (l1 + l2), 0.98 * (l1 + l2)
-        dist = np.where(
-            dist > r0, r0 + (r1 - r0) * np.tanh((dist - r0) / (r1 - r0)), dist
-        )
+        dist = np.where(dist > r0, r0 + (r1 - r0) * np.tanh((dist - r0) / (r1 - r0)), dist)
     d = np.clip(dist, abs(l1 - l2) + 1e-3, (l1 + l2) * 0.9995)
     cos_a = np.clip((l1 * l1 + d * d - l2 * l2) / (2.0 * l1 * d), -1.0, 1.0)
     sin_a = np.sqrt(1.0 - cos_a * cos_a)
@@ -208,4 +191,3 @@ def two_bone_ik(
         quat.inv_rotate(world1, dir2),
     )
     return local1, local2, world1
-

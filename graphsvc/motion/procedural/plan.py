@@ -14,14 +14,35 @@ from graphsvc.motion.procedural.body import STAND_H, STAND_W, G, _fwd, _left
 # --------------------------------------------------------------------------- plan
 
 NEUTRAL = {
-    "px": 0.0, "pz": 0.0, "py": STAND_H, "yaw": 0.0, "pyaw": 0.0, "lean": 0.02, "roll": 0.0,
-    "twist": 0.0, "tlean": 0.02, "tside": 0.0, "hyaw": 0.0, "hpitch": 0.0,
+    "px": 0.0,
+    "pz": 0.0,
+    "py": STAND_H,
+    "yaw": 0.0,
+    "pyaw": 0.0,
+    "lean": 0.02,
+    "roll": 0.0,
+    "twist": 0.0,
+    "tlean": 0.02,
+    "tside": 0.0,
+    "hyaw": 0.0,
+    "hpitch": 0.0,
     # wrist targets relative to the shoulder, chest frame, x positive away from the midline
-    "l_wx": 0.03, "l_wy": -0.52, "l_wz": 0.07, "r_wx": 0.03, "r_wy": -0.52, "r_wz": 0.07,
+    "l_wx": 0.03,
+    "l_wy": -0.52,
+    "l_wz": 0.07,
+    "r_wx": 0.03,
+    "r_wy": -0.52,
+    "r_wz": 0.07,
     # elbow pole directions, same convention
-    "l_px": 0.3, "l_py": 0.0, "l_pz": -1.0, "r_px": 0.3, "r_py": 0.0, "r_pz": -1.0,
-    "l_hand": 0.0, "r_hand": 0.0,
-}  # fmt: skip
+    "l_px": 0.3,
+    "l_py": 0.0,
+    "l_pz": -1.0,
+    "r_px": 0.3,
+    "r_py": 0.0,
+    "r_pz": -1.0,
+    "l_hand": 0.0,
+    "r_hand": 0.0,
+}
 _HANG = (0.03, -0.52, 0.07)
 _BACK_POLE = (0.3, 0.0, -1.0)
 
@@ -108,14 +129,8 @@ class _Plan:
         t_land = max(t_land, t_lift + 0.18)
         prev.t_off = t_lift
         prev.heel = heel
-        prev.heel_s = (
-            min(heel_s, 0.45 * (t_lift - prev.t_land))
-            if np.isfinite(prev.t_land)
-            else heel_s
-        )
-        self.plants[foot].append(
-            _Plant(t_land, np.inf, float(xz[0]), float(xz[1]), heading, lift=lift)
-        )
+        prev.heel_s = min(heel_s, 0.45 * (t_lift - prev.t_land)) if np.isfinite(prev.t_land) else heel_s
+        self.plants[foot].append(_Plant(t_land, np.inf, float(xz[0]), float(xz[1]), heading, lift=lift))
         return t_land
 
     def body(self, x: float, z: float, heading=None) -> np.ndarray:
@@ -130,9 +145,7 @@ def _new_plan(rng, heading=None) -> _Plan:
     plan.base = np.zeros(2)
     for foot, side in ((0, 1.0), (1, -1.0)):
         xz = plan.base + side * STAND_W * _left(plan.heading)
-        plan.plants[foot].append(
-            _Plant(-np.inf, np.inf, xz[0], xz[1], plan.heading + side * 0.08)
-        )
+        plan.plants[foot].append(_Plant(-np.inf, np.inf, xz[0], xz[1], plan.heading + side * 0.08))
     for k, v in NEUTRAL.items():
         plan.key(k, 0.0, v)
     plan.pelvis_at(0.0, plan.base, yaw=plan.heading)
@@ -151,9 +164,7 @@ def _gait(v: float, run: bool) -> tuple[float, float, bool]:
     return 1.25 + 0.5 * v, 0.64 - 0.03 * v, False
 
 
-def _smooth_curve(
-    rng, t0: float, t1: float, every: float, lo: float, hi: float, zero_prob=0.3
-):
+def _smooth_curve(rng, t0: float, t1: float, every: float, lo: float, hi: float, zero_prob=0.3):
     """A smooth random function on [t0, t1]: (times, values) to use with np.interp
     after PCHIP densification; values in [lo, hi], some segments exactly 0."""
     n = max(2, int(np.ceil((t1 - t0) / every)) + 2)
@@ -215,18 +226,12 @@ def _locomote(
         th_next = th + omega * T
         S = 0.5 * (v + v_next) * T
         heading_mid = 0.5 * (th + th_next)
-        if (
-            not first
-        ):  # between mid-stances the pelvis follows the speed ramp (trapezoid rule)
-            plan.pelvis_at(
-                t + 0.5 * T, b + (0.375 * v + 0.125 * v_next) * T * _fwd(heading_mid)
-            )
+        if not first:  # between mid-stances the pelvis follows the speed ramp (trapezoid rule)
+            plan.pelvis_at(t + 0.5 * T, b + (0.375 * v + 0.125 * v_next) * T * _fwd(heading_mid))
         b = b + S * _fwd(heading_mid)
         D = duty * 2.0 * T  # stance duration
         swing = max(0.22, (1.0 - duty) * 2.0 * T)
-        a = (
-            0.45 if running else 0.4
-        )  # fraction of stance before the pelvis passes the foot
+        a = 0.45 if running else 0.4  # fraction of stance before the pelvis passes the foot
         t_mid = t + T
         if first:  # from standing: leave time to shift weight and swing
             t_mid = t + 0.15 + swing + a * D
@@ -259,10 +264,15 @@ def _locomote(
             y_mid, y_between = STAND_H - 0.004, STAND_H - 0.02 - 0.01 * v_next
         plan.key("py", 0.5 * (t + t_mid), y_between)
         plan.pelvis_at(
-            t_mid, pb, py=y_mid, yaw=th_next, roll=0.6 * lean_turn + side * 0.04 * min(1.0, v_next),
-            lean=0.08 if running else 0.03, tlean=0.06 + 0.01 * v_next if running else 0.03 + 0.01 * v_next,
+            t_mid,
+            pb,
+            py=y_mid,
+            yaw=th_next,
+            roll=0.6 * lean_turn + side * 0.04 * min(1.0, v_next),
+            lean=0.08 if running else 0.03,
+            tlean=0.06 + 0.01 * v_next if running else 0.03 + 0.01 * v_next,
             tside=0.3 * lean_turn - side * 0.03 * min(1.0, v_next),
-        )  # fmt: skip
+        )
         amp = min(1.0, v_next / 1.2)
         pyaw = -side * (0.10 if running else 0.07) * amp
         chest = side * (0.12 if running else 0.06) * amp
@@ -292,15 +302,11 @@ def _arm_swing_keys(plan: _Plan, t: float, foot: int, v: float, running: bool) -
         c, s = np.cos(beta), np.sin(beta)
         y = base[1] * c - base[2] * s
         z = -base[1] * s + base[2] * c
-        x = base[0] - (0.06 if running else 0.02) * max(
-            0.0, s
-        )  # forward swing crosses the body
+        x = base[0] - (0.06 if running else 0.02) * max(0.0, s)  # forward swing crosses the body
         plan.wrist(side, t, (x + 0.03, y, z), _BACK_POLE)
 
 
-def _close_step(
-    plan: _Plan, t: float, b: np.ndarray, th: float, foot: int, v: float, run: bool
-) -> None:
+def _close_step(plan: _Plan, t: float, b: np.ndarray, th: float, foot: int, v: float, run: bool) -> None:
     """Bring `foot` beside the other and settle into a standstill. The foot lifts as
     it would in gait (shortly after the other foot landed), so it never trails far
     behind the pelvis while the body decelerates over the stance foot."""
@@ -321,9 +327,7 @@ def _close_step(
         0.035,
     )
     t_end = t_land + 0.35
-    plan.pelvis_at(
-        t_end, mid, py=STAND_H, yaw=th, roll=0.0, lean=0.02, tlean=0.02, tside=0.0
-    )
+    plan.pelvis_at(t_end, mid, py=STAND_H, yaw=th, roll=0.0, lean=0.02, tlean=0.02, tside=0.0)
     plan.key("py", 0.5 * (t + t_land), STAND_H - 0.01)
     plan.key("pyaw", t_land, 0.0)
     plan.key("twist", t_land, 0.0)
@@ -350,10 +354,16 @@ def _idle(plan: _Plan, rng, duration: float, label="idle") -> None:
         t = min(t + rng.uniform(1.0, 2.2), t0 + duration - 0.6)
         shift = rng.uniform(-0.045, 0.045)
         plan.pelvis_at(
-            t, plan.body(shift, rng.uniform(-0.02, 0.02)), py=STAND_H - abs(shift) * 0.1,
-            pyaw=rng.uniform(-0.08, 0.08), roll=-shift * 1.2, tside=shift * 0.8, twist=rng.uniform(-0.1, 0.1),
-            hyaw=rng.uniform(-0.6, 0.6), hpitch=rng.uniform(-0.15, 0.2),
-        )  # fmt: skip
+            t,
+            plan.body(shift, rng.uniform(-0.02, 0.02)),
+            py=STAND_H - abs(shift) * 0.1,
+            pyaw=rng.uniform(-0.08, 0.08),
+            roll=-shift * 1.2,
+            tside=shift * 0.8,
+            twist=rng.uniform(-0.1, 0.1),
+            hyaw=rng.uniform(-0.6, 0.6),
+            hpitch=rng.uniform(-0.15, 0.2),
+        )
         for s in "lr":
             j = rng.uniform(-0.03, 0.03, 3)
             plan.wrist(s, t + rng.uniform(-0.2, 0.2), np.array(_HANG) + j, _BACK_POLE)
@@ -396,9 +406,7 @@ def _swing(plan: _Plan, rng, kind: str) -> None:
 
     t = t0 + 0.45 * j()
     stance = plan.base.copy()
-    plan.pelvis_at(
-        t, stance, py=STAND_H - 0.05 * j(), tlean=0.15 * j(), lean=0.05, hyaw=0.0
-    )
+    plan.pelvis_at(t, stance, py=STAND_H - 0.05 * j(), tlean=0.15 * j(), lean=0.05, hyaw=0.0)
     plan.wrist("l", t, _READY_L, (0.5, -0.5, -0.6), 0.0)
     plan.wrist("r", t, _READY_R, (0.5, -0.5, -0.6), 0.0)
     if kind == "forehand":
@@ -474,33 +482,39 @@ def _swing(plan: _Plan, rng, kind: str) -> None:
         plan.wrist("r", tc, (0.15, -0.30, 0.42), (0.6, -0.7, 0.0), 0.0)
         plan.wrist("l", tc, (0.15, -0.30, 0.15), _BACK_POLE)
         tf = tc + 0.22 * j(0.05)
-        plan.pelvis_at(
-            tf, plan.body(-0.06, 0.16), pyaw=-0.15, twist=-0.3 * j(), hyaw=0.15
-        )
+        plan.pelvis_at(tf, plan.body(-0.06, 0.16), pyaw=-0.15, twist=-0.3 * j(), hyaw=0.15)
         plan.wrist("r", tf, (0.45, 0.12, 0.18), (0.8, 0.2, -0.5), 0.2)
         plan.wrist("l", tf, (0.30, -0.30, -0.10), _BACK_POLE)
         foot, back = 1, (-STAND_W, 0.0)
     else:  # overhead, serve-like: trophy pose, knee bend, upward swing, step through
         tb = t + 0.9 * j()  # trophy
-        plan.pelvis_at(tb, plan.body(-0.04, -0.03), pyaw=-0.35 * j(), twist=-0.45 * j(), py=STAND_H - 0.08 * j(),
-                       tlean=-0.12, tside=0.15, hpitch=-0.35)  # fmt: skip
+        plan.pelvis_at(
+            tb,
+            plan.body(-0.04, -0.03),
+            pyaw=-0.35 * j(),
+            twist=-0.45 * j(),
+            py=STAND_H - 0.08 * j(),
+            tlean=-0.12,
+            tside=0.15,
+            hpitch=-0.35,
+        )
         plan.wrist("l", tb - 0.2, (0.05, 0.48, 0.15), (0.5, -0.5, -0.5), 0.0)
         plan.wrist("r", tb, (0.18, 0.16, -0.22), (1.0, 0.5, -0.4), 0.3)
         td = tb + 0.18 * j(0.05)  # racket drop behind the back
         plan.wrist("r", td, (0.05, 0.02, -0.28), (0.6, 1.0, -0.2), 0.5)
-        plan.pelvis_at(
-            td, plan.body(-0.02, 0.0), py=STAND_H - 0.07, pyaw=-0.25, twist=-0.3
-        )
+        plan.pelvis_at(td, plan.body(-0.02, 0.0), py=STAND_H - 0.07, pyaw=-0.25, twist=-0.3)
         tc = td + 0.26 * j(0.05)  # contact, reaching up
-        plan.pelvis_at(tc, plan.body(0.0, 0.08), py=STAND_H + 0.002, pyaw=0.05, twist=0.1, tlean=0.1, tside=-0.1,
-                       hpitch=-0.2)  # fmt: skip
+        plan.pelvis_at(
+            tc, plan.body(0.0, 0.08), py=STAND_H + 0.002, pyaw=0.05, twist=0.1, tlean=0.1, tside=-0.1, hpitch=-0.2
+        )
         plan.wrist("r", tc, (-0.05, 0.48, 0.18), (0.8, 0.3, -0.3), 0.0)
         plan.wrist("l", tc, (-0.10, -0.25, 0.30), (0.5, -0.5, -0.5))
         # the arm stays long as it sweeps down in front (an arc, not a chord past the shoulder)
         plan.wrist("r", tc + 0.12, (-0.12, 0.02, 0.48), (0.7, -0.5, -0.3), -0.1)
         tf = tc + 0.30 * j(0.05)
-        plan.pelvis_at(tf, plan.body(0.0, 0.22), py=STAND_H - 0.05, pyaw=0.2, twist=0.4, tlean=0.35, tside=0.0,
-                       hpitch=0.1)  # fmt: skip
+        plan.pelvis_at(
+            tf, plan.body(0.0, 0.22), py=STAND_H - 0.05, pyaw=0.2, twist=0.4, tlean=0.35, tside=0.0, hpitch=0.1
+        )
         plan.wrist("r", tf, (-0.35, -0.38, 0.20), (0.6, -0.6, -0.4), -0.2)
         plan.wrist("l", tf, (0.05, -0.40, 0.10), _BACK_POLE)
         tl = plan.step(
@@ -570,9 +584,7 @@ def _punches(plan: _Plan, rng, count: int) -> None:
     )
     guard_xz = plan.body(0.01, 0.1)
     t += 0.15
-    plan.pelvis_at(
-        t, guard_xz, py=STAND_H - 0.04, pyaw=-0.25, twist=0.0, tlean=0.1, hpitch=0.1
-    )
+    plan.pelvis_at(t, guard_xz, py=STAND_H - 0.04, pyaw=-0.25, twist=0.0, tlean=0.1, hpitch=0.1)
     for s in "lr":
         plan.wrist(s, t, _GUARD, _GUARD_POLE, 0.0)
     arm = "l"
@@ -608,14 +620,9 @@ def _punches(plan: _Plan, rng, count: int) -> None:
         plan.pelvis_at(t, guard_xz, pyaw=-0.25, twist=0.0)
         arm = ("r" if arm == "l" else "l") if rng.random() < 0.75 else arm
     t += 0.3
-    plan.pelvis_at(
-        t + 0.3, stance, py=STAND_H, pyaw=0.0, twist=0.0, tlean=0.02, hpitch=0.0
-    )
-    t = plan.step(
-        0, t, t + 0.35, plan.body(STAND_W, 0.0), plan.heading + 0.08, 0.0, 0.0, 0.04
-    )
+    plan.pelvis_at(t + 0.3, stance, py=STAND_H, pyaw=0.0, twist=0.0, tlean=0.02, hpitch=0.0)
+    t = plan.step(0, t, t + 0.35, plan.body(STAND_W, 0.0), plan.heading + 0.08, 0.0, 0.0, 0.04)
     for s in "lr":
         plan.wrist(s, t + 0.2, _HANG, _BACK_POLE)
     plan.segments.append((t0, t + 0.3, "punch"))
     plan.t = t + 0.3
-

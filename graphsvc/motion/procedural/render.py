@@ -64,18 +64,14 @@ def _foot_track(plants: list, t: np.ndarray):
     def heel_ankle(p, a):
         """Ankle position with the heel raised a (rad) about the planted toe."""
         q = quat.mul(quat.about_y(np.full(np.shape(a), p.heading)), _rot_x(a))
-        toe = np.array([p.x, ANKLE_H, p.z]) + quat.rotate(
-            quat.about_y(p.heading), TOE_FROM_ANKLE
-        )
+        toe = np.array([p.x, ANKLE_H, p.z]) + quat.rotate(quat.about_y(p.heading), TOE_FROM_ANKLE)
         return toe + quat.rotate(q, np.broadcast_to(heel_vec, np.shape(a) + (3,)))
 
     for k, p in enumerate(plants):
         m = (t >= p.t_land) & (t <= p.t_off)
         if m.any():
             if p.heel > 0.0 and np.isfinite(p.t_off):
-                a = p.heel * _min_jerk(
-                    (t[m] - (p.t_off - p.heel_s)) / max(p.heel_s, 1e-6)
-                )
+                a = p.heel * _min_jerk((t[m] - (p.t_off - p.heel_s)) / max(p.heel_s, 1e-6))
             else:
                 a = np.zeros(m.sum())
             ankle[m] = heel_ankle(p, a)
@@ -100,10 +96,7 @@ def _foot_track(plants: list, t: np.ndarray):
                 toe_pitch[m] = -p.heel * (1.0 - s)
     foot_rot = quat.mul(quat.about_y(yaw), _rot_x(pitch))
     # keep the toe above the floor in early swing (raise the ankle if needed)
-    toe_y = (
-        ankle[:, 1]
-        + quat.rotate(foot_rot, np.broadcast_to(TOE_FROM_ANKLE, (F, 3)))[:, 1]
-    )
+    toe_y = ankle[:, 1] + quat.rotate(foot_rot, np.broadcast_to(TOE_FROM_ANKLE, (F, 3)))[:, 1]
     ankle[:, 1] += np.maximum(0.0, TOE_H - toe_y)
     stance = np.zeros(F, dtype=bool)
     for p in plants:
@@ -117,9 +110,7 @@ def _render(plan: _Plan, sk: Skeleton, t: np.ndarray) -> tuple[np.ndarray, np.nd
     F = t.shape[0]
     c = _channels(plan, t)
     yaw = c["yaw"] + c["pyaw"]
-    pelvis_rot = quat.mul(
-        quat.about_y(yaw), quat.mul(_rot_x(c["lean"]), _rot_z(c["roll"]))
-    )
+    pelvis_rot = quat.mul(quat.about_y(yaw), quat.mul(_rot_x(c["lean"]), _rot_z(c["roll"])))
     feet = [_foot_track(plan.plants[f], t) for f in (0, 1)]
     pelvis = np.stack([c["px"], c["py"], c["pz"]], -1)
 
@@ -142,12 +133,7 @@ def _render(plan: _Plan, sk: Skeleton, t: np.ndarray) -> tuple[np.ndarray, np.nd
         if not deficit.any():
             break
         sigma = 0.05 * _rate_of(t)
-        deficit = (
-            gaussian_filter1d(
-                maximum_filter1d(deficit, 2 * int(np.ceil(2 * sigma)) + 1), sigma
-            )
-            * 1.05
-        )
+        deficit = gaussian_filter1d(maximum_filter1d(deficit, 2 * int(np.ceil(2 * sigma)) + 1), sigma) * 1.05
         pelvis[:, 1] -= deficit + 1e-4
 
     R = quat.identity((F, sk.num_joints))
@@ -185,26 +171,27 @@ def _render(plan: _Plan, sk: Skeleton, t: np.ndarray) -> tuple[np.ndarray, np.nd
         flip = np.array([sign, 1.0, 1.0])  # side-local x (away from midline) → chest x
         rel = np.stack([c[f"{s}_wx"], c[f"{s}_wy"], c[f"{s}_wz"]], -1) * flip
         pole = np.stack([c[f"{s}_px"], c[f"{s}_py"], c[f"{s}_pz"]], -1) * flip
-        shoulder = chest_p + quat.rotate(
-            chest_w, np.broadcast_to(_OFF[f"{s}_shoulder"], (F, 3))
-        )
+        shoulder = chest_p + quat.rotate(chest_w, np.broadcast_to(_OFF[f"{s}_shoulder"], (F, 3)))
         l1, l2, _ = two_bone_ik(
-            shoulder, shoulder + quat.rotate(chest_w, rel), quat.rotate(chest_w, pole), chest_w,
-            UPPER_ARM, FOREARM, (sign, 0.0, 0.0), (0.0, 0.0, -1.0), soft=True,
-        )  # fmt: skip
+            shoulder,
+            shoulder + quat.rotate(chest_w, rel),
+            quat.rotate(chest_w, pole),
+            chest_w,
+            UPPER_ARM,
+            FOREARM,
+            (sign, 0.0, 0.0),
+            (0.0, 0.0, -1.0),
+            soft=True,
+        )
         R[:, _IDX[f"{s}_shoulder"]] = l1
         R[:, _IDX[f"{s}_elbow"]] = l2
         R[:, _IDX[f"{s}_wrist"]] = _rot_z(sign * c[f"{s}_hand"])  # flex/extend the hand
 
     for f, s in ((0, "l"), (1, "r")):
         ankle, foot_rot, toe_rot, _, swing_w = feet[f]
-        hip = pelvis + quat.rotate(
-            pelvis_rot, np.broadcast_to(_OFF[f"{s}_hip"], (F, 3))
-        )
+        hip = pelvis + quat.rotate(pelvis_rot, np.broadcast_to(_OFF[f"{s}_hip"], (F, 3)))
         ankle = _soft_reach(hip, ankle, swing_w, THIGH + SHIN)
-        knee_dir = quat.rotate(
-            foot_rot, np.broadcast_to(np.array([0.0, 0.0, 1.0]), (F, 3))
-        )
+        knee_dir = quat.rotate(foot_rot, np.broadcast_to(np.array([0.0, 0.0, 1.0]), (F, 3)))
         knee_dir[:, 1] = 0.0
         l1, l2, hip_w = two_bone_ik(
             hip,
@@ -218,18 +205,14 @@ def _render(plan: _Plan, sk: Skeleton, t: np.ndarray) -> tuple[np.ndarray, np.nd
         )
         R[:, _IDX[f"{s}_hip"]] = l1
         R[:, _IDX[f"{s}_knee"]] = l2
-        R[:, _IDX[f"{s}_ankle"]] = quat.mul(
-            quat.conjugate(quat.mul(hip_w, l2)), foot_rot
-        )
+        R[:, _IDX[f"{s}_ankle"]] = quat.mul(quat.conjugate(quat.mul(hip_w, l2)), foot_rot)
         R[:, _IDX[f"{s}_toe"]] = toe_rot
     # one sign per quaternion stream: keep w ≥ 0 for tidy interpolation downstream
     R *= np.where(R[..., :1] < 0.0, -1.0, 1.0)
     return R, T
 
 
-def _soft_reach(
-    hip: np.ndarray, ankle: np.ndarray, weight: np.ndarray, length: float
-) -> np.ndarray:
+def _soft_reach(hip: np.ndarray, ankle: np.ndarray, weight: np.ndarray, length: float) -> np.ndarray:
     """Pull swing-foot targets (F, 3) smoothly back within reach of the hip: beyond
     90 % of the leg length, distances saturate (tanh) below full extension. Blended
     in by `weight` (0 at lift-off and landing), so planted feet are never moved."""
@@ -243,4 +226,3 @@ def _soft_reach(
 
 def _rate_of(t: np.ndarray) -> float:
     return 1.0 / (t[1] - t[0]) if t.shape[0] > 1 else 30.0
-

@@ -60,9 +60,14 @@ class Body:
 def graph_body(graph: MotionGraph, node: int = 0) -> Body:
     """The graph's skeleton at node `node`'s translations, with its layout's placement."""
     parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
-    return Body(parents, pose_layout(graph.skeleton, graph.params.get("mapping")),
-                graph.node_rotations[node].astype(np.float64), graph.node_translations[node].astype(np.float64),
-                meta.graph_placement(graph), float(graph.rate_hz))  # fmt: skip
+    return Body(
+        parents,
+        pose_layout(graph.skeleton, graph.params.get("mapping")),
+        graph.node_rotations[node].astype(np.float64),
+        graph.node_translations[node].astype(np.float64),
+        meta.graph_placement(graph),
+        float(graph.rate_hz),
+    )
 
 
 def unit_times(frames: int, length: int, warp=()) -> np.ndarray:
@@ -90,7 +95,7 @@ def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray
     L, lay = values.shape[0], body.layout
     rot = np.repeat(body.rot[None], L, axis=0)
     trans = np.repeat(body.trans[None], L, axis=0)
-    q = values[:, 5: lay.dims].reshape(L, -1, 4)
+    q = values[:, 5 : lay.dims].reshape(L, -1, 4)
     rot[:, lay.joints] = q / np.maximum(np.linalg.norm(q, axis=2, keepdims=True), 1e-12)
     rel = values[:, 0:4] / np.maximum(np.linalg.norm(values[:, 0:4], axis=1, keepdims=True), 1e-12)
     return rot, trans, rel, values[:, 4].copy()
@@ -99,16 +104,26 @@ def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray
 def placed(rot, trans, rel, height, ground, heading, body: Body) -> tuple[np.ndarray, np.ndarray]:
     """Local frames put at ground (L, 2) m and heading (L,) rad (in place; returned)."""
     src_rot, src_pos = forward_kinematics(rot, trans, body.parents)
-    place_poses(rot, trans, np.ascontiguousarray(rel), np.ascontiguousarray(height), np.ascontiguousarray(ground),
-                np.ascontiguousarray(heading), src_rot, src_pos, body.parents, body.layout.pelvis,
-                body.layout.carrier)  # fmt: skip
+    place_poses(
+        rot,
+        trans,
+        np.ascontiguousarray(rel),
+        np.ascontiguousarray(height),
+        np.ascontiguousarray(ground),
+        np.ascontiguousarray(heading),
+        src_rot,
+        src_pos,
+        body.parents,
+        body.layout.pelvis,
+        body.layout.carrier,
+    )
     return rot, trans
 
 
 def simulate_unit(values: np.ndarray, body: Body) -> np.ndarray:
     """(L, S, 3) the layout's readings (g) of a unit's values, on its own track."""
     d = body.layout.dims
-    ground, heading = meta.integrate_path(np.zeros(2), 0.0, values[1:, d: d + 2], values[1:, d + 2])
+    ground, heading = meta.integrate_path(np.zeros(2), 0.0, values[1:, d : d + 2], values[1:, d + 2])
     rot, trans = placed(*local_frames(values, body), ground, heading, body)
     world_rot, world_pos = forward_kinematics(rot, trans, body.parents)
     return simulate_accelerations(world_rot, world_pos, body.placement, body.rate_hz).astype(np.float64) / GRAVITY
@@ -138,8 +153,9 @@ def start_rows(t: Tensor, measured: np.ndarray, inside: np.ndarray, count: int) 
     return [(int(k), costs[int(k)]) for k in order]
 
 
-def fit_unit(t: Tensor, measured: np.ndarray, inside: np.ndarray, body: Body, prior: float, warp: bool,
-             evaluations: int) -> UnitFit:  # fmt: skip
+def fit_unit(
+    t: Tensor, measured: np.ndarray, inside: np.ndarray, body: Body, prior: float, warp: bool, evaluations: int
+) -> UnitFit:
     """The coefficients (and warp) of tensor t's unit best explaining `measured` (L, S, 3)
     g on frames `inside` (L,) bool (module docstring)."""
     L = measured.shape[0]
@@ -159,25 +175,35 @@ def fit_unit(t: Tensor, measured: np.ndarray, inside: np.ndarray, body: Body, pr
         p0 = np.concatenate([*t.row_coefficients(row // R, row % R), np.zeros(J)])
 
         def values_of(p):
-            return unit_values(t, p[:kS], p[kS: kS + kR], L, p[kS + kR:], d)
+            return unit_values(t, p[:kS], p[kS : kS + kR], L, p[kS + kR :], d)
 
         def residual(p, p0=p0, values_of=values_of):
             sim = simulate_unit(values_of(p), body).reshape(L, -1)
             return np.concatenate([(sim[use] - m[use]).reshape(-1) * scale, prior * (p - p0)])
 
         if count == 0:
-            return UnitFit(p0[:kS], p0[kS: kS + kR], np.zeros(J), values_of(p0), 0.0, 0.0, row, 0)
+            return UnitFit(p0[:kS], p0[kS : kS + kR], np.zeros(J), values_of(p0), 0.0, 0.0, row, 0)
         start = residual(p0)
         lo, hi = np.full(p0.size, -np.inf), np.full(p0.size, np.inf)
-        lo[kS + kR:], hi[kS + kR:] = -WARP_LIMIT, WARP_LIMIT
+        lo[kS + kR :], hi[kS + kR :] = -WARP_LIMIT, WARP_LIMIT
         sol = least_squares(residual, p0, bounds=(lo, hi), method="trf", max_nfev=evaluations)
         p = sol.x
-        fit = UnitFit(p[:kS].copy(), p[kS: kS + kR].copy(), p[kS + kR:].copy(), values_of(p),
-                      float(np.mean((sol.fun[:count] / scale) ** 2)), float(np.mean((start[:count] / scale) ** 2)), row,
-                      int(sol.nfev))  # fmt: skip
+        fit = UnitFit(
+            p[:kS].copy(),
+            p[kS : kS + kR].copy(),
+            p[kS + kR :].copy(),
+            values_of(p),
+            float(np.mean((sol.fun[:count] / scale) ** 2)),
+            float(np.mean((start[:count] / scale) ** 2)),
+            row,
+            int(sol.nfev),
+        )
         if best is None or fit.cost < best.cost:
-            best = replace(fit, evaluations=fit.evaluations + (best.evaluations if best else 0),
-                           start_cost=min(fit.start_cost, best.start_cost) if best else fit.start_cost)
+            best = replace(
+                fit,
+                evaluations=fit.evaluations + (best.evaluations if best else 0),
+                start_cost=min(fit.start_cost, best.start_cost) if best else fit.start_cost,
+            )
         else:
             best = replace(best, evaluations=best.evaluations + fit.evaluations)
     return best

@@ -96,10 +96,14 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     values = np.zeros((N, layout.dims + EXTRA), np.float32)
     parents = graph.skeleton.parents
     for c in range(C):
-        n = nodes[start[c]: start[c + 1]]
-        values[start[c]: start[c + 1], : layout.dims] = pose_vectors(
-            graph.node_rotations[n].astype(np.float64), graph.node_translations[n].astype(np.float64), parents, layout,
-            graph.node_heading[n].astype(np.float64))  # fmt: skip
+        n = nodes[start[c] : start[c + 1]]
+        values[start[c] : start[c + 1], : layout.dims] = pose_vectors(
+            graph.node_rotations[n].astype(np.float64),
+            graph.node_translations[n].astype(np.float64),
+            parents,
+            layout,
+            graph.node_heading[n].astype(np.float64),
+        )
     refs = hemisphere_refs(values[:, : layout.dims], layout.slot)
     align_hemispheres(values, refs, layout.slot)
     e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
@@ -111,20 +115,27 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     readings = np.zeros((N, 3 * S), np.float32)
     readings[has] = np.asarray(graph.edge_acc)[edge[has]].reshape(-1, 3 * S) / GRAVITY
     d = layout.dims
-    values[has, d: d + 2] = np.asarray(graph.edge_offset)[edge[has]]
+    values[has, d : d + 2] = np.asarray(graph.edge_offset)[edge[has]]
     values[has, d + 2] = np.asarray(graph.edge_heading)[edge[has]]
-    values[:, d + 3: d + 5] = np.asarray(graph.node_contacts)[nodes]
+    values[:, d + 3 : d + 5] = np.asarray(graph.node_contacts)[nodes]
     for c in range(C):  # (a clip's first frame: its second's readings, a step of zero)
         if sizes[c] > 1 and not has[start[c]]:
             readings[start[c]] = readings[start[c] + 1]
     ground = np.asarray(graph.node_ground, dtype=np.float64)[nodes]
     speed = np.zeros(C)
     for c in range(C):
-        g = ground[start[c]: start[c + 1]]
+        g = ground[start[c] : start[c + 1]]
         if g.shape[0] > 1:
             speed[c] = float(np.linalg.norm(np.diff(g, axis=0), axis=1).sum()) * graph.rate_hz / (g.shape[0] - 1)
-    return {"clip_start": start, "nodes": nodes, "values": values, "readings": readings, "speed": speed,
-            "pose_dims": np.array([d], np.int64), "hemispheres": refs}  # fmt: skip
+    return {
+        "clip_start": start,
+        "nodes": nodes,
+        "values": values,
+        "readings": readings,
+        "speed": speed,
+        "pose_dims": np.array([d], np.int64),
+        "hemispheres": refs,
+    }
 
 
 def hemisphere_refs(poses: np.ndarray, slot: np.ndarray) -> np.ndarray:
@@ -132,7 +143,7 @@ def hemisphere_refs(poses: np.ndarray, slot: np.ndarray) -> np.ndarray:
     eigenvector of Σ q qᵀ over the frames."""
     refs = np.empty((slot.size, 4))
     for k, s in enumerate(slot):
-        q = np.asarray(poses[:, s: s + 4], dtype=np.float64)
+        q = np.asarray(poses[:, s : s + 4], dtype=np.float64)
         refs[k] = np.linalg.eigh(q.T @ q)[1][:, -1]
     return refs
 
@@ -143,8 +154,8 @@ def align_hemispheres(values: np.ndarray, refs: np.ndarray, slot: np.ndarray) ->
     whose rotation stays near 180°: Bandai's skeleton has two such, whose w is within
     0.3 of zero in every frame, and a mix of units across the flip is no rotation.)"""
     for k, s in enumerate(slot):
-        flip = values[:, s: s + 4] @ refs[k] < 0.0
-        values[flip, s: s + 4] *= -1.0
+        flip = values[:, s : s + 4] @ refs[k] < 0.0
+        values[flip, s : s + 4] *= -1.0
 
 
 def touchdowns(contacts: np.ndarray, min_gap: int) -> list[tuple[int, int]]:
@@ -197,7 +208,7 @@ def gather_units(graph: MotionGraph, data: dict, clips: np.ndarray) -> tuple[lis
         for c in sorted(members, key=lambda c: (clip_style_take(graph.clips[c]["name"])[1], c)):
             style = clip_style_take(graph.clips[c]["name"])[0]
             if moving:
-                contacts = np.asarray(data["values"])[start[c]: start[c + 1], d + 3: d + 5]
+                contacts = np.asarray(data["values"])[start[c] : start[c + 1], d + 3 : d + 5]
                 for a, b, foot in step_units(contacts, graph.rate_hz):
                     groups[foot].setdefault(style, []).append((c, a, b))
             else:
@@ -209,7 +220,7 @@ def gather_units(graph: MotionGraph, data: dict, clips: np.ndarray) -> tuple[lis
 
 def unit_values(data: dict, clip: int, a: int, b: int) -> np.ndarray:
     s = int(np.asarray(data["clip_start"])[clip])
-    return np.asarray(data["values"], dtype=np.float64)[s + a: s + b]
+    return np.asarray(data["values"], dtype=np.float64)[s + a : s + b]
 
 
 def warp_values(values: np.ndarray, times: np.ndarray, pose_dims: int) -> np.ndarray:
@@ -218,14 +229,18 @@ def warp_values(values: np.ndarray, times: np.ndarray, pose_dims: int) -> np.nda
     cumulative track (a unit played faster takes longer steps a frame)."""
     out = tn.sample(values, times)
     d = pose_dims
-    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(values[:, d: d + 3], axis=0)])  # cum[k + 1]: the track at frame k
+    cum = np.concatenate(
+        [np.zeros((1, 3)), np.cumsum(values[:, d : d + 3], axis=0)]
+    )  # cum[k + 1]: the track at frame k
     t = np.asarray(times, dtype=np.float64)
     previous = np.concatenate([[t[0] - 1.0], t[:-1]])
-    out[:, d: d + 3] = tn.sample(cum, t + 1.0) - tn.sample(cum, previous + 1.0)
+    out[:, d : d + 3] = tn.sample(cum, t + 1.0) - tn.sample(cum, previous + 1.0)
     return out
 
 
-def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, align: str = "auto") -> dict[str, np.ndarray] | None:
+def build_tensor(
+    data: dict, group: ClassUnits, max_reps: int, variance: float, align: str = "auto"
+) -> dict[str, np.ndarray] | None:
     """One class's (and foot's) tensor and its truncated HOSVD (module docstring, 4–5),
     or None with fewer than two units."""
     styles = sorted(s for s, u in group.units.items() if u)
@@ -235,8 +250,7 @@ def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, 
     rows = []
     for s in styles:
         units = group.units[s]
-        pick = np.linspace(0, len(units) - 1, R).round().astype(int) if len(units) >= R else \
-            np.arange(R) % len(units)  # fmt: skip
+        pick = np.linspace(0, len(units) - 1, R).round().astype(int) if len(units) >= R else np.arange(R) % len(units)
         rows += [units[k] for k in pick]
     lengths = np.array([b - a for _, a, b in rows])
     ref = int(np.flatnonzero(lengths == np.sort(lengths)[(lengths.size - 1) // 2])[0])
@@ -258,9 +272,13 @@ def build_tensor(data: dict, group: ClassUnits, max_reps: int, variance: float, 
             times = np.linspace(0.0, b - a - 1.0, F)
         X[:, :, k // R, k % R] = warp_values(v, times, d).T
         row_frame[k] = a + times
-        row_readings[k] = tn.sample(np.asarray(data["readings"], np.float64)[start[c] + a: start[c] + b], times)
-    return {**decompose(X, variance), "row_clip": np.array([c for c, _, _ in rows], np.int64), "row_frame": row_frame,
-            "row_readings": row_readings}  # fmt: skip
+        row_readings[k] = tn.sample(np.asarray(data["readings"], np.float64)[start[c] + a : start[c] + b], times)
+    return {
+        **decompose(X, variance),
+        "row_clip": np.array([c for c, _, _ in rows], np.int64),
+        "row_frame": row_frame,
+        "row_readings": row_readings,
+    }
 
 
 def decompose(X: np.ndarray, variance: float) -> dict[str, np.ndarray]:
@@ -271,9 +289,18 @@ def decompose(X: np.ndarray, variance: float) -> dict[str, np.ndarray]:
     X = X - mean[:, :, None, None]
     Us, ss = zip(*(tn.mode_svd(X, mode) for mode in range(4)))
     kS, kR = tn.kept_count(ss[2], variance), tn.kept_count(ss[3], variance)
-    return {"mean": mean, "core_t": tn.natural_core(X, Us[2][:, :kS], Us[3][:, :kR]), "u_style": Us[2],
-            "u_rep": Us[3], "sv_style": ss[2], "sv_rep": ss[3], "sv_values": ss[0], "sv_frames": ss[1],
-            "kept": np.array([kS, kR], np.int64), "tensor": X}  # fmt: skip
+    return {
+        "mean": mean,
+        "core_t": tn.natural_core(X, Us[2][:, :kS], Us[3][:, :kR]),
+        "u_style": Us[2],
+        "u_rep": Us[3],
+        "sv_style": ss[2],
+        "sv_rep": ss[3],
+        "sv_values": ss[0],
+        "sv_frames": ss[1],
+        "kept": np.array([kS, kR], np.int64),
+        "tensor": X,
+    }
 
 
 def usable_clips(graph: MotionGraph, allowed: np.ndarray | None) -> np.ndarray:
@@ -282,9 +309,16 @@ def usable_clips(graph: MotionGraph, allowed: np.ndarray | None) -> np.ndarray:
     if allowed is None:
         return np.arange(C)
     allowed = np.asarray(allowed, dtype=bool)
-    return np.array([c for c in range(C) if allowed[int(graph.clips[c]["first_node"]):
-                                                    int(graph.clips[c]["first_node"]) + int(graph.clips[c]["frames"])].all()],
-                    dtype=np.int64)  # fmt: skip
+    return np.array(
+        [
+            c
+            for c in range(C)
+            if allowed[
+                int(graph.clips[c]["first_node"]) : int(graph.clips[c]["first_node"]) + int(graph.clips[c]["frames"])
+            ].all()
+        ],
+        dtype=np.int64,
+    )
 
 
 def model_key(own, clips: np.ndarray) -> str:
@@ -309,8 +343,10 @@ def learn(graph: MotionGraph, data: dict, clips: np.ndarray, own) -> dict[str, n
         table.append([labels.index(group.label), group.foot, t["core_t"].shape[1]])
         out.update({f"t{i}.{k}": v for k, v in t.items()})
     if not table:
-        raise InputError("multilinear: no class of the knowledge base has two takes (clips named <content>_<style>_<take>, "
-                         "the take three digits or more) to make a tensor of")  # fmt: skip
+        raise InputError(
+            "multilinear: no class of the knowledge base has two takes (clips named <content>_<style>_<take>, "
+            "the take three digits or more) to make a tensor of"
+        )
     out["tensors"] = np.array(table, np.int64).reshape(-1, 3)
     out["locomotion"] = np.array([labels.index(k) for k, v in sorted(locomotion.items()) if v], np.int64)
     out["clips"] = np.asarray(clips, np.int64)
@@ -355,11 +391,19 @@ class Tensor:
 
 def tensor_of(t: dict, label: int = 0, foot: int = -1) -> Tensor:
     """A Tensor from one tensor's arrays (`decompose`'s, with the rows' clip, frames and readings)."""
-    return Tensor(label, foot, int(np.asarray(t["core_t"]).shape[1]), *(np.asarray(t[k]) for k in (
-        "mean", "core_t", "u_style", "u_rep", "row_clip", "row_frame", "row_readings")))  # fmt: skip
+    return Tensor(
+        label,
+        foot,
+        int(np.asarray(t["core_t"]).shape[1]),
+        *(np.asarray(t[k]) for k in ("mean", "core_t", "u_style", "u_rep", "row_clip", "row_frame", "row_readings")),
+    )
 
 
 def tensors_of(arrays: dict) -> list[Tensor]:
     table = np.asarray(arrays["tensors"])
-    return [tensor_of({k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith(f"t{i}.")}, int(row[0]),
-                      int(row[1])) for i, row in enumerate(table)]  # fmt: skip
+    return [
+        tensor_of(
+            {k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith(f"t{i}.")}, int(row[0]), int(row[1])
+        )
+        for i, row in enumerate(table)
+    ]

@@ -53,7 +53,7 @@ from graphsvc.strategies.multilinear.model import (
     learn,
     model_key,
     tensors_of,
-    touchdowns,  # fmt: skip
+    touchdowns,
     usable_clips,
 )
 from graphsvc.strategies.multilinear.options import MultilinearOptions
@@ -70,8 +70,10 @@ INDEX_VERSION = 2
 MIN_RUN_S = 0.3
 BLEND_S = 0.15  # half the blending window at a cut between units
 SOURCES = 3  # the heaviest original units a frame's provenance names
-LIVE_REFUSAL = ("multilinear reconstructs whole recordings only (synthesize, evaluate, batch): a motion unit is "
-                "fitted once the search has placed its end, so live streams are refused")  # fmt: skip
+LIVE_REFUSAL = (
+    "multilinear reconstructs whole recordings only (synthesize, evaluate, batch): a motion unit is "
+    "fitted once the search has placed its end, so live streams are refused"
+)
 
 
 def learned_model(graph: MotionGraph, data: dict, own: MultilinearOptions, allowed=None) -> dict:
@@ -79,9 +81,11 @@ def learned_model(graph: MotionGraph, data: dict, own: MultilinearOptions, allow
     graph (learned and written there the first time), held for the graph object."""
     clips = usable_clips(graph, allowed)
     key = model_key(own, clips)
-    return derived(graph, ("multilinear model", key),
-                   lambda: cached_arrays(graph, f"multilinear-{key}", INDEX_VERSION,
-                                         lambda: learn(graph, data, clips, own)))  # fmt: skip
+    return derived(
+        graph,
+        ("multilinear model", key),
+        lambda: cached_arrays(graph, f"multilinear-{key}", INDEX_VERSION, lambda: learn(graph, data, clips, own)),
+    )
 
 
 @dataclass
@@ -98,8 +102,9 @@ class Unit:
     label: int
 
 
-def plan_units(labels: np.ndarray, contacts: np.ndarray, lookup: dict, locomotion: set, rate_hz: float,
-               frames: dict) -> list[Unit]:  # fmt: skip
+def plan_units(
+    labels: np.ndarray, contacts: np.ndarray, lookup: dict, locomotion: set, rate_hz: float, frames: dict
+) -> list[Unit]:
     """The units of a recording (module docstring) from its per-frame class labels (T,)
     and foot contacts (T, 2); lookup: (label, foot) → tensor index (foot −1 for whole
     units); frames: tensor index → its reference length."""
@@ -153,8 +158,16 @@ class MultilinearStrategy(Strategy):
         out = ["latency_s"] if options.latency_s is not None else []
         return sorted(out + super().ignored_options(options))
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         from graphsvc.strategies import get
 
         own = self.own(options)
@@ -166,16 +179,24 @@ class MultilinearStrategy(Strategy):
         T = inp.num_samples
         shortest = min(t.frames for t in tensors)
         if T < shortest:
-            raise InputError(f"multilinear: the recording's {T} samples ({T / rate:.2f} s) are shorter than one motion "
-                             f"unit (the shortest the model holds is {shortest} frames, {shortest / rate:.2f} s)")  # fmt: skip
+            raise InputError(
+                f"multilinear: the recording's {T} samples ({T / rate:.2f} s) are shorter than one motion "
+                f"unit (the shortest the model holds is {shortest} frames, {shortest / rate:.2f} s)"
+            )
         forced = None if own.label is None else self._forced_label(graph, tensors, own.label)
 
         t0 = time.perf_counter()
         viterbi = get("viterbi")
-        search_options = Options(strategy="viterbi", weights=options.weights, shared=replace(options.shared, refine=False),
-                                 settings=options.settings, heading_from_track=options.heading_from_track)  # fmt: skip
-        found = viterbi.reconstruct(prepared_index(viterbi, graph), graph, inp, search_options, allowed, threads,
-                                    should_stop)  # fmt: skip
+        search_options = Options(
+            strategy="viterbi",
+            weights=options.weights,
+            shared=replace(options.shared, refine=False),
+            settings=options.settings,
+            heading_from_track=options.heading_from_track,
+        )
+        found = viterbi.reconstruct(
+            prepared_index(viterbi, graph), graph, inp, search_options, allowed, threads, should_stop
+        )
         nodes, edges = found.node_path, found.edge_path
         search_s = time.perf_counter() - t0
 
@@ -185,8 +206,14 @@ class MultilinearStrategy(Strategy):
             labels[:] = forced
         contacts = np.asarray(graph.node_contacts)[nodes]
         lookup = {(t.label, t.foot): k for k, t in enumerate(tensors)}
-        units = plan_units(labels, contacts, lookup, set(int(x) for x in np.asarray(arrays["locomotion"])), rate,
-                           {k: t.frames for k, t in enumerate(tensors)})  # fmt: skip
+        units = plan_units(
+            labels,
+            contacts,
+            lookup,
+            set(int(x) for x in np.asarray(arrays["locomotion"])),
+            rate,
+            {k: t.frames for k, t in enumerate(tensors)},
+        )
         body = graph_body(graph)
         values = self._search_values(graph, found.motion, nodes, edges, body)
         align_hemispheres(values, np.asarray(index["hemispheres"]), body.layout.slot)
@@ -213,8 +240,8 @@ class MultilinearStrategy(Strategy):
             unit_body = replace(body, trans=np.asarray(graph.node_translations[int(nodes[u.lo])], np.float64))
             fit = fit_unit(t, measured, inside, unit_body, own.prior, own.warp, own.evaluations)
             k = u.lo - u.start
-            values[u.lo: u.hi] = fit.values[k: k + u.hi - u.lo]
-            trans_of[u.lo: u.hi] = unit_body.trans
+            values[u.lo : u.hi] = fit.values[k : k + u.hi - u.lo]
+            trans_of[u.lo : u.hi] = unit_body.trans
             entered[u.lo] = fit.values[k - 1] if k > 0 else 2.0 * fit.values[k] - fit.values[min(k + 1, L - 1)]
             w = t.row_weights(fit.x_s, fit.x_r)
             order = np.argsort(-np.abs(w), kind="stable")[:SOURCES]
@@ -222,15 +249,29 @@ class MultilinearStrategy(Strategy):
             times = unit_times(t.frames, L, fit.warp)
             for f in range(u.lo, u.hi):
                 ref = times[f - u.start]
-                sources[f] = [(int(t.row_clip[r]), float(np.interp(ref, np.arange(t.frames), t.row_frame[r])),
-                               float(s)) for r, s in zip(order, share)]  # fmt: skip
-            rows.append({"class": graph.labels[u.label], "foot": ("left", "right", "whole")[t.foot], "start_frame": u.lo,
-                         "frames": u.hi - u.lo, "unit_frames": L, "x_style": [round(float(x), 5) for x in fit.x_s],
-                         "x_repetition": [round(float(x), 5) for x in fit.x_r], "warp": [round(float(w), 4) for w in fit.warp],
-                         "cost": round(fit.cost, 6), "start_cost": round(fit.start_cost, 6),
-                         "start_row": fit.start_row, "evaluations": fit.evaluations})  # fmt: skip
-        motion = self._assemble(graph, body, values, trans_of, entered, units, inp, options,
-                                found.motion if own.hold_feet else None)  # fmt: skip
+                sources[f] = [
+                    (int(t.row_clip[r]), float(np.interp(ref, np.arange(t.frames), t.row_frame[r])), float(s))
+                    for r, s in zip(order, share)
+                ]
+            rows.append(
+                {
+                    "class": graph.labels[u.label],
+                    "foot": ("left", "right", "whole")[t.foot],
+                    "start_frame": u.lo,
+                    "frames": u.hi - u.lo,
+                    "unit_frames": L,
+                    "x_style": [round(float(x), 5) for x in fit.x_s],
+                    "x_repetition": [round(float(x), 5) for x in fit.x_r],
+                    "warp": [round(float(w), 4) for w in fit.warp],
+                    "cost": round(fit.cost, 6),
+                    "start_cost": round(fit.start_cost, 6),
+                    "start_row": fit.start_row,
+                    "evaluations": fit.evaluations,
+                }
+            )
+        motion = self._assemble(
+            graph, body, values, trans_of, entered, units, inp, options, found.motion if own.hold_feet else None
+        )
         fit_s = time.perf_counter() - t0
         frame_labels = np.asarray(graph.labels, dtype=object)[labels]
         K = SOURCES
@@ -241,13 +282,23 @@ class MultilinearStrategy(Strategy):
         fallback = sum(u.hi - u.lo for u in units if u.tensor < 0)
         report = {
             "cost": float(sum(r["cost"] * r["frames"] for r in rows)),
-            "multilinear": {"tensors": [{"class": graph.labels[t.label], "foot": ("left", "right", "whole")[t.foot],
-                                         "frames": t.frames, "styles": int(t.u_style.shape[0]),
-                                         "repetitions": int(t.u_rep.shape[0]), "kept": list(t.kept)}
-                                        for t in tensors],
-                            "units": rows, "search_frames": int(fallback),
-                            "search_labels": found.report.get("labels", []),
-                            "class": None if forced is None else graph.labels[forced]},  # fmt: skip
+            "multilinear": {
+                "tensors": [
+                    {
+                        "class": graph.labels[t.label],
+                        "foot": ("left", "right", "whole")[t.foot],
+                        "frames": t.frames,
+                        "styles": int(t.u_style.shape[0]),
+                        "repetitions": int(t.u_rep.shape[0]),
+                        "kept": list(t.kept),
+                    }
+                    for t in tensors
+                ],
+                "units": rows,
+                "search_frames": int(fallback),
+                "search_labels": found.report.get("labels", []),
+                "class": None if forced is None else graph.labels[forced],
+            },
             "labels": label_runs(list(frame_labels)),
             "timings_s": {"warm_up": round(learn_s, 4), "search": round(search_s, 4), "synthesis": round(fit_s, 4)},
             "samples_per_s": round(T / max(search_s + fit_s, 1e-9), 1),
@@ -257,12 +308,15 @@ class MultilinearStrategy(Strategy):
     @staticmethod
     def _forced_label(graph: MotionGraph, tensors: list[Tensor], name: str) -> int:
         if name not in graph.labels:
-            raise InputError(f"multilinear label {name!r} is not a class of the knowledge base "
-                             f"({', '.join(graph.labels)})")  # fmt: skip
+            raise InputError(
+                f"multilinear label {name!r} is not a class of the knowledge base ({', '.join(graph.labels)})"
+            )
         c = graph.labels.index(name)
         if not any(t.label == c for t in tensors):
-            raise InputError(f"multilinear label {name!r}: the class has fewer than two takes usable "
-                             f"(clips named <content>_<style>_<take>), no tensor to fit")  # fmt: skip
+            raise InputError(
+                f"multilinear label {name!r}: the class has fewer than two takes usable "
+                f"(clips named <content>_<style>_<take>), no tensor to fit"
+            )
         return c
 
     @staticmethod
@@ -272,16 +326,26 @@ class MultilinearStrategy(Strategy):
         d = body.layout.dims
         T = nodes.size
         out = np.zeros((T, d + 5))
-        out[:, :d] = pose_vectors(motion.rotations.astype(np.float64), motion.translations.astype(np.float64),
-                                  body.parents, body.layout)  # fmt: skip
-        out[1:, d: d + 2] = np.asarray(graph.edge_offset)[edges]
+        out[:, :d] = pose_vectors(
+            motion.rotations.astype(np.float64), motion.translations.astype(np.float64), body.parents, body.layout
+        )
+        out[1:, d : d + 2] = np.asarray(graph.edge_offset)[edges]
         out[1:, d + 2] = np.asarray(graph.edge_heading)[edges]
-        out[:, d + 3: d + 5] = np.asarray(graph.node_contacts)[nodes]
+        out[:, d + 3 : d + 5] = np.asarray(graph.node_contacts)[nodes]
         return out
 
     @staticmethod
-    def _assemble(graph: MotionGraph, body: Body, values, trans_of, entered, units, inp: PreparedInput,
-                  options: Options, searched: Motion | None) -> Motion:  # fmt: skip
+    def _assemble(
+        graph: MotionGraph,
+        body: Body,
+        values,
+        trans_of,
+        entered,
+        units,
+        inp: PreparedInput,
+        options: Options,
+        searched: Motion | None,
+    ) -> Motion:
         """The units' values blended at their cuts and put on the root's track; with the
         search's motion, the feet held while the units say they are planted (moving as
         the search's planted feet move: `synthesis.foot_hold`)."""
@@ -293,22 +357,40 @@ class MultilinearStrategy(Strategy):
         cuts = np.array(sorted({u.lo for u in units if 0 < u.lo < T}), np.int64)
         if cuts.size:
             e_rot, _, e_rel, e_height = local_frames(entered[cuts], body)
-            blend_cuts(rot, trans, rel, height, path_tables(graph).below, cuts, e_rot, trans[cuts], e_rel, e_height,
-                       BLEND_S, rate)  # fmt: skip
+            blend_cuts(
+                rot,
+                trans,
+                rel,
+                height,
+                path_tables(graph).below,
+                cuts,
+                e_rot,
+                trans[cuts],
+                e_rel,
+                e_height,
+                BLEND_S,
+                rate,
+            )
         position, heading = tracked_streams(options, inp.position, inp.heading)
         state = _Track(options, rate, *start_state(position, heading, rate))
         ground, turning = np.empty((T, 2)), np.empty(T)
         for t in range(T):
             state.t = t
-            advance_own_track(state, values[t, d: d + 2], float(values[t, d + 2]), values[t, d + 3: d + 5] > 0.5,
-                              None if position is None else position[t], None if heading is None else heading[t])  # fmt: skip
+            advance_own_track(
+                state,
+                values[t, d : d + 2],
+                float(values[t, d + 2]),
+                values[t, d + 3 : d + 5] > 0.5,
+                None if position is None else position[t],
+                None if heading is None else heading[t],
+            )
             ground[t], turning[t] = state.ground, state.heading
         rot, trans = placed(rot, trans, rel, height, ground, turning, body)
         shift_to_smoothed(state.track_inputs, state.track_model, body.parents, trans)
         rot, trans = smooth_poses(rot, trans, options.shared.smooth_s * rate)
         if searched is not None:
             hold = FootHold(graph.skeleton, rate, graph.params.get("mapping"))
-            rot = hold.apply(rot, trans, searched.rotations, searched.translations, values[:, d + 3: d + 5] > 0.5)
+            rot = hold.apply(rot, trans, searched.rotations, searched.translations, values[:, d + 3 : d + 5] > 0.5)
         return Motion(graph.skeleton, rot, trans, rate, name="synthesized", source="multilinear")
 
 
@@ -317,8 +399,11 @@ class _Track:
 
     def __init__(self, options: Options, rate: float, ground0, heading0: float):
         self.alpha = track_pull(options.shared.track_pull_s, rate)
-        self.track_model = (TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate)
-                            if options.weights.position else None)  # fmt: skip
+        self.track_model = (
+            TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate)
+            if options.weights.position
+            else None
+        )
         self.filter = None if self.track_model is None else FixedLagSmoother(self.track_model, 0)
         self.track_inputs: list | None = [] if self.track_model is not None else None
         self.t = 0

@@ -78,8 +78,11 @@ def _index(graph: MotionGraph, arrays: dict, allowed: np.ndarray | None = None) 
     e = np.flatnonzero(np.asarray(graph.edge_kind) == EDGE_ORIGINAL)
     next_of = np.full(graph.num_nodes, -1, dtype=np.int64)
     next_of[np.asarray(graph.edge_src)[e]] = position[np.asarray(graph.edge_dst)[e]]
-    cue = None if graph.edge_up is None else np.asarray(graph.edge_up, np.float32)[np.asarray(edges)].reshape(
-        nodes.size, -1)  # fmt: skip
+    cue = (
+        None
+        if graph.edge_up is None
+        else np.asarray(graph.edge_up, np.float32)[np.asarray(edges)].reshape(nodes.size, -1)
+    )
     return NearestIndex(np.asarray(nodes), np.asarray(edges), np.asarray(readings), cKDTree(readings), next_of, cue)
 
 
@@ -103,8 +106,16 @@ class NearestStrategy(Strategy):
         # path follows it (the shared track pull is not among what it reads)
         return sorted(frame_by_frame_ignored(options) + super().ignored_options(options))
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         t0 = time.perf_counter()
         idx = _index(graph, index, allowed)
         warm_up_synthesis(graph)
@@ -134,8 +145,9 @@ class NearestStrategy(Strategy):
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
 
 
-def choose(idx: NearestIndex, acc: np.ndarray, previous: int = -1, up: np.ndarray | None = None,
-           weight: float = 0.0) -> tuple[np.ndarray, float]:  # fmt: skip
+def choose(
+    idx: NearestIndex, acc: np.ndarray, previous: int = -1, up: np.ndarray | None = None, weight: float = 0.0
+) -> tuple[np.ndarray, float]:
     """(T,) positions in idx.nodes of each sample's frame, and the summed cost (mean over
     sensors of the squared reading difference, g², as the Viterbi search's C_A, plus
     W_R·C_R where the orientation cue counted). acc (T, S, 3) m/s²; up (T, S, W) the

@@ -52,7 +52,7 @@ from graphsvc.strategies.olng.pose import (
     optimise,
     pose_positions,
     sensor_orientations,
-    weighted_pca,  # fmt: skip
+    weighted_pca,
 )
 from graphsvc.synthesis.path import FOOT_BLEND_S, _two_bone_ik, path_tables
 from graphsvc.synthesis.sensor_orientations import impose_at_nodes
@@ -66,8 +66,15 @@ class OlngDecoder:
     None) → (rotations (J, 4), translations (J, 3), sources [(clip, frame, weight)],
     label, row), row being the frame's report entry."""
 
-    def __init__(self, graph: MotionGraph, index: OlngIndex, model: PoseModel, options: OlngOptions, pull_alpha: float,
-                 track_model: TrackModel | None = None):  # fmt: skip
+    def __init__(
+        self,
+        graph: MotionGraph,
+        index: OlngIndex,
+        model: PoseModel,
+        options: OlngOptions,
+        pull_alpha: float,
+        track_model: TrackModel | None = None,
+    ):
         self.graph = graph
         self.index = index
         self.model = model
@@ -158,9 +165,18 @@ class OlngDecoder:
             trans[0, root, 2] += self.ground[1] - self.own[1]
         t3 = time.perf_counter()
         sources, label = self._sources(best, w)
-        row = {"cost": float(cost[0]), "energy": energy, "iterations": iterations, "subspace": dims,
-               "path_length": float(np.dot(w, lengths)), "dropped": int(dropped), "complete": complete,
-               "nn_ms": (t1 - t0) * 1e3, "olng_ms": (t2 - t1) * 1e3, "optimise_ms": (t3 - t2) * 1e3}  # fmt: skip
+        row = {
+            "cost": float(cost[0]),
+            "energy": energy,
+            "iterations": iterations,
+            "subspace": dims,
+            "path_length": float(np.dot(w, lengths)),
+            "dropped": int(dropped),
+            "complete": complete,
+            "nn_ms": (t1 - t0) * 1e3,
+            "olng_ms": (t2 - t1) * 1e3,
+            "optimise_ms": (t3 - t2) * 1e3,
+        }
         return rot, trans, sources, label, row
 
     # ------------------------------------------------------------ parts
@@ -172,8 +188,8 @@ class OlngDecoder:
         ref = self.p_prev if self.p_prev is not None else Q[0]
         slots = self.model.slot
         for s in slots:  # each quaternion to the reference's side
-            flip = Q[:, s: s + 4] @ ref[s: s + 4] < 0.0
-            Q[flip, s: s + 4] *= -1.0
+            flip = Q[:, s : s + 4] @ ref[s : s + 4] < 0.0
+            Q[flip, s : s + 4] *= -1.0
         mean, basis, _ = weighted_pca(Q, w)
         X = np.asarray(idx.positions[best], dtype=np.float64)
         f1, f2 = self.prev[best], self.prev[self.prev[best]]
@@ -197,10 +213,18 @@ class OlngDecoder:
                 weights[3] = 0.0
             else:
                 control = self._control(X, X2, f1, best, w, acc)
-        terms = EnergyTerms(Q, np.ascontiguousarray(w, dtype=np.float64), self.offsets, np.ascontiguousarray(motion),
-                            np.ascontiguousarray(accel), np.ascontiguousarray(control),
-                            zeros if self.x_t is None else self.x_t, zeros if self.x_tm1 is None else self.x_tm1,
-                            weights, self.rate)  # fmt: skip
+        terms = EnergyTerms(
+            Q,
+            np.ascontiguousarray(w, dtype=np.float64),
+            self.offsets,
+            np.ascontiguousarray(motion),
+            np.ascontiguousarray(accel),
+            np.ascontiguousarray(control),
+            zeros if self.x_t is None else self.x_t,
+            zeros if self.x_tm1 is None else self.x_tm1,
+            weights,
+            self.rate,
+        )
         start = self.p_prev if self.p_prev is not None else Q[0]
         p, energy, iterations = optimise(mean, basis, start, terms, self.model)
         return p, energy, iterations, int(basis.shape[1])
@@ -237,13 +261,24 @@ class OlngDecoder:
         rot = g.node_rotations[node].astype(np.float64)[None].copy()
         trans = g.node_translations[node].astype(np.float64)[None].copy()
         for k in range(1, m.active.size):
-            q = p[m.slot[k]: m.slot[k] + 4]
+            q = p[m.slot[k] : m.slot[k] + 4]
             rot[0, m.active[k]] = q / np.linalg.norm(q)
             trans[0, m.active[k]] = self.offsets[k]
         src_rot, src_pos = forward_kinematics(rot, trans, self.parents)
         rel = (p[0:4] / np.linalg.norm(p[0:4]))[None]
-        place_poses(rot, trans, rel, np.array([p[4]]), self.own[None], np.array([self.heading]), src_rot, src_pos,
-                    self.parents, m.pelvis, m.carrier)  # fmt: skip
+        place_poses(
+            rot,
+            trans,
+            rel,
+            np.array([p[4]]),
+            self.own[None],
+            np.array([self.heading]),
+            src_rot,
+            src_pos,
+            self.parents,
+            m.pelvis,
+            m.carrier,
+        )
         return rot, trans
 
     def _contacts(self, best, w) -> np.ndarray:
@@ -271,8 +306,14 @@ class OlngDecoder:
                 if k is None:
                     continue
                 x, x1 = X[:, k], X1[:, k]
-                d = np.stack([c[:, 0] * x[:, 0] + s[:, 0] * x[:, 2] + step[:, 0] - x1[:, 0], x[:, 1] - x1[:, 1],
-                              -s[:, 0] * x[:, 0] + c[:, 0] * x[:, 2] + step[:, 1] - x1[:, 2]], axis=1)  # fmt: skip
+                d = np.stack(
+                    [
+                        c[:, 0] * x[:, 0] + s[:, 0] * x[:, 2] + step[:, 0] - x1[:, 0],
+                        x[:, 1] - x1[:, 1],
+                        -s[:, 0] * x[:, 0] + c[:, 0] * x[:, 2] + step[:, 1] - x1[:, 2],
+                    ],
+                    axis=1,
+                )
                 m = w @ d
                 out[side, n] = (ch * m[0] + sh * m[2], m[1], -sh * m[0] + ch * m[2])
         return out
@@ -306,8 +347,20 @@ class OlngDecoder:
                 self.fade[side] = (da, dt_, k)
                 share = 1.0 - k / (blend + 1.0)
                 target = (here[0] + share * da, here[1] + share * dt_)
-            _two_bone_ik(rot, world_rot, world_pos, self.parents, hip, knee, ankle, toe,
-                         np.asarray(target[0]), np.asarray(target[1]), lateral, 0)  # fmt: skip
+            _two_bone_ik(
+                rot,
+                world_rot,
+                world_pos,
+                self.parents,
+                hip,
+                knee,
+                ankle,
+                toe,
+                np.asarray(target[0]),
+                np.asarray(target[1]),
+                lateral,
+                0,
+            )
             world_rot, world_pos = forward_kinematics(rot, trans, self.parents)
 
     def _sources(self, best, w):
@@ -318,4 +371,3 @@ class OlngDecoder:
         sources = [(int(g.node_clip[nodes[i]]), float(g.node_frame[nodes[i]]), float(s)) for i, s in zip(top, share)]
         votes = np.bincount(np.asarray(g.node_label)[nodes], weights=w, minlength=len(g.labels))
         return sources, g.labels[int(np.argmax(votes))]
-

@@ -84,8 +84,11 @@ class OlngIndex:
         if self.nodes.size == 0:
             raise InputError("the graph has no original frames with readings for OLNG")
         self.tree = cKDTree(self.readings)
-        self.up = None if graph.edge_up is None else np.asarray(graph.edge_up, np.float32)[self.edges].reshape(
-            self.nodes.size, -1)  # fmt: skip
+        self.up = (
+            None
+            if graph.edge_up is None
+            else np.asarray(graph.edge_up, np.float32)[self.edges].reshape(self.nodes.size, -1)
+        )
         self._oriented: dict = {}  # weight → the tree over readings and √weight · up
         self.hidden = None if allowed is None else ~np.asarray(allowed, dtype=bool)[self.nodes]
         if self.hidden is not None and not self.hidden.any():

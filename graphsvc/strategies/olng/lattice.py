@@ -104,8 +104,10 @@ class Lattice:
         frames = np.ascontiguousarray(frames, dtype=np.int64)
         distances = np.ascontiguousarray(distances, dtype=np.float64)
         if frames.ndim != 1 or frames.shape != distances.shape or not 1 <= frames.size <= self.options.k:
-            raise InputError(f"a column needs 1 to {self.options.k} frames with a distance each, got {frames.shape} "
-                             f"and {distances.shape}")  # fmt: skip
+            raise InputError(
+                f"a column needs 1 to {self.options.k} frames with a distance each, got {frames.shape} "
+                f"and {distances.shape}"
+            )
         if not np.all(np.isfinite(distances)) or (distances < 0).any():
             raise InputError("neighbour distances must be finite and ≥ 0")
         self.t += 1
@@ -119,8 +121,23 @@ class Lattice:
         self.node_cost[c, :n] = distances
         M = self.options.m
         self.penalty[self.t % (M + 1)] = 2.0 * float(distances.max())
-        _advance(self.t, M, frames, distances, self.clip_of, self.steps, self.frames, self.sorted_frames,
-                 self.sorted_at, self.count, self.cost, self.contrib, self.start, self.step_of, self.penalty)  # fmt: skip
+        _advance(
+            self.t,
+            M,
+            frames,
+            distances,
+            self.clip_of,
+            self.steps,
+            self.frames,
+            self.sorted_frames,
+            self.sorted_at,
+            self.count,
+            self.cost,
+            self.contrib,
+            self.start,
+            self.step_of,
+            self.penalty,
+        )
 
     def column(self, back: int = 0) -> dict:
         """Column t − back: frames, node costs, best path costs, path lengths (window
@@ -130,11 +147,17 @@ class Lattice:
         c = (self.t - back) % 3
         n = int(self.count[c])
         length = np.minimum(self.t - back - self.start[c, :n] + 1, self.options.m)
-        return {"frames": self.frames[c, :n].copy(), "node_cost": self.node_cost[c, :n].copy(),
-                "cost": self.cost[c, :n].copy(), "length": length, "step": self.step_of[c, :n].copy()}  # fmt: skip
+        return {
+            "frames": self.frames[c, :n].copy(),
+            "node_cost": self.node_cost[c, :n].copy(),
+            "cost": self.cost[c, :n].copy(),
+            "length": length,
+            "step": self.step_of[c, :n].copy(),
+        }
 
-    def best(self, count: int | None = None,
-             col: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    def best(
+        self, count: int | None = None, col: dict | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The I (count) cheapest paths into the newest column: (positions in the
         column, frames, costs, weights), cheapest first (ties: the column's order).
         col: `column()` when the caller has it already."""
@@ -169,8 +192,23 @@ def _find(sorted_frames, count, frame):
 
 
 @numba.njit(cache=True, nogil=True)
-def _advance(t, M, frames, distances, clip_of, steps, all_frames, sorted_frames, sorted_at, count, cost, contrib,
-             start, step_of, penalty):  # fmt: skip
+def _advance(
+    t,
+    M,
+    frames,
+    distances,
+    clip_of,
+    steps,
+    all_frames,
+    sorted_frames,
+    sorted_at,
+    count,
+    cost,
+    contrib,
+    start,
+    step_of,
+    penalty,
+):
     """Column t's best paths (see the module docstring), written into ring slot t % 3."""
     R = M + 1
     c = t % 3
@@ -202,8 +240,12 @@ def _advance(t, M, frames, distances, clip_of, steps, all_frames, sorted_frames,
             if back == 1:
                 total = cost[pc, a] - (contrib[pc, a, drop1] if t - M >= 0 else 0.0) + d
             else:
-                total = cost[pc, a] - (contrib[pc, a, drop2] if t - M - 1 >= 0 else 0.0) \
-                    - (contrib[pc, a, drop1] if t - M >= 0 else 0.0) + 2.0 * d
+                total = (
+                    cost[pc, a]
+                    - (contrib[pc, a, drop2] if t - M - 1 >= 0 else 0.0)
+                    - (contrib[pc, a, drop1] if t - M >= 0 else 0.0)
+                    + 2.0 * d
+                )
             if total < best:
                 best, best_step, best_at = total, s, a
         if start_cost + d < best:

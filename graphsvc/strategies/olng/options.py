@@ -24,22 +24,45 @@ class OlngOptions:
     neighbours' feet moved (off by default: on Bandai dataset-2's takes 002, the tuning
     set, it cost 0.6 cm of mean joint error, 1.0 cm on gestures)."""
 
-    k: int | None = option(None, low=1, high=MAX_COUNT, label="OLNG K", metavar="K",
-                           help="neighbours a sample (default: frames / 150, 16 to 4096, the paper's 4096 of ~600,000)")
+    k: int | None = option(
+        None,
+        low=1,
+        high=MAX_COUNT,
+        label="OLNG K",
+        metavar="K",
+        help="neighbours a sample (default: frames / 150, 16 to 4096, the paper's 4096 of ~600,000)",
+    )
     m: int = option(32, low=2, high=MAX_COUNT, label="OLNG M", metavar="M", help="window columns (default 32)")
-    i: int | None = option(None, low=1, high=MAX_COUNT, label="OLNG I", metavar="I",
-                           help="paths the pose is made from (default K / 16, 4 to 256)")
-    extended: bool = option(True, negated=("--olng-basic-steps",), label="OLNG extended steps",
-                            help="the extended steps, a column skipped (default on)")
+    i: int | None = option(
+        None,
+        low=1,
+        high=MAX_COUNT,
+        label="OLNG I",
+        metavar="I",
+        help="paths the pose is made from (default K / 16, 4 to 256)",
+    )
+    extended: bool = option(
+        True,
+        negated=("--olng-basic-steps",),
+        label="OLNG extended steps",
+        help="the extended steps, a column skipped (default on)",
+    )
     w_prior: float = option(5.0, low=0.0, label="OLNG weight prior", help="energy weight of the prior (default 5)")
-    w_contr: float = option(1.0, low=0.0, label="OLNG weight contr", help="energy weight of the control term (default 1)")
+    w_contr: float = option(
+        1.0, low=0.0, label="OLNG weight contr", help="energy weight of the control term (default 1)"
+    )
     w_pose: float = option(0.6, low=0.0, label="OLNG weight pose", help="energy weight of the pose term (default 0.6)")
-    w_motion: float = option(0.2, low=0.0, label="OLNG weight motion", help="energy weight of the motion term (default 0.2)")
-    w_smooth: float = option(0.2, low=0.0, label="OLNG weight smooth",
-                             help="energy weight of the smoothness term (default 0.2)")
-    fix_feet: bool = option(False, label="OLNG fix feet",
-                            help="foot clean-up: a foot in contact moves only as the neighbours' feet moved (costs "
-                                 "accuracy; default off)")  # fmt: skip
+    w_motion: float = option(
+        0.2, low=0.0, label="OLNG weight motion", help="energy weight of the motion term (default 0.2)"
+    )
+    w_smooth: float = option(
+        0.2, low=0.0, label="OLNG weight smooth", help="energy weight of the smoothness term (default 0.2)"
+    )
+    fix_feet: bool = option(
+        False,
+        label="OLNG fix feet",
+        help="foot clean-up: a foot in contact moves only as the neighbours' feet moved (costs accuracy; default off)",
+    )
 
     # One flag for several fields: --olng-weights PRIOR,CONTR,POSE,MOTION,SMOOTH.
     flag_groups: ClassVar[dict] = {"weights": WEIGHTS}

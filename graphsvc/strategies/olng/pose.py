@@ -113,13 +113,20 @@ def pose_model(graph: MotionGraph) -> PoseModel:
     missing = [int(j) for j in np.concatenate([placement.segment, placement.toward, carried]) if int(j) not in where]
     if missing:
         raise InputError(f"OLNG needs every sensor on the body under the pelvis; joint {sk.names[missing[0]]!r} is not")
-    return PoseModel(active, parent_slot, slot, descendant,
-                     np.array([where[int(j)] for j in placement.segment], dtype=np.int64),
-                     np.array([where[int(j)] for j in placement.toward], dtype=np.int64),
-                     np.asarray(placement.along, dtype=np.float64), np.asarray(placement.rotation, dtype=np.float64),
-                     int(pelvis), int(carrier),
-                     np.array([where[int(j)] if j >= 0 else -1 for j in placement.carrier], dtype=np.int64),
-                     np.asarray(placement.axis, dtype=np.float64))  # fmt: skip
+    return PoseModel(
+        active,
+        parent_slot,
+        slot,
+        descendant,
+        np.array([where[int(j)] for j in placement.segment], dtype=np.int64),
+        np.array([where[int(j)] for j in placement.toward], dtype=np.int64),
+        np.asarray(placement.along, dtype=np.float64),
+        np.asarray(placement.rotation, dtype=np.float64),
+        int(pelvis),
+        int(carrier),
+        np.array([where[int(j)] if j >= 0 else -1 for j in placement.carrier], dtype=np.int64),
+        np.asarray(placement.axis, dtype=np.float64),
+    )
 
 
 def frame_poses(graph: MotionGraph, model: PoseModel, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -132,13 +139,13 @@ def frame_poses(graph: MotionGraph, model: PoseModel, nodes: np.ndarray) -> tupl
     X = np.empty((F, model.active.size, 3), np.float32)
     layout = pose_layout(graph.skeleton, graph.params.get("mapping"))  # (its joints: model.active[1:])
     for lo in range(0, F, 65536):
-        n = nodes[lo: lo + 65536]
+        n = nodes[lo : lo + 65536]
         rot = graph.node_rotations[n].astype(np.float64)
         trans = graph.node_translations[n].astype(np.float64)
         p = pose_vectors(rot, trans, graph.skeleton.parents, layout, graph.node_heading[n].astype(np.float64))
-        P[lo: lo + n.size] = p
+        P[lo : lo + n.size] = p
         offsets = np.ascontiguousarray(trans[:, model.active])
-        X[lo: lo + n.size] = _positions(p, offsets, model.parent_slot, model.slot)
+        X[lo : lo + n.size] = _positions(p, offsets, model.parent_slot, model.slot)
     return P, X
 
 
@@ -218,8 +225,28 @@ class EnergyTerms:
 
 
 @numba.njit(cache=True, nogil=True)
-def _energy(z, mean, basis, Q, w, offsets, motion, accel, control, x_t, x_tm1, weights, rate,
-            parent_slot, slot, descendant, sensor_a, sensor_b, along, grad):  # fmt: skip
+def _energy(
+    z,
+    mean,
+    basis,
+    Q,
+    w,
+    offsets,
+    motion,
+    accel,
+    control,
+    x_t,
+    x_tm1,
+    weights,
+    rate,
+    parent_slot,
+    slot,
+    descendant,
+    sensor_a,
+    sensor_b,
+    along,
+    grad,
+):
     """E at subspace point z (d,); its gradient into grad (d,)."""
     D, d = basis.shape
     Ja = slot.shape[0]
@@ -350,29 +377,64 @@ def _energy(z, mean, basis, Q, w, offsets, motion, accel, control, x_t, x_tm1, w
 def energy(z, mean, basis, terms: EnergyTerms, model: PoseModel) -> tuple[float, np.ndarray]:
     """E (module docstring) at subspace point z and its gradient (d,)."""
     grad = np.empty(basis.shape[1])
-    e = _energy(np.asarray(z, dtype=np.float64), mean, basis, terms.Q, terms.w, terms.offsets, terms.motion,
-                terms.accel, terms.control, terms.x_t, terms.x_tm1, terms.weights, float(terms.rate),
-                model.parent_slot, model.slot, model.descendant, model.sensor_a, model.sensor_b, model.along, grad)  # fmt: skip
+    e = _energy(
+        np.asarray(z, dtype=np.float64),
+        mean,
+        basis,
+        terms.Q,
+        terms.w,
+        terms.offsets,
+        terms.motion,
+        terms.accel,
+        terms.control,
+        terms.x_t,
+        terms.x_tm1,
+        terms.weights,
+        float(terms.rate),
+        model.parent_slot,
+        model.slot,
+        model.descendant,
+        model.sensor_a,
+        model.sensor_b,
+        model.along,
+        grad,
+    )
     return float(e), grad
 
 
-def optimise(mean: np.ndarray, basis: np.ndarray, start: np.ndarray, terms: EnergyTerms, model: PoseModel,
-             max_iterations: int = MAX_ITERATIONS) -> tuple[np.ndarray, float, int]:  # fmt: skip
+def optimise(
+    mean: np.ndarray,
+    basis: np.ndarray,
+    start: np.ndarray,
+    terms: EnergyTerms,
+    model: PoseModel,
+    max_iterations: int = MAX_ITERATIONS,
+) -> tuple[np.ndarray, float, int]:
     """The pose vector (D,) minimising the energy in the subspace, from pose `start`
     (D,) projected into it; its energy and the iterations taken."""
     z0 = basis.T @ (np.asarray(start, dtype=np.float64) - mean)
     if basis.shape[1] == 0:
         e, _ = energy(z0, mean, basis, terms, model)
         return mean.copy(), e, 0
-    res = minimize(energy, z0, args=(mean, basis, terms, model), jac=True, method="L-BFGS-B",
-                   options={"maxiter": int(max_iterations), "gtol": 1e-7})  # fmt: skip
+    res = minimize(
+        energy,
+        z0,
+        args=(mean, basis, terms, model),
+        jac=True,
+        method="L-BFGS-B",
+        options={"maxiter": int(max_iterations), "gtol": 1e-7},
+    )
     return mean + basis @ res.x, float(res.fun), int(res.nit)
 
 
 def pose_positions(p: np.ndarray, offsets: np.ndarray, model: PoseModel) -> np.ndarray:
     """Heading-frame joint positions (Ja, 3) of one pose vector."""
-    return _positions(np.asarray(p, dtype=np.float64)[None], np.ascontiguousarray(offsets, dtype=np.float64)[None],
-                      model.parent_slot, model.slot)[0]  # fmt: skip
+    return _positions(
+        np.asarray(p, dtype=np.float64)[None],
+        np.ascontiguousarray(offsets, dtype=np.float64)[None],
+        model.parent_slot,
+        model.slot,
+    )[0]
 
 
 def sensor_orientations(p: np.ndarray, model: PoseModel) -> np.ndarray:
@@ -383,7 +445,7 @@ def sensor_orientations(p: np.ndarray, model: PoseModel) -> np.ndarray:
     g = np.empty((Ja, 4))
     for k in range(Ja):
         s = model.slot[k]
-        q = np.asarray(p[s: s + 4], dtype=np.float64)
+        q = np.asarray(p[s : s + 4], dtype=np.float64)
         q = q / np.linalg.norm(q)
         g[k] = q if k == 0 else _qmul(*g[model.parent_slot[k]], *q)
     out = np.empty((model.sensor_a.size, 4))

@@ -47,10 +47,17 @@ def resolved_options(index: OlngIndex, options: OlngOptions) -> OlngOptions:
 
 def make_decoder(graph: MotionGraph, index: OlngIndex, options: Options, own: OlngOptions) -> OlngDecoder:
     rate = float(graph.rate_hz)
-    model = (TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate) if options.weights.position
-             else None)  # fmt: skip
-    decoder = OlngDecoder(graph, index, pose_model(graph), resolved_options(index, own),
-                          track_pull(options.shared.track_pull_s, rate), model)  # fmt: skip
+    model = (
+        TrackModel(options.shared.track_sigma_m, options.shared.track_drift, rate) if options.weights.position else None
+    )
+    decoder = OlngDecoder(
+        graph,
+        index,
+        pose_model(graph),
+        resolved_options(index, own),
+        track_pull(options.shared.track_pull_s, rate),
+        model,
+    )
     decoder.up_weight = float(options.weights.orientation)  # (used where the samples carry the orientation cue)
     decoder.impose = decoder.up_weight > 0 and imposes(graph)
     if decoder.impose:
@@ -82,8 +89,16 @@ class OlngStrategy(Strategy):
             out.append("weights.acc")  # (its own energy weights: olng)
         return sorted(out + super().ignored_options(options))
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         t0 = time.perf_counter()
         idx = index.with_allowed(allowed)
         decoder = make_decoder(graph, idx, options, self.own(options))
@@ -104,9 +119,12 @@ class OlngStrategy(Strategy):
         for t in range(T):
             if should_stop is not None and t % 64 == 0 and should_stop():
                 raise SearchCancelled("reconstruction cancelled")
-            r, tr, sources, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
-                                                      None if heading is None else heading[t],
-                                                      None if up is None else up[t])  # fmt: skip
+            r, tr, sources, label, row = decoder.step(
+                inp.acc[t],
+                None if position is None else position[t],
+                None if heading is None else heading[t],
+                None if up is None else up[t],
+            )
             rot[t], trans[t] = r[0], tr[0]
             for k, (c, f, w) in enumerate(sources):
                 clip[t, k], frame[t, k], weight[t, k] = c, f, w
@@ -138,23 +156,52 @@ def report(decoder: OlngDecoder, rows: list[dict], labels: list, warm_up_s: floa
 
     # search: the neighbours and the lattice; synthesis: the pose, root and feet.
     search_s = float(np.sum(col("nn_ms")) + np.sum(col("olng_ms"))) / 1e3 if T else 0.0
-    timings = {"warm_up": round(warm_up_s, 4), "search": round(search_s, 4),
-               "synthesis": round(max(total_s - search_s, 0.0), 4)}  # fmt: skip
+    timings = {
+        "warm_up": round(warm_up_s, 4),
+        "search": round(search_s, 4),
+        "synthesis": round(max(total_s - search_s, 0.0), 4),
+    }
     for name in ("nn_ms", "olng_ms", "optimise_ms"):
         timings[f"median_{name}"] = round(float(np.median(col(name))), 3) if T else 0.0
     return {
         "cost": float(col("cost").sum()) if T else 0.0,
-        "terms": {"path_cost": float(col("cost").sum()) if T else 0.0, "energy": float(col("energy").sum()) if T else 0.0},
-        "olng": {"k": o.k, "i": o.i, "m": o.m, "extended": o.extended, "w_prior": o.w_prior, "w_contr": o.w_contr,
-                 "w_pose": o.w_pose, "w_motion": o.w_motion, "w_smooth": o.w_smooth, "fix_feet": o.fix_feet,
-                 "track_pull_alpha": round(decoder.alpha, 6)},  # fmt: skip
-        **({"track": {"sigma_m": decoder.track_model.sigma_m, "drift": decoder.track_model.drift,
-                      "smoothed": decoder.track_inputs is not None}} if decoder.track_model else {}),  # fmt: skip
+        "terms": {
+            "path_cost": float(col("cost").sum()) if T else 0.0,
+            "energy": float(col("energy").sum()) if T else 0.0,
+        },
+        "olng": {
+            "k": o.k,
+            "i": o.i,
+            "m": o.m,
+            "extended": o.extended,
+            "w_prior": o.w_prior,
+            "w_contr": o.w_contr,
+            "w_pose": o.w_pose,
+            "w_motion": o.w_motion,
+            "w_smooth": o.w_smooth,
+            "fix_feet": o.fix_feet,
+            "track_pull_alpha": round(decoder.alpha, 6),
+        },
+        **(
+            {
+                "track": {
+                    "sigma_m": decoder.track_model.sigma_m,
+                    "drift": decoder.track_model.drift,
+                    "smoothed": decoder.track_inputs is not None,
+                }
+            }
+            if decoder.track_model
+            else {}
+        ),
         "candidate_frames": int(decoder.index.searchable),
-        "per_frame": {"path_cost": [round(v, 5) for v in col("cost")], "energy": [round(v, 5) for v in col("energy")],
-                      "path_length": [round(v, 3) for v in col("path_length")],
-                      "subspace_dims": [int(v) for v in col("subspace")], "iterations": [int(v) for v in col("iterations")],
-                      "dropped": [int(v) for v in col("dropped")]},  # fmt: skip
+        "per_frame": {
+            "path_cost": [round(v, 5) for v in col("cost")],
+            "energy": [round(v, 5) for v in col("energy")],
+            "path_length": [round(v, 3) for v in col("path_length")],
+            "subspace_dims": [int(v) for v in col("subspace")],
+            "iterations": [int(v) for v in col("iterations")],
+            "dropped": [int(v) for v in col("dropped")],
+        },
         "mean_path_length": round(float(col("path_length").mean()), 3) if T else 0.0,
         "incomplete_samples": int(sum(not r["complete"] for r in rows)),
         "labels": label_runs(labels),
@@ -197,7 +244,9 @@ class OlngSession(LiveSession):
         frame, weight = np.zeros((1, SOURCES)), np.zeros((1, SOURCES))
         for k, (c, f, w) in enumerate(sources):
             clip[0, k], frame[0, k], weight[0, k] = c, f, w
-        out = self._emit(self.frame_index, rot, trans, provenance=Provenance(clip, frame, weight, np.array([label], object)))
+        out = self._emit(
+            self.frame_index, rot, trans, provenance=Provenance(clip, frame, weight, np.array([label], object))
+        )
         self.frame_index += 1
         return out
 

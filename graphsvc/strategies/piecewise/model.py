@@ -123,11 +123,17 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     layout = pose_layout(graph.skeleton, graph.params.get("mapping"))
     poses = np.empty((nodes.size, layout.dims), np.float32)
     for lo in range(0, nodes.size, CHUNK):
-        n = nodes[lo: lo + CHUNK]
-        poses[lo: lo + n.size] = pose_vectors(graph.node_rotations[n].astype(np.float64),
-                                              graph.node_translations[n].astype(np.float64), graph.skeleton.parents,
-                                              layout, graph.node_heading[n].astype(np.float64))  # fmt: skip
-    steps = np.concatenate([np.asarray(graph.edge_offset)[edges], np.asarray(graph.edge_heading)[edges][:, None]], axis=1)
+        n = nodes[lo : lo + CHUNK]
+        poses[lo : lo + n.size] = pose_vectors(
+            graph.node_rotations[n].astype(np.float64),
+            graph.node_translations[n].astype(np.float64),
+            graph.skeleton.parents,
+            layout,
+            graph.node_heading[n].astype(np.float64),
+        )
+    steps = np.concatenate(
+        [np.asarray(graph.edge_offset)[edges], np.asarray(graph.edge_heading)[edges][:, None]], axis=1
+    )
     contacts = np.asarray(graph.node_contacts)[nodes].astype(np.float32)
     return {**arrays, "poses": poses, "steps": steps.astype(np.float32), "contacts": contacts}
 
@@ -192,16 +198,24 @@ def learn(data: dict, rows: np.ndarray, own) -> dict[str, np.ndarray]:
         k = min(bic, key=bic.get)
     gmm = _mixture(GaussianMixture, k).fit(joint[:: max(1, -(-rows.size // GMM_FRAMES))])
     label = gmm.predict(joint)
-    outputs = np.concatenate([reduced, np.asarray(data["steps"], np.float64)[rows],
-                              np.asarray(data["contacts"], np.float64)[rows]], axis=1)  # fmt: skip
+    outputs = np.concatenate(
+        [reduced, np.asarray(data["steps"], np.float64)[rows], np.asarray(data["contacts"], np.float64)[rows]], axis=1
+    )
     rbf = _fit_rbfs(readings, outputs, label, k, gmm.means_[:, :d], own.width)
-    return {**reduction, "mix_weights": gmm.weights_,
-            "mix_means": gmm.means_, "mix_covariances": gmm.covariances_,
-            "bic_counts": np.array(list(bic), np.int64), "bic_values": np.array(list(bic.values()), np.float64),
-            **rbf, "centre_nodes": np.asarray(data["nodes"])[rows][rbf["centre_rows"]].astype(np.int64),
-            "row_labels": label.astype(np.int32), "row_outputs": outputs.astype(np.float32),
-            "row_nodes": np.asarray(data["nodes"])[rows].astype(np.int64),
-            "template": np.asarray(data["nodes"])[rows[:1]].astype(np.int64)}  # fmt: skip
+    return {
+        **reduction,
+        "mix_weights": gmm.weights_,
+        "mix_means": gmm.means_,
+        "mix_covariances": gmm.covariances_,
+        "bic_counts": np.array(list(bic), np.int64),
+        "bic_values": np.array(list(bic.values()), np.float64),
+        **rbf,
+        "centre_nodes": np.asarray(data["nodes"])[rows][rbf["centre_rows"]].astype(np.int64),
+        "row_labels": label.astype(np.int32),
+        "row_outputs": outputs.astype(np.float32),
+        "row_nodes": np.asarray(data["nodes"])[rows].astype(np.int64),
+        "template": np.asarray(data["nodes"])[rows[:1]].astype(np.int64),
+    }
 
 
 def kept_dims(poses: np.ndarray) -> int:
@@ -227,8 +241,9 @@ def _lle(poses: np.ndarray, d: int) -> dict[str, np.ndarray]:
     k = min(max(LLE_NEIGHBOURS, d + 1), marks.shape[0] - 1)
     if k <= d:
         raise InputError(f"piecewise: LLE into {d} dimensions needs more than {d + 1} frames")
-    lle = LocallyLinearEmbedding(n_neighbors=k, n_components=d, eigen_solver="arpack", random_state=RANDOM_STATE,
-                                 reg=LLE_REG)  # fmt: skip
+    lle = LocallyLinearEmbedding(
+        n_neighbors=k, n_components=d, eigen_solver="arpack", random_state=RANDOM_STATE, reg=LLE_REG
+    )
     embedding = lle.fit_transform(marks)
     # (in the poses' units: its total variance theirs, as a PCA's nearly is; ARPACK's
     # unit eigenvectors put every coordinate near 1/√landmarks)
@@ -278,10 +293,14 @@ def _fit_rbfs(X: np.ndarray, Y: np.ndarray, label: np.ndarray, K: int, pose_mean
         rows.append(c)
         start.append(start[-1] + c.size)
     F = X.shape[1]
-    return {"centres": np.concatenate(centres) if centres else np.zeros((0, F)),
-            "weights": np.concatenate(weights) if weights else np.zeros((0, O)),
-            "centre_rows": np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, np.int64),
-            "start": np.asarray(start, np.int64), "sigma": sigma, "out_mean": out_mean}  # fmt: skip
+    return {
+        "centres": np.concatenate(centres) if centres else np.zeros((0, F)),
+        "weights": np.concatenate(weights) if weights else np.zeros((0, O)),
+        "centre_rows": np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, np.int64),
+        "start": np.asarray(start, np.int64),
+        "sigma": sigma,
+        "out_mean": out_mean,
+    }
 
 
 def _width(C: np.ndarray) -> float:
@@ -307,8 +326,9 @@ class Model:
     precisions, log normalisers) and, for the optimisation, each cluster's prior and
     readings model folded into two inverse matrices."""
 
-    def __init__(self, arrays: dict, readings: np.ndarray, w_smooth: float = 0.2, w_control: float = 0.8,
-                 assign: str = "nearest"):  # fmt: skip
+    def __init__(
+        self, arrays: dict, readings: np.ndarray, w_smooth: float = 0.2, w_control: float = 0.8, assign: str = "nearest"
+    ):
         from scipy.spatial import cKDTree
 
         self.arrays = arrays
@@ -346,8 +366,9 @@ class Model:
             srr, scc, scr = covs[k, :d, :d], covs[k, d:, d:], covs[k, d:, :d]
             inv_cc = np.linalg.inv(scc)
             self.read_chol[k] = np.linalg.cholesky(0.5 * (inv_cc + inv_cc.T))
-            self.read_log[k] = (math.log(a["mix_weights"][k]) - 0.5 * np.linalg.slogdet(scc)[1]
-                                - 0.5 * F * math.log(2.0 * math.pi))  # fmt: skip
+            self.read_log[k] = (
+                math.log(a["mix_weights"][k]) - 0.5 * np.linalg.slogdet(scc)[1] - 0.5 * F * math.log(2.0 * math.pi)
+            )
             prec = np.linalg.inv(srr)
             self.G[k] = scr @ prec
             self.g[k] = self.read_mean[k] - self.G[k] @ self.prior_mean[k]
@@ -395,12 +416,15 @@ class Model:
         w = np.exp(-((dist / sigma) ** 2))
         return (w / w.sum()) @ self.row_outputs[near].astype(np.float64), int(self.row_nodes[near[0]])
 
-    def optimise(self, k: int, c: np.ndarray, r1: np.ndarray | None, r2: np.ndarray | None,
-                 mu: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    def optimise(
+        self, k: int, c: np.ndarray, r1: np.ndarray | None, r2: np.ndarray | None, mu: np.ndarray | None = None
+    ) -> np.ndarray:
         """The reduced pose minimising eq. 6.2–6.4 in cluster k (module docstring, 6);
         r1, r2: the two previous frames' (None: not yet, no smoothness term); mu: the
         prior's mean (None: the cluster's)."""
-        b = (self.rhs_prior[k] if mu is None else self.precision[k] @ mu) + self.w_control * self.G[k].T @ (self.control[k] @ (c - self.g[k]))
+        b = (self.rhs_prior[k] if mu is None else self.precision[k] @ mu) + self.w_control * self.G[k].T @ (
+            self.control[k] @ (c - self.g[k])
+        )
         if r1 is None or r2 is None:
             return self.solve[0, k] @ b
         return self.solve[1, k] @ (b + self.w_smooth * (2.0 * r1 - r2))

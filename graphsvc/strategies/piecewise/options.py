@@ -31,28 +31,59 @@ class PiecewiseOptions:
     readings); w_smooth, w_control: the optimisation's smoothness and control weights
     (ω_s, ω_c: 0.2 and 0.8, Xie's)."""
 
-    method: str = option("rbf", choices=METHODS, label="piecewise method",
-                         help="pose from the cluster's normalised RBF over its frames nearest the readings (rbf, the "
-                              "default), its fitted RBF map of Xie eq. 5.9 (rbf-fit) or the per-frame optimisation "
-                              "(optimise)")  # fmt: skip
-    reduce: str = option("pca", choices=REDUCTIONS, label="piecewise reduce",
-                         help="how poses are reduced before clustering: pca (the default) or lle (landmark LLE)")
-    dims: int | None = option(None, low=1, high=256, metavar="D", label="piecewise dims",
-                              help="reduced pose dimension, below the pose's own (default: the fewest holding 99.9 "
-                                   "percent of the pose variance)")  # fmt: skip
-    clusters: str = option("auto", label="piecewise clusters", metavar="K|auto", noun="a whole number ≥ 1 or auto",
-                           help="GMM clusters: a count, or auto to pick the count by BIC (default auto)")
-    assign: str = option("nearest", choices=ASSIGNMENTS, label="piecewise assign",
-                         help="how a sample finds its cluster: the cluster of the knowledge-base frame with the nearest "
-                              "readings (nearest, the default) or the mixture's marginal over the readings (mixture, "
-                              "Xie's)")  # fmt: skip
-    width: float | None = option(None, low=0.0, low_open=True, metavar="SIGMA", label="piecewise width",
-                                 noun="a finite width in g",
-                                 help="RBF kernel width σ in g (default: each cluster's, from its readings' spacing)")
-    w_smooth: float = option(0.2, low=0.0, label="piecewise smoothness weight",
-                             help="optimise: smoothness weight ω_s (default 0.2)")
-    w_control: float = option(0.8, low=0.0, label="piecewise control weight",
-                              help="optimise: control weight ω_c (default 0.8)")
+    method: str = option(
+        "rbf",
+        choices=METHODS,
+        label="piecewise method",
+        help="pose from the cluster's normalised RBF over its frames nearest the readings (rbf, the "
+        "default), its fitted RBF map of Xie eq. 5.9 (rbf-fit) or the per-frame optimisation "
+        "(optimise)",
+    )
+    reduce: str = option(
+        "pca",
+        choices=REDUCTIONS,
+        label="piecewise reduce",
+        help="how poses are reduced before clustering: pca (the default) or lle (landmark LLE)",
+    )
+    dims: int | None = option(
+        None,
+        low=1,
+        high=256,
+        metavar="D",
+        label="piecewise dims",
+        help="reduced pose dimension, below the pose's own (default: the fewest holding 99.9 "
+        "percent of the pose variance)",
+    )
+    clusters: str = option(
+        "auto",
+        label="piecewise clusters",
+        metavar="K|auto",
+        noun="a whole number ≥ 1 or auto",
+        help="GMM clusters: a count, or auto to pick the count by BIC (default auto)",
+    )
+    assign: str = option(
+        "nearest",
+        choices=ASSIGNMENTS,
+        label="piecewise assign",
+        help="how a sample finds its cluster: the cluster of the knowledge-base frame with the nearest "
+        "readings (nearest, the default) or the mixture's marginal over the readings (mixture, "
+        "Xie's)",
+    )
+    width: float | None = option(
+        None,
+        low=0.0,
+        low_open=True,
+        metavar="SIGMA",
+        label="piecewise width",
+        noun="a finite width in g",
+        help="RBF kernel width σ in g (default: each cluster's, from its readings' spacing)",
+    )
+    w_smooth: float = option(
+        0.2, low=0.0, label="piecewise smoothness weight", help="optimise: smoothness weight ω_s (default 0.2)"
+    )
+    w_control: float = option(
+        0.8, low=0.0, label="piecewise control weight", help="optimise: control weight ω_c (default 0.8)"
+    )
 
     def check(self) -> None:
         self.cluster_count()
@@ -63,6 +94,8 @@ class PiecewiseOptions:
         if text == "auto":
             return None
         if not text.isdigit() or not 1 <= int(text) <= MAX_CLUSTERS:
-            raise OptionError("clusters", f"piecewise clusters must be a whole number from 1 to {MAX_CLUSTERS} or "
-                                          f"auto, got {self.clusters!r}")  # fmt: skip
+            raise OptionError(
+                "clusters",
+                f"piecewise clusters must be a whole number from 1 to {MAX_CLUSTERS} or auto, got {self.clusters!r}",
+            )
         return int(text)

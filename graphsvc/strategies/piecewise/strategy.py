@@ -59,15 +59,21 @@ def shared_model(graph: MotionGraph, data: dict, own: PiecewiseOptions, allowed=
     stream's state, so every decoder of this process shares it."""
     rows = training_rows(data, allowed)
     arrays, key = _learned(graph, data, own, rows)
-    return derived(graph, ("piecewise decoder model", key, own.w_smooth, own.w_control, own.assign),
-                   lambda: Model(arrays, np.asarray(data["readings"])[rows], own.w_smooth, own.w_control, own.assign))
+    return derived(
+        graph,
+        ("piecewise decoder model", key, own.w_smooth, own.w_control, own.assign),
+        lambda: Model(arrays, np.asarray(data["readings"])[rows], own.w_smooth, own.w_control, own.assign),
+    )
 
 
 def _learned(graph: MotionGraph, data: dict, own: PiecewiseOptions, rows: np.ndarray) -> tuple[dict, str]:
     check_against(own, rows.size, np.asarray(data["poses"]).shape[1])
     key = model_key(own, data, rows)
-    arrays = derived(graph, ("piecewise model", key),
-                     lambda: cached_arrays(graph, f"piecewise-{key}", INDEX_VERSION, lambda: learn(data, rows, own)))
+    arrays = derived(
+        graph,
+        ("piecewise model", key),
+        lambda: cached_arrays(graph, f"piecewise-{key}", INDEX_VERSION, lambda: learn(data, rows, own)),
+    )
     return arrays, key
 
 
@@ -85,11 +91,16 @@ class PiecewiseDecoder:
         self.parents = np.ascontiguousarray(graph.skeleton.parents, dtype=np.int64)
         self.layout = pose_layout(graph.skeleton, graph.params.get("mapping"))
         node = int(np.asarray(arrays["template"])[0])
-        self.template = (graph.node_rotations[node].astype(np.float64)[None],
-                         graph.node_translations[node].astype(np.float64)[None])  # fmt: skip
+        self.template = (
+            graph.node_rotations[node].astype(np.float64)[None],
+            graph.node_translations[node].astype(np.float64)[None],
+        )
         self.alpha = track_pull(options.shared.track_pull_s, self.rate)
-        self.track_model = (TrackModel(options.shared.track_sigma_m, options.shared.track_drift, self.rate)
-                            if options.weights.position else None)  # fmt: skip
+        self.track_model = (
+            TrackModel(options.shared.track_sigma_m, options.shared.track_drift, self.rate)
+            if options.weights.position
+            else None
+        )
         self.filter = None if self.track_model is None else FixedLagSmoother(self.track_model, 0)
         self.track_inputs: list | None = None  # (measured − own, gate, filtered offset) a frame, for a batch's smoother
         self.t = -1
@@ -121,7 +132,7 @@ class PiecewiseDecoder:
         self.last, self.last_source = y, source
         r = y[: m.d]
         self.r2, self.r1 = self.r1, r.copy()
-        step, turn, contacts = y[m.d: m.d + 2], float(y[m.d + 2]), y[m.d + 3: m.d + 5] > 0.5
+        step, turn, contacts = y[m.d : m.d + 2], float(y[m.d + 2]), y[m.d + 3 : m.d + 5] > 0.5
         advance_own_track(self, step, turn, contacts, position, heading)
         rot, trans = self._place(m.pose(r))
         for root in np.flatnonzero(self.parents < 0):  # onto the fused track, the whole body at once
@@ -141,8 +152,19 @@ class PiecewiseDecoder:
         rot[0, lay.joints] = q / np.linalg.norm(q, axis=1, keepdims=True)
         src_rot, src_pos = forward_kinematics(rot, trans, self.parents)
         rel = (p[0:4] / np.linalg.norm(p[0:4]))[None]
-        place_poses(rot, trans, rel, np.array([p[4]]), self.own[None], np.array([self.heading]), src_rot, src_pos,
-                    self.parents, lay.pelvis, lay.carrier)  # fmt: skip
+        place_poses(
+            rot,
+            trans,
+            rel,
+            np.array([p[4]]),
+            self.own[None],
+            np.array([self.heading]),
+            src_rot,
+            src_pos,
+            self.parents,
+            lay.pelvis,
+            lay.carrier,
+        )
         return rot, trans
 
 
@@ -165,8 +187,16 @@ class PiecewiseStrategy(Strategy):
         own = self.own(options)
         return PiecewiseDecoder(graph, shared_model(graph, index, own, allowed), options, own)
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         t0 = time.perf_counter()
         decoder = self.decoder(graph, index, options, allowed)
         if options.latency_s is None:
@@ -182,8 +212,9 @@ class PiecewiseStrategy(Strategy):
         for t in range(T):
             if should_stop is not None and t % 256 == 0 and should_stop():
                 raise SearchCancelled("reconstruction cancelled")
-            r, tr, where, label, row = decoder.step(inp.acc[t], None if position is None else position[t],
-                                                    None if heading is None else heading[t])  # fmt: skip
+            r, tr, where, label, row = decoder.step(
+                inp.acc[t], None if position is None else position[t], None if heading is None else heading[t]
+            )
             rot[t], trans[t] = r[0], tr[0]
             if where is not None:
                 clip[t, 0], frame[t, 0], weight[t, 0] = where[0], where[1], 1.0
@@ -200,11 +231,17 @@ class PiecewiseStrategy(Strategy):
         arrays = decoder.model.arrays
         report = {
             "cost": 0.0,
-            "piecewise": {"method": own.method, "reduce": own.reduce, "assign": own.assign, "dims": model.d,
-                          "clusters": model.K,
-                          "bic": dict(zip((int(k) for k in arrays["bic_counts"]),
-                                          (round(float(v), 1) for v in arrays["bic_values"]))),
-                          "centres": int(model.centres.shape[0])},  # fmt: skip
+            "piecewise": {
+                "method": own.method,
+                "reduce": own.reduce,
+                "assign": own.assign,
+                "dims": model.d,
+                "clusters": model.K,
+                "bic": dict(
+                    zip((int(k) for k in arrays["bic_counts"]), (round(float(v), 1) for v in arrays["bic_values"]))
+                ),
+                "centres": int(model.centres.shape[0]),
+            },
             "per_frame": {"cluster": [int(k) for k in clusters]},
             "incomplete_samples": incomplete,
             "labels": label_runs(labels),
@@ -230,7 +267,9 @@ class PiecewiseSession(LiveSession):
         clip = np.array([[-1 if where is None else where[0]]], np.int64)
         frame = np.array([[0.0 if where is None else where[1]]])
         weight = np.array([[0.0 if where is None else 1.0]])
-        out = self._emit(self.frame_index, rot, trans, provenance=Provenance(clip, frame, weight, np.array([label], object)))
+        out = self._emit(
+            self.frame_index, rot, trans, provenance=Provenance(clip, frame, weight, np.array([label], object))
+        )
         self.frame_index += 1
         return out
 

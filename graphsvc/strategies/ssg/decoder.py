@@ -42,7 +42,7 @@ from graphsvc.strategies.ssg.graph import (
     Layer,
     cheapest_path,
     edge_costs,
-    placed,  # fmt: skip
+    placed,
     weighted,
 )
 from graphsvc.strategies.ssg.index import SsgIndex, WindowPoints
@@ -87,7 +87,7 @@ class Tail:
 
     def truncate(self, n: int) -> None:
         """Drop the items from index n on."""
-        del self.items[max(0, n - self.base):]
+        del self.items[max(0, n - self.base) :]
 
     def drop_before(self, n: int) -> None:
         """Drop the items before index n."""
@@ -142,7 +142,7 @@ def smooth_warp(frames: np.ndarray, width: int = WARP_SMOOTHING) -> np.ndarray:
     h = min(width // 2, len(f) - 1)
     if h < 1:
         return f
-    padded = np.concatenate([2 * f[0] - f[h:0:-1], f, 2 * f[-1] - f[-2:-h - 2:-1]])
+    padded = np.concatenate([2 * f[0] - f[h:0:-1], f, 2 * f[-1] - f[-2 : -h - 2 : -1]])
     out = np.convolve(padded, np.ones(2 * h + 1) / (2 * h + 1), mode="valid")
     return np.clip(out, f[0], f[-1])
 
@@ -155,8 +155,17 @@ class SsgDecoder:
     session's, whose frames are read as they become final; a batch run reads its layers
     and anchors at the end."""
 
-    def __init__(self, index: SsgIndex, kb_markers: np.ndarray, kb: WindowPoints, windows: Windows,
-                 rate_hz: float, lag: int | None = None, expected_frames: int = 0, prune: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        index: SsgIndex,
+        kb_markers: np.ndarray,
+        kb: WindowPoints,
+        windows: Windows,
+        rate_hz: float,
+        lag: int | None = None,
+        expected_frames: int = 0,
+        prune: bool = False,
+    ):
         self.index = index
         self.kb_markers = kb_markers
         self.kb = kb
@@ -202,8 +211,8 @@ class SsgDecoder:
         K = points.shape[0]
         if self.T + K - self.base > len(self.points):
             self._make_room(K)
-        self.points[self.T - self.base:self.T + K - self.base] = points
-        self.seen[self.T - self.base:self.T + K - self.base] = seen
+        self.points[self.T - self.base : self.T + K - self.base] = points
+        self.seen[self.T - self.base : self.T + K - self.base] = seen
         self.T += K
         out = []
         while True:
@@ -243,12 +252,15 @@ class SsgDecoder:
         """Room for K more input frames: the frames a pruning decoder no longer needs
         dropped (those before its oldest kept layer and what a local cost looks back),
         then, if that is not enough, the buffers doubled."""
-        keep = max(self.base, min(self.layers[self.layers.base].start - self.back, self.T)) \
-            if self.prune and self.layers.base else self.base
+        keep = (
+            max(self.base, min(self.layers[self.layers.base].start - self.back, self.T))
+            if self.prune and self.layers.base
+            else self.base
+        )
         if keep > self.base:
             held = self.T - keep
-            self.points[:held] = self.points[keep - self.base:self.T - self.base]
-            self.seen[:held] = self.seen[keep - self.base:self.T - self.base]
+            self.points[:held] = self.points[keep - self.base : self.T - self.base]
+            self.seen[:held] = self.seen[keep - self.base : self.T - self.base]
             self.base = keep
         if self.T + K - self.base > len(self.points):
             grow = max(self.T + K - self.base, 2 * len(self.points))
@@ -259,7 +271,7 @@ class SsgDecoder:
         """Input frames [start, stop): points (L, M, 3), seen (L, M)."""
         if start < self.base:
             raise IndexError(f"input frame {start} was dropped (kept from {self.base})")
-        return self.points[start - self.base:stop - self.base], self.seen[start - self.base:stop - self.base]
+        return self.points[start - self.base : stop - self.base], self.seen[start - self.base : stop - self.base]
 
     @property
     def retained_bytes(self) -> int:
@@ -350,8 +362,12 @@ class SsgDecoder:
             if a == 0:
                 self.dp.append(cost)
             else:
-                self.dp.append(cost + np.min(self.dp[a - 1][:, None] + weighted(self.edges[a - 1], self.w.weight),
-                                             axis=0, initial=np.inf))  # fmt: skip
+                self.dp.append(
+                    cost
+                    + np.min(
+                        self.dp[a - 1][:, None] + weighted(self.edges[a - 1], self.w.weight), axis=0, initial=np.inf
+                    )
+                )
         self.dp_valid = len(self.dp)
         return self.dp[z]
 
@@ -379,7 +395,9 @@ class SsgDecoder:
             layer.add(BACKWARD, mine, self._extension_costs(layer, mine))
             self.dp_valid = min(self.dp_valid, a)
             a -= 1
-        for p in range(max(a, 0), z - 1):  # (the edges into and out of each extended layer, once; z − 1 → z: the caller)
+        for p in range(
+            max(a, 0), z - 1
+        ):  # (the edges into and out of each extended layer, once; z − 1 → z: the caller)
             self._refresh_edges(p)
 
     def _search_anyway(self) -> None:
@@ -388,7 +406,14 @@ class SsgDecoder:
         rows = [self._data_rows(layer.start, layer.stop) for layer in self.layers]
         best = int(np.argmax(rows))
         spans = [(layer.start, layer.stop) for layer in self.layers]  # (nothing committed: none dropped)
-        self.layers, self.edges, self.anchors, self.dp, self.dp_valid, self.stops = Tail(), Tail(), {}, Tail(), 0, Tail()
+        self.layers, self.edges, self.anchors, self.dp, self.dp_valid, self.stops = (
+            Tail(),
+            Tail(),
+            {},
+            Tail(),
+            0,
+            Tail(),
+        )
         self.next_anchor = 0
         for z, (s, e) in enumerate(spans):
             self._add_layer(s, e, force=z == best)
@@ -415,8 +440,7 @@ class SsgDecoder:
         out = np.empty(len(anchors))
         for i, a in enumerate(anchors):
             A = self.anchors[a]
-            kb = placed(self._kb_at(A.frames_at(n))[None], np.array([A.theta]), np.array([A.tx]),
-                        np.array([A.tz]))[0]  # fmt: skip
+            kb = placed(self._kb_at(A.frames_at(n))[None], np.array([A.theta]), np.array([A.tx]), np.array([A.tz]))[0]
             d = ((kb - points) ** 2).sum(axis=-1)
             per_row = np.where(seen.any(axis=1), (d * seen).sum(axis=1) / np.maximum(seen.sum(axis=1), 1), 0.0)
             out[i] = per_row.sum() / n.size
@@ -437,8 +461,13 @@ class SsgDecoder:
             frames = np.asarray(need, dtype=np.int64)
             # (frames held from `base` on, which lies before every frame these look at:
             # `_make_room`)
-            C = dtw.local_costs(self.kb, self.points[:self.T - self.base], self.seen[:self.T - self.base],
-                                frames - self.base, self.index.allowed)  # fmt: skip
+            C = dtw.local_costs(
+                self.kb,
+                self.points[: self.T - self.base],
+                self.seen[: self.T - self.base],
+                frames - self.base,
+                self.index.allowed,
+            )
             for i, n in enumerate(need):
                 self.rows[n] = C[i]
         for n in [n for n in self.rows if n < start]:
@@ -515,12 +544,12 @@ class SsgDecoder:
             if nxt is not None and nxt.start < layer.stop:  # fading out into the next window
                 L_ov = layer.stop - nxt.start
                 u = (n - nxt.start + 1) / (L_ov + 1.0)
-                fade = np.where(n >= nxt.start, 1.0 - (3 * u * u - 2 * u ** 3), 1.0)
+                fade = np.where(n >= nxt.start, 1.0 - (3 * u * u - 2 * u**3), 1.0)
                 w = w * fade
             if prv is not None and layer.start < prv.stop:  # fading in from the one before
                 L_ov = prv.stop - layer.start
                 u = (n - layer.start + 1) / (L_ov + 1.0)
-                fade = np.where(n < prv.stop, 3 * u * u - 2 * u ** 3, 1.0)
+                fade = np.where(n < prv.stop, 3 * u * u - 2 * u**3, 1.0)
                 w = w * fade
             slot = np.where(anchor[n - a, 0] < 0, 0, 1)
             rows = n - a

@@ -148,8 +148,9 @@ def weighted(edges: np.ndarray, weight: float) -> np.ndarray:
     return np.where(np.isinf(edges), np.inf, weight * np.where(np.isinf(edges), 0.0, edges))
 
 
-def cheapest_path(layers: list[Layer], edges: list[np.ndarray], weight: float, first: int = 0,
-                  entry: np.ndarray | None = None) -> tuple[np.ndarray, float]:  # fmt: skip
+def cheapest_path(
+    layers: list[Layer], edges: list[np.ndarray], weight: float, first: int = 0, entry: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
     """The cheapest path through layers[first:] (one node index a layer) and its cost.
     edges[a]: layer a → a + 1 costs; entry: (K_first,) cost of entering each node of
     layer `first` (a committed predecessor's edges; None: from the source, free)."""

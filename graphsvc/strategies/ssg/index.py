@@ -48,9 +48,9 @@ def build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
     pos = np.empty((nodes.size, graph.skeleton.num_joints, 3), dtype=np.float32)
     parents = graph.skeleton.parents
     for lo in range(0, nodes.size, 8192):
-        sel = nodes[lo:lo + 8192]
+        sel = nodes[lo : lo + 8192]
         r, p = forward_kinematics(graph.node_rotations[sel], graph.node_translations[sel], parents)
-        rot[lo:lo + sel.size], pos[lo:lo + sel.size] = r, p
+        rot[lo : lo + sel.size], pos[lo : lo + sel.size] = r, p
     return {"nodes": nodes.astype(np.int64), "run_start": run_start, "world_rot": rot, "world_pos": pos}
 
 
@@ -78,8 +78,9 @@ class SsgIndex:
         self.clip_offsets = np.asarray(graph.clip_offsets)
         self.skeleton = graph.skeleton
         self.mapping = graph.params.get("mapping")
-        self.allowed = np.ones(self.nodes.size, dtype=bool) if allowed is None else \
-            np.asarray(allowed, dtype=bool)[self.nodes]  # fmt: skip
+        self.allowed = (
+            np.ones(self.nodes.size, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)[self.nodes]
+        )
 
     @property
     def frames(self) -> int:
@@ -92,8 +93,9 @@ class SsgIndex:
     def with_allowed(self, allowed: np.ndarray | None) -> SsgIndex:
         other = object.__new__(SsgIndex)
         other.__dict__.update(self.__dict__)
-        other.allowed = np.ones(self.nodes.size, dtype=bool) if allowed is None else \
-            np.asarray(allowed, dtype=bool)[self.nodes]  # fmt: skip
+        other.allowed = (
+            np.ones(self.nodes.size, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)[self.nodes]
+        )
         return other
 
     def marker_locals(self, marker_set: MarkerSet) -> tuple[np.ndarray, np.ndarray]:
@@ -104,8 +106,13 @@ class SsgIndex:
         carrier = None
         for offsets in np.unique(self.clip_offsets.reshape(len(self.clip_offsets), -1), axis=0):
             clips = np.flatnonzero((self.clip_offsets.reshape(len(self.clip_offsets), -1) == offsets).all(axis=1))
-            sk = Skeleton(self.skeleton.names, self.skeleton.parents, offsets.reshape(-1, 3), self.skeleton.channels,
-                          self.skeleton.end_site)  # fmt: skip
+            sk = Skeleton(
+                self.skeleton.names,
+                self.skeleton.parents,
+                offsets.reshape(-1, 3),
+                self.skeleton.channels,
+                self.skeleton.end_site,
+            )
             placement = place_markers(marker_set, sk, self.mapping)
             carrier = placement.carrier
             out[np.isin(self.clip, clips)] = placement.local

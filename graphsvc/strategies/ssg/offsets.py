@@ -28,8 +28,17 @@ FIT_ROUNDS = 3  # reconstruct, fit, reconstruct again: at most this many fits
 FIT_SETTLED_M = 0.002  # … or until no offset moves more than this
 
 
-def fit_offsets(index: SsgIndex, carrier: np.ndarray, nominal: np.ndarray, points: np.ndarray, seen: np.ndarray,
-                anchors, anchor: np.ndarray, frame: np.ndarray, weight: np.ndarray) -> np.ndarray:  # fmt: skip
+def fit_offsets(
+    index: SsgIndex,
+    carrier: np.ndarray,
+    nominal: np.ndarray,
+    points: np.ndarray,
+    seen: np.ndarray,
+    anchors,
+    anchor: np.ndarray,
+    frame: np.ndarray,
+    weight: np.ndarray,
+) -> np.ndarray:
     """(M, 3) offsets in the carriers' frames. carrier (M,) joints; nominal (M, 3);
     points (T, M, 3), seen (T, M) the input; anchor, frame, weight (T, 2) the
     reconstruction's sources (`SsgDecoder.sources`), the heavier one used."""
@@ -59,6 +68,10 @@ def fit_offsets(index: SsgIndex, carrier: np.ndarray, nominal: np.ndarray, point
 def fitted_set(marker_set: MarkerSet, local: np.ndarray) -> MarkerSet:
     """The set with each marker at its fitted offset on its carrier (a set file
     `--markers` reads back, for a live stream of the same performer)."""
-    return MarkerSet(f"{marker_set.name}-fitted", tuple(
-        MarkerSpec(m.name, m.segment, offset_m=tuple(round(float(v), 5) for v in local[j]))
-        for j, m in enumerate(marker_set.markers)))  # fmt: skip
+    return MarkerSet(
+        f"{marker_set.name}-fitted",
+        tuple(
+            MarkerSpec(m.name, m.segment, offset_m=tuple(round(float(v), 5) for v in local[j]))
+            for j, m in enumerate(marker_set.markers)
+        ),
+    )

@@ -41,33 +41,65 @@ class SsgOptions:
     against the knowledge-base poses it is matched to, `strategies.ssg.offsets`),
     "auto" (fit unless the recording was simulated by graphsvc with this set)."""
 
-    markers: str | None = option(None, aliases=("--markers",), metavar="SET", label="SSG markers",
-                                 noun="a marker set's name, file or JSON text",
-                                 help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file "
-                                      "(JSON/TOML) (default: the one the recording names)")  # fmt: skip
-    keep: tuple[str, ...] | None = option(None, aliases=("--keep",), metavar="NAMES", label="SSG keep",
-                                          noun="marker names",
-                                          help="use only these markers of the set (comma-separated; default: all)")
-    window_s: float | None = option(None, low=0.0, low_open=True, aliases=("--ssg-window",), metavar="S",
-                                    label="SSG window", noun="a finite number of seconds",
-                                    help="window length, seconds (default 1/3; 0.25 when every marker is on the head or "
-                                         "trunk)")  # fmt: skip
-    overlap_s: float | None = option(None, low=0.0, aliases=("--ssg-overlap",), metavar="S", label="SSG overlap",
-                                     noun="a finite number of seconds",
-                                     help="overlap of consecutive windows, seconds, at most half a window (default 1/6; "
-                                          "0.1)")  # fmt: skip
-    k: int | None = option(None, low=1, high=256, metavar="K", label="SSG k",
-                           help="subsequences kept a window (default 8; 16)")
-    weight: float | None = option(None, low=0.0, metavar="W", label="SSG weight",
-                                  help="weight of the transition costs against the node costs (default 1; 4)")
-    offsets: str = option("auto", choices=OFFSETS, label="SSG offsets",
-                          help="marker offsets on their segments: the set's (nominal), fitted to the input (fit), or fit "
-                               "unless the recording was simulated (auto, the default)")  # fmt: skip
+    markers: str | None = option(
+        None,
+        aliases=("--markers",),
+        metavar="SET",
+        label="SSG markers",
+        noun="a marker set's name, file or JSON text",
+        help="marker set: hands-feet, left-foot, head-back, vicon, or a marker set file "
+        "(JSON/TOML) (default: the one the recording names)",
+    )
+    keep: tuple[str, ...] | None = option(
+        None,
+        aliases=("--keep",),
+        metavar="NAMES",
+        label="SSG keep",
+        noun="marker names",
+        help="use only these markers of the set (comma-separated; default: all)",
+    )
+    window_s: float | None = option(
+        None,
+        low=0.0,
+        low_open=True,
+        aliases=("--ssg-window",),
+        metavar="S",
+        label="SSG window",
+        noun="a finite number of seconds",
+        help="window length, seconds (default 1/3; 0.25 when every marker is on the head or trunk)",
+    )
+    overlap_s: float | None = option(
+        None,
+        low=0.0,
+        aliases=("--ssg-overlap",),
+        metavar="S",
+        label="SSG overlap",
+        noun="a finite number of seconds",
+        help="overlap of consecutive windows, seconds, at most half a window (default 1/6; 0.1)",
+    )
+    k: int | None = option(
+        None, low=1, high=256, metavar="K", label="SSG k", help="subsequences kept a window (default 8; 16)"
+    )
+    weight: float | None = option(
+        None,
+        low=0.0,
+        metavar="W",
+        label="SSG weight",
+        help="weight of the transition costs against the node costs (default 1; 4)",
+    )
+    offsets: str = option(
+        "auto",
+        choices=OFFSETS,
+        label="SSG offsets",
+        help="marker offsets on their segments: the set's (nominal), fitted to the input (fit), or fit "
+        "unless the recording was simulated (auto, the default)",
+    )
 
     def check(self) -> None:
         if self.window_s is not None and self.overlap_s is not None and self.overlap_s > 0.5 * self.window_s:
-            raise OptionError("overlap_s", f"SSG overlap ({self.overlap_s:g} s) must be at most half the window "
-                                           f"({self.window_s:g} s)")  # fmt: skip
+            raise OptionError(
+                "overlap_s", f"SSG overlap ({self.overlap_s:g} s) must be at most half the window ({self.window_s:g} s)"
+            )
         if self.markers is not None:
             try:
                 marker_set = parse_marker_set(self.markers)
@@ -83,5 +115,10 @@ class SsgOptions:
         and trunk."""
         d = (0.25, 0.1, 16, 4.0) if trunk_only else (1.0 / 3.0, 1.0 / 6.0, 8, 1.0)
         pick = lambda v, default: default if v is None else v  # noqa: E731
-        return replace(self, window_s=pick(self.window_s, d[0]), overlap_s=pick(self.overlap_s, d[1]),
-                       k=pick(self.k, d[2]), weight=pick(self.weight, d[3]))  # fmt: skip
+        return replace(
+            self,
+            window_s=pick(self.window_s, d[0]),
+            overlap_s=pick(self.overlap_s, d[1]),
+            k=pick(self.k, d[2]),
+            weight=pick(self.weight, d[3]),
+        )

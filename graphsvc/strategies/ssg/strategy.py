@@ -30,13 +30,7 @@ from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.markers import PRESETS as MARKER_PRESETS
-from graphsvc.sensors.markers import (  # fmt: skip
-    TRUNK_SEGMENTS,
-    MarkerSet,
-    keep_markers,
-    load_marker_set,
-    marker_set_from_dict,
-)
+from graphsvc.sensors.markers import TRUNK_SEGMENTS, MarkerSet, keep_markers, load_marker_set, marker_set_from_dict
 from graphsvc.sensors.simulate import simulate_marker_recording
 from graphsvc.strategies.base import Strategy, prepared_index
 from graphsvc.strategies.inputs import PreparedInput
@@ -65,16 +59,20 @@ def used_markers(options: SsgOptions, names: tuple, meta: dict | None) -> tuple[
     elif meta and isinstance(meta.get("marker_set"), dict):
         marker_set = marker_set_from_dict(meta["marker_set"], "the recording's marker set")
     else:
-        raise InputError("strategy 'ssg' needs a marker set: give --markers (hands-feet, left-foot, head-back, vicon, "
-                         "or a marker set file)")  # fmt: skip
+        raise InputError(
+            "strategy 'ssg' needs a marker set: give --markers (hands-feet, left-foot, head-back, vicon, "
+            "or a marker set file)"
+        )
     marker_set = keep_markers(marker_set, options.keep)
     have = {n: k for k, n in enumerate(names)}
     kept = [m for m in marker_set.markers if m.name in have]
     missing = [m.name for m in marker_set.markers if m.name not in have]
     if not kept:
-        raise InputError(f"the input has none of the markers of set {marker_set.name!r} "
-                         f"({', '.join(marker_set.marker_names[:8])}{' …' if len(marker_set.markers) > 8 else ''}); "
-                         f"it has {', '.join(names[:8]) or 'none'}")  # fmt: skip
+        raise InputError(
+            f"the input has none of the markers of set {marker_set.name!r} "
+            f"({', '.join(marker_set.marker_names[:8])}{' …' if len(marker_set.markers) > 8 else ''}); "
+            f"it has {', '.join(names[:8]) or 'none'}"
+        )
     used = MarkerSet(marker_set.name, tuple(kept))
     ignored = [n for n in names if n not in used.marker_names]
     return used, np.array([have[m.name] for m in kept], dtype=np.int64), ignored, missing
@@ -113,8 +111,11 @@ def looks_ahead(rate_hz: float) -> int:
 def _prepared_markers(graph: MotionGraph, index: SsgIndex, marker_set: MarkerSet, local: np.ndarray | None):
     """The knowledge base's markers (F, M, 3) and their window clouds, once per graph,
     set and offsets."""
-    key = ("ssg markers", json.dumps(marker_set.to_dict(), sort_keys=True),
-           None if local is None else np.round(local, 9).tobytes())  # fmt: skip
+    key = (
+        "ssg markers",
+        json.dumps(marker_set.to_dict(), sort_keys=True),
+        None if local is None else np.round(local, 9).tobytes(),
+    )
 
     def make():
         kb_markers = index.markers(marker_set, local)
@@ -169,20 +170,33 @@ class SsgStrategy(Strategy):
         text = values.get("markers")
         if text is None:
             if chosen:  # (the library would take the recording's own set, which does not cross the wire)
-                raise on_field(InputError(f"strategy {self.name!r} needs a marker set: a built-in name "
-                                          f"({', '.join(MARKER_PRESETS)}) or a marker set as JSON"), "markers")  # fmt: skip
+                raise on_field(
+                    InputError(
+                        f"strategy {self.name!r} needs a marker set: a built-in name "
+                        f"({', '.join(MARKER_PRESETS)}) or a marker set as JSON"
+                    ),
+                    "markers",
+                )
             return
         if isinstance(text, str) and not text.strip().startswith("{") and text.strip() not in MARKER_PRESETS:
-            raise on_field(InputError(f"unknown marker set {text!r}: not a built-in set ({', '.join(MARKER_PRESETS)}) "
-                                      "nor a marker set as JSON (the server reads no files)"), "markers")  # fmt: skip
+            raise on_field(
+                InputError(
+                    f"unknown marker set {text!r}: not a built-in set ({', '.join(MARKER_PRESETS)}) "
+                    "nor a marker set as JSON (the server reads no files)"
+                ),
+                "markers",
+            )
 
     def check_stream(self, options: Options, sensor_names, marker_names) -> None:
         if not marker_names:
-            raise on_field(InputError(f"strategy {self.name!r} needs the names of the markers the stream carries"),
-                           "marker_names")  # fmt: skip
+            raise on_field(
+                InputError(f"strategy {self.name!r} needs the names of the markers the stream carries"), "marker_names"
+            )
         if self.own(options).offsets == "fit":
-            raise InputError("SSG offsets 'fit' needs the whole input: fit them in a batch run (its report's "
-                             "fitted_marker_set) and stream with that set")  # fmt: skip
+            raise InputError(
+                "SSG offsets 'fit' needs the whole input: fit them in a batch run (its report's "
+                "fitted_marker_set) and stream with that set"
+            )
         try:
             used_markers(self.own(options), tuple(marker_names), None)
         except GraphsvcError as exc:  # none of the set's (kept) markers among the stream's
@@ -192,27 +206,46 @@ class SsgStrategy(Strategy):
         if not self.own(options).markers:
             raise InputError(f"--strategy {self.name} reads optical markers: give the set to simulate, --markers")
 
-    def simulate_input(self, motion, layout, options: Options, noise, seed: int, rate_hz: float, mapping=None,
-                       pattern=None):  # fmt: skip
+    def simulate_input(
+        self, motion, layout, options: Options, noise, seed: int, rate_hz: float, mapping=None, pattern=None
+    ):
         """The markers of the options' set (those kept) lost to `pattern`."""
         self.check_simulation(options)
         o = self.own(options)
         kwargs = {} if pattern is None else {"pattern": pattern}
-        return simulate_marker_recording(motion, load_marker_set(o.markers), noise, seed=seed, rate_hz=rate_hz,
-                                         mapping=mapping, keep=o.keep, **kwargs)  # fmt: skip
+        return simulate_marker_recording(
+            motion,
+            load_marker_set(o.markers),
+            noise,
+            seed=seed,
+            rate_hz=rate_hz,
+            mapping=mapping,
+            keep=o.keep,
+            **kwargs,
+        )
 
     def describe_input(self, options: Options, noise, pattern=None) -> str:
         o = self.own(options)
         kept = f" ({','.join(o.keep)})" if o.keep else ""
         text = f"markers {o.markers}{kept}, σ {noise.marker:g} mm"
         if pattern is not None:
-            text += ((f", {100 * pattern.gap_fraction:g} % in gaps" if pattern.gap_fraction else "")
-                     + (f", gaps {pattern.gaps}" if pattern.gaps else "")
-                     + (f", flicker {100 * pattern.flicker:g} %" if pattern.flicker else ""))  # fmt: skip
+            text += (
+                (f", {100 * pattern.gap_fraction:g} % in gaps" if pattern.gap_fraction else "")
+                + (f", gaps {pattern.gaps}" if pattern.gaps else "")
+                + (f", flicker {100 * pattern.flicker:g} %" if pattern.flicker else "")
+            )
         return text
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         t0 = time.perf_counter()
         warm_up()
         idx = index.with_allowed(allowed)
@@ -247,13 +280,17 @@ class SsgStrategy(Strategy):
                 decoder = _run(graph, idx, used, local, w, lag, points, seen, should_stop)
                 if moved < FIT_SETTLED_M:
                     break
-            offsets_report.update({
-                "rounds": rounds,
-                "fitted_on_s": round(span / rate, 3),
-                "moved_cm": {m.name: round(float(np.linalg.norm(local[j] - nominal[j])) * 100.0, 2)
-                             for j, m in enumerate(used.markers)},
-                "fitted_marker_set": fitted_set(used, local).to_dict(),
-            })  # fmt: skip
+            offsets_report.update(
+                {
+                    "rounds": rounds,
+                    "fitted_on_s": round(span / rate, 3),
+                    "moved_cm": {
+                        m.name: round(float(np.linalg.norm(local[j] - nominal[j])) * 100.0, 2)
+                        for j, m in enumerate(used.markers)
+                    },
+                    "fitted_marker_set": fitted_set(used, local).to_dict(),
+                }
+            )
         search_s = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -263,8 +300,22 @@ class SsgStrategy(Strategy):
         clip, frame, weight, labels = provenance(graph, idx, a, f, wt)
         motion = Motion(graph.skeleton, rot, trans, rate, name="synthesized", source="ssg")
         synth_s = time.perf_counter() - t0
-        report = _report(decoder, used, resolved, w, lag, ignored, missing, offsets_report, seen, labels, idx,
-                         warm_up_s, search_s, synth_s)  # fmt: skip
+        report = _report(
+            decoder,
+            used,
+            resolved,
+            w,
+            lag,
+            ignored,
+            missing,
+            offsets_report,
+            seen,
+            labels,
+            idx,
+            warm_up_s,
+            search_s,
+            synth_s,
+        )
         return Reconstruction(motion, None, None, report, Provenance(clip, frame, weight, labels))
 
 
@@ -279,13 +330,27 @@ def _run(graph, idx, used, local, w, lag, points, seen, should_stop) -> SsgDecod
     for t in range(0, len(points), block):
         if should_stop is not None and t % 256 == 0 and should_stop():
             raise SearchCancelled("reconstruction cancelled")
-        decoder.push(points[t:t + block], seen[t:t + block])
+        decoder.push(points[t : t + block], seen[t : t + block])
     decoder.finish()
     return decoder
 
 
-def _report(decoder: SsgDecoder, used: MarkerSet, o: SsgOptions, w: Windows, lag, ignored, missing, offsets, seen,
-            labels, idx: SsgIndex, warm_up_s, search_s, synth_s) -> dict:  # fmt: skip
+def _report(
+    decoder: SsgDecoder,
+    used: MarkerSet,
+    o: SsgOptions,
+    w: Windows,
+    lag,
+    ignored,
+    missing,
+    offsets,
+    seen,
+    labels,
+    idx: SsgIndex,
+    warm_up_s,
+    search_s,
+    synth_s,
+) -> dict:
     """The report of an SSG run (docs/ssg.md)."""
     path = []
     node_cost = transition = 0.0
@@ -296,26 +361,44 @@ def _report(decoder: SsgDecoder, used: MarkerSet, o: SsgOptions, w: Windows, lag
         node_cost += float(layer.cost[node])
         if z:
             transition += float(decoder.edges[z - 1][decoder.path[z - 1], node])
-        path.append({"start_frame": layer.start, "frames": layer.stop - layer.start,
-                     "kind": ("retrieved", "forward", "backward")[int(layer.kind[node])],
-                     "clip": int(idx.clip[int(frames[0])]),
-                     "clip_frames": [round(float(idx.clip_frame[int(frames[0])] + frames[0] % 1), 2),
-                                     round(float(idx.clip_frame[int(frames[-1])] + frames[-1] % 1), 2)],
-                     "cost": round(float(layer.cost[node]), 8)})  # fmt: skip
+        path.append(
+            {
+                "start_frame": layer.start,
+                "frames": layer.stop - layer.start,
+                "kind": ("retrieved", "forward", "backward")[int(layer.kind[node])],
+                "clip": int(idx.clip[int(frames[0])]),
+                "clip_frames": [
+                    round(float(idx.clip_frame[int(frames[0])] + frames[0] % 1), 2),
+                    round(float(idx.clip_frame[int(frames[-1])] + frames[-1] % 1), 2),
+                ],
+                "cost": round(float(layer.cost[node]), 8),
+            }
+        )
     kinds = [layer.kind for layer in decoder.layers]
     T = seen.shape[0]
     total = search_s
     return {
         "cost": node_cost + w.weight * transition,
         "terms": {"node_m2": node_cost, "transition_m2": transition},
-        "ssg": {"marker_set": used.name, "markers": list(used.marker_names), "window_frames": w.n,
-                "overlap_frames": w.o, "k": w.k, "weight": w.weight, "window_s": round(o.window_s, 6),
-                "overlap_s": round(o.overlap_s, 6), "lag_windows": lag, "offsets": offsets},  # fmt: skip
+        "ssg": {
+            "marker_set": used.name,
+            "markers": list(used.marker_names),
+            "window_frames": w.n,
+            "overlap_frames": w.o,
+            "k": w.k,
+            "weight": w.weight,
+            "window_s": round(o.window_s, 6),
+            "overlap_s": round(o.overlap_s, 6),
+            "lag_windows": lag,
+            "offsets": offsets,
+        },
         "windows": len(decoder.layers),
         "blind_windows": int(sum(layer.blind for layer in decoder.layers)),
-        "nodes": {"retrieved": int(sum((k == RETRIEVED).sum() for k in kinds)),
-                  "forward": int(sum((k == FORWARD).sum() for k in kinds)),
-                  "backward": int(sum((k == BACKWARD).sum() for k in kinds))},  # fmt: skip
+        "nodes": {
+            "retrieved": int(sum((k == RETRIEVED).sum() for k in kinds)),
+            "forward": int(sum((k == FORWARD).sum() for k in kinds)),
+            "backward": int(sum((k == BACKWARD).sum() for k in kinds)),
+        },
         "dtw_cells": int(decoder.cells),
         "seen": round(float(seen.mean()), 4),
         "ignored_markers": ignored,
@@ -389,8 +472,13 @@ class SsgSession(LiveSession):
 
     def _finish(self):
         if not self.any_seen:  # (as a batch run refuses such a recording; a stream can only tell at its end)
-            raise on_field(InputError(f"every kept marker ({', '.join(self.used.marker_names)}) is NaN in all "
-                                      f"{self.samples_in} samples: nothing to match"), "marker_positions_m")  # fmt: skip
+            raise on_field(
+                InputError(
+                    f"every kept marker ({', '.join(self.used.marker_names)}) is NaN in all "
+                    f"{self.samples_in} samples: nothing to match"
+                ),
+                "marker_positions_m",
+            )
         return self._frames(self.decoder.finish())
 
 

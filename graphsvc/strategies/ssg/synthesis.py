@@ -26,10 +26,15 @@ def _frame_pose(graph: MotionGraph, index: SsgIndex, f: np.ndarray):
     hi = np.minimum(lo + 1, index.run_last[lo])
     w = f - lo
     a, b = index.nodes[lo], index.nodes[hi]
-    rot = quat.slerp(graph.node_rotations[a].astype(np.float64), graph.node_rotations[b].astype(np.float64),
-                     np.broadcast_to(w[:, None], (f.size, graph.skeleton.num_joints)))  # fmt: skip
-    trans = graph.node_translations[a].astype(np.float64) * (1.0 - w[:, None, None]) + \
-        graph.node_translations[b].astype(np.float64) * w[:, None, None]  # fmt: skip
+    rot = quat.slerp(
+        graph.node_rotations[a].astype(np.float64),
+        graph.node_rotations[b].astype(np.float64),
+        np.broadcast_to(w[:, None], (f.size, graph.skeleton.num_joints)),
+    )
+    trans = (
+        graph.node_translations[a].astype(np.float64) * (1.0 - w[:, None, None])
+        + graph.node_translations[b].astype(np.float64) * w[:, None, None]
+    )
     return rot, trans
 
 
@@ -65,8 +70,14 @@ def _placed_pose(graph, index, anchors: list[Anchor], anchor: np.ndarray, f: np.
     return rot, trans
 
 
-def poses(graph: MotionGraph, index: SsgIndex, anchors: list[Anchor], anchor: np.ndarray, frame: np.ndarray,
-          weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def poses(
+    graph: MotionGraph,
+    index: SsgIndex,
+    anchors: list[Anchor],
+    anchor: np.ndarray,
+    frame: np.ndarray,
+    weight: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Rotations (L, J, 4) and translations (L, J, 3) of frames given as up to two
     sources each (`SsgDecoder.sources`: anchor, index frame, weight (L, 2))."""
     chain = _carrier_chain(graph)

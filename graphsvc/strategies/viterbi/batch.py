@@ -20,6 +20,7 @@ from graphsvc.strategies.viterbi.tables import search_index
 REQ_NONE, REQ_CONTACT, REQ_LABEL = 0, 1, 2
 CONTACT_CODES = {"none": 0, "left": 1, "right": 2, "both": 3}  # bit 0 left, bit 1 right
 
+
 @dataclass
 class SearchResult:
     """node_path (T,), edge_path (T−1,) int64; cost: total weighted cost of the path;
@@ -37,7 +38,9 @@ class SearchResult:
     extra: dict = field(default_factory=dict)
 
 
-def compile_constraints(graph: MotionGraph, constraint_sets: list, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def compile_constraints(
+    graph: MotionGraph, constraint_sets: list, times_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Constraint sets (priority order; each a list of {start_s, end_s, require:
     {contact: left|right|both|none} or {label: NAME}}) → per-sample requirement kinds
     and values, (γ, T) int arrays. A sample without a requirement in a set is free."""
@@ -55,7 +58,9 @@ def compile_constraints(graph: MotionGraph, constraint_sets: list, times_s: np.n
                 kind, value = REQ_CONTACT, CONTACT_CODES[req["contact"]]
             elif "label" in req:
                 if req["label"] not in graph.labels:
-                    raise InputError(f"constraint set {k}: unknown label {req['label']!r} (graph labels: {', '.join(graph.labels)})")
+                    raise InputError(
+                        f"constraint set {k}: unknown label {req['label']!r} (graph labels: {', '.join(graph.labels)})"
+                    )
                 kind, value = REQ_LABEL, graph.labels.index(req["label"])
             else:
                 raise InputError(f"constraint set {k}: 'require' needs 'contact' or 'label'")
@@ -65,9 +70,16 @@ def compile_constraints(graph: MotionGraph, constraint_sets: list, times_s: np.n
     return kinds, values
 
 
-
-def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc, position=None, heading=None,
-               measured=None, up=None) -> dict:  # fmt: skip
+def path_terms(
+    search: ViterbiSearch,
+    nodes: np.ndarray,
+    edges: np.ndarray,
+    acc,
+    position=None,
+    heading=None,
+    measured=None,
+    up=None,
+) -> dict:
     """The accelerometer (g²), position (m) and heading (rad) costs accumulated along a
     path found by `search` (unweighted; a term counts where the search used it), and
     in an oriented search the orientation cost (chord²), with the search's arithmetic
@@ -80,8 +92,16 @@ def path_terms(search: ViterbiSearch, nodes: np.ndarray, edges: np.ndarray, acc,
         D = a_mask.shape[1]
         r_mask = np.zeros_like(mask)
         r_mask[:, D:] = mask[:, D:] != 0
-        terms = _terms(search, edges, meas, np.concatenate([a_mask, np.zeros_like(mask[:, D:])], axis=1), a_present,
-                       position, heading, T)  # fmt: skip
+        terms = _terms(
+            search,
+            edges,
+            meas,
+            np.concatenate([a_mask, np.zeros_like(mask[:, D:])], axis=1),
+            a_present,
+            position,
+            heading,
+            T,
+        )
         r_present = r_mask.sum(axis=1) / search.graph.edge_up.shape[-1]
         terms["orientation_chord2"] = _terms(search, edges, meas, r_mask, r_present, None, None, T)["acc_g2"]
         return terms
@@ -94,18 +114,39 @@ def _terms(search, edges, meas, mask, present, position, heading, T) -> dict:
     head = np.full(T, np.nan) if heading is None else np.asarray(heading, dtype=np.float64)
     p0, h0 = search.start_placement
     w = search.weights
-    out = _path_terms(edges.astype(np.int64), search.readings_t, search.edge_reading, search.edge_offset,
-                      search.edge_heading, search.edge_turn, meas, mask, present, pos, head, w.position != 0,
-                      w.heading != 0, float(p0[0]), float(p0[1]), h0, np.cos(h0), np.sin(h0),
-                      search.pull_alpha)  # fmt: skip
+    out = _path_terms(
+        edges.astype(np.int64),
+        search.readings_t,
+        search.edge_reading,
+        search.edge_offset,
+        search.edge_heading,
+        search.edge_turn,
+        meas,
+        mask,
+        present,
+        pos,
+        head,
+        w.position != 0,
+        w.heading != 0,
+        float(p0[0]),
+        float(p0[1]),
+        h0,
+        np.cos(h0),
+        np.sin(h0),
+        search.pull_alpha,
+    )
     return {"acc_g2": float(out[0]), "position_m": float(out[1]), "heading_rad": float(out[2])}
 
 
 def orientation_counts(graph: MotionGraph, weights: Weights, up=None) -> bool:
     """Whether the orientation term can count: W_R > 0, some measured orientation cue
     (T, S, W) finite, and the graph has orientation metadata (`graph.edge_up`)."""
-    return bool(up is not None and weights.orientation > 0 and graph.edge_up is not None
-                and np.isfinite(np.asarray(up)).all(axis=-1).any())
+    return bool(
+        up is not None
+        and weights.orientation > 0
+        and graph.edge_up is not None
+        and np.isfinite(np.asarray(up)).all(axis=-1).any()
+    )
 
 
 def needs_placement(weights: Weights, position=None, heading=None) -> bool:
@@ -140,8 +181,13 @@ def _warm_up(graph: MotionGraph, threads: bool) -> None:
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     free = np.zeros(1, np.int64)
     placed, unplaced = Weights(0.5, 1, 1), Weights(1, 0, 0)
-    for window, gamma, weights, beam in ((None, 0, placed, None), (2, 0, placed, None), (None, 0, unplaced, None),
-                                         (None, 1, placed, None), (2, 0, placed, 1e-6)):  # fmt: skip
+    for window, gamma, weights, beam in (
+        (None, 0, placed, None),
+        (2, 0, placed, None),
+        (None, 0, unplaced, None),
+        (None, 1, placed, None),
+        (2, 0, placed, 1e-6),
+    ):
         search = ViterbiSearch(graph, weights, gamma, threads=threads, window=window, ring=(4, 2), beam=beam)
         search.start(position[0], 0.0, free[:gamma], free[:gamma])
         for t in range(1, T):
@@ -178,11 +224,22 @@ def batch_ring(samples: int) -> tuple[int, int]:
     return (block, window) if samples > block else (max(int(samples), 1), 0)
 
 
-def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=None, weights: Weights = Weights(),
-                   constraint_sets: list | None = None, rate_hz: float | None = None,
-                   allowed: np.ndarray | None = None, threads: bool = True, should_stop=None,
-                   beam: float | None = None, start: tuple | None = None,
-                   pull_s: float | None = None, up: np.ndarray | None = None) -> SearchResult:  # fmt: skip
+def viterbi_search(
+    graph: MotionGraph,
+    acc: np.ndarray,
+    position=None,
+    heading=None,
+    weights: Weights = Weights(),
+    constraint_sets: list | None = None,
+    rate_hz: float | None = None,
+    allowed: np.ndarray | None = None,
+    threads: bool = True,
+    should_stop=None,
+    beam: float | None = None,
+    start: tuple | None = None,
+    pull_s: float | None = None,
+    up: np.ndarray | None = None,
+) -> SearchResult:
     """Batch search. acc: (T, S, 3) m/s² in the graph's layout (NaN = missing);
     position: (T, 2) m or None; heading: (T,) rad or None; constraint_sets: see
     `compile_constraints` (times from sample index / graph rate); allowed: (N,) bool
@@ -200,14 +257,26 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
     if T == 0:
         raise InputError("the input has no samples")
     if acc.ndim != 3 or acc.shape[1:] != (len(graph.sensor_names), 3):
-        raise InputError(f"accelerations must be (samples, {len(graph.sensor_names)}, 3) for the graph's layout, got {acc.shape}")
+        raise InputError(
+            f"accelerations must be (samples, {len(graph.sensor_names)}, 3) for the graph's layout, got {acc.shape}"
+        )
     constraint_sets = constraint_sets or []
     gamma = len(constraint_sets)
     times = np.arange(T) / (rate_hz or graph.rate_hz)
     kinds, values = compile_constraints(graph, constraint_sets, times)
     oriented = orientation_counts(graph, weights, up)
-    search = ViterbiSearch(graph, weights, gamma, allowed, threads, needs_placement(weights, position, heading),
-                           ring=batch_ring(T), beam=beam, pull_s=pull_s, oriented=oriented)  # fmt: skip
+    search = ViterbiSearch(
+        graph,
+        weights,
+        gamma,
+        allowed,
+        threads,
+        needs_placement(weights, position, heading),
+        ring=batch_ring(T),
+        beam=beam,
+        pull_s=pull_s,
+        oriented=oriented,
+    )
     up = up if oriented else None
     pos = (lambda t: None) if position is None else (lambda t: position[t])
     head = (lambda t: None) if heading is None else (lambda t: heading[t])
@@ -223,14 +292,24 @@ def viterbi_search(graph: MotionGraph, acc: np.ndarray, position=None, heading=N
         # (a beam search's sparse steps compute only the readings they read)
         costs = None if search.narrow else search.reading_costs(acc[block], tuple(m[block] for m in measured))
         for t in range(t0, min(T, t0 + READING_BATCH)):
-            search.step(acc[t], pos(t), head(t), kinds[:, t], values[:, t], None if costs is None else costs[t - t0],
-                        None if up is None else up[t])  # fmt: skip
+            search.step(
+                acc[t],
+                pos(t),
+                head(t),
+                kinds[:, t],
+                values[:, t],
+                None if costs is None else costs[t - t0],
+                None if up is None else up[t],
+            )
     best = search.best_node()
     nodes, edges = search.trace(best)
     terms = path_terms(search, nodes, edges, acc, position, heading, measured, up)
     return SearchResult(
-        node_path=nodes, edge_path=edges, cost=float(search.cost[best]), terms=terms,
+        node_path=nodes,
+        edge_path=edges,
+        cost=float(search.cost[best]),
+        terms=terms,
         broken=[int(v) for v in search.rank[best]],
-        compression=float(search.compression), peak_entries=int(search.peak_entries),
-    )  # fmt: skip
-
+        compression=float(search.compression),
+        peak_entries=int(search.peak_entries),
+    )

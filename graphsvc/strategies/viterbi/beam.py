@@ -65,11 +65,52 @@ def _immortal(incoming, edge_src, allowed):
 BEAM_CHUNKS = 64
 
 
-def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks, marks_words, sources, touched, total,
-                  keep, survivors_out, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, edge_turn,
-                  readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, beam,
-                  state_prev, det_prev, state_new, det_new, arrivals, none, ancestor_prev, ancestor_new,
-                  chunk_low, pull):  # fmt: skip
+def _beam_step_py(
+    active,
+    n_active,
+    out_start,
+    out_dst,
+    allowed,
+    immortal,
+    marks,
+    marks_words,
+    sources,
+    touched,
+    total,
+    keep,
+    survivors_out,
+    incoming,
+    edge_src,
+    edge_reading,
+    edge_kind,
+    edge_offset,
+    edge_heading,
+    edge_turn,
+    readings,
+    meas,
+    mask,
+    scale,
+    w_acc,
+    w_pos,
+    w_head,
+    use_pos,
+    use_head,
+    mx,
+    mz,
+    mh,
+    placed,
+    beam,
+    state_prev,
+    det_prev,
+    state_new,
+    det_new,
+    arrivals,
+    none,
+    ancestor_prev,
+    ancestor_new,
+    chunk_low,
+    pull,
+):
     """One step of a beam search (γ = 0) while few nodes are live (see
     `ViterbiSearch.BEAM_DENSE_SHARE`; else the exact step and `_beam_prune`).
 
@@ -116,9 +157,32 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
         low, low_immortal = np.inf, np.inf
         for i in range(c * per, min(count, (c + 1) * per)):
             n = touched[i]
-            a, t = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, None,
-                                 readings, meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
-                                 placed, state_prev, det_prev, sources)  # fmt: skip
+            a, t = _exact_choice(
+                n,
+                incoming,
+                edge_src,
+                edge_reading,
+                edge_kind,
+                edge_offset,
+                edge_heading,
+                None,
+                readings,
+                meas,
+                mask,
+                scale,
+                w_acc,
+                w_pos,
+                w_head,
+                use_pos,
+                use_head,
+                mx,
+                mz,
+                mh,
+                placed,
+                state_prev,
+                det_prev,
+                sources,
+            )
             total[i] = t
             if a >= 0:
                 arrivals[n] = a
@@ -146,8 +210,18 @@ def _beam_step_py(active, n_active, out_start, out_dst, allowed, immortal, marks
             if ancestor_prev.shape[0]:
                 ancestor_new[n] = ancestor_prev[m]
             if placed:
-                _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                                 edge_turn[e, 0], edge_turn[e, 1], pull)  # fmt: skip
+                _carry_placement(
+                    state_prev,
+                    m,
+                    state_new,
+                    n,
+                    edge_offset[e, 0],
+                    edge_offset[e, 1],
+                    edge_heading[e],
+                    edge_turn[e, 0],
+                    edge_turn[e, 1],
+                    pull,
+                )
     for i in range(n_active):
         sources[active[i]] = 0
     survivors = 0
@@ -267,5 +341,3 @@ def _bound_live(state, live, count, most, immortal, arrivals, none, c32):
 
 
 _beam_step, _beam_step_serial = _compile(_beam_step_py, True), _compile(_beam_step_py, False)
-
-

@@ -113,7 +113,7 @@ def _reading_costs_py(readings_t, meas, mask, scale, out):
             if mask[j] == 0.0:
                 continue
             m, w = meas[j], mask[j]
-            row = readings_t[j, r0:r0 + n]
+            row = readings_t[j, r0 : r0 + n]
             for i in range(n):
                 d = (row[i] - m) * w
                 sums[i] = _fma(d, d, sums[i])
@@ -136,7 +136,7 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
         n = min(R, r0 + chunk) - r0
         sums = np.zeros((B, chunk), np.float32)
         for j in range(D):
-            row = readings_t[j, r0:r0 + n]
+            row = readings_t[j, r0 : r0 + n]
             for b in range(B):
                 if mask[b, j] == 0.0:
                     continue
@@ -147,7 +147,6 @@ def _reading_costs_batch_py(readings_t, meas, mask, scale, out):
         for b in range(B):
             for i in range(n):
                 out[b, r0 + i] = sums[b, i] * scale[b]
-
 
 
 _reading_costs_batch = _compile(_reading_costs_batch_py, True)
@@ -226,6 +225,7 @@ _INV_TWO_PI32 = np.float32(0.5 / np.pi)
 DEAD32 = np.float32(1e38)  # float32 cost of a dead path (finite, so tagging keeps it ordered)
 DEAD_BELOW = np.float32(1e37)  # a live path's relative cost never comes near this
 
+
 @numba.njit(inline="always")
 def _place_terms(qx, qz, rh, ox, oz, dh):
     """Position (m) and heading (rad) terms of an edge (offset ox, oz in the source's
@@ -255,8 +255,9 @@ def _exact_total(cost_m, qx, qz, rh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_p
 @numba.njit(inline="always")
 def _row_total(rel, state, m, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     """`_exact_total` for an edge from m, read from m's relative row (`_relative`)."""
-    return _exact_total(_cost_at(state, m), rel[m, QX], rel[m, QZ], rel[m, RH], ca, ox, oz, dh, w_acc, w_pos, w_head,
-                        use_pos, use_head)  # fmt: skip
+    return _exact_total(
+        _cost_at(state, m), rel[m, QX], rel[m, QZ], rel[m, RH], ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head
+    )
 
 
 @numba.njit(inline="always")
@@ -309,7 +310,6 @@ def _carry_placement(place_prev, m, place_new, n, ox, oz, dh, tc, ts, pull):
     place_new[n, SIN] = s * tc + c * ts
 
 
-
 @numba.njit(inline="always")
 def _tie_better(i, b, slot_src, slot_kind, det_prev):
     """Between two paths of equal cost (within TIE): fewer non-original edges, then
@@ -319,7 +319,6 @@ def _tie_better(i, b, slot_src, slot_kind, det_prev):
     if det != best_det:
         return det < best_det
     return slot_kind[i] < slot_kind[b]
-
 
 
 @numba.njit(inline="always")
@@ -355,8 +354,9 @@ def _source_total(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_
 @numba.extending.overload(_source_total, inline="always")
 def _source_total_kernel(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
     if state.ndim == 1:  # (unplaced pass 2 hands over the cost column)
-        return lambda placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head: \
+        return lambda placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head: (
             state[m] + w_acc * ca
+        )
 
     def total(placed, state, m, mx, mz, mh, ca, ox, oz, dh, w_acc, w_pos, w_head, use_pos, use_head):
         if placed:
@@ -381,9 +381,32 @@ def _dead_kernel(live, state, m):
 
 
 @numba.njit(inline="always")
-def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading, reading_cost, readings,
-                  meas, mask, scale, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh, placed, state,
-                  det_prev, live=None):  # fmt: skip
+def _exact_choice(
+    n,
+    incoming,
+    edge_src,
+    edge_reading,
+    edge_kind,
+    edge_offset,
+    edge_heading,
+    reading_cost,
+    readings,
+    meas,
+    mask,
+    scale,
+    w_acc,
+    w_pos,
+    w_head,
+    use_pos,
+    use_head,
+    mx,
+    mz,
+    mh,
+    placed,
+    state,
+    det_prev,
+    live=None,
+):
     """Node n's best incoming edge by the float64 rule of `dense._select_py` (candidates in
     graph order; lower total beyond TIE, else fewer detours, then plainer kind), each
     total from its source's state as pass 2 computes it (`_source_total`; the relative
@@ -398,8 +421,23 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
         if _dead(live, state, m):  # (never the better; its C_A is not worth computing)
             continue
         ca = _edge_ca(reading_cost, readings, meas, mask, scale, edge_reading[e])
-        t = _source_total(placed, state, m, mx, mz, mh, ca, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                          w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
+        t = _source_total(
+            placed,
+            state,
+            m,
+            mx,
+            mz,
+            mh,
+            ca,
+            edge_offset[e, 0],
+            edge_offset[e, 1],
+            edge_heading[e],
+            w_acc,
+            w_pos,
+            w_head,
+            use_pos,
+            use_head,
+        )
         better = t < cb - TIE
         if abs(t - cb) <= TIE:
             better = _tie_better(e, best, edge_src, edge_kind, det_prev)  # (graph order instead of slot order)
@@ -408,10 +446,28 @@ def _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, e
     return (best - first if best >= 0 else np.int64(-1)), cb
 
 
-
 @numba.njit(cache=True, nogil=True)
-def _path_terms(edges, readings_t, edge_reading, edge_offset, edge_heading, edge_turn, meas, mask, present, meas_pos,
-                meas_heading, use_pos, use_head, x, z, h, c, s, alpha):  # fmt: skip
+def _path_terms(
+    edges,
+    readings_t,
+    edge_reading,
+    edge_offset,
+    edge_heading,
+    edge_turn,
+    meas,
+    mask,
+    present,
+    meas_pos,
+    meas_heading,
+    use_pos,
+    use_head,
+    x,
+    z,
+    h,
+    c,
+    s,
+    alpha,
+):
     """Accumulated acc (g²), position (m) and heading (rad) costs along one path, with
     the search's arithmetic. edges (T−1,); meas/mask (T, 3S) float32 as the search's
     measurement vectors; present (T,) sensors present; meas_pos (T, 2), meas_heading

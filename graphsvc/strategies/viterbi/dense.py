@@ -40,7 +40,7 @@ from graphsvc.strategies.viterbi.costs import (
     _row_total,
     _set_cost,
     _state_total,
-    _tie_better,  # fmt: skip
+    _tie_better,
 )
 from graphsvc.strategies.viterbi.intrinsics import compile_kernel as _compile
 from graphsvc.strategies.viterbi.intrinsics import fmax as _fmax
@@ -81,9 +81,21 @@ from graphsvc.strategies.viterbi.intrinsics import tag as _tag
 PREFETCH_AHEAD = np.uint64(32)
 
 
-
-def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_cost, w_acc, w_pos, w_head, use_pos,
-                    use_head, state, rel, total):  # fmt: skip
+def _edge_totals_py(
+    edge_src,
+    edge_reading,
+    edge_offset,
+    edge_heading,
+    reading_cost,
+    w_acc,
+    w_pos,
+    w_head,
+    use_pos,
+    use_head,
+    state,
+    rel,
+    total,
+):
     """total (E,): the cost of each path extended by each edge, G(src) + L(e, t)
     (inf from a dead source; state (N, W) the sources' states), float64 (the
     constrained search's pass). reading_cost (R,) C_A per distinct reading; use_pos /
@@ -95,12 +107,37 @@ def _edge_totals_py(edge_src, edge_reading, edge_offset, edge_heading, reading_c
             total[e] = state[edge_src[e], COST] + w_acc * reading_cost[edge_reading[e]]
         return
     for e in numba.prange(E):
-        total[e] = _row_total(rel, state, edge_src[e], reading_cost[edge_reading[e]], edge_offset[e, 0],
-                              edge_offset[e, 1], edge_heading[e], w_acc, w_pos, w_head, use_pos, use_head)  # fmt: skip
+        total[e] = _row_total(
+            rel,
+            state,
+            edge_src[e],
+            reading_cost[edge_reading[e]],
+            edge_offset[e, 0],
+            edge_offset[e, 1],
+            edge_heading[e],
+            w_acc,
+            w_pos,
+            w_head,
+            use_pos,
+            use_head,
+        )
 
 
-def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, total, allowed, det_prev,
-               rank_prev, best_slot, state_new, best_edge):  # fmt: skip
+def _select_py(
+    chunk_nodes,
+    chunk_slots,
+    slot_dst,
+    slot_src,
+    slot_kind,
+    slot_edge,
+    total,
+    allowed,
+    det_prev,
+    rank_prev,
+    best_slot,
+    state_new,
+    best_edge,
+):
     """Each node's best incoming edge (graph edge id, −1: none alive, or the node is
     masked) and its path's cost (state_new's COST): fewest broken constraints (rank,
     lexicographic), then lowest total (within TIE counts as equal), then fewer
@@ -153,10 +190,28 @@ def _select_py(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edg
             state_new[n, COST] = total[b]
 
 
-
-def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_heading, edge_turn, ok, placed, state_prev,
-                det_prev, rank_prev, state_new, det_new, rank_new, arrivals, none, ancestor_prev,
-                ancestor_new, pull):  # fmt: skip
+def _advance_py(
+    best_edge,
+    incoming,
+    edge_src,
+    edge_kind,
+    edge_offset,
+    edge_heading,
+    edge_turn,
+    ok,
+    placed,
+    state_prev,
+    det_prev,
+    rank_prev,
+    state_new,
+    det_new,
+    rank_new,
+    arrivals,
+    none,
+    ancestor_prev,
+    ancestor_new,
+    pull,
+):
     """The new state of every live path from its predecessor's along its best edge:
     the arrival (which of the node's incoming edges, `none`: dead) into this sample's
     lattice row, detour count, broken constraints, its node at an earlier sample
@@ -180,8 +235,18 @@ def _advance_py(best_edge, incoming, edge_src, edge_kind, edge_offset, edge_head
         for k in range(gamma):
             rank_new[n, k] = rank_prev[m, k] + (0 if ok[k, n] else 1)
         if placed:
-            _carry_placement(state_prev, m, state_new, n, edge_offset[e, 0], edge_offset[e, 1], edge_heading[e],
-                             edge_turn[e, 0], edge_turn[e, 1], pull)  # fmt: skip
+            _carry_placement(
+                state_prev,
+                m,
+                state_new,
+                n,
+                edge_offset[e, 0],
+                edge_offset[e, 1],
+                edge_heading[e],
+                edge_turn[e, 0],
+                edge_turn[e, 1],
+                pull,
+            )
     return live
 
 
@@ -216,10 +281,34 @@ def _keep_two_run(best, second, shift, costs, src, labels, reading_cost, w_acc, 
         i += np.uint64(1)
 
 
-def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, shared_offset, shared_heading,
-                      own_bounds, own_src, own_reading, own_pos, own_arrival, own_offset, own_heading, reading_cost,
-                      w_acc, w_pos, w_head, rows, c32, rel, keep, allowed_pos, alpha, beta, best,
-                      second):  # fmt: skip
+def _approx_select_py(
+    chunk_nodes,
+    shared_slots,
+    shared_src,
+    shared_arrival,
+    shared_offset,
+    shared_heading,
+    own_bounds,
+    own_src,
+    own_reading,
+    own_pos,
+    own_arrival,
+    own_offset,
+    own_heading,
+    reading_cost,
+    w_acc,
+    w_pos,
+    w_head,
+    rows,
+    c32,
+    rel,
+    keep,
+    allowed_pos,
+    alpha,
+    beta,
+    best,
+    second,
+):
     """Pass 1 of a step (see above): best[p], second[p] (N,) float32, the lowest and
     second-lowest float32 total among the incoming edges of the node at layout
     position p (`tables.search_tables`); best's low bits (`keep` clears them) hold which of
@@ -254,12 +343,35 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
                     for k in range(8):
                         if i + PREFETCH_AHEAD + k < E:
                             _prefetch(rel, shared_src[i + PREFETCH_AHEAD + k])
-                    _keep_two_placed8(best, second, i + shift, rel, shared_src, i, shared_offset, shared_heading,
-                                      reading_cost, w_acc, w_pos, w_head, keep, shared_arrival)  # fmt: skip
+                    _keep_two_placed8(
+                        best,
+                        second,
+                        i + shift,
+                        rel,
+                        shared_src,
+                        i,
+                        shared_offset,
+                        shared_heading,
+                        reading_cost,
+                        w_acc,
+                        w_pos,
+                        w_head,
+                        keep,
+                        shared_arrival,
+                    )
                     i += np.uint64(8)
                 while i < s1:
-                    t = _placed_total32(rel, shared_src[i], reading_cost[i + shift], shared_offset[i, 0],
-                                        shared_offset[i, 1], shared_heading[i], w_acc, w_pos, w_head)  # fmt: skip
+                    t = _placed_total32(
+                        rel,
+                        shared_src[i],
+                        reading_cost[i + shift],
+                        shared_offset[i, 0],
+                        shared_offset[i, 1],
+                        shared_heading[i],
+                        w_acc,
+                        w_pos,
+                        w_head,
+                    )
                     _keep_two(best, second, i + shift, _tag(t, keep, shared_arrival[i]))
                     i += np.uint64(1)
             else:
@@ -267,8 +379,17 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
         for i in range(own_bounds[c], own_bounds[c + 1]):
             m = own_src[i]
             if rows:
-                t = _placed_total32(rel, m, reading_cost[own_reading[i]], own_offset[i, 0], own_offset[i, 1],
-                                    own_heading[i], w_acc, w_pos, w_head)  # fmt: skip
+                t = _placed_total32(
+                    rel,
+                    m,
+                    reading_cost[own_reading[i]],
+                    own_offset[i, 0],
+                    own_offset[i, 1],
+                    own_heading[i],
+                    w_acc,
+                    w_pos,
+                    w_head,
+                )
             else:
                 t = c32[m] + w_acc * reading_cost[own_reading[i]]
             _keep_two(best, second, np.uint64(own_pos[i]), _tag(t, keep, own_arrival[i]))
@@ -282,16 +403,47 @@ def _approx_select_py(chunk_nodes, shared_slots, shared_src, shared_arrival, sha
             best[p] = _pick(allowed_pos[p], _pick(near, _tag(b1, keep, ~keep), b1), DEAD32)
 
 
-
 def _finish_kernel(placed: bool, parallel: bool):
     """`_finish` compiled for placed or unplaced searches (a placed search's float32
     pass always reads the relative rows): with the flag a constant, the other kind's
     branches compile away (one generic kernel took 1.4× as long in mode A)."""
 
-    def finish(chunk_nodes, node_pos, best, best_bits, label_mask, incoming, edge_src, edge_reading, edge_kind,
-               edge_offset, edge_heading, edge_turn, reading_cost, w_acc, w_pos, w_head, use_pos, use_head, mx, mz, mh,
-               state_prev, det_prev, c32_base, state_new, det_new, c32_new, arrivals, none, lowest, highest,
-               ancestor_prev, ancestor_new, pull):  # fmt: skip
+    def finish(
+        chunk_nodes,
+        node_pos,
+        best,
+        best_bits,
+        label_mask,
+        incoming,
+        edge_src,
+        edge_reading,
+        edge_kind,
+        edge_offset,
+        edge_heading,
+        edge_turn,
+        reading_cost,
+        w_acc,
+        w_pos,
+        w_head,
+        use_pos,
+        use_head,
+        mx,
+        mz,
+        mh,
+        state_prev,
+        det_prev,
+        c32_base,
+        state_new,
+        det_new,
+        c32_new,
+        arrivals,
+        none,
+        lowest,
+        highest,
+        ancestor_prev,
+        ancestor_new,
+        pull,
+    ):
         """Pass 2 of a step (see above), per node: its best edge (the float32 pass's, or
         the float64 rule's on a near-tie: best_bits' label all ones), the arrival into
         this sample's lattice row (`none`: dead or masked), the chosen path's new state
@@ -319,9 +471,31 @@ def _finish_kernel(placed: bool, parallel: bool):
                 label = best_bits[p] & label_mask
                 if label == label_mask:  # a near-tie (marked by pass 1)
                     near_ties += 1
-                    a, _ = _exact_choice(n, incoming, edge_src, edge_reading, edge_kind, edge_offset, edge_heading,
-                                         reading_cost, None, None, None, None, w_acc, w_pos, w_head, use_pos,
-                                         use_head, mx, mz, mh, placed, state_prev, det_prev)  # fmt: skip
+                    a, _ = _exact_choice(
+                        n,
+                        incoming,
+                        edge_src,
+                        edge_reading,
+                        edge_kind,
+                        edge_offset,
+                        edge_heading,
+                        reading_cost,
+                        None,
+                        None,
+                        None,
+                        None,
+                        w_acc,
+                        w_pos,
+                        w_head,
+                        use_pos,
+                        use_head,
+                        mx,
+                        mz,
+                        mh,
+                        placed,
+                        state_prev,
+                        det_prev,
+                    )
                     arrival = np.uint32(a)  # a ≥ 0: a live candidate exists
                 else:
                     arrival = label
@@ -365,7 +539,6 @@ def _finish_kernel(placed: bool, parallel: bool):
     return _compile(finish, parallel)
 
 
-
 _edge_totals, _edge_totals_serial = _compile(_edge_totals_py, True), _compile(_edge_totals_py, False)
 _select, _select_serial = _compile(_select_py, True), _compile(_select_py, False)
 _advance, _advance_serial = _compile(_advance_py, True), _compile(_advance_py, False)
@@ -373,8 +546,15 @@ _approx_select, _approx_select_serial = _compile(_approx_select_py, True), _comp
 _finish = {placed: _finish_kernel(placed, True) for placed in (False, True)}
 _finish_serial = {placed: _finish_kernel(placed, False) for placed in (False, True)}
 _THREADED = (_reading_costs, _relative, _edge_totals, _select, _advance, _approx_select, _finish)
-_SERIAL = (_reading_costs_serial, _relative_serial, _edge_totals_serial, _select_serial, _advance_serial,
-           _approx_select_serial, _finish_serial)  # fmt: skip
+_SERIAL = (
+    _reading_costs_serial,
+    _relative_serial,
+    _edge_totals_serial,
+    _select_serial,
+    _advance_serial,
+    _approx_select_serial,
+    _finish_serial,
+)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -478,5 +658,3 @@ def _best_in_chunks(state, det, chunk_nodes, lowest, highest):
             if state[n, COST] <= near:
                 best, best_key = _ranked(n, state[n, COST], det, small, best, best_key)
     return best
-
-

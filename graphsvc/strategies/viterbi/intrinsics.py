@@ -96,8 +96,9 @@ def prefetch(typingctx, array, index):
         indices = [row] + [context.get_constant(types.intp, 0)] * (array_type.ndim - 1)
         ptr = cgutils.get_item_pointer(context, builder, array_type, ary, indices, wraparound=False, boundscheck=False)
         i8p = ir.IntType(8).as_pointer()
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, _I32, _I32, _I32]),
-                                            "llvm.prefetch.p0i8")  # fmt: skip
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [i8p, _I32, _I32, _I32]), "llvm.prefetch.p0i8"
+        )
         builder.call(fn, [builder.bitcast(ptr, i8p), ir.Constant(_I32, 0), ir.Constant(_I32, 3), ir.Constant(_I32, 1)])
         return context.get_dummy_value()
 
@@ -180,9 +181,13 @@ def keep_two_gathered8(typingctx, best, second, p, costs, src, i, extra, weight,
     loop spends a load, a tag and three min/max instructions on each. best, second,
     costs, extra (…,) float32, src (…,) uint32 and labels (…,) unsigned (8 or 16
     bits), C-contiguous; weight float32; p, i unsigned; src's entries < 2³¹."""
-    if not (_vectors((best, second, costs, extra), types.float32) and _vectors((src,), types.uint32)
-            and _labels(labels) and weight == types.float32
-            and all(isinstance(x, types.Integer) for x in (p, i, keep))):
+    if not (
+        _vectors((best, second, costs, extra), types.float32)
+        and _vectors((src,), types.uint32)
+        and _labels(labels)
+        and weight == types.float32
+        and all(isinstance(x, types.Integer) for x in (p, i, keep))
+    ):
         return None
 
     def codegen(context, builder, signature, args):
@@ -193,11 +198,21 @@ def keep_two_gathered8(typingctx, best, second, p, costs, src, i, extra, weight,
         if _gathers(context):
             i8 = ir.IntType(8)
             gather = cgutils.get_or_insert_function(
-                builder.module, ir.FunctionType(_V8F, [_V8F, i8.as_pointer(), _V8I, _V8F, i8]),
-                "llvm.x86.avx2.gather.d.ps.256")  # fmt: skip
+                builder.module,
+                ir.FunctionType(_V8F, [_V8F, i8.as_pointer(), _V8I, _V8F, i8]),
+                "llvm.x86.avx2.gather.d.ps.256",
+            )
             every_lane = builder.bitcast(ir.Constant(_V8I, [-1] * 8), _V8F)
-            cost = builder.call(gather, [ir.Constant(_V8F, [0.0] * 8), builder.bitcast(costs_d, i8.as_pointer()),
-                                         index, every_lane, ir.Constant(i8, 4)])  # fmt: skip
+            cost = builder.call(
+                gather,
+                [
+                    ir.Constant(_V8F, [0.0] * 8),
+                    builder.bitcast(costs_d, i8.as_pointer()),
+                    index,
+                    every_lane,
+                    ir.Constant(i8, 4),
+                ],
+            )
         else:
             cost = ir.Constant(_V8F, ir.Undefined)
             for k in range(8):
@@ -219,11 +234,17 @@ def keep_two_placed8(typingctx, best, second, p, rel, src, i, offset, turn, extr
     float32 operations in the same order, so the scalar loop's values bit for bit.
     The eight rows come in eight 16-byte loads, transposed into four vectors.
     offset (…, 2) and turn, extra (…,) float32; C-contiguous arrays."""
-    if not (_vectors((best, second, turn, extra), types.float32) and _vectors((src,), types.uint32)
-            and _labels(labels) and w_acc == w_pos == w_head == types.float32
-            and all(isinstance(a, types.Array) and a.layout == "C" and a.ndim == 2 and a.dtype == types.float32
-                    for a in (rel, offset))
-            and all(isinstance(x, types.Integer) for x in (p, i, keep))):
+    if not (
+        _vectors((best, second, turn, extra), types.float32)
+        and _vectors((src,), types.uint32)
+        and _labels(labels)
+        and w_acc == w_pos == w_head == types.float32
+        and all(
+            isinstance(a, types.Array) and a.layout == "C" and a.ndim == 2 and a.dtype == types.float32
+            for a in (rel, offset)
+        )
+        and all(isinstance(x, types.Integer) for x in (p, i, keep))
+    ):
         return None
 
     def codegen(context, builder, signature, args):
@@ -237,8 +258,12 @@ def keep_two_placed8(typingctx, best, second, p, rel, src, i, offset, turn, extr
         # rows k and k+4 side by side, then a 4 × 4 transpose within each 128-bit half
         r04, r15, r26, r37 = (v.shuffle(rows[k], rows[k + 4], list(range(8))) for k in range(4))
         low, high = [0, 8, 1, 9, 4, 12, 5, 13], [2, 10, 3, 11, 6, 14, 7, 15]
-        lo01, hi01, lo23, hi23 = v.shuffle(r04, r15, low), v.shuffle(r04, r15, high), v.shuffle(r26, r37, low), \
-            v.shuffle(r26, r37, high)
+        lo01, hi01, lo23, hi23 = (
+            v.shuffle(r04, r15, low),
+            v.shuffle(r04, r15, high),
+            v.shuffle(r26, r37, low),
+            v.shuffle(r26, r37, high),
+        )
         pairs_a, pairs_b = [0, 1, 8, 9, 4, 5, 12, 13], [2, 3, 10, 11, 6, 7, 14, 15]
         qx, qz = v.shuffle(lo01, lo23, pairs_a), v.shuffle(lo01, lo23, pairs_b)
         rh, cost = v.shuffle(hi01, hi23, pairs_a), v.shuffle(hi01, hi23, pairs_b)
@@ -247,8 +272,9 @@ def keep_two_placed8(typingctx, best, second, p, rel, src, i, offset, turn, extr
         dz = builder.fadd(qz, v.shuffle(offsets, offsets, [1, 3, 5, 7, 9, 11, 13, 15]))
         pos = v.call("llvm.sqrt.v8f32", builder.fadd(builder.fmul(dx, dx), builder.fmul(dz, dz)))
         a = builder.fadd(rh, v.load(v.data(7), i_, _V8F))
-        pi, two_pi, inv_two_pi = (v.splat(ir.Constant(_F32, float(np.float32(x)))) for x in (np.pi, 2 * np.pi,
-                                                                                               0.5 / np.pi))
+        pi, two_pi, inv_two_pi = (
+            v.splat(ir.Constant(_F32, float(np.float32(x)))) for x in (np.pi, 2 * np.pi, 0.5 / np.pi)
+        )
         turns = v.call("llvm.floor.v8f32", builder.fmul(builder.fadd(a, pi), inv_two_pi))
         head = v.call("llvm.fabs.v8f32", builder.fsub(a, builder.fmul(two_pi, turns)))
         t = builder.fadd(cost, builder.fmul(v.splat(args[9]), v.load(v.data(8), p_, _V8F)))

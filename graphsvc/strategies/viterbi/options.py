@@ -17,10 +17,22 @@ class ViterbiOptions:
     starts at this many chosen by how well their edges' readings fit its second sample
     (`stream.FixedLagDecoder`'s max_live; 0: the beam alone, every node starting a path)."""
 
-    beam: float | None = option(None, low=0.0, low_open=True, noun="a finite cost", aliases=("--beam",),
-                                metavar="COST", help="beam search: after each sample keep only the paths within COST of "
-                                                     "the best (faster; default: the exact search)")  # fmt: skip
-    live_paths: int = option(4096, low=0, metavar="PATHS", label="Viterbi live paths",
-                             help="with --beam and a latency (live): keep at most the PATHS cheapest paths after each "
-                                  "sample, and start at the PATHS whose edges' readings fit the second sample best "
-                                  "(default 4096; 0: the beam alone, every node starting a path, as a batch search)")  # fmt: skip
+    beam: float | None = option(
+        None,
+        low=0.0,
+        low_open=True,
+        noun="a finite cost",
+        aliases=("--beam",),
+        metavar="COST",
+        help="beam search: after each sample keep only the paths within COST of "
+        "the best (faster; default: the exact search)",
+    )
+    live_paths: int = option(
+        4096,
+        low=0,
+        metavar="PATHS",
+        label="Viterbi live paths",
+        help="with --beam and a latency (live): keep at most the PATHS cheapest paths after each "
+        "sample, and start at the PATHS whose edges' readings fit the second sample best "
+        "(default 4096; 0: the beam alone, every node starting a path, as a batch search)",
+    )

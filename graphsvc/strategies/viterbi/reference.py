@@ -17,8 +17,16 @@ from graphsvc.strategies.viterbi.batch import compile_constraints, orientation_c
 from graphsvc.strategies.viterbi.costs import track_pull
 
 
-def reference_viterbi(graph: MotionGraph, acc, position=None, heading=None, weights: Weights = Weights(),
-                      constraint_sets=None, pull_s=None, up=None) -> tuple[np.ndarray, float]:  # fmt: skip
+def reference_viterbi(
+    graph: MotionGraph,
+    acc,
+    position=None,
+    heading=None,
+    weights: Weights = Weights(),
+    constraint_sets=None,
+    pull_s=None,
+    up=None,
+) -> tuple[np.ndarray, float]:
     """(node path (T,), cost) — same inputs and meaning as `batch.viterbi_search`."""
     oriented = orientation_counts(graph, weights, up)
     if oriented:  # rows scaled to their norm, rounded to float32, as the search's tables and measurements

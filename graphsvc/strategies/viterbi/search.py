@@ -36,7 +36,7 @@ from graphsvc.strategies.viterbi.beam import (
     _beam_step,
     _beam_step_serial,
     _best_in_list,
-    _bound_live,  # fmt: skip
+    _bound_live,
     _immortal,
     _reset_costs,
 )
@@ -66,10 +66,20 @@ class ViterbiSearch(SurvivorMemory):
 
     Samples: acc (S, 3) m/s² (NaN = missing), position (2,) m or NaN, heading rad or NaN."""
 
-    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), gamma: int = 0, allowed: np.ndarray | None = None,
-                 threads: bool = True, placed: bool | None = None, window: int | None = None,
-                 ring: tuple[int, int] | None = None, beam: float | None = None,
-                 pull_s: float | None = None, oriented: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        graph: MotionGraph,
+        weights: Weights = Weights(),
+        gamma: int = 0,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        placed: bool | None = None,
+        window: int | None = None,
+        ring: tuple[int, int] | None = None,
+        beam: float | None = None,
+        pull_s: float | None = None,
+        oriented: bool = False,
+    ):
         """allowed: (N,) bool, nodes the search may use (None: all); masked nodes are
         never entered, which is how leave-one-out evaluation hides a clip. threads:
         spread each step over numba's threads (one search at a time) or not (many
@@ -98,8 +108,9 @@ class ViterbiSearch(SurvivorMemory):
         self.graph = graph
         self._timer = StepTimer()  # (whether a step that may use the threads does)
         self.threads = threads
-        if not all(np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading,
-                                                         weights.orientation)):  # fmt: skip
+        if not all(
+            np.isfinite(w) and w >= 0 for w in (weights.acc, weights.position, weights.heading, weights.orientation)
+        ):
             raise InputError(f"weights must be finite and ≥ 0, got {weights}")
         self.weights = weights
         self.oriented = bool(oriented)
@@ -126,7 +137,7 @@ class ViterbiSearch(SurvivorMemory):
         self.readings_t = tables["readings_t"]
         self.edge_reading = tables["edge_reading"]
         c = graph.node_contacts
-        self.contact_code = (c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1))
+        self.contact_code = c[:, 0].astype(np.int64) | (c[:, 1].astype(np.int64) << 1)
         self.label = np.ascontiguousarray(graph.node_label, dtype=np.int64)
         P = N if self.placed else 1  # unplaced searches pass a dummy row to the kernels
         width = PLACED_WIDTH if self.placed else UNPLACED_WIDTH
@@ -150,23 +161,50 @@ class ViterbiSearch(SurvivorMemory):
             self._best_bits = self._best32.view(np.uint32)  # pass 2 reads the labels through it
             pass1 = self.index.float32
             self.node_pos = tables["node_pos"]
-            self._pass1 = tuple(pass1[k] for k in (
-                "chunk_nodes", "shared_slots", "shared_src", "shared_arrival", "shared_offset", "shared_heading",
-                "own_bounds", "own_src", "own_reading", "own_pos", "own_arrival", "own_offset", "own_heading"))
+            self._pass1 = tuple(
+                pass1[k]
+                for k in (
+                    "chunk_nodes",
+                    "shared_slots",
+                    "shared_src",
+                    "shared_arrival",
+                    "shared_offset",
+                    "shared_heading",
+                    "own_bounds",
+                    "own_src",
+                    "own_reading",
+                    "own_pos",
+                    "own_arrival",
+                    "own_offset",
+                    "own_heading",
+                )
+            )
             # unsigned views of the index tables pass 2 reads (see `dense._approx_select_py`)
             self._unsigned = {
-                "incoming": tables["incoming"].view(np.uint32), "edge_src": tables["edge_src"].view(np.uint32),
+                "incoming": tables["incoming"].view(np.uint32),
+                "edge_src": tables["edge_src"].view(np.uint32),
                 "edge_reading": tables["edge_reading"].view(np.uint32),
-            }  # fmt: skip
+            }
             self._chunk_nodes = pass1["chunk_nodes"]
             self._chunk_low = np.empty(len(self._chunk_nodes) - 1)
             self._chunk_high = np.empty_like(self._chunk_low)
             self.c32 = np.zeros(N if not self.placed else 1, dtype=np.float32)
             self._c32_new = np.zeros_like(self.c32)
         else:
-            self.slots = tuple(self.index.slots[k] for k in (
-                "chunk_nodes", "chunk_slots", "slot_dst", "slot_src", "slot_kind", "slot_edge", "slot_reading",
-                "slot_offset", "slot_heading"))
+            self.slots = tuple(
+                self.index.slots[k]
+                for k in (
+                    "chunk_nodes",
+                    "chunk_slots",
+                    "slot_dst",
+                    "slot_src",
+                    "slot_kind",
+                    "slot_edge",
+                    "slot_reading",
+                    "slot_offset",
+                    "slot_heading",
+                )
+            )
             self.total = np.full(graph.num_edges + 1, np.inf)  # slot order; total[E] = inf (no candidate)
             self.best_slot = np.full(N, graph.num_edges, dtype=np.int64)
         self.low = 0.0  # lowest live cost (the float32 costs' base)
@@ -254,7 +292,7 @@ class ViterbiSearch(SurvivorMemory):
     def place(self) -> np.ndarray | None:
         """(N, 5) float64 each node's best path's placement (x, z m, heading rad, its
         cos, sin), a view; None when the search is not placed."""
-        return self.state[:, X:SIN + 1] if self.placed else None
+        return self.state[:, X : SIN + 1] if self.placed else None
 
     @property
     def live_entries(self) -> int:
@@ -279,7 +317,7 @@ class ViterbiSearch(SurvivorMemory):
         self._anchor(position, heading, place)
         if self.placed:
             rows = slice(None) if live is None else starts
-            self.state[rows, X:SIN + 1] = place[0, X:SIN + 1]
+            self.state[rows, X : SIN + 1] = place[0, X : SIN + 1]
         self.state[:, COST] = np.where(starts, 0.0, np.inf)
         self.det[:] = 0
         if self.beam is not None:
@@ -308,8 +346,9 @@ class ViterbiSearch(SurvivorMemory):
         edges are allowed."""
         src = self.edge_src
         usable = self.allowed[src] & self.allowed[self.graph.edge_dst]
-        cost = self.reading_costs(np.asarray(acc, dtype=np.float64)[None],
-                                  up=None if up is None else np.asarray(up)[None])[0][self.edge_reading]
+        cost = self.reading_costs(
+            np.asarray(acc, dtype=np.float64)[None], up=None if up is None else np.asarray(up)[None]
+        )[0][self.edge_reading]
         cost = np.where(usable, cost, np.inf)
         out = np.zeros(self.N, dtype=bool)
         if int(usable.sum()) <= most:
@@ -370,8 +409,9 @@ class ViterbiSearch(SurvivorMemory):
         """Advance by one sample. reading_cost: this sample's row of `reading_costs`,
         when a batch caller computed it ahead (else it is computed here). up: (S, 3)
         the sensors' measured "up" vectors (an oriented search; None or NaN: missing)."""
-        if (self.anchor_position is None and position is not None) or (self.anchor_heading is None and
-                                                                           heading is not None):
+        if (self.anchor_position is None and position is not None) or (
+            self.anchor_heading is None and heading is not None
+        ):
             self._anchor(position, heading)
         self._make_room()
         self.t += 1
@@ -417,33 +457,127 @@ class ViterbiSearch(SurvivorMemory):
                 self._rebase_c32()
             u = self._unsigned
             base = self.low if rows else self.c32_base  # what the float32 costs read are relative to
-            approx_select(*self._pass1, reading_cost, np.float32(wa), np.float32(wp if use_pos else 0.0),
-                          np.float32(wh if use_head else 0.0), rows, self.c32, self.rel, self._keep, self._allowed_pos,
-                          self._alpha, 2.0**-48 * base + 1e-30, self._best32, self._second32)  # fmt: skip
+            approx_select(
+                *self._pass1,
+                reading_cost,
+                np.float32(wa),
+                np.float32(wp if use_pos else 0.0),
+                np.float32(wh if use_head else 0.0),
+                rows,
+                self.c32,
+                self.rel,
+                self._keep,
+                self._allowed_pos,
+                self._alpha,
+                2.0**-48 * base + 1e-30,
+                self._best32,
+                self._second32,
+            )
             # (unplaced: the cost column alone, 1-D — see `costs._cost_at`)
             state, state_new = (self.state, self._state_new) if self.placed else (self.cost, self._state_new[:, COST])
             live, near_ties = finish[self.placed](
-                self._chunk_nodes, self.node_pos, self._best32, self._best_bits, self._label_mask, u["incoming"],
-                u["edge_src"], u["edge_reading"], self.edge_kind, self.edge_offset, self.edge_heading,
-                self.edge_turn, reading_cost, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1], meas_heading,
-                state, self.det, self.low, state_new, self._det_new, self._c32_new, arrivals, self.none,
-                self._chunk_low, self._chunk_high, *ancestors, pull)  # fmt: skip
+                self._chunk_nodes,
+                self.node_pos,
+                self._best32,
+                self._best_bits,
+                self._label_mask,
+                u["incoming"],
+                u["edge_src"],
+                u["edge_reading"],
+                self.edge_kind,
+                self.edge_offset,
+                self.edge_heading,
+                self.edge_turn,
+                reading_cost,
+                wa,
+                wp,
+                wh,
+                use_pos,
+                use_head,
+                meas_pos[0],
+                meas_pos[1],
+                meas_heading,
+                state,
+                self.det,
+                self.low,
+                state_new,
+                self._det_new,
+                self._c32_new,
+                arrivals,
+                self.none,
+                self._chunk_low,
+                self._chunk_high,
+                *ancestors,
+                pull,
+            )
             self.near_ties += near_ties
             if live:
                 self.c32_base, self.low = self.low, float(self._chunk_low.min())
                 self._chunks_t = self.t
                 self.c32, self._c32_new = self._c32_new, self.c32
         else:
-            chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, slot_reading, slot_offset, \
-                slot_heading = self.slots
-            edge_totals(slot_src, slot_reading, slot_offset, slot_heading, reading_cost, wa, wp, wh, use_pos, use_head,
-                        self.state, self.rel, self.total)  # fmt: skip
-            select(chunk_nodes, chunk_slots, slot_dst, slot_src, slot_kind, slot_edge, self.total, self.allowed,
-                   self.det, self.rank, self.best_slot, self._state_new, self._best_edge)  # fmt: skip
-            live = advance(self._best_edge, self.incoming, self.edge_src, self.edge_kind, self.edge_offset,
-                           self.edge_heading, self.edge_turn, self.ok, self.placed, self.state, self.det, self.rank,
-                           self._state_new, self._det_new, self._rank_new, arrivals, self.none,
-                           *ancestors, pull)  # fmt: skip
+            (
+                chunk_nodes,
+                chunk_slots,
+                slot_dst,
+                slot_src,
+                slot_kind,
+                slot_edge,
+                slot_reading,
+                slot_offset,
+                slot_heading,
+            ) = self.slots
+            edge_totals(
+                slot_src,
+                slot_reading,
+                slot_offset,
+                slot_heading,
+                reading_cost,
+                wa,
+                wp,
+                wh,
+                use_pos,
+                use_head,
+                self.state,
+                self.rel,
+                self.total,
+            )
+            select(
+                chunk_nodes,
+                chunk_slots,
+                slot_dst,
+                slot_src,
+                slot_kind,
+                slot_edge,
+                self.total,
+                self.allowed,
+                self.det,
+                self.rank,
+                self.best_slot,
+                self._state_new,
+                self._best_edge,
+            )
+            live = advance(
+                self._best_edge,
+                self.incoming,
+                self.edge_src,
+                self.edge_kind,
+                self.edge_offset,
+                self.edge_heading,
+                self.edge_turn,
+                self.ok,
+                self.placed,
+                self.state,
+                self.det,
+                self.rank,
+                self._state_new,
+                self._det_new,
+                self._rank_new,
+                arrivals,
+                self.none,
+                *ancestors,
+                pull,
+            )
         if self.beam is not None:
             if not narrow and live:
                 live = self._cut(arrivals)
@@ -493,13 +627,51 @@ class ViterbiSearch(SurvivorMemory):
         returns the survivors."""
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
         kernel = _beam_step if self._kernels is _THREADED else _beam_step_serial
-        live, low = kernel(self._live, self._n_live, self._out_start, self._out_dst, self.allowed, self._immortal,
-                           self._marks, self._marks_words, self._sources, self._touched, self._total, self._survives,
-                           self._live_before, self.incoming, self.edge_src, self.edge_reading, self.edge_kind,
-                           self.edge_offset, self.edge_heading, self.edge_turn, self._readings, self._meas, self._mask,
-                           self._scale, wa, wp, wh, use_pos, use_head, meas_pos[0], meas_pos[1],
-                           meas_heading, self.placed, self.beam, self.state, self.det, self._state_new,
-                           self._det_new, arrivals, self.none, *ancestors, self._beam_low, pull)  # fmt: skip
+        live, low = kernel(
+            self._live,
+            self._n_live,
+            self._out_start,
+            self._out_dst,
+            self.allowed,
+            self._immortal,
+            self._marks,
+            self._marks_words,
+            self._sources,
+            self._touched,
+            self._total,
+            self._survives,
+            self._live_before,
+            self.incoming,
+            self.edge_src,
+            self.edge_reading,
+            self.edge_kind,
+            self.edge_offset,
+            self.edge_heading,
+            self.edge_turn,
+            self._readings,
+            self._meas,
+            self._mask,
+            self._scale,
+            wa,
+            wp,
+            wh,
+            use_pos,
+            use_head,
+            meas_pos[0],
+            meas_pos[1],
+            meas_heading,
+            self.placed,
+            self.beam,
+            self.state,
+            self.det,
+            self._state_new,
+            self._det_new,
+            arrivals,
+            self.none,
+            *ancestors,
+            self._beam_low,
+            pull,
+        )
         self._live, self._live_before = self._live_before, self._live
         self._n_live, self._n_live_before = live, self._n_live
         if live:
@@ -522,8 +694,9 @@ class ViterbiSearch(SurvivorMemory):
         their number."""
         c32 = self.c32 if self.float32_pass else self._no_c32
         none = arrivals.dtype.type(self.none)
-        self._n_live = _bound_live(self._state_new, self._live, self._n_live, int(self.max_live), self._immortal,
-                                   arrivals, none, c32)  # fmt: skip
+        self._n_live = _bound_live(
+            self._state_new, self._live, self._n_live, int(self.max_live), self._immortal, arrivals, none, c32
+        )
         return self._n_live
 
     def _rebase_c32(self) -> None:
@@ -559,8 +732,9 @@ class ViterbiSearch(SurvivorMemory):
         n = np.where(acc_on & (present > 0), present, n_r)
         rho = np.sqrt(np.where(n_r > 0, (w.orientation / self.w_reading) * n / np.maximum(n_r, 1.0), 0.0))
         meas = np.concatenate([meas, u.reshape(B, -1).astype(np.float32)], axis=1)
-        mask = np.concatenate([mask * np.float32(acc_on), np.repeat(valid * rho[:, None], W, axis=1).astype(np.float32)],
-                              axis=1)  # fmt: skip
+        mask = np.concatenate(
+            [mask * np.float32(acc_on), np.repeat(valid * rho[:, None], W, axis=1).astype(np.float32)], axis=1
+        )
         return meas, mask, n.astype(present.dtype)
 
     @staticmethod

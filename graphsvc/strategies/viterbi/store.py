@@ -77,8 +77,7 @@ def _predecessors(nodes, count, arrivals, row, incoming, edge_src, alive, few, p
 
 
 @numba.njit(cache=True, nogil=True)
-def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, level_nodes, level_start, ancestor,
-                  state):  # fmt: skip
+def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, level_nodes, level_start, ancestor, state):
     """Walk back from logical row used − 1, one row at a time, to the oldest:
     level_nodes[level_start[k]:level_start[k+1]] are the distinct nodes, ascending,
     that logical row k's surviving paths pass through, listed for the oldest `flush`
@@ -151,8 +150,9 @@ def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, aliv
 
 
 @numba.njit(cache=True, nogil=True)
-def _append_block(arrivals, first, flush, t_first, incoming, edge_src, heads, store, size, level_nodes, level_start,
-                  row_of):  # fmt: skip
+def _append_block(
+    arrivals, first, flush, t_first, incoming, edge_src, heads, store, size, level_nodes, level_start, row_of
+):
     """Append the surviving lattice points (see `_block_levels`) of the window's
     oldest `flush` rows (samples t_first…) to the store in sample order; heads (N,):
     each node's store row at the sample before them on entry, at their last sample on
@@ -250,5 +250,3 @@ def _trace(arrivals, first, used, t, heads, incoming, edge_src, store, node, sin
         row = store[row, PARENT]
         i -= 1
     return nodes, edges
-
-

@@ -31,7 +31,7 @@ from graphsvc.strategies.viterbi.batch import (
     orientation_counts,
     viterbi_search,
     warm_up_search,
-    warm_up_search_once,  # fmt: skip
+    warm_up_search_once,
 )
 from graphsvc.strategies.viterbi.options import ViterbiOptions
 from graphsvc.strategies.viterbi.stream import FixedLagDecoder
@@ -53,9 +53,11 @@ class ViterbiStrategy(Strategy):
     def describe_lag(self, rate_hz: float) -> str:
         s = ViterbiSession
         tail, total = s.synthesis_lag_frames(rate_hz, SMOOTH_S), s.output_lag_frames(rate_hz)
-        return (f"at most round(S × rate) + {tail} frames after its sample at {rate_hz:g} Hz ({tail} for the synthesis' "
-                f"blend look-ahead, its batches of {s.SYNTH_BATCH} frames and the poses' smoothing): {total} frames "
-                f"({total / rate_hz:.2f} s) by default (and none before the search starts, 1 s in)")  # fmt: skip
+        return (
+            f"at most round(S × rate) + {tail} frames after its sample at {rate_hz:g} Hz ({tail} for the synthesis' "
+            f"blend look-ahead, its batches of {s.SYNTH_BATCH} frames and the poses' smoothing): {total} frames "
+            f"({total / rate_hz:.2f} s) by default (and none before the search starts, 1 s in)"
+        )
 
     def prepare(self, graph: MotionGraph) -> SearchIndex:
         return search_index(graph)  # (its tables are made on first use: by the warm-up at load)
@@ -64,8 +66,16 @@ class ViterbiStrategy(Strategy):
         warm_up(graph, threads)
         warm_up_refine(graph)  # (its arrays on disk, its tree in memory: a session opens at once)
 
-    def reconstruct(self, index, graph: MotionGraph, inp: PreparedInput, options: Options,
-                    allowed: np.ndarray | None = None, threads: bool = True, should_stop=None) -> Reconstruction:  # fmt: skip
+    def reconstruct(
+        self,
+        index,
+        graph: MotionGraph,
+        inp: PreparedInput,
+        options: Options,
+        allowed: np.ndarray | None = None,
+        threads: bool = True,
+        should_stop=None,
+    ) -> Reconstruction:
         acc, position, heading, constraints = inp.acc, inp.position, inp.heading, inp.constraints
         rate = float(graph.rate_hz)
         T = acc.shape[0]
@@ -78,7 +88,9 @@ class ViterbiStrategy(Strategy):
         t0 = time.perf_counter()
         warm_up_search_once(graph, threads)
         warm_up_synthesis(graph)
-        if orientation_counts(graph, w, inp.up):  # (the oriented index's tables, once per graph, not in the search's time)
+        if orientation_counts(
+            graph, w, inp.up
+        ):  # (the oriented index's tables, once per graph, not in the search's time)
             oriented = search_index(graph, True)
             _ = oriented.slots if constraints else (oriented.tables, oriented.float32)
         refining = refine_index(graph, allowed) if options.shared.refine else None
@@ -97,32 +109,67 @@ class ViterbiStrategy(Strategy):
         targets = pull_targets(use_pos, T)
         model = track_model(options, rate) if np.isfinite(targets).all(axis=1).any() else None
         if options.latency_s is None:
-            result = viterbi_search(graph, acc, use_pos, use_head, w, constraints, allowed=allowed, threads=threads,
-                                    should_stop=should_stop, beam=beam, start=start,
-                                    pull_s=pull_s, up=inp.up)  # fmt: skip
+            result = viterbi_search(
+                graph,
+                acc,
+                use_pos,
+                use_head,
+                w,
+                constraints,
+                allowed=allowed,
+                threads=threads,
+                should_stop=should_stop,
+                beam=beam,
+                start=start,
+                pull_s=pull_s,
+                up=inp.up,
+            )
             nodes, edges = result.node_path, result.edge_path
             search_s = time.perf_counter() - t0
             t0 = time.perf_counter()
             track = fused_track(graph, nodes, edges, start_ground, start_heading, targets, model) if model else None
             motion = synthesize_motion(graph, nodes, edges, start_ground, start_heading, track=track)
-            motion = (refine_motion(graph, motion, nodes, refining, acc, options.shared.smooth_s * rate, inp.up,
-                                    refine_weight)
-                      if refining is not None else smoothed(motion, options))  # fmt: skip
+            motion = (
+                refine_motion(
+                    graph, motion, nodes, refining, acc, options.shared.smooth_s * rate, inp.up, refine_weight
+                )
+                if refining is not None
+                else smoothed(motion, options)
+            )
             synth_s = time.perf_counter() - t0
-            extra = {"cost": result.cost, "terms": result.terms, "broken_constraints": result.broken,
-                     "compression": round(result.compression, 2), "peak_survivor_entries": result.peak_entries}  # fmt: skip
+            extra = {
+                "cost": result.cost,
+                "terms": result.terms,
+                "broken_constraints": result.broken,
+                "compression": round(result.compression, 2),
+                "peak_survivor_entries": result.peak_entries,
+            }
         else:
             lag = int(round(options.latency_s * rate))
-            decoder = FixedLagDecoder(graph, w, lag, constraints, allowed, rate, threads,
-                                      needs_placement(w, use_pos, use_head), beam=beam,
-                                      start_samples=start_samples(rate), pull_s=pull_s,
-                                      oriented=orientation_counts(graph, w, inp.up),
-                                      max_live=self.own(options).live_paths)  # fmt: skip
-            synth = StreamingSynthesizer(graph, start_ground, start_heading, batch=LiveSession.SYNTH_BATCH,
-                                         track_model=track_model(options, rate) if use_pos is not None else None,
-                                         smooth_frames=options.shared.smooth_s * rate,
-                                         refiner=None if refining is None else Refiner(graph, refining,
-                                                                                       refine_weight))  # fmt: skip
+            decoder = FixedLagDecoder(
+                graph,
+                w,
+                lag,
+                constraints,
+                allowed,
+                rate,
+                threads,
+                needs_placement(w, use_pos, use_head),
+                beam=beam,
+                start_samples=start_samples(rate),
+                pull_s=pull_s,
+                oriented=orientation_counts(graph, w, inp.up),
+                max_live=self.own(options).live_paths,
+            )
+            synth = StreamingSynthesizer(
+                graph,
+                start_ground,
+                start_heading,
+                batch=LiveSession.SYNTH_BATCH,
+                track_model=track_model(options, rate) if use_pos is not None else None,
+                smooth_frames=options.shared.smooth_s * rate,
+                refiner=None if refining is None else Refiner(graph, refining, refine_weight),
+            )
             emitted = 0
             node_parts, edge_parts, rot_parts, trans_parts = [], [], [], []
             synth_s = 0.0
@@ -134,15 +181,18 @@ class ViterbiStrategy(Strategy):
                 elif synth.refiner is not None:
                     synth.refiner.finish()
                 if t < T:  # (the raw streams: the search scores only what its weights count)
-                    n, e = decoder.push(acc[t], None if position is None else position[t],
-                                        None if heading is None else heading[t],
-                                        None if inp.up is None else inp.up[t])  # fmt: skip
+                    n, e = decoder.push(
+                        acc[t],
+                        None if position is None else position[t],
+                        None if heading is None else heading[t],
+                        None if inp.up is None else inp.up[t],
+                    )
                 else:
                     n, e = decoder.flush()
                 node_parts.append(n)
                 edge_parts.append(e)
                 ts = time.perf_counter()
-                part = synth.add(n, e, targets[emitted:emitted + len(n)])
+                part = synth.add(n, e, targets[emitted : emitted + len(n)])
                 emitted += len(n)
                 _, rot, trans = part if t < T else _join(part, synth.finish())
                 synth_s += time.perf_counter() - ts
@@ -150,21 +200,30 @@ class ViterbiStrategy(Strategy):
                 trans_parts.append(trans)
             nodes = np.concatenate(node_parts)
             edges = np.concatenate(edge_parts)[1:]
-            motion = Motion(graph.skeleton, np.concatenate(rot_parts), np.concatenate(trans_parts), rate,
-                            name="synthesized", source="graph path")  # fmt: skip
+            motion = Motion(
+                graph.skeleton,
+                np.concatenate(rot_parts),
+                np.concatenate(trans_parts),
+                rate,
+                name="synthesized",
+                source="graph path",
+            )
             search_s = time.perf_counter() - t0 - synth_s
             s = decoder.search
-            extra = {"lag_samples": lag, "revisions": decoder.revisions,
-                     "converged_early_frames": decoder.converged_frames, "compression": round(s.compression, 2),
-                     "peak_survivor_entries": int(s.peak_entries)}  # fmt: skip
+            extra = {
+                "lag_samples": lag,
+                "revisions": decoder.revisions,
+                "converged_early_frames": decoder.converged_frames,
+                "compression": round(s.compression, 2),
+                "peak_survivor_entries": int(s.peak_entries),
+            }
         if model is not None:  # (the paths were placed toward the tracker, the root fused with it)
             extra["track"] = {"pull_s": float(pull_s), "sigma_m": model.sigma_m, "drift": model.drift}
         report = {
             **extra,
             "labels": path_labels(graph, nodes),
             "node_path": nodes.tolist(),
-            "timings_s": {"warm_up": round(warm_up_s, 4), "search": round(search_s, 4),
-                          "synthesis": round(synth_s, 4)},  # fmt: skip
+            "timings_s": {"warm_up": round(warm_up_s, 4), "search": round(search_s, 4), "synthesis": round(synth_s, 4)},
             "samples_per_s": round(T / max(search_s, 1e-9), 1),
         }
         return Reconstruction(motion, nodes, edges, report, Provenance.of_nodes(graph, nodes))
@@ -173,8 +232,11 @@ class ViterbiStrategy(Strategy):
 def smoothed(motion: Motion, options: Options) -> Motion:
     """The motion with its poses filtered (`synthesis.smooth`, the shared smooth_s)."""
     rot, trans = smooth_poses(motion.rotations, motion.translations, options.shared.smooth_s * motion.rate_hz)
-    return motion if rot is motion.rotations else Motion(motion.skeleton, rot, trans, motion.rate_hz, name=motion.name,
-                                                         source=motion.source)  # fmt: skip
+    return (
+        motion
+        if rot is motion.rotations
+        else Motion(motion.skeleton, rot, trans, motion.rate_hz, name=motion.name, source=motion.source)
+    )
 
 
 def track_model(options: Options, rate_hz: float) -> TrackModel:
@@ -205,19 +267,34 @@ class ViterbiSession(LiveSession):
     def _open(self, allowed, threads: bool) -> None:
         graph, options = self.graph, self.options
         constraints = check_constraints(options.constraints or [], graph)
-        self.decoder = FixedLagDecoder(graph, options.weights, self.decoder_lag(self.rate, options.latency_s),
-                                       constraints, allowed, self.rate, threads, beam=self.own.beam,
-                                       start_samples=start_samples(self.rate),
-                                       pull_s=options.shared.track_pull_s, oriented=self.reads_up,
-                                       max_live=self.own.live_paths)  # fmt: skip
+        self.decoder = FixedLagDecoder(
+            graph,
+            options.weights,
+            self.decoder_lag(self.rate, options.latency_s),
+            constraints,
+            allowed,
+            self.rate,
+            threads,
+            beam=self.own.beam,
+            start_samples=start_samples(self.rate),
+            pull_s=options.shared.track_pull_s,
+            oriented=self.reads_up,
+            max_live=self.own.live_paths,
+        )
         self.synth: StreamingSynthesizer | None = None
         self.counts_position = options.weights.position != 0
         self._targets: deque = deque()  # measured positions of the samples not yet synthesized
-        self.track = (CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
-                      if options.heading_from_track else None)  # fmt: skip
+        self.track = (
+            CausalTrackHeading(self.rate, options.speed_threshold, math.radians(options.rest_heading_deg))
+            if options.heading_from_track
+            else None
+        )
         self.lag_frames = self.decoder.lag + self.synthesis_lag_frames(self.rate, options.shared.smooth_s)
-        self.refiner = (Refiner(graph, refine_index(graph, allowed), options.weights.orientation if self.reads_up else 0.0)
-                        if options.shared.refine else None)  # fmt: skip
+        self.refiner = (
+            Refiner(graph, refine_index(graph, allowed), options.weights.orientation if self.reads_up else 0.0)
+            if options.shared.refine
+            else None
+        )
 
     @classmethod
     def decoder_lag(cls, rate_hz: float, latency_s: float | None = None) -> int:
@@ -269,9 +346,15 @@ class ViterbiSession(LiveSession):
         if self.synth is None:
             g, h = self.decoder.search.start_placement
             model = track_model(self.options, self.rate) if self.counts_position else None
-            self.synth = StreamingSynthesizer(self.graph, g, h, batch=self.SYNTH_BATCH, track_model=model,
-                                              smooth_frames=self.options.shared.smooth_s * self.rate,
-                                              refiner=self.refiner)  # fmt: skip
+            self.synth = StreamingSynthesizer(
+                self.graph,
+                g,
+                h,
+                batch=self.SYNTH_BATCH,
+                track_model=model,
+                smooth_frames=self.options.shared.smooth_s * self.rate,
+                refiner=self.refiner,
+            )
         return self.synth
 
     def _frames(self, synthesized):
@@ -301,8 +384,9 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     acc[:, :, 1] += 9.81
     position = np.cumsum(rng.normal(0.0, 0.02, (T, 2)), axis=0)
     heading = np.zeros(T)
-    session = ViterbiSession(STRATEGY, graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2, own=ViterbiOptions()),
-                             threads=threads)  # fmt: skip
+    session = ViterbiSession(
+        STRATEGY, graph, Options(weights=Weights(0.5, 1, 1), latency_s=0.2, own=ViterbiOptions()), threads=threads
+    )
     for t in range(T):
         session.push(t / graph.rate_hz, acc[t], position[t], heading[t])
     session.flush()

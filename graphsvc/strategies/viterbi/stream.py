@@ -64,11 +64,23 @@ class FixedLagDecoder:
     # window plus a survivor store, which only pays for much longer lags.
     DENSE_MAX_LAG = 256
 
-    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), lag: int = 0, constraint_sets=None,
-                 allowed: np.ndarray | None = None, rate_hz: float | None = None, threads: bool = True,
-                 placed: bool | None = None, store: bool | None = None, beam: float | None = None,
-                 start_samples: int = 1, pull_s: float | None = None, oriented: bool = False,
-                 max_live: int | None = None):  # fmt: skip
+    def __init__(
+        self,
+        graph: MotionGraph,
+        weights: Weights = Weights(),
+        lag: int = 0,
+        constraint_sets=None,
+        allowed: np.ndarray | None = None,
+        rate_hz: float | None = None,
+        threads: bool = True,
+        placed: bool | None = None,
+        store: bool | None = None,
+        beam: float | None = None,
+        start_samples: int = 1,
+        pull_s: float | None = None,
+        oriented: bool = False,
+        max_live: int | None = None,
+    ):
         """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch). placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
         store: keep survivors in ViterbiSearch's survivor store (True) or only the last
@@ -90,9 +102,18 @@ class FixedLagDecoder:
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
         if store is None:
             store = self.lag > self.DENSE_MAX_LAG
-        self.search = ViterbiSearch(graph, weights, self.requirements.gamma, allowed, threads, placed,
-                                    window=None if store else self.lag + 1, beam=beam, pull_s=pull_s,
-                                    oriented=oriented)  # fmt: skip
+        self.search = ViterbiSearch(
+            graph,
+            weights,
+            self.requirements.gamma,
+            allowed,
+            threads,
+            placed,
+            window=None if store else self.lag + 1,
+            beam=beam,
+            pull_s=pull_s,
+            oriented=oriented,
+        )
         self.start_samples = max(1, int(start_samples))
         self.max_live = int(max_live) if max_live and beam is not None else None
         self.search.max_live = self.max_live
@@ -135,8 +156,9 @@ class FixedLagDecoder:
     def _start_pending(self) -> tuple[np.ndarray, np.ndarray]:
         """Start the search placed from the samples waiting, then run them through it."""
         pending, self._pending = self._pending, []
-        position = np.array([np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64)
-                             for _, p, _, _ in pending])  # fmt: skip
+        position = np.array(
+            [np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64) for _, p, _, _ in pending]
+        )
         heading = np.array([np.nan if h is None else float(h) for _, _, h, _ in pending])
         p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
         if self.max_live and len(pending) > 1:
@@ -173,9 +195,17 @@ class SlidingWindowDecoder:
     possible start, at the window's first measured position and heading) and emit
     frame t − lag of the best path. Costs `window` times the fixed-lag decoder."""
 
-    def __init__(self, graph: MotionGraph, weights: Weights = Weights(), window: int = 30, lag: int = 0,
-                 constraint_sets=None, allowed: np.ndarray | None = None, rate_hz: float | None = None,
-                 oriented: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        graph: MotionGraph,
+        weights: Weights = Weights(),
+        window: int = 30,
+        lag: int = 0,
+        constraint_sets=None,
+        allowed: np.ndarray | None = None,
+        rate_hz: float | None = None,
+        oriented: bool = False,
+    ):
         """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch)."""
         self.graph = graph
         self.weights = weights
@@ -243,8 +273,12 @@ def decode_stream(decoder, acc: np.ndarray, position=None, heading=None, up=None
     an oriented decoder, or None."""
     out_nodes, out_edges = [], []
     for t in range(acc.shape[0]):
-        n, e = decoder.push(acc[t], None if position is None else position[t], None if heading is None else heading[t],
-                            None if up is None else up[t])  # fmt: skip
+        n, e = decoder.push(
+            acc[t],
+            None if position is None else position[t],
+            None if heading is None else heading[t],
+            None if up is None else up[t],
+        )
         out_nodes.append(n)
         out_edges.append(e)
     n, e = decoder.flush()

@@ -26,7 +26,7 @@ from graphsvc.strategies.viterbi.store import (
     _append_block,
     _block_levels,
     _collect,
-    _converged_row,  # fmt: skip
+    _converged_row,
     _converged_until,
     _trace,
 )
@@ -136,8 +136,7 @@ class SurvivorMemory:
     def _ancestors(self) -> tuple[np.ndarray, np.ndarray]:
         """What a step's kernels carry the ancestors in (current, next), or empty arrays
         when they are not carried."""
-        return ((self.ancestor, self._ancestor_new) if self.carry_ancestors else
-                (self._no_ancestors, self._no_ancestors))  # fmt: skip
+        return (self.ancestor, self._ancestor_new) if self.carry_ancestors else (self._no_ancestors, self._no_ancestors)
 
     def _row_written(self) -> None:
         """After a sample's arrivals are written into `_free_row()`."""
@@ -173,9 +172,19 @@ class SurvivorMemory:
         else:
             walk, ancestor = self.used, self._identity
         while True:  # grown on demand: the worst case (nothing merges) is used × N
-            total, converged_row = _block_levels(self.arrivals, self.first, walk, self.BLOCK, self.incoming,
-                                                 self.edge_src, self.alive_map, self.level_nodes, self.level_start,
-                                                 ancestor, self.state)  # fmt: skip
+            total, converged_row = _block_levels(
+                self.arrivals,
+                self.first,
+                walk,
+                self.BLOCK,
+                self.incoming,
+                self.edge_src,
+                self.alive_map,
+                self.level_nodes,
+                self.level_start,
+                ancestor,
+                self.state,
+            )
             if total >= 0:
                 break
             self.level_nodes = np.zeros(2 * self.level_nodes.shape[0], dtype=np.int32)
@@ -188,8 +197,20 @@ class SurvivorMemory:
                 bigger = np.empty((2 * (self.size + appended), 4), dtype=np.int32)
                 bigger[: self.size] = self.store[: self.size]
                 self.store = bigger
-        self.size = _append_block(self.arrivals, self.first, flush, t_first, self.incoming, self.edge_src, self.heads,
-                                  self.store, self.size, self.level_nodes, self.level_start, self.row_of)  # fmt: skip
+        self.size = _append_block(
+            self.arrivals,
+            self.first,
+            flush,
+            t_first,
+            self.incoming,
+            self.edge_src,
+            self.heads,
+            self.store,
+            self.size,
+            self.level_nodes,
+            self.level_start,
+            self.row_of,
+        )
         self.peak_entries = max(self.peak_entries, self.live_rows + appended)
         self.peak_bytes = max(self.peak_bytes, self.lattice_bytes)
         self.first = (self.first + flush) % self.arrivals.shape[0]
@@ -216,8 +237,9 @@ class SurvivorMemory:
         t_first = self.t - self.used + 1  # the sample of the oldest row
         lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
         if lowest < self.used:
-            row = _converged_row(self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none,
-                                 self.alive_map)  # fmt: skip
+            row = _converged_row(
+                self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none, self.alive_map
+            )
             if row >= 0:
                 self.converged_t = max(self.converged_t, t_first + row)
         self.first = (self.first + self.BLOCK) % self.arrivals.shape[0]
@@ -246,10 +268,22 @@ class SurvivorMemory:
         if self.window is not None and self.used < self.t:  # the window has slid past sample 0
             earliest = max(earliest, self.t - self.used + 1)
         if not earliest <= since <= self.t:
-            raise InputError(f"cannot trace from sample {since}: the search is at sample {self.t}"
-                             f" and has forgotten samples before {earliest}")  # fmt: skip
-        return _trace(self.arrivals, self.first, self.used, self.t, self.heads, self.incoming, self.edge_src, self.store,
-                      int(node), int(since))  # fmt: skip
+            raise InputError(
+                f"cannot trace from sample {since}: the search is at sample {self.t}"
+                f" and has forgotten samples before {earliest}"
+            )
+        return _trace(
+            self.arrivals,
+            self.first,
+            self.used,
+            self.t,
+            self.heads,
+            self.incoming,
+            self.edge_src,
+            self.store,
+            int(node),
+            int(since),
+        )
 
     def trace(self, node: int, since: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Nodes (t+1−since,) at samples since..t of the path ending at `node` now,

@@ -81,8 +81,11 @@ def _make_search_tables(graph: MotionGraph, oriented: bool = False) -> dict:
         "edge_kind": np.ascontiguousarray(graph.edge_kind, dtype=np.uint8),
         "edge_offset": np.ascontiguousarray(graph.edge_offset, dtype=np.float32),
         "edge_heading": np.ascontiguousarray(graph.edge_heading, dtype=np.float32),
-        "edge_turn": np.ascontiguousarray(np.stack([np.cos(graph.edge_heading.astype(np.float64)),
-                                                    np.sin(graph.edge_heading.astype(np.float64))], axis=-1)),
+        "edge_turn": np.ascontiguousarray(
+            np.stack(
+                [np.cos(graph.edge_heading.astype(np.float64)), np.sin(graph.edge_heading.astype(np.float64))], axis=-1
+            )
+        ),
     }
     return tables
 
@@ -216,7 +219,6 @@ def _make_float32_tables(graph: MotionGraph, tables: dict) -> dict:
         "own_offset": np.ascontiguousarray(tables["edge_offset"][own]),
         "own_heading": tables["edge_heading"][own],
     }
-
 
 
 def _make_beam_tables(graph: MotionGraph, tables: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
