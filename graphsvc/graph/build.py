@@ -24,6 +24,7 @@ from graphsvc.errors import InputError, SkeletonError
 from graphsvc.graph import bridges as br
 from graphsvc.graph import interpolation as interp
 from graphsvc.graph import metadata as meta
+from graphsvc.graph import partners
 from graphsvc.graph.connectivity import label_hops, typical_times
 from graphsvc.graph.distance import (
     DEFAULT_WINDOW_S,
@@ -537,33 +538,24 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     Blending every pair grows the graph with the square of the clips per label
     (Bandai: 13× the data); each clip instead blends with its `interp_partners` best
     partners, ranked by the fraction of its frames that have a close match in the
-    partner, so growth stays linear in the data."""
+    partner (`partners.choose_partners`: all pairs of a label's clips, or a clip-level
+    index where a label has many), so growth stays linear in the data."""
     rate = options.rate_hz
     by_label: dict[str, list[int]] = {}
     for c, clip in enumerate(clips):
         by_label.setdefault(_content(clip.motion), []).append(c)
-    chosen: set[tuple[int, int]] = set()
     # Ranking looks at every `step`-th frame only (0.1 s apart): a ninth of the cells,
     # enough to tell which clips share long similar stretches.
     step = max(1, int(round(rate / 10.0)))
     sampled = [(take(c.features, np.arange(0, c.motion.num_frames, step)), c.contacts[::step]) for c in clips]
-    for members in bar(list(by_label.values()), desc="similarity", unit="label"):
-        score = {}
-        for k, a in enumerate(members):
-            for b in members[k + 1 :]:
-                # A clip and its own mirror or reversal are one performance: blending
-                # a left punch with its mirrored right punch makes neither.
-                if _performance(clips[a].motion) == _performance(clips[b].motion):
-                    score[a, b] = score[b, a] = 0.0
-                    continue
-                distance = distance_block(sampled[a][0], sampled[b][0])
-                same = interp.same_contact_matrix(sampled[a][1], sampled[b][1])
-                close = np.where(same, distance, np.inf) < options.interp_threshold_m
-                score[a, b] = float(close.any(axis=1).mean())
-                score[b, a] = float(close.any(axis=0).mean())
-        for a in members:
-            ranked = sorted((b for b in members if b != a and score[a, b] > 0), key=lambda b: (-score[a, b], b))
-            chosen.update((min(a, b), max(a, b)) for b in ranked[: options.interp_partners])
+    chosen = partners.choose_partners(
+        sampled,
+        list(by_label.values()),
+        [_performance(c.motion) for c in clips],
+        options.interp_threshold_m,
+        options.interp_partners,
+        bar=bar,
+    )
     segments = []
     first_reached, last_grounded = br.reachable_span(np.concatenate([c.contacts for c in clips]), start)
     for a, b in bar(sorted(chosen), desc="interpolation", unit="pair"):

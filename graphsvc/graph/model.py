@@ -16,6 +16,7 @@ contiguous run (`incoming`, CSR offsets) — the access pattern of the Viterbi s
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,7 @@ NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
 NODE_KINDS = ("original", "slow-down", "interpolated", "bridge")
 EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, EDGE_INTERP, EDGE_BRIDGE = 0, 1, 2, 3, 4, 5
 EDGE_KINDS = ("original", "slow-down", "speed-up", "transition", "interpolated", "bridge")
+_AUGMENTED = re.compile(r"_(mirror|reverse)$")
 
 
 @dataclass(eq=False)
@@ -112,7 +114,13 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
     """What `graphsvc info` reports (the columns of Table 2 of Kelly et al. 2013, and more)."""
     nodes = {k: int(np.sum(graph.node_kind == i)) for i, k in enumerate(NODE_KINDS)}
     edges = {k: int(np.sum(graph.edge_kind == i)) for i, k in enumerate(EDGE_KINDS)}
-    original_frames = nodes["original"]
+    # Every frame the graph was built from, augmented copies included (their clips are
+    # named "<name>_mirror" / "<name>_reverse", `motion.augment`); the recorded ones beside.
+    if graph.clips:
+        kb_frames = sum(int(c["frames"]) for c in graph.clips)
+        recorded = sum(int(c["frames"]) for c in graph.clips if not _AUGMENTED.search(str(c["name"])))
+    else:  # (a bare graph of edges: `graph_from_edges`)
+        kb_frames = recorded = nodes["original"]
     out = {
         "nodes": graph.num_nodes,
         "edges": graph.num_edges,
@@ -120,8 +128,9 @@ def summary(graph: MotionGraph, file_size: int | None = None) -> dict:
         "edges_by_kind": edges,
         "dead_ends": int(np.sum(graph.out_degree() == 0)),
         "clips": len(graph.clips),
-        "kb_frames": original_frames,
-        "kb_minutes": round(original_frames / graph.rate_hz / 60.0, 3),
+        "kb_frames": kb_frames,
+        "kb_frames_original": recorded,
+        "kb_minutes": round(kb_frames / graph.rate_hz / 60.0, 3),
         "labels": list(graph.labels),
         "layout": graph.layout["name"],
         "sensors": list(graph.sensor_names),
@@ -141,8 +150,13 @@ def format_summary(s: dict) -> str:
     lines = [
         f"nodes {s['nodes']:,} ({kinds(s['nodes_by_kind'])})",
         f"edges {s['edges']:,} ({kinds(s['edges_by_kind'])})",
-        f"dead ends {s['dead_ends']:,}; clips {s['clips']}, {s['kb_frames']:,} frames "
-        f"({s['kb_minutes']:.1f} min) at {s['rate_hz']:g} Hz, {s['joints']} joints",
+        f"dead ends {s['dead_ends']:,}; clips {s['clips']}, {s['kb_frames']:,} frames"
+        + (
+            f" ({s['kb_frames_original']:,} recorded, the rest augmented copies)"
+            if s.get("kb_frames_original", s["kb_frames"]) != s["kb_frames"]
+            else ""
+        )
+        + f" ({s['kb_minutes']:.1f} min) at {s['rate_hz']:g} Hz, {s['joints']} joints",
         f"layout {s['layout']} ({', '.join(s['sensors'])})"
         + (
             "; sensor orientations"

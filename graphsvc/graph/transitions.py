@@ -131,7 +131,13 @@ def _project(desc: np.ndarray, dims: int) -> np.ndarray:
     return centred @ vecs[:, ::-1][:, :dims]
 
 
-def _search_radius(features: PoseFeatures, frames: np.ndarray, threshold_m: float) -> float:
+def invariant_points(features: PoseFeatures, dims: int = DEFAULT_PCA_DIMS) -> np.ndarray:
+    """(F, dims) the frames' rotation-invariant descriptors on their top principal axes:
+    Euclidean distances between rows never exceed the frame distance D."""
+    return _project(_invariant_descriptors(features), dims)
+
+
+def search_radius(features: PoseFeatures, frames: np.ndarray, threshold_m: float) -> float:
     # The closed form cancels large terms held in float32, so a computed distance can
     # sit a hair below the true one; widen the radius by that rounding so the lower
     # bound stays a bound for the distances actually computed.
@@ -160,8 +166,8 @@ def indexed_pairs(
     out = [np.empty((0, 2), dtype=np.int64)]
     if frames.size < 2:
         return out[0]
-    radius = _search_radius(features, frames, threshold_m)
-    points = _project(_invariant_descriptors(take(features, frames)), pca_dims)
+    radius = search_radius(features, frames, threshold_m)
+    points = invariant_points(take(features, frames), pca_dims)
     state = _state_code(fr.contacts[frames])
     for s in np.unique(state):
         members = np.flatnonzero(state == s)
@@ -193,7 +199,7 @@ def bruteforce_pairs(features: PoseFeatures, fr: KBFrames, threshold_m: float) -
     sub = take(features, frames)
     d = distance_block(sub, sub)
     state = _state_code(fr.contacts[frames])
-    ok = (d <= _search_radius(features, frames, threshold_m)) & (state[:, None] == state[None, :])
+    ok = (d <= search_radius(features, frames, threshold_m)) & (state[:, None] == state[None, :])
     ia, ib = np.nonzero(np.triu(ok, k=1))
     return np.stack([frames[ia], frames[ib]], axis=1).astype(np.int64)
 

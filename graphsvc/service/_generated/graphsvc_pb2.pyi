@@ -57,7 +57,7 @@ class GetGraphResponse(_message.Message):
     def __init__(self, graph: _Optional[_Union[GraphInfo, _Mapping]] = ...) -> None: ...
 
 class GraphInfo(_message.Message):
-    __slots__ = ("name", "node_count", "edge_count", "node_counts_by_kind", "edge_counts_by_kind", "dead_end_count", "clip_count", "kb_frame_count", "kb_minutes", "labels", "layout", "sensor_names", "rate_hz", "joint_count", "interpolated_segment_count", "file_bytes", "params", "skeleton", "rest_pose_accelerations_m_s2", "bridge_count", "sensor_orientations")
+    __slots__ = ("name", "node_count", "edge_count", "node_counts_by_kind", "edge_counts_by_kind", "dead_end_count", "clip_count", "kb_frame_count", "kb_minutes", "labels", "layout", "sensor_names", "rate_hz", "joint_count", "interpolated_segment_count", "file_bytes", "params", "skeleton", "rest_pose_accelerations_m_s2", "bridge_count", "sensor_orientations", "kb_original_frame_count")
     class NodeCountsByKindEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -93,6 +93,7 @@ class GraphInfo(_message.Message):
     REST_POSE_ACCELERATIONS_M_S2_FIELD_NUMBER: _ClassVar[int]
     BRIDGE_COUNT_FIELD_NUMBER: _ClassVar[int]
     SENSOR_ORIENTATIONS_FIELD_NUMBER: _ClassVar[int]
+    KB_ORIGINAL_FRAME_COUNT_FIELD_NUMBER: _ClassVar[int]
     name: str
     node_count: int
     edge_count: int
@@ -114,7 +115,8 @@ class GraphInfo(_message.Message):
     rest_pose_accelerations_m_s2: _containers.RepeatedScalarFieldContainer[float]
     bridge_count: int
     sensor_orientations: bool
-    def __init__(self, name: _Optional[str] = ..., node_count: _Optional[int] = ..., edge_count: _Optional[int] = ..., node_counts_by_kind: _Optional[_Mapping[str, int]] = ..., edge_counts_by_kind: _Optional[_Mapping[str, int]] = ..., dead_end_count: _Optional[int] = ..., clip_count: _Optional[int] = ..., kb_frame_count: _Optional[int] = ..., kb_minutes: _Optional[float] = ..., labels: _Optional[_Iterable[str]] = ..., layout: _Optional[str] = ..., sensor_names: _Optional[_Iterable[str]] = ..., rate_hz: _Optional[float] = ..., joint_count: _Optional[int] = ..., interpolated_segment_count: _Optional[int] = ..., file_bytes: _Optional[int] = ..., params: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ..., rest_pose_accelerations_m_s2: _Optional[_Iterable[float]] = ..., bridge_count: _Optional[int] = ..., sensor_orientations: _Optional[bool] = ...) -> None: ...
+    kb_original_frame_count: int
+    def __init__(self, name: _Optional[str] = ..., node_count: _Optional[int] = ..., edge_count: _Optional[int] = ..., node_counts_by_kind: _Optional[_Mapping[str, int]] = ..., edge_counts_by_kind: _Optional[_Mapping[str, int]] = ..., dead_end_count: _Optional[int] = ..., clip_count: _Optional[int] = ..., kb_frame_count: _Optional[int] = ..., kb_minutes: _Optional[float] = ..., labels: _Optional[_Iterable[str]] = ..., layout: _Optional[str] = ..., sensor_names: _Optional[_Iterable[str]] = ..., rate_hz: _Optional[float] = ..., joint_count: _Optional[int] = ..., interpolated_segment_count: _Optional[int] = ..., file_bytes: _Optional[int] = ..., params: _Optional[_Union[_struct_pb2.Struct, _Mapping]] = ..., skeleton: _Optional[_Union[Skeleton, _Mapping]] = ..., rest_pose_accelerations_m_s2: _Optional[_Iterable[float]] = ..., bridge_count: _Optional[int] = ..., sensor_orientations: _Optional[bool] = ..., kb_original_frame_count: _Optional[int] = ...) -> None: ...
 
 class Skeleton(_message.Message):
     __slots__ = ("joint_names", "parent_indices", "offsets_m", "channels", "end_sites")
