@@ -34,10 +34,12 @@ undefined and a quasi-Newton method stalls (ε = 1e-4 in the terms' units).
 
 The subspace keeps the leading principal directions of the neighbours' weighted pose
 covariance until they hold 99 % of its variance; the search starts from the previous
-pose projected into it (the first frame: the heaviest neighbour's) and runs scipy's
-L-BFGS-B on the energy and its analytic gradient: one numba pass computes FK, the four
-terms, and the gradient back through the tree (each joint's rotation moves its
-descendants) and through the quaternions' normalisation.
+pose projected into it (the first frame: the heaviest neighbour's) and runs L-BFGS on
+the energy and its analytic gradient, all inside numba (`_minimise`, `lbfgs`: the steps
+and stopping rules of scipy's L-BFGS-B, whose Python driver cost about 0.2 ms an
+iteration around this energy): one pass computes FK, the four terms, and the gradient
+back through the tree (each joint's rotation moves its descendants) and through the
+quaternions' normalisation.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
@@ -178,6 +181,20 @@ def _positions(p, offsets, parent_slot, slot):
 # ---------------------------------------------------------------- subspace
 
 
+_BLAS: ThreadpoolController | None = None
+
+
+def _one_blas_thread():
+    """A context in which BLAS and LAPACK run on one thread: OpenBLAS's threads on a
+    matrix of this size (a 100-odd-square eigendecomposition) cost far more than they
+    bring, and on a loaded machine a great deal more (one eigh of 133 × 133: 230 ms of
+    CPU with its threads, 1.7–4 ms without; the 17 µs the switch costs are nothing)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
 def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> tuple[np.ndarray, np.ndarray, float]:
     """Mean (D,), basis (D, d) (orthonormal columns, largest variance first) and the
     share of the weighted variance it holds, for the fewest directions holding at
@@ -185,15 +202,16 @@ def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> t
     P = np.asarray(P, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
     w = w / w.sum()
-    mean = w @ P
-    Y = (P - mean) * np.sqrt(w)[:, None]
-    if Y.shape[0] < Y.shape[1]:  # fewer poses than dimensions: through the (I, I) Gram matrix
-        values, u = np.linalg.eigh(Y @ Y.T)
-        values, u = np.maximum(values[::-1], 0.0), u[:, ::-1]
-        vectors = Y.T @ u / np.sqrt(np.maximum(values, 1e-300))
-    else:
-        values, vectors = np.linalg.eigh(Y.T @ Y)
-        values, vectors = np.maximum(values[::-1], 0.0), vectors[:, ::-1]
+    with _one_blas_thread():
+        mean = w @ P
+        Y = (P - mean) * np.sqrt(w)[:, None]
+        if Y.shape[0] < Y.shape[1]:  # fewer poses than dimensions: through the (I, I) Gram matrix
+            values, u = np.linalg.eigh(Y @ Y.T)
+            values, u = np.maximum(values[::-1], 0.0), u[:, ::-1]
+            vectors = Y.T @ u / np.sqrt(np.maximum(values, 1e-300))
+        else:
+            values, vectors = np.linalg.eigh(Y.T @ Y)
+            values, vectors = np.maximum(values[::-1], 0.0), vectors[:, ::-1]
     total = values.sum()
     if not total > 1e-18:
         return mean, np.zeros((P.shape[1], 0)), 1.0
