@@ -34,10 +34,12 @@ undefined and a quasi-Newton method stalls (ε = 1e-4 in the terms' units).
 
 The subspace keeps the leading principal directions of the neighbours' weighted pose
 covariance until they hold 99 % of its variance; the search starts from the previous
-pose projected into it (the first frame: the heaviest neighbour's) and runs scipy's
-L-BFGS-B on the energy and its analytic gradient: one numba pass computes FK, the four
-terms, and the gradient back through the tree (each joint's rotation moves its
-descendants) and through the quaternions' normalisation.
+pose projected into it (the first frame: the heaviest neighbour's) and runs L-BFGS on
+the energy and its analytic gradient, all inside numba (`_minimise`, `lbfgs`: the steps
+and stopping rules of scipy's L-BFGS-B, whose Python driver cost about 0.2 ms an
+iteration around this energy): one pass computes FK, the four terms, and the gradient
+back through the tree (each joint's rotation moves its descendants) and through the
+quaternions' normalisation.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.optimize import minimize
+from threadpoolctl import ThreadpoolController
 
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
@@ -57,11 +59,14 @@ from graphsvc.motion.kinematics import qmul4 as _qmul
 from graphsvc.motion.kinematics import qrot3 as _qrot
 from graphsvc.motion.placement import joint_tables
 from graphsvc.sensors.accelerometer import carried_frame
+from graphsvc.strategies.olng import lbfgs
 from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
 
 EPS = 1e-4  # ρ's smoothing (units of each term)
 VARIANCE_KEPT = 0.99
 MAX_ITERATIONS = 40
+GTOL = 1e-7  # the largest gradient component at which the search stops (scipy's pgtol as it was called)
+EPS_MACHINE = float(np.finfo(np.float64).eps)
 
 
 @dataclass(frozen=True)
@@ -176,6 +181,20 @@ def _positions(p, offsets, parent_slot, slot):
 # ---------------------------------------------------------------- subspace
 
 
+_BLAS: ThreadpoolController | None = None
+
+
+def _one_blas_thread():
+    """A context in which BLAS and LAPACK run on one thread: OpenBLAS's threads on a
+    matrix of this size (a 100-odd-square eigendecomposition) cost far more than they
+    bring, and on a loaded machine a great deal more (one eigh of 133 × 133: 230 ms of
+    CPU with its threads, 1.7–4 ms without; the 17 µs the switch costs are nothing)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
+
+
 def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> tuple[np.ndarray, np.ndarray, float]:
     """Mean (D,), basis (D, d) (orthonormal columns, largest variance first) and the
     share of the weighted variance it holds, for the fewest directions holding at
@@ -183,15 +202,16 @@ def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> t
     P = np.asarray(P, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
     w = w / w.sum()
-    mean = w @ P
-    Y = (P - mean) * np.sqrt(w)[:, None]
-    if Y.shape[0] < Y.shape[1]:  # fewer poses than dimensions: through the (I, I) Gram matrix
-        values, u = np.linalg.eigh(Y @ Y.T)
-        values, u = np.maximum(values[::-1], 0.0), u[:, ::-1]
-        vectors = Y.T @ u / np.sqrt(np.maximum(values, 1e-300))
-    else:
-        values, vectors = np.linalg.eigh(Y.T @ Y)
-        values, vectors = np.maximum(values[::-1], 0.0), vectors[:, ::-1]
+    with _one_blas_thread():
+        mean = w @ P
+        Y = (P - mean) * np.sqrt(w)[:, None]
+        if Y.shape[0] < Y.shape[1]:  # fewer poses than dimensions: through the (I, I) Gram matrix
+            values, u = np.linalg.eigh(Y @ Y.T)
+            values, u = np.maximum(values[::-1], 0.0), u[:, ::-1]
+            vectors = Y.T @ u / np.sqrt(np.maximum(values, 1e-300))
+        else:
+            values, vectors = np.linalg.eigh(Y.T @ Y)
+            values, vectors = np.maximum(values[::-1], 0.0), vectors[:, ::-1]
     total = values.sum()
     if not total > 1e-18:
         return mean, np.zeros((P.shape[1], 0)), 1.0
@@ -402,6 +422,152 @@ def energy(z, mean, basis, terms: EnergyTerms, model: PoseModel) -> tuple[float,
     return float(e), grad
 
 
+@numba.njit(cache=True, nogil=True)
+def _minimise(
+    z0,
+    max_iterations,
+    gtol,
+    mean,
+    basis,
+    Q,
+    w,
+    offsets,
+    motion,
+    accel,
+    control,
+    x_t,
+    x_tm1,
+    weights,
+    rate,
+    parent_slot,
+    slot,
+    descendant,
+    sensor_a,
+    sensor_b,
+    along,
+):
+    """L-BFGS on the energy from z0 (`lbfgs`: L-BFGS-B's steps without bounds):
+    (z, E, iterations, evaluations)."""
+    n = z0.shape[0]
+    S = np.zeros((lbfgs.MEMORY, n))
+    Y = np.zeros((lbfgs.MEMORY, n))
+    rho = np.zeros(lbfgs.MEMORY)
+    alpha = np.zeros(lbfgs.MEMORY)
+    state = np.zeros(lbfgs.STATE_SIZE)
+    x = z0.copy()
+    g = np.empty(n)
+    trial = np.empty(n)
+    g_trial = np.empty(n)
+    d = np.empty(n)
+    f = _energy(
+        x,
+        mean,
+        basis,
+        Q,
+        w,
+        offsets,
+        motion,
+        accel,
+        control,
+        x_t,
+        x_tm1,
+        weights,
+        rate,
+        parent_slot,
+        slot,
+        descendant,
+        sensor_a,
+        sensor_b,
+        along,
+        g,
+    )
+    evaluations = 1
+    if np.max(np.abs(g)) <= gtol:
+        return x, f, 0, evaluations
+    count = 0
+    head = lbfgs.MEMORY - 1
+    iterations = 0
+    while True:
+        lbfgs.direction(g, S, Y, rho, count, head, d, alpha)
+        gd = 0.0
+        dd = 0.0
+        for c in range(n):
+            gd += g[c] * d[c]
+            dd += d[c] * d[c]
+        stp = min(1.0 / math.sqrt(dd), lbfgs.STEP_MAX) if iterations == 0 else 1.0
+        failed = not gd < 0.0
+        f_trial = f
+        if not failed:
+            lbfgs.search_start(f, gd, stp, state)
+            trials = 0
+            while True:
+                for c in range(n):
+                    trial[c] = x[c] + stp * d[c]
+                f_trial = _energy(
+                    trial,
+                    mean,
+                    basis,
+                    Q,
+                    w,
+                    offsets,
+                    motion,
+                    accel,
+                    control,
+                    x_t,
+                    x_tm1,
+                    weights,
+                    rate,
+                    parent_slot,
+                    slot,
+                    descendant,
+                    sensor_a,
+                    sensor_b,
+                    along,
+                    g_trial,
+                )
+                evaluations += 1
+                trials += 1
+                gd_trial = 0.0
+                for c in range(n):
+                    gd_trial += g_trial[c] * d[c]
+                verdict, stp = lbfgs.search_step(f_trial, gd_trial, stp, state)
+                if verdict == lbfgs.SEARCH_DONE:
+                    break
+                if trials >= lbfgs.MAX_TRIALS:
+                    failed = True
+                    break
+        if failed:  # the last point stays; restart from −g, or stop with no memory left
+            if count == 0:
+                return x, f, iterations, evaluations
+            count = 0
+            continue
+        iterations += 1
+        f_old = f
+        # The pair s = stp·d, y = g_trial − g, kept when sᵀy > ε_mach · (−gᵀs).
+        nxt = (head + 1) % lbfgs.MEMORY
+        sy = 0.0
+        for c in range(n):
+            s_c = trial[c] - x[c]
+            y_c = g_trial[c] - g[c]
+            S[nxt, c] = s_c
+            Y[nxt, c] = y_c
+            sy += s_c * y_c
+            x[c] = trial[c]
+            g[c] = g_trial[c]
+        f = f_trial
+        if iterations >= max_iterations:
+            break
+        if np.max(np.abs(g)) <= gtol:
+            break
+        if f_old - f <= lbfgs.REL_REDUCTION * max(abs(f_old), abs(f), 1.0):
+            break
+        if sy > EPS_MACHINE * (-gd * stp):
+            head = nxt
+            rho[head] = 1.0 / sy
+            count = min(count + 1, lbfgs.MEMORY)
+    return x, f, iterations, evaluations
+
+
 def optimise(
     mean: np.ndarray,
     basis: np.ndarray,
@@ -411,20 +577,35 @@ def optimise(
     max_iterations: int = MAX_ITERATIONS,
 ) -> tuple[np.ndarray, float, int]:
     """The pose vector (D,) minimising the energy in the subspace, from pose `start`
-    (D,) projected into it; its energy and the iterations taken."""
+    (D,) projected into it; its energy and the iterations taken (`_minimise`)."""
     z0 = basis.T @ (np.asarray(start, dtype=np.float64) - mean)
     if basis.shape[1] == 0:
         e, _ = energy(z0, mean, basis, terms, model)
         return mean.copy(), e, 0
-    res = minimize(
-        energy,
-        z0,
-        args=(mean, basis, terms, model),
-        jac=True,
-        method="L-BFGS-B",
-        options={"maxiter": int(max_iterations), "gtol": 1e-7},
+    z, e, iterations, _ = _minimise(
+        np.ascontiguousarray(z0),
+        int(max_iterations),
+        GTOL,
+        mean,
+        np.ascontiguousarray(basis),
+        terms.Q,
+        terms.w,
+        terms.offsets,
+        terms.motion,
+        terms.accel,
+        terms.control,
+        terms.x_t,
+        terms.x_tm1,
+        terms.weights,
+        float(terms.rate),
+        model.parent_slot,
+        model.slot,
+        model.descendant,
+        model.sensor_a,
+        model.sensor_b,
+        model.along,
     )
-    return mean + basis @ res.x, float(res.fun), int(res.nit)
+    return mean + basis @ z, float(e), int(iterations)
 
 
 def pose_positions(p: np.ndarray, offsets: np.ndarray, model: PoseModel) -> np.ndarray:
