@@ -41,11 +41,6 @@ from graphsvc.synthesis.smooth import smooth_poses
 from graphsvc.synthesis.stream import StreamingSynthesizer
 from graphsvc.synthesis.track import TrackModel, fused_track
 
-# A live search's start steps through the first second's waiting samples at most this
-# many a push (`FixedLagDecoder`'s catch_up): the same frames, the start's CPU spread
-# over the next pushes instead of 30 steps in one (many streams starting at once).
-START_CATCH_UP = 4
-
 
 class ViterbiStrategy(Strategy):
     name = "viterbi"
@@ -285,7 +280,6 @@ class ViterbiSession(LiveSession):
             pull_s=options.shared.track_pull_s,
             oriented=self.reads_up,
             max_live=self.own.live_paths,
-            catch_up=START_CATCH_UP,
         )
         self.synth: StreamingSynthesizer | None = None
         self.counts_position = options.weights.position != 0

@@ -146,6 +146,8 @@ class FixedLagDecoder:
         if self._pending or (not self.started and self.start_samples > 1):
             self._pending.append((acc, position, heading, up))
             if not self.started:
+                if len(self._pending) == 2 and self.max_live:  # (the seed in a push that has no step)
+                    self._seed = self.search.seed(acc, self.max_live, up)
                 if len(self._pending) < self.start_samples:
                     return np.zeros(0, np.int64), np.zeros(0, np.int64)
                 return self._start_pending()
@@ -172,7 +174,7 @@ class FixedLagDecoder:
         )
         heading = np.array([np.nan if h is None else float(h) for _, _, h, _ in pending])
         p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
-        if self.max_live and len(pending) > 1:
+        if self.max_live and len(pending) > 1 and self._seed is None:
             self._seed = self.search.seed(pending[1][0], self.max_live, pending[1][3])
         self._pending = pending[1:]
         first = self._advance(pending[0][0], p0, h0)  # (sample 0 places the paths; its readings are not scored)
