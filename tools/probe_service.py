@@ -63,6 +63,7 @@ def session_costs(
     from graphsvc.service import convert
     from graphsvc.service._generated import graphsvc_pb2 as pb
     from graphsvc.service.graphs import load_graphs
+    from graphsvc.strategies.start import start_samples
     from graphsvc.synthesis.stream import StreamingSynthesizer
 
     spent = [0.0]  # seconds inside the streaming synthesis (a part of push_ms)
@@ -87,9 +88,19 @@ def session_costs(
     names = graph.sensor_names
     sessions = [open_session(graph, options, names, keep_motion=False) for _ in range(streams)]
     inputs = [joined_recordings(recordings, samples, seed) for seed in range(streams)]
+    # A throwaway session through its start first: the kernels' loading and first
+    # calls are no stream's start.
+    spare = open_session(graph, options, names, keep_motion=False)
+    acc, pos, head = inputs[0]
+    for k in range(min(samples, 2 * start_samples(graph.rate_hz))):
+        spare.push(k / graph.rate_hz, acc[k], None if pos is None else pos[k], None if head is None else head[k])
+    del spare
     warm = min(60, samples // 4)
+    opening = min(samples, int(round(5 * graph.rate_hz)))  # a stream's first 5 s
+    cpu_first = np.zeros((streams, opening))  # each session's pushes' process CPU in its first 5 s
     totals = np.zeros(3)
     counted = 0
+    steady_cpu = [0.0]  # the pushes' process CPU after `warm`, s
     first_pushes = np.zeros((streams, warm))  # each session's pushes before `warm`
     for k in range(samples):
         for i in range(streams):
@@ -109,14 +120,19 @@ def session_costs(
             if k == warm and i == 0:
                 spent[0] = 0.0
             t1 = time.perf_counter()
+            c1 = time.process_time()
             frames = sessions[i].push(t, a, p, h, markers=markers, orientations=orientations)
             t2 = time.perf_counter()
+            c2 = time.process_time()
+            if k < opening:
+                cpu_first[i, k] = c2 - c1
             if k < warm:
                 first_pushes[i, k] = t2 - t1
             for f in frames:
                 pb.StreamSynthesizeResponse(frame=convert.frame_to_proto(f, k)).SerializeToString()
             t3 = time.perf_counter()
             if k >= warm:
+                steady_cpu[0] += c2 - c1
                 totals += (t1 - t0, t2 - t1, t3 - t2)
                 counted += 1
     ms = 1e3 * totals / max(1, counted)
@@ -133,6 +149,13 @@ def session_costs(
         "warm_samples": warm,
         "start_push_ms": round(float(1e3 * first_pushes.max(axis=1).mean()), 2),
         "first_samples_ms": round(float(1e3 * first_pushes.sum(axis=1).mean()), 2),
+        "start_push_cpu_ms": round(float(1e3 * cpu_first.max(axis=1).mean()), 2),
+        "start_push_cpu_ms_max": round(float(1e3 * cpu_first.max()), 2),
+        "opening_cpu_ms_by_s": [
+            round(float(1e3 * cpu_first[:, j : j + int(graph.rate_hz)].sum(axis=1).mean()), 2)
+            for j in range(0, opening, int(graph.rate_hz))
+        ],
+        "steady_cpu_ms": round(float(1e3 * steady_cpu[0] / max(1, counted)), 4),
     }
 
 

@@ -127,3 +127,44 @@ def test_a_bound_holding_every_node_gives_the_unbounded_decoders_frames():
     for x, y in zip(*(d.flush() for d in decoders)):
         np.testing.assert_array_equal(x, y)
     assert decoders[1].search.max_live == g.num_nodes and decoders[0].search.max_live is None
+
+
+@pytest.mark.parametrize("catch_up,lag,T", [(1, 6, 70), (3, 6, 70), (4, 0, 70), (2, 6, 14), (3, 2, 8)])
+def test_a_start_caught_up_over_several_pushes_gives_the_same_frames_a_few_steps_a_push(catch_up, lag, T):
+    rng = np.random.default_rng(5)
+    g = random_graph(rng, N=90, out=3)
+    meas, position, heading = _inputs(rng, g, T)
+    start = 12
+    whole = FixedLagDecoder(g, PLACED, lag=lag, threads=False, beam=8.0, start_samples=start, max_live=20)
+    spread = FixedLagDecoder(
+        g, PLACED, lag=lag, threads=False, beam=8.0, start_samples=start, max_live=20, catch_up=catch_up
+    )
+    steps = [0]
+    step = spread.search.step
+
+    def counted(*args, **kwargs):
+        steps[0] += 1
+        step(*args, **kwargs)
+
+    spread.search.step = counted
+    want, got, per_push = [], [], []
+    for t in range(T):
+        want.append(whole.push(meas[t], position[t], heading[t]))
+        before = steps[0]
+        got.append(spread.push(meas[t], position[t], heading[t]))
+        per_push.append(steps[0] - before)
+    want.append(whole.flush())
+    got.append(spread.flush())
+    for k in (0, 1):
+        np.testing.assert_array_equal(np.concatenate([w[k] for w in want]), np.concatenate([o[k] for o in got]))
+    assert sum(len(o[0]) for o in got) == T
+    # before the start nothing, then at most catch_up samples a push (the start's own
+    # sample 0 is no step), until the search has caught up: one a push
+    assert per_push[: start - 1] == [0] * min(T, start - 1)
+    assert max(per_push) <= catch_up
+    if T >= start + (start - 1) // max(1, catch_up - 1) + 1:
+        assert spread.search.t == T - 1 and not spread._pending
+        assert per_push[-1] == 1
+    # a frame is released no earlier than by the whole start's push
+    released = np.cumsum([len(o[0]) for o in got[:T]])
+    assert (released <= np.cumsum([len(w[0]) for w in want[:T]])).all()

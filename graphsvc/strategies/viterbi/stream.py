@@ -80,6 +80,7 @@ class FixedLagDecoder:
         pull_s: float | None = None,
         oriented: bool = False,
         max_live: int | None = None,
+        catch_up: int | None = None,
     ):
         """oriented: weigh the samples' measured "up" vectors (see ViterbiSearch). placed: see ViterbiSearch (None: from the weights; a caller that knows no
         position or heading will come passes False, which makes each step cheaper).
@@ -96,7 +97,13 @@ class FixedLagDecoder:
         `ViterbiSearch.seed` picks for this many from the start's second sample: a
         start's steps are then sparse ones where every node was live (the kick-off of
         many streams at once), and no later step keeps more. None or 0: the beam alone,
-        every node starting a path, as in a batch search (an exact search always)."""
+        every node starting a path, as in a batch search (an exact search always).
+        catch_up: with start_samples > 1, the search steps at most this many samples a
+        push until it has caught up with the samples waiting at its start (the push
+        that starts it: its start and catch_up − 1 steps), so that a start costs a few
+        steps a push over the next pushes instead of start_samples steps in one; the
+        frames are those of the start in one push, each released by a later push.
+        None or 0: every waiting sample in the push that starts the search."""
         self.graph = graph
         self.lag = _check_lag(lag)
         self.requirements = _Requirements(graph, constraint_sets, rate_hz or graph.rate_hz)
@@ -117,6 +124,7 @@ class FixedLagDecoder:
         self.start_samples = max(1, int(start_samples))
         self.max_live = int(max_live) if max_live and beam is not None else None
         self.search.max_live = self.max_live
+        self.catch_up = int(catch_up) if catch_up and catch_up > 0 else None
         self._seed = None  # where a bounded search's paths start (`_start_pending`)
         self._pending: list = []  # samples (acc, position, heading) that arrived before the search started
         self.emitted = 0  # frames emitted so far
@@ -135,11 +143,15 @@ class FixedLagDecoder:
     def push(self, acc, position=None, heading=None, up=None) -> tuple[np.ndarray, np.ndarray]:
         """One sample: accelerations (S, 3) m/s², position (2,) m, heading rad, the
         sensors' "up" vectors (S, 3) (an oriented decoder's; None: missing)."""
-        if not self.started and self.start_samples > 1:
+        if self._pending or (not self.started and self.start_samples > 1):
             self._pending.append((acc, position, heading, up))
-            if len(self._pending) < self.start_samples:
-                return np.zeros(0, np.int64), np.zeros(0, np.int64)
-            return self._start_pending()
+            if not self.started:
+                if len(self._pending) == 2 and self.max_live:  # (the seed in a push that has no step)
+                    self._seed = self.search.seed(acc, self.max_live, up)
+                if len(self._pending) < self.start_samples:
+                    return np.zeros(0, np.int64), np.zeros(0, np.int64)
+                return self._start_pending()
+            return self._catch_up(self.catch_up)
         return self._advance(acc, position, heading, up)
 
     def _advance(self, acc, position, heading, up=None) -> tuple[np.ndarray, np.ndarray]:
@@ -154,26 +166,37 @@ class FixedLagDecoder:
         return self._emit(final)
 
     def _start_pending(self) -> tuple[np.ndarray, np.ndarray]:
-        """Start the search placed from the samples waiting, then run them through it."""
-        pending, self._pending = self._pending, []
+        """Start the search placed from the samples waiting, then run them (or, with
+        catch_up, the first of them) through it."""
+        pending = self._pending
         position = np.array(
             [np.full(2, np.nan) if p is None else np.asarray(p, dtype=np.float64) for _, p, _, _ in pending]
         )
         heading = np.array([np.nan if h is None else float(h) for _, _, h, _ in pending])
         p0, h0 = start_placement(position, heading, self.requirements.rate_hz)
-        if self.max_live and len(pending) > 1:
+        if self.max_live and len(pending) > 1 and self._seed is None:
             self._seed = self.search.seed(pending[1][0], self.max_live, pending[1][3])
-        out = [self._advance(pending[0][0], p0, h0)]  # (sample 0 places the paths; its readings are not scored)
-        out += [self._advance(acc, p, h, u) for acc, p, h, u in pending[1:]]
+        self._pending = pending[1:]
+        first = self._advance(pending[0][0], p0, h0)  # (sample 0 places the paths; its readings are not scored)
+        rest = self._catch_up(None if self.catch_up is None else self.catch_up - 1)
+        return np.concatenate([first[0], rest[0]]), np.concatenate([first[1], rest[1]])
+
+    def _catch_up(self, most: int | None) -> tuple[np.ndarray, np.ndarray]:
+        """Step the search through at most `most` of the samples waiting (None: all)."""
+        count = len(self._pending) if most is None else min(most, len(self._pending))
+        steps, self._pending = self._pending[:count], self._pending[count:]
+        out = [self._advance(acc, p, h, u) for acc, p, h, u in steps]
+        if not out:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
         return np.concatenate([n for n, _ in out]), np.concatenate([e for _, e in out])
 
     def flush(self) -> tuple[np.ndarray, np.ndarray]:
         """Everything not yet emitted, from the best path now."""
-        if not self.started:
-            if not self._pending:
-                return np.zeros(0, np.int64), np.zeros(0, np.int64)
-            self._start_pending()
-        return self._emit(self.search.t)
+        if not self.started and not self._pending:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        out = [self._start_pending()] if not self.started else []
+        out += [self._catch_up(None), self._emit(self.search.t)]
+        return np.concatenate([n for n, _ in out]), np.concatenate([e for _, e in out])
 
     def _emit(self, until: int) -> tuple[np.ndarray, np.ndarray]:
         if until < self.emitted:
