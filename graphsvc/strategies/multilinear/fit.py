@@ -89,24 +89,13 @@ def unit_values(t: Tensor, x_s: np.ndarray, x_r: np.ndarray, length: int, warp, 
     return warp_values(t.values(x_s, x_r), unit_times(t.frames, length, warp), pose_dims)
 
 
-def warp_matrices(frames: int, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, F) matrices P, Q with `model.warp_values(v, times, d)` = P @ v but for its
-    step and turn columns d … d+2, = Q @ v there: the warp is linear in the values (a
-    linear interpolation, and differences of an interpolated cumulative sum), so the
-    fit builds the two once per warp and plays every coefficient vector through them."""
-    eye = np.eye(frames)
-    cum = np.vstack([np.zeros((1, frames)), np.tril(np.ones((frames, frames)))])  # cum[k + 1]: Σ of frames ≤ k
-    t = np.asarray(times, dtype=np.float64)
-    previous = np.concatenate([[t[0] - 1.0], t[:-1]])
-    return tn.sample(eye, t), tn.sample(cum, t + 1.0) - tn.sample(cum, previous + 1.0)
-
-
 class UnitPlayer:
     """`unit_values` of one tensor on L frames for many (x_S, x_R, warp), as the fit asks
     for them: the core as one (V·F, kS·kR) matrix (a product with x_S ⊗ x_R, where
-    numpy's einsum spent most of its time planning), the warp's matrices
-    (`warp_matrices`) kept while the warp stays (a numeric Jacobian moves one
-    parameter at a time, most of them coefficients)."""
+    numpy's einsum spent most of its time planning), the warp's times kept while the
+    warp stays (a numeric Jacobian moves one parameter at a time, most of them
+    coefficients). (The warp as dense (L, F) interpolation matrices was tried: quicker
+    for a step, three times slower for a gesture's few hundred frames.)"""
 
     def __init__(self, t: Tensor, length: int, pose_dims: int):
         V, F, kS, kR = t.core_t.shape
@@ -115,20 +104,16 @@ class UnitPlayer:
         self.frames, self.length, self.d = F, length, pose_dims
         self.shape = (V, F)
         self._key: bytes | None = None
-        self._pq: tuple[np.ndarray, np.ndarray] | None = None
+        self._times: np.ndarray | None = None
 
     def __call__(self, x_s: np.ndarray, x_r: np.ndarray, warp) -> np.ndarray:
         w = np.ascontiguousarray(warp, dtype=np.float64)
         key = w.tobytes()
-        if key != self._key or self._pq is None:
-            self._pq = warp_matrices(self.frames, unit_times(self.frames, self.length, w))
+        if key != self._key or self._times is None:
+            self._times = unit_times(self.frames, self.length, w)
             self._key = key
-        P, Q = self._pq
         base = (self.mean + (self.core @ np.outer(x_s, x_r).reshape(-1)).reshape(self.shape)).T  # (F, V)
-        out = P @ base
-        d = self.d
-        out[:, d : d + 3] = Q @ base[:, d : d + 3]
-        return out
+        return warp_values(base, self._times, self.d)
 
 
 def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
