@@ -82,7 +82,7 @@ def main() -> None:
     print(
         json.dumps(
             {
-                "tree": str(Path(sys.modules["graphsvc"].__file__).resolve().parents[1]),
+                "tree": str(Path(str(sys.modules["graphsvc"].__file__)).resolve().parents[1]),
                 "units": len(calls),
                 "cpu_s": rounds,
                 "min_cpu_s": min(rounds),
