@@ -89,6 +89,33 @@ def unit_values(t: Tensor, x_s: np.ndarray, x_r: np.ndarray, length: int, warp, 
     return warp_values(t.values(x_s, x_r), unit_times(t.frames, length, warp), pose_dims)
 
 
+class UnitPlayer:
+    """`unit_values` of one tensor on L frames for many (x_S, x_R, warp), as the fit asks
+    for them: the core as one (V·F, kS·kR) matrix (a product with x_S ⊗ x_R, where
+    numpy's einsum spent most of its time planning), the warp's times kept while the
+    warp stays (a numeric Jacobian moves one parameter at a time, most of them
+    coefficients). (The warp as dense (L, F) interpolation matrices was tried: quicker
+    for a step, three times slower for a gesture's few hundred frames.)"""
+
+    def __init__(self, t: Tensor, length: int, pose_dims: int):
+        V, F, kS, kR = t.core_t.shape
+        self.core = np.ascontiguousarray(t.core_t.reshape(V * F, kS * kR), dtype=np.float64)
+        self.mean = np.asarray(t.mean, dtype=np.float64)
+        self.frames, self.length, self.d = F, length, pose_dims
+        self.shape = (V, F)
+        self._key: bytes | None = None
+        self._times: np.ndarray | None = None
+
+    def __call__(self, x_s: np.ndarray, x_r: np.ndarray, warp) -> np.ndarray:
+        w = np.ascontiguousarray(warp, dtype=np.float64)
+        key = w.tobytes()
+        if key != self._key or self._times is None:
+            self._times = unit_times(self.frames, self.length, w)
+            self._key = key
+        base = (self.mean + (self.core @ np.outer(x_s, x_r).reshape(-1)).reshape(self.shape)).T  # (F, V)
+        return warp_values(base, self._times, self.d)
+
+
 def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Values (L, V) as local rotations (L, J, 4) and translations (L, J, 3) of the
     template (quaternions normalised), the pelvis' relative rotation (L, 4) and height (L,)."""
@@ -96,8 +123,9 @@ def local_frames(values: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray
     rot = np.repeat(body.rot[None], L, axis=0)
     trans = np.repeat(body.trans[None], L, axis=0)
     q = values[:, 5 : lay.dims].reshape(L, -1, 4)
-    rot[:, lay.joints] = q / np.maximum(np.linalg.norm(q, axis=2, keepdims=True), 1e-12)
-    rel = values[:, 0:4] / np.maximum(np.linalg.norm(values[:, 0:4], axis=1, keepdims=True), 1e-12)
+    rot[:, lay.joints] = q / np.maximum(np.sqrt((q * q).sum(axis=2))[:, :, None], 1e-12)
+    r = values[:, 0:4]
+    rel = r / np.maximum(np.sqrt((r * r).sum(axis=1))[:, None], 1e-12)
     return rot, trans, rel, values[:, 4].copy()
 
 
@@ -171,11 +199,12 @@ def fit_unit(
     scale = 1.0 / np.sqrt(max(count, 1))
     R = t.u_rep.shape[0]
     best = None
+    play = UnitPlayer(t, L, d)
     for row, _ in start_rows(t, m, inside & finite, STARTS):
         p0 = np.concatenate([*t.row_coefficients(row // R, row % R), np.zeros(J)])
 
         def values_of(p):
-            return unit_values(t, p[:kS], p[kS : kS + kR], L, p[kS + kR :], d)
+            return play(p[:kS], p[kS : kS + kR], p[kS + kR :])
 
         def residual(p, p0=p0, values_of=values_of):
             sim = simulate_unit(values_of(p), body).reshape(L, -1)
