@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from graphsvc.blas import one_thread
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.distance import PoseFeatures, concat_features, pose_features
 from graphsvc.graph.transitions import _pair_distances, _state_code
@@ -319,16 +320,17 @@ def select_matches(
         return Matches(empty, empty, empty, empty, np.zeros(0), empty, empty, empty)
     clip = kb.clip
     feats = match_features(kb.canon, kb.ground, kb.heading, kb.start, rate_hz)
-    points = _project(feats[frames], FEATURE_DIMS)
     fclip = clip[frames]
-    best, best_d2 = best_per_label(
-        points,
-        _state_code(kb.contacts[frames]),
-        kb.performance[fclip],
-        kb.label[fclip],
-        num_labels,
-        kb.performer[fclip],
-    )
+    with one_thread():  # (the nearest candidates the same however many threads BLAS has: graphsvc.blas)
+        points = _project(feats[frames], FEATURE_DIMS)
+        best, best_d2 = best_per_label(
+            points,
+            _state_code(kb.contacts[frames]),
+            kb.performance[fclip],
+            kb.label[fclip],
+            num_labels,
+            kb.performer[fclip],
+        )
     in_clip = frames - kb.start[fclip]
     lengths = np.diff(kb.start)
 

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.distance import (
     PoseFeatures,
@@ -127,8 +128,9 @@ def _project(desc: np.ndarray, dims: int) -> np.ndarray:
     centred = desc - desc.mean(axis=0)
     if dims >= desc.shape[1]:
         return centred
-    _, vecs = np.linalg.eigh(centred.T @ centred)
-    return centred @ vecs[:, ::-1][:, :dims]
+    with one_thread():  # (the same axes however many threads BLAS has: graphsvc.blas)
+        _, vecs = np.linalg.eigh(centred.T @ centred)
+        return centred @ vecs[:, ::-1][:, :dims]
 
 
 def invariant_points(features: PoseFeatures, dims: int = DEFAULT_PCA_DIMS) -> np.ndarray:

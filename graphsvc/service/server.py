@@ -54,9 +54,6 @@ from graphsvc.service.metrics import Metrics, StatusCounter
 from graphsvc.service.servicer import MotionGraphServicer
 from graphsvc.service.streams import CONFIG_TIMEOUT_S
 
-# What `graphsvc serve` reads before it binds, named here too: the command line and
-# the tests import them from this module.
-
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["MotionGraphService"].full_name  # "graphsvc.v1.MotionGraphService"
 UNARY_WORKERS = 4  # threads beyond the live streams' for ListGraphs/GetGraph/Synthesize and rejections
 

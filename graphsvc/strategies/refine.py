@@ -74,6 +74,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from graphsvc.blas import one_thread
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
@@ -207,21 +208,22 @@ def regress(index: RefineIndex, queries: np.ndarray, weight: float = 0.0) -> np.
     dist, near = tree.query(queries, k=K)
     dist, near = dist.reshape(n, K), near.reshape(n, K)
     d = features.shape[1]
-    for lo in range(0, n, CHUNK):
-        s = slice(lo, min(lo + CHUNK, n))
-        dk = dist[s]
-        h = np.maximum(dk[:, -1:], 1e-12)
-        u = dk / h
-        w = ((1.0 - u * u) ** 2 + 1e-6) / (u + SHARPEN) ** 2
-        w /= w.sum(axis=1, keepdims=True)
-        F, P = features[near[s]], index.poses[near[s]]
-        fm, pm = (w[:, None, :] @ F)[:, 0], (w[:, None, :] @ P)[:, 0]
-        root = np.sqrt(w)[:, :, None]
-        Fc, Pc = (F - fm[:, None]) * root, (P - pm[:, None]) * root
-        A = Fc.transpose(0, 2, 1) @ Fc
-        A += (RIDGE * np.trace(A, axis1=1, axis2=2) / d + 1e-12)[:, None, None] * np.eye(d)
-        beta = np.linalg.solve(A, Fc.transpose(0, 2, 1) @ Pc)
-        poses[s] = pm + ((queries[s] - fm)[:, None, :] @ beta)[:, 0]
+    with one_thread():  # (the same poses however many threads BLAS has: graphsvc.blas)
+        for lo in range(0, n, CHUNK):
+            s = slice(lo, min(lo + CHUNK, n))
+            dk = dist[s]
+            h = np.maximum(dk[:, -1:], 1e-12)
+            u = dk / h
+            w = ((1.0 - u * u) ** 2 + 1e-6) / (u + SHARPEN) ** 2
+            w /= w.sum(axis=1, keepdims=True)
+            F, P = features[near[s]], index.poses[near[s]]
+            fm, pm = (w[:, None, :] @ F)[:, 0], (w[:, None, :] @ P)[:, 0]
+            root = np.sqrt(w)[:, :, None]
+            Fc, Pc = (F - fm[:, None]) * root, (P - pm[:, None]) * root
+            A = Fc.transpose(0, 2, 1) @ Fc
+            A += (RIDGE * np.trace(A, axis1=1, axis2=2) / d + 1e-12)[:, None, None] * np.eye(d)
+            beta = np.linalg.solve(A, Fc.transpose(0, 2, 1) @ Pc)
+            poses[s] = pm + ((queries[s] - fm)[:, None, :] @ beta)[:, 0]
     return poses
 
 

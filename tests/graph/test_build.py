@@ -256,3 +256,18 @@ def test_per_frame_labels_label_each_node_by_its_frame():
     again, _ = build_graph(kb, BuildOptions(layout=PRESETS["wrists-ankles"], progress=False), {})
     np.testing.assert_array_equal(plain.node_label, again.node_label)
     assert plain.labels == again.labels
+
+
+def test_build_is_the_same_however_many_threads_blas_has(kb, built, tmp_path):
+    # A Dask worker's BLAS has one thread and the CLI's as many as there are cores: the
+    # bridges' candidates (float32 products) and the transitions' axes (eigh) must not
+    # depend on it (graphsvc.blas).
+    from threadpoolctl import threadpool_limits
+
+    g, _ = built
+    save_graph(g, tmp_path / "a.graph")
+    for threads in (1, 2):
+        with threadpool_limits(threads, user_api="blas"):
+            again, _ = build_graph(kb, BuildOptions(layout=PRESETS["kelly6"], progress=False))
+        save_graph(again, tmp_path / f"{threads}.graph")
+        assert (tmp_path / "a.graph").read_bytes() == (tmp_path / f"{threads}.graph").read_bytes(), threads

@@ -315,10 +315,11 @@ def test_serve_on_an_address_not_of_this_machine_says_why_in_one_line(graph_file
 # bound port first (the listening line comes once the graphs are served).
 _HELD_LOAD = """
 import sys
+import graphsvc.service.graphs as G
 import graphsvc.service.server as S
 from graphsvc.cli import main
 
-bind, load = S.bind_server, S.load_graphs
+bind, load = S.bind_server, G.load_graphs
 
 def bound_then_printed(config):
     bound = bind(config)
@@ -330,7 +331,7 @@ def held_load(specs):
         gate.read()
     return load(specs)
 
-S.bind_server, S.load_graphs = bound_then_printed, held_load
+S.bind_server, G.load_graphs = bound_then_printed, held_load
 sys.exit(main(sys.argv[2:]))
 """
 

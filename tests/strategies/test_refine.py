@@ -85,3 +85,22 @@ def test_refine_is_the_default_of_the_search_and_nearest_stays_unrefined(built):
     a = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1)))
     b = reconstruct(graph, rec, Options(weights=Weights(0.5, 1, 1), refine=False))
     assert np.array_equal(a.node_path, b.node_path) and not np.allclose(a.motion.rotations, b.motion.rotations)
+
+
+def test_the_regressed_poses_are_the_same_however_many_threads_blas_has():
+    # (a batch worker's BLAS has one thread, the CLI's two: graphsvc.blas)
+    from threadpoolctl import threadpool_limits
+
+    from graphsvc.sensors.layout import PRESETS
+    from graphsvc.strategies.refine import regress
+
+    # (six sensors: products large enough for OpenBLAS to split over its threads)
+    graph, _ = build_graph(generate_knowledge_base(seed=0, minutes=0.5), BuildOptions(layout=PRESETS["kelly6"]))
+    index = refine_index(graph)
+    rng = np.random.default_rng(1)
+    queries = index.windows[::7] + 0.05 * rng.standard_normal(index.windows[::7].shape)  # (near, not on, its rows)
+    got = []
+    for threads in (1, 2):
+        with threadpool_limits(threads, user_api="blas"):
+            got.append(regress(index, queries))
+    assert got[0].tobytes() == got[1].tobytes()

@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
+from graphsvc.blas import one_thread
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
 from graphsvc.motion.kinematics import forward_kinematics
@@ -181,6 +182,7 @@ def start_rows(t: Tensor, measured: np.ndarray, inside: np.ndarray, count: int) 
     return [(int(k), costs[int(k)]) for k in order]
 
 
+@one_thread()  # (the same fit however many threads BLAS has: graphsvc.blas)
 def fit_unit(
     t: Tensor, measured: np.ndarray, inside: np.ndarray, body: Body, prior: float, warp: bool, evaluations: int
 ) -> UnitFit:

@@ -57,6 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.holdout import is_augmented
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
@@ -328,6 +329,7 @@ def model_key(own, clips: np.ndarray) -> str:
     return h.hexdigest()[:16]
 
 
+@one_thread()  # (the same tensors however many threads BLAS has: graphsvc.blas)
 def learn(graph: MotionGraph, data: dict, clips: np.ndarray, own) -> dict[str, np.ndarray]:
     """The model's arrays (module docstring) from graph clips `clips`. InputError when no
     class of them has two units."""

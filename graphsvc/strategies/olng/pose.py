@@ -49,8 +49,8 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from threadpoolctl import ThreadpoolController
 
+from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph
@@ -181,20 +181,6 @@ def _positions(p, offsets, parent_slot, slot):
 # ---------------------------------------------------------------- subspace
 
 
-_BLAS: ThreadpoolController | None = None
-
-
-def _one_blas_thread():
-    """A context in which BLAS and LAPACK run on one thread: OpenBLAS's threads on a
-    matrix of this size (a 100-odd-square eigendecomposition) cost far more than they
-    bring, and on a loaded machine a great deal more (one eigh of 133 × 133: 230 ms of
-    CPU with its threads, 1.7–4 ms without; the 17 µs the switch costs are nothing)."""
-    global _BLAS
-    if _BLAS is None:
-        _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
-
-
 def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> tuple[np.ndarray, np.ndarray, float]:
     """Mean (D,), basis (D, d) (orthonormal columns, largest variance first) and the
     share of the weighted variance it holds, for the fewest directions holding at
@@ -202,7 +188,11 @@ def weighted_pca(P: np.ndarray, w: np.ndarray, kept: float = VARIANCE_KEPT) -> t
     P = np.asarray(P, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
     w = w / w.sum()
-    with _one_blas_thread():
+    # On one BLAS thread: the same basis however many threads BLAS has, and cheaper:
+    # OpenBLAS's threads on a 100-odd-square eigendecomposition cost far more than they
+    # bring (one eigh of 133 × 133 on a loaded machine: 230 ms of CPU with its threads,
+    # 1.7–4 ms without).
+    with one_thread():
         mean = w @ P
         Y = (P - mean) * np.sqrt(w)[:, None]
         if Y.shape[0] < Y.shape[1]:  # fewer poses than dimensions: through the (I, I) Gram matrix

@@ -90,6 +90,7 @@ import math
 
 import numpy as np
 
+from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
 from graphsvc.strategies.index import frame_readings
@@ -168,6 +169,7 @@ def model_key(own, data: dict, rows: np.ndarray) -> str:
     return h.hexdigest()[:16]
 
 
+@one_thread()  # (the same model however many threads BLAS has: graphsvc.blas)
 def learn(data: dict, rows: np.ndarray, own) -> dict[str, np.ndarray]:
     """The model's arrays, learned from frames `rows` of `data` (module docstring)."""
     from sklearn.decomposition import PCA
@@ -326,6 +328,7 @@ class Model:
     precisions, log normalisers) and, for the optimisation, each cluster's prior and
     readings model folded into two inverse matrices."""
 
+    @one_thread()
     def __init__(
         self, arrays: dict, readings: np.ndarray, w_smooth: float = 0.2, w_control: float = 0.8, assign: str = "nearest"
     ):
