@@ -13,7 +13,7 @@ turning, its blends and planted feet — and adds to each frame's local pose
    (`OFFSETS_S`: five samples over ±0.13 s, in g, each sensor's frame), so a pose is
    told by how the readings move and not by one noisy sample;
 2. its `NEIGHBOURS` nearest knowledge-base frames by the same window of their virtual
-   readings (a k-d tree, scipy's `cKDTree`; only the frames a hold-out leaves usable),
+   readings (only the frames a hold-out leaves usable; `nearest_rows`, below),
    weighted by a bisquare kernel out to the farthest of them, sharpened toward the
    nearest (÷ (d/h + ε)², so a frame the knowledge base holds comes back as it is);
 3. the regressed pose is the neighbours' weighted mean plus a ridge regression of their
@@ -71,8 +71,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from graphsvc.blas import one_thread
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
@@ -145,21 +145,22 @@ class RefineIndex:
 
     windows: np.ndarray
     poses: np.ndarray
-    tree: cKDTree
+    columns: np.ndarray  # the windows (d, M) float32, for `nearest_rows`
     layout: PoseLayout
     rate_hz: float
     mapping: object = None  # (the graph's joint map)
     cue: np.ndarray | None = None
-    oriented: dict = field(default_factory=dict)  # weight → (features (M, d + W·S), their tree)
+    oriented: dict = field(default_factory=dict)  # weight → (features (M, d + W·S), their columns)
 
-    def features(self, weight: float) -> tuple[np.ndarray, cKDTree]:
-        """The frames' query features and their tree: the windows alone (weight 0 or no
-        cue), else the windows and √weight · the orientation cue."""
+    def features(self, weight: float) -> tuple[np.ndarray, np.ndarray]:
+        """The frames' query features (M, d) float64 and the same as columns (d, M)
+        float32: the windows alone (weight 0 or no cue), else the windows and √weight ·
+        the orientation cue."""
         if weight <= 0 or self.cue is None:
-            return self.windows, self.tree
+            return self.windows, self.columns
         if weight not in self.oriented:
             f = np.concatenate([self.windows, np.sqrt(weight) * self.cue], axis=1)
-            self.oriented[weight] = (f, cKDTree(f))
+            self.oriented[weight] = (f, _columns(f))
         return self.oriented[weight]
 
 
@@ -188,12 +189,52 @@ def _make_index(graph: MotionGraph, allowed: np.ndarray | None) -> RefineIndex:
     return RefineIndex(
         windows,
         np.asarray(arrays["poses"][keep], dtype=np.float64),
-        cKDTree(windows),
+        _columns(windows),
         pose_layout(graph.skeleton, graph.params.get("mapping")),
         float(graph.rate_hz),
         graph.params.get("mapping"),
         cue,
     )
+
+
+def _columns(features: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(features.T, dtype=np.float32)
+
+
+@numba.njit(cache=True)
+def nearest_rows(features, columns, queries, near, dist):  # pragma: no cover - numba
+    """For each query (n, d): its K = near.shape[1] nearest rows of features (M, d) into
+    near (n, K), their distances into dist (n, K), nearest first (ties: lower row).
+
+    A brute force: every row's squared distance in float32 over the columns (d, M)
+    (a loop over rows the compiler vectorises), the K smallest selected, then their
+    distances in float64 from `features` and sorted. On the 60-value windows of 33,048
+    frames it takes 0.56 ms of CPU a query where scipy's k-d tree took 3.9 ms (a tree
+    prunes little in 60 dimensions). The selection in float32 may swap rows tied to
+    within its rounding at the K-th distance, where the weights are nil."""
+    d, M = columns.shape
+    K = near.shape[1]
+    acc = np.empty(M, np.float32)
+    for q in range(queries.shape[0]):
+        acc[:] = 0.0
+        for j in range(d):
+            v = np.float32(queries[q, j])
+            row = columns[j]
+            for i in range(M):
+                t = row[i] - v
+                acc[i] += t * t
+        picked = np.sort(np.argpartition(acc, K - 1)[:K])
+        d2 = np.empty(K)
+        for k in range(K):
+            s = 0.0
+            for j in range(d):
+                t = features[picked[k], j] - queries[q, j]
+                s += t * t
+            d2[k] = s
+        order = np.argsort(d2, kind="mergesort")
+        for k in range(K):
+            near[q, k] = picked[order[k]]
+            dist[q, k] = np.sqrt(d2[order[k]])
 
 
 def regress(index: RefineIndex, queries: np.ndarray, weight: float = 0.0) -> np.ndarray:
@@ -204,9 +245,10 @@ def regress(index: RefineIndex, queries: np.ndarray, weight: float = 0.0) -> np.
     K = min(NEIGHBOURS, index.windows.shape[0])
     if n == 0:
         return poses
-    features, tree = index.features(weight)
-    dist, near = tree.query(queries, k=K)
-    dist, near = dist.reshape(n, K), near.reshape(n, K)
+    features, columns = index.features(weight)
+    queries = np.ascontiguousarray(queries, dtype=np.float64)
+    near, dist = np.empty((n, K), np.int64), np.empty((n, K))
+    nearest_rows(features, columns, queries, near, dist)
     d = features.shape[1]
     with one_thread():  # (the same poses however many threads BLAS has: graphsvc.blas)
         for lo in range(0, n, CHUNK):
@@ -408,3 +450,7 @@ def warm_up_refine(graph: MotionGraph) -> None:
     FootHold(graph.skeleton, index.rate_hz, index.mapping).apply(
         rot2, trans2, rot, trans, np.ones((nodes.size, 2), dtype=bool)
     )
+    k = min(2, index.windows.shape[0])
+    if k:
+        q = index.windows[:1].copy()
+        nearest_rows(index.windows, index.columns, q, np.empty((1, k), np.int64), np.empty((1, k)))
