@@ -5,15 +5,21 @@ OpenBLAS splits a matrix product or an eigendecomposition over its threads, and 
 split changes which of its kernels computes which block, so the last bits of a result
 depend on the thread count: on a 2-core machine a product computed with two threads
 and with one differ by an ulp here and there. Where such a result is compared or
-ranked (the bridges' nearest candidates, the refinement's local regression), an ulp
-can change a choice, and then a graph built by `graphsvc build` and one built in a
-Dask worker (whose BLAS gets one thread), or a reconstruction in the CLI and the same
-in a batch worker, would differ. Those steps run inside `one_thread()`: with one thread
+ranked (the bridges' candidates, the transitions' axes, the learned models of the
+piecewise and multilinear strategies, OLNG's subspace), an ulp can change a choice,
+and then a graph built by `graphsvc build` and one built in a Dask worker (whose BLAS
+gets one thread), or a reconstruction in the CLI and the same one in a batch worker or
+a server's thread, would differ. Those steps run inside `one_thread()`: with one thread
 a product is the same on every run on a machine. (Across processors the kernels
 differ in any case: bytes are the same for the same input, seed and machine.)
 
-The switch costs about 15 µs. It is process-wide: a lock and a count keep nested and
-concurrent users from restoring the thread count while another still needs one thread.
+OpenBLAS's thread count is one setting for the whole process, and threadpoolctl lets
+only one Python thread at a time hold it (another thread's limit is silently ignored
+while the first holds it). So `one_thread()` holds a lock for its whole extent: the
+thread inside sets one thread, computes and restores the count; another thread that
+needs one waits for it. Entering costs about 20 µs; the steps inside are the build's,
+a model's learning, a multilinear unit's fit and an OLNG frame's PCA (1–4 ms), which
+two streams of one server then take in turn.
 """
 
 from __future__ import annotations
@@ -26,27 +32,16 @@ import numpy as np  # noqa: F401  (their BLAS libraries loaded before the contro
 import scipy.linalg  # noqa: F401
 from threadpoolctl import ThreadpoolController
 
-_lock = threading.Lock()
-_users = 0
+_lock = threading.RLock()  # (re-entrant: a step inside another)
 _controller: ThreadpoolController | None = None
-_restore = None
 
 
 @contextmanager
 def one_thread() -> Iterator[None]:
     """A context in which BLAS and LAPACK (numpy's and scipy's) run on one thread."""
-    global _users, _controller, _restore
+    global _controller
     with _lock:
-        if _users == 0:
-            if _controller is None:  # (created on first use: it sees the libraries loaded by then)
-                _controller = ThreadpoolController()
-            _restore = _controller.limit(limits=1, user_api="blas")
-        _users += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _users -= 1
-            if _users == 0 and _restore is not None:
-                _restore.restore_original_limits()
-                _restore = None
+        if _controller is None:  # (made on first use: it sees the libraries loaded by then)
+            _controller = ThreadpoolController()
+        with _controller.limit(limits=1, user_api="blas"):
+            yield

@@ -74,7 +74,6 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from graphsvc.blas import one_thread
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
@@ -91,7 +90,6 @@ NEIGHBOURS = 256
 RIDGE = 1.0
 SHARPEN = 0.01  # ε of the weights' 1 / (d/h + ε)²
 CORRECTION_S = 0.1  # σ (s) of the Gaussian over the corrections
-CHUNK = 64  # frames regressed at once (a (CHUNK, K, dims) block)
 ORIENTATION_GAIN = 30.0  # the query's orientation cue weighs W_R times this (module docstring)
 CUE_S = 1 / 30  # σ (s) of the Gaussian over the measured orientations imposed
 
@@ -249,24 +247,99 @@ def regress(index: RefineIndex, queries: np.ndarray, weight: float = 0.0) -> np.
     queries = np.ascontiguousarray(queries, dtype=np.float64)
     near, dist = np.empty((n, K), np.int64), np.empty((n, K))
     nearest_rows(features, columns, queries, near, dist)
-    d = features.shape[1]
-    with one_thread():  # (the same poses however many threads BLAS has: graphsvc.blas)
-        for lo in range(0, n, CHUNK):
-            s = slice(lo, min(lo + CHUNK, n))
-            dk = dist[s]
-            h = np.maximum(dk[:, -1:], 1e-12)
-            u = dk / h
-            w = ((1.0 - u * u) ** 2 + 1e-6) / (u + SHARPEN) ** 2
-            w /= w.sum(axis=1, keepdims=True)
-            F, P = features[near[s]], index.poses[near[s]]
-            fm, pm = (w[:, None, :] @ F)[:, 0], (w[:, None, :] @ P)[:, 0]
-            root = np.sqrt(w)[:, :, None]
-            Fc, Pc = (F - fm[:, None]) * root, (P - pm[:, None]) * root
-            A = Fc.transpose(0, 2, 1) @ Fc
-            A += (RIDGE * np.trace(A, axis1=1, axis2=2) / d + 1e-12)[:, None, None] * np.eye(d)
-            beta = np.linalg.solve(A, Fc.transpose(0, 2, 1) @ Pc)
-            poses[s] = pm + ((queries[s] - fm)[:, None, :] @ beta)[:, 0]
+    local_regression(features, index.poses, queries, near, dist, RIDGE, SHARPEN, poses)
     return poses
+
+
+@numba.njit(cache=True)
+def local_regression(features, poses, queries, near, dist, ridge, sharpen, out):  # pragma: no cover - numba
+    """Steps 2–3 of the module docstring for each query (n, d) from its neighbours'
+    rows near (n, K) of features (M, d) and poses (M, D), at distances dist (n, K)
+    (nearest first), into out (n, D).
+
+    With dev_k = f_k − f̄ and A = Σ w_k dev_k dev_kᵀ + λI (λ = ridge × A's mean
+    eigenvalue), the ridge regression's β = A⁻¹ Σ w_k dev_k (p_k − p̄)ᵀ evaluated at the
+    query is p̄ + Σ_k w_k (dev_k · z)(p_k − p̄) with z = A⁻¹ (q − f̄): one Cholesky
+    factorisation and a single right-hand side a query. Written out here rather than
+    through BLAS: OpenBLAS's products change in the last bits with its thread count,
+    and these poses must be the same bytes in the CLI, a batch worker and a server's
+    thread (graphsvc.blas). About 0.5 ms of CPU a query with 256 neighbours of 60
+    values and 105-value poses; numpy's batched products and solve were about 0.8 ms."""
+    n, K = near.shape
+    d, D = features.shape[1], poses.shape[1]
+    w = np.empty(K)
+    fm = np.empty(d)
+    pm = np.empty(D)
+    dev = np.empty((K, d))
+    A = np.empty((d, d))
+    z = np.empty(d)
+    for q in range(n):
+        h = max(dist[q, K - 1], 1e-12)
+        total = 0.0
+        for k in range(K):
+            u = dist[q, k] / h
+            a = 1.0 - u * u
+            w[k] = (a * a + 1e-6) / ((u + sharpen) * (u + sharpen))
+            total += w[k]
+        for k in range(K):
+            w[k] /= total
+        fm[:] = 0.0
+        pm[:] = 0.0
+        for k in range(K):
+            r = near[q, k]
+            for j in range(d):
+                fm[j] += w[k] * features[r, j]
+            for j in range(D):
+                pm[j] += w[k] * poses[r, j]
+        for k in range(K):
+            r = near[q, k]
+            for j in range(d):
+                dev[k, j] = features[r, j] - fm[j]
+        A[:, :] = 0.0
+        for k in range(K):
+            for i in range(d):
+                a = w[k] * dev[k, i]
+                for j in range(i, d):
+                    A[i, j] += a * dev[k, j]
+        trace = 0.0
+        for i in range(d):
+            trace += A[i, i]
+        lam = ridge * trace / d + 1e-12
+        for i in range(d):
+            A[i, i] += lam
+            for j in range(i):
+                A[i, j] = A[j, i]
+        # Cholesky, A = L Lᵀ, L in A's lower triangle.
+        for j in range(d):
+            s = A[j, j]
+            for m in range(j):
+                s -= A[j, m] * A[j, m]
+            A[j, j] = np.sqrt(s)
+            for i in range(j + 1, d):
+                s = A[i, j]
+                for m in range(j):
+                    s -= A[i, m] * A[j, m]
+                A[i, j] = s / A[j, j]
+        for i in range(d):  # L y = q − f̄
+            s = queries[q, i] - fm[i]
+            for m in range(i):
+                s -= A[i, m] * z[m]
+            z[i] = s / A[i, i]
+        for i in range(d - 1, -1, -1):  # Lᵀ z = y
+            s = z[i]
+            for m in range(i + 1, d):
+                s -= A[m, i] * z[m]
+            z[i] = s / A[i, i]
+        for j in range(D):
+            out[q, j] = pm[j]
+        for k in range(K):
+            c = 0.0
+            for j in range(d):
+                c += dev[k, j] * z[j]
+            c *= w[k]
+            r = near[q, k]
+            for j in range(D):
+                out[q, j] += c * (poses[r, j] - pm[j])
 
 
 def _aligned(p: np.ndarray, to: np.ndarray) -> np.ndarray:
@@ -450,7 +523,5 @@ def warm_up_refine(graph: MotionGraph) -> None:
     FootHold(graph.skeleton, index.rate_hz, index.mapping).apply(
         rot2, trans2, rot, trans, np.ones((nodes.size, 2), dtype=bool)
     )
-    k = min(2, index.windows.shape[0])
-    if k:
-        q = index.windows[:1].copy()
-        nearest_rows(index.windows, index.columns, q, np.empty((1, k), np.int64), np.empty((1, k)))
+    if index.windows.shape[0]:
+        regress(index, index.windows[:1])  # (the neighbour search and the regression compiled or loaded)
