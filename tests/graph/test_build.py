@@ -264,10 +264,9 @@ def test_build_is_the_same_however_many_threads_blas_has(kb, built, tmp_path):
     # depend on it (graphsvc.blas).
     from threadpoolctl import threadpool_limits
 
-    g, _ = built
+    g, _ = built  # (built with BLAS's own thread count: the cores')
     save_graph(g, tmp_path / "a.graph")
-    for threads in (1, 2):
-        with threadpool_limits(threads, user_api="blas"):
-            again, _ = build_graph(kb, BuildOptions(layout=PRESETS["kelly6"], progress=False))
-        save_graph(again, tmp_path / f"{threads}.graph")
-        assert (tmp_path / "a.graph").read_bytes() == (tmp_path / f"{threads}.graph").read_bytes(), threads
+    with threadpool_limits(1, user_api="blas"):
+        again, _ = build_graph(kb, BuildOptions(layout=PRESETS["kelly6"], progress=False))
+    save_graph(again, tmp_path / "b.graph")
+    assert (tmp_path / "a.graph").read_bytes() == (tmp_path / "b.graph").read_bytes()
