@@ -38,6 +38,7 @@ _API = {
     "MotionGraph": "graphsvc.graph.model",
     "save_graph": "graphsvc.graph.file",
     "load_graph": "graphsvc.graph.file",
+    "node_poses": "graphsvc.graph.poses",
     # sensors and recordings
     "Layout": "graphsvc.sensors.layout",
     "load_layout": "graphsvc.sensors.layout",

@@ -21,6 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics
@@ -51,8 +52,8 @@ def node_local_positions(graph: MotionGraph, names: list[str]) -> np.ndarray:
     for lo in range(0, graph.num_nodes, CHUNK):
         n = np.arange(lo, min(lo + CHUNK, graph.num_nodes))
         _, world = forward_kinematics(
-            graph.node_rotations[n].astype(np.float64),
-            graph.node_translations[n].astype(np.float64),
+            node_rotations(graph, n),
+            node_translations(graph, n),
             graph.skeleton.parents,
         )
         ground = signals.ground_position(world, table["pelvis"])

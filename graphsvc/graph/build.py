@@ -49,6 +49,7 @@ from graphsvc.graph.model import (
     MotionGraph,
     incoming_offsets,
 )
+from graphsvc.graph.poses import PosePacker, moving_joints, rotating_joints
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
 from graphsvc.motion import augment as aug
 from graphsvc.motion import quat, signals
@@ -111,8 +112,8 @@ class PreparedClip:
     readings: meta.SpeedReadings
     half_ground: np.ndarray  # (2F−1, 2)
     half_heading: np.ndarray  # (2F−1,)
-    half_rotations: np.ndarray  # (2F−1, J, 4)
-    half_translations: np.ndarray  # (2F−1, J, 3)
+    mid_rotations: np.ndarray  # (F−1, J, 4) float32: the half-speed poses between frames
+    mid_translations: np.ndarray  # (F−1, J, 3) float32
     placement: Placement  # the layout on this clip, its sensor frames estimated from the clip's motion
     digest: str = ""
 
@@ -181,8 +182,8 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
         readings=readings,
         half_ground=half_ground,
         half_heading=half_heading,
-        half_rotations=half_rot,
-        half_translations=half_trans,
+        mid_rotations=half_rot[1::2].astype(np.float32),
+        mid_translations=half_trans[1::2].astype(np.float32),
         placement=placement,
         digest=content_digest(motion),
     )
@@ -341,20 +342,25 @@ def build_graph(
         "clip": [clip_of_frame.astype(np.int32)],
         "frame": [frame_in_clip.astype(np.float32)],
         "contacts": [contacts],
-        "rot": [np.concatenate([c.motion.rotations for c in clips]).astype(np.float32)],
-        "trans": [np.concatenate([c.motion.translations for c in clips]).astype(np.float32)],
         "ground": [ground.astype(np.float32)],
         "heading": [heading.astype(np.float32)],
     }
+    poses = PosePacker(
+        rotating_joints([c.motion.rotations for c in clips]),
+        moving_joints([c.motion.translations for c in clips]),
+        clips[0].motion.skeleton.num_joints,
+    )
+    for c in clips:
+        poses.add(c.motion.rotations, c.motion.translations)
     next_node = N0
     if options.msv:
         for c, clip in enumerate(clips):
-            next_node = _add_speed_variations(clip, int(start[c]), c, next_node, edges, node_parts)
+            next_node = _add_speed_variations(clip, int(start[c]), c, next_node, edges, node_parts, poses)
     report.timings["edges_s"] = time.perf_counter() - t0
     segments = []
     if options.interp:
         t0 = time.perf_counter()
-        segments = _add_interpolations(clips, start, options, layout, next_node, edges, node_parts, bar)
+        segments = _add_interpolations(clips, start, options, layout, next_node, edges, node_parts, poses, bar)
         next_node = sum(len(k) for k in node_parts["kind"])
         report.timings["interpolation_s"] = time.perf_counter() - t0
     per_frame = [_clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
@@ -363,7 +369,9 @@ def build_graph(
     bridges = []
     if options.bridges:
         t0 = time.perf_counter()
-        bridges = _add_bridges(clips, start, label_of_clip, window, options, layout, next_node, edges, node_parts)
+        bridges = _add_bridges(
+            clips, start, label_of_clip, window, options, layout, next_node, edges, node_parts, poses
+        )
         report.bridges = len(bridges)
         report.timings["bridges_s"] = time.perf_counter() - t0
 
@@ -394,8 +402,7 @@ def build_graph(
         node_label=_node_labels(
             per_frame, labels, label_of_clip, start, lengths, node_clip, np.concatenate(node_parts["frame"])
         ),
-        node_rotations=np.concatenate(node_parts["rot"]),
-        node_translations=np.concatenate(node_parts["trans"]),
+        **poses.arrays(),
         node_ground=np.concatenate(node_parts["ground"]),
         node_heading=np.concatenate(node_parts["heading"]),
         edge_src=e_src[order].astype(np.int32),
@@ -493,7 +500,9 @@ def _params(options: BuildOptions, layout: Layout, window: int) -> dict:
     return d
 
 
-def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_node: int, edges: _Edges, parts) -> int:
+def _add_speed_variations(
+    clip: PreparedClip, first: int, clip_index: int, next_node: int, edges: _Edges, parts, poses: PosePacker
+) -> int:
     """Slow-down nodes between frames f and f+1 and speed-up edges f → f+2 (Kelly et al. 2013, §4.1),
     never where a frame involved has both feet off the ground (gravity would play
     at half or double strength). Returns the next free node index."""
@@ -512,8 +521,7 @@ def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_
     parts["clip"].append(np.full(len(f), clip_index, np.int32))
     parts["frame"].append((f + 0.5).astype(np.float32))
     parts["contacts"].append(clip.contacts[f] & clip.contacts[f + 1])
-    parts["rot"].append(clip.half_rotations[2 * f + 1].astype(np.float32))
-    parts["trans"].append(clip.half_translations[2 * f + 1].astype(np.float32))
+    poses.add(clip.mid_rotations[f], clip.mid_translations[f])
     parts["ground"].append(hg[2 * f + 1].astype(np.float32))
     parts["heading"].append(hh[2 * f + 1].astype(np.float32))
     # Speed-up: o_f → o_{f+2}, reading the double-speed playback.
@@ -524,7 +532,7 @@ def _add_speed_variations(clip: PreparedClip, first: int, clip_index: int, next_
     return next_node + len(f)
 
 
-def _add_interpolations(clips, start, options, layout, next_node, edges, parts, bar) -> list[dict]:
+def _add_interpolations(clips, start, options, layout, next_node, edges, parts, poses, bar) -> list[dict]:
     """Interpolation nodes (Kelly et al. 2013, §4.2). For every pair of clips with the same content
     label — K blends only similar actions, and restricting the pairs keeps the
     similarity matrices few — find regions of similar frames with equal contact
@@ -585,8 +593,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
             parts["clip"].append(np.full(K, a, np.int32))
             parts["frame"].append(coords_a.astype(np.float32))
             parts["contacts"].append(contacts)
-            parts["rot"].append(rot.astype(np.float32))
-            parts["trans"].append(trans.astype(np.float32))
+            poses.add(rot, trans)
             parts["ground"].append(ground.astype(np.float32))
             parts["heading"].append(heading.astype(np.float32))
             off, dh = meta.local_offsets(ground[:-1], heading[:-1], ground[1:], heading[1:])
@@ -629,7 +636,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     return segments
 
 
-def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node, edges, parts) -> list[dict]:
+def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node, edges, parts, poses) -> list[dict]:
     """Bridges between actions and out of / into every clip's ends (`bridges.py`):
     their nodes and edges appended to the graph under construction. Returns the
     bridge records (graph.bridges)."""
@@ -680,8 +687,7 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     parts["clip"].append(nodes.source_clip.astype(np.int32))
     parts["frame"].append(nodes.source_frame.astype(np.float32))
     parts["contacts"].append(nodes.contacts)
-    parts["rot"].append(nodes.rotations)  # float32 already, as the graph stores them
-    parts["trans"].append(nodes.translations)
+    poses.add(nodes.rotations, nodes.translations)
     parts["ground"].append(nodes.ground.astype(np.float32))
     parts["heading"].append(nodes.heading.astype(np.float32))
     # Edges bridge by bridge: entry → node 1 → … → node L → exit (the order of nodes.readings).

@@ -12,6 +12,7 @@ import numpy as np
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import clip_placement
 from graphsvc.graph.model import EDGE_ORIGINAL
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.sensors.accelerometer import sensor_poses
 from graphsvc.sensors.anatomy import REST_POSE
@@ -97,8 +98,8 @@ def graph_verticals(graph, nodes: np.ndarray, names) -> np.ndarray:
     for c in np.unique(clips):
         pick = np.flatnonzero(clips == c)
         world_rot, world_pos = forward_kinematics(
-            graph.node_rotations[nodes[pick]].astype(np.float64),
-            graph.node_translations[nodes[pick]].astype(np.float64),
+            node_rotations(graph, nodes[pick]),
+            node_translations(graph, nodes[pick]),
             sk.parents,
         )
         placement = clip_placement(graph, layout, int(c))

@@ -13,14 +13,15 @@ import numpy as np
 from graphsvc.errors import FormatError
 from graphsvc.fileio import StrPath
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import pack_poses
 from graphsvc.motion.skeleton import Skeleton
 from graphsvc.sensors.layout import ROOT_SEGMENT
 from graphsvc.sensors.orientation import RELATIVE_WIDTH, WIDTHS
 from graphsvc.store import file_checksum, read_container, read_header, write_container
 
 KIND = "graph"
-FORMAT_VERSION = 2  # 2: bridge nodes and edges (kind 3 / 5) and their records
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3  # 2: bridge nodes and edges (kind 3 / 5) and their records; 3: packed poses
+READABLE_VERSIONS = (1, 2, 3)  # 1 and 2 store float32 poses, packed on load
 ARRAYS = (
     "clip_offsets",
     "node_kind",
@@ -28,8 +29,12 @@ ARRAYS = (
     "node_frame",
     "node_contacts",
     "node_label",
-    "node_rotations",
-    "node_translations",
+    "node_rot64",
+    "node_moving",
+    "node_bones",
+    "bone_sets",
+    "moving_joints",
+    "rotating_joints",
     "node_ground",
     "node_heading",
     "edge_src",
@@ -77,6 +82,9 @@ def load_graph(path: StrPath, mmap: bool = True, verify: bool = True) -> MotionG
             f"graph format version {version} is not supported (this graphsvc reads "
             f"{', '.join(map(str, READABLE_VERSIONS))})",
         )
+    if version < 3 and "node_rotations" in arrays and "node_translations" in arrays:
+        arrays = dict(arrays)
+        arrays.update(_packed(arrays.pop("node_rotations"), arrays.pop("node_translations"), path))
     missing = [a for a in ARRAYS if a not in arrays]
     if missing:
         raise FormatError(path, f"graph file lacks arrays: {', '.join(missing)}")
@@ -117,6 +125,7 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
     clips and labels) is in range: the search's compiled loops index without bounds
     checks, so a file checksummed after it was altered must not reach them."""
     N, E, J, C = graph.num_nodes, graph.num_edges, graph.skeleton.num_joints, len(graph.clips)
+    V, B, R = graph.moving_joints.shape[0], graph.bone_sets.shape[0], graph.rotating_joints.shape[0]
     layout = graph.layout
     if (
         not isinstance(layout, dict)
@@ -131,8 +140,12 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
         "node_frame": (N,),
         "node_contacts": (N, 2),
         "node_label": (N,),
-        "node_rotations": (N, J, 4),
-        "node_translations": (N, J, 3),
+        "node_rot64": (N, R),
+        "node_moving": (N, V, 3),
+        "node_bones": (N,),
+        "bone_sets": (B, J, 3),
+        "moving_joints": (V,),
+        "rotating_joints": (R,),
         "node_ground": (N, 2),
         "node_heading": (N,),
         "edge_src": (E,),
@@ -164,7 +177,20 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
                 "graph metadata: orientations relative to a root sensor, and the layout has no "
                 f"sensor on the {ROOT_SEGMENT}",
             )
-    for name in ("edge_src", "edge_dst", "node_clip", "node_label", "incoming", "node_kind", "edge_kind"):
+    if graph.node_rot64.dtype != np.uint64:
+        raise FormatError(path, f"graph array node_rot64 holds {graph.node_rot64.dtype}, expected uint64")
+    for name in (
+        "edge_src",
+        "edge_dst",
+        "node_clip",
+        "node_label",
+        "incoming",
+        "node_kind",
+        "edge_kind",
+        "node_bones",
+        "moving_joints",
+        "rotating_joints",
+    ):
         if getattr(graph, name).dtype.kind not in "iu":
             raise FormatError(path, f"graph array {name} holds {getattr(graph, name).dtype}, expected integers")
     inc = graph.incoming
@@ -178,6 +204,19 @@ def check_graph_arrays(graph: MotionGraph, path) -> None:
         raise FormatError(path, "graph array incoming is not the edges' offsets by destination")
     if outside(graph.node_clip, 0, C) or outside(graph.node_label, -1, len(graph.labels)):
         raise FormatError(path, "graph nodes name clips or labels the graph does not have")
+    if outside(graph.node_bones, 0, B):
+        raise FormatError(path, "graph nodes name bone sets the graph does not have")
+    for name in ("moving_joints", "rotating_joints"):
+        joints = getattr(graph, name)
+        if len(joints) == 0 or int(joints[0]) != 0 or outside(joints, 0, J) or bool(np.any(np.diff(joints) <= 0)):
+            raise FormatError(path, f"graph array {name} is not the root and then increasing joint indices")
+
+
+def _packed(rotations: np.ndarray, translations: np.ndarray, path) -> dict:
+    """A version 1 or 2 file's float32 poses, packed as a version 3 file holds them."""
+    if rotations.ndim != 3 or rotations.shape[-1] != 4 or translations.shape != rotations.shape[:2] + (3,):
+        raise FormatError(path, f"graph poses are {list(rotations.shape)} and {list(translations.shape)}")
+    return pack_poses(rotations, translations)
 
 
 def graph_file_meta(path) -> dict:

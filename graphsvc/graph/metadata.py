@@ -24,6 +24,7 @@ import numba
 import numpy as np
 
 from graphsvc.graph.model import EDGE_BRIDGE, EDGE_SLOW, EDGE_SPEEDUP, NODE_BRIDGE, NODE_SLOW
+from graphsvc.graph.poses import node_poses, node_rotations, node_translations
 from graphsvc.motion import quat, signals
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.resample import resample_arrays
@@ -244,8 +245,8 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     placements = []
     for c, info in enumerate(graph.clips):
         nodes = info["first_node"] + np.arange(info["frames"])
-        rot = graph.node_rotations[nodes].astype(np.float64)
-        trans = graph.node_translations[nodes].astype(np.float64)
+        rot = node_rotations(graph, nodes)
+        trans = node_translations(graph, nodes)
         half_rot, half_trans = half_speed_poses(rot, trans)
         world_rot, world_pos = forward_kinematics(rot, trans, sk.parents)
         placement = clip_placement(graph, layout, c, ANATOMICAL, (world_rot, world_pos))
@@ -259,8 +260,8 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     for seg in graph.segments:
         nodes = seg["first_node"] + np.arange(seg["count"])
         world_rot, world_pos = forward_kinematics(
-            graph.node_rotations[nodes].astype(np.float64),
-            graph.node_translations[nodes].astype(np.float64),
+            node_rotations(graph, nodes),
+            node_translations(graph, nodes),
             sk.parents,
         )
         normal[nodes] = simulate_accelerations(world_rot, world_pos, placements[seg["clip_a"]], graph.rate_hz)
@@ -281,9 +282,7 @@ def _bridge_accelerations(graph, placements, out) -> None:
     layout on each clip."""
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
-    ctx_rot, ctx_pos = forward_kinematics(
-        graph.node_rotations[:N0].astype(np.float64), graph.node_translations[:N0].astype(np.float64), sk.parents
-    )
+    ctx_rot, ctx_pos = forward_kinematics(*node_poses(graph, slice(0, N0)), sk.parents)
     recs = graph.bridges
     first_node = np.array([b["first_node"] for b in recs], dtype=np.int64)
     count = np.array([b["count"] for b in recs], dtype=np.int64)
@@ -291,9 +290,7 @@ def _bridge_accelerations(graph, placements, out) -> None:
     ca = np.array([b["clip_a"] for b in recs], dtype=np.int64)
     cb = np.array([b["clip_b"] for b in recs], dtype=np.int64)
     nodes = np.concatenate([f + np.arange(n) for f, n in zip(first_node, count)])
-    node_rot, node_pos = forward_kinematics(
-        graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64), sk.parents
-    )
+    node_rot, node_pos = forward_kinematics(node_rotations(graph, nodes), node_translations(graph, nodes), sk.parents)
     first = np.zeros(len(recs), dtype=np.int64)
     np.cumsum(count[:-1], out=first[1:])
     readings = bridge_readings(
@@ -346,9 +343,7 @@ def graph_placement(graph, layout=None):
         return place(layout, sk, mapping)
     n0 = sum(int(c["frames"]) for c in graph.clips) or graph.num_nodes
     nodes = np.unique(np.linspace(0, n0 - 1, min(n0, PLACEMENT_SAMPLE)).round().astype(np.int64))
-    world_rot, world_pos = forward_kinematics(
-        graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64), sk.parents
-    )
+    world_rot, world_pos = forward_kinematics(node_rotations(graph, nodes), node_translations(graph, nodes), sk.parents)
     return anatomical_placement(layout, sk, mapping, world_rot, world_pos)
 
 
@@ -383,8 +378,8 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
         for k in range(0, nodes.size, _UP_CHUNK):
             part = nodes[k : k + _UP_CHUNK]
             world_rot, world_pos = forward_kinematics(
-                graph.node_rotations[part].astype(np.float64),
-                graph.node_translations[part].astype(np.float64),
+                node_rotations(graph, part),
+                node_translations(graph, part),
                 sk.parents,
             )
             node_cue[part] = orientation_cue(sensor_poses(world_rot, world_pos, placement)[1], width, root)
@@ -410,8 +405,8 @@ def clip_placement(graph, layout, c: int, convention: str | None = None, poses=N
         info = graph.clips[c]
         nodes = info["first_node"] + np.arange(info["frames"])
         poses = forward_kinematics(
-            graph.node_rotations[nodes].astype(np.float64),
-            graph.node_translations[nodes].astype(np.float64),
+            node_rotations(graph, nodes),
+            node_translations(graph, nodes),
             sk.parents,
         )
     world_rot, world_pos = poses

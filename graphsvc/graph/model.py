@@ -3,8 +3,8 @@
 Nodes are poses: every knowledge-base frame (original), half-way frames for playing
 slower (slow-down), blends of similar segments (interpolated), and the blended frames
 of bridges that carry one clip into another of a different action (`bridges.py`).
-Each node keeps its full local pose, so sensor metadata for any layout can be
-recomputed from the graph alone (`graph.metadata.recompute_accelerations`).
+Each node keeps its full local pose (packed, `graph/poses.py`), so sensor metadata for
+any layout can be recomputed from the graph alone (`graph.metadata.recompute_accelerations`).
 
 An edge m → n says "after pose m, pose n may follow, one sample later". Its metadata
 (Kelly et al. 2013, §4.3): the accelerations the layout's sensors read on arriving at n that way
@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from graphsvc.graph.poses import pack_poses
 from graphsvc.motion.skeleton import Skeleton
 
 NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
@@ -36,8 +37,13 @@ class MotionGraph:
 
     node_kind (N,) uint8; node_clip (N,) int32 source clip; node_frame (N,) float32
     source frame (x.5 for slow-down nodes); node_contacts (N, 2) bool (left, right);
-    node_label (N,) int32 into `labels`; node_rotations (N, J, 4) float32 local
-    quaternions; node_translations (N, J, 3) float32 local translations (m);
+    node_label (N,) int32 into `labels`; the local poses, read through
+    `graph.poses.node_poses` (float64), stored as `graph.poses` packs them:
+    node_rot64 (N, R) uint64 quaternions in 64 bits of the joints `rotating_joints` (R,)
+    int32 (the others hold the identity); node_moving (N, V, 3) float32
+    local translations (m) of the joints `moving_joints` (V,) int32 (the root and any
+    joint animated in translation); node_bones (N,) int32 into bone_sets (B, J, 3)
+    float32, the distinct local translations of the other joints;
     node_ground (N, 2) float32 root ground position (x, z) in its source clip (m);
     node_heading (N,) float32 (rad).
     edge_src, edge_dst (E,) int32; edge_kind (E,) uint8; edge_acc (E, S, 3) float32
@@ -63,8 +69,12 @@ class MotionGraph:
     node_frame: np.ndarray
     node_contacts: np.ndarray
     node_label: np.ndarray
-    node_rotations: np.ndarray
-    node_translations: np.ndarray
+    node_rot64: np.ndarray
+    node_moving: np.ndarray
+    node_bones: np.ndarray
+    bone_sets: np.ndarray
+    moving_joints: np.ndarray
+    rotating_joints: np.ndarray
     node_ground: np.ndarray
     node_heading: np.ndarray
     edge_src: np.ndarray
@@ -204,8 +214,7 @@ def graph_from_edges(
         node_frame=np.zeros(N, np.float32),
         node_contacts=contacts,
         node_label=labels,
-        node_rotations=np.zeros((N, 1, 4), np.float32),
-        node_translations=np.zeros((N, 1, 3), np.float32),
+        **pack_poses(np.tile([1.0, 0.0, 0.0, 0.0], (N, 1, 1)), np.zeros((N, 1, 3))),
         node_ground=np.zeros((N, 2), np.float32),
         node_heading=np.zeros(N, np.float32),
         edge_src=src[order].astype(np.int32),

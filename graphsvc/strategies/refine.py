@@ -75,6 +75,7 @@ import numba
 import numpy as np
 
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.sensors.orientation import normalised_rows
@@ -520,7 +521,7 @@ def warm_up_refine(graph: MotionGraph) -> None:
     if imposes(graph):
         clip_sensor_placements(graph)  # (each clip's placement, for imposing measured orientations)
     nodes = np.arange(min(2, graph.num_nodes), dtype=np.int64)
-    rot, trans = graph.node_rotations[nodes].astype(np.float64), graph.node_translations[nodes].astype(np.float64)
+    rot, trans = node_rotations(graph, nodes), node_translations(graph, nodes)
     pose = pose_vectors(rot, trans, graph.skeleton.parents, index.layout)
     rot2, trans2 = place_local_poses(rot, trans, graph.skeleton.parents, index.layout, pose, np.ones(nodes.size, bool))
     FootHold(graph.skeleton, index.rate_hz, index.mapping).apply(

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion import signals
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics
@@ -90,9 +91,7 @@ def node_pose_vectors(graph: MotionGraph, nodes: np.ndarray, layout: PoseLayout)
     parents = graph.skeleton.parents
     for lo in range(0, nodes.size, CHUNK):
         n = nodes[lo : lo + CHUNK]
-        out[lo : lo + n.size] = pose_vectors(
-            graph.node_rotations[n].astype(np.float64), graph.node_translations[n].astype(np.float64), parents, layout
-        )
+        out[lo : lo + n.size] = pose_vectors(node_rotations(graph, n), node_translations(graph, n), parents, layout)
     return out
 
 

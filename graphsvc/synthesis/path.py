@@ -50,6 +50,7 @@ from graphsvc.graph.model import (
     NODE_SLOW,
     MotionGraph,
 )
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import diff3 as _diff3
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
@@ -544,8 +545,8 @@ def synthesize_motion(
     )
 
     # b. Poses relative to their source placement.
-    rot = graph.node_rotations[node_path].astype(np.float64)
-    trans = graph.node_translations[node_path].astype(np.float64)
+    rot = node_rotations(graph, node_path)
+    trans = node_translations(graph, node_path)
     src_rot, src_pos = forward_kinematics(rot, trans, parents)
     node_heading = graph.node_heading[node_path].astype(np.float64)
     rel, height = _relative_pose(src_rot, src_pos, node_heading, pelvis)
@@ -556,8 +557,8 @@ def synthesize_motion(
     # The node one step before each frame's node in its own clip: the previous frame's
     # node where the path plays on, at a cut the entered clip's own frame before it.
     entered = tables.predecessor[node_path[cuts]]
-    entered_rot = graph.node_rotations[entered].astype(np.float64)
-    entered_trans = graph.node_translations[entered].astype(np.float64)
+    entered_rot = node_rotations(graph, entered)
+    entered_trans = node_translations(graph, entered)
     e_rot, e_pos = forward_kinematics(entered_rot, entered_trans, parents)
     if cuts.size and blend_s > 0:
         left = node_path[cuts - 1]

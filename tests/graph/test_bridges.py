@@ -11,6 +11,7 @@ from graphsvc.graph.build import BuildOptions, build_graph
 from graphsvc.graph.file import load_graph, save_graph
 from graphsvc.graph.metadata import recompute_accelerations
 from graphsvc.graph.model import EDGE_BRIDGE, NODE_BRIDGE, NODE_ORIGINAL
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.sensors.layout import PRESETS
@@ -90,9 +91,7 @@ def test_bridge_blends_from_one_clip_into_the_other(graph):
     pelvis = joint_map(sk)["pelvis"]
 
     def local(nodes):
-        _, pos = forward_kinematics(
-            g.node_rotations[nodes].astype(np.float64), g.node_translations[nodes].astype(np.float64), sk.parents
-        )
+        _, pos = forward_kinematics(node_rotations(g, nodes), node_translations(g, nodes), sk.parents)
         c, s = np.cos(g.node_heading[nodes]), np.sin(g.node_heading[nodes])
         x = pos[..., 0] - pos[:, pelvis : pelvis + 1, 0]
         z = pos[..., 2] - pos[:, pelvis : pelvis + 1, 2]
@@ -152,7 +151,7 @@ def test_synthesis_plays_through_a_bridge_without_jumps(graph):
     step = fastest(motion.rotations, motion.translations)
     # The two clips as recorded, over the frames the bridge blends and a bit around.
     own = max(
-        fastest(g.node_rotations[r].astype(float), g.node_translations[r].astype(float)).max()
+        fastest(node_rotations(g, r), node_translations(g, r)).max()
         for r in (
             np.arange(
                 entry - 5,

@@ -102,7 +102,7 @@ def test_relayout_changes_only_the_sensor_metadata(kb_dir, tmp_path, capsys):
     a, b = load_graph(src), load_graph(out)
     assert b.sensor_names == ("r_wrist",) and b.edge_acc.shape == (a.num_edges, 1, 3)
     assert b.params["layout"] == "right-wrist"
-    for name in ("edge_src", "edge_dst", "edge_offset", "node_rotations"):
+    for name in ("edge_src", "edge_dst", "edge_offset", "node_rot64", "node_moving", "node_bones", "bone_sets"):
         assert (getattr(a, name) == getattr(b, name)).all()
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import NODE_ORIGINAL, MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion import quat
 from graphsvc.motion.skeleton import Motion
 from graphsvc.strategies.base import Strategy
@@ -53,7 +54,7 @@ def mean_pose_node(graph: MotionGraph, allowed: np.ndarray | None, label: str | 
     nodes = np.flatnonzero(nodes)
     if not nodes.size:
         raise InputError("no knowledge-base frame to average (every one hidden, or none of the label)")
-    rot = np.asarray(graph.node_rotations[nodes], dtype=np.float64).copy()  # (K, J, 4)
+    rot = node_rotations(graph, nodes)  # (K, J, 4)
     rot[:, 0] = quat.mul(quat.about_y(-np.asarray(graph.node_heading[nodes], dtype=np.float64)), rot[:, 0])
     rot *= np.sign(np.sum(rot * rot[:1], axis=-1, keepdims=True) + 1e-12)  # one hemisphere a joint
     mean = quat.normalize(rot.mean(axis=0))
@@ -65,8 +66,8 @@ def place(graph: MotionGraph, node: int, ground: np.ndarray, heading: np.ndarray
     """Node `node`'s pose at each of T ground positions (T, 2) and headings (T,):
     rotations (T, J, 4) and translations (T, J, 3), turned and moved at the root joint."""
     T = ground.shape[0]
-    rot = np.repeat(np.asarray(graph.node_rotations[node], dtype=np.float64)[None], T, axis=0)
-    trans = np.repeat(np.asarray(graph.node_translations[node], dtype=np.float64)[None], T, axis=0)
+    rot = np.repeat(node_rotations(graph, node)[None], T, axis=0)
+    trans = np.repeat(node_translations(graph, node)[None], T, axis=0)
     turn = quat.about_y(heading - float(graph.node_heading[node]))
     rot[:, 0] = quat.mul(turn, rot[:, 0])
     trans[:, 0] = quat.rotate(turn, trans[:, 0])

@@ -33,6 +33,7 @@ from scipy.optimize import least_squares
 from graphsvc.blas import one_thread
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
 from graphsvc.sensors.accelerometer import GRAVITY, simulate_accelerations
@@ -64,8 +65,8 @@ def graph_body(graph: MotionGraph, node: int = 0) -> Body:
     return Body(
         parents,
         pose_layout(graph.skeleton, graph.params.get("mapping")),
-        graph.node_rotations[node].astype(np.float64),
-        graph.node_translations[node].astype(np.float64),
+        node_rotations(graph, node),
+        node_translations(graph, node),
         meta.graph_placement(graph),
         float(graph.rate_hz),
     )

@@ -61,6 +61,7 @@ from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.holdout import is_augmented
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.multilinear import tensor as tn
 from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
@@ -99,8 +100,8 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     for c in range(C):
         n = nodes[start[c] : start[c + 1]]
         values[start[c] : start[c + 1], : layout.dims] = pose_vectors(
-            graph.node_rotations[n].astype(np.float64),
-            graph.node_translations[n].astype(np.float64),
+            node_rotations(graph, n),
+            node_translations(graph, n),
             parents,
             layout,
             graph.node_heading[n].astype(np.float64),

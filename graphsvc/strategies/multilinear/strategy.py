@@ -38,6 +38,7 @@ import numpy as np
 from graphsvc.errors import InputError, SearchCancelled
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_translations
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.accelerometer import GRAVITY
 from graphsvc.strategies.base import Strategy, prepared_index
@@ -217,7 +218,7 @@ class MultilinearStrategy(Strategy):
         body = graph_body(graph)
         values = self._search_values(graph, found.motion, nodes, edges, body)
         align_hemispheres(values, np.asarray(index["hemispheres"]), body.layout.slot)
-        trans_of = np.asarray(graph.node_translations)[nodes].astype(np.float64)
+        trans_of = node_translations(graph, nodes)
         acc = np.asarray(inp.acc, dtype=np.float64) / GRAVITY
         S = acc.shape[1]
         entered = values[np.maximum(np.arange(T) - 1, 0)].copy()
@@ -237,7 +238,7 @@ class MultilinearStrategy(Strategy):
             measured = np.full((L, S, 3), np.nan)
             measured[inside] = acc[frames[inside]]
             # (on the bone lengths of the clip the search played at the unit's first frame)
-            unit_body = replace(body, trans=np.asarray(graph.node_translations[int(nodes[u.lo])], np.float64))
+            unit_body = replace(body, trans=node_translations(graph, int(nodes[u.lo])))
             fit = fit_unit(t, measured, inside, unit_body, own.prior, own.warp, own.evaluations)
             k = u.lo - u.start
             values[u.lo : u.hi] = fit.values[k : k + u.hi - u.lo]

@@ -38,6 +38,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion import quat
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
@@ -258,8 +259,8 @@ class OlngDecoder:
         g = self.graph
         m = self.model
         node = int(self.index.nodes[node_frame])
-        rot = g.node_rotations[node].astype(np.float64)[None].copy()
-        trans = g.node_translations[node].astype(np.float64)[None].copy()
+        rot = node_rotations(g, node)[None].copy()
+        trans = node_translations(g, node)[None].copy()
         for k in range(1, m.active.size):
             q = p[m.slot[k] : m.slot[k] + 4]
             rot[0, m.active[k]] = q / np.linalg.norm(q)

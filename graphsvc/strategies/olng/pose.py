@@ -54,6 +54,7 @@ from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.metadata import graph_placement
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.kinematics import qmul4 as _qmul
 from graphsvc.motion.kinematics import qrot3 as _qrot
@@ -145,8 +146,8 @@ def frame_poses(graph: MotionGraph, model: PoseModel, nodes: np.ndarray) -> tupl
     layout = pose_layout(graph.skeleton, graph.params.get("mapping"))  # (its joints: model.active[1:])
     for lo in range(0, F, 65536):
         n = nodes[lo : lo + 65536]
-        rot = graph.node_rotations[n].astype(np.float64)
-        trans = graph.node_translations[n].astype(np.float64)
+        rot = node_rotations(graph, n)
+        trans = node_translations(graph, n)
         p = pose_vectors(rot, trans, graph.skeleton.parents, layout, graph.node_heading[n].astype(np.float64))
         P[lo : lo + n.size] = p
         offsets = np.ascontiguousarray(trans[:, model.active])

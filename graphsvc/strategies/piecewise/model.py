@@ -93,6 +93,7 @@ import numpy as np
 from graphsvc.blas import one_thread
 from graphsvc.errors import InputError
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.strategies.index import frame_readings
 from graphsvc.synthesis.local_pose import pose_layout, pose_vectors
 
@@ -126,8 +127,8 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     for lo in range(0, nodes.size, CHUNK):
         n = nodes[lo : lo + CHUNK]
         poses[lo : lo + n.size] = pose_vectors(
-            graph.node_rotations[n].astype(np.float64),
-            graph.node_translations[n].astype(np.float64),
+            node_rotations(graph, n),
+            node_translations(graph, n),
             graph.skeleton.parents,
             layout,
             graph.node_heading[n].astype(np.float64),

@@ -28,6 +28,7 @@ import numpy as np
 from graphsvc.errors import SearchCancelled
 from graphsvc.graph.derived import derived
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import place_poses
 from graphsvc.motion.skeleton import Motion
@@ -92,8 +93,8 @@ class PiecewiseDecoder:
         self.layout = pose_layout(graph.skeleton, graph.params.get("mapping"))
         node = int(np.asarray(arrays["template"])[0])
         self.template = (
-            graph.node_rotations[node].astype(np.float64)[None],
-            graph.node_translations[node].astype(np.float64)[None],
+            node_rotations(graph, node)[None],
+            node_translations(graph, node)[None],
         )
         self.alpha = track_pull(options.shared.track_pull_s, self.rate)
         self.track_model = (

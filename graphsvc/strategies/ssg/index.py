@@ -24,6 +24,7 @@ import numpy as np
 
 from graphsvc.errors import InputError
 from graphsvc.graph.model import NODE_ORIGINAL, MotionGraph
+from graphsvc.graph.poses import node_poses
 from graphsvc.motion import quat
 from graphsvc.motion.joints import canonical_indices, joint_map
 from graphsvc.motion.kinematics import forward_kinematics
@@ -49,7 +50,7 @@ def build_arrays(graph: MotionGraph) -> dict[str, np.ndarray]:
     parents = graph.skeleton.parents
     for lo in range(0, nodes.size, 8192):
         sel = nodes[lo : lo + 8192]
-        r, p = forward_kinematics(graph.node_rotations[sel], graph.node_translations[sel], parents)
+        r, p = forward_kinematics(*node_poses(graph, sel), parents)
         rot[lo : lo + sel.size], pos[lo : lo + sel.size] = r, p
     return {"nodes": nodes.astype(np.int64), "run_start": run_start, "world_rot": rot, "world_pos": pos}
 

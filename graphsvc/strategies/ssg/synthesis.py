@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion import quat
 from graphsvc.motion.joints import joint_map
 from graphsvc.motion.placement import joint_tables
@@ -27,14 +28,11 @@ def _frame_pose(graph: MotionGraph, index: SsgIndex, f: np.ndarray):
     w = f - lo
     a, b = index.nodes[lo], index.nodes[hi]
     rot = quat.slerp(
-        graph.node_rotations[a].astype(np.float64),
-        graph.node_rotations[b].astype(np.float64),
+        node_rotations(graph, a),
+        node_rotations(graph, b),
         np.broadcast_to(w[:, None], (f.size, graph.skeleton.num_joints)),
     )
-    trans = (
-        graph.node_translations[a].astype(np.float64) * (1.0 - w[:, None, None])
-        + graph.node_translations[b].astype(np.float64) * w[:, None, None]
-    )
+    trans = node_translations(graph, a) * (1.0 - w[:, None, None]) + node_translations(graph, b) * w[:, None, None]
     return rot, trans
 
 
