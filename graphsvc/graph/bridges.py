@@ -61,6 +61,7 @@ layout from the graph's stored poses (`metadata.recompute_accelerations`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numba
@@ -434,15 +435,13 @@ def select_matches(
 class BridgeNodes:
     """The M new nodes of B bridges, in bridge order (bridge b's nodes are
     first[b] … first[b] + count[b] − 1 of these arrays, first relative to the bridges'
-    first node). rotations (M, J, 4), translations (M, J, 3) float32 placed local poses;
+    first node; their poses went to `blend_bridges`'s add_poses as they were made).
     ground (M, 2), heading (M,) their placement in clip a's frame; contacts (M, 2);
     source_clip, source_frame (M,) the clip and frame of the dominant side;
     step_offset (M + B, 2), step_heading (M + B,): the ground displacement and heading
     change of every edge, bridge by bridge the L edges into its nodes then the one
     out; readings (M + B, S, 3) float32 in the same order."""
 
-    rotations: np.ndarray
-    translations: np.ndarray
     ground: np.ndarray
     heading: np.ndarray
     contacts: np.ndarray
@@ -529,10 +528,19 @@ def _blend_poses(rotations, translations, rel, height, ga, gb, w, below, rot, tr
 
 
 def blend_bridges(
-    kb: KBFrames, matches: Matches, skeleton, joints: dict, placement_of_clip, rate_hz: float, chunk_nodes: int = 32768
+    kb: KBFrames,
+    matches: Matches,
+    skeleton,
+    joints: dict,
+    placement_of_clip,
+    rate_hz: float,
+    add_poses: Callable[[np.ndarray, np.ndarray], None],
+    chunk_nodes: int = 32768,
 ) -> BridgeNodes:
-    """The nodes, edges' steps and readings of every bridge (module docstring), poses
-    and readings in float32 as the graph stores them. joints: the canonical joint map;
+    """The nodes, edges' steps and readings of every bridge (module docstring), readings
+    in float32 as the graph stores them; the nodes' placed local poses, float32 rotations
+    (m, J, 4) and translations (m, J, 3), go to add_poses chunk by chunk in node order
+    (the build packs them: never every bridge's at once). joints: the canonical joint map;
     placement_of_clip(c): the layout placed on clip c's skeleton (a bridge's readings
     use clip a's). Bridges are blended about chunk_nodes nodes at a time, so the
     float64 working arrays stay a few hundred MB on any knowledge base."""
@@ -548,18 +556,20 @@ def blend_bridges(
                 for f in ("clip_a", "clip_b", "i", "j", "distance", "length", "before", "kind")
             )
         )
-        parts.append(_blend_chunk(kb, sub, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all))
+        parts.append(
+            _blend_chunk(kb, sub, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses)
+        )
         b0 = b1
     if not parts:
-        parts.append(_blend_chunk(kb, matches, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all))
+        parts.append(
+            _blend_chunk(kb, matches, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses)
+        )
     first, at = [], 0
     for p in parts:
         first.append(p.first + at)
-        at += p.rotations.shape[0]
+        at += p.ground.shape[0]
     cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
     return BridgeNodes(
-        cat("rotations"),
-        cat("translations"),
         cat("ground"),
         cat("heading"),
         cat("contacts"),
@@ -582,6 +592,7 @@ def _blend_chunk(
     rate_hz: float,
     rel_all: np.ndarray,
     height_all: np.ndarray,
+    add_poses: Callable[[np.ndarray, np.ndarray], None],
 ) -> BridgeNodes:
     """`blend_bridges` of a few bridges; rel_all, height_all: every KB frame's pelvis
     rotation relative to its heading and pelvis height (`motion.placement.relative_pose`)."""
@@ -660,9 +671,8 @@ def _blend_chunk(
         [placement_of_clip(int(c)) for c in matches.clip_a],
         rate_hz,
     )
+    add_poses(rot.astype(np.float32), trans.astype(np.float32))
     return BridgeNodes(
-        rot.astype(np.float32),
-        trans.astype(np.float32),
         ground,
         heading,
         contacts,

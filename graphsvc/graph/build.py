@@ -69,7 +69,10 @@ from graphsvc.sensors.layout import PRESETS, Layout, Placement, anatomical_place
 class BuildOptions:
     """rate_hz: graph rate. transition_threshold_m: RMS point-cloud distance (m).
     window_s: distance window. max_transitions_per_frame: cap on a frame's
-    transitions (None: all local minima). still_clip_step_s: clips without any
+    transitions (None: all local minima). transition_candidates: each contact-change
+    frame's candidate partners, its this many nearest by the distance's lower bound
+    within the threshold (`transitions.indexed_pairs`; None: every frame within it,
+    which grows with the square of a label's near-identical clips). still_clip_step_s: clips without any
     contact change (gestures with both feet planted) offer a transition candidate
     every this many seconds, or they could never be entered or left. bridges:
     blended transitions between actions and out of / into clip ends (`bridges.py`),
@@ -87,6 +90,7 @@ class BuildOptions:
     interp_partners: int = 2
     window_s: float = DEFAULT_WINDOW_S
     max_transitions_per_frame: int | None = 8
+    transition_candidates: int | None = 128
     still_clip_step_s: float = 0.2
     bridges: bool = True
     bridge_threshold_m: float = br.DEFAULT_THRESHOLD_M
@@ -103,7 +107,6 @@ class PreparedClip:
     """One KB clip at the graph rate, with everything the graph needs (F frames)."""
 
     motion: Motion
-    world_pos: np.ndarray  # (F, J, 3)
     contacts: np.ndarray  # (F, 2) bool
     changes: np.ndarray  # (F,) bool
     ground: np.ndarray  # (F, 2)
@@ -173,7 +176,6 @@ def prepare_clip(motion: Motion, rate_hz: float, layout: Layout, window: int, ma
     readings = meta.speed_readings(world_rot, world_pos, half_world_rot, half_pos, placement, rate_hz)
     return PreparedClip(
         motion=motion,
-        world_pos=world_pos,
         contacts=contacts,
         changes=signals.contact_changes(contacts),
         ground=ground,
@@ -318,6 +320,7 @@ def build_graph(
         exclude_same_clip_within=max(1, int(round(10 * scale))),
         local_min_radius=max(1, int(round(5 * scale))),
         max_per_source=options.max_transitions_per_frame,
+        k=options.transition_candidates,
     )
     report.transitions = len(trans)
     report.timings["transitions_s"] = time.perf_counter() - t0
@@ -649,10 +652,10 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     performer = np.array(
         [performers.setdefault(np.round(c.motion.skeleton.offsets, 6).tobytes(), len(performers)) for c in clips]
     )
-    world_pos = np.concatenate([c.world_pos for c in clips])
     rotations = np.concatenate([c.motion.rotations for c in clips])
     translations = np.concatenate([c.motion.translations for c in clips])
-    world_rot, _ = forward_kinematics(rotations, translations, sk.parents)
+    # (the positions prepare_clip computed, the same numbers: not kept clip by clip)
+    world_rot, world_pos = forward_kinematics(rotations, translations, sk.parents)
     kb = br.KBFrames(
         rotations=rotations,
         translations=translations,
@@ -681,13 +684,12 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     )
     if not len(matches):
         return []
-    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement, rate)
-    B, M = len(matches), nodes.rotations.shape[0]
+    nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement, rate, poses.add)
+    B, M = len(matches), nodes.ground.shape[0]
     parts["kind"].append(np.full(M, NODE_BRIDGE, np.uint8))
     parts["clip"].append(nodes.source_clip.astype(np.int32))
     parts["frame"].append(nodes.source_frame.astype(np.float32))
     parts["contacts"].append(nodes.contacts)
-    poses.add(nodes.rotations, nodes.translations)
     parts["ground"].append(nodes.ground.astype(np.float32))
     parts["heading"].append(nodes.heading.astype(np.float32))
     # Edges bridge by bridge: entry → node 1 → … → node L → exit (the order of nodes.readings).

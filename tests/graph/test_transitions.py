@@ -10,6 +10,8 @@ from graphsvc.graph.transitions import (
     best_per_source,
     find_transitions,
     find_transitions_bruteforce,
+    indexed_pairs,
+    kb_frames,
     local_minima,
 )
 from graphsvc.motion.signals import contact_changes
@@ -235,3 +237,35 @@ def test_indexed_equals_bruteforce_on_random_kbs(seed, threshold, radius, exclud
     b = find_transitions_bruteforce(**args, **rules)
     assert as_set(a) == as_set(b)
     assert np.all(args["contacts"][a.src] == args["contacts"][a.dst]) and np.all(a.distance <= threshold)
+
+
+def test_bounded_candidates_on_near_identical_clips():
+    """Twenty near-copies of one walk: every heel strike is within the threshold of
+    about a hundred others. k nearest candidates a frame bound the pairs, keep every
+    transition valid, and find nearly all of the exact search's (8 a source)."""
+    rng = np.random.default_rng(4)
+    clips = []
+    for _ in range(20):
+        pts, contacts = walker(np.arange(90.0) + rng.uniform(-0.2, 0.2), arm=rng.uniform(0.24, 0.26))
+        clips.append((pts + rng.normal(0, 0.002, pts.shape), contacts))
+    args, _ = build_kb(clips)
+    rules = {"threshold_m": 0.05, "local_min_radius": 5, "exclude_same_clip_within": 10, "max_per_source": 8}
+    exact = find_transitions(**args, **rules)
+    candidates = int(np.sum(args["changes"] & (args["frame_in_clip"] > 0)))
+    fr = kb_frames(
+        args["features"],
+        args["contacts"],
+        args["changes"],
+        args["clip_of_frame"],
+        args["frame_in_clip"],
+        args["clip_lengths"],
+    )
+    assert len(indexed_pairs(args["features"], fr, 0.05)) > 40 * candidates  # the square the bound is for
+    assert len(indexed_pairs(args["features"], fr, 0.05, k=16)) <= 16 * candidates
+    bounded = find_transitions(**args, **rules, k=16)
+    assert np.all(bounded.distance <= 0.05)
+    assert np.all(args["contacts"][bounded.src] == args["contacts"][bounded.dst])
+    assert np.all(np.bincount(bounded.src) <= 8)
+    found = len(as_set(bounded) & as_set(exact)) / len(as_set(exact))
+    assert found > 0.9, found
+    assert as_set(find_transitions(**args, **rules, k=candidates)) == as_set(exact)
