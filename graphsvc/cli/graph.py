@@ -141,6 +141,7 @@ def _cmd_relayout(args) -> int:
 
     from graphsvc.graph.file import load_graph, save_graph
     from graphsvc.graph.metadata import edge_up_vectors, recompute_accelerations
+    from graphsvc.graph.model import READING_DTYPE
     from graphsvc.sensors.anatomy import ANATOMICAL
     from graphsvc.sensors.layout import load_layout
 
@@ -151,7 +152,13 @@ def _cmd_relayout(args) -> int:
     acc = recompute_accelerations(graph, layout)
     params = {**graph.params, "layout": layout.name, "sensor_frames": ANATOMICAL}  # (an older graph's converted)
     save_graph(
-        replace(graph, edge_acc=acc, edge_up=edge_up_vectors(graph, layout), layout=layout.to_dict(), params=params),
+        replace(
+            graph,
+            edge_acc=acc.astype(READING_DTYPE),
+            edge_up=edge_up_vectors(graph, layout),
+            layout=layout.to_dict(),
+            params=params,
+        ),
         out,
     )
     print(f"wrote {out}: edge metadata for layout {layout.name} ({', '.join(layout.sensor_names)})")

@@ -46,6 +46,7 @@ from graphsvc.graph.model import (
     NODE_INTERP,
     NODE_ORIGINAL,
     NODE_SLOW,
+    READING_DTYPE,
     MotionGraph,
     incoming_offsets,
 )
@@ -411,7 +412,7 @@ def build_graph(
         edge_src=e_src[order].astype(np.int32),
         edge_dst=e_dst[order].astype(np.int32),
         edge_kind=e_kind[order],
-        edge_acc=e_acc[order],
+        edge_acc=e_acc[order].astype(READING_DTYPE),
         edge_offset=e_off[order],
         edge_heading=e_dh[order],
         incoming=incoming_offsets(e_dst[order], N),

@@ -62,5 +62,5 @@ def frame_readings(graph) -> dict[str, np.ndarray]:
     e, dst = e[keep], dst[keep]
     order = np.argsort(dst, kind="stable")
     e, dst = e[order], dst[order]
-    readings = (np.asarray(graph.edge_acc)[e].reshape(e.size, -1) / GRAVITY).astype(np.float32)
+    readings = (np.asarray(graph.edge_acc, np.float64)[e].reshape(e.size, -1) / GRAVITY).astype(np.float32)
     return {"nodes": dst, "edges": e.astype(np.int64), "readings": readings}

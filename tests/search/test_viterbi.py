@@ -127,6 +127,7 @@ def test_bad_inputs():
 
 def test_noise_free_input_decodes_to_its_own_clip():
     from graphsvc.graph.build import BuildOptions, build_graph
+    from graphsvc.graph.model import READING_DTYPE
     from graphsvc.motion.procedural import generate_knowledge_base
     from graphsvc.sensors.layout import PRESETS
     from graphsvc.sensors.noise import PRESETS as NOISE
@@ -137,8 +138,9 @@ def test_noise_free_input_decodes_to_its_own_clip():
     for c in range(len(kb)):
         rec = simulate_recording(kb[c], PRESETS["wrists-ankles"], NOISE["none"])
         first = g.clips[c]["first_node"]
+        acc = rec.accelerations.astype(READING_DTYPE)  # (the graph's readings are the clip's, to their bits)
         for w in (Weights(1, 0, 0), Weights(0.5, 1, 1)):
-            r = viterbi_search(g, rec.accelerations, rec.ground_position, rec.heading, weights=w)
+            r = viterbi_search(g, acc, rec.ground_position, rec.heading, weights=w)
             np.testing.assert_array_equal(r.node_path, first + np.arange(rec.num_samples), err_msg=kb[c].name)
             assert r.terms["acc_g2"] < 1e-9
 

@@ -52,7 +52,7 @@ def test_each_sample_takes_the_frame_with_the_nearest_readings(graph_file):
     # By hand: the arrival reading of an original frame is its original edge's.
     n = idx.nodes[5]
     e = np.flatnonzero((g.edge_kind == EDGE_ORIGINAL) & (g.edge_dst == n))[0]
-    np.testing.assert_allclose(idx.readings[5], g.edge_acc[e].ravel() / GRAVITY, rtol=1e-6)
+    np.testing.assert_allclose(idx.readings[5], g.edge_acc[e].astype(np.float64).ravel() / GRAVITY, rtol=1e-6)
     # A sample with a missing sensor plays on: the next frame of the previous one's clip.
     acc2 = acc[:2].copy()
     acc2[1, 0] = np.nan

@@ -25,7 +25,8 @@ def test_frames_are_original_nodes_in_runs_of_consecutive_frames(graph):
     assert (graph.node_clip[nodes[1:]][same] == graph.node_clip[nodes[:-1]][same]).all()
     np.testing.assert_array_equal(graph.node_frame[nodes[1:]][same] - graph.node_frame[nodes[:-1]][same], 1.0)
     assert run[-1] + 1 == len(graph.clips)  # (one run a clip here: no frame left out)
-    np.testing.assert_allclose(a["readings"], graph.edge_acc[a["edges"]].reshape(nodes.size, -1) / GRAVITY, rtol=1e-6)
+    stored = graph.edge_acc[a["edges"]].astype(np.float64)
+    np.testing.assert_allclose(a["readings"], stored.reshape(nodes.size, -1) / GRAVITY, rtol=1e-6)
 
 
 def test_query_is_the_nearest_by_brute_force_and_drops_hidden_frames(graph):

@@ -115,7 +115,7 @@ def frame_data(graph: MotionGraph) -> dict[str, np.ndarray]:
     has = edge >= 0
     S = len(graph.sensor_names)
     readings = np.zeros((N, 3 * S), np.float32)
-    readings[has] = np.asarray(graph.edge_acc)[edge[has]].reshape(-1, 3 * S) / GRAVITY
+    readings[has] = np.asarray(graph.edge_acc, np.float64)[edge[has]].reshape(-1, 3 * S) / GRAVITY
     d = layout.dims
     values[has, d : d + 2] = np.asarray(graph.edge_offset)[edge[has]]
     values[has, d + 2] = np.asarray(graph.edge_heading)[edge[has]]
