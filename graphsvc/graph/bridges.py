@@ -545,6 +545,9 @@ def blend_bridges(
     use clip a's). Bridges are blended about chunk_nodes nodes at a time, so the
     float64 working arrays stay a few hundred MB on any knowledge base."""
     rel_all, height_all = relative_pose(kb.world_rot, kb.world_pos, kb.heading, joints["pelvis"])
+    blend = lambda some: _blend_chunk(  # noqa: E731
+        kb, some, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses
+    )
     ends = np.cumsum(matches.length)
     parts = []
     b0 = 0
@@ -556,14 +559,10 @@ def blend_bridges(
                 for f in ("clip_a", "clip_b", "i", "j", "distance", "length", "before", "kind")
             )
         )
-        parts.append(
-            _blend_chunk(kb, sub, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses)
-        )
+        parts.append(blend(sub))
         b0 = b1
     if not parts:
-        parts.append(
-            _blend_chunk(kb, matches, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses)
-        )
+        parts.append(blend(matches))
     first, at = [], 0
     for p in parts:
         first.append(p.first + at)

@@ -28,7 +28,7 @@ NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
 NODE_KINDS = ("original", "slow-down", "interpolated", "bridge")
 EDGE_ORIGINAL, EDGE_SLOW, EDGE_SPEEDUP, EDGE_TRANSITION, EDGE_INTERP, EDGE_BRIDGE = 0, 1, 2, 3, 4, 5
 EDGE_KINDS = ("original", "slow-down", "speed-up", "transition", "interpolated", "bridge")
-# Edge readings as a graph stores them: float16 keeps 11 significant bits, 0.005 m/s²
+# Edge readings as a graph stores them: float16 keeps 11 significant bits, 0.004 m/s²
 # at 10 m/s² (0.03 at 100), under any accelerometer's noise; the search reads them
 # through float32 tables. Half the bytes of float32: 24 a 4-sensor edge.
 READING_DTYPE = np.float16

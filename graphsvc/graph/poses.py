@@ -38,6 +38,8 @@ from typing import TYPE_CHECKING, Any
 import numba
 import numpy as np
 
+from graphsvc.graph.rows import distinct_rows
+
 if TYPE_CHECKING:
     from graphsvc.graph.model import MotionGraph
 
@@ -177,19 +179,17 @@ class PosePacker:
             return
         if fixed.shape[1] == 0:  # every joint moves: one empty set
             fixed = np.zeros((len(t), 1), np.float32)
-        rows, first, inverse = np.unique(
-            fixed.view(np.dtype((np.void, fixed.shape[1] * 4)))[:, 0], return_index=True, return_inverse=True
-        )
-        ids = np.empty(len(rows), np.int32)
-        for r in np.argsort(first, kind="stable"):  # first appearance first
-            key = rows[r].tobytes()
+        first, label = distinct_rows(fixed)  # (in order of first appearance)
+        ids = np.empty(len(first), np.int32)
+        for r, row in enumerate(first):
+            key = fixed[row].tobytes()
             if key not in self._sets:
                 self._sets[key] = len(self._rows)
                 full = np.zeros((self.num_joints, 3), np.float32)
-                full[self.fixed] = fixed[first[r], : 3 * len(self.fixed)].reshape(-1, 3)
+                full[self.fixed] = fixed[row, : 3 * len(self.fixed)].reshape(-1, 3)
                 self._rows.append(full)
             ids[r] = self._sets[key]
-        self.bone_index.append(ids[np.ravel(inverse)])
+        self.bone_index.append(ids[label])
 
     def arrays(self) -> dict[str, Any]:
         """The MotionGraph's pose arrays."""
