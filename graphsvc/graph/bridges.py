@@ -62,6 +62,7 @@ layout from the graph's stored poses (`metadata.recompute_accelerations`).
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
@@ -69,7 +70,7 @@ import numpy as np
 
 from graphsvc.blas import one_thread
 from graphsvc.graph import metadata as meta
-from graphsvc.graph.distance import PoseFeatures, concat_features, pose_features
+from graphsvc.graph.distance import PoseFeatures, window_features
 from graphsvc.graph.transitions import _pair_distances, _state_code
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import joint_tables, place_poses, relative_pose
@@ -92,16 +93,20 @@ _ROWS = 512  # source rows per block of the candidate distance matrix
 class KBFrames:
     """The knowledge base on one frame axis of N frames (C clips), as `build` holds it.
 
-    rotations (N, J, 4), translations (N, J, 3): local poses; world_rot, world_pos:
-    their FK; ground (N, 2) m, heading (N,) rad; contacts (N, 2) bool; window: the
-    distance window (frames, `distance.py`); canon (N, P, 3) canonical joint positions;
-    start (C + 1,) first frame of each clip; label (C,), performance (C,), performer
-    (C,) int per clip (a performer: clips with equal skeleton offsets)."""
+    rotations (N, J, 4), translations (N, J, 3): local poses; pelvis_rel (N, 4),
+    pelvis_height (N,): the pelvis world rotation with the frame's heading taken off and
+    its height (`motion.placement.relative_pose`); ground (N, 2) m, heading (N,) rad;
+    contacts (N, 2) bool; window: the distance window (frames, `distance.py`); canon
+    (N, P, 3) canonical joint positions; start (C + 1,) first frame of each clip; label
+    (C,), performance (C,), performer (C,) int per clip (a performer: clips with equal
+    skeleton offsets). The world poses of every frame are not kept (1.2 KB a frame in
+    float64): `world_summaries` makes canon and the pelvis from them a chunk at a time,
+    and a bridge's readings compute the few clip frames around it again (`_blend_chunk`)."""
 
     rotations: np.ndarray
     translations: np.ndarray
-    world_rot: np.ndarray
-    world_pos: np.ndarray
+    pelvis_rel: np.ndarray
+    pelvis_height: np.ndarray
     ground: np.ndarray
     heading: np.ndarray
     contacts: np.ndarray
@@ -116,6 +121,29 @@ class KBFrames:
     def clip(self) -> np.ndarray:
         lengths = np.diff(self.start)
         return np.repeat(np.arange(lengths.shape[0]), lengths)
+
+
+def world_summaries(
+    rotations: np.ndarray,
+    translations: np.ndarray,
+    heading: np.ndarray,
+    parents: np.ndarray,
+    pelvis: int,
+    canon_joints: list[int],
+    chunk: int = 65536,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """KBFrames' canon (N, P, 3), pelvis_rel (N, 4) and pelvis_height (N,) from the local
+    poses (N, J, 4/3), by forward kinematics `chunk` frames at a time (each frame's the
+    same numbers as all at once)."""
+    N = rotations.shape[0]
+    canon = np.empty((N, len(canon_joints), 3))
+    rel, height = np.empty((N, 4)), np.empty(N)
+    for f0 in range(0, N, chunk):
+        f1 = min(N, f0 + chunk)
+        world_rot, world_pos = forward_kinematics(rotations[f0:f1], translations[f0:f1], parents)
+        canon[f0:f1] = world_pos[:, canon_joints]
+        rel[f0:f1], height[f0:f1] = relative_pose(world_rot, world_pos, heading[f0:f1], pelvis)
+    return canon, rel, height
 
 
 @dataclass(frozen=True)
@@ -154,41 +182,52 @@ KINDS = ("label", "end", "start")
 
 
 def match_features(
-    canon: np.ndarray, ground: np.ndarray, heading: np.ndarray, start: np.ndarray, rate_hz: float
+    canon: np.ndarray,
+    ground: np.ndarray,
+    heading: np.ndarray,
+    start: np.ndarray,
+    rate_hz: float,
+    frames: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(N, 3·P·3) float32: per frame the canonical joints (N, P, 3) at t − dt, t, t + dt
-    (dt = FEATURE_DT_S, clamped to the clip), each relative to its own frame's root
-    ground position and turned by frame t's heading onto +Z, the centre frame
-    weighted twice: the pose and the limbs' motion, not the root's speed."""
-    N = canon.shape[0]
-    lengths = np.diff(start)
-    clip = np.repeat(np.arange(lengths.shape[0]), lengths)
+    """(F, 3·P·3) float32: at each of `frames` (default every frame) the canonical
+    joints (N, P, 3) at t − dt, t, t + dt (dt = FEATURE_DT_S, clamped to the clip), each
+    relative to its own frame's root ground position and turned by frame t's heading
+    onto +Z, the centre frame weighted twice: the pose and the limbs' motion, not the
+    root's speed."""
+    f = np.arange(canon.shape[0]) if frames is None else np.asarray(frames)
+    clip = np.searchsorted(start, f, side="right") - 1
     lo, hi = start[clip], start[clip + 1] - 1
     d = max(1, int(round(FEATURE_DT_S * rate_hz)))
-    f = np.arange(N)
-    c, s = np.cos(heading), np.sin(heading)
+    c, s = np.cos(heading[f]), np.sin(heading[f])
     parts = []
-    for frames, weight in ((np.maximum(f - d, lo), 0.5), (f, 1.0), (np.minimum(f + d, hi), 0.5)):
-        x = canon[frames, :, 0] - ground[frames, None, 0]
-        z = canon[frames, :, 2] - ground[frames, None, 1]
+    for at, weight in ((np.maximum(f - d, lo), 0.5), (f, 1.0), (np.minimum(f + d, hi), 0.5)):
+        x = canon[at, :, 0] - ground[at, None, 0]
+        z = canon[at, :, 2] - ground[at, None, 1]
         # R_y(−h)·(x, z) = (c·x − s·z, s·x + c·z): the facing direction onto +Z.
         parts += [
             weight * (c[:, None] * x - s[:, None] * z),
-            weight * canon[frames, :, 1],
+            weight * canon[at, :, 1],
             weight * (s[:, None] * x + c[:, None] * z),
         ]
     return np.concatenate(parts, axis=1).astype(np.float32)
 
 
-def body_features(canon: np.ndarray, ground: np.ndarray, start: np.ndarray, window: int) -> PoseFeatures:
-    """The window point clouds of `distance.pose_features` of every clip, made of the
-    canonical joints (N, P, 3) relative to each frame's own root ground position (N, 2):
-    their distance compares the pose and how the limbs move over the window but not
-    how fast the body travels, which a bridge's blend changes on its own."""
+def body_features(
+    canon: np.ndarray, ground: np.ndarray, start: np.ndarray, window: int, frames: np.ndarray | None = None
+) -> PoseFeatures:
+    """The window point clouds of `distance.pose_features` at `frames` (default every
+    frame; each clip's windows clamped to it), made of the canonical joints (N, P, 3)
+    relative to each frame's own root ground position (N, 2): their distance compares
+    the pose and how the limbs move over the window but not how fast the body travels,
+    which a bridge's blend changes on its own."""
     rel = canon.copy()
     rel[..., 0] -= ground[:, None, 0]
     rel[..., 2] -= ground[:, None, 1]
-    return concat_features([pose_features(rel[start[c] : start[c + 1]], window) for c in range(start.shape[0] - 1)])
+    f = np.arange(canon.shape[0]) if frames is None else np.asarray(frames)
+    clip = np.searchsorted(start, f, side="right") - 1
+    half = window // 2
+    idx = np.clip(f[:, None] + np.arange(-half, half + 1)[None, :], start[clip, None], start[clip + 1, None] - 1)
+    return window_features(rel, idx)
 
 
 def _project(x: np.ndarray, dims: int) -> np.ndarray:
@@ -236,43 +275,77 @@ def best_per_label(
     label: np.ndarray,
     num_labels: int,
     performer: np.ndarray | None = None,
+    jobs: int = 1,
 ) -> tuple[np.ndarray, np.ndarray]:
     """For each point (M, d) and each label, the nearest point of that label that
     shares a planted foot with it (contact states with a common bit) and belongs to
     another performance: (M, L, V) indices (−1: none) and squared distances (inf:
     none); V = 1, or 2 with `performer` (M,) given, the second the nearest of the
-    point's own performer. Dense float32 blocks of _ROWS rows (BLAS), exact enough to
-    rank candidates that D then scores."""
+    point's own performer. Dense float32 blocks of _ROWS rows: the products by BLAS,
+    the squared distances, masks and minima folded in one compiled pass over each
+    block (`_fold_nearest`; numpy's masked argmin made ten passes over it), row blocks
+    on `jobs` threads (each writes its own rows: the same result however many); exact
+    enough to rank candidates that D then scores. Call it inside `one_thread()`: each
+    product on one BLAS thread."""
     M = points.shape[0]
     V = 1 if performer is None else 2
     order = np.argsort(label, kind="stable")
     bounds = np.searchsorted(label[order], np.arange(num_labels + 1))
-    y = points[order]
+    y = np.ascontiguousarray(points[order], dtype=np.float32)
     y2 = np.einsum("md,md->m", y, y)
-    ys, yp = state[order], performance[order]
-    yq = None if performer is None else performer[order]
-    x2 = np.einsum("md,md->m", points, points)
+    ys = np.ascontiguousarray(state[order], dtype=np.int64)
+    yp = np.ascontiguousarray(performance[order], dtype=np.int64)
+    yq = np.zeros(M, np.int64) if performer is None else np.ascontiguousarray(performer[order], dtype=np.int64)
+    xs = np.ascontiguousarray(state, dtype=np.int64)
+    xp = np.ascontiguousarray(performance, dtype=np.int64)
+    xq = np.zeros(M, np.int64) if performer is None else np.ascontiguousarray(performer, dtype=np.int64)
+    x = np.ascontiguousarray(points, dtype=np.float32)
+    x2 = np.einsum("md,md->m", x, x)
     best = np.full((M, num_labels, V), -1, dtype=np.int64)
     best_d2 = np.full((M, num_labels, V), np.inf, dtype=np.float32)
-    for r0 in range(0, M, _ROWS):
+
+    def rows(r0: int) -> None:
         r1 = min(M, r0 + _ROWS)
-        x = points[r0:r1]
-        rows = np.arange(r1 - r0)
         for lab in range(num_labels):
             a, b = bounds[lab], bounds[lab + 1]
             if a == b:
                 continue
-            d2 = (x2[r0:r1, None] + y2[None, a:b]) - 2.0 * (x @ y[a:b].T)
-            d2[((state[r0:r1, None] & ys[None, a:b]) == 0) | (performance[r0:r1, None] == yp[None, a:b])] = np.inf
-            for v in range(V):
-                if v == 1:
-                    d2[performer[r0:r1, None] != yq[None, a:b]] = np.inf
-                k = np.argmin(d2, axis=1)
-                val = d2[rows, k]
-                ok = np.isfinite(val)
-                best[r0 + rows[ok], lab, v] = order[a + k[ok]]
-                best_d2[r0 + rows[ok], lab, v] = np.maximum(val[ok], 0.0)
+            _fold_nearest(
+                x[r0:r1] @ y[a:b].T,
+                x2[r0:r1], y2[a:b], xs[r0:r1], ys[a:b], xp[r0:r1], yp[a:b], xq[r0:r1], yq[a:b],
+                V, best[r0:r1, lab], best_d2[r0:r1, lab],
+            )  # fmt: skip
+
+    with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        list(pool.map(rows, range(0, M, _ROWS)))
+    found = best >= 0
+    best[found] = order[bounds[np.nonzero(found)[1]] + best[found]]  # (a label's column → its point)
     return best, best_d2
+
+
+@numba.njit(cache=True, nogil=True)
+def _fold_nearest(G, x2, y2, xs, ys, xp, yp, xq, yq, V, best, best_d2):  # pragma: no cover - compiled
+    """Rows r of a block against one label's columns c, G = x·yᵀ (float32): the first
+    column of least (x2 + y2) − 2 G (float32, as numpy rounds it) among those sharing a
+    contact bit and of another performance, into best[r, 0] (column index) and
+    best_d2[r, 0] (clamped at 0); with V = 2 the same among the row's own performer's
+    into best[r, 1]. Rows without one keep −1 / inf."""
+    two = np.float32(2.0)
+    for r in range(G.shape[0]):
+        b0, b1 = -1, -1
+        d0, d1 = np.float32(np.inf), np.float32(np.inf)
+        for c in range(G.shape[1]):
+            if (xs[r] & ys[c]) == 0 or xp[r] == yp[c]:
+                continue
+            d = (x2[r] + y2[c]) - two * G[r, c]
+            if d < d0:
+                d0, b0 = d, c
+            if V == 2 and d < d1 and xq[r] == yq[c]:
+                d1, b1 = d, c
+        if b0 >= 0:
+            best[r, 0], best_d2[r, 0] = b0, max(d0, np.float32(0.0))
+        if V == 2 and b1 >= 0:
+            best[r, 1], best_d2[r, 1] = b1, max(d1, np.float32(0.0))
 
 
 def _best_of_groups(key: np.ndarray, score: np.ndarray, limit: int) -> np.ndarray:
@@ -309,10 +382,11 @@ def select_matches(
     end_threshold_m: float = DEFAULT_END_THRESHOLD_M,
     spacing_s: float = DEFAULT_SPACING_S,
     needed: np.ndarray | None = None,
+    jobs: int = 1,
 ) -> Matches:
     """The bridges of a knowledge base (module docstring), feasible and distinct.
     needed: (L, L) bool, the ordered label pairs that get bridges between labels (None:
-    all)."""
+    all); jobs: threads for the candidate search (the same matches however many)."""
     C = kb.start.shape[0] - 1
     num_labels = int(kb.label.max()) + 1 if C else 0
     frames = candidate_frames(kb, rate_hz)
@@ -320,10 +394,10 @@ def select_matches(
     if frames.size < 2 or C < 2:
         return Matches(empty, empty, empty, empty, np.zeros(0), empty, empty, empty)
     clip = kb.clip
-    feats = match_features(kb.canon, kb.ground, kb.heading, kb.start, rate_hz)
+    feats = match_features(kb.canon, kb.ground, kb.heading, kb.start, rate_hz, frames)
     fclip = clip[frames]
     with one_thread():  # (the nearest candidates the same however many threads BLAS has: graphsvc.blas)
-        points = _project(feats[frames], FEATURE_DIMS)
+        points = _project(feats, FEATURE_DIMS)
         best, best_d2 = best_per_label(
             points,
             _state_code(kb.contacts[frames]),
@@ -331,6 +405,7 @@ def select_matches(
             kb.label[fclip],
             num_labels,
             kb.performer[fclip],
+            jobs,
         )
     in_clip = frames - kb.start[fclip]
     lengths = np.diff(kb.start)
@@ -390,7 +465,11 @@ def select_matches(
         slot.append(key_end[top])
         next_slot += C
     src, dst, kind, slot = (np.concatenate(v) for v in (src, dst, kind, slot))
-    distance = _pair_distances(body_features(kb.canon, kb.ground, kb.start, kb.window), src, dst)
+    # (the clouds of the frames the candidates pair only: every frame's is 0.8 KB a frame)
+    scored, pair = np.unique(np.concatenate([src, dst]), return_inverse=True)
+    features = body_features(kb.canon, kb.ground, kb.start, kb.window, scored)
+    distance = _pair_distances(features, pair[: src.size], pair[src.size :])
+    del features
     ok = distance <= np.where(kind == 0, threshold_m, end_threshold_m)
     src, dst, kind, slot, distance = src[ok], dst[ok], kind[ok], slot[ok], distance[ok]
 
@@ -544,10 +623,7 @@ def blend_bridges(
     placement_of_clip(c): the layout placed on clip c's skeleton (a bridge's readings
     use clip a's). Bridges are blended about chunk_nodes nodes at a time, so the
     float64 working arrays stay a few hundred MB on any knowledge base."""
-    rel_all, height_all = relative_pose(kb.world_rot, kb.world_pos, kb.heading, joints["pelvis"])
-    blend = lambda some: _blend_chunk(  # noqa: E731
-        kb, some, skeleton, joints, placement_of_clip, rate_hz, rel_all, height_all, add_poses
-    )
+    blend = lambda some: _blend_chunk(kb, some, skeleton, joints, placement_of_clip, rate_hz, add_poses)  # noqa: E731
     ends = np.cumsum(matches.length)
     parts = []
     b0 = 0
@@ -589,12 +665,9 @@ def _blend_chunk(
     joints: dict,
     placement_of_clip,
     rate_hz: float,
-    rel_all: np.ndarray,
-    height_all: np.ndarray,
     add_poses: Callable[[np.ndarray, np.ndarray], None],
 ) -> BridgeNodes:
-    """`blend_bridges` of a few bridges; rel_all, height_all: every KB frame's pelvis
-    rotation relative to its heading and pelvis height (`motion.placement.relative_pose`)."""
+    """`blend_bridges` of a few bridges."""
     B = len(matches)
     count = matches.length
     first = np.zeros(B, dtype=np.int64)
@@ -628,7 +701,9 @@ def _blend_chunk(
     trans = np.empty((M,) + kb.translations.shape[1:])
     rel = np.empty((M, 4))
     height = np.empty(M)
-    _blend_poses(kb.rotations, kb.translations, rel_all, height_all, ga, gb, w, below, rot, trans, rel, height)
+    _blend_poses(
+        kb.rotations, kb.translations, kb.pelvis_rel, kb.pelvis_height, ga, gb, w, below, rot, trans, rel, height
+    )
     parents = np.ascontiguousarray(skeleton.parents, dtype=np.int64)
     src_rot, src_pos = forward_kinematics(rot, trans, parents)
     place_poses(rot, trans, rel, height, ground, heading, src_rot, src_pos, parents, pelvis, carrier)
@@ -651,8 +726,7 @@ def _blend_chunk(
 
     world_rot, world_pos = forward_kinematics(rot, trans, parents)
     readings = meta.bridge_readings(
-        kb.world_rot,
-        kb.world_pos,
+        lambda f: forward_kinematics(kb.rotations[f], kb.translations[f], parents),
         kb.ground,
         kb.heading,
         world_rot,

@@ -13,7 +13,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -25,7 +25,7 @@ from graphsvc.graph import bridges as br
 from graphsvc.graph import interpolation as interp
 from graphsvc.graph import metadata as meta
 from graphsvc.graph import partners
-from graphsvc.graph.connectivity import label_hops, typical_times
+from graphsvc.graph.connectivity import label_reach
 from graphsvc.graph.distance import (
     DEFAULT_WINDOW_S,
     PoseFeatures,
@@ -51,7 +51,9 @@ from graphsvc.graph.model import (
     incoming_offsets,
 )
 from graphsvc.graph.poses import PosePacker, moving_joints, rotating_joints
+from graphsvc.graph.rows import drain
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
+from graphsvc.heap import release_free_memory
 from graphsvc.motion import augment as aug
 from graphsvc.motion import quat, signals
 from graphsvc.motion.augment import mirror_label
@@ -105,7 +107,8 @@ class BuildOptions:
 
 @dataclass
 class PreparedClip:
-    """One KB clip at the graph rate, with everything the graph needs (F frames)."""
+    """One KB clip at the graph rate, with everything the graph needs (F frames);
+    `build_graph` empties its features and midpoints once they are spent (`_spent`)."""
 
     motion: Motion
     contacts: np.ndarray  # (F, 2) bool
@@ -120,6 +123,20 @@ class PreparedClip:
     mid_translations: np.ndarray  # (F−1, J, 3) float32
     placement: Placement  # the layout on this clip, its sensor frames estimated from the clip's motion
     digest: str = ""
+
+
+def _spent(clip: PreparedClip) -> PreparedClip:
+    """The clip without what only the transitions, the speed variations and the
+    interpolation use: its window clouds (1.6 KB a frame) and half-speed midpoints
+    (0.6 KB), left with zero rows."""
+    f = clip.features
+    none = lambda a: a[:0].copy()  # noqa: E731  (a copy: a view would keep the rows alive)
+    return replace(
+        clip,
+        features=PoseFeatures(none(f.x), none(f.z), none(f.y), none(f.norm2), none(f.mean_xz)),
+        mid_rotations=none(clip.mid_rotations),
+        mid_translations=none(clip.mid_translations),
+    )
 
 
 @dataclass
@@ -200,36 +217,39 @@ def standard_skeleton(motions: list[Motion]) -> Skeleton:
 
 
 class _Edges:
-    """Edge lists gathered per kind, concatenated once at the end."""
+    """Edge lists gathered per kind, concatenated once at the end: src, dst (int64),
+    kind (uint8), readings (in the graph's READING_DTYPE, rounded through float32 as
+    ever), offset and heading change (float32), a list of parts each."""
 
-    def __init__(self):
-        self.parts: list[tuple] = []
+    def __init__(self) -> None:
+        self.src: list[np.ndarray] = []
+        self.dst: list[np.ndarray] = []
+        self.kind: list[np.ndarray] = []
+        self.acc: list[np.ndarray] = []
+        self.offset: list[np.ndarray] = []
+        self.dheading: list[np.ndarray] = []
 
     def add(self, src, dst, kind, acc, offset, dheading):
         n = len(src)
         if n:
-            self.parts.append(
-                (
-                    np.asarray(src, np.int64),
-                    np.asarray(dst, np.int64),
-                    np.full(n, kind, np.uint8),
-                    acc.astype(np.float32),
-                    offset.astype(np.float32),
-                    dheading.astype(np.float32),
-                )
-            )
+            self.src.append(np.asarray(src, np.int64))
+            self.dst.append(np.asarray(dst, np.int64))
+            self.kind.append(np.full(n, kind, np.uint8))
+            self.acc.append(acc.astype(np.float32).astype(READING_DTYPE))
+            self.offset.append(offset.astype(np.float32))
+            self.dheading.append(dheading.astype(np.float32))
 
     def arrays(self, S: int):
-        if not self.parts:
-            return (
-                np.zeros(0, np.int64),
-                np.zeros(0, np.int64),
-                np.zeros(0, np.uint8),
-                np.zeros((0, S, 3), np.float32),
-                np.zeros((0, 2), np.float32),
-                np.zeros(0, np.float32),
-            )
-        return tuple(np.concatenate([p[i] for p in self.parts]) for i in range(6))
+        """(src, dst, kind, readings, offset, heading change), each part freed as it is
+        copied (call once)."""
+        return (
+            drain(self.src, (0,), np.int64),
+            drain(self.dst, (0,), np.int64),
+            drain(self.kind, (0,), np.uint8),
+            drain(self.acc, (0, S, 3), READING_DTYPE),
+            drain(self.offset, (0, 2), np.float32),
+            drain(self.dheading, (0,), np.float32),
+        )
 
 
 def thread_map(jobs: int) -> Callable:
@@ -367,6 +387,8 @@ def build_graph(
         segments = _add_interpolations(clips, start, options, layout, next_node, edges, node_parts, poses, bar)
         next_node = sum(len(k) for k in node_parts["kind"])
         report.timings["interpolation_s"] = time.perf_counter() - t0
+    clips = [_spent(c) for c in clips]  # (before the bridges, the build's memory peak)
+    release_free_memory()
     per_frame = [_clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
     labels = sorted({_content(m.motion) for m in clips} | {x for f in per_frame if f is not None for x in f})
     label_of_clip = np.array([labels.index(_content(c.motion)) for c in clips], dtype=np.int32)
@@ -389,8 +411,25 @@ def build_graph(
     keep = np.ones(len(order), dtype=bool)
     keep[1:] = (src_sorted[1:] != src_sorted[:-1]) | (dst_sorted[1:] != dst_sorted[:-1])
     order = order[keep]  # every edge array below is indexed by this one order
+    del src_sorted, dst_sorted, keep
+    # Each array put in order as the gathered one is dropped, the node parts freed as they
+    # are joined: the graph's arrays are never held twice.
+    edge_src = e_src[order].astype(np.int32)
+    del e_src
+    edge_dst = e_dst[order]
+    del e_dst
+    edge_kind = e_kind[order]
+    del e_kind
+    edge_acc = e_acc[order]
+    del e_acc
+    edge_offset = e_off[order]
+    del e_off
+    edge_heading = e_dh[order]
+    del e_dh, order
     N = sum(len(k) for k in node_parts["kind"])
-    node_clip = np.concatenate(node_parts["clip"])
+    incoming = incoming_offsets(edge_dst, N)
+    node_clip = drain(node_parts["clip"], (0,), np.int32)
+    node_frame = drain(node_parts["frame"], (0,), np.float32)
     graph = MotionGraph(
         rate_hz=rate,
         skeleton=standard_skeleton([c.motion for c in clips]),
@@ -399,26 +438,26 @@ def build_graph(
         labels=tuple(labels),
         params={k: v for k, v in _params(options, layout, window).items()},
         clip_offsets=np.stack([c.motion.skeleton.offsets for c in clips]),
-        node_kind=np.concatenate(node_parts["kind"]),
+        node_kind=drain(node_parts["kind"], (0,), np.uint8),
         node_clip=node_clip,
-        node_frame=np.concatenate(node_parts["frame"]),
-        node_contacts=np.concatenate(node_parts["contacts"]),
-        node_label=_node_labels(
-            per_frame, labels, label_of_clip, start, lengths, node_clip, np.concatenate(node_parts["frame"])
-        ),
+        node_frame=node_frame,
+        node_contacts=drain(node_parts["contacts"], (0, 2), bool),
+        node_label=_node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, node_frame),
         **poses.arrays(),
-        node_ground=np.concatenate(node_parts["ground"]),
-        node_heading=np.concatenate(node_parts["heading"]),
-        edge_src=e_src[order].astype(np.int32),
-        edge_dst=e_dst[order].astype(np.int32),
-        edge_kind=e_kind[order],
-        edge_acc=e_acc[order].astype(READING_DTYPE),
-        edge_offset=e_off[order],
-        edge_heading=e_dh[order],
-        incoming=incoming_offsets(e_dst[order], N),
+        node_ground=drain(node_parts["ground"], (0, 2), np.float32),
+        node_heading=drain(node_parts["heading"], (0,), np.float32),
+        edge_src=edge_src,
+        edge_dst=edge_dst.astype(np.int32),
+        edge_kind=edge_kind,
+        edge_acc=edge_acc,
+        edge_offset=edge_offset,
+        edge_heading=edge_heading,
+        incoming=incoming,
         segments=segments,
         bridges=bridges,
     )
+    del clips, edge_dst  # (what the prepared clips still hold: readings, placements)
+    release_free_memory()
     report.timings["assemble_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     graph.edge_up = meta.edge_up_vectors(graph, layout)  # (from the stored poses, as `relayout` computes it)
@@ -655,18 +694,21 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     )
     rotations = np.concatenate([c.motion.rotations for c in clips])
     translations = np.concatenate([c.motion.translations for c in clips])
+    heading = np.concatenate([c.heading for c in clips])
     # (the positions prepare_clip computed, the same numbers: not kept clip by clip)
-    world_rot, world_pos = forward_kinematics(rotations, translations, sk.parents)
+    canon, pelvis_rel, pelvis_height = br.world_summaries(
+        rotations, translations, heading, sk.parents, joints["pelvis"], [joints[c] for c in CANONICAL]
+    )
     kb = br.KBFrames(
         rotations=rotations,
         translations=translations,
-        world_rot=world_rot,
-        world_pos=world_pos,
+        pelvis_rel=pelvis_rel,
+        pelvis_height=pelvis_height,
         ground=np.concatenate([c.ground for c in clips]),
-        heading=np.concatenate([c.heading for c in clips]),
+        heading=heading,
         contacts=np.concatenate([c.contacts for c in clips]),
         window=window,
-        canon=world_pos[:, [joints[c] for c in CANONICAL]],
+        canon=canon,
         start=start,
         label=np.asarray(label_of_clip),
         performance=performance,
@@ -676,12 +718,18 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     # other: where plain transitions already connect two actions (a walk and a walk
     # that turns), bridges measured no better on mixed performances, at 11 % more nodes.
     node_label = np.asarray(label_of_clip)[np.concatenate(parts["clip"])]
-    e_src, e_dst = (np.concatenate([p[k] for p in edges.parts]) for k in (0, 1))
-    typical = typical_times(label_hops(e_src, e_dst, node_label, int(np.max(label_of_clip)) + 1), node_label, rate)
+    e_src, e_dst = np.concatenate(edges.src), np.concatenate(edges.dst)
+    typical = label_reach(e_src, e_dst, node_label, int(np.max(label_of_clip)) + 1)[1] / rate
     needed = ~(typical <= options.bridge_spacing_s / 2.0)
     np.fill_diagonal(needed, False)
     matches = br.select_matches(
-        kb, rate, options.bridge_threshold_m, options.bridge_end_threshold_m, options.bridge_spacing_s, needed
+        kb,
+        rate,
+        options.bridge_threshold_m,
+        options.bridge_end_threshold_m,
+        options.bridge_spacing_s,
+        needed,
+        options.jobs,
     )
     if not len(matches):
         return []
@@ -708,14 +756,15 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     src[inner], dst[inner] = src_in, ids
     src[~inner], dst[~inner] = last_ids, exit_frame
     edges.add(src, dst, EDGE_BRIDGE, nodes.readings, nodes.step_offset, nodes.step_heading)
+    a_entry, b_exit = matches.entry, matches.exit  # (computed properties: once, not a bridge at a time)
     return [
         {
             "first_node": int(next_node + nodes.first[b]),
             "count": int(nodes.count[b]),
             "clip_a": int(matches.clip_a[b]),
             "clip_b": int(matches.clip_b[b]),
-            "a_entry": int(matches.entry[b]),
-            "b_exit": int(matches.exit[b]),
+            "a_entry": int(a_entry[b]),
+            "b_exit": int(b_exit[b]),
             "a_match": int(matches.i[b]),
             "b_match": int(matches.j[b]),
             "distance_m": round(float(matches.distance[b]), 5),

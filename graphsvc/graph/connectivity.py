@@ -20,9 +20,10 @@ Nodes outside `allowed` (a leave-one-out mask) and their edges are left out.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 
 from graphsvc.graph.model import MotionGraph
 
@@ -46,7 +47,7 @@ def strong_components(graph: MotionGraph, allowed: np.ndarray | None = None) -> 
 
 
 def label_distances(graph: MotionGraph, allowed: np.ndarray | None = None) -> np.ndarray:
-    """(L, N) float: for each label B and node v, the fewest edges from v to a node of
+    """(L, N) float32: for each label B and node v, the fewest edges from v to a node of
     B (0 on B's own nodes, inf where none is reachable or v is not allowed)."""
     return label_hops(graph.edge_src, graph.edge_dst, graph.node_label, len(graph.labels), allowed)
 
@@ -55,32 +56,84 @@ def label_hops(
     src: np.ndarray, dst: np.ndarray, node_label: np.ndarray, num_labels: int, allowed: np.ndarray | None = None
 ) -> np.ndarray:
     """`label_distances` of any edge list (E,) over N = len(node_label) nodes."""
-    N = node_label.shape[0]
+    out = np.full((num_labels, np.asarray(node_label).shape[0]), np.inf, dtype=np.float32)
+    for b, hops in _each_label(src, dst, node_label, num_labels, allowed):
+        out[b] = hops
+    return out
+
+
+def label_reach(
+    src: np.ndarray, dst: np.ndarray, node_label: np.ndarray, num_labels: int, allowed: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(shortest, typical), each (L, L) in edges: row A, column B the minimum and the
+    median over A's allowed nodes of their fewest edges to a node of B (inf where
+    unreachable; NaN for a label without allowed nodes). The same figures as reducing
+    `label_hops`, label by label, without its (L, N) matrix."""
+    labels = np.asarray(node_label)
+    ok = np.ones(labels.shape[0], dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
+    nodes = np.flatnonzero(ok)
+    order = nodes[np.argsort(labels[nodes], kind="stable")]
+    bounds = np.searchsorted(labels[order], np.arange(num_labels + 1))
+    shortest = np.full((num_labels, num_labels), np.nan)
+    typical = np.full((num_labels, num_labels), np.nan)
+    for b, hops in _each_label(src, dst, labels, num_labels, ok):
+        grouped = hops[order]
+        for a in range(num_labels):
+            d = grouped[bounds[a] : bounds[a + 1]]
+            if d.size:
+                shortest[a, b], typical[a, b] = float(d.min()), float(np.median(d))
+    return shortest, typical
+
+
+def _each_label(src, dst, node_label, num_labels: int, allowed):
+    """(b, (N,) float32 hops to label b) for every label with an allowed node, others
+    skipped: one multi-source breadth-first search a label over the reversed edges
+    (compressed rows of each node's predecessors), O(N + E) each."""
+    labels = np.asarray(node_label)
+    N = labels.shape[0]
     src, dst = np.asarray(src, dtype=np.int64), np.asarray(dst, dtype=np.int64)
     ok = np.ones(N, dtype=bool) if allowed is None else np.asarray(allowed, dtype=bool)
     keep = ok[src] & ok[dst]
-    reverse = csr_matrix((np.ones(int(keep.sum()), dtype=np.float32), (dst[keep], src[keep])), shape=(N, N))
-    labels = np.asarray(node_label)
-    out = np.full((num_labels, N), np.inf)
+    src, dst = src[keep], dst[keep]
+    order = np.argsort(dst, kind="stable")
+    predecessors = src[order].astype(np.int32)
+    indptr = np.zeros(N + 1, dtype=np.int64)
+    np.cumsum(np.bincount(dst, minlength=N), out=indptr[1:])
+    del src, dst, order, keep
+    hops = np.empty(N, dtype=np.int32)
+    queue = np.empty(N, dtype=np.int32)
     for b in range(num_labels):
-        sources = np.flatnonzero((labels == b) & ok)
-        if sources.size:
-            out[b] = dijkstra(reverse, directed=True, indices=sources, unweighted=True, min_only=True)
-    out[:, ~ok] = np.inf
-    return out
+        sources = np.flatnonzero((labels == b) & ok).astype(np.int32)
+        if not sources.size:
+            continue
+        _multi_source_bfs(indptr, predecessors, sources, hops, queue)
+        out = hops.astype(np.float32)
+        out[hops < 0] = np.inf
+        yield b, out
 
 
-def typical_times(hops: np.ndarray, node_label: np.ndarray, rate_hz: float) -> np.ndarray:
-    """(L, L) seconds: row A, column B the median over A's nodes of `label_hops`' B
-    row, over the rate (inf when most of A's nodes cannot reach B; NaN for a label
-    without nodes)."""
-    L = hops.shape[0]
-    out = np.full((L, L), np.nan)
-    for a in range(L):
-        nodes = node_label == a
-        if nodes.any():
-            out[a] = np.median(hops[:, nodes], axis=1) / rate_hz
-    return out
+@numba.njit(cache=True, nogil=True)
+def _multi_source_bfs(indptr, neighbours, sources, hops, queue):  # pragma: no cover - compiled
+    """hops[v]: fewest edges from any source to v along `neighbours` (CSR), −1 where
+    none reaches; `queue` is scratch of N entries."""
+    hops[:] = -1
+    tail = 0
+    for s in sources:
+        if hops[s] < 0:
+            hops[s] = 0
+            queue[tail] = s
+            tail += 1
+    head = 0
+    while head < tail:
+        v = queue[head]
+        head += 1
+        h = hops[v] + 1
+        for k in range(indptr[v], indptr[v + 1]):
+            u = neighbours[k]
+            if hops[u] < 0:
+                hops[u] = h
+                queue[tail] = u
+                tail += 1
 
 
 def connectivity(graph: MotionGraph, allowed: np.ndarray | None = None) -> dict:
@@ -102,21 +155,19 @@ def connectivity(graph: MotionGraph, allowed: np.ndarray | None = None) -> dict:
             {"nodes": int(sizes[c]), "labels": {graph.labels[k]: int(n) for k, n in enumerate(present) if n}}
         )
     total = int(ok.sum())
-    hops = label_distances(graph, ok)
     rate = float(graph.rate_hz)
+    shortest, typical = label_reach(graph.edge_src, graph.edge_dst, graph.node_label, len(graph.labels), ok)
     present_labels = [k for k in range(len(graph.labels)) if np.any(labels == k)]
     reach: dict = {}
     for a in present_labels:
         row = {}
-        nodes_a = ok & (np.asarray(graph.node_label) == a)
         for b in present_labels:
             if a == b:
                 continue
-            d = hops[b, nodes_a]
-            shortest, typical = float(d.min()), float(np.median(d))
+            low, mid = shortest[a, b], typical[a, b]
             row[graph.labels[b]] = {
-                "shortest_s": round(shortest / rate, 3) if np.isfinite(shortest) else None,
-                "typical_s": round(typical / rate, 3) if np.isfinite(typical) else None,
+                "shortest_s": round(float(low) / rate, 3) if np.isfinite(low) else None,
+                "typical_s": round(float(mid) / rate, 3) if np.isfinite(mid) else None,
             }
         reach[graph.labels[a]] = row
     return {

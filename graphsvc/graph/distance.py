@@ -61,12 +61,20 @@ def window_weights(length: int) -> np.ndarray:
 def pose_features(positions: np.ndarray, window: int) -> PoseFeatures:
     """positions: (F, P, 3) world positions of the P canonical joints of one clip.
     Frames within half a window of either end repeat the end frame."""
-    F, P, _ = positions.shape
+    F = positions.shape[0]
     if F == 0:
         raise InputError("cannot compute pose features of zero frames")
     half = window // 2
+    return window_features(positions, np.clip(np.arange(F)[:, None] + np.arange(-half, half + 1)[None, :], 0, F - 1))
+
+
+def window_features(positions: np.ndarray, idx: np.ndarray) -> PoseFeatures:
+    """The clouds of `pose_features` with each cloud's frames given: idx (F, W) rows of
+    positions (N, P, 3), a window of W (odd) frames each (a frame's cloud is the same
+    numbers whichever others are computed with it)."""
+    F, window = idx.shape
+    P = positions.shape[1]
     time_w = window_weights(window)
-    idx = np.clip(np.arange(F)[:, None] + np.arange(-half, half + 1)[None, :], 0, F - 1)
     cloud = positions[idx]  # (F, W, P, 3)
     w = np.repeat(time_w / P, P)  # (W·P,) per point, sums to 1
     cloud = cloud.reshape(F, window * P, 3)

@@ -151,8 +151,7 @@ def rotate_ground(points: np.ndarray, theta: np.ndarray, translation: np.ndarray
 
 
 def bridge_readings(
-    ctx_rot,
-    ctx_pos,
+    ctx_world,
     ctx_ground,
     ctx_heading,
     node_rot,
@@ -172,8 +171,10 @@ def bridge_readings(
 ) -> np.ndarray:
     """(M + B, S, 3) float32 readings of B bridges, in the order of `BridgeNodes`.
 
-    ctx_*: world poses (rotations, positions), ground positions and headings of the
-    clip frames (indexed by frame on one axis); node_*: those of the bridges' M nodes
+    ctx_world(frames) → (rotations (K, J, 4), positions (K, J, 3)): the world poses of
+    clip frames (indexed by frame on one axis: only the few around each bridge are
+    asked for); ctx_ground, ctx_heading: every clip frame's ground position and
+    heading; node_*: the world poses, ground positions and headings of the bridges' M nodes
     (bridge b's are rows first[b] … first[b] + count[b] − 1). entry, exit_frame (B,):
     the clip frames each bridge is entered from and leaves to; a_lo, a_hi, b_lo, b_hi
     (B,): the frame ranges [lo, hi) of its two clips, for clamping the context;
@@ -193,17 +194,19 @@ def bridge_readings(
     anchor = np.maximum(exit_frame - 1, b_lo)
     turn = node_heading[last] - ctx_heading[anchor]
     c, s = np.cos(turn)[:, None, None], np.sin(turn)[:, None, None]
-    rel = ctx_pos[after] - np.stack([ctx_ground[anchor, 0], np.zeros(B), ctx_ground[anchor, 1]], axis=-1)[:, None, None]
+    after_rot, after_pos = (v.reshape((B, AFTER) + v.shape[1:]) for v in ctx_world(after.ravel()))
+    rel = after_pos - np.stack([ctx_ground[anchor, 0], np.zeros(B), ctx_ground[anchor, 1]], axis=-1)[:, None, None]
     moved = np.empty_like(rel)  # (B, AFTER, J, 3)
     moved[..., 0] = c * rel[..., 0] + s * rel[..., 2] + node_ground[last, 0][:, None, None]
     moved[..., 1] = rel[..., 1]
     moved[..., 2] = -s * rel[..., 0] + c * rel[..., 2] + node_ground[last, 1][:, None, None]
-    moved_rot = quat.mul(quat.about_y(turn)[:, None, None], ctx_rot[after])
+    moved_rot = quat.mul(quat.about_y(turn)[:, None, None], after_rot)
     # One pool of poses: the frames of a before each bridge, the bridges' nodes, then the
     # moved frames of b after each.
     M = node_rot.shape[0]
-    pool_rot = np.concatenate([ctx_rot[before.ravel()], node_rot, moved_rot.reshape((-1,) + ctx_rot.shape[1:])])
-    pool_pos = np.concatenate([ctx_pos[before.ravel()], node_pos, moved.reshape((-1,) + ctx_pos.shape[1:])])
+    before_rot, before_pos = ctx_world(before.ravel())
+    pool_rot = np.concatenate([before_rot, node_rot, moved_rot.reshape((-1,) + before_rot.shape[1:])])
+    pool_pos = np.concatenate([before_pos, node_pos, moved.reshape((-1,) + before_pos.shape[1:])])
     N = B * BEFORE
     length = BEFORE + count + AFTER
     groups: dict = {}
@@ -282,7 +285,6 @@ def _bridge_accelerations(graph, placements, out) -> None:
     layout on each clip."""
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
-    ctx_rot, ctx_pos = forward_kinematics(*node_poses(graph, slice(0, N0)), sk.parents)
     recs = graph.bridges
     first_node = np.array([b["first_node"] for b in recs], dtype=np.int64)
     count = np.array([b["count"] for b in recs], dtype=np.int64)
@@ -294,8 +296,7 @@ def _bridge_accelerations(graph, placements, out) -> None:
     first = np.zeros(len(recs), dtype=np.int64)
     np.cumsum(count[:-1], out=first[1:])
     readings = bridge_readings(
-        ctx_rot,
-        ctx_pos,
+        lambda f: forward_kinematics(*node_poses(graph, f), sk.parents),
         graph.node_ground[:N0].astype(np.float64),
         graph.node_heading[:N0].astype(np.float64),
         node_rot,

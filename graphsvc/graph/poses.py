@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numba
 import numpy as np
 
-from graphsvc.graph.rows import distinct_rows
+from graphsvc.graph.rows import distinct_rows, drain
 
 if TYPE_CHECKING:
     from graphsvc.graph.model import MotionGraph
@@ -192,14 +192,13 @@ class PosePacker:
         self.bone_index.append(ids[label])
 
     def arrays(self) -> dict[str, Any]:
-        """The MotionGraph's pose arrays."""
+        """The MotionGraph's pose arrays, once: the chunks added are freed as they are copied."""
         J, R, V = self.num_joints, len(self.rotating), len(self.moving)
-        cat = lambda parts, shape, dtype: np.concatenate(parts) if parts else np.zeros(shape, dtype)  # noqa: E731
         return {
-            "node_rot64": cat(self.rotations, (0, R), np.uint64),
+            "node_rot64": drain(self.rotations, (0, R), np.uint64),
             "rotating_joints": self.rotating.copy(),
-            "node_moving": cat(self.moving_translations, (0, V, 3), np.float32),
-            "node_bones": cat(self.bone_index, (0,), np.int32),
+            "node_moving": drain(self.moving_translations, (0, V, 3), np.float32),
+            "node_bones": drain(self.bone_index, (0,), np.int32),
             "bone_sets": np.stack(self._rows) if self._rows else np.zeros((0, J, 3), np.float32),
             "moving_joints": self.moving.copy(),
         }

@@ -1,5 +1,7 @@
-"""Distinct rows of an array, compared bit for bit: the search's readings table
-(`strategies/viterbi/tables.py`) and the graph's bone sets (`graph/poses.py`)."""
+"""Row arrays: the distinct rows of an array, compared bit for bit (the search's
+readings table, `strategies/viterbi/tables.py`, and the graph's bone sets,
+`graph/poses.py`); and parts gathered row block by row block concatenated while they
+are freed (the build's node and edge arrays)."""
 
 from __future__ import annotations
 
@@ -26,3 +28,19 @@ def distinct_rows(rows: np.ndarray, hashes: np.ndarray | None = None) -> tuple[n
     label = np.empty(len(first), dtype=np.int32)
     label[by_first_use] = np.arange(len(first), dtype=np.int32)
     return first[by_first_use], label[group.reshape(-1)]
+
+
+def drain(parts: list[np.ndarray], empty: tuple[int, ...], dtype) -> np.ndarray:
+    """`np.concatenate(parts)` (or zeros of shape `empty` when there are none) that
+    empties the list as it copies: the whole and one part held at once, not the whole
+    twice, when nothing else holds the parts."""
+    if not parts:
+        return np.zeros(empty, dtype)
+    out = np.empty((sum(len(p) for p in parts),) + parts[0].shape[1:], dtype=np.result_type(*parts))
+    parts.reverse()
+    at = 0
+    while parts:
+        part = parts.pop()
+        out[at : at + len(part)] = part
+        at += len(part)
+    return out

@@ -228,3 +228,95 @@ def test_reachable_span_and_trimming():
     assert interp.trim_to_reachable(path, (3, 6), (3, 6), rate_hz=30.0, min_seconds=0.5) is None
     untouched = interp.trim_to_reachable(path[2:8], (1, 20), (1, 20), rate_hz=30.0, min_seconds=0.1)
     np.testing.assert_array_equal(untouched, path[2:8])
+
+
+def _masked_nearest(points, state, performance, label, num_labels, performer):
+    """The candidate search written out plainly: for each point and label, the
+    nearest (float64) point of that label sharing a contact bit, of another
+    performance (and, second, of the point's own performer)."""
+    d2 = ((points[:, None, :].astype(np.float64) - points[None, :, :]) ** 2).sum(-1)
+    ok = ((state[:, None] & state[None, :]) != 0) & (performance[:, None] != performance[None, :])
+    out = np.full((len(points), num_labels, 2), -1)
+    for v, mask in enumerate((ok, ok & (performer[:, None] == performer[None, :]))):
+        for lab in range(num_labels):
+            d = np.where(mask & (label[None, :] == lab), d2, np.inf)
+            k = np.argmin(d, axis=1)
+            some = np.isfinite(d[np.arange(len(points)), k])
+            out[some, lab, v] = k[some]
+    return out
+
+
+def test_candidate_search_finds_the_masked_nearest_on_any_number_of_threads():
+    """`best_per_label` (BLAS products, one compiled pass of masks and minima, row
+    blocks on threads) against the plain masked nearest, on points spread far enough
+    apart that float32 rounding cannot swap two; the same on 1 and 3 threads."""
+    rng = np.random.default_rng(4)
+    M, L = 1300, 5  # (more than two row blocks of 512)
+    points = rng.normal(size=(M, 6)).astype(np.float32) * 10.0
+    state = rng.integers(1, 4, M)
+    performance = rng.integers(0, 40, M)
+    performer = performance % 3
+    label = rng.integers(0, L, M)
+    label[label == 4] = 3  # (a label without points: no candidate)
+    one = br.best_per_label(points, state, performance, label, L, performer, jobs=1)
+    three = br.best_per_label(points, state, performance, label, L, performer, jobs=3)
+    np.testing.assert_array_equal(one[0], three[0])
+    np.testing.assert_array_equal(one[1], three[1])
+    want = _masked_nearest(points, state, performance, label, L, performer)
+    np.testing.assert_array_equal(one[0], want)
+    assert (one[0][:, 4] == -1).all() and np.isinf(one[1][:, 4]).all()
+    found = one[0] >= 0
+    rows = np.nonzero(found)[0]
+    exact = ((points[rows].astype(np.float64) - points[one[0][found]]) ** 2).sum(-1)
+    np.testing.assert_allclose(one[1][found], exact, rtol=1e-4)
+    alone = br.best_per_label(points, state, performance, label, L)  # without performers: one variant
+    np.testing.assert_array_equal(alone[0][..., 0], want[..., 0])
+
+
+def test_features_at_some_frames_are_those_of_every_frame(kb):
+    """The candidates' features computed at their frames only are, bit for bit, the
+    rows of every frame's (each frame's window and clamping within its own clip)."""
+    from graphsvc.graph.metadata import ground_and_heading
+    from graphsvc.motion.joints import CANONICAL
+
+    clips = kb[:3]
+    sk = clips[0].skeleton
+    table = joint_map(sk)
+    canon, ground, heading = [], [], []
+    for clip in clips:
+        _, pos = forward_kinematics(clip.rotations, clip.translations, sk.parents)
+        g, h = ground_and_heading(pos, table)
+        canon.append(pos[:, [table[c] for c in CANONICAL]])
+        ground.append(g)
+        heading.append(h)
+    canon, ground, heading = np.concatenate(canon), np.concatenate(ground), np.concatenate(heading)
+    start = np.r_[0, np.cumsum([c.num_frames for c in clips])]
+    frames = np.array([0, 1, 5, start[1] - 1, start[1], start[1] + 2, start[2] + 3, start[3] - 1])
+    full = br.match_features(canon, ground, heading, start, 30.0)
+    np.testing.assert_array_equal(br.match_features(canon, ground, heading, start, 30.0, frames), full[frames])
+    every = br.body_features(canon, ground, start, 7)
+    some = br.body_features(canon, ground, start, 7, frames)
+    for name in ("x", "z", "y", "norm2", "mean_xz"):
+        np.testing.assert_array_equal(getattr(some, name), getattr(every, name)[frames])
+    # Every frame's clouds are those `pose_features` makes of each clip alone.
+    from graphsvc.graph.distance import pose_features
+
+    rel = canon.copy()
+    rel[..., 0] -= ground[:, None, 0]
+    rel[..., 2] -= ground[:, None, 1]
+    second = pose_features(rel[start[1] : start[2]], 7)
+    np.testing.assert_array_equal(every.x[start[1] : start[2]], second.x)
+
+
+def test_world_summaries_chunk_by_chunk_are_those_of_all_frames(kb):
+    from graphsvc.motion.placement import relative_pose
+
+    clip = kb[1]
+    sk = clip.skeleton
+    heading = np.linspace(0.0, 2.0, clip.num_frames)
+    rot, pos = forward_kinematics(clip.rotations, clip.translations, sk.parents)
+    rel, height = relative_pose(rot, pos, heading, 1)
+    canon, rel_c, height_c = br.world_summaries(clip.rotations, clip.translations, heading, sk.parents, 1, [0, 3], 17)
+    np.testing.assert_array_equal(canon, pos[:, [0, 3]])
+    np.testing.assert_array_equal(rel_c, rel)
+    np.testing.assert_array_equal(height_c, height)

@@ -136,3 +136,44 @@ def test_format_lists_the_table(graphs):
     assert "largest strongly connected component" in text
     for k, name in enumerate(sorted(KINDS)):
         assert f"{k + 1:>2d} {name}" in text
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_label_hops_match_scipy_shortest_paths_on_random_graphs(seed):
+    """The breadth-first search against scipy's unweighted shortest paths, and the
+    label-by-label reduction against the median and minimum of the full matrix, on
+    random sparse graphs with a node mask, self loops and repeated edges."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from graphsvc.graph.connectivity import label_hops, label_reach
+
+    rng = np.random.default_rng(seed)
+    N, E, L = 400, 700, 5
+    src, dst = rng.integers(0, N, E), rng.integers(0, N, E)
+    src[:20] = dst[:20]
+    src[20:40], dst[20:40] = src[40:60], dst[40:60]
+    labels = rng.integers(0, L, N)
+    labels[labels == 3] = 2  # label 3 has no node
+    allowed = rng.random(N) > 0.1
+    hops = label_hops(src, dst, labels, L, allowed)
+    keep = allowed[src] & allowed[dst]
+    reverse = csr_matrix((np.ones(int(keep.sum())), (dst[keep], src[keep])), shape=(N, N))
+    for b in range(L):
+        sources = np.flatnonzero((labels == b) & allowed)
+        want = np.full(N, np.inf)
+        if sources.size:
+            want = dijkstra(reverse, directed=True, indices=sources, unweighted=True, min_only=True)
+        want[~allowed] = np.inf
+        np.testing.assert_array_equal(hops[b], want)
+    shortest, typical = label_reach(src, dst, labels, L, allowed)
+    for a in range(L):
+        nodes = (labels == a) & allowed
+        for b in range(L):
+            if not nodes.any() or b == 3:
+                assert np.isnan(shortest[a, b]) and np.isnan(typical[a, b])
+                continue
+            assert shortest[a, b] == hops[b, nodes].min()
+            assert typical[a, b] == np.median(hops[b, nodes].astype(np.float64))
+    assert np.isnan(typical[3]).all()
+    assert np.isfinite(typical[0, 1]) and typical[0, 1] > 0

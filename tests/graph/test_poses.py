@@ -164,3 +164,14 @@ def test_altered_pose_arrays_are_refused(built, tmp_path, name, value, says):
     write_container(path, KIND, meta, arrays, version)
     with pytest.raises(FormatError, match=says):
         load_graph(path)
+
+
+def test_drain_concatenates_and_frees_the_parts():
+    from graphsvc.graph.rows import drain
+
+    parts = [np.arange(6).reshape(3, 2), np.zeros((0, 2), int), np.arange(4).reshape(2, 2) + 10]
+    want = np.concatenate(parts)
+    got = drain(parts, (0, 2), int)
+    np.testing.assert_array_equal(got, want)
+    assert parts == []
+    assert drain([], (0, 3), np.float32).shape == (0, 3)
