@@ -35,6 +35,7 @@ from graphsvc.graph.distance import (
     take,
     window_frames,
 )
+from graphsvc.graph.labels import AUGMENTED_SUFFIX, clip_frame_labels, content_label, node_labels
 from graphsvc.graph.model import (
     EDGE_BRIDGE,
     EDGE_INTERP,
@@ -56,7 +57,6 @@ from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
 from graphsvc.heap import release_free_memory
 from graphsvc.motion import augment as aug
 from graphsvc.motion import quat, signals
-from graphsvc.motion.augment import mirror_label
 from graphsvc.motion.joints import CANONICAL, joint_map
 from graphsvc.motion.kinematics import forward_kinematics, motion_fk
 from graphsvc.motion.library import find_motion_files, load_motion
@@ -389,9 +389,9 @@ def build_graph(
         report.timings["interpolation_s"] = time.perf_counter() - t0
     clips = [_spent(c) for c in clips]  # (before the bridges, the build's memory peak)
     release_free_memory()
-    per_frame = [_clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
-    labels = sorted({_content(m.motion) for m in clips} | {x for f in per_frame if f is not None for x in f})
-    label_of_clip = np.array([labels.index(_content(c.motion)) for c in clips], dtype=np.int32)
+    per_frame = [clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
+    labels = sorted({content_label(m.motion) for m in clips} | {x for f in per_frame if f is not None for x in f})
+    label_of_clip = np.array([labels.index(content_label(c.motion)) for c in clips], dtype=np.int32)
     bridges = []
     if options.bridges:
         t0 = time.perf_counter()
@@ -442,7 +442,7 @@ def build_graph(
         node_clip=node_clip,
         node_frame=node_frame,
         node_contacts=drain(node_parts["contacts"], (0, 2), bool),
-        node_label=_node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, node_frame),
+        node_label=node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, node_frame),
         **poses.arrays(),
         node_ground=drain(node_parts["ground"], (0, 2), np.float32),
         node_heading=drain(node_parts["heading"], (0,), np.float32),
@@ -485,51 +485,7 @@ def _clip_record(clip: PreparedClip, frames: int, first_node: int) -> dict:
 
 def _performance(motion: Motion) -> tuple[str, str]:
     """What identifies one recorded performance across its augmented copies."""
-    return motion.source, re.sub(r"(_mirror|_reverse)+$", "", motion.name)
-
-
-def _content(motion: Motion) -> str:
-    return motion.labels[0] if motion.labels else motion.name
-
-
-def _clip_frame_labels(motion: Motion, frame_labels: dict | None, frames: int) -> np.ndarray | None:
-    """The clip's per-frame labels from `build_graph`'s frame_labels (by its name, or its
-    original's for a mirrored or reversed copy), at `frames` frames (nearest), or None."""
-    if not frame_labels:
-        return None
-    if motion.name in frame_labels:
-        out = np.asarray(frame_labels[motion.name], dtype=str)
-    else:
-        base = _performance(motion)[1]
-        if base not in frame_labels:
-            return None
-        out = np.asarray(frame_labels[base], dtype=str)
-        suffixes = motion.name[len(base) :]  # (mirroring and reversing commute on labels)
-        if "_reverse" in suffixes:
-            out = out[::-1]
-        if "_mirror" in suffixes:
-            out = np.array([mirror_label(x) for x in out], dtype=str)
-    if len(out) != frames:  # (resampled to the graph rate)
-        out = out[np.minimum(np.round(np.arange(frames) * len(out) / max(frames, 1)).astype(np.int64), len(out) - 1)]
-    return out
-
-
-def _node_labels(per_frame, labels, label_of_clip, start, lengths, node_clip, node_frame) -> np.ndarray:
-    """(N,) int32 each node's label: its clip's, or, where the clip has per-frame
-    labels, that of the frame it comes from (`node_frame`, the first clip's frame for
-    interpolated nodes, the source frame for bridges)."""
-    if all(f is None for f in per_frame):
-        return label_of_clip[node_clip]
-    flat = np.concatenate(
-        [
-            np.full(int(lengths[k]), label_of_clip[k], dtype=np.int32)
-            if f is None
-            else np.array([labels.index(x) for x in f], dtype=np.int32)
-            for k, f in enumerate(per_frame)
-        ]
-    )
-    frame = np.clip(np.floor(node_frame).astype(np.int64), 0, np.asarray(lengths)[node_clip] - 1)
-    return flat[np.asarray(start)[node_clip] + frame]
+    return motion.source, re.sub(AUGMENTED_SUFFIX, "", motion.name)
 
 
 def _params(options: BuildOptions, layout: Layout, window: int) -> dict:
@@ -594,7 +550,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     rate = options.rate_hz
     by_label: dict[str, list[int]] = {}
     for c, clip in enumerate(clips):
-        by_label.setdefault(_content(clip.motion), []).append(c)
+        by_label.setdefault(content_label(clip.motion), []).append(c)
     # Ranking looks at every `step`-th frame only (0.1 s apart): a ninth of the cells,
     # enough to tell which clips share long similar stretches.
     step = max(1, int(round(rate / 10.0)))
