@@ -15,8 +15,14 @@ per KB frame, the build's stages in seconds (its `times:` line), wall and CPU se
 peak RSS, the connectivity report's largest share, and the growth exponent of every
 figure against the previous size (log ratio over log of the frames' ratio).
 
+With --live DIR each graph is also served and streamed as `tools/bench_live_scale.py`
+does it (DIR: held-out `.rec` recordings in the default wrists-ankles layout; --markers
+DIR: marker recordings for the SSG), its JSON under "live": the server's load, each
+strategy's figures a frame. Leave the recordings' clips out of every build with
+--exclude GLOB (a file-name pattern, e.g. '*_004.bvh').
+
 Usage: tools/bench_scale.py [DATA] [--sizes 76000,300000,600000,1030000] [--jobs 2]
-    [--max-rss-gb 7] [--keep DIR]
+    [--max-rss-gb 7] [--keep DIR] [--exclude GLOB] [--live DIR [--markers DIR] [--seconds 60]]
 
 A build whose tree passes --max-rss-gb is killed and reported as such (the machine is
 shared). Sizes above the whole set are skipped.
@@ -25,6 +31,7 @@ shared). Sizes above the whole set are skipped.
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import math
 import os
@@ -143,9 +150,13 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--max-rss-gb", type=float, default=7.0, help="kill a build whose tree passes this")
     parser.add_argument("--keep", help="keep the graph files in this folder")
+    parser.add_argument("--exclude", action="append", default=[], metavar="GLOB", help="leave out matching files")
+    parser.add_argument("--live", metavar="DIR", help="held-out .rec recordings: each graph's live figures too")
+    parser.add_argument("--markers", metavar="DIR", help="with --live: marker recordings for the SSG")
+    parser.add_argument("--seconds", type=float, default=60.0, help="with --live: seconds a live stream")
     args = parser.parse_args()
     data = Path(args.data)
-    files = source_files(data)
+    files = [f for f in source_files(data) if not any(fnmatch.fnmatch(f.name, g) for g in args.exclude)]
     if not files:
         sys.exit(f"bench_scale: no motion files under {data}")
     frames = [clip_frames(f) for f in files]
@@ -172,6 +183,12 @@ def main() -> None:
                 subprocess.run([exe, "info", str(graph), "--json"], capture_output=True, text=True).stdout
             )
             size_bytes = graph.stat().st_size
+            if args.live:
+                live = [sys.executable, str(ROOT / "tools" / "bench_live_scale.py"), str(graph)]
+                live += ["--recordings", args.live, "--seconds", str(args.seconds)]
+                live += ["--markers", args.markers] if args.markers else []
+                done = subprocess.run(live, capture_output=True, text=True)
+                row["live"] = json.loads(done.stdout) if done.returncode == 0 else {"error": done.stderr[-400:]}
         kb = info["kb_frames"]
         row.update(
             {

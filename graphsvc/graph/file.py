@@ -12,7 +12,7 @@ import numpy as np
 
 from graphsvc.errors import FormatError
 from graphsvc.fileio import StrPath
-from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.model import EDGE_ARRAYS, NODE_ARRAYS, MotionGraph
 from graphsvc.graph.poses import pack_poses
 from graphsvc.motion.skeleton import Skeleton
 from graphsvc.sensors.layout import ROOT_SEGMENT
@@ -24,25 +24,11 @@ FORMAT_VERSION = 3  # 2: bridge nodes and edges (kind 3 / 5) and their records; 
 READABLE_VERSIONS = (1, 2, 3)  # 1 and 2 store float32 poses, packed on load
 ARRAYS = (
     "clip_offsets",
-    "node_kind",
-    "node_clip",
-    "node_frame",
-    "node_contacts",
-    "node_label",
-    "node_rot64",
-    "node_moving",
-    "node_bones",
+    *NODE_ARRAYS,
     "bone_sets",
     "moving_joints",
     "rotating_joints",
-    "node_ground",
-    "node_heading",
-    "edge_src",
-    "edge_dst",
-    "edge_kind",
-    "edge_acc",
-    "edge_offset",
-    "edge_heading",
+    *EDGE_ARRAYS,
     "incoming",
 )
 OPTIONAL = ("edge_up",)  # absent from files written before it (loaded as None)

@@ -17,7 +17,8 @@ contiguous run (`incoming`, CSR offsets) — the access pattern of the Viterbi s
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -117,11 +118,69 @@ class MotionGraph:
         return np.bincount(self.edge_src, minlength=self.num_nodes)
 
 
+# A graph's arrays of one row a node and one row an edge (`MotionGraph`), as stored.
+NODE_ARRAYS = (
+    "node_kind",
+    "node_clip",
+    "node_frame",
+    "node_contacts",
+    "node_label",
+    "node_rot64",
+    "node_moving",
+    "node_bones",
+    "node_ground",
+    "node_heading",
+)
+EDGE_ARRAYS = ("edge_src", "edge_dst", "edge_kind", "edge_acc", "edge_offset", "edge_heading")
+
+
 def incoming_offsets(edge_dst: np.ndarray, num_nodes: int) -> np.ndarray:
     """CSR offsets (N + 1,) of edges sorted by destination."""
     out = np.zeros(num_nodes + 1, dtype=np.int64)
     np.cumsum(np.bincount(edge_dst, minlength=num_nodes), out=out[1:])
     return out
+
+
+def node_subgraph(graph: MotionGraph, nodes) -> MotionGraph:
+    """The graph's nodes `nodes` (ids, any order; renumbered in increasing order) and the
+    edges among them, with its skeleton, layout, clips, labels and bone sets, and the
+    segments and bridges whose nodes are all kept: a graph whose arrays have the whole
+    one's types at a fraction of its size (what a warm-up runs on,
+    `strategies.viterbi.strategy.warm_up`). Not loaded from a file: no source path or
+    checksum."""
+    nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+    if nodes.size == 0 or nodes[0] < 0 or nodes[-1] >= graph.num_nodes:
+        raise ValueError(f"node_subgraph: node ids must lie in 0..{graph.num_nodes - 1}")
+    new_id = np.full(graph.num_nodes, -1, dtype=np.int64)
+    new_id[nodes] = np.arange(nodes.size)
+    # the edges into the kept nodes (edges are numbered by destination), then those from kept nodes
+    starts, counts = graph.incoming[nodes], np.diff(graph.incoming)[nodes]
+    into = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    keep = into[new_id[np.asarray(graph.edge_src)[into]] >= 0]
+    edges = {name: np.ascontiguousarray(getattr(graph, name)[keep]) for name in EDGE_ARRAYS[2:]}  # (ends: below)
+    edge_dst = new_id[np.asarray(graph.edge_dst)[keep]].astype(np.int32)
+
+    def kept(parts: list[dict]) -> list[dict]:
+        out = []
+        for p in parts:
+            first, last = int(p["first_node"]), int(p["first_node"]) + int(p["count"]) - 1
+            if new_id[first] >= 0 and new_id[last] - new_id[first] == last - first:
+                out.append({**p, "first_node": int(new_id[first])})
+        return out
+
+    fields: dict[str, Any] = {name: np.ascontiguousarray(getattr(graph, name)[nodes]) for name in NODE_ARRAYS}
+    fields.update(
+        edges,
+        edge_src=new_id[np.asarray(graph.edge_src)[keep]].astype(np.int32),
+        edge_dst=edge_dst,
+        incoming=incoming_offsets(edge_dst, nodes.size),
+        edge_up=None if graph.edge_up is None else np.ascontiguousarray(graph.edge_up[keep]),
+        segments=kept(graph.segments),
+        bridges=kept(graph.bridges),
+        source_path=None,
+        checksum=None,
+    )
+    return replace(graph, **fields)
 
 
 def summary(graph: MotionGraph, file_size: int | None = None) -> dict:

@@ -9,8 +9,12 @@ process the threads queue for the one GIL: that server stopped at 1.23 of 2 core
 message and the encoding of the frames in its own process, and runs the sessions in
 `count` worker processes, where one thread pushes the sessions' samples one after
 another (a stream keeps its worker for life; a new stream goes to the worker with
-fewest). The graphs are memory-mapped, so their pages are shared by every process;
-each worker makes its own indexes and tables at start. A session's start is heavy (40–
+fewest). The graphs are memory-mapped, so their pages are shared by every process,
+and so are the strategies' indexes and tables, mapped from their cache files beside
+each graph (`strategies.index`). A worker maps a graph without hashing it again: it
+reports the checksum the file's trailer records, and the front, which verified the
+file's bytes, refuses a worker whose graph is not the one it verified (the file
+replaced meanwhile). A session's start is heavy (40–
 160 ms in one push), so its first YOUNG_S seconds of samples, its opening and its
 flush run on a second thread of the worker, beside the other sessions' pushes rather
 than ahead of them. Measured on 2 cores shared with the clients: 24 streams started
@@ -83,13 +87,13 @@ def _worker_main(conn, graph_paths: dict[str, str]) -> None:
     try:
         graphs = {}
         for name, path in graph_paths.items():
-            graphs[name] = load_graph(Path(path))
+            graphs[name] = load_graph(Path(path), verify=False)  # (the front verifies the bytes)
             warm_up(graphs[name], threads=False)
             warm_up(graphs[name], threads=True)
     except BaseException as exc:  # noqa: BLE001 — told to the front, which refuses to start
         conn.send((None, "error", f"{type(exc).__name__}: {exc}"))
         return
-    conn.send((None, "ok", os.getpid()))
+    conn.send((None, "ok", (os.getpid(), {name: g.checksum for name, g in graphs.items()})))
 
     sessions: dict = {}
     young: dict[int, int] = {}  # session → pushes still to go to the side thread
@@ -270,6 +274,9 @@ class LiveWorkers:
         self._stopping = False
         self.restart_delay_s = float(restart_delay_s)
         self.replaced = 0  # workers that died and were started again
+        # name → SHA-256 of each graph as the front verified it (`expect`); a worker
+        # that mapped other bytes is refused.
+        self.checksums: dict[str, str] = {}
 
     # ------------------------------------------------------------ lifetime
 
@@ -283,6 +290,11 @@ class LiveWorkers:
         """Start the worker processes (they load the graphs meanwhile); returns at once."""
         if not self._pending and not any(self._workers):
             self._pending = [self._spawn() for _ in range(self.count)]
+
+    def expect(self, checksums: dict[str, str]) -> None:
+        """The graphs' checksums as the front verified them (name → SHA-256 hex): a
+        worker ready after this with other bytes mapped is refused."""
+        self.checksums = dict(checksums)
 
     def wait_ready(self) -> None:
         """Wait until every launched worker is ready (`start`)."""
@@ -316,7 +328,15 @@ class LiveWorkers:
             ) from None
         if status != "ok":
             raise GraphsvcError(f"live worker {process.pid} could not load the graphs: {value}")
-        worker = _Worker(index, process, conn, value)
+        pid, checksums = value
+        changed = sorted(n for n, c in self.checksums.items() if checksums.get(n) != c)
+        if changed:
+            process.kill()
+            raise GraphsvcError(
+                f"live worker {pid}: the graph file of {', '.join(changed)} is not the one the server verified"
+                " (replaced while the server started?)"
+            )
+        worker = _Worker(index, process, conn, pid)
         threading.Thread(
             target=self._receive, args=(worker,), name=f"graphsvc-live-worker-{index}", daemon=True
         ).start()

@@ -334,6 +334,7 @@ def start_server(
         if workers is None and config.live_workers:
             workers = LiveWorkers({n: g.path for n, g in graphs.items()}, config.live_workers)
         if workers is not None:
+            workers.expect({n: g.graph.checksum for n, g in graphs.items()})
             workers.start()
         bound.servicer.take(graphs, batches, workers)
         if bound.metrics is not None:

@@ -74,6 +74,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from graphsvc.graph.derived import derived
 from graphsvc.graph.model import EDGE_ORIGINAL, MotionGraph
 from graphsvc.graph.poses import node_rotations, node_translations
 from graphsvc.motion.skeleton import Motion
@@ -163,20 +164,13 @@ class RefineIndex:
         return self.oriented[weight]
 
 
-_WHOLE: dict = {}  # graph id → (graph, its index with nothing hidden): a server's sessions share it
-
-
 def refine_index(graph: MotionGraph, allowed: np.ndarray | None = None) -> RefineIndex:
     """The index over the frames `allowed` (N,) leaves usable (None: all; that one is
-    made once per graph and kept)."""
-    whole = allowed is None or bool(np.all(allowed))
-    if whole and id(graph) in _WHOLE and _WHOLE[id(graph)][0] is graph:
-        return _WHOLE[id(graph)][1]
-    index = _make_index(graph, None if whole else allowed)
-    if whole:
-        _WHOLE.clear()  # (one graph a process in practice: the last one kept)
-        _WHOLE[id(graph)] = (graph, index)
-    return index
+    made once per graph object and kept while the graph is, `graph.derived`: a server's
+    sessions share it)."""
+    if allowed is None or bool(np.all(allowed)):
+        return derived(graph, "refine.index", lambda: _make_index(graph, None))
+    return _make_index(graph, allowed)
 
 
 def _make_index(graph: MotionGraph, allowed: np.ndarray | None) -> RefineIndex:
@@ -184,7 +178,8 @@ def _make_index(graph: MotionGraph, allowed: np.ndarray | None) -> RefineIndex:
     keep = slice(None) if allowed is None else np.asarray(allowed, dtype=bool)[arrays["nodes"]]
     windows = np.asarray(arrays["windows"][keep], dtype=np.float64)
     edges = np.asarray(arrays["edges"][keep], dtype=np.int64)
-    cue = None if graph.edge_up is None else np.asarray(graph.edge_up, dtype=np.float64)[edges].reshape(edges.size, -1)
+    # (the frames' edges gathered first: the whole edge_up in float64 is 1.2 GB on a 12.5M-edge graph)
+    cue = None if graph.edge_up is None else np.asarray(graph.edge_up[edges], dtype=np.float64).reshape(edges.size, -1)
     return RefineIndex(
         windows,
         np.asarray(arrays["poses"][keep], dtype=np.float64),

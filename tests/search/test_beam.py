@@ -230,3 +230,33 @@ def test_between_the_shares_a_beam_search_steps_the_way_its_past_steps_predict_i
     search._time_beam_step(False, 4e-3, 0)
     assert search._step_seconds[1] == pytest.approx(4e-3)
     assert not ViterbiSearch(g, UNPLACED).narrow  # the exact search
+
+
+def test_narrow_steps_on_a_large_graph_reset_only_their_rows_survivors(monkeypatch):
+    # Few live paths among many nodes: a sparse step lists the nodes it reaches by sorting
+    # them (not a scan of every node's mark) and resets only the entries an earlier beam
+    # step left in its lattice row. The same costs and path as the exact passes and a
+    # cut, sample by sample, and every row reused from the ring holds exactly the live
+    # nodes' arrivals.
+    from graphsvc.strategies.viterbi.beam import MARKS_SCAN_SHARE
+
+    rng = np.random.default_rng(21)
+    g = random_graph(rng, N=6000, out=3)
+    meas, position, heading = _inputs(rng, g, 60)
+    runs = []
+    for steps in (SPARSE, DENSE):
+        _steps(monkeypatch, steps)
+        search = ViterbiSearch(g, PLACED, beam=5.0, ring=(8, 4))
+        search.max_live = 8
+        search.start(position[0], heading[0])
+        costs = []
+        for t in range(1, len(meas)):
+            search.step(meas[t], position[t], heading[t])
+            live = search._live[: search._n_live]
+            row = search.arrivals[(search.first + search.used - 1) % search.arrivals.shape[0]]
+            np.testing.assert_array_equal(np.flatnonzero(row != search.none), live)
+            assert 3 * len(live) * MARKS_SCAN_SHARE < g.num_nodes  # (the sort, not the scan)
+            costs.append(search.cost.copy())
+        runs.append((np.array(costs), search.trace(search.best_node())[0]))
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])

@@ -214,6 +214,24 @@ def test_a_worker_that_cannot_load_its_graphs_stops_the_start(tmp_path):
         workers.start()
 
 
+def test_a_worker_whose_graph_is_not_the_verified_one_is_refused(graph_file, graph):
+    from graphsvc.errors import GraphsvcError
+    from graphsvc.service.live_workers import LiveWorkers
+
+    workers = LiveWorkers({"g": graph_file}, 1)
+    workers.expect({"g": "0" * 64})  # (what the front would have verified: other bytes)
+    with pytest.raises(GraphsvcError, match="the graph file of g is not the one the server verified"):
+        workers.start()
+    workers.stop()
+    workers = LiveWorkers({"g": graph_file}, 1)
+    workers.expect({"g": graph.checksum})
+    workers.start()
+    try:
+        assert len(workers.pids()) == 1
+    finally:
+        workers.stop()
+
+
 def test_the_default_count_is_one_a_core_and_none_on_one_core(monkeypatch):
     from graphsvc.service import live_workers
 

@@ -254,6 +254,10 @@ class ViterbiSearch(SurvivorMemory):
         self.incoming = tables["incoming"]
         self._best_edge = np.full(N, -1, dtype=np.int32)
         self._init_memory(N, window, ring)
+        # For each lattice row, the nodes whose entries a beam step may have left set
+        # (its survivors), or None after a dense pass (every entry written): a beam
+        # step resets only those (`_beam_step`). The ring starts all `none`.
+        self._row_written_nodes: list[np.ndarray | None] = [np.zeros(0, np.int32)] * self.arrivals.shape[0]
         self.t = -1
 
     # A beam search steps sparsely (`beam._beam_step_py`: only the nodes its live paths reach,
@@ -423,6 +427,8 @@ class ViterbiSearch(SurvivorMemory):
         use_pos = self.placed and wp != 0.0 and position is not None and bool(np.all(np.isfinite(position)))
         use_head = self.placed and wh != 0.0 and heading is not None and bool(np.isfinite(heading))
         narrow = self.narrow
+        if not narrow:  # (a dense pass writes every entry of the row)
+            self._row_written_nodes[(self.first + self.used) % self.arrivals.shape[0]] = None
         timed = self._may_thread and not narrow  # (narrow beam steps: too short to time)
         if timed:
             threaded = self._timer.choose()
@@ -627,6 +633,10 @@ class ViterbiSearch(SurvivorMemory):
         returns the survivors."""
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
         kernel = _beam_step if self._kernels is _THREADED else _beam_step_serial
+        row = (self.first + self.used) % self.arrivals.shape[0]  # (arrivals is this row)
+        written = self._row_written_nodes[row]
+        if written is not None:
+            arrivals[written] = self.none  # (the only entries an earlier beam step left set)
         live, low = kernel(
             self._live,
             self._n_live,
@@ -668,12 +678,14 @@ class ViterbiSearch(SurvivorMemory):
             self._det_new,
             arrivals,
             self.none,
+            written is None,
             *ancestors,
             self._beam_low,
             pull,
         )
         self._live, self._live_before = self._live_before, self._live
         self._n_live, self._n_live_before = live, self._n_live
+        self._row_written_nodes[row] = self._live[:live].copy()  # (a bound may only set more of them to none)
         if live:
             self.low = low
         self._c32_stale = True

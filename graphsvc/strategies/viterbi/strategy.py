@@ -10,13 +10,16 @@ index (`tables.SearchIndex`), made at load by the warm-up.
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from collections import deque
+from pathlib import Path
 
 import numpy as np
 
 from graphsvc.errors import SearchCancelled
-from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.file import load_graph, save_graph
+from graphsvc.graph.model import MotionGraph, node_subgraph
 from graphsvc.motion.skeleton import Motion
 from graphsvc.sensors.noise import CausalTrackHeading
 from graphsvc.strategies.base import Strategy
@@ -33,6 +36,7 @@ from graphsvc.strategies.viterbi.batch import (
     warm_up_search,
     warm_up_search_once,
 )
+from graphsvc.strategies.viterbi.beam import _immortal
 from graphsvc.strategies.viterbi.options import ViterbiOptions
 from graphsvc.strategies.viterbi.stream import FixedLagDecoder
 from graphsvc.strategies.viterbi.tables import SearchIndex, search_index
@@ -372,11 +376,51 @@ ViterbiStrategy.session_class = ViterbiSession
 STRATEGY = ViterbiStrategy()
 
 
+# Above this many nodes the warm-up's searches run on a subgraph of about this many
+# (`warm_up`): dense steps cost in proportion to the nodes, and on a 9.3M-node graph
+# the whole graph's warm-up took 306 s of a server's start.
+WARM_UP_NODES = 50_000
+
+
 def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     """Run a few samples through a live session and a batch search, so numba's
     compilation (or loading from its cache) and the graph's search tables are paid at
-    load, not by the first client. Returns the seconds it took."""
+    load, not by the first client. Returns the seconds it took.
+
+    On a graph of a file with more than WARM_UP_NODES nodes the tables are made (or
+    mapped from their cache) for the graph, and the samples run on a subgraph of it
+    saved to a temporary file and mapped as the graph is, so every kernel sees the
+    argument types a search of the graph passes (read-only mapped arrays, the same
+    dtypes: the subgraph keeps the node with the most incoming edges and its
+    predecessors, which set the width of the arrivals' type). Graphs built in memory,
+    small ones, and those whose subgraph has no cycle (every search on it would run
+    into a dead end) warm up on themselves."""
     t0 = time.perf_counter()
+    if graph.source_path is None or graph.num_nodes <= WARM_UP_NODES:
+        _warm_up_on(graph, threads)
+        return time.perf_counter() - t0
+    index = search_index(graph)
+    _ = index.tables, index.float32, index.beam  # (mapped from the cache beside the graph, made once)
+    degree = np.diff(graph.incoming)
+    busiest = int(np.argmax(degree))
+    nodes = np.concatenate(
+        [np.arange(WARM_UP_NODES), [busiest], graph.edge_src[graph.incoming[busiest] : graph.incoming[busiest + 1]]]
+    )
+    small = node_subgraph(graph, nodes)
+    if not _immortal(small.incoming, small.edge_src, np.ones(small.num_nodes, dtype=bool)).any():
+        _warm_up_on(graph, threads)  # (no path goes on forever there: the searches would find none)
+        return time.perf_counter() - t0
+    with tempfile.TemporaryDirectory(prefix="graphsvc-warm-up-", ignore_cleanup_errors=True) as folder:
+        path = Path(folder) / "warm-up.graph"
+        save_graph(small, path)
+        del small
+        _warm_up_on(load_graph(path, verify=False), threads)
+    index.warmed.update((True, False) if threads else (False,))
+    warm_up_synthesis(graph)
+    return time.perf_counter() - t0
+
+
+def _warm_up_on(graph: MotionGraph, threads: bool) -> None:
     S = len(graph.sensor_names)
     rng = np.random.default_rng(0)
     T = 48
@@ -392,4 +436,3 @@ def warm_up(graph: MotionGraph, threads: bool = False) -> float:
     session.flush()
     warm_up_search(graph, threads)  # (batch searches too)
     warm_up_synthesis(graph)
-    return time.perf_counter() - t0
