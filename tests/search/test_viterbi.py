@@ -365,8 +365,10 @@ def test_walk_back_lists_the_rows_nodes_as_plain_sets_do():
             cost = np.where(newest != self.none, 0.0, np.inf)
             for lowest in (0, self.used // 2, self.used - 1):
                 want = _levels_by_sets(*args, 0, self.incoming, self.edge_src, ancestor, cost, lowest)[2]
-                assert V._converged_row(*args, lowest, *scratch[:2], self.none, self.alive_map) == want
-                assert not self.alive_map.any()
+                for live in (np.zeros(0, np.int32), np.flatnonzero(newest != self.none).astype(np.int32)):
+                    # (the row scanned for its alive nodes, or given them, as a beam search does)
+                    assert V._converged_row(*args, lowest, *scratch[:2], self.none, self.alive_map, live) == want
+                    assert not self.alive_map.any()
             super()._flush()
 
     rng = np.random.default_rng(9)

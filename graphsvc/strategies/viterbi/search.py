@@ -628,6 +628,13 @@ class ViterbiSearch(SurvivorMemory):
             dense = seconds if dense is None else 0.75 * dense + 0.25 * seconds
         self._step_seconds = (per_node, dense)
 
+    def _newest_nodes(self) -> np.ndarray:
+        # A beam search's live nodes are exactly those with an arrival in the newest row
+        # (every other entry `none`: the beam's cut and the bound write it).
+        if self.beam is None or self._n_live == 0:
+            return np.zeros(0, dtype=np.int32)
+        return self._live[: self._n_live]
+
     def _beam_step(self, wa, wp, wh, use_pos, use_head, meas_pos, meas_heading, arrivals, ancestors, pull) -> int:
         """`step`'s passes for a beam search while few nodes are live (`beam._beam_step_py`);
         returns the survivors."""

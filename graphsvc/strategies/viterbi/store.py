@@ -128,18 +128,25 @@ def _block_levels(arrivals, first, used, flush, incoming, edge_src, alive, level
 
 
 @numba.njit(cache=True, nogil=True)
-def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, alive):
+def _converged_row(arrivals, first, used, lowest, incoming, edge_src, none, alive, live):
     """`_block_levels` without the lists, for the dense-window mode: the highest logical
     row in [lowest, used) where the paths of every node alive at the newest row pass
-    through a single node, or −1. Stops there (every older row then holds one node too)."""
+    through a single node, or −1. Stops there (every older row then holds one node too).
+    live: the nodes alive at the newest row, ascending, when the caller knows them (a
+    beam search's live list: the walk then costs what they are, not N); empty: found by
+    scanning the row."""
     R, N = arrivals.shape
     top = (first + used - 1) % R
-    nodes, preds = np.empty(N, np.int32), np.empty(N, np.int32)
-    count = 0
-    for n in range(N):
-        if arrivals[top, n] != none:
-            nodes[count] = n
-            count += 1
+    if live.shape[0]:
+        count = live.shape[0]
+        nodes, preds = live.astype(np.int32), np.empty(count, np.int32)
+    else:
+        nodes, preds = np.empty(N, np.int32), np.empty(N, np.int32)
+        count = 0
+        for n in range(N):
+            if arrivals[top, n] != none:
+                nodes[count] = n
+                count += 1
     few = max(N // SPARSE_SHARE, 16)
     for k in range(used - 1, lowest - 1, -1):
         if count == 1:

@@ -238,12 +238,25 @@ class SurvivorMemory:
         lowest = max(0, self.keep_from - t_first, self.converged_t + 1 - t_first)
         if lowest < self.used:
             row = _converged_row(
-                self.arrivals, self.first, self.used, lowest, self.incoming, self.edge_src, self.none, self.alive_map
+                self.arrivals,
+                self.first,
+                self.used,
+                lowest,
+                self.incoming,
+                self.edge_src,
+                self.none,
+                self.alive_map,
+                self._newest_nodes(),
             )
             if row >= 0:
                 self.converged_t = max(self.converged_t, t_first + row)
         self.first = (self.first + self.BLOCK) % self.arrivals.shape[0]
         self.used -= self.BLOCK
+
+    def _newest_nodes(self) -> np.ndarray:
+        """The nodes alive at the newest row, ascending (int32), where the search keeps
+        them (a beam search's live list); empty: `_slide` finds them in the row."""
+        return np.zeros(0, dtype=np.int32)
 
     def forget_before(self, t: int) -> None:
         """Let the next garbage collection drop survivors of samples before t: a
