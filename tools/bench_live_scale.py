@@ -3,7 +3,7 @@
 them, printed as one JSON object.
 
     .venv/bin/python tools/bench_live_scale.py GRAPH --recordings DIR [--markers DIR]
-        [--strategies viterbi,olng,ssg] [--seconds 60] [--beam 10] [--no-refine] [--skip-load]
+        [--strategies viterbi,olng,ssg] [--seconds 60] [--beam 10] [--no-refine] [--live-paths N] [--skip-load]
 
 GRAPH: a built graph whose knowledge base leaves out the recordings' clips (e.g. every
 shared clip but dataset 2's takes 004, `--exclude '*_004.bvh'`); DIR: `.rec`
@@ -92,7 +92,13 @@ def load_part(graph_path: str) -> dict:
 
 
 def live_part(
-    graph_path: str, recordings: list[str], strategy: str, seconds: float, beam: float, refine: bool = True
+    graph_path: str,
+    recordings: list[str],
+    strategy: str,
+    seconds: float,
+    beam: float,
+    refine: bool = True,
+    live_paths: int | None = None,
 ) -> dict:
     from bench_service import joined_recordings
 
@@ -106,7 +112,10 @@ def live_part(
     samples = int(round(seconds * rate))
     shared = SharedOptions(refine=refine)
     if strategy == "viterbi":
-        options = Options(strategy="viterbi", beam=beam, shared=shared)
+        from graphsvc.strategies.viterbi.options import ViterbiOptions
+
+        own = ViterbiOptions(beam=beam) if live_paths is None else ViterbiOptions(beam=beam, live_paths=live_paths)
+        options = Options(strategy="viterbi", own=own, shared=shared)
     else:
         options = Options(strategy=strategy, shared=shared)
     acc, pos, head = joined_recordings(recordings, samples + int(3 * rate), seed=0)
@@ -128,6 +137,7 @@ def live_part(
     return {
         "samples": samples,
         "refine": refine,
+        "live_paths": getattr(options.own, "live_paths", None),
         "steady_p50_ms": round(float(np.percentile(steady, 50)), 3),
         "steady_p99_ms": round(float(np.percentile(steady, 99)), 3),
         "steady_max_ms": round(float(steady.max()), 3),
@@ -178,6 +188,7 @@ def main() -> None:
     parser.add_argument("--beam", type=float, default=10.0)
     parser.add_argument("--skip-load", action="store_true", help="leave out the load part")
     parser.add_argument("--no-refine", action="store_true", help="live sessions without the pose refinement")
+    parser.add_argument("--live-paths", type=int, help="the Viterbi session's live paths (default: its own, 4096)")
     args = parser.parse_args()
     recordings = sorted(str(p) for p in Path(args.recordings).glob("*.rec"))
     if not recordings:
@@ -192,7 +203,7 @@ def main() -> None:
                 out["ssg"] = _in_process(ssg_part, args.graph, marks)
         else:
             out[name] = _in_process(
-                live_part, args.graph, recordings, name, args.seconds, args.beam, not args.no_refine
+                live_part, args.graph, recordings, name, args.seconds, args.beam, not args.no_refine, args.live_paths
             )
         print(json.dumps({name: out.get(name)}), file=sys.stderr, flush=True)
     print(json.dumps(out))

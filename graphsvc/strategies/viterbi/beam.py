@@ -112,6 +112,7 @@ def _beam_step_py(
     arrivals,
     none,
     clear,
+    reset,
     ancestor_prev,
     ancestor_new,
     chunk_low,
@@ -145,10 +146,13 @@ def _beam_step_py(
     the number of survivors and the lowest cost (which always survives).
 
     clear: set every entry of arrivals (this sample's lattice row) to `none` first;
-    False when the caller has reset the entries an earlier sample wrote (the row's
-    survivors then): a step then costs what its live nodes reach, not N."""
+    else only the entries reset (int32) lists — those an earlier beam step left set
+    there (its survivors): a step then costs what its live nodes reach, not N."""
     if clear:
         arrivals[:] = none
+    else:
+        for i in range(reset.shape[0]):
+            arrivals[reset[i]] = none
     for i in range(n_active):
         sources[active[i]] = 1
     count = 0

@@ -258,6 +258,7 @@ class ViterbiSearch(SurvivorMemory):
         # (its survivors), or None after a dense pass (every entry written): a beam
         # step resets only those (`_beam_step`). The ring starts all `none`.
         self._row_written_nodes: list[np.ndarray | None] = [np.zeros(0, np.int32)] * self.arrivals.shape[0]
+        self._no_reset = np.zeros(0, np.int32)
         self.t = -1
 
     # A beam search steps sparsely (`beam._beam_step_py`: only the nodes its live paths reach,
@@ -272,6 +273,10 @@ class ViterbiSearch(SurvivorMemory):
     # every node live they took 3 times an exact step on G_E.
     BEAM_DENSE_SHARE = 0.05
     BEAM_SPARSE_SHARE = 0.5
+    # A sparse step resets the entries its lattice row's last beam step left set while
+    # they are at most one node in ROW_RESET_SHARE, else fills the row (a fill of N
+    # bytes beats scattered writes of more than about N / 64 entries).
+    ROW_RESET_SHARE = 64
 
     @property
     def threads(self) -> bool:
@@ -641,9 +646,8 @@ class ViterbiSearch(SurvivorMemory):
         _reset_costs(self._state_new, self._live_before, self._n_live_before)
         kernel = _beam_step if self._kernels is _THREADED else _beam_step_serial
         row = (self.first + self.used) % self.arrivals.shape[0]  # (arrivals is this row)
-        written = self._row_written_nodes[row]
-        if written is not None:
-            arrivals[written] = self.none  # (the only entries an earlier beam step left set)
+        written = self._row_written_nodes[row]  # (the only entries an earlier beam step left set)
+        clear = written is None or written.shape[0] * self.ROW_RESET_SHARE > self.N  # (then a fill is cheaper)
         live, low = kernel(
             self._live,
             self._n_live,
@@ -685,7 +689,8 @@ class ViterbiSearch(SurvivorMemory):
             self._det_new,
             arrivals,
             self.none,
-            written is None,
+            clear,
+            self._no_reset if clear else written,
             *ancestors,
             self._beam_low,
             pull,

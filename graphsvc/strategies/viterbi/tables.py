@@ -250,7 +250,9 @@ class SearchIndex:
         with self._lock:
             if name not in self._made:
                 key = f"viterbi-{name}" + ("-oriented" if self.oriented else "")
-                self._made[name] = cached_arrays(self.graph, key, TABLES_VERSION, make)
+                self._made[name] = {
+                    k: _read_only(a) for k, a in cached_arrays(self.graph, key, TABLES_VERSION, make).items()
+                }
             return self._made[name]
 
     @property
@@ -273,6 +275,18 @@ class SearchIndex:
         """A beam step's successors and row-major readings (`_make_beam_tables`)."""
         beam = self._table("beam", lambda: dict(zip(BEAM_KEYS, _make_beam_tables(self.graph, self.tables))))
         return tuple(beam[k] for k in BEAM_KEYS)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of a table: mapped from a cache file they are read-only anyway,
+    and numba compiles a kernel once for each argument type, so tables made in memory
+    (a graph built, never saved) are read-only too and share the mapped ones' kernels
+    (one compilation on a fresh install, not two). Nothing writes into a table."""
+    if not a.flags.writeable:
+        return a
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def search_index(graph: MotionGraph, oriented: bool = False) -> SearchIndex:
