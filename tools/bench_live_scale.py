@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
-import resource
 import sys
 import time
 from pathlib import Path
@@ -50,8 +49,11 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 
 def _memory_mb() -> dict:
-    """This process's RSS and PSS now (MB, /proc/self/smaps_rollup) and peak RSS."""
-    out = {"peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)}
+    """This process's peak RSS (`bench_ssg.peak_rss_mb`: its own, not the parent's) and
+    its RSS and PSS now (MB, /proc/self/smaps_rollup)."""
+    from bench_ssg import peak_rss_mb
+
+    out = {"peak_rss_mb": round(peak_rss_mb())}
     try:
         for line in Path("/proc/self/smaps_rollup").read_text().splitlines():
             key, _, value = line.partition(":")

@@ -10,7 +10,9 @@ knowledge-base skeleton.
   they read, with the list of every place each term is computed.
 - `tables`: the graph's arrays in the search's layouts (`SearchIndex`).
 - `dense`: the exact step's passes over every node and edge, float32 and float64.
-- `beam`: the beam search's sparse step and cut.
+- `beam`: the beam search's sparse step and cut (kernels).
+- `beam_search`: a search's beam side (`BeamSteps`: setup, sparse or dense, the cut and
+  the bound, the rows a sparse step resets).
 - `store`: the survivor store and the walks back through the dense rows.
 - `search`: `ViterbiSearch`, the incremental search a batch or live caller steps.
 - `batch`: the batch search, constraint sets, per-term path costs, the warm-up.
