@@ -71,6 +71,7 @@ import numpy as np
 from graphsvc.blas import one_thread
 from graphsvc.graph import metadata as meta
 from graphsvc.graph.distance import PoseFeatures, window_features
+from graphsvc.graph.records import BRIDGE_KINDS
 from graphsvc.graph.transitions import _pair_distances, _state_code
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.placement import joint_tables, place_poses, relative_pose
@@ -175,7 +176,7 @@ class Matches:
         return self.j - self.before + self.length + 1
 
 
-KINDS = ("label", "end", "start")
+KINDS = BRIDGE_KINDS
 
 
 # ---------------------------------------------------------------- candidates

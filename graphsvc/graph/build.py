@@ -24,7 +24,7 @@ from graphsvc.errors import InputError, SkeletonError
 from graphsvc.graph import bridges as br
 from graphsvc.graph import interpolation as interp
 from graphsvc.graph import metadata as meta
-from graphsvc.graph import partners
+from graphsvc.graph import partners, records
 from graphsvc.graph.connectivity import label_reach
 from graphsvc.graph.distance import (
     DEFAULT_WINDOW_S,
@@ -52,6 +52,7 @@ from graphsvc.graph.model import (
     incoming_offsets,
 )
 from graphsvc.graph.poses import PosePacker, moving_joints, rotating_joints
+from graphsvc.graph.records import BRIDGE_FIELDS, Records
 from graphsvc.graph.rows import drain
 from graphsvc.graph.transitions import DEFAULT_THRESHOLD_M, find_transitions
 from graphsvc.heap import release_free_memory
@@ -392,7 +393,7 @@ def build_graph(
     per_frame = [clip_frame_labels(c.motion, frame_labels, int(lengths[k])) for k, c in enumerate(clips)]
     labels = sorted({content_label(m.motion) for m in clips} | {x for f in per_frame if f is not None for x in f})
     label_of_clip = np.array([labels.index(content_label(c.motion)) for c in clips], dtype=np.int32)
-    bridges = []
+    bridges = records.bridges()
     if options.bridges:
         t0 = time.perf_counter()
         bridges = _add_bridges(
@@ -453,7 +454,7 @@ def build_graph(
         edge_offset=edge_offset,
         edge_heading=edge_heading,
         incoming=incoming,
-        segments=segments,
+        segments=records.segments(segments),
         bridges=bridges,
     )
     del clips, edge_dst  # (what the prepared clips still hold: readings, placements)
@@ -635,7 +636,7 @@ def _add_interpolations(clips, start, options, layout, next_node, edges, parts, 
     return segments
 
 
-def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node, edges, parts, poses) -> list[dict]:
+def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node, edges, parts, poses) -> Records:
     """Bridges between actions and out of / into every clip's ends (`bridges.py`):
     their nodes and edges appended to the graph under construction. Returns the
     bridge records (graph.bridges)."""
@@ -688,7 +689,7 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
         options.jobs,
     )
     if not len(matches):
-        return []
+        return records.bridges()
     nodes = br.blend_bridges(kb, matches, sk, joints, lambda c: clips[c].placement, rate, poses.add)
     B, M = len(matches), nodes.ground.shape[0]
     parts["kind"].append(np.full(M, NODE_BRIDGE, np.uint8))
@@ -712,22 +713,19 @@ def _add_bridges(clips, start, label_of_clip, window, options, layout, next_node
     src[inner], dst[inner] = src_in, ids
     src[~inner], dst[~inner] = last_ids, exit_frame
     edges.add(src, dst, EDGE_BRIDGE, nodes.readings, nodes.step_offset, nodes.step_heading)
-    a_entry, b_exit = matches.entry, matches.exit  # (computed properties: once, not a bridge at a time)
-    return [
-        {
-            "first_node": int(next_node + nodes.first[b]),
-            "count": int(nodes.count[b]),
-            "clip_a": int(matches.clip_a[b]),
-            "clip_b": int(matches.clip_b[b]),
-            "a_entry": int(a_entry[b]),
-            "b_exit": int(b_exit[b]),
-            "a_match": int(matches.i[b]),
-            "b_match": int(matches.j[b]),
-            "distance_m": round(float(matches.distance[b]), 5),
-            "kind": br.KINDS[int(matches.kind[b])],
-        }
-        for b in range(B)
-    ]
+    columns = {
+        "first_node": next_node + nodes.first,
+        "count": nodes.count,
+        "clip_a": matches.clip_a,
+        "clip_b": matches.clip_b,
+        "a_entry": matches.entry,
+        "b_exit": matches.exit,
+        "a_match": matches.i,
+        "b_match": matches.j,
+        "distance_m": np.round(np.asarray(matches.distance, np.float64), 5),
+        "kind": matches.kind,
+    }
+    return Records(BRIDGE_FIELDS, {f.name: np.asarray(columns[f.name], dtype=f.dtype) for f in BRIDGE_FIELDS})
 
 
 def _blend_segment(A: PreparedClip, B: PreparedClip, path: np.ndarray, layout: Layout, rate: float, mapping=None):

@@ -50,7 +50,8 @@ def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray
     indices = [clip_index] if np.ndim(clip_index) == 0 else list(clip_index)
     clips = np.unique(np.concatenate([performance_clips(graph, int(k)) for k in indices]))
     hidden = np.isin(np.asarray(graph.node_clip), clips)
-    for seg in (*graph.segments, *graph.bridges):
-        if seg["clip_a"] in clips or seg["clip_b"] in clips:
-            hidden[seg["first_node"] : seg["first_node"] + seg["count"]] = True
+    for recs in (graph.segments, graph.bridges):
+        made = np.isin(recs.column("clip_a"), clips) | np.isin(recs.column("clip_b"), clips)
+        for first, count in zip(recs.column("first_node")[made].tolist(), recs.column("count")[made].tolist()):
+            hidden[first : first + count] = True
     return ~hidden

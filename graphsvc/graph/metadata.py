@@ -274,7 +274,7 @@ def recompute_accelerations(graph, layout) -> np.ndarray:
     out[slow_edges] = half[dst[slow_edges]]
     fast = ekind == EDGE_SPEEDUP
     out[fast] = double[dst[fast]]
-    if graph.bridges:
+    if len(graph.bridges):
         _bridge_accelerations(graph, placements, out)
     return out
 
@@ -286,11 +286,9 @@ def _bridge_accelerations(graph, placements, out) -> None:
     sk = graph.skeleton
     N0 = sum(int(c["frames"]) for c in graph.clips)  # the original nodes, clip after clip
     recs = graph.bridges
-    first_node = np.array([b["first_node"] for b in recs], dtype=np.int64)
-    count = np.array([b["count"] for b in recs], dtype=np.int64)
+    first_node, count = recs.column("first_node").astype(np.int64), recs.column("count").astype(np.int64)
     clip_start = np.array([c["first_node"] for c in graph.clips] + [N0], dtype=np.int64)
-    ca = np.array([b["clip_a"] for b in recs], dtype=np.int64)
-    cb = np.array([b["clip_b"] for b in recs], dtype=np.int64)
+    ca, cb = recs.column("clip_a").astype(np.int64), recs.column("clip_b").astype(np.int64)
     nodes = np.concatenate([f + np.arange(n) for f, n in zip(first_node, count)])
     node_rot, node_pos = forward_kinematics(node_rotations(graph, nodes), node_translations(graph, nodes), sk.parents)
     first = np.zeros(len(recs), dtype=np.int64)
@@ -305,8 +303,8 @@ def _bridge_accelerations(graph, placements, out) -> None:
         graph.node_heading[nodes].astype(np.float64),
         first,
         count,
-        clip_start[ca] + np.array([b["a_entry"] for b in recs]),
-        clip_start[cb] + np.array([b["b_exit"] for b in recs]),
+        clip_start[ca] + recs.column("a_entry"),
+        clip_start[cb] + recs.column("b_exit"),
         clip_start[ca],
         clip_start[ca + 1],
         clip_start[cb],
@@ -369,13 +367,18 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
     root = root_sensor(layout)
     width = TILT_WIDTH if root is None else RELATIVE_WIDTH
     owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
-    for rec in list(graph.segments) + list(graph.bridges):
-        owner[int(rec["first_node"]) : int(rec["first_node"]) + int(rec["count"])] = int(rec["clip_a"])
+    for recs in (graph.segments, graph.bridges):
+        for first, count, clip in zip(*(recs.column(f).tolist() for f in ("first_node", "count", "clip_a"))):
+            owner[first : first + count] = clip
     node_cue = np.zeros((N, S, width), np.float16)
     placements = clip_placements(graph, layout)
-    for c in np.unique(owner):
+    # Nodes grouped by owner, each group in node order (one sort, not a scan of every
+    # node for each of thousands of clips).
+    by_owner = np.argsort(owner, kind="stable")
+    clips, starts = np.unique(owner[by_owner], return_index=True)
+    for c, lo, hi in zip(clips.tolist(), starts.tolist(), [*starts[1:].tolist(), N]):
         placement = placements[c]
-        nodes = np.flatnonzero(owner == c)
+        nodes = by_owner[lo:hi]
         for k in range(0, nodes.size, _UP_CHUNK):
             part = nodes[k : k + _UP_CHUNK]
             world_rot, world_pos = forward_kinematics(

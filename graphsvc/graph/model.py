@@ -22,7 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from graphsvc.graph import records
 from graphsvc.graph.poses import pack_poses
+from graphsvc.graph.records import Records
 from graphsvc.motion.skeleton import Skeleton
 
 NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
@@ -42,8 +44,10 @@ class MotionGraph:
 
     node_kind (N,) uint8; node_clip (N,) int32 source clip; node_frame (N,) float32
     source frame (x.5 for slow-down nodes); node_contacts (N, 2) bool (left, right);
-    node_label (N,) int32 into `labels`; the local poses, read through
-    `graph.poses.node_poses` (float64), stored as `graph.poses` packs them:
+    node_label (N,) int32 into `labels` (a file holds node_clip and node_bones as
+    uint16 and node_label as int16 where their counts allow, `file.narrow_index`); the
+    local poses, read through `graph.poses.node_poses` (float64), stored as
+    `graph.poses` packs them:
     node_rot64 (N, R) uint64 quaternions in 64 bits of the joints `rotating_joints` (R,)
     int32 (the others hold the identity); node_moving (N, V, 3) float32
     local translations (m) of the joints `moving_joints` (V,) int32 (the root and any
@@ -53,7 +57,8 @@ class MotionGraph:
     node_heading (N,) float32 (rad).
     edge_src, edge_dst (E,) int32; edge_kind (E,) uint8; edge_acc (E, S, 3) float16
     (m/s², READING_DTYPE; float32 in files before format 3); edge_offset (E, 2) float32 (m, in the source node's local frame);
-    edge_heading (E,) float32 (rad); incoming (N + 1,) int64 CSR offsets by destination.
+    edge_heading (E,) float32 (rad); incoming (N + 1,) int64 CSR offsets by destination
+    (not stored: `incoming_offsets` of edge_dst).
     clip_offsets (C, J, 3) float64: each clip's skeleton offsets (sensor placement).
     edge_up (E, S, W) float16 or None: each edge's sensor orientation cue
     (`metadata.edge_up_vectors`, `sensors.orientation`): W = 3, the sensors' "up" (world
@@ -89,13 +94,10 @@ class MotionGraph:
     edge_offset: np.ndarray
     edge_heading: np.ndarray
     incoming: np.ndarray
-    # Interpolated segments: first_node, count, clip_a, clip_b, a_start, a_end,
-    # b_start, b_end (source frames, inclusive), the alignment theta/translation of b onto a.
-    segments: list[dict] = field(default_factory=list)
-    # Bridges (`bridges.py`): first_node, count, clip_a, clip_b, a_entry (the frame of a
-    # it is entered from), b_exit (the frame of b it leaves to), a_match, b_match,
-    # distance_m, kind ("label", "end", "start").
-    bridges: list[dict] = field(default_factory=list)
+    # Interpolated segments and bridges (`bridges.py`): one record each of the nodes it
+    # made, from which clips and frames (`records.SEGMENT_FIELDS`, `records.BRIDGE_FIELDS`).
+    segments: Records = field(default_factory=records.segments)
+    bridges: Records = field(default_factory=records.bridges)
     # Where the graph was loaded from and that file's SHA-256 (`store.file_checksum`),
     # or None for a graph built in memory: what a strategy's cached index is keyed by.
     source_path: str | None = None
@@ -160,13 +162,11 @@ def node_subgraph(graph: MotionGraph, nodes) -> MotionGraph:
     edges = {name: np.ascontiguousarray(getattr(graph, name)[keep]) for name in EDGE_ARRAYS[2:]}  # (ends: below)
     edge_dst = new_id[np.asarray(graph.edge_dst)[keep]].astype(np.int32)
 
-    def kept(parts: list[dict]) -> list[dict]:
-        out = []
-        for p in parts:
-            first, last = int(p["first_node"]), int(p["first_node"]) + int(p["count"]) - 1
-            if new_id[first] >= 0 and new_id[last] - new_id[first] == last - first:
-                out.append({**p, "first_node": int(new_id[first])})
-        return out
+    def kept(parts: Records) -> Records:
+        first = parts.column("first_node").astype(np.int64)
+        last = first + parts.column("count") - 1
+        whole = (new_id[first] >= 0) & (new_id[last] - new_id[first] == last - first)
+        return parts.select(whole).replaced("first_node", new_id[first[whole]])
 
     fields: dict[str, Any] = {name: np.ascontiguousarray(getattr(graph, name)[nodes]) for name in NODE_ARRAYS}
     fields.update(

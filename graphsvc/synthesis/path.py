@@ -169,15 +169,16 @@ def _predecessors(graph: MotionGraph, nodes: np.ndarray) -> np.ndarray:
     out[orig] = nodes[orig] - 1
     slow = kind == NODE_SLOW  # between original frames f and f+1: f precedes it
     out[slow] = first[slow] + np.floor(frame[slow]).astype(np.int64)
-    seg_first = np.array([s["first_node"] for s in graph.segments], dtype=np.int64)
+    seg_first = graph.segments.column("first_node").astype(np.int64)
     interp = (kind == NODE_INTERP) & ~np.isin(nodes, seg_first)
     out[interp] = nodes[interp] - 1
     # A bridge's nodes follow one another; its first follows the frame of a it is entered from.
     bridge = kind == NODE_BRIDGE
     out[bridge] = nodes[bridge] - 1
-    if graph.bridges:
-        first = np.array([b["first_node"] for b in graph.bridges], dtype=np.int64)
-        entry = np.array([graph.clips[b["clip_a"]]["first_node"] + b["a_entry"] for b in graph.bridges], dtype=np.int64)
+    if len(graph.bridges):
+        first = graph.bridges.column("first_node").astype(np.int64)
+        clip_first = np.array([c["first_node"] for c in graph.clips], dtype=np.int64)
+        entry = clip_first[graph.bridges.column("clip_a")] + graph.bridges.column("a_entry")
         at = np.searchsorted(first, nodes[bridge])
         hit = (at < first.size) & (first[np.minimum(at, first.size - 1)] == nodes[bridge])
         out[np.flatnonzero(bridge)[hit]] = entry[at[hit]]

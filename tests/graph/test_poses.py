@@ -7,7 +7,7 @@ import pytest
 
 from graphsvc.errors import FormatError
 from graphsvc.graph.build import BuildOptions, build_graph
-from graphsvc.graph.file import ARRAYS, KIND, load_graph, save_graph
+from graphsvc.graph.file import ARRAYS, FORMAT_VERSION, KIND, load_graph, save_graph
 from graphsvc.graph.model import NODE_ORIGINAL
 from graphsvc.graph.poses import (
     PosePacker,
@@ -23,6 +23,7 @@ from graphsvc.motion import quat
 from graphsvc.motion.procedural import generate_knowledge_base
 from graphsvc.sensors.layout import PRESETS
 from graphsvc.store import read_container, write_container
+from tests.graph.test_records import as_format_3
 
 # A kept component is stored as 2^19 + round(c·√2·(2^19 − 1)): off by at most half a
 # step, (1/√2)/(2^19 − 1)/2 = 6.74e-7; the rotation between q and its copy is then
@@ -120,7 +121,7 @@ def test_a_built_graph_gives_back_its_clips_frames(built):
 
 def _as_version_2(g, path):
     """The file graphsvc wrote before packed poses: float32 rotations and translations."""
-    save_graph(g, path)
+    as_format_3(g, path)
     meta, arrays, _ = read_container(path, kind=KIND, mmap=False)
     old = {k: v for k, v in arrays.items() if k not in ("node_rot64", "node_moving", "node_bones", "bone_sets")}
     old.pop("moving_joints"), old.pop("rotating_joints")
@@ -130,7 +131,7 @@ def _as_version_2(g, path):
     return rot, trans
 
 
-def test_a_version_2_file_loads_packed_and_writes_as_version_3(built, tmp_path):
+def test_a_version_2_file_loads_packed_and_writes_as_the_current_version(built, tmp_path):
     _, g = built
     rot, trans = _as_version_2(g, tmp_path / "old.graph")
     old = load_graph(tmp_path / "old.graph")
@@ -138,7 +139,7 @@ def test_a_version_2_file_loads_packed_and_writes_as_version_3(built, tmp_path):
     assert np.abs(t2 - trans).max() < 1e-7
     assert _angle(r2, rot).max() < ANGLE + 1e-7  # (and float32's rounding on the way)
     save_graph(old, tmp_path / "new.graph")
-    assert read_container(tmp_path / "new.graph")[2] == 3 and set(ARRAYS) <= set(
+    assert read_container(tmp_path / "new.graph")[2] == FORMAT_VERSION and set(ARRAYS) <= set(
         read_container(tmp_path / "new.graph")[1]
     )
 

@@ -41,7 +41,7 @@ def test_the_subgraph_holds_the_kept_nodes_and_every_edge_among_them(graph_file,
         np.testing.assert_array_equal(getattr(sub, name), getattr(graph, name)[expected])
     np.testing.assert_array_equal(np.diff(sub.incoming), np.bincount(sub.edge_dst, minlength=sub.num_nodes))
     # its segments and bridges lie wholly among the kept nodes, renumbered with them
-    for part in sub.segments + sub.bridges:
+    for part in [*sub.segments, *sub.bridges]:
         first = int(part["first_node"])
         assert int(nodes[first + int(part["count"]) - 1]) - int(nodes[first]) == int(part["count"]) - 1
     save_graph(sub, tmp_path / "sub.graph")  # (a whole graph: the file's checks pass)
