@@ -19,6 +19,7 @@ import re
 import numpy as np
 
 from graphsvc.graph.model import MotionGraph
+from graphsvc.graph.rows import ranges
 
 _AUGMENT_SUFFIX = re.compile(r"(_mirror|_reverse)+$")
 
@@ -52,6 +53,5 @@ def held_out_mask(graph: MotionGraph, clip_index: int | list[int]) -> np.ndarray
     hidden = np.isin(np.asarray(graph.node_clip), clips)
     for recs in (graph.segments, graph.bridges):
         made = np.isin(recs.column("clip_a"), clips) | np.isin(recs.column("clip_b"), clips)
-        for first, count in zip(recs.column("first_node")[made].tolist(), recs.column("count")[made].tolist()):
-            hidden[first : first + count] = True
+        hidden[ranges(recs.column("first_node")[made], recs.column("count")[made])] = True
     return ~hidden

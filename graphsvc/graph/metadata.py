@@ -25,6 +25,7 @@ import numpy as np
 
 from graphsvc.graph.model import EDGE_BRIDGE, EDGE_SLOW, EDGE_SPEEDUP, NODE_BRIDGE, NODE_SLOW
 from graphsvc.graph.poses import node_poses, node_rotations, node_translations
+from graphsvc.graph.rows import ranges
 from graphsvc.motion import quat, signals
 from graphsvc.motion.kinematics import forward_kinematics
 from graphsvc.motion.resample import resample_arrays
@@ -289,7 +290,7 @@ def _bridge_accelerations(graph, placements, out) -> None:
     first_node, count = recs.column("first_node").astype(np.int64), recs.column("count").astype(np.int64)
     clip_start = np.array([c["first_node"] for c in graph.clips] + [N0], dtype=np.int64)
     ca, cb = recs.column("clip_a").astype(np.int64), recs.column("clip_b").astype(np.int64)
-    nodes = np.concatenate([f + np.arange(n) for f, n in zip(first_node, count)])
+    nodes = ranges(first_node, count)
     node_rot, node_pos = forward_kinematics(node_rotations(graph, nodes), node_translations(graph, nodes), sk.parents)
     first = np.zeros(len(recs), dtype=np.int64)
     np.cumsum(count[:-1], out=first[1:])
@@ -368,8 +369,9 @@ def edge_up_vectors(graph, layout) -> np.ndarray:
     width = TILT_WIDTH if root is None else RELATIVE_WIDTH
     owner = np.asarray(graph.node_clip, dtype=np.int64).copy()  # the clip whose skeleton places each node's sensors
     for recs in (graph.segments, graph.bridges):
-        for first, count, clip in zip(*(recs.column(f).tolist() for f in ("first_node", "count", "clip_a"))):
-            owner[first : first + count] = clip
+        owner[ranges(recs.column("first_node"), recs.column("count"))] = np.repeat(
+            recs.column("clip_a"), recs.column("count")
+        )
     node_cue = np.zeros((N, S, width), np.float16)
     placements = clip_placements(graph, layout)
     # Nodes grouped by owner, each group in node order (one sort, not a scan of every

@@ -25,6 +25,7 @@ import numpy as np
 from graphsvc.graph import records
 from graphsvc.graph.poses import pack_poses
 from graphsvc.graph.records import Records
+from graphsvc.graph.rows import ranges
 from graphsvc.motion.skeleton import Skeleton
 
 NODE_ORIGINAL, NODE_SLOW, NODE_INTERP, NODE_BRIDGE = 0, 1, 2, 3
@@ -157,7 +158,7 @@ def node_subgraph(graph: MotionGraph, nodes) -> MotionGraph:
     new_id[nodes] = np.arange(nodes.size)
     # the edges into the kept nodes (edges are numbered by destination), then those from kept nodes
     starts, counts = graph.incoming[nodes], np.diff(graph.incoming)[nodes]
-    into = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    into = ranges(starts, counts)
     keep = into[new_id[np.asarray(graph.edge_src)[into]] >= 0]
     edges = {name: np.ascontiguousarray(getattr(graph, name)[keep]) for name in EDGE_ARRAYS[2:]}  # (ends: below)
     edge_dst = new_id[np.asarray(graph.edge_dst)[keep]].astype(np.int32)

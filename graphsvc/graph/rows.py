@@ -1,7 +1,8 @@
 """Row arrays: the distinct rows of an array, compared bit for bit (the search's
 readings table, `strategies/viterbi/tables.py`, and the graph's bone sets,
-`graph/poses.py`); and parts gathered row block by row block concatenated while they
-are freed (the build's node and edge arrays)."""
+`graph/poses.py`); parts gathered row block by row block concatenated while they
+are freed (the build's node and edge arrays); and runs of consecutive ids (a record's
+nodes, a node's incoming edges) joined."""
 
 from __future__ import annotations
 
@@ -44,3 +45,11 @@ def drain(parts: list[np.ndarray], empty: tuple[int, ...], dtype) -> np.ndarray:
         out[at : at + len(part)] = part
         at += len(part)
     return out
+
+
+def ranges(starts, counts) -> np.ndarray:
+    """(sum(counts),) int64: starts[k], starts[k] + 1, …, starts[k] + counts[k] − 1 for
+    each k in turn, `np.concatenate([s + np.arange(n) for s, n in zip(starts, counts)])`
+    without a Python loop."""
+    starts, counts = np.asarray(starts, dtype=np.int64), np.asarray(counts, dtype=np.int64)
+    return np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()), dtype=np.int64)

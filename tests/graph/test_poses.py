@@ -176,3 +176,11 @@ def test_drain_concatenates_and_frees_the_parts():
     np.testing.assert_array_equal(got, want)
     assert parts == []
     assert drain([], (0, 3), np.float32).shape == (0, 3)
+
+
+def test_ranges_join_runs_of_consecutive_ids():
+    from graphsvc.graph.rows import ranges
+
+    starts, counts = [7, 0, 3, 9], [3, 0, 2, 1]
+    assert ranges(starts, counts).tolist() == [7, 8, 9, 3, 4, 9]  # (by hand)
+    assert ranges([], []).tolist() == []
